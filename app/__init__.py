@@ -1,0 +1,1 @@
+"""talus: app (see DESIGN.md section 2)."""

@@ -1,0 +1,1 @@
+"""talus: calibration (see DESIGN.md section 2)."""

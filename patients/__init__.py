@@ -1,0 +1,1 @@
+"""talus: patients (see DESIGN.md section 2)."""

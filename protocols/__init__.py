@@ -1,0 +1,1 @@
+"""talus: protocols (see DESIGN.md section 2)."""

@@ -1,0 +1,1 @@
+"""talus: reports (see DESIGN.md section 2)."""

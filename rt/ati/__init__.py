@@ -1,0 +1,1 @@
+"""ATI force/torque sensors: Net F/T over UDP (RDT) and over CAN."""

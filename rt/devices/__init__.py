@@ -1,0 +1,1 @@
+"""Device interfaces (one small ABC per device kind) and the backend registry."""

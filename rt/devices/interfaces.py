@@ -1,0 +1,188 @@
+"""One small interface per device kind (CONVENTIONS items 1, 3 and 7).
+
+Every device is a context manager whose ``close()`` is safe to call twice. Readings are
+returned in SI units through typed views (``Wrench``); raw counts stay inside backends.
+Frames: a force/torque sensor reports in its own sensor frame S (z along the tool axis).
+"""
+from __future__ import annotations
+
+import abc
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from rt.errors import HardwareError
+
+NAN = math.nan
+
+
+@dataclass(slots=True)
+class Wrench:
+    """Force (N) and torque (N m) in the sensor frame, NaN until read.
+
+    ``t`` is the host time of the reading (s, monotonic), ``sequence`` the device's sample
+    counter, ``status`` its raw status word. ``stale`` is set when no fresh sample arrived within
+    the client's timeout; ``saturated`` when the device flags an overload.
+    """
+
+    fx: float = NAN
+    fy: float = NAN
+    fz: float = NAN
+    tx: float = NAN
+    ty: float = NAN
+    tz: float = NAN
+    t: float = NAN
+    sequence: int = -1
+    status: int = 0
+    stale: bool = True
+    saturated: bool = False
+
+    def as_tuple(self) -> tuple[float, float, float, float, float, float]:
+        """(fx, fy, fz, tx, ty, tz) in N and N m."""
+        return (self.fx, self.fy, self.fz, self.tx, self.ty, self.tz)
+
+    def set(self, values: Sequence[float]) -> None:
+        """Overwrite fx..tz in place (no allocation; used in the real-time path)."""
+        self.fx, self.fy, self.fz, self.tx, self.ty, self.tz = (
+            float(values[0]), float(values[1]), float(values[2]),
+            float(values[3]), float(values[4]), float(values[5]),
+        )
+
+    def copy_from(self, other: "Wrench") -> None:
+        """Copy every field of ``other`` into this wrench, in place."""
+        self.fx, self.fy, self.fz = other.fx, other.fy, other.fz
+        self.tx, self.ty, self.tz = other.tx, other.ty, other.tz
+        self.t, self.sequence, self.status = other.t, other.sequence, other.status
+        self.stale, self.saturated = other.stale, other.saturated
+
+
+class Device(abc.ABC):
+    """Base of every device: context manager, idempotent ``close()``."""
+
+    _closed: bool = False
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Release the device; safe to call more than once."""
+        if not self._closed:
+            self._closed = True
+            self._close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise HardwareError(f"{type(self).__name__} is closed; open a new one")
+
+    @abc.abstractmethod
+    def _close(self) -> None:
+        """Backend-specific release."""
+
+
+class EncoderBank(Device):
+    """Incremental encoders of the three sliders.
+
+    ``read_positions_m(out)`` fills ``out`` (len 3) with slider positions in metres relative to
+    the position at the last ``reset()``; ``read_counts()`` gives the raw counter values.
+    """
+
+    n_axes: int = 3
+
+    @abc.abstractmethod
+    def read_counts(self) -> tuple[int, ...]:
+        """Raw counter values, one per axis."""
+
+    @abc.abstractmethod
+    def read_positions_m(self, out: np.ndarray) -> np.ndarray:
+        """Decoded positions (m) written into ``out`` and returned."""
+
+    @abc.abstractmethod
+    def reset(self) -> None:
+        """Set every counter to its reference value (the PCL-833 midpoint)."""
+
+
+class ActuatorOutputs(Device):
+    """Analog command outputs (V) to the current-mode amplifiers, with drive enable.
+
+    A card refuses ``write_volts`` with non-zero values while disabled. ``disable()`` writes
+    zero volts first.
+    """
+
+    n_channels: int = 3
+
+    @abc.abstractmethod
+    def enable(self) -> None: ...
+
+    @abc.abstractmethod
+    def disable(self) -> None: ...
+
+    @property
+    @abc.abstractmethod
+    def enabled(self) -> bool: ...
+
+    @abc.abstractmethod
+    def write_volts(self, volts: Sequence[float]) -> None:
+        """Command one voltage (V) per channel."""
+
+
+class ForceTorqueSensor(Device):
+    """A 6-axis force/torque sensor (the ATI reference)."""
+
+    @abc.abstractmethod
+    def start(self) -> None:
+        """Start streaming."""
+
+    @abc.abstractmethod
+    def stop(self) -> None:
+        """Stop streaming."""
+
+    @abc.abstractmethod
+    def bias(self) -> None:
+        """Zero the sensor at the current load (software bias)."""
+
+    @abc.abstractmethod
+    def read(self, out: Wrench) -> Wrench:
+        """Latest wrench written into ``out`` (stale flag set if none arrived in time)."""
+
+
+class ForcePlate(Device):
+    """A force plate's raw channels (V or counts as the backend documents); calibration maps them."""
+
+    n_channels: int = 8
+
+    @abc.abstractmethod
+    def read_channels(self, out: np.ndarray) -> np.ndarray:
+        """Raw channel values written into ``out`` and returned."""
+
+
+class Camera(Device):
+    """A camera giving BGR frames (uint8, H x W x 3)."""
+
+    @abc.abstractmethod
+    def read(self) -> tuple[np.ndarray, float]:
+        """The next frame and its host timestamp (s); raises ``HardwareError`` on failure."""
+
+
+@dataclass(slots=True)
+class DigitalInputState:
+    """Safety-relevant digital inputs; True means the stop is pressed (fail-safe: open contact)."""
+
+    hardware_estop: bool = False
+    hand_stop: bool = False
+    extra: dict[str, bool] = field(default_factory=dict)
+
+
+class DigitalInputs(Device):
+    """Digital inputs: hardware e-stop chain and the patient's hand-held stop."""
+
+    @abc.abstractmethod
+    def read(self, out: DigitalInputState) -> DigitalInputState: ...

@@ -1,0 +1,53 @@
+"""Backends picked by name from config, imported lazily (CONVENTIONS item 1).
+
+A machine without comedilib, an ISA card or a camera never imports their modules; choosing such
+a backend there gives one clear ``BackendUnavailableError``.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from rt.errors import BackendUnavailableError, ConfigurationError
+
+#: kind -> backend name -> "module:Class". Modules are imported only when chosen.
+BACKENDS: dict[str, dict[str, str]] = {
+    "encoders": {},
+    "actuators": {},
+    "force_torque": {},
+    "force_plate": {},
+    "camera": {},
+    "digital_inputs": {},
+}
+
+
+def register_backend(kind: str, name: str, target: str) -> None:
+    """Register ``target`` ("package.module:ClassName") as backend ``name`` of device ``kind``."""
+    if kind not in BACKENDS:
+        raise ConfigurationError(f"unknown device kind {kind!r}; known: {sorted(BACKENDS)}")
+    if ":" not in target:
+        raise ConfigurationError(f"backend target {target!r} must look like 'module:Class'")
+    BACKENDS[kind][name] = target
+
+
+def backend_class(kind: str, name: str) -> type:
+    """Import and return the class of backend ``name`` for device ``kind``."""
+    if kind not in BACKENDS:
+        raise ConfigurationError(f"unknown device kind {kind!r}; known: {sorted(BACKENDS)}")
+    try:
+        target = BACKENDS[kind][name]
+    except KeyError:
+        raise ConfigurationError(
+            f"no {kind} backend named {name!r}; known: {sorted(BACKENDS[kind])}") from None
+    module_name, _, class_name = target.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except (ImportError, OSError) as exc:
+        raise BackendUnavailableError(
+            f"{kind} backend {name!r} is unavailable on this machine: {exc}") from exc
+    return getattr(module, class_name)
+
+
+def create(kind: str, name: str, **config: Any):
+    """Instantiate backend ``name`` of ``kind`` with ``config`` keyword arguments."""
+    return backend_class(kind, name)(**config)

@@ -1,0 +1,49 @@
+"""One error hierarchy for the product (CONVENTIONS item 12).
+
+Messages say what was wrong and, where it helps, what to do about it.
+"""
+from __future__ import annotations
+
+
+class TalusError(Exception):
+    """Root of every error raised on purpose by talus."""
+
+
+class ConfigurationError(TalusError):
+    """A configuration or description file is malformed or inconsistent."""
+
+
+class InputError(TalusError):
+    """A request (CLI line, IPC message, datagram) is malformed; nothing was changed."""
+
+
+class KinematicsError(TalusError):
+    """A pose or joint vector cannot be handled by the kinematic model."""
+
+
+class WorkspaceError(KinematicsError):
+    """The pose or joint vector lies outside the robot's workspace."""
+
+
+class ConvergenceError(KinematicsError):
+    """An iterative solver (forward kinematics) did not converge."""
+
+
+class HardwareError(TalusError):
+    """A device failed to read or write."""
+
+
+class BackendUnavailableError(HardwareError):
+    """A hardware backend was chosen but cannot run on this machine."""
+
+
+class ProtocolError(HardwareError):
+    """A device spoke something that is not its protocol (malformed frame or datagram)."""
+
+
+class SafetyTrip(TalusError):
+    """The safety supervisor stopped the robot."""
+
+
+class ProtocolValidationError(TalusError):
+    """A therapy/calibration protocol file failed validation."""
