@@ -1,0 +1,42 @@
+# talus: two commands do everything on a fresh machine (README.md).
+#   make demo   set up, then run the main job on the digital twin
+#   make test   set up, then run the whole test suite
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed-stamp
+# Debian packages the project needs at run or test time (none beyond the image's Python yet;
+# later parts add Xvfb and poppler-utils here).
+APT_PACKAGES :=
+
+.PHONY: demo test setup system-deps bench clean
+
+setup: system-deps $(STAMP)
+
+system-deps:
+	@if [ -n "$(APT_PACKAGES)" ]; then \
+	  missing=$$(for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	  if [ -n "$$missing" ]; then \
+	    echo "installing Debian packages: $$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
+	  fi; \
+	fi
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[test]'
+	touch $(STAMP)
+
+demo: setup
+	$(BIN)/talus model demo
+
+test: setup
+	$(BIN)/pytest -q
+
+bench: setup
+	$(BIN)/python bench/model.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis

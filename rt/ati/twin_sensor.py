@@ -1,0 +1,308 @@
+"""The twin's ATI force/torque sensor: physics, faults, and the device-side sample plumbing.
+
+``TwinAtiSensorModel`` turns the true wrench acting on the sensor into what an ATI Net F/T
+would report: constant bias, slow drift, Gaussian noise, per-axis overload (clipped value and
+status bits) and injectable faults. ``SourceReader`` is the piece of "firmware" shared by the
+twin's RDT server and CAN responder: it pulls samples from a ``WrenchSource``, numbers them
+and applies the software bias the way the device does.
+
+Units: forces in N, torques in N m, time in s, all in the sensor frame S.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, NamedTuple, Sequence, Union
+
+import numpy as np
+
+from rt.ati.rdt import STATUS_ANY_ERROR, STATUS_FT_OUT_OF_RANGE, STATUS_GAGE_OUT_OF_RANGE
+from rt.errors import InputError
+
+Wrench6 = tuple[float, float, float, float, float, float]
+
+#: Fault switches of the twin sensor.
+#: ``dropout``: no new samples (servers send nothing while it is on);
+#: ``stale``: the previous sample is repeated with the same ft_sequence;
+#: ``saturate``: the gage-saturation status flag is raised (values are passed through).
+FAULTS: tuple[str, ...] = ("dropout", "stale", "saturate")
+
+#: Measuring ranges of an ATI Delta SI-660-60 (N, N, N, N m, N m, N m).
+DELTA_SI_660_60_RANGES: Wrench6 = (660.0, 660.0, 1980.0, 60.0, 60.0, 60.0)
+
+
+class AtiSample(NamedTuple):
+    """One sensor sample: measured ``wrench`` (N, N m), raw ``status`` word, ``ft_sequence``.
+
+    A NamedTuple, so it is also a valid 3-tuple return value of a ``WrenchSource``.
+    """
+
+    wrench: Wrench6
+    status: int
+    ft_sequence: int
+
+
+#: What a ``WrenchSource`` may return: ``None`` when no new sample exists (dropout),
+#: ``(wrench6, status)`` (the server numbers the samples) or ``(wrench6, status, ft_sequence)``
+#: (the source numbers them; a repeated ft_sequence marks a stale sample).
+SourceResult = Union[None, tuple[Sequence[float], int], tuple[Sequence[float], int, int]]
+#: Zero-argument callable giving the sensor's current sample; called from the server thread.
+WrenchSource = Callable[[], SourceResult]
+
+
+def _as6(name: str, values: Sequence[float]) -> Wrench6:
+    if len(values) != 6:
+        raise InputError(f"{name} needs 6 values (Fx Fy Fz Tx Ty Tz), got {len(values)}")
+    out = tuple(float(v) for v in values)
+    if not all(math.isfinite(v) for v in out):
+        raise InputError(f"{name} must be finite, got {out}")
+    return out  # type: ignore[return-value]
+
+
+@dataclass(frozen=True, slots=True)
+class AtiSensorParams:
+    """Parameters of the twin sensor (per axis Fx, Fy, Fz in N; Tx, Ty, Tz in N m).
+
+    * ``noise_sigma``: standard deviation of white Gaussian noise per sample. Defaults are of the
+      order of the Delta SI-660-60 resolution (1/8 N, 1/4 N on z, 7.5 mN m); fit them to a
+      recording of the real sensor.
+    * ``bias``: constant offset (the unloaded reading before a software bias).
+    * ``drift_rate``: intensity of the drift random walk, in units/sqrt(s): after T seconds
+      the drift has a standard deviation of about ``drift_rate * sqrt(T)``.
+    * ``drift_limit``: bound of the drift (it is clipped to +-limit), so a long run stays
+      within what a temperature-drifting strain-gage sensor shows.
+    * ``ranges``: measuring range; a larger reading is clipped and flagged (overload).
+    """
+
+    noise_sigma: Wrench6 = (0.125, 0.125, 0.25, 0.0075, 0.0075, 0.0075)
+    bias: Wrench6 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    drift_rate: Wrench6 = (0.02, 0.02, 0.04, 0.001, 0.001, 0.001)
+    drift_limit: Wrench6 = (2.0, 2.0, 4.0, 0.1, 0.1, 0.1)
+    ranges: Wrench6 = DELTA_SI_660_60_RANGES
+
+    def __post_init__(self) -> None:
+        for name in ("noise_sigma", "bias", "drift_rate", "drift_limit", "ranges"):
+            object.__setattr__(self, name, _as6(name, getattr(self, name)))
+        for name in ("noise_sigma", "drift_rate", "drift_limit"):
+            if any(v < 0.0 for v in getattr(self, name)):
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if any(v <= 0.0 for v in self.ranges):
+            raise InputError(f"ranges must be > 0, got {self.ranges}")
+
+
+@dataclass(slots=True)
+class _FaultWindow:
+    name: str
+    t_start: float
+    t_end: float | None
+
+
+@dataclass(slots=True)
+class _State:
+    """Mutable state, kept apart from parameters so a run can be reset and replayed."""
+
+    rng: np.random.Generator
+    drift: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    t_last: float | None = None
+    ft_sequence: int = 0
+    last: AtiSample | None = None
+
+
+class TwinAtiSensorModel:
+    """The twin's ATI sensor.
+
+    Ports (see ``measure``):
+      * input ``true_wrench``: the wrench acting on the sensor, (Fx, Fy, Fz, Tx, Ty, Tz) in N and
+        N m, sensor frame S;
+      * input ``t``: simulation time (s), non-decreasing;
+      * output: ``AtiSample`` (measured wrench, status word, ft_sequence), or ``None`` while the
+        ``dropout`` fault is on.
+
+    measured = clip(true + bias + drift(t) + noise, +-ranges). Overload on any axis sets
+    ``STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE``; the ``saturate`` fault sets
+    ``STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE``. ``ft_sequence`` counts new samples.
+    Everything random comes from one ``numpy.random.Generator`` seeded by ``seed``, so the same
+    seed, inputs and fault schedule give the same samples.
+    """
+
+    def __init__(self, params: AtiSensorParams | None = None, seed: int = 0) -> None:
+        self.params = params if params is not None else AtiSensorParams()
+        self.seed = int(seed)
+        self._manual: dict[str, bool] = {name: False for name in FAULTS}
+        self._schedule: list[_FaultWindow] = []
+        p = self.params
+        # Parameters as arrays once, so the per-sample path only does in-place arithmetic.
+        self._sigma = np.array(p.noise_sigma)
+        self._bias = np.array(p.bias)
+        self._drift_rate = np.array(p.drift_rate)
+        self._drift_limit = np.array(p.drift_limit)
+        self._ranges = np.array(p.ranges)
+        self._work = np.empty(6)
+        self._noise = np.empty(6)
+        self._state = _State(rng=np.random.default_rng(self.seed))
+
+    # ---------------------------------------------------------------- state
+    def reset(self, seed: int | None = None) -> None:
+        """Back to the initial state (drift 0, ft_sequence 0); faults and schedule are kept."""
+        if seed is not None:
+            self.seed = int(seed)
+        self._state = _State(rng=np.random.default_rng(self.seed))
+
+    @property
+    def drift(self) -> Wrench6:
+        """Current drift (N, N m), for tests and plots."""
+        return tuple(float(v) for v in self._state.drift)  # type: ignore[return-value]
+
+    # ---------------------------------------------------------------- faults
+    def set_fault(self, name: str, active: bool = True) -> None:
+        """Switch fault ``name`` on or off now (independent of the schedule)."""
+        self._check_fault(name)
+        self._manual[name] = bool(active)
+
+    def schedule_fault(self, name: str, t_start: float, t_end: float | None = None) -> None:
+        """Make fault ``name`` active for ``t_start <= t < t_end`` (s); ``t_end=None``: forever."""
+        self._check_fault(name)
+        if t_end is not None and t_end <= t_start:
+            raise InputError(f"fault {name!r}: t_end {t_end} must be after t_start {t_start}")
+        self._schedule.append(_FaultWindow(name, float(t_start), t_end))
+
+    def clear_faults(self) -> None:
+        """Switch every fault off and forget the schedule."""
+        for name in FAULTS:
+            self._manual[name] = False
+        self._schedule.clear()
+
+    def fault_active(self, name: str, t: float) -> bool:
+        """Whether fault ``name`` is on at time ``t`` (s)."""
+        if self._manual.get(name, False):
+            return True
+        for w in self._schedule:
+            if w.name == name and w.t_start <= t and (w.t_end is None or t < w.t_end):
+                return True
+        return False
+
+    @staticmethod
+    def _check_fault(name: str) -> None:
+        if name not in FAULTS:
+            raise InputError(f"unknown ATI sensor fault {name!r}; known: {', '.join(FAULTS)}")
+
+    # ---------------------------------------------------------------- physics
+    def measure(self, true_wrench: Sequence[float], t: float) -> AtiSample | None:
+        """The sample the sensor reports at time ``t`` (s) under ``true_wrench`` (N, N m)."""
+        st = self._state
+        if self.fault_active("dropout", t):
+            return None
+        if st.last is not None and self.fault_active("stale", t):
+            return st.last
+
+        dt = 0.0 if st.t_last is None else t - st.t_last
+        if dt > 0.0:
+            # Bounded random walk: increments ~ N(0, rate^2 dt), clipped to +-limit.
+            st.rng.standard_normal(out=self._noise)
+            st.drift += self._drift_rate * math.sqrt(dt) * self._noise
+            np.clip(st.drift, -self._drift_limit, self._drift_limit, out=st.drift)
+        if st.t_last is None or t > st.t_last:
+            st.t_last = t
+
+        m = self._work
+        m[:] = true_wrench
+        m += self._bias
+        m += st.drift
+        st.rng.standard_normal(out=self._noise)
+        m += self._sigma * self._noise
+
+        status = 0
+        if np.any(np.abs(m) > self._ranges):
+            np.clip(m, -self._ranges, self._ranges, out=m)
+            status |= STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE
+        if self.fault_active("saturate", t):
+            status |= STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE
+
+        st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
+        sample = AtiSample(
+            (float(m[0]), float(m[1]), float(m[2]), float(m[3]), float(m[4]), float(m[5])),
+            status, st.ft_sequence)
+        st.last = sample
+        return sample
+
+    def make_source(self, true_wrench: Sequence[float] | Callable[[], Sequence[float]],
+                    clock: Callable[[], float] = time.monotonic) -> WrenchSource:
+        """A ``WrenchSource`` for the RDT server / CAN responder.
+
+        ``true_wrench`` is a constant 6-vector or a zero-argument callable giving it (N, N m);
+        time is ``clock()`` (s) relative to the first call, so schedule faults on that time base.
+        """
+        get = true_wrench if callable(true_wrench) else (lambda w=_as6("true_wrench", true_wrench): w)
+        t0: list[float] = []
+
+        def source() -> AtiSample | None:
+            now = clock()
+            if not t0:
+                t0.append(now)
+            return self.measure(get(), now - t0[0])
+
+        return source
+
+
+class SourceReader:
+    """Device-side plumbing shared by the twin's RDT server and CAN responder.
+
+    ``poll()`` pulls one sample from ``source``; afterwards ``value`` holds the reported wrench
+    (raw minus software bias, N and N m), ``status`` and ``ft_sequence``. ``set_bias()`` makes
+    the current raw reading the new zero, as the Net F/T's software bias does (manual: "set
+    software bias" / CAN "bias": zeros the readings at the current load). Not thread-safe: the
+    owning server thread is its only caller.
+    """
+
+    def __init__(self, source: WrenchSource) -> None:
+        if not callable(source):
+            raise InputError("source must be a callable returning (wrench6, status[, ft_seq])")
+        self._source = source
+        self.raw: list[float] = [0.0] * 6
+        self.value: list[float] = [0.0] * 6
+        self.bias: list[float] = [0.0] * 6
+        self.status = 0
+        self.ft_sequence = 0
+        self.has_sample = False
+        self._own_sequence = 0
+
+    def poll(self) -> bool:
+        """Fetch a sample; False (state unchanged) when the source has none (dropout)."""
+        result = self._source()
+        if result is None:
+            return False
+        wrench = result[0]
+        if len(wrench) != 6:
+            raise InputError(f"source returned {len(wrench)} wrench values, expected 6")
+        self.status = int(result[1]) & 0xFFFF_FFFF
+        if len(result) > 2:
+            self.ft_sequence = int(result[2]) & 0xFFFF_FFFF  # type: ignore[misc]
+        else:
+            self._own_sequence = (self._own_sequence + 1) & 0xFFFF_FFFF
+            self.ft_sequence = self._own_sequence
+        raw, value, bias = self.raw, self.value, self.bias
+        for i in range(6):
+            raw[i] = float(wrench[i])
+            value[i] = raw[i] - bias[i]
+        self.has_sample = True
+        return True
+
+    def set_bias(self) -> bool:
+        """Zero at the current raw reading; False when no reading is available (dropout).
+
+        A fresh sample is pulled first so the bias is the load *now*, even when not streaming;
+        during a dropout the last reading is used, as the device can only use what it has.
+        """
+        if not self.poll() and not self.has_sample:
+            return False
+        for i in range(6):
+            self.bias[i] = self.raw[i]
+            self.value[i] = 0.0
+        return True
+
+    def clear_bias(self) -> None:
+        """Forget the software bias."""
+        for i in range(6):
+            self.bias[i] = 0.0
+            self.value[i] = self.raw[i]

@@ -1,0 +1,181 @@
+"""Register-level emulation of the PCL-833 encoder card, behind the ``PortIO`` interface.
+
+Tests and the digital twin hand a ``FakePcl833Port`` to ``Pcl833Encoders`` instead of
+``DevPortIO``, so the real driver (configuration writes, latch, byte reads, midpoint reset,
+decoding) runs unchanged. The register map and the assumptions about latch and reset are
+those documented in ``rt.drivers.pcl833``:
+
+* reading a channel's high byte (+2/+6/+10) latches the live counter when that channel's
+  latch source is "software read"; the low and middle bytes then return the latched value;
+* the counter-reset register (+7) is a level: while a channel's bit is set the counter is
+  held at its reset value (0, or 0x800000 with the mode register's "middle" bit) and drops
+  pulses. A driver that forgets to release the reset therefore reads a frozen counter here.
+  (If the real register is a strobe, a driver that releases it behaves the same on both.)
+* a channel counts only when its input mode is not "disable". Counts are in counter units,
+  after the card's x1/x2/x4 multiplication; the emulation does not model A/B edges.
+* overflow (+3/+7/+11) and status (+14) registers read 0: not emulated, not used.
+
+The simulation side, used by tests and the twin (axis i is card channel i+1, the thesis
+wiring):
+
+* ``set_position_m(axis, q)`` / ``set_positions_m(q)``: the encoder model. The slider is at
+  ``q`` metres; the encoder has moved ``round(sign * q / m_per_count)`` counts from q = 0,
+  and the change since the previous call is fed to the counter as pulses (dropped while the
+  channel is disabled, held in reset or frozen). After the driver's midpoint reset at
+  q = q0 the driver therefore reads ``q - q0``, as on the real rig.
+* ``set_count(axis, count)``: a back door that presets the live counter (mod 2**24); with
+  ``rt.drivers.pcl833.encode_position`` it places an absolute position directly.
+* ``move_counts(axis, delta)``: ``delta`` pulses through the input stage.
+* ``set_frozen(axis, True)``: fault injection, the counter stops (encoder freeze); a jump is
+  ``move_counts`` with a large delta.
+
+Not thread-safe: drive it from the loop's thread (the twin runs in lockstep).
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+from rt.drivers.pcl833 import (
+    COUNTER_MASK, DEFAULT_BASE, DEFAULT_M_PER_COUNT, LATCH_SOURCE_MASK,
+    LATCH_SOURCE_SOFTWARE_READ, PORT_SPAN, REG_COUNTER_RESET, REG_STATUS, InputMode,
+    reset_value,
+)
+from rt.drivers.port_io import PortIO
+from rt.errors import ConfigurationError, HardwareError
+
+#: Offsets that the card answers on when read / written (from the Advantech driver).
+_READABLE = frozenset(range(0, 12)) | {REG_STATUS}
+_WRITABLE = frozenset(range(0, 11))
+
+
+def _per_axis(value, name: str) -> list:
+    if isinstance(value, (int, float)):
+        return [value] * 3
+    values = list(value)
+    if len(values) != 3:
+        raise ConfigurationError(f"{name} needs 3 values (one per axis), got {len(values)}")
+    return values
+
+
+class FakePcl833Port(PortIO):
+    """A PCL-833 at ``base`` (default 0x220), emulated byte by byte.
+
+    ``m_per_count`` and ``sign`` (one value or one per axis) are the encoder model used by
+    ``set_position_m``; give the driver the same values. ``strict`` makes an access to a port
+    the card does not decode raise ``HardwareError`` (a driver bug) instead of reading 0xFF
+    like an empty ISA bus.
+
+    ``writes`` records every ``outb`` as ``(port, value)``; ``n_reads`` counts ``inb`` calls.
+    At power-up every register is 0: inputs disabled, counters at 0.
+    """
+
+    def __init__(self, base: int = DEFAULT_BASE,
+                 m_per_count: float | Sequence[float] = DEFAULT_M_PER_COUNT,
+                 sign: int | Sequence[int] = +1, strict: bool = True) -> None:
+        self.base = base
+        self.m_per_count = [float(m) for m in _per_axis(m_per_count, "m_per_count")]
+        self.sign = [int(s) for s in _per_axis(sign, "sign")]
+        self.strict = strict
+        self.writes: list[tuple[int, int]] = []
+        self.n_reads = 0
+        self._reg = [0] * PORT_SPAN              # last byte written to each write register
+        self._count = [0, 0, 0]                  # live counters
+        self._latched = [0, 0, 0]                # latched counters (what the bytes read)
+        self._encoder_index = [0, 0, 0]          # encoder position in counts from q = 0
+        self._frozen = [False, False, False]
+
+    # --- PortIO ----------------------------------------------------------------------------
+
+    def inb(self, port: int) -> int:
+        self._check_open()
+        offset = self._offset(port, _READABLE)
+        self.n_reads += 1
+        if offset is None:
+            return 0xFF
+        if offset == REG_STATUS or offset % 4 == 3:
+            return 0
+        channel, byte = divmod(offset, 4)
+        if byte == 2 and (self._reg[3 + channel] & LATCH_SOURCE_MASK) == LATCH_SOURCE_SOFTWARE_READ:
+            self._latched[channel] = self._count[channel]
+        return (self._latched[channel] >> (8 * byte)) & 0xFF
+
+    def outb(self, port: int, value: int) -> None:
+        self._check_open()
+        if not 0 <= value <= 0xFF:
+            raise HardwareError(f"outb(0x{port:X}, {value}): value is not a byte")
+        offset = self._offset(port, _WRITABLE)
+        self.writes.append((port, value))
+        if offset is None:
+            return
+        self._reg[offset] = value
+        self._apply_reset_hold()
+
+    def _offset(self, port: int, valid: frozenset[int]) -> int | None:
+        offset = port - self.base
+        if offset in valid:
+            return offset
+        if self.strict:
+            raise HardwareError(
+                f"port 0x{port:X} is not a PCL-833 register at base 0x{self.base:X}")
+        return None
+
+    def _close(self) -> None:
+        pass
+
+    # --- card behaviour --------------------------------------------------------------------
+
+    def _held(self, axis: int) -> bool:
+        return bool(self._reg[REG_COUNTER_RESET] & (1 << axis))
+
+    def _counting(self, axis: int) -> bool:
+        mode = self._reg[axis] & 0x07
+        return mode != InputMode.DISABLE and not self._held(axis) and not self._frozen[axis]
+
+    def _apply_reset_hold(self) -> None:
+        for axis in range(3):
+            if self._held(axis):
+                self._count[axis] = reset_value(self._reg[axis])
+
+    # --- simulation side -------------------------------------------------------------------
+
+    def count(self, axis: int) -> int:
+        """Live counter of ``axis`` (0-2, card channel axis+1), without latching."""
+        return self._count[axis]
+
+    def register(self, offset: int) -> int:
+        """Last byte the driver wrote to write-register ``offset`` (0 if never written)."""
+        return self._reg[offset]
+
+    def set_count(self, axis: int, count: int) -> None:
+        """Preset the live counter of ``axis`` to ``count`` (mod 2**24); a reset hold wins."""
+        self._count[axis] = count & COUNTER_MASK
+        self._apply_reset_hold()
+
+    def move_counts(self, axis: int, delta: int) -> None:
+        """Feed ``delta`` counts (signed) to ``axis``'s counter, wrapping modulo 2**24.
+
+        Dropped while the channel is disabled, held in reset or frozen, as pulses would be.
+        """
+        if delta and self._counting(axis):
+            self._count[axis] = (self._count[axis] + delta) & COUNTER_MASK
+
+    def set_position_m(self, axis: int, position_m: float) -> None:
+        """Move ``axis``'s encoder to slider position ``position_m`` (m, 0 at the stroke bottom).
+
+        The encoder position is quantized to the nearest count; the change since the last
+        call goes to the counter as pulses.
+        """
+        index = math.floor(self.sign[axis] * position_m / self.m_per_count[axis] + 0.5)
+        delta = index - self._encoder_index[axis]
+        self._encoder_index[axis] = index
+        self.move_counts(axis, delta)
+
+    def set_positions_m(self, positions_m: Sequence[float]) -> None:
+        """``set_position_m`` for the three axes."""
+        for axis in range(3):
+            self.set_position_m(axis, positions_m[axis])
+
+    def set_frozen(self, axis: int, frozen: bool = True) -> None:
+        """Fault injection: a frozen channel ignores all motion until unfrozen."""
+        self._frozen[axis] = frozen

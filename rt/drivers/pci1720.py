@@ -1,0 +1,375 @@
+"""Advantech PCI-1720 4-channel 12-bit DAC through comedilib (thesis 3.1.2 and 3.2.3).
+
+The amplifiers run in current mode (1 A/V), so the volts written here are motor current
+commands; 0 V is zero torque.
+
+Sources, and what came from which:
+
+* Thesis 3.1.2 / 3.2.3: ±10 V range, 12 bits (0.0048 V resolution), control saturated at
+  ±6 V "to avoid too fast movements"; ``comedi_open("/dev/comedi0")``, ``comedi_get_maxdata``,
+  ``comedi_get_range``, ``comedi_from_phys`` and ``comedi_data_write(..., AREF_GROUND, data)``.
+  The thesis says nothing about a drive-enable signal.
+* comedilib reference (``comedilib.h``, man pages ``comedi_data_write(3)``,
+  ``comedi_get_range(3)``, ``comedi_from_phys(3)``): ``comedi_t *comedi_open(const char *)``
+  (NULL on error), ``int comedi_close(comedi_t *)``, ``lsampl_t comedi_get_maxdata(comedi_t *,
+  unsigned subdevice, unsigned chan)``, ``comedi_range *comedi_get_range(comedi_t *, unsigned
+  subdevice, unsigned chan, unsigned range)`` (NULL on error; ``struct {double min; double
+  max; unsigned unit;}``), ``int comedi_data_write(comedi_t *, unsigned subdevice, unsigned
+  chan, unsigned range, unsigned aref, lsampl_t data)`` (1 on success, -1 on error),
+  ``int comedi_get_n_channels(comedi_t *, unsigned subdevice)``, ``int comedi_dio_config(...,
+  unsigned dir)``, ``int comedi_dio_write(..., unsigned bit)``, ``int comedi_errno(void)``,
+  ``const char *comedi_strerror(int)``; ``AREF_GROUND = 0``, ``UNIT_volt = 0``,
+  ``COMEDI_OUTPUT = 1`` (``comedi.h``). ``comedi_from_phys`` computes
+  ``s = (v - min) / (max - min) * maxdata``, clamps to [0, maxdata] and returns
+  ``floor(s + 0.5)``; we do the same arithmetic in Python (``volts_to_code``) so it costs no
+  library call and the test double needs no converter.
+* Linux comedi driver ``adv_pci1720.c``: subdevice 0 is the analog output (4 channels,
+  maxdata 0x0fff, ranges 0: 0-5 V, 1: 0-10 V, 2: ±5 V, 3: ±10 V); subdevice 1 is a
+  4-bit digital *input* (the BoardID switch). The card has no digital output, so a
+  drive-enable line, if the rig has one, lives on another comedi device. After power-up
+  the outputs are at 0 V in the 0-5 V range; writing with range 3 switches to ±10 V, which
+  is why ``Pci1720Outputs`` writes 0 V to every channel as soon as it opens.
+
+Enable semantics (the thesis is silent, so this is our definition): ``enabled`` is a software
+gate that refuses non-zero commands until the supervisor calls ``enable()``. If an
+``EnableLine`` is configured, ``enable()`` also drives that digital output to its active
+level and ``disable()`` drops it after writing 0 V to every channel; without one, disable
+leaves the amplifiers powered with a 0 V (zero-current) command, and cutting power stays
+the job of the hardware e-stop chain.
+"""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import math
+import os
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+from rt.devices.interfaces import ActuatorOutputs
+from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError, InputError
+
+AREF_GROUND = 0
+UNIT_VOLT = 0
+COMEDI_OUTPUT = 1
+#: adv_pci1720 range index of ±10 V (thesis 3.1.2).
+RANGE_BIPOLAR_10V = 3
+#: Thesis 3.1.2: commands are saturated at ±6 V.
+DEFAULT_LIMIT_V = 6.0
+
+MISSING_LIBRARY_MESSAGE = "comedilib not found: install libcomedi0 or choose the 'sim' backend"
+
+
+class ComediRange(ctypes.Structure):
+    """``comedi_range`` from comedilib.h: physical limits of one range (V for UNIT_volt)."""
+
+    _fields_ = [("min", ctypes.c_double), ("max", ctypes.c_double), ("unit", ctypes.c_uint)]
+
+
+def load_comedilib() -> Any:
+    """Load comedilib with ctypes and declare the prototypes we call.
+
+    Raises one ``BackendUnavailableError`` when the library is not installed.
+    """
+    name = ctypes.util.find_library("comedi")
+    if name is None:
+        raise BackendUnavailableError(MISSING_LIBRARY_MESSAGE)
+    try:
+        lib = ctypes.CDLL(name, use_errno=True)
+    except OSError as exc:
+        raise BackendUnavailableError(f"{MISSING_LIBRARY_MESSAGE} ({exc})") from None
+    u = ctypes.c_uint
+    p = ctypes.c_void_p
+    prototypes = {
+        "comedi_open": (p, (ctypes.c_char_p,)),
+        "comedi_close": (ctypes.c_int, (p,)),
+        "comedi_get_n_channels": (ctypes.c_int, (p, u)),
+        "comedi_get_maxdata": (u, (p, u, u)),
+        "comedi_get_range": (ctypes.POINTER(ComediRange), (p, u, u, u)),
+        "comedi_data_write": (ctypes.c_int, (p, u, u, u, u, u)),
+        "comedi_dio_config": (ctypes.c_int, (p, u, u, u)),
+        "comedi_dio_write": (ctypes.c_int, (p, u, u, u)),
+        "comedi_errno": (ctypes.c_int, ()),
+        "comedi_strerror": (ctypes.c_char_p, (ctypes.c_int,)),
+    }
+    for fname, (restype, argtypes) in prototypes.items():
+        fn = getattr(lib, fname)
+        fn.restype = restype
+        fn.argtypes = argtypes
+    return lib
+
+
+def volts_to_code(volts: float, v_min: float = -10.0, v_max: float = 10.0,
+                  maxdata: int = 4095) -> int:
+    """DAC code for ``volts`` (V): ``floor((V - v_min) / (v_max - v_min) * maxdata + 0.5)``.
+
+    On the PCI-1720's ±10 V range that is ``round((V + 10) / 20 * 4095)`` with halves rounded
+    up (as ``comedi_from_phys``), clamped to 0..4095. One LSB is 20/4095 V = 4.88 mV, and
+    the output ``code_to_volts(volts_to_code(V))`` is within half an LSB (2.44 mV) of V
+    inside the range. 0 V gives code 2048 = +2.44 mV: a symmetric range has no exact zero.
+    """
+    s = (volts - v_min) / (v_max - v_min) * maxdata
+    if s <= 0.0:
+        return 0
+    if s >= maxdata:
+        return maxdata
+    return int(math.floor(s + 0.5))
+
+
+def code_to_volts(code: int, v_min: float = -10.0, v_max: float = 10.0,
+                  maxdata: int = 4095) -> float:
+    """Ideal output voltage (V) of DAC ``code`` (``comedi_to_phys``)."""
+    return v_min + code / maxdata * (v_max - v_min)
+
+
+@dataclass(frozen=True)
+class EnableLine:
+    """A digital output that enables the drives (the rig's own wiring; not in the thesis).
+
+    ``device`` is the comedi device holding it (``None``: the DAC's own device; the PCI-1720
+    has no digital outputs, so on the thesis rig this is another card), ``subdevice`` and
+    ``channel`` address the bit, ``active_high`` its polarity.
+    """
+
+    subdevice: int
+    channel: int
+    device: str | None = None
+    active_high: bool = True
+
+
+@dataclass(frozen=True)
+class _Channel:
+    number: int
+    v_min: float
+    v_max: float
+    maxdata: int
+
+
+class Pci1720Outputs(ActuatorOutputs):
+    """Command voltages (V) to the three current-mode amplifiers through a PCI-1720.
+
+    Inputs: ``write_volts(volts)`` with one voltage per axis. Outputs: ``last_codes`` (DAC
+    codes written), ``last_volts`` (the quantized voltages they produce), ``clamped`` (which
+    channels hit the command limit on the last write).
+
+    Parameters (fixed after construction):
+
+    * ``device``: comedi device file (thesis: /dev/comedi0).
+    * ``subdevice``: analog-output subdevice (adv_pci1720: 0).
+    * ``channels``: DAC channel of each axis (thesis: 0, 1, 2 on terminals A9, A15, B1).
+    * ``range_index``: comedi range (adv_pci1720: 3 = ±10 V).
+    * ``limit_v``: software command limit (V), symmetric (thesis: 6 V); must lie inside the
+      range.
+    * ``enable_line``: optional drive-enable output, see the module docstring.
+    * ``lib``: comedilib, or a test double with the same functions; ``None`` loads the real
+      library and fails with one clear ``BackendUnavailableError`` when it is missing.
+
+    Starts disabled with 0 V on every channel. ``close()`` disables, then closes the device.
+    """
+
+    def __init__(self, device: str = "/dev/comedi0", subdevice: int = 0,
+                 channels: Sequence[int] = (0, 1, 2), range_index: int = RANGE_BIPOLAR_10V,
+                 limit_v: float = DEFAULT_LIMIT_V, enable_line: EnableLine | dict | None = None,
+                 lib: Any = None) -> None:
+        self.device = device
+        self.subdevice = int(subdevice)
+        self.range_index = int(range_index)
+        self.limit_v = float(limit_v)
+        if isinstance(enable_line, dict):          # from a YAML config
+            enable_line = EnableLine(**enable_line)
+        self.enable_line = enable_line
+        numbers = tuple(int(c) for c in channels)
+        if len(numbers) != self.n_channels or len(set(numbers)) != len(numbers):
+            raise ConfigurationError(
+                f"channels must name {self.n_channels} distinct DAC channels, got {numbers}")
+        if not (math.isfinite(self.limit_v) and self.limit_v > 0):
+            raise ConfigurationError(f"limit_v must be a positive voltage, got {limit_v}")
+
+        self._lib = load_comedilib() if lib is None else lib
+        self._enabled = False
+        self._dev: Any = None
+        self._enable_dev: Any = None
+        self.last_codes = [0] * self.n_channels
+        self.last_volts = [math.nan] * self.n_channels
+        self.clamped = [False] * self.n_channels
+
+        self._dev = self._open(device)
+        try:
+            self._channels = tuple(self._probe_channel(n) for n in numbers)
+            if enable_line is not None:
+                self._setup_enable_line(enable_line)
+            self._write_zero()
+        except BaseException:
+            self._release_handles()
+            self._closed = True
+            raise
+
+    # --- setup -------------------------------------------------------------------------
+
+    def _error_text(self) -> str:
+        msg = self._lib.comedi_strerror(self._lib.comedi_errno())
+        return msg.decode(errors="replace") if isinstance(msg, bytes) else str(msg)
+
+    def _open(self, path: str) -> Any:
+        handle = self._lib.comedi_open(path.encode())
+        if not handle:
+            reason = self._error_text()
+            if not os.path.exists(path):
+                raise BackendUnavailableError(
+                    f"{path} does not exist: load the comedi driver for the card "
+                    f"(adv_pci1720) or choose the 'sim' backend ({reason})")
+            raise HardwareError(f"comedi_open({path}) failed: {reason}")
+        return handle
+
+    def _probe_channel(self, number: int) -> _Channel:
+        lib, dev, sub = self._lib, self._dev, self.subdevice
+        n = lib.comedi_get_n_channels(dev, sub)
+        if n < 0:
+            raise ConfigurationError(
+                f"{self.device} has no subdevice {sub}: {self._error_text()}")
+        if not 0 <= number < n:
+            raise ConfigurationError(
+                f"{self.device} subdevice {sub} has channels 0-{n - 1}, not {number}")
+        maxdata = int(lib.comedi_get_maxdata(dev, sub, number))
+        rng = lib.comedi_get_range(dev, sub, number, self.range_index)
+        if not rng or maxdata <= 0:
+            raise ConfigurationError(
+                f"{self.device} subdevice {sub} channel {number} has no range "
+                f"{self.range_index}: {self._error_text()}")
+        r = rng.contents
+        if r.unit != UNIT_VOLT:
+            raise ConfigurationError(
+                f"range {self.range_index} of channel {number} is not a voltage range")
+        if not r.min <= -self.limit_v < self.limit_v <= r.max:
+            raise ConfigurationError(
+                f"command limit ±{self.limit_v} V does not fit range "
+                f"[{r.min}, {r.max}] V of channel {number}; pick a bipolar range")
+        return _Channel(number, float(r.min), float(r.max), maxdata)
+
+    def _setup_enable_line(self, line: EnableLine) -> None:
+        if line.device is None or line.device == self.device:
+            self._enable_dev = self._dev
+        else:
+            self._enable_dev = self._open(line.device)
+        if self._lib.comedi_dio_config(self._enable_dev, line.subdevice, line.channel,
+                                       COMEDI_OUTPUT) < 0:
+            raise ConfigurationError(
+                f"cannot make subdevice {line.subdevice} channel {line.channel} a digital "
+                f"output: {self._error_text()}")
+        self._drive_enable(False)
+
+    # --- ActuatorOutputs ---------------------------------------------------------------
+
+    @property
+    def enabled(self) -> bool:
+        return self._enabled
+
+    @property
+    def lsb_v(self) -> tuple[float, ...]:
+        """Voltage step of one DAC code per channel (V); 20/4095 V on ±10 V."""
+        return tuple((c.v_max - c.v_min) / c.maxdata for c in self._channels)
+
+    def enable(self) -> None:
+        """Allow non-zero commands and assert the drive-enable line (if configured)."""
+        self._check_open()
+        if self.enable_line is not None:
+            self._drive_enable(True)
+        self._enabled = True
+
+    def disable(self) -> None:
+        """Write 0 V to every channel, then drop the drive-enable line. Safe to repeat.
+
+        Both steps are attempted even if the first fails; the first error is raised after.
+        """
+        self._check_open()
+        self._enabled = False
+        error: HardwareError | None = None
+        try:
+            self._write_zero()
+        except HardwareError as exc:
+            error = exc
+        if self.enable_line is not None:
+            try:
+                self._drive_enable(False)
+            except HardwareError as exc:
+                error = error or exc
+        if error is not None:
+            raise error
+
+    def write_volts(self, volts: Sequence[float]) -> None:
+        """Command ``volts`` (V), one per axis, clamped to ±``limit_v`` and quantized.
+
+        Refused (``HardwareError``, nothing written) with a non-zero value while disabled;
+        refused (``InputError``, nothing written) for a wrong length or a non-finite value.
+        """
+        self._check_open()
+        if len(volts) != self.n_channels:
+            raise InputError(f"write_volts needs {self.n_channels} values, got {len(volts)}")
+        nonzero = False
+        for v in volts:        # validate everything before writing anything
+            if not math.isfinite(v):
+                raise InputError(f"write_volts got a non-finite command {list(volts)}; nothing "
+                                 f"was written")
+            if v != 0.0:
+                nonzero = True
+        if nonzero and not self._enabled:
+            raise HardwareError(
+                "Pci1720Outputs refused a non-zero command while disabled; only the "
+                "supervisor enables the drives")
+        limit = self.limit_v
+        for i in range(self.n_channels):
+            v = float(volts[i])
+            self.clamped[i] = not -limit <= v <= limit
+            self._write_channel(i, min(limit, max(-limit, v)))
+
+    # --- internals ---------------------------------------------------------------------
+
+    def _write_channel(self, i: int, volts: float) -> None:
+        ch = self._channels[i]
+        code = volts_to_code(volts, ch.v_min, ch.v_max, ch.maxdata)
+        rc = self._lib.comedi_data_write(self._dev, self.subdevice, ch.number,
+                                         self.range_index, AREF_GROUND, code)
+        if rc < 0:
+            raise HardwareError(
+                f"comedi_data_write on {self.device} channel {ch.number} failed: "
+                f"{self._error_text()}")
+        self.last_codes[i] = code
+        self.last_volts[i] = code_to_volts(code, ch.v_min, ch.v_max, ch.maxdata)
+
+    def _write_zero(self) -> None:
+        error: HardwareError | None = None
+        for i in range(self.n_channels):
+            self.clamped[i] = False
+            try:
+                self._write_channel(i, 0.0)
+            except HardwareError as exc:     # still zero the other channels
+                error = error or exc
+        if error is not None:
+            raise error
+
+    def _drive_enable(self, on: bool) -> None:
+        line = self.enable_line
+        assert line is not None
+        level = 1 if on == line.active_high else 0
+        if self._lib.comedi_dio_write(self._enable_dev, line.subdevice, line.channel,
+                                      level) < 0:
+            raise HardwareError(
+                f"cannot {'assert' if on else 'drop'} the drive-enable line: "
+                f"{self._error_text()}")
+
+    def _release_handles(self) -> None:
+        if self._enable_dev is not None and self._enable_dev is not self._dev:
+            self._lib.comedi_close(self._enable_dev)
+        if self._dev is not None:
+            self._lib.comedi_close(self._dev)
+        self._enable_dev = None
+        self._dev = None
+
+    def _close(self) -> None:
+        try:
+            self._enabled = False
+            self._write_zero()
+            if self.enable_line is not None:
+                self._drive_enable(False)
+        finally:
+            self._release_handles()

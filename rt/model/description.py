@@ -1,0 +1,219 @@
+"""The robot description file: YAML with ``schema_version``, SI units, loaded into typed objects.
+
+A bad file is refused with a ``ConfigurationError`` that names the field and the reason. The
+frames and the meaning of every field are documented at the top of
+``rt/data/robot_nominal.yaml``.
+"""
+from __future__ import annotations
+
+import math
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from rt.errors import ConfigurationError
+
+SCHEMA_VERSION = 1
+
+PositiveFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+NonNegativeFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Geometry(_Strict):
+    base_radius_m: PositiveFloat
+    platform_radius_m: PositiveFloat
+    rod_length_m: PositiveFloat
+    leg_angles_deg: Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
+
+    @field_validator("leg_angles_deg")
+    @classmethod
+    def _equally_spaced(cls, angles: list[float]) -> list[float]:
+        # The closed-form parasitic yaw (thesis eq. 9) and the (x, y) solution assume legs 120°
+        # apart, counter-clockwise; any starting angle is fine.
+        for k in (1, 2):
+            gap = (angles[k] - angles[0] - 120.0 * k) % 360.0
+            if min(gap, 360.0 - gap) > 1e-9:
+                raise ValueError("legs must be 120 degrees apart, counter-clockwise "
+                                 f"(got {angles})")
+        return angles
+
+    @model_validator(mode="after")
+    def _reachable(self) -> "Geometry":
+        if self.rod_length_m <= abs(self.base_radius_m - self.platform_radius_m):
+            raise ValueError("rod_length_m must exceed |base_radius_m - platform_radius_m|")
+        return self
+
+
+class Limits(_Strict):
+    stroke_m: Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)]
+    rod_angle_max_deg: Annotated[float, Field(gt=0.0, lt=90.0)]
+    spherical_cone_half_angle_deg: Annotated[float, Field(gt=0.0, lt=90.0)]
+    roll_max_deg: Annotated[float, Field(gt=0.0, lt=60.0)]
+    pitch_max_deg: Annotated[float, Field(gt=0.0, lt=60.0)]
+
+    @field_validator("stroke_m")
+    @classmethod
+    def _ordered(cls, stroke: list[float]) -> list[float]:
+        if not stroke[0] < stroke[1]:
+            raise ValueError(f"stroke_m must be [low, high] with low < high (got {stroke})")
+        return stroke
+
+
+class Body(_Strict):
+    mass_kg: PositiveFloat
+    com_m: Vector3
+    inertia_kg_m2: Annotated[list[Vector3], Field(min_length=3, max_length=3)]
+
+    @field_validator("inertia_kg_m2")
+    @classmethod
+    def _physical(cls, rows: list[list[float]]) -> list[list[float]]:
+        inertia = np.array(rows, dtype=float)
+        if not np.allclose(inertia, inertia.T, rtol=0.0, atol=1e-12):
+            raise ValueError("inertia tensor must be symmetric")
+        eig = np.linalg.eigvalsh(inertia)
+        if eig[0] < 0.0:
+            raise ValueError(f"inertia tensor must be positive semi-definite (eigenvalues {eig})")
+        # Triangle inequality of principal moments: a real body satisfies I1 + I2 >= I3.
+        if eig[0] + eig[1] < eig[2] * (1.0 - 1e-9):
+            raise ValueError(f"principal moments {eig} violate I1 + I2 >= I3 (not a real body)")
+        return rows
+
+
+class Bodies(_Strict):
+    slider: Body
+    rod: Body
+    platform: Body
+    sensor: Body
+
+
+class SensorMount(_Strict):
+    offset_m: Vector3
+
+
+class Drive(_Strict):
+    rotor_inertia_kg_m2: PositiveFloat
+    screw_lead_m: PositiveFloat
+    screw_efficiency: Annotated[float, Field(gt=0.0, le=1.0)]
+    torque_constant_n_m_per_a: PositiveFloat
+    amplifier_gain_a_per_v: PositiveFloat
+    command_limit_v: PositiveFloat
+    current_limit_a: PositiveFloat
+
+    @property
+    def reflected_inertia_kg(self) -> float:
+        """Rotor inertia seen at the slider: J (2π / lead)² (kg)."""
+        return self.rotor_inertia_kg_m2 * (2.0 * math.pi / self.screw_lead_m) ** 2
+
+    @property
+    def force_per_amp_n(self) -> float:
+        """Screw force per motor current: Kt η 2π / lead (N/A)."""
+        return (self.torque_constant_n_m_per_a * self.screw_efficiency * 2.0 * math.pi
+                / self.screw_lead_m)
+
+    @property
+    def force_per_volt_n(self) -> float:
+        """Screw force per amplifier command volt (N/V), current-mode amplifier."""
+        return self.force_per_amp_n * self.amplifier_gain_a_per_v
+
+
+class Friction(_Strict):
+    viscous_n_s_per_m: NonNegativeFloat
+    coulomb_n: NonNegativeFloat
+    coulomb_smoothing_m_s: PositiveFloat
+    static_n: NonNegativeFloat
+    stribeck_velocity_m_s: PositiveFloat
+
+
+class Encoder(_Strict):
+    m_per_count: PositiveFloat
+    counter_bits: Annotated[int, Field(ge=8, le=32)]
+    midpoint: Annotated[int, Field(ge=0)]
+
+    @model_validator(mode="after")
+    def _midpoint_fits(self) -> "Encoder":
+        if self.midpoint >= 2 ** self.counter_bits:
+            raise ValueError(f"midpoint {self.midpoint} does not fit {self.counter_bits} bits")
+        return self
+
+
+class Dac(_Strict):
+    bits: Annotated[int, Field(ge=8, le=24)]
+    range_v: Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)]
+
+
+class RobotDescription(_Strict):
+    """Everything the model, the twin and the drivers need to know about one robot."""
+
+    schema_version: int
+    name: str
+    gravity_m_s2: PositiveFloat
+    geometry: Geometry
+    limits: Limits
+    bodies: Bodies
+    sensor: SensorMount
+    drive: Drive
+    friction: Friction
+    encoder: Encoder
+    dac: Dac
+
+    @field_validator("schema_version")
+    @classmethod
+    def _known_version(cls, version: int) -> int:
+        if version != SCHEMA_VERSION:
+            raise ValueError(f"unsupported schema_version {version}; this talus reads "
+                             f"{SCHEMA_VERSION}")
+        return version
+
+    @model_validator(mode="after")
+    def _stroke_within_rod(self) -> "RobotDescription":
+        stroke = self.limits.stroke_m
+        if stroke[0] < 0.0:
+            raise ValueError("limits.stroke_m must start at or above 0 (bottom of the guide)")
+        return self
+
+
+def _format_validation_error(exc: ValidationError, source: str) -> str:
+    parts = []
+    for err in exc.errors():
+        where = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        parts.append(f"{where}: {err['msg']}")
+    return f"robot description {source} is invalid: " + "; ".join(parts)
+
+
+def description_from_dict(data: Any, source: str = "<dict>") -> RobotDescription:
+    """Validate a parsed description; raises ``ConfigurationError`` naming the bad field."""
+    if not isinstance(data, dict):
+        raise ConfigurationError(f"robot description {source} must be a YAML mapping, "
+                                 f"got {type(data).__name__}")
+    try:
+        return RobotDescription.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigurationError(_format_validation_error(exc, source)) from None
+
+
+def load_description(path: str | Path | None = None) -> RobotDescription:
+    """Load a description file; ``None`` loads the packaged nominal twin description."""
+    if path is None:
+        text = resources.files("rt.data").joinpath("robot_nominal.yaml").read_text()
+        source = "robot_nominal.yaml (packaged)"
+    else:
+        try:
+            text = Path(path).read_text()
+        except OSError as exc:
+            raise ConfigurationError(f"cannot read robot description {path}: {exc}") from None
+        source = str(path)
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigurationError(f"robot description {source} is not valid YAML: {exc}") from None
+    return description_from_dict(data, source)

@@ -1,0 +1,304 @@
+"""Kinematics of the 3-PRS robot, written on plain floats (PLATFORM.md: numpy costs µs per call
+on 3-vectors; this module runs every control cycle).
+
+Coordinates (frames in ``rt/data/robot_nominal.yaml``):
+
+* ``q_i`` slider positions (m) along the vertical guides, 0 at the bottom of the stroke.
+* ``phi_i`` rod angles (rad) about each leg's tangent axis, 0 = rod vertical, < 0 leaning inward.
+* Platform pose: heave ``z`` (m), roll ``γ`` about x and pitch ``β`` about y (rad), fixed-axis
+  X-Y-Z so R = Rz(α) Ry(β) Rx(γ). The parasitic yaw α and translations x, y follow from the
+  constraints (each sphere stays in its leg's vertical plane):
+  α = atan2(sβ sγ, cβ + cγ) (thesis eq. 9, equivalently R[1,0] = R[0,1]) and
+  (x, y) = -(2/3) Σ t_i (r_i · t_i) with t_i the legs' tangents and r_i = R b_i.
+
+Inverse kinematics is closed form. Forward kinematics solves the thesis's three rigid-triangle
+equations |B_i - B_j|² = 3 R_p² for the rod angles by Newton-Raphson (quadratic convergence,
+warm-started from the previous solution), then builds the platform frame from the three sphere
+centres.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from rt.errors import ConvergenceError, WorkspaceError
+from rt.model.description import RobotDescription
+
+_FK_MAX_ITERATIONS = 25
+# Newton stops when the largest rod-angle update is below this (rad). 1e-12 rad on a 0.45 m rod
+# is 4.5e-13 m, far below the 2e-5 m encoder resolution and above float round-off (~1e-16).
+_FK_STEP_TOL_RAD = 1e-12
+
+
+@dataclass(slots=True)
+class Configuration:
+    """One assembled configuration of the robot: actuated, passive and platform coordinates.
+
+    Lengths in m, angles in rad. ``rotation`` is R_BP row-major (9 floats), ``spheres`` the three
+    sphere centres B_i in the base frame, ``normal`` the platform z axis in the base frame.
+    """
+
+    q: tuple[float, float, float]
+    phi: tuple[float, float, float]
+    z: float
+    roll: float
+    pitch: float
+    x: float
+    y: float
+    yaw: float
+    rotation: tuple[float, ...] = field(repr=False)
+    spheres: tuple[tuple[float, float, float], ...] = field(repr=False)
+    iterations: int = 0
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """The three controlled coordinates (z, roll, pitch)."""
+        return (self.z, self.roll, self.pitch)
+
+
+def rotation_zyx(yaw: float, pitch: float, roll: float) -> tuple[float, ...]:
+    """R = Rz(yaw) Ry(pitch) Rx(roll), row-major 9-tuple."""
+    ca, sa = math.cos(yaw), math.sin(yaw)
+    cb, sb = math.cos(pitch), math.sin(pitch)
+    cg, sg = math.cos(roll), math.sin(roll)
+    return (
+        ca * cb, ca * sb * sg - sa * cg, ca * sb * cg + sa * sg,
+        sa * cb, sa * sb * sg + ca * cg, sa * sb * cg - ca * sg,
+        -sb, cb * sg, cb * cg,
+    )
+
+
+def parasitic_yaw(roll: float, pitch: float) -> float:
+    """Yaw α (rad) forced by the 3-PRS constraints for a given roll γ and pitch β (thesis eq. 9)."""
+    return math.atan2(math.sin(pitch) * math.sin(roll), math.cos(pitch) + math.cos(roll))
+
+
+class Kinematics:
+    """Closed-form IK, Newton-Raphson FK, velocity maps and the workspace check."""
+
+    def __init__(self, description: RobotDescription):
+        g = description.geometry
+        lim = description.limits
+        self.description = description
+        self.base_radius = g.base_radius_m
+        self.platform_radius = g.platform_radius_m
+        self.rod_length = g.rod_length_m
+        th = [math.radians(a) for a in g.leg_angles_deg]
+        self.cos_theta = tuple(math.cos(t) for t in th)
+        self.sin_theta = tuple(math.sin(t) for t in th)
+        # cos(θ_i - θ_j) for the pairs (0,1), (1,2), (2,0): -1/2 for 120° spacing.
+        self._pairs = ((0, 1), (1, 2), (2, 0))
+        self._cos_pair = tuple(math.cos(th[i] - th[j]) for i, j in self._pairs)
+        self._side_sq = 3.0 * self.platform_radius ** 2
+        self.stroke = (lim.stroke_m[0], lim.stroke_m[1])
+        self.rod_angle_max = math.radians(lim.rod_angle_max_deg)
+        self.cone_half_angle = math.radians(lim.spherical_cone_half_angle_deg)
+        self.roll_max = math.radians(lim.roll_max_deg)
+        self.pitch_max = math.radians(lim.pitch_max_deg)
+        # Rod angle with the platform level and centred: sin φ0 = (R_p - R_b) / L.
+        self.phi_nominal = math.asin((self.platform_radius - self.base_radius) / self.rod_length)
+        self._phi_guess = [self.phi_nominal] * 3
+
+    # ------------------------------------------------------------------ inverse kinematics
+    def ik(self, z: float, roll: float, pitch: float, check: bool = True) -> Configuration:
+        """Slider positions for a platform pose (z m, roll γ rad, pitch β rad).
+
+        Raises ``WorkspaceError`` naming the violated limit when the pose is unreachable or (with
+        ``check``) outside the workspace limits.
+        """
+        for name, value in (("z", z), ("roll", roll), ("pitch", pitch)):
+            if not math.isfinite(value):
+                raise WorkspaceError(f"{name} must be a finite number, got {value}")
+        if check:
+            if abs(roll) > self.roll_max:
+                raise WorkspaceError(f"roll {math.degrees(roll):.2f} deg exceeds the limit "
+                                     f"±{math.degrees(self.roll_max):.1f} deg")
+            if abs(pitch) > self.pitch_max:
+                raise WorkspaceError(f"pitch {math.degrees(pitch):.2f} deg exceeds the limit "
+                                     f"±{math.degrees(self.pitch_max):.1f} deg")
+        yaw = parasitic_yaw(roll, pitch)
+        rot = rotation_zyx(yaw, pitch, roll)
+        rp, rb, length = self.platform_radius, self.base_radius, self.rod_length
+        r = []
+        rt_sum_x = rt_sum_y = 0.0
+        for i in range(3):
+            c, s = self.cos_theta[i], self.sin_theta[i]
+            rx = rp * (rot[0] * c + rot[1] * s)
+            ry = rp * (rot[3] * c + rot[4] * s)
+            rz = rp * (rot[6] * c + rot[7] * s)
+            r.append((rx, ry, rz))
+            along_t = -s * rx + c * ry          # r_i · t_i, with t_i = (-sin θ_i, cos θ_i, 0)
+            rt_sum_x += -s * along_t
+            rt_sum_y += c * along_t
+        x = -2.0 / 3.0 * rt_sum_x
+        y = -2.0 / 3.0 * rt_sum_y
+        q = [0.0, 0.0, 0.0]
+        phi = [0.0, 0.0, 0.0]
+        spheres = []
+        for i in range(3):
+            c, s = self.cos_theta[i], self.sin_theta[i]
+            bx, by, bz = x + r[i][0], y + r[i][1], z + r[i][2]
+            spheres.append((bx, by, bz))
+            radial = bx * c + by * s
+            sin_phi = (radial - rb) / length
+            if abs(sin_phi) >= 1.0:
+                raise WorkspaceError(f"pose unreachable: sphere {i + 1} is {abs(radial - rb):.3f} m "
+                                     f"from its guide, more than the rod length {length} m")
+            phi[i] = math.asin(sin_phi)
+            q[i] = bz - length * math.cos(phi[i])
+        cfg = Configuration((q[0], q[1], q[2]), (phi[0], phi[1], phi[2]), z, roll, pitch, x, y,
+                            yaw, rot, tuple(spheres))
+        if check:
+            self.check_workspace(cfg)
+        return cfg
+
+    # ------------------------------------------------------------------ forward kinematics
+    def fk(self, q, guess=None, check: bool = True) -> Configuration:
+        """Platform pose from slider positions ``q`` (m) by Newton-Raphson on the rod angles.
+
+        Warm-started from ``guess`` (rod angles, rad) or from this object's previous solution.
+        Raises ``ConvergenceError`` when Newton does not converge and ``WorkspaceError`` when the
+        result lies outside the workspace (with ``check``).
+        """
+        q0, q1, q2 = float(q[0]), float(q[1]), float(q[2])
+        if not (math.isfinite(q0) and math.isfinite(q1) and math.isfinite(q2)):
+            raise WorkspaceError(f"slider positions must be finite numbers, got {tuple(q)}")
+        if check:
+            lo, hi = self.stroke
+            for i, qi in enumerate((q0, q1, q2)):
+                if not lo <= qi <= hi:
+                    raise WorkspaceError(f"slider {i + 1} at {qi:.4f} m is outside the stroke "
+                                         f"[{lo}, {hi}] m")
+        g = self._phi_guess if guess is None else guess
+        p0, p1, p2 = float(g[0]), float(g[1]), float(g[2])
+        iterations = 0
+        while True:
+            (f0, f1, f2), (a00, a01, a11, a12, a22, a20) = self.constraint_terms(
+                (q0, q1, q2), (p0, p1, p2))
+            # A = [[a00, a01, 0], [0, a11, a12], [a20, 0, a22]]; solve A Δ = f by Cramer's rule.
+            det = a00 * a11 * a22 + a01 * a12 * a20
+            if det == 0.0 or not math.isfinite(det):
+                raise ConvergenceError(f"forward kinematics hit a singular configuration at "
+                                       f"q = {(q0, q1, q2)} m")
+            x0 = (f0 * a11 * a22 - a01 * (f1 * a22 - a12 * f2)) / det
+            x1 = (a00 * (f1 * a22 - a12 * f2) + f0 * a12 * a20) / det
+            x2 = (a00 * a11 * f2 + a01 * f1 * a20 - f0 * a11 * a20) / det
+            p0 -= x0
+            p1 -= x1
+            p2 -= x2
+            iterations += 1
+            step = max(abs(x0), abs(x1), abs(x2))
+            if step < _FK_STEP_TOL_RAD:
+                break
+            if iterations >= _FK_MAX_ITERATIONS or not math.isfinite(step) or step > 10.0:
+                raise ConvergenceError(
+                    f"forward kinematics did not converge for q = {(q0, q1, q2)} m after "
+                    f"{iterations} Newton iterations (last step {step:.3g} rad); the sliders may "
+                    "be outside the assembly range")
+        cfg = self._assemble((q0, q1, q2), (p0, p1, p2), iterations)
+        if check:
+            self.check_workspace(cfg)
+        self._phi_guess[0], self._phi_guess[1], self._phi_guess[2] = p0, p1, p2
+        return cfg
+
+    def constraint_terms(self, q, phi) -> tuple[tuple[float, float, float], tuple[float, ...]]:
+        """Residuals f_p = |B_i - B_j|² - 3 R_p² (m²) of the pairs (0,1), (1,2), (2,0) and the
+        non-zero entries of ∂f/∂φ (m²/rad): (a00, a01, a11, a12, a22, a20), where row p of the
+        Jacobian has its entries in columns i and j of its pair."""
+        rb, length = self.base_radius, self.rod_length
+        ca, cb, cc = self._cos_pair
+        side_sq = self._side_sq
+        s0, c0 = math.sin(phi[0]), math.cos(phi[0])
+        s1, c1 = math.sin(phi[1]), math.cos(phi[1])
+        s2, c2 = math.sin(phi[2]), math.cos(phi[2])
+        r0, r1, r2 = rb + length * s0, rb + length * s1, rb + length * s2
+        h0, h1, h2 = q[0] + length * c0, q[1] + length * c1, q[2] + length * c2
+        d01, d12, d20 = h0 - h1, h1 - h2, h2 - h0
+        f0 = r0 * r0 + r1 * r1 - 2.0 * ca * r0 * r1 + d01 * d01 - side_sq
+        f1 = r1 * r1 + r2 * r2 - 2.0 * cb * r1 * r2 + d12 * d12 - side_sq
+        f2 = r2 * r2 + r0 * r0 - 2.0 * cc * r2 * r0 + d20 * d20 - side_sq
+        # ∂ρ/∂φ = L cos φ, ∂h/∂φ = -L sin φ.
+        dr0, dr1, dr2 = length * c0, length * c1, length * c2
+        dh0, dh1, dh2 = -length * s0, -length * s1, -length * s2
+        a00 = 2.0 * (r0 - ca * r1) * dr0 + 2.0 * d01 * dh0
+        a01 = 2.0 * (r1 - ca * r0) * dr1 - 2.0 * d01 * dh1
+        a11 = 2.0 * (r1 - cb * r2) * dr1 + 2.0 * d12 * dh1
+        a12 = 2.0 * (r2 - cb * r1) * dr2 - 2.0 * d12 * dh2
+        a22 = 2.0 * (r2 - cc * r0) * dr2 + 2.0 * d20 * dh2
+        a20 = 2.0 * (r0 - cc * r2) * dr0 - 2.0 * d20 * dh0
+        return (f0, f1, f2), (a00, a01, a11, a12, a22, a20)
+
+    def _assemble(self, q, phi, iterations: int) -> Configuration:
+        """Platform frame from the three sphere centres (thesis eq. 7)."""
+        rb, length = self.base_radius, self.rod_length
+        pts = []
+        for i in range(3):
+            rad = rb + length * math.sin(phi[i])
+            pts.append((rad * self.cos_theta[i], rad * self.sin_theta[i],
+                        q[i] + length * math.cos(phi[i])))
+        px = (pts[0][0] + pts[1][0] + pts[2][0]) / 3.0
+        py = (pts[0][1] + pts[1][1] + pts[2][1]) / 3.0
+        pz = (pts[0][2] + pts[1][2] + pts[2][2]) / 3.0
+        # Platform z axis: normal of the sphere triangle (legs counter-clockwise → points up).
+        ux, uy, uz = pts[1][0] - pts[0][0], pts[1][1] - pts[0][1], pts[1][2] - pts[0][2]
+        vx, vy, vz = pts[2][0] - pts[0][0], pts[2][1] - pts[0][1], pts[2][2] - pts[0][2]
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+        nx, ny, nz = nx / nn, ny / nn, nz / nn
+        # f1: unit vector towards sphere 0 in the base frame; e1 the same in the platform frame.
+        fx, fy, fz = pts[0][0] - px, pts[0][1] - py, pts[0][2] - pz
+        fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+        fx, fy, fz = fx / fn, fy / fn, fz / fn
+        gx, gy, gz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx   # n × f1
+        e1x, e1y = self.cos_theta[0], self.sin_theta[0]                           # in P
+        e2x, e2y = -e1y, e1x                                                      # ẑ × e1
+        # R = f1 e1ᵀ + (n × f1) e2ᵀ + n ẑᵀ
+        rot = (
+            fx * e1x + gx * e2x, fx * e1y + gx * e2y, nx,
+            fy * e1x + gy * e2x, fy * e1y + gy * e2y, ny,
+            fz * e1x + gz * e2x, fz * e1y + gz * e2y, nz,
+        )
+        roll = math.atan2(rot[7], rot[8])
+        pitch = math.atan2(-rot[6], math.hypot(rot[7], rot[8]))
+        yaw = math.atan2(rot[3], rot[0])
+        return Configuration((q[0], q[1], q[2]), (phi[0], phi[1], phi[2]), pz, roll, pitch, px,
+                             py, yaw, rot, tuple(pts), iterations)
+
+    # ------------------------------------------------------------------ workspace
+    def workspace_violations(self, cfg: Configuration) -> list[str]:
+        """Every limit the configuration breaks, as readable sentences (empty when inside)."""
+        out = []
+        lo, hi = self.stroke
+        rot = cfg.rotation
+        nx, ny, nz = rot[2], rot[5], rot[8]
+        for i in range(3):
+            qi = cfg.q[i]
+            if not lo <= qi <= hi:
+                out.append(f"slider {i + 1} at {qi:.4f} m is outside the stroke [{lo}, {hi}] m")
+            phi = cfg.phi[i]
+            if abs(phi) > self.rod_angle_max:
+                out.append(f"rod {i + 1} inclined {math.degrees(phi):.1f} deg beyond "
+                           f"±{math.degrees(self.rod_angle_max):.1f} deg")
+            # Rod direction in the base frame: sin φ r̂_i + cos φ ẑ.
+            s, c = math.sin(phi), math.cos(phi)
+            dot = s * (self.cos_theta[i] * nx + self.sin_theta[i] * ny) + c * nz
+            cone = math.acos(max(-1.0, min(1.0, dot)))
+            if cone > self.cone_half_angle:
+                out.append(f"spherical joint {i + 1} at {math.degrees(cone):.1f} deg beyond its "
+                           f"cone ±{math.degrees(self.cone_half_angle):.1f} deg")
+        if abs(cfg.roll) > self.roll_max:
+            out.append(f"roll {math.degrees(cfg.roll):.2f} deg exceeds "
+                       f"±{math.degrees(self.roll_max):.1f} deg")
+        if abs(cfg.pitch) > self.pitch_max:
+            out.append(f"pitch {math.degrees(cfg.pitch):.2f} deg exceeds "
+                       f"±{math.degrees(self.pitch_max):.1f} deg")
+        return out
+
+    def check_workspace(self, cfg: Configuration) -> None:
+        """Raise ``WorkspaceError`` listing every violated limit."""
+        violations = self.workspace_violations(cfg)
+        if violations:
+            raise WorkspaceError("outside the workspace: " + "; ".join(violations))
+
+    def in_workspace(self, cfg: Configuration) -> bool:
+        return not self.workspace_violations(cfg)

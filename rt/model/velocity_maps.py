@@ -1,0 +1,276 @@
+"""Velocity and acceleration maps of the closed chains, compiled with numba.
+
+The dynamics project a Pinocchio tree (3 legs + a free platform, 12 scalar joints) onto the
+three slider coordinates. That needs, every cycle, the tree velocity map S(q) = ∂Q/∂q (12×3)
+and its time derivative Ṡ(q, q̇) (12×3). Both are a few hundred floating-point operations that
+cost tens of µs in interpreted Python (PLATFORM.md), so they are compiled; the maths is
+documented in ``docs/dynamics.md``.
+
+Tree coordinate order Q: [q0, φ0, q1, φ1, q2, φ2, x, y, z, α (yaw), β (pitch), γ (roll)].
+``geom`` packs the geometry: [R_b, R_p, L, cos θ0..2, sin θ0..2, cos(θ_i - θ_j) for the pairs
+(0,1), (1,2), (2,0)].
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+TREE_DOF = 12
+IX_X, IX_Y, IX_Z, IX_YAW, IX_PITCH, IX_ROLL = 6, 7, 8, 9, 10, 11
+_PAIR_I = (0, 1, 2)
+_PAIR_J = (1, 2, 0)
+
+
+def pack_geometry(base_radius: float, platform_radius: float, rod_length: float,
+                  cos_theta, sin_theta, cos_pair) -> np.ndarray:
+    """The ``geom`` array the kernels read (see module docstring)."""
+    return np.array([base_radius, platform_radius, rod_length, *cos_theta, *sin_theta,
+                     *cos_pair], dtype=np.float64)
+
+
+@njit(cache=True)
+def _inv3(a, out):
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    out[0, 0] = c00 / det
+    out[1, 0] = c01 / det
+    out[2, 0] = c02 / det
+    out[0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) / det
+    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) / det
+    out[2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) / det
+    out[0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) / det
+    out[1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) / det
+    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) / det
+    return det
+
+
+@njit(cache=True)
+def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
+    """Fill S = ∂Q/∂q, Ṡ (for slider velocity ``qd``) and the platform twist map.
+
+    ``rot`` is R_BP (3×3). ``twist`` (6×3) maps q̇ to the platform's (v_P, ω) in the base frame,
+    v_P being the velocity of the platform origin. Returns det(∂f/∂φ), the forward-kinematics
+    constraint Jacobian's determinant (0 at a forward singularity).
+    """
+    rb = geom[0]
+    rp = geom[1]
+    ln = geom[2]
+    ct = geom[3:6]
+    st = geom[6:9]
+    cpair = geom[9:12]
+    sphi = np.empty(3)
+    cphi = np.empty(3)
+    rho = np.empty(3)
+    h = np.empty(3)
+    for i in range(3):
+        sphi[i] = math.sin(phi[i])
+        cphi[i] = math.cos(phi[i])
+        rho[i] = rb + ln * sphi[i]
+        h[i] = q[i] + ln * cphi[i]
+    # Constraint Jacobians of f_p = |B_i - B_j|² - 3 R_p² for the pairs p = (i, j).
+    f_phi = np.zeros((3, 3))
+    f_q = np.zeros((3, 3))
+    for p in range(3):
+        i = (0, 1, 2)[p]
+        j = (1, 2, 0)[p]
+        d = h[i] - h[j]
+        c = cpair[p]
+        f_phi[p, i] = 2.0 * (rho[i] - c * rho[j]) * ln * cphi[i] - 2.0 * d * ln * sphi[i]
+        f_phi[p, j] = 2.0 * (rho[j] - c * rho[i]) * ln * cphi[j] + 2.0 * d * ln * sphi[j]
+        f_q[p, i] = 2.0 * d
+        f_q[p, j] = -2.0 * d
+    f_phi_inv = np.empty((3, 3))
+    det = _inv3(f_phi, f_phi_inv)
+    # Platform geometry: sphere offsets r_i = B_i - p (p is the centroid), normal n.
+    nx = rot[0, 2]
+    ny = rot[1, 2]
+    nz = rot[2, 2]
+    r = np.empty((3, 3))
+    for i in range(3):
+        r[i, 0] = rot[0, 0] * ct[i] * rp + rot[0, 1] * st[i] * rp
+        r[i, 1] = rot[1, 0] * ct[i] * rp + rot[1, 1] * st[i] * rp
+        r[i, 2] = rot[2, 0] * ct[i] * rp + rot[2, 1] * st[i] * rp
+    sa = rot[1, 0]
+    ca = rot[0, 0]
+    nrm = math.hypot(ca, sa)
+    ca /= nrm
+    sa /= nrm
+    sb = -rot[2, 0]
+    cb = math.sqrt(max(0.0, 1.0 - sb * sb))
+    ginv = 2.0 / (3.0 * rp * rp)
+    half_p = 1.5 * rp * rp
+
+    # Velocity-level quantities for m = 4 velocity vectors: the three unit vectors e_k and qd.
+    m = 4
+    phid = np.zeros((m, 3))
+    rhod = np.zeros((m, 3))
+    hd = np.zeros((m, 3))
+    w = np.zeros((m, 3))
+    ang = np.zeros((m, 3))     # (yaw rate, pitch rate, roll rate)
+    for k in range(m):
+        for i in range(3):
+            acc = 0.0
+            for j in range(3):
+                u = qd[j] if k == 3 else (1.0 if j == k else 0.0)
+                for p in range(3):
+                    acc -= f_phi_inv[i, p] * f_q[p, j] * u
+            phid[k, i] = acc
+        for i in range(3):
+            u = qd[i] if k == 3 else (1.0 if i == k else 0.0)
+            rhod[k, i] = ln * cphi[i] * phid[k, i]
+            hd[k, i] = u - ln * sphi[i] * phid[k, i]
+        vx = 0.0
+        vy = 0.0
+        vz = 0.0
+        for i in range(3):
+            vx += rhod[k, i] * ct[i] / 3.0
+            vy += rhod[k, i] * st[i] / 3.0
+            vz += hd[k, i] / 3.0
+        mx = 0.0
+        my = 0.0
+        mz = 0.0
+        for i in range(3):
+            dx = rhod[k, i] * ct[i] - vx
+            dy = rhod[k, i] * st[i] - vy
+            dz = hd[k, i] - vz
+            mx += r[i, 1] * dz - r[i, 2] * dy
+            my += r[i, 2] * dx - r[i, 0] * dz
+            mz += r[i, 0] * dy - r[i, 1] * dx
+        nm = nx * mx + ny * my + nz * mz
+        wx = ginv * (mx - 0.5 * nx * nm)
+        wy = ginv * (my - 0.5 * ny * nm)
+        wz = ginv * (mz - 0.5 * nz * nm)
+        w[k, 0] = wx
+        w[k, 1] = wy
+        w[k, 2] = wz
+        roll_d = (wx * ca + wy * sa) / cb
+        pitch_d = -wx * sa + wy * ca
+        yaw_d = wz + roll_d * sb
+        ang[k, 0] = yaw_d
+        ang[k, 1] = pitch_d
+        ang[k, 2] = roll_d
+        if k < 3:
+            for i in range(3):
+                S[2 * i, k] = 1.0 if i == k else 0.0
+                S[2 * i + 1, k] = phid[k, i]
+            S[IX_X, k] = vx
+            S[IX_Y, k] = vy
+            S[IX_Z, k] = vz
+            S[IX_YAW, k] = yaw_d
+            S[IX_PITCH, k] = pitch_d
+            S[IX_ROLL, k] = roll_d
+            twist[0, k] = vx
+            twist[1, k] = vy
+            twist[2, k] = vz
+            twist[3, k] = wx
+            twist[4, k] = wy
+            twist[5, k] = wz
+
+    # Ṡ e_k = H(qd, e_k): the symmetric bilinear second-order term of Q(q) (q̈ = 0).
+    eb_x = -sa
+    eb_y = ca
+    eg_x = ca * cb
+    eg_y = sa * cb
+    eg_z = -sb
+    u_ = 3
+    kappa = np.empty(3)
+    phidd = np.empty(3)
+    for k in range(3):
+        pp = np.empty(3)
+        for i in range(3):
+            pp[i] = phid[u_, i] * phid[k, i]
+        for p in range(3):
+            i = (0, 1, 2)[p]
+            j = (1, 2, 0)[p]
+            c = cpair[p]
+            d = h[i] - h[j]
+            rho0_i = -ln * sphi[i] * pp[i]
+            rho0_j = -ln * sphi[j] * pp[j]
+            h0_i = -ln * cphi[i] * pp[i]
+            h0_j = -ln * cphi[j] * pp[j]
+            dd_u = hd[u_, i] - hd[u_, j]
+            dd_w = hd[k, i] - hd[k, j]
+            kappa[p] = (2.0 * rhod[u_, i] * rhod[k, i] + 2.0 * rho[i] * rho0_i
+                        + 2.0 * rhod[u_, j] * rhod[k, j] + 2.0 * rho[j] * rho0_j
+                        - 2.0 * c * (rho0_i * rho[j] + rhod[u_, i] * rhod[k, j]
+                                     + rhod[k, i] * rhod[u_, j] + rho[i] * rho0_j)
+                        + 2.0 * dd_u * dd_w + 2.0 * d * (h0_i - h0_j))
+        for i in range(3):
+            acc = 0.0
+            for p in range(3):
+                acc -= f_phi_inv[i, p] * kappa[p]
+            phidd[i] = acc
+        ax = 0.0
+        ay = 0.0
+        az = 0.0
+        rdd = np.empty(3)
+        hdd = np.empty(3)
+        for i in range(3):
+            rdd[i] = ln * cphi[i] * phidd[i] - ln * sphi[i] * pp[i]
+            hdd[i] = -ln * sphi[i] * phidd[i] - ln * cphi[i] * pp[i]
+            ax += rdd[i] * ct[i] / 3.0
+            ay += rdd[i] * st[i] / 3.0
+            az += hdd[i] / 3.0
+        mx = 0.0
+        my = 0.0
+        mz = 0.0
+        for i in range(3):
+            dx = rdd[i] * ct[i] - ax
+            dy = rdd[i] * st[i] - ay
+            dz = hdd[i] - az
+            mx += r[i, 1] * dz - r[i, 2] * dy
+            my += r[i, 2] * dx - r[i, 0] * dz
+            mz += r[i, 0] * dy - r[i, 1] * dx
+        # Subtract ½[(P ω_u) × ω_w + (P ω_w) × ω_u], P = (3 R_p²/2)(I - n nᵀ).
+        wu0, wu1, wu2 = w[u_, 0], w[u_, 1], w[u_, 2]
+        ww0, ww1, ww2 = w[k, 0], w[k, 1], w[k, 2]
+        nwu = nx * wu0 + ny * wu1 + nz * wu2
+        nww = nx * ww0 + ny * ww1 + nz * ww2
+        pu0 = half_p * (wu0 - nx * nwu)
+        pu1 = half_p * (wu1 - ny * nwu)
+        pu2 = half_p * (wu2 - nz * nwu)
+        pw0 = half_p * (ww0 - nx * nww)
+        pw1 = half_p * (ww1 - ny * nww)
+        pw2 = half_p * (ww2 - nz * nww)
+        mx -= 0.5 * ((pu1 * ww2 - pu2 * ww1) + (pw1 * wu2 - pw2 * wu1))
+        my -= 0.5 * ((pu2 * ww0 - pu0 * ww2) + (pw2 * wu0 - pw0 * wu2))
+        mz -= 0.5 * ((pu0 * ww1 - pu1 * ww0) + (pw0 * wu1 - pw1 * wu0))
+        nm = nx * mx + ny * my + nz * mz
+        dwx = ginv * (mx - 0.5 * nx * nm)
+        dwy = ginv * (my - 0.5 * ny * nm)
+        dwz = ginv * (mz - 0.5 * nz * nm)
+        # Remove the Euler-rate terms: β̇ ė_β + γ̇ ė_γ, symmetrised.
+        ya_u, pi_u, ro_u = ang[u_, 0], ang[u_, 1], ang[u_, 2]
+        ya_w, pi_w, ro_w = ang[k, 0], ang[k, 1], ang[k, 2]
+        cb_coef = 0.5 * (pi_u * ya_w + pi_w * ya_u)
+        # ẑ × e_β = (-e_β,y, e_β,x, 0)
+        tx = cb_coef * (-eb_y)
+        ty = cb_coef * eb_x
+        tz = 0.0
+        # ½[γ̇_u (α̇_w ẑ + β̇_w e_β) + γ̇_w (α̇_u ẑ + β̇_u e_β)] × e_γ
+        ox = 0.5 * (ro_u * pi_w + ro_w * pi_u) * eb_x
+        oy = 0.5 * (ro_u * pi_w + ro_w * pi_u) * eb_y
+        oz = 0.5 * (ro_u * ya_w + ro_w * ya_u)
+        tx += oy * eg_z - oz * eg_y
+        ty += oz * eg_x - ox * eg_z
+        tz += ox * eg_y - oy * eg_x
+        ex = dwx - tx
+        ey = dwy - ty
+        ez = dwz - tz
+        roll_dd = (ex * ca + ey * sa) / cb
+        pitch_dd = -ex * sa + ey * ca
+        yaw_dd = ez + roll_dd * sb
+        for i in range(3):
+            Sd[2 * i, k] = 0.0
+            Sd[2 * i + 1, k] = phidd[i]
+        Sd[IX_X, k] = ax
+        Sd[IX_Y, k] = ay
+        Sd[IX_Z, k] = az
+        Sd[IX_YAW, k] = yaw_dd
+        Sd[IX_PITCH, k] = pitch_dd
+        Sd[IX_ROLL, k] = roll_dd
+    return det
