@@ -19,10 +19,10 @@ from typing import Any
 import can
 
 from rt.ati.can_protocol import (
-    OFFSET_SHORT_XY, OFFSET_SHORT_Z, OP_BIAS, OP_REQUEST_SHORT, STATUS16_SATURATION_MASK,
-    check_base_id, decode_request, decode_short_xy, decode_short_z, encode_request,
-    encode_short_response, status16_from_status32, status32_from_status16, to_counts16,
-    DEFAULT_CAN_COUNTS_PER_FORCE, DEFAULT_CAN_COUNTS_PER_TORQUE,
+    DEFAULT_CAN_COUNTS_PER_FORCE, DEFAULT_CAN_COUNTS_PER_TORQUE, OFFSET_SHORT_XY,
+    OFFSET_SHORT_Z, OP_BIAS, OP_REQUEST_SHORT, STATUS16_SATURATION_MASK, check_base_id,
+    decode_request, decode_short_xy, decode_short_z, encode_request, encode_short_response,
+    status16_from_status32, status32_from_status16, to_counts16,
 )
 from rt.ati.rdt import CountsPerUnit
 from rt.ati.twin_sensor import SourceReader, WrenchSource
@@ -170,12 +170,13 @@ class AtiCanForceTorqueSensor(ForceTorqueSensor):
             if now >= next_poll:
                 if self._awaiting:
                     self.counters.timeouts += 1
-                self._xy = None  # a new request aborts the previous transmission
+                # _xy is kept: a reply in flight still pairs correctly, because the device
+                # always sends base+5 before base+6 and a newer base+5 replaces an older one.
                 try:
                     self._bus.send(self._request_short, timeout=self.timeout_s)
                     self.counters.requests += 1
                     self._awaiting = True
-                except can.CanError as exc:
+                except (can.CanError, OSError) as exc:
                     self.last_error = f"request failed: {exc}"
                 next_poll += self.poll_period_s
                 if now - next_poll > 10.0 * self.poll_period_s:
@@ -183,8 +184,9 @@ class AtiCanForceTorqueSensor(ForceTorqueSensor):
             try:
                 msg = self._bus.recv(timeout=min(_RECV_SLICE_S,
                                                  max(0.0, next_poll - time.monotonic())))
-            except can.CanError as exc:
+            except (can.CanError, OSError) as exc:
                 self.last_error = f"receive failed: {exc}"
+                self._closing.wait(_RECV_SLICE_S)  # a bus that is down fails at once: no spin
                 continue
             if msg is not None:
                 self._on_frame(msg, time.monotonic())
@@ -280,8 +282,9 @@ class AtiCanResponder:
         while not self._closing.is_set():
             try:
                 msg = self._bus.recv(timeout=_RECV_SLICE_S)
-            except can.CanError as exc:
+            except (can.CanError, OSError) as exc:
                 self.last_error = f"receive failed: {exc}"
+                self._closing.wait(_RECV_SLICE_S)  # a bus that is down fails at once: no spin
                 continue
             if msg is None or msg.arbitration_id != self.base_id or msg.is_extended_id:
                 continue

@@ -190,6 +190,8 @@ class TwinAtiSensorModel:
     # ---------------------------------------------------------------- physics
     def measure(self, true_wrench: Sequence[float], t: float) -> AtiSample | None:
         """The sample the sensor reports at time ``t`` (s) under ``true_wrench`` (N, N m)."""
+        if len(true_wrench) != 6:
+            raise InputError(f"true_wrench needs 6 values (N, N m), got {len(true_wrench)}")
         st = self._state
         if self.fault_active("dropout", t):
             return None

@@ -12,11 +12,21 @@ from rt.errors import BackendUnavailableError, ConfigurationError
 
 #: kind -> backend name -> "module:Class". Modules are imported only when chosen.
 BACKENDS: dict[str, dict[str, str]] = {
-    "encoders": {},
-    "actuators": {},
-    "force_torque": {},
+    "encoders": {
+        "pcl833": "rt.drivers.pcl833:Pcl833Encoders",
+    },
+    "actuators": {
+        "pci1720": "rt.drivers.pci1720:Pci1720Outputs",
+    },
+    "force_torque": {
+        "ati_rdt": "rt.ati.rdt_client:RdtForceTorqueSensor",
+        "ati_can": "rt.ati.can_client:AtiCanForceTorqueSensor",
+    },
     "force_plate": {},
-    "camera": {},
+    "camera": {
+        "opencv": "rt.drivers.camera_cv:OpenCvCamera",
+        "synthetic": "rt.drivers.synthetic_frames:SyntheticMarkerCamera",
+    },
     "digital_inputs": {},
 }
 

@@ -34,6 +34,7 @@ Not thread-safe: drive it from the loop's thread (the twin runs in lockstep).
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Sequence
 
 from rt.drivers.pcl833 import (
@@ -49,8 +50,8 @@ _READABLE = frozenset(range(0, 12)) | {REG_STATUS}
 _WRITABLE = frozenset(range(0, 11))
 
 
-def _per_axis(value, name: str) -> list:
-    if isinstance(value, (int, float)):
+def _per_axis(value: float | Sequence[float], name: str) -> list:
+    if isinstance(value, numbers.Real):
         return [value] * 3
     values = list(value)
     if len(values) != 3:

@@ -280,9 +280,15 @@ class Pci1720Outputs(ActuatorOutputs):
         """Write 0 V to every channel, then drop the drive-enable line. Safe to repeat.
 
         Both steps are attempted even if the first fails; the first error is raised after.
+        After ``close()`` (which already did this) it does nothing, so fault handling may
+        call it unconditionally.
         """
-        self._check_open()
+        if self.closed:
+            return
         self._enabled = False
+        self._zero_and_drop()
+
+    def _zero_and_drop(self) -> None:
         error: HardwareError | None = None
         try:
             self._write_zero()
@@ -366,10 +372,8 @@ class Pci1720Outputs(ActuatorOutputs):
         self._dev = None
 
     def _close(self) -> None:
+        self._enabled = False
         try:
-            self._enabled = False
-            self._write_zero()
-            if self.enable_line is not None:
-                self._drive_enable(False)
+            self._zero_and_drop()
         finally:
             self._release_handles()

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import enum
 import math
+import numbers
 from typing import Sequence
 
 import numpy as np
@@ -204,7 +205,7 @@ class CountUnwrapper:
 # --- the driver ----------------------------------------------------------------------------
 
 def _per_axis(value: float | Sequence[float], name: str, n: int) -> tuple:
-    if isinstance(value, (int, float)):
+    if isinstance(value, numbers.Real):
         return (value,) * n
     values = tuple(value)
     if len(values) != n:

@@ -6,7 +6,7 @@
   slider along z, revolute rod about the leg's tangent) and the platform on its own chain
   (PX, PY, PZ, RZ, RY, RX, so the platform coordinates are x, y, z, yaw α, pitch β, roll γ) —
   closed by the three spherical-joint constraints. With S(q) = ∂Q/∂q the tree coordinates'
-  sensitivity to the sliders (``rt.model.velocity_maps``), the actuated dynamics are the
+  sensitivity to the sliders (``rt.model.kernels``), the actuated dynamics are the
   projection  M = Sᵀ M_tree S + J_r I,  C = Sᵀ (M_tree Ṡ + C_tree S),  G = Sᵀ g_tree,  where
   J_r is the motors' reflected inertia. Because M_tree and C_tree satisfy Ṁ − 2C skew and
   Sᵀ M Ṡ − Ṡᵀ M S is skew, the projected C keeps the property Ṁ − 2C skew-symmetric.
@@ -28,7 +28,7 @@ import pinocchio as pin
 from rt.errors import InputError
 from rt.model.description import Body, RobotDescription
 from rt.model.kinematics import Configuration, Kinematics
-from rt.model.velocity_maps import TREE_DOF, pack_geometry, tree_maps
+from rt.model.kernels import TREE_DOF, pack_geometry, tree_maps
 
 #: Pinocchio joint ids (1-based; 0 is the universe) of the bodies that carry mass.
 SLIDER_JOINTS = (1, 3, 5)
