@@ -28,7 +28,7 @@ import pinocchio as pin
 from rt.errors import InputError
 from rt.model.description import Body, RobotDescription
 from rt.model.kinematics import Configuration, Kinematics
-from rt.model.kernels import TREE_DOF, pack_geometry, tree_maps
+from rt.model.kernels import TREE_DOF, tree_maps
 
 #: Pinocchio joint ids (1-based; 0 is the universe) of the bodies that carry mass.
 SLIDER_JOINTS = (1, 3, 5)
@@ -139,8 +139,7 @@ class Dynamics:
         self.description = description
         self.kin = kinematics or Kinematics(description)
         k = self.kin
-        self._geom = pack_geometry(k.base_radius, k.platform_radius, k.rod_length,
-                                   k.cos_theta, k.sin_theta, k._cos_pair)
+        self._geom = k.geom
         self.model = build_tree_model(description)
         self.data = self.model.createData()
         self._platform_nominal = self.model.inertias[PLATFORM_JOINT].copy()

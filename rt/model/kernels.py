@@ -31,6 +31,46 @@ def pack_geometry(base_radius: float, platform_radius: float, rod_length: float,
 
 
 @njit(cache=True)
+def constraint_terms(geom, q, p0, p1, p2):
+    """Residuals f_p = |B_i - B_j|² - 3 R_p² (m²) for the pairs (0,1), (1,2), (2,0) and the
+    non-zero entries of ∂f/∂φ (m²/rad), returned as (f0, f1, f2, a00, a01, a11, a12, a22, a20):
+    row p of the Jacobian has its two entries in the columns of its pair."""
+    rb = geom[0]
+    rp = geom[1]
+    ln = geom[2]
+    ca = geom[9]
+    cb = geom[10]
+    cc = geom[11]
+    s0 = math.sin(p0)
+    c0 = math.cos(p0)
+    s1 = math.sin(p1)
+    c1 = math.cos(p1)
+    s2 = math.sin(p2)
+    c2 = math.cos(p2)
+    r0 = rb + ln * s0
+    r1 = rb + ln * s1
+    r2 = rb + ln * s2
+    h0 = q[0] + ln * c0
+    h1 = q[1] + ln * c1
+    h2 = q[2] + ln * c2
+    d01 = h0 - h1
+    d12 = h1 - h2
+    d20 = h2 - h0
+    side_sq = 3.0 * rp * rp
+    f0 = r0 * r0 + r1 * r1 - 2.0 * ca * r0 * r1 + d01 * d01 - side_sq
+    f1 = r1 * r1 + r2 * r2 - 2.0 * cb * r1 * r2 + d12 * d12 - side_sq
+    f2 = r2 * r2 + r0 * r0 - 2.0 * cc * r2 * r0 + d20 * d20 - side_sq
+    # ∂ρ/∂φ = L cos φ and ∂h/∂φ = -L sin φ.
+    a00 = 2.0 * (r0 - ca * r1) * ln * c0 - 2.0 * d01 * ln * s0
+    a01 = 2.0 * (r1 - ca * r0) * ln * c1 + 2.0 * d01 * ln * s1
+    a11 = 2.0 * (r1 - cb * r2) * ln * c1 - 2.0 * d12 * ln * s1
+    a12 = 2.0 * (r2 - cb * r1) * ln * c2 + 2.0 * d12 * ln * s2
+    a22 = 2.0 * (r2 - cc * r0) * ln * c2 - 2.0 * d20 * ln * s2
+    a20 = 2.0 * (r0 - cc * r2) * ln * c0 + 2.0 * d20 * ln * s0
+    return f0, f1, f2, a00, a01, a11, a12, a22, a20
+
+
+@njit(cache=True)
 def _inv3(a, out):
     c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
     c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
@@ -72,15 +112,19 @@ def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
         rho[i] = rb + ln * sphi[i]
         h[i] = q[i] + ln * cphi[i]
     # Constraint Jacobians of f_p = |B_i - B_j|² - 3 R_p² for the pairs p = (i, j).
+    _, _, _, a00, a01, a11, a12, a22, a20 = constraint_terms(geom, q, phi[0], phi[1], phi[2])
     f_phi = np.zeros((3, 3))
+    f_phi[0, 0] = a00
+    f_phi[0, 1] = a01
+    f_phi[1, 1] = a11
+    f_phi[1, 2] = a12
+    f_phi[2, 2] = a22
+    f_phi[2, 0] = a20
     f_q = np.zeros((3, 3))
     for p in range(3):
         i = (0, 1, 2)[p]
         j = (1, 2, 0)[p]
         d = h[i] - h[j]
-        c = cpair[p]
-        f_phi[p, i] = 2.0 * (rho[i] - c * rho[j]) * ln * cphi[i] - 2.0 * d * ln * sphi[i]
-        f_phi[p, j] = 2.0 * (rho[j] - c * rho[i]) * ln * cphi[j] + 2.0 * d * ln * sphi[j]
         f_q[p, i] = 2.0 * d
         f_q[p, j] = -2.0 * d
     f_phi_inv = np.empty((3, 3))
@@ -274,3 +318,49 @@ def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
         Sd[IX_PITCH, k] = pitch_dd
         Sd[IX_ROLL, k] = roll_dd
     return det
+
+
+FK_SINGULAR = -1
+FK_NO_CONVERGENCE = -2
+
+
+@njit(cache=True)
+def fk_solve(geom, q, phi, step_tol, max_iterations):
+    """Newton-Raphson on the rod angles ``phi`` (rad, in/out: warm start in, solution out).
+
+    Solves the thesis's rigid-triangle equations f_p = |B_i - B_j|² - 3 R_p² = 0 for the pairs
+    (0,1), (1,2), (2,0). Returns the number of iterations, or ``FK_SINGULAR`` /
+    ``FK_NO_CONVERGENCE`` (``phi`` then holds the last iterate).
+    """
+    p0 = phi[0]
+    p1 = phi[1]
+    p2 = phi[2]
+    it = 0
+    while True:
+        f0, f1, f2, a00, a01, a11, a12, a22, a20 = constraint_terms(geom, q, p0, p1, p2)
+        det = a00 * a11 * a22 + a01 * a12 * a20
+        if det == 0.0 or not math.isfinite(det):
+            phi[0] = p0
+            phi[1] = p1
+            phi[2] = p2
+            return FK_SINGULAR
+        # A = [[a00, a01, 0], [0, a11, a12], [a20, 0, a22]]; Cramer's rule for A Δ = f.
+        x0 = (f0 * a11 * a22 - a01 * (f1 * a22 - a12 * f2)) / det
+        x1 = (a00 * (f1 * a22 - a12 * f2) + f0 * a12 * a20) / det
+        x2 = (a00 * a11 * f2 + a01 * f1 * a20 - f0 * a11 * a20) / det
+        p0 -= x0
+        p1 -= x1
+        p2 -= x2
+        it += 1
+        step = max(abs(x0), abs(x1), abs(x2))
+        if step < step_tol:
+            break
+        if it >= max_iterations or not math.isfinite(step) or step > 10.0:
+            phi[0] = p0
+            phi[1] = p1
+            phi[2] = p2
+            return FK_NO_CONVERGENCE
+    phi[0] = p0
+    phi[1] = p1
+    phi[2] = p2
+    return it

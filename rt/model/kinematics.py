@@ -11,7 +11,8 @@ Coordinates (frames in ``rt/data/robot_nominal.yaml``):
   α = atan2(sβ sγ, cβ + cγ) (thesis eq. 9, equivalently R[1,0] = R[0,1]) and
   (x, y) = -(2/3) Σ t_i (r_i · t_i) with t_i the legs' tangents and r_i = R b_i.
 
-Inverse kinematics is closed form. Forward kinematics solves the thesis's three rigid-triangle
+Inverse kinematics is closed form. Forward kinematics (the Newton loop compiled with numba in
+``rt.model.kernels.fk_solve``, shared with the twin) solves the thesis's three rigid-triangle
 equations |B_i - B_j|² = 3 R_p² for the rod angles by Newton-Raphson (quadratic convergence,
 warm-started from the previous solution), then builds the platform frame from the three sphere
 centres.
@@ -21,7 +22,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from rt.errors import ConvergenceError, WorkspaceError
+from rt.model.kernels import FK_SINGULAR, fk_solve, pack_geometry
 from rt.model.description import RobotDescription
 
 _FK_MAX_ITERATIONS = 25
@@ -98,6 +102,10 @@ class Kinematics:
         # Rod angle with the platform level and centred: sin φ0 = (R_p - R_b) / L.
         self.phi_nominal = math.asin((self.platform_radius - self.base_radius) / self.rod_length)
         self._phi_guess = [self.phi_nominal] * 3
+        self.geom = pack_geometry(self.base_radius, self.platform_radius, self.rod_length,
+                                  self.cos_theta, self.sin_theta, self._cos_pair)
+        self._q_buf = np.zeros(3)
+        self._phi_work = np.zeros(3)
 
     # ------------------------------------------------------------------ inverse kinematics
     def ik(self, z: float, roll: float, pitch: float, check: bool = True) -> Configuration:
@@ -169,64 +177,25 @@ class Kinematics:
                 if not lo <= qi <= hi:
                     raise WorkspaceError(f"slider {i + 1} at {qi:.4f} m is outside the stroke "
                                          f"[{lo}, {hi}] m")
+        self._q_buf[0], self._q_buf[1], self._q_buf[2] = q0, q1, q2
+        phi = self._phi_work
         g = self._phi_guess if guess is None else guess
-        p0, p1, p2 = float(g[0]), float(g[1]), float(g[2])
-        iterations = 0
-        while True:
-            (f0, f1, f2), (a00, a01, a11, a12, a22, a20) = self.constraint_terms(
-                (q0, q1, q2), (p0, p1, p2))
-            # A = [[a00, a01, 0], [0, a11, a12], [a20, 0, a22]]; solve A Δ = f by Cramer's rule.
-            det = a00 * a11 * a22 + a01 * a12 * a20
-            if det == 0.0 or not math.isfinite(det):
-                raise ConvergenceError(f"forward kinematics hit a singular configuration at "
-                                       f"q = {(q0, q1, q2)} m")
-            x0 = (f0 * a11 * a22 - a01 * (f1 * a22 - a12 * f2)) / det
-            x1 = (a00 * (f1 * a22 - a12 * f2) + f0 * a12 * a20) / det
-            x2 = (a00 * a11 * f2 + a01 * f1 * a20 - f0 * a11 * a20) / det
-            p0 -= x0
-            p1 -= x1
-            p2 -= x2
-            iterations += 1
-            step = max(abs(x0), abs(x1), abs(x2))
-            if step < _FK_STEP_TOL_RAD:
-                break
-            if iterations >= _FK_MAX_ITERATIONS or not math.isfinite(step) or step > 10.0:
-                raise ConvergenceError(
-                    f"forward kinematics did not converge for q = {(q0, q1, q2)} m after "
-                    f"{iterations} Newton iterations (last step {step:.3g} rad); the sliders may "
-                    "be outside the assembly range")
+        phi[0], phi[1], phi[2] = g[0], g[1], g[2]
+        iterations = fk_solve(self.geom, self._q_buf, phi, _FK_STEP_TOL_RAD, _FK_MAX_ITERATIONS)
+        if iterations == FK_SINGULAR:
+            raise ConvergenceError(f"forward kinematics hit a singular configuration at "
+                                   f"q = {(q0, q1, q2)} m")
+        if iterations < 0:
+            raise ConvergenceError(
+                f"forward kinematics did not converge for q = {(q0, q1, q2)} m within "
+                f"{_FK_MAX_ITERATIONS} Newton iterations; the sliders may be outside the "
+                "assembly range")
+        p0, p1, p2 = float(phi[0]), float(phi[1]), float(phi[2])
         cfg = self._assemble((q0, q1, q2), (p0, p1, p2), iterations)
         if check:
             self.check_workspace(cfg)
         self._phi_guess[0], self._phi_guess[1], self._phi_guess[2] = p0, p1, p2
         return cfg
-
-    def constraint_terms(self, q, phi) -> tuple[tuple[float, float, float], tuple[float, ...]]:
-        """Residuals f_p = |B_i - B_j|² - 3 R_p² (m²) of the pairs (0,1), (1,2), (2,0) and the
-        non-zero entries of ∂f/∂φ (m²/rad): (a00, a01, a11, a12, a22, a20), where row p of the
-        Jacobian has its entries in columns i and j of its pair."""
-        rb, length = self.base_radius, self.rod_length
-        ca, cb, cc = self._cos_pair
-        side_sq = self._side_sq
-        s0, c0 = math.sin(phi[0]), math.cos(phi[0])
-        s1, c1 = math.sin(phi[1]), math.cos(phi[1])
-        s2, c2 = math.sin(phi[2]), math.cos(phi[2])
-        r0, r1, r2 = rb + length * s0, rb + length * s1, rb + length * s2
-        h0, h1, h2 = q[0] + length * c0, q[1] + length * c1, q[2] + length * c2
-        d01, d12, d20 = h0 - h1, h1 - h2, h2 - h0
-        f0 = r0 * r0 + r1 * r1 - 2.0 * ca * r0 * r1 + d01 * d01 - side_sq
-        f1 = r1 * r1 + r2 * r2 - 2.0 * cb * r1 * r2 + d12 * d12 - side_sq
-        f2 = r2 * r2 + r0 * r0 - 2.0 * cc * r2 * r0 + d20 * d20 - side_sq
-        # ∂ρ/∂φ = L cos φ, ∂h/∂φ = -L sin φ.
-        dr0, dr1, dr2 = length * c0, length * c1, length * c2
-        dh0, dh1, dh2 = -length * s0, -length * s1, -length * s2
-        a00 = 2.0 * (r0 - ca * r1) * dr0 + 2.0 * d01 * dh0
-        a01 = 2.0 * (r1 - ca * r0) * dr1 - 2.0 * d01 * dh1
-        a11 = 2.0 * (r1 - cb * r2) * dr1 + 2.0 * d12 * dh1
-        a12 = 2.0 * (r2 - cb * r1) * dr2 - 2.0 * d12 * dh2
-        a22 = 2.0 * (r2 - cc * r0) * dr2 + 2.0 * d20 * dh2
-        a20 = 2.0 * (r0 - cc * r2) * dr0 - 2.0 * d20 * dh0
-        return (f0, f1, f2), (a00, a01, a11, a12, a22, a20)
 
     def _assemble(self, q, phi, iterations: int) -> Configuration:
         """Platform frame from the three sphere centres (thesis eq. 7)."""

@@ -7,6 +7,7 @@ import numpy as np
 
 from rt.errors import KinematicsError
 from rt.model.dynamics import Dynamics
+from rt.model.kernels import constraint_terms
 from rt.model.kinematics import Configuration, Kinematics
 
 
@@ -24,7 +25,8 @@ def conditioning(dyn: Dynamics, cfg: Configuration) -> dict[str, float]:
     j_fk_scaled = j_fk * np.array([1.0, rp, rp])[:, None]
     s = np.linalg.svd(j_fk_scaled, compute_uv=False)
     inverse = float(s[-1] / s[0])
-    _, (a00, a01, a11, a12, a22, a20) = dyn.kin.constraint_terms(cfg.q, cfg.phi)
+    _, _, _, a00, a01, a11, a12, a22, a20 = constraint_terms(dyn.kin.geom, np.array(cfg.q),
+                                                             *cfg.phi)
     jac = np.array([[a00, a01, 0.0], [0.0, a11, a12], [a20, 0.0, a22]])
     sf = np.linalg.svd(jac, compute_uv=False)
     return {"inverse": inverse, "forward": float(sf[-1] / sf[0])}
