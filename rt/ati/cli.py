@@ -68,6 +68,13 @@ def register_twin_commands(commands: argparse._SubParsersAction) -> None:
                    help="true wrench, N and N m (default 0 0 -50 0 0 0: light static load)")
     p.add_argument("--buffer", type=int, default=10,
                    help="records per datagram in buffered mode (default %(default)s)")
+    p.add_argument("--env", default=None,
+                   help="run the full twin in real time in this environment (free, "
+                        "payload:KG[@S], plate[:HEIGHT_M], ankle) and serve its sensor instead "
+                        "of a constant wrench")
+    p.add_argument("--volts", type=float, nargs=3, default=None, metavar=("V1", "V2", "V3"),
+                   help="with --env: amplifier commands held on the twin (default: the "
+                        "gravity-compensating voltages at home)")
     _add_counts_options(p)
     p.set_defaults(func=cmd_serve_ati)
 
@@ -112,8 +119,13 @@ def cmd_serve_ati(args: argparse.Namespace) -> int:
     from rt.ati.twin_sensor import TwinAtiSensorModel
 
     try:
-        model = TwinAtiSensorModel(seed=args.seed)
-        source = model.make_source(args.wrench)
+        if args.env is not None:
+            from rt.twin.serve import twin_wrench_source
+
+            source = twin_wrench_source(args.env, args.volts, args.seed)
+        else:
+            model = TwinAtiSensorModel(seed=args.seed)
+            source = model.make_source(args.wrench)
         server = RdtServer(source, host=args.host, port=args.port, rate_hz=args.rate,
                            buffer_records=args.buffer,
                            counts=CountsPerUnit(args.counts_per_force, args.counts_per_torque))

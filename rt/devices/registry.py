@@ -14,20 +14,25 @@ from rt.errors import BackendUnavailableError, ConfigurationError
 BACKENDS: dict[str, dict[str, str]] = {
     "encoders": {
         "pcl833": "rt.drivers.pcl833:Pcl833Encoders",
+        "sim": "rt.twin.backends:TwinEncoders",
     },
     "actuators": {
         "pci1720": "rt.drivers.pci1720:Pci1720Outputs",
+        "sim": "rt.twin.backends:TwinActuators",
     },
     "force_torque": {
         "ati_rdt": "rt.ati.rdt_client:RdtForceTorqueSensor",
         "ati_can": "rt.ati.can_client:AtiCanForceTorqueSensor",
+        "sim": "rt.twin.backends:TwinForceTorque",
     },
     "force_plate": {},
     "camera": {
         "opencv": "rt.drivers.camera_cv:OpenCvCamera",
         "synthetic": "rt.drivers.synthetic_frames:SyntheticMarkerCamera",
     },
-    "digital_inputs": {},
+    "digital_inputs": {
+        "sim": "rt.twin.backends:TwinDigitalInputs",
+    },
 }
 
 

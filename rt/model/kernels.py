@@ -364,3 +364,60 @@ def fk_solve(geom, q, phi, step_tol, max_iterations):
     phi[1] = p1
     phi[2] = p2
     return it
+
+
+@njit(cache=True)
+def assemble(geom, q, phi, rot, pos, spheres):
+    """Platform frame from the three sphere centres (thesis eq. 7).
+
+    Writes R_BP into ``rot`` (3×3), the platform origin (centroid of the spheres) into ``pos``
+    and the sphere centres into ``spheres`` (3×3, one per row), all in the base frame (m).
+    """
+    rb = geom[0]
+    ln = geom[2]
+    for i in range(3):
+        rad = rb + ln * math.sin(phi[i])
+        spheres[i, 0] = rad * geom[3 + i]
+        spheres[i, 1] = rad * geom[6 + i]
+        spheres[i, 2] = q[i] + ln * math.cos(phi[i])
+    for c in range(3):
+        pos[c] = (spheres[0, c] + spheres[1, c] + spheres[2, c]) / 3.0
+    # Platform z axis: normal of the sphere triangle (legs counter-clockwise -> points up).
+    ux = spheres[1, 0] - spheres[0, 0]
+    uy = spheres[1, 1] - spheres[0, 1]
+    uz = spheres[1, 2] - spheres[0, 2]
+    vx = spheres[2, 0] - spheres[0, 0]
+    vy = spheres[2, 1] - spheres[0, 1]
+    vz = spheres[2, 2] - spheres[0, 2]
+    nx = uy * vz - uz * vy
+    ny = uz * vx - ux * vz
+    nz = ux * vy - uy * vx
+    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+    nx /= nn
+    ny /= nn
+    nz /= nn
+    # f1: unit vector towards sphere 0 in the base frame; e1 the same in the platform frame.
+    fx = spheres[0, 0] - pos[0]
+    fy = spheres[0, 1] - pos[1]
+    fz = spheres[0, 2] - pos[2]
+    fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+    fx /= fn
+    fy /= fn
+    fz /= fn
+    gx = ny * fz - nz * fy                  # n × f1
+    gy = nz * fx - nx * fz
+    gz = nx * fy - ny * fx
+    e1x = geom[3]
+    e1y = geom[6]
+    e2x = -e1y                              # ẑ × e1
+    e2y = e1x
+    # R = f1 e1ᵀ + (n × f1) e2ᵀ + n ẑᵀ
+    rot[0, 0] = fx * e1x + gx * e2x
+    rot[0, 1] = fx * e1y + gx * e2y
+    rot[0, 2] = nx
+    rot[1, 0] = fy * e1x + gy * e2x
+    rot[1, 1] = fy * e1y + gy * e2y
+    rot[1, 2] = ny
+    rot[2, 0] = fz * e1x + gz * e2x
+    rot[2, 1] = fz * e1y + gz * e2y
+    rot[2, 2] = nz

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rt.errors import ConvergenceError, WorkspaceError
-from rt.model.kernels import FK_SINGULAR, fk_solve, pack_geometry
+from rt.model.kernels import FK_SINGULAR, assemble, fk_solve, pack_geometry
 from rt.model.description import RobotDescription
 
 _FK_MAX_ITERATIONS = 25
@@ -106,6 +106,9 @@ class Kinematics:
                                   self.cos_theta, self.sin_theta, self._cos_pair)
         self._q_buf = np.zeros(3)
         self._phi_work = np.zeros(3)
+        self._rot = np.zeros((3, 3))
+        self._pos = np.zeros(3)
+        self._spheres = np.zeros((3, 3))
 
     # ------------------------------------------------------------------ inverse kinematics
     def ik(self, z: float, roll: float, pitch: float, check: bool = True) -> Configuration:
@@ -198,35 +201,14 @@ class Kinematics:
         return cfg
 
     def _assemble(self, q, phi, iterations: int) -> Configuration:
-        """Platform frame from the three sphere centres (thesis eq. 7)."""
-        rb, length = self.base_radius, self.rod_length
-        pts = []
-        for i in range(3):
-            rad = rb + length * math.sin(phi[i])
-            pts.append((rad * self.cos_theta[i], rad * self.sin_theta[i],
-                        q[i] + length * math.cos(phi[i])))
-        px = (pts[0][0] + pts[1][0] + pts[2][0]) / 3.0
-        py = (pts[0][1] + pts[1][1] + pts[2][1]) / 3.0
-        pz = (pts[0][2] + pts[1][2] + pts[2][2]) / 3.0
-        # Platform z axis: normal of the sphere triangle (legs counter-clockwise → points up).
-        ux, uy, uz = pts[1][0] - pts[0][0], pts[1][1] - pts[0][1], pts[1][2] - pts[0][2]
-        vx, vy, vz = pts[2][0] - pts[0][0], pts[2][1] - pts[0][1], pts[2][2] - pts[0][2]
-        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-        nx, ny, nz = nx / nn, ny / nn, nz / nn
-        # f1: unit vector towards sphere 0 in the base frame; e1 the same in the platform frame.
-        fx, fy, fz = pts[0][0] - px, pts[0][1] - py, pts[0][2] - pz
-        fn = math.sqrt(fx * fx + fy * fy + fz * fz)
-        fx, fy, fz = fx / fn, fy / fn, fz / fn
-        gx, gy, gz = ny * fz - nz * fy, nz * fx - nx * fz, nx * fy - ny * fx   # n × f1
-        e1x, e1y = self.cos_theta[0], self.sin_theta[0]                           # in P
-        e2x, e2y = -e1y, e1x                                                      # ẑ × e1
-        # R = f1 e1ᵀ + (n × f1) e2ᵀ + n ẑᵀ
-        rot = (
-            fx * e1x + gx * e2x, fx * e1y + gx * e2y, nx,
-            fy * e1x + gy * e2x, fy * e1y + gy * e2y, ny,
-            fz * e1x + gz * e2x, fz * e1y + gz * e2y, nz,
-        )
+        """Platform frame from the three sphere centres (thesis eq. 7), angles read off R."""
+        phi_arr = self._phi_work
+        phi_arr[0], phi_arr[1], phi_arr[2] = phi
+        self._q_buf[0], self._q_buf[1], self._q_buf[2] = q
+        assemble(self.geom, self._q_buf, phi_arr, self._rot, self._pos, self._spheres)
+        rot = tuple(self._rot.ravel().tolist())
+        px, py, pz = self._pos.tolist()
+        pts = tuple(tuple(row) for row in self._spheres.tolist())
         roll = math.atan2(rot[7], rot[8])
         pitch = math.atan2(-rot[6], math.hypot(rot[7], rot[8]))
         yaw = math.atan2(rot[3], rot[0])

@@ -1,0 +1,1 @@
+"""State estimation from the encoders: slider velocity and acceleration."""

@@ -1,0 +1,513 @@
+"""The twin's physics, compiled with numba: actuated dynamics, drives, friction, environments,
+and the fixed-step integrators.
+
+Why not call Pinocchio here: the twin must run ≥ 20× real time with ≥ 5 kHz substeps, i.e.
+≤ 10 µs per substep for everything, and one Pinocchio evaluation from Python costs ~25 µs. The
+same rigid-body model (same description, same tree, same closed-chain maps from
+``rt.model.kernels``) is therefore evaluated here body by body — M = Σ (m AᵀA + Ωᵀ I Ω) and the
+bias forces from the bodies' drift accelerations — and ``tests/test_twin_physics.py`` checks it
+against the Pinocchio model to round-off at random states.
+
+Parameter arrays (packed by ``rt.twin.plant``):
+
+* ``bodies`` (float64[40]): [m_slider, m_rod, c_rod(3), I_rod(9), m_plat, c_plat(3), I_plat(9),
+  sensor offset s(3), gravity g, J_reflected, force_per_amp, current_limit, amp_gain,
+  end-stop low, end-stop high (m), end-stop stiffness (N/m) and damping (N s/m), spare];
+  rod quantities in the rod frame, platform ones in P (payload and sensor included), inertias
+  about the COM.
+* ``friction`` (float64[5]): [f_v (N s/m), f_c (N), f_s static (N), v_stribeck (m/s),
+  v_smooth (m/s)].  F = f_v v + (f_c + (f_s − f_c) exp(−(v/v_st)²)) tanh(v/v_smooth).
+* ``env`` (float64[16]): env[0] selects the environment (see ``ENV_*``), the rest its
+  parameters (documented in ``rt.twin.environment``).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from rt.model.kernels import assemble, fk_solve, tree_maps
+
+ENV_FREE = 0.0
+ENV_PLATE = 1.0
+ENV_ANKLE = 2.0
+
+B_M_SLIDER = 0
+B_M_ROD = 1
+B_C_ROD = 2
+B_I_ROD = 5
+B_M_PLAT = 14
+B_C_PLAT = 15
+B_I_PLAT = 18
+B_SENSOR = 27
+B_G = 30
+B_J_REFL = 31
+B_F_PER_A = 32
+B_I_LIMIT = 33
+B_AMP_GAIN = 34
+B_STOP_LO = 35
+B_STOP_HI = 36
+B_STOP_K = 37
+B_STOP_C = 38
+N_BODY_PARAMS = 40
+
+STATUS_OK = 0
+STATUS_FK_FAILED = 1
+
+_FK_TOL = 1e-12
+_FK_MAX_IT = 25
+
+
+@njit(cache=True)
+def _cross(ax, ay, az, bx, by, bz):
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@njit(cache=True)
+def drive_force(volts, bodies, out):
+    """Screw force (N) per axis for amplifier command volts: current mode, current-limited."""
+    gain = bodies[B_AMP_GAIN]
+    limit = bodies[B_I_LIMIT]
+    fpa = bodies[B_F_PER_A]
+    for i in range(3):
+        current = gain * volts[i]
+        if current > limit:
+            current = limit
+        elif current < -limit:
+            current = -limit
+        out[i] = fpa * current
+
+
+@njit(cache=True)
+def friction_force(qd, friction, out):
+    """Stribeck friction (N) per axis, smooth through zero velocity."""
+    fv = friction[0]
+    fc = friction[1]
+    fs = friction[2]
+    vst = friction[3]
+    vsm = friction[4]
+    for i in range(3):
+        v = qd[i]
+        x = v / vst
+        out[i] = fv * v + (fc + (fs - fc) * math.exp(-x * x)) * math.tanh(v / vsm)
+
+
+@njit(cache=True)
+def end_stop_force(q, qd, bodies):
+    """Force (N) of the mechanical end stops at the ends of the ball-screw stroke: stiff,
+    damped, one-sided (they push the slider back, never pull)."""
+    lo = bodies[B_STOP_LO]
+    hi = bodies[B_STOP_HI]
+    f = 0.0
+    if q > hi:
+        f = -bodies[B_STOP_K] * (q - hi) - bodies[B_STOP_C] * qd
+        if f > 0.0:
+            f = 0.0
+    elif q < lo:
+        f = -bodies[B_STOP_K] * (q - lo) - bodies[B_STOP_C] * qd
+        if f < 0.0:
+            f = 0.0
+    return f
+
+
+@njit(cache=True)
+def mass_and_bias(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h):
+    """Actuated mass matrix M (kg) and bias forces h = C q̇ + G (N) at (q, q̇).
+
+    ``phi`` must hold the solved rod angles; S, Ṡ and the twist map are filled here.
+    """
+    spheres = np.empty((3, 3))
+    assemble(geom, q, phi, rot, pos, spheres)
+    tree_maps(geom, q, phi, rot, qd, S, Sd, twist)
+    g = bodies[B_G]
+    jr = bodies[B_J_REFL]
+    ms = bodies[B_M_SLIDER]
+    for a in range(3):
+        h[a] = ms * g
+        for b in range(3):
+            M[a, b] = 0.0
+        M[a, a] = jr + ms
+    # ---- rods: rotation about the leg tangent t_i, pivot moving with the slider.
+    mr = bodies[B_M_ROD]
+    for i in range(3):
+        ct = geom[3 + i]
+        st = geom[6 + i]
+        sp = math.sin(phi[i])
+        cp = math.cos(phi[i])
+        # R_rod = Rz(θ) Ry(φ); columns in the base frame.
+        r00 = ct * cp
+        r01 = -st
+        r02 = ct * sp
+        r10 = st * cp
+        r11 = ct
+        r12 = st * sp
+        r20 = -sp
+        r21 = 0.0
+        r22 = cp
+        cx = bodies[B_C_ROD]
+        cy = bodies[B_C_ROD + 1]
+        cz = bodies[B_C_ROD + 2]
+        rhox = r00 * cx + r01 * cy + r02 * cz
+        rhoy = r10 * cx + r11 * cy + r12 * cz
+        rhoz = r20 * cx + r21 * cy + r22 * cz
+        # World inertia I_w = R I Rᵀ.
+        iw = np.empty((3, 3))
+        rr = np.empty((3, 3))
+        rr[0, 0] = r00
+        rr[0, 1] = r01
+        rr[0, 2] = r02
+        rr[1, 0] = r10
+        rr[1, 1] = r11
+        rr[1, 2] = r12
+        rr[2, 0] = r20
+        rr[2, 1] = r21
+        rr[2, 2] = r22
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for k in range(3):
+                    for l in range(3):
+                        acc += rr[a, k] * bodies[B_I_ROD + 3 * k + l] * rr[b, l]
+                iw[a, b] = acc
+        tx = -st
+        ty = ct
+        # Columns: v_k = δ_ik ẑ + ω_k × ρ, ω_k = φ̇_ik t.
+        av = np.empty((3, 3))
+        aw = np.empty((3, 3))
+        for k in range(3):
+            pd = S[2 * i + 1, k]
+            wx = pd * tx
+            wy = pd * ty
+            wz = 0.0
+            vx, vy, vz = _cross(wx, wy, wz, rhox, rhoy, rhoz)
+            if k == i:
+                vz += 1.0
+            av[0, k] = vx
+            av[1, k] = vy
+            av[2, k] = vz
+            aw[0, k] = wx
+            aw[1, k] = wy
+            aw[2, k] = wz
+        # Drift accelerations (q̈ = 0) for the actual q̇.
+        phid = 0.0
+        phidd = 0.0
+        for k in range(3):
+            phid += S[2 * i + 1, k] * qd[k]
+            phidd += Sd[2 * i + 1, k] * qd[k]
+        wx = phid * tx
+        wy = phid * ty
+        alx = phidd * tx
+        aly = phidd * ty
+        a1x, a1y, a1z = _cross(alx, aly, 0.0, rhox, rhoy, rhoz)
+        w1x, w1y, w1z = _cross(wx, wy, 0.0, rhox, rhoy, rhoz)
+        a2x, a2y, a2z = _cross(wx, wy, 0.0, w1x, w1y, w1z)
+        ax0 = a1x + a2x
+        ay0 = a1y + a2y
+        az0 = a1z + a2z + g            # a⁰ − g_vec with g_vec = (0, 0, −g)
+        iwx = iw[0, 0] * wx + iw[0, 1] * wy
+        iwy = iw[1, 0] * wx + iw[1, 1] * wy
+        iwz = iw[2, 0] * wx + iw[2, 1] * wy
+        gx, gy, gz = _cross(wx, wy, 0.0, iwx, iwy, iwz)
+        tqx = iw[0, 0] * alx + iw[0, 1] * aly + gx
+        tqy = iw[1, 0] * alx + iw[1, 1] * aly + gy
+        tqz = iw[2, 0] * alx + iw[2, 1] * aly + gz
+        for a in range(3):
+            h[a] += mr * (av[0, a] * ax0 + av[1, a] * ay0 + av[2, a] * az0) \
+                + aw[0, a] * tqx + aw[1, a] * tqy + aw[2, a] * tqz
+            for b in range(3):
+                acc = mr * (av[0, a] * av[0, b] + av[1, a] * av[1, b] + av[2, a] * av[2, b])
+                for k in range(3):
+                    for l in range(3):
+                        acc += aw[k, a] * iw[k, l] * aw[l, b]
+                M[a, b] += acc
+    # ---- platform (with sensor and payload).
+    mp = bodies[B_M_PLAT]
+    cx = bodies[B_C_PLAT]
+    cy = bodies[B_C_PLAT + 1]
+    cz = bodies[B_C_PLAT + 2]
+    rhox = rot[0, 0] * cx + rot[0, 1] * cy + rot[0, 2] * cz
+    rhoy = rot[1, 0] * cx + rot[1, 1] * cy + rot[1, 2] * cz
+    rhoz = rot[2, 0] * cx + rot[2, 1] * cy + rot[2, 2] * cz
+    iw = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            acc = 0.0
+            for k in range(3):
+                for l in range(3):
+                    acc += rot[a, k] * bodies[B_I_PLAT + 3 * k + l] * rot[b, l]
+            iw[a, b] = acc
+    av = np.empty((3, 3))
+    aw = np.empty((3, 3))
+    for k in range(3):
+        wx = twist[3, k]
+        wy = twist[4, k]
+        wz = twist[5, k]
+        vx, vy, vz = _cross(wx, wy, wz, rhox, rhoy, rhoz)
+        av[0, k] = twist[0, k] + vx
+        av[1, k] = twist[1, k] + vy
+        av[2, k] = twist[2, k] + vz
+        aw[0, k] = wx
+        aw[1, k] = wy
+        aw[2, k] = wz
+    # Drift: origin acceleration from Ṡ, angular acceleration from the Euler-rate kinematics.
+    pax = 0.0
+    pay = 0.0
+    paz = 0.0
+    yd = 0.0
+    pd = 0.0
+    rd = 0.0
+    ydd = 0.0
+    pdd = 0.0
+    rdd = 0.0
+    wx = 0.0
+    wy = 0.0
+    wz = 0.0
+    for k in range(3):
+        pax += Sd[6, k] * qd[k]
+        pay += Sd[7, k] * qd[k]
+        paz += Sd[8, k] * qd[k]
+        yd += S[9, k] * qd[k]
+        pd += S[10, k] * qd[k]
+        rd += S[11, k] * qd[k]
+        ydd += Sd[9, k] * qd[k]
+        pdd += Sd[10, k] * qd[k]
+        rdd += Sd[11, k] * qd[k]
+        wx += twist[3, k] * qd[k]
+        wy += twist[4, k] * qd[k]
+        wz += twist[5, k] * qd[k]
+    yaw = math.atan2(rot[1, 0], rot[0, 0])
+    sa = math.sin(yaw)
+    ca = math.cos(yaw)
+    sb = -rot[2, 0]
+    cb = math.sqrt(max(0.0, 1.0 - sb * sb))
+    ebx = -sa
+    eby = ca
+    egx = ca * cb
+    egy = sa * cb
+    egz = -sb
+    # ω̇ = α̈ ẑ + β̈ e_β + γ̈ e_γ + β̇ α̇ (ẑ × e_β) + γ̇ (α̇ ẑ + β̇ e_β) × e_γ
+    alx = pdd * ebx + rdd * egx + pd * yd * (-eby)
+    aly = pdd * eby + rdd * egy + pd * yd * ebx
+    alz = ydd + rdd * egz
+    ox = pd * ebx
+    oy = pd * eby
+    oz = yd
+    t1x, t1y, t1z = _cross(ox, oy, oz, egx, egy, egz)
+    alx += rd * t1x
+    aly += rd * t1y
+    alz += rd * t1z
+    a1x, a1y, a1z = _cross(alx, aly, alz, rhox, rhoy, rhoz)
+    w1x, w1y, w1z = _cross(wx, wy, wz, rhox, rhoy, rhoz)
+    a2x, a2y, a2z = _cross(wx, wy, wz, w1x, w1y, w1z)
+    ax0 = pax + a1x + a2x
+    ay0 = pay + a1y + a2y
+    az0 = paz + a1z + a2z + g
+    iwx = iw[0, 0] * wx + iw[0, 1] * wy + iw[0, 2] * wz
+    iwy = iw[1, 0] * wx + iw[1, 1] * wy + iw[1, 2] * wz
+    iwz = iw[2, 0] * wx + iw[2, 1] * wy + iw[2, 2] * wz
+    gx, gy, gz = _cross(wx, wy, wz, iwx, iwy, iwz)
+    tqx = iw[0, 0] * alx + iw[0, 1] * aly + iw[0, 2] * alz + gx
+    tqy = iw[1, 0] * alx + iw[1, 1] * aly + iw[1, 2] * alz + gy
+    tqz = iw[2, 0] * alx + iw[2, 1] * aly + iw[2, 2] * alz + gz
+    for a in range(3):
+        h[a] += mp * (av[0, a] * ax0 + av[1, a] * ay0 + av[2, a] * az0) \
+            + aw[0, a] * tqx + aw[1, a] * tqy + aw[2, a] * tqz
+        for b in range(3):
+            acc = mp * (av[0, a] * av[0, b] + av[1, a] * av[1, b] + av[2, a] * av[2, b])
+            for k in range(3):
+                for l in range(3):
+                    acc += aw[k, a] * iw[k, l] * aw[l, b]
+            M[a, b] += acc
+
+
+@njit(cache=True)
+def environment_wrench(env, bodies, rot, pos, twist, qd, env_state, wrench_s, tau_env):
+    """Wrench of the environment on the platform at the sensor origin, in the sensor frame
+    (``wrench_s``: N, N m) and its actuator-space image τ_env = J_Sᵀ w_S (N)."""
+    for k in range(6):
+        wrench_s[k] = 0.0
+    for k in range(3):
+        tau_env[k] = 0.0
+    kind = env[0]
+    if kind == ENV_FREE:
+        return
+    # Sensor origin and its velocity in the base frame.
+    sx = bodies[B_SENSOR]
+    sy = bodies[B_SENSOR + 1]
+    sz = bodies[B_SENSOR + 2]
+    obx = rot[0, 0] * sx + rot[0, 1] * sy + rot[0, 2] * sz
+    oby = rot[1, 0] * sx + rot[1, 1] * sy + rot[1, 2] * sz
+    obz = rot[2, 0] * sx + rot[2, 1] * sy + rot[2, 2] * sz
+    vx = 0.0
+    vy = 0.0
+    vz = 0.0
+    wx = 0.0
+    wy = 0.0
+    wz = 0.0
+    for k in range(3):
+        vx += twist[0, k] * qd[k]
+        vy += twist[1, k] * qd[k]
+        vz += twist[2, k] * qd[k]
+        wx += twist[3, k] * qd[k]
+        wy += twist[4, k] * qd[k]
+        wz += twist[5, k] * qd[k]
+    ex, ey, ez = _cross(wx, wy, wz, obx, oby, obz)
+    vox = vx + ex
+    voy = vy + ey
+    voz = vz + ez
+    oz = pos[2] + obz
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    if kind == ENV_PLATE:
+        # env: [1, z_plate, k_n, c_n, c_t, tool_length]: the tool tip, ``tool_length`` along the
+        # sensor z axis above its origin, presses a horizontal rigidly-mounted plate from below.
+        tool = env[5]
+        tipx = rot[0, 2] * tool
+        tipy = rot[1, 2] * tool
+        tipz = rot[2, 2] * tool
+        depth = oz + tipz - env[1]
+        if depth > 0.0:
+            tvx, tvy, tvz = _cross(wx, wy, wz, tipx, tipy, tipz)
+            vtz = voz + tvz
+            fn = env[2] * depth + env[3] * vtz
+            if fn < 0.0:
+                fn = 0.0                       # the contact pushes, never pulls
+            fx = -env[4] * (vox + tvx)
+            fy = -env[4] * (voy + tvy)
+            fz = -fn
+            mx, my, mz = _cross(tipx, tipy, tipz, fx, fy, fz)
+            env_state[0] = 1.0
+        else:
+            env_state[0] = 0.0
+    elif kind == ENV_ANKLE:
+        # env: [2, z0, roll0, pitch0, k_z, c_z, k_roll, k_pitch, k_yaw, d_roll, d_pitch, d_yaw,
+        #       limb_weight]: a strapped foot, bilateral, as springs and dampers about the
+        # neutral pose, plus the limb's weight.
+        roll = math.atan2(rot[2, 1], rot[2, 2])
+        pitch = math.atan2(-rot[2, 0], math.sqrt(rot[2, 1] ** 2 + rot[2, 2] ** 2))
+        yaw = math.atan2(rot[1, 0], rot[0, 0])
+        fz = -env[4] * (oz - env[1]) - env[5] * voz - env[12]
+        mx = -env[6] * (roll - env[2]) - env[9] * wx
+        my = -env[7] * (pitch - env[3]) - env[10] * wy
+        mz = -env[8] * yaw - env[11] * wz
+    # Express in the sensor frame (axes of P).
+    for a in range(3):
+        wrench_s[a] = rot[0, a] * fx + rot[1, a] * fy + rot[2, a] * fz
+        wrench_s[3 + a] = rot[0, a] * mx + rot[1, a] * my + rot[2, a] * mz
+    # τ_env,k = (v_k + ω_k × s_B) · f + ω_k · m  (power of the wrench for q̇ = e_k).
+    for k in range(3):
+        cx_, cy_, cz_ = _cross(twist[3, k], twist[4, k], twist[5, k], obx, oby, obz)
+        tau_env[k] = ((twist[0, k] + cx_) * fx + (twist[1, k] + cy_) * fy
+                      + (twist[2, k] + cz_) * fz
+                      + twist[3, k] * mx + twist[4, k] * my + twist[5, k] * mz)
+
+
+@njit(cache=True)
+def acceleration(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd, wrench_s,
+                 work_rot, work_pos, S, Sd, twist, M, h, tau_env, fr):
+    """q̈ (m/s²) for screw forces ``force`` (N); returns a status (FK failure -> 1)."""
+    it = fk_solve(geom, q, phi, _FK_TOL, _FK_MAX_IT)
+    if it < 0:
+        return STATUS_FK_FAILED
+    mass_and_bias(geom, bodies, q, qd, phi, work_rot, work_pos, S, Sd, twist, M, h)
+    environment_wrench(env, bodies, work_rot, work_pos, twist, qd, env_state, wrench_s, tau_env)
+    friction_force(qd, friction, fr)
+    r0 = force[0] - h[0] - fr[0] + tau_env[0] + end_stop_force(q[0], qd[0], bodies)
+    r1 = force[1] - h[1] - fr[1] + tau_env[1] + end_stop_force(q[1], qd[1], bodies)
+    r2 = force[2] - h[2] - fr[2] + tau_env[2] + end_stop_force(q[2], qd[2], bodies)
+    # M is symmetric positive definite and dominated by the reflected inertia: Cramer's rule.
+    c00 = M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1]
+    c01 = M[1, 2] * M[2, 0] - M[1, 0] * M[2, 2]
+    c02 = M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]
+    det = M[0, 0] * c00 + M[0, 1] * c01 + M[0, 2] * c02
+    qdd[0] = (r0 * c00 + r1 * (M[0, 2] * M[2, 1] - M[0, 1] * M[2, 2])
+              + r2 * (M[0, 1] * M[1, 2] - M[0, 2] * M[1, 1])) / det
+    qdd[1] = (r0 * c01 + r1 * (M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0])
+              + r2 * (M[0, 2] * M[1, 0] - M[0, 0] * M[1, 2])) / det
+    qdd[2] = (r0 * c02 + r1 * (M[0, 1] * M[2, 0] - M[0, 0] * M[2, 1])
+              + r2 * (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0])) / det
+    return STATUS_OK
+
+
+INTEGRATOR_SYMPLECTIC_EULER = 0
+INTEGRATOR_RK4 = 1
+
+
+@njit(cache=True)
+def integrate(geom, bodies, friction, env, q, qd, phi, volts, n_steps, h_step, integrator,
+              env_state, qdd, wrench_s):
+    """Advance (q, q̇) by ``n_steps`` substeps of ``h_step`` s with the drives held at ``volts``.
+
+    ``integrator`` 0: semi-implicit (symplectic) Euler, q̇ += h q̈ then q += h q̇ — one dynamics
+    evaluation per substep, energy error bounded (no drift) for the conservative part.
+    1: classical Runge-Kutta 4 — four evaluations, O(h⁴) for accuracy checks.
+    ``qdd`` and ``wrench_s`` are left as evaluated at the start of the last substep (Euler) or at
+    the final state (RK4). Returns a status (0 ok, 1 forward kinematics failed).
+    """
+    force = np.empty(3)
+    drive_force(volts, bodies, force)
+    rot = np.empty((3, 3))
+    pos = np.empty(3)
+    S = np.empty((12, 3))
+    Sd = np.empty((12, 3))
+    twist = np.empty((6, 3))
+    M = np.empty((3, 3))
+    hb = np.empty(3)
+    tau_env = np.empty(3)
+    fr = np.empty(3)
+    if integrator == INTEGRATOR_SYMPLECTIC_EULER:
+        for _ in range(n_steps):
+            st = acceleration(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd,
+                              wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+            if st != STATUS_OK:
+                return st
+            for i in range(3):
+                qd[i] += h_step * qdd[i]
+                q[i] += h_step * qd[i]
+    else:
+        q0 = np.empty(3)
+        v0 = np.empty(3)
+        qs = np.empty(3)
+        vs = np.empty(3)
+        k1 = np.empty(3)
+        k2 = np.empty(3)
+        k3 = np.empty(3)
+        k4 = np.empty(3)
+        for _ in range(n_steps):
+            for i in range(3):
+                q0[i] = q[i]
+                v0[i] = qd[i]
+            st = acceleration(geom, bodies, friction, env, q0, v0, phi, force, env_state, k1,
+                              wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+            for i in range(3):
+                qs[i] = q0[i] + 0.5 * h_step * v0[i]
+                vs[i] = v0[i] + 0.5 * h_step * k1[i]
+            st += acceleration(geom, bodies, friction, env, qs, vs, phi, force, env_state, k2,
+                               wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+            v2 = vs.copy()
+            for i in range(3):
+                qs[i] = q0[i] + 0.5 * h_step * v2[i]
+                vs[i] = v0[i] + 0.5 * h_step * k2[i]
+            st += acceleration(geom, bodies, friction, env, qs, vs, phi, force, env_state, k3,
+                               wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+            v3 = vs.copy()
+            for i in range(3):
+                qs[i] = q0[i] + h_step * v3[i]
+                vs[i] = v0[i] + h_step * k3[i]
+            st += acceleration(geom, bodies, friction, env, qs, vs, phi, force, env_state, k4,
+                               wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+            if st != STATUS_OK:
+                return STATUS_FK_FAILED
+            v4 = vs
+            for i in range(3):
+                q[i] = q0[i] + h_step / 6.0 * (v0[i] + 2.0 * v2[i] + 2.0 * v3[i] + v4[i])
+                qd[i] = v0[i] + h_step / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        # Leave q̈ and the wrench consistent with the final state.
+        return acceleration(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd,
+                            wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+    return STATUS_OK

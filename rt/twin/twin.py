@@ -1,0 +1,202 @@
+"""The digital twin: the plant plus the rig's sensors and drives, speaking their real formats.
+
+* Encoders: a byte-level PCL-833 (``FakePcl833Port``) counts pulses from the simulated slider
+  positions, so the real driver (``Pcl833Encoders``: latch, 24-bit read, midpoint decode) runs.
+* Drives: two PCI-1720 cards behind a comedilib double (``FakeComedi``); the real driver turns
+  volts into 12-bit codes on ±10 V and the twin turns the codes back into amplifier input. The
+  amplifier input follows the card that is enabled (card 0 first): the thesis's redundant card
+  takes over when the first is disabled. The amplifier clamps at ±command_limit_v (6 V).
+* ATI sensor: ``TwinAtiSensorModel`` (noise, bias, drift, overload) under the true wrench that
+  the environment applies to the platform at the sensor.
+* Digital inputs: hardware e-stop chain and the patient's hand-held stop.
+
+Time: the plant advances only through ``sync(t)``, holding the amplifier inputs constant
+between calls (zero-order hold, as the real amplifiers see a DAC). The device backends call
+``sync(clock())`` before every read, so the twin runs in lockstep with whatever clock the loop
+uses: simulated time (as fast as possible) or the monotonic clock (real time).
+"""
+from __future__ import annotations
+
+from collections import deque
+from typing import Callable
+
+import numpy as np
+
+from rt.ati.twin_sensor import AtiSample, AtiSensorParams, TwinAtiSensorModel
+from rt.devices.interfaces import DigitalInputState
+from rt.drivers.fake_comedi import FakeComedi
+from rt.drivers.fake_pcl833 import FakePcl833Port
+from rt.drivers.pci1720 import code_to_volts
+from rt.drivers.pcl833 import encode_position
+from rt.errors import InputError
+from rt.model.description import RobotDescription, load_description
+from rt.model.dynamics import Payload
+from rt.twin.environment import FreeMotion, PayloadStep
+from rt.twin.faults import FaultPlan
+from rt.twin.plant import TwinPlant
+
+#: Longest stretch integrated with one held command and one fault/schedule check (s).
+_MAX_CHUNK_S = 0.001
+
+
+class SimClock:
+    """Simulated time for lockstep runs as fast as possible: whoever drives the loop sets ``t``."""
+
+    def __init__(self, t: float = 0.0) -> None:
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+
+class Twin:
+    """The robot, its sensors and environment in one object (see module docstring)."""
+
+    def __init__(self, description: RobotDescription | None = None, environment=None,
+                 seed: int = 0, physics_rate_hz: float = 5000.0,
+                 integrator: str = "symplectic_euler", frictionless: bool = False,
+                 ati_params: AtiSensorParams | None = None,
+                 clock: Callable[[], float] | None = None):
+        self.description = description or load_description()
+        self.environment = environment or FreeMotion()
+        self.plant = TwinPlant(self.description, self.environment, physics_rate_hz, integrator,
+                               frictionless)
+        self.rng = np.random.default_rng(seed)
+        self.clock = clock
+        self.faults = FaultPlan()
+        enc = self.description.encoder
+        self.m_per_count = enc.m_per_count
+        self.encoder_port = FakePcl833Port(m_per_count=enc.m_per_count)
+        # The encoders sit at the current slider positions before the card counts anything.
+        self.encoder_port.set_positions_m(self.plant.q)
+        self.dac_libs = (FakeComedi(keep_log=False), FakeComedi(keep_log=False))
+        self.card_enabled = [False, False]
+        self._stuck_volts: dict[tuple[int, int], float] = {}
+        self.command_limit_v = self.description.drive.command_limit_v
+        self.amp_volts = np.zeros(3)
+        self.ati = TwinAtiSensorModel(ati_params, seed=seed)
+        self.ati_sample: AtiSample | None = None
+        self.inputs = DigitalInputState()
+        self._payload_applied = False
+        self._jumps_done: set[int] = set()
+        # Delayed sensor history for the latency fault: (t, positions, ATI sample).
+        self._history: deque = deque(maxlen=512)
+        self.plant.set_payload(None)
+
+    # ------------------------------------------------------------------ setup
+    def place(self, q, qd=(0.0, 0.0, 0.0)) -> None:
+        """Put the robot at slider positions ``q`` (m); the encoder counters then read q."""
+        self.plant.set_state(q, qd)
+        self.encoder_port.set_positions_m(self.plant.q)
+
+    def home_encoders(self) -> None:
+        """Preset the counters so the decoded positions are absolute (the rig's homing)."""
+        for axis in range(3):
+            self.encoder_port.set_count(
+                axis, encode_position(float(self.plant.q[axis]), m_per_count=self.m_per_count))
+
+    @property
+    def t(self) -> float:
+        return self.plant.t
+
+    # ------------------------------------------------------------------ running
+    def sync(self, t: float | None = None) -> None:
+        """Advance the physics to time ``t`` (s; default ``clock()``) with the held commands."""
+        if t is None:
+            if self.clock is None:
+                return
+            t = self.clock()
+        while t - self.plant.t > 1e-12:
+            chunk = min(_MAX_CHUNK_S, t - self.plant.t)
+            env = self.environment
+            if isinstance(env, PayloadStep) and not self._payload_applied:
+                remaining = env.at_s - self.plant.t
+                if remaining <= 1e-12:
+                    self.plant.set_payload(Payload(env.mass_kg, env.com_m))
+                    self._payload_applied = True
+                else:
+                    chunk = min(chunk, remaining)
+            self._update_amplifier_input()
+            self.plant.advance(chunk, self.amp_volts)
+            self._update_sensors()
+
+    def _update_amplifier_input(self) -> None:
+        t = self.plant.t
+        card = 0 if self.card_enabled[0] else (1 if self.card_enabled[1] else -1)
+        for ch in range(3):
+            v = 0.0
+            if card >= 0:
+                code = self.dac_libs[card].last_code.get(ch)
+                v = code_to_volts(code) if code is not None else 0.0
+            if self.faults.faults:
+                for f in self.faults.active("dac_dead", t):
+                    if f.card == card and f.channel == ch:
+                        v = 0.0
+                for f in self.faults.active("dac_stuck", t):
+                    if f.card == card and f.channel == ch:
+                        v = self._stuck_volts.setdefault((card, ch), v)
+            self.amp_volts[ch] = max(-self.command_limit_v, min(self.command_limit_v, v))
+
+    def _update_sensors(self) -> None:
+        t = self.plant.t
+        port = self.encoder_port
+        if self.faults.faults:
+            frozen = {f.axis for f in self.faults.active("encoder_freeze", t)}
+            for axis in range(3):
+                port.set_frozen(axis, axis in frozen)
+            for i, f in enumerate(self.faults.faults):
+                if f.kind == "encoder_jump" and f.active(t) and i not in self._jumps_done:
+                    port.move_counts(f.axis, f.counts)
+                    self._jumps_done.add(i)
+            for f in self.faults.active("encoder_noise", t):
+                port.move_counts(f.axis, int(round(self.rng.normal(0.0, f.sigma_counts))))
+            for kind, name in (("ati_dropout", "dropout"), ("ati_stale", "stale"),
+                               ("ati_saturation", "saturate")):
+                self.ati.set_fault(name, bool(self.faults.active(kind, t)))
+            self.inputs.hardware_estop = bool(self.faults.active("hardware_estop", t))
+            self.inputs.hand_stop = bool(self.faults.active("hand_stop", t))
+        port.set_positions_m(self.plant.q)
+        sample = self.ati.measure(self.plant.wrench_s, t)
+        if sample is not None:
+            self.ati_sample = sample
+        if any(f.kind == "latency" for f in self.faults.faults):
+            self._history.append((t, port_counts(port), self.ati_sample))
+
+    # ------------------------------------------------------------------ reads for backends
+    def delayed(self) -> tuple[tuple[int, int, int] | None, AtiSample | None]:
+        """With a latency fault active: (counter values, ATI sample) from ``seconds`` ago."""
+        faults = self.faults.active("latency", self.plant.t) if self.faults.faults else []
+        if not faults:
+            return None, self.ati_sample
+        target = self.plant.t - max(f.seconds for f in faults)
+        best = None
+        for entry in self._history:
+            if entry[0] <= target:
+                best = entry
+            else:
+                break
+        if best is None:
+            return None, None
+        return best[1], best[2]
+
+    def set_card_enabled(self, card: int, enabled: bool) -> None:
+        if card not in (0, 1):
+            raise InputError(f"DAC card must be 0 or 1, got {card}")
+        self.card_enabled[card] = enabled
+
+    @property
+    def drives_enabled(self) -> bool:
+        return any(self.card_enabled)
+
+    def true_state(self) -> dict:
+        """Ground truth for tests and logs (not visible to the controller on a real rig)."""
+        p = self.plant
+        return {"t": p.t, "q": p.q.tolist(), "qd": p.qd.tolist(), "qdd": p.qdd.tolist(),
+                "wrench": p.wrench_s.tolist(), "amp_volts": self.amp_volts.tolist(),
+                "in_contact": p.in_contact}
+
+
+def port_counts(port: FakePcl833Port) -> tuple[int, int, int]:
+    return (port.count(0), port.count(1), port.count(2))
+
+
