@@ -90,6 +90,7 @@ class Component:
         self._active = False
         self._was_configured = False
         self._sealed = False  # set when added to a graph: the port set is then frozen
+        self._graph: Any = None  # the graph whose slot this component occupies (or reserves)
 
     # ---------------------------------------------------------------- ports
     def _check_new_port(self, name: str) -> None:

@@ -57,6 +57,22 @@ class TimingStats:
                 f"p99={self.p99_us:.1f} max={self.max_us:.1f} µs")
 
 
+def _quantiles(x: np.ndarray, qs: tuple[float, ...]) -> list[float]:
+    """Linear-interpolated quantiles (numpy's default method) via one ``np.partition``:
+    O(n), and unlike ``np.percentile`` it leaves no cached objects behind (``np.percentile``
+    grows a ~200 kB internal cache over its first few hundred calls)."""
+    n = x.size
+    pos = [q * (n - 1) for q in qs]
+    kth = sorted({int(p) for p in pos} | {min(int(p) + 1, n - 1) for p in pos})
+    part = np.partition(x, kth)
+    out = []
+    for p in pos:
+        lo = int(p)
+        hi = min(lo + 1, n - 1)
+        out.append(float(part[lo] + (part[hi] - part[lo]) * (p - lo)))
+    return out
+
+
 def summarize(ring: np.ndarray, count: int, max_all_ns: int | None = None) -> TimingStats:
     """Summarise a ring of ns samples (``-1`` = empty) into :class:`TimingStats` (µs)."""
     samples = ring.copy()  # the cycle may be writing concurrently: work on a snapshot
@@ -66,10 +82,10 @@ def summarize(ring: np.ndarray, count: int, max_all_ns: int | None = None) -> Ti
         return TimingStats(count, 0, nan, nan, nan, nan,
                            nan if not max_all_ns else max_all_ns / 1e3)
     us = samples.astype(np.float64) / 1e3
-    p50, p99 = np.percentile(us, [50.0, 99.0])
+    p50, p99 = _quantiles(us, (0.50, 0.99))
     mx = float(us.max())
     mx_all = mx if max_all_ns is None else max(mx, max_all_ns / 1e3)
-    return TimingStats(int(count), int(us.size), float(us.mean()), float(p50), float(p99), mx,
+    return TimingStats(int(count), int(us.size), float(us.mean()), p50, p99, mx,
                        mx_all)
 
 

@@ -132,6 +132,7 @@ class Friction(_Strict):
     coulomb_smoothing_m_s: PositiveFloat
     static_n: NonNegativeFloat
     stribeck_velocity_m_s: PositiveFloat
+    stiction_smoothing_m_s: PositiveFloat
 
 
 class Encoder(_Strict):

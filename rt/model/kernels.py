@@ -88,6 +88,9 @@ def _inv3(a, out):
     return det
 
 
+TREE_MAPS_WORK = 160
+
+
 @njit(cache=True)
 def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
     """Fill S = ∂Q/∂q, Ṡ (for slider velocity ``qd``) and the platform twist map.
@@ -96,16 +99,23 @@ def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
     v_P being the velocity of the platform origin. Returns det(∂f/∂φ), the forward-kinematics
     constraint Jacobian's determinant (0 at a forward singularity).
     """
+    return tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, np.empty(TREE_MAPS_WORK))
+
+
+@njit(cache=True)
+def tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work):
+    """``tree_maps`` with caller-provided scratch (float64[TREE_MAPS_WORK]): no allocation,
+    for the twin's inner loop."""
     rb = geom[0]
     rp = geom[1]
     ln = geom[2]
     ct = geom[3:6]
     st = geom[6:9]
     cpair = geom[9:12]
-    sphi = np.empty(3)
-    cphi = np.empty(3)
-    rho = np.empty(3)
-    h = np.empty(3)
+    sphi = work[0:3]
+    cphi = work[3:6]
+    rho = work[6:9]
+    h = work[9:12]
     for i in range(3):
         sphi[i] = math.sin(phi[i])
         cphi[i] = math.cos(phi[i])
@@ -113,27 +123,29 @@ def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
         h[i] = q[i] + ln * cphi[i]
     # Constraint Jacobians of f_p = |B_i - B_j|² - 3 R_p² for the pairs p = (i, j).
     _, _, _, a00, a01, a11, a12, a22, a20 = constraint_terms(geom, q, phi[0], phi[1], phi[2])
-    f_phi = np.zeros((3, 3))
+    f_phi = work[12:21].reshape((3, 3))
+    f_phi[:, :] = 0.0
     f_phi[0, 0] = a00
     f_phi[0, 1] = a01
     f_phi[1, 1] = a11
     f_phi[1, 2] = a12
     f_phi[2, 2] = a22
     f_phi[2, 0] = a20
-    f_q = np.zeros((3, 3))
+    f_q = work[21:30].reshape((3, 3))
+    f_q[:, :] = 0.0
     for p in range(3):
         i = (0, 1, 2)[p]
         j = (1, 2, 0)[p]
         d = h[i] - h[j]
         f_q[p, i] = 2.0 * d
         f_q[p, j] = -2.0 * d
-    f_phi_inv = np.empty((3, 3))
+    f_phi_inv = work[30:39].reshape((3, 3))
     det = _inv3(f_phi, f_phi_inv)
     # Platform geometry: sphere offsets r_i = B_i - p (p is the centroid), normal n.
     nx = rot[0, 2]
     ny = rot[1, 2]
     nz = rot[2, 2]
-    r = np.empty((3, 3))
+    r = work[39:48].reshape((3, 3))
     for i in range(3):
         r[i, 0] = rot[0, 0] * ct[i] * rp + rot[0, 1] * st[i] * rp
         r[i, 1] = rot[1, 0] * ct[i] * rp + rot[1, 1] * st[i] * rp
@@ -150,11 +162,11 @@ def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
 
     # Velocity-level quantities for m = 4 velocity vectors: the three unit vectors e_k and qd.
     m = 4
-    phid = np.zeros((m, 3))
-    rhod = np.zeros((m, 3))
-    hd = np.zeros((m, 3))
-    w = np.zeros((m, 3))
-    ang = np.zeros((m, 3))     # (yaw rate, pitch rate, roll rate)
+    phid = work[48:60].reshape((m, 3))
+    rhod = work[60:72].reshape((m, 3))
+    hd = work[72:84].reshape((m, 3))
+    w = work[84:96].reshape((m, 3))
+    ang = work[96:108].reshape((m, 3))     # (yaw rate, pitch rate, roll rate)
     for k in range(m):
         for i in range(3):
             acc = 0.0
@@ -221,10 +233,10 @@ def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
     eg_y = sa * cb
     eg_z = -sb
     u_ = 3
-    kappa = np.empty(3)
-    phidd = np.empty(3)
+    kappa = work[108:111]
+    phidd = work[111:114]
     for k in range(3):
-        pp = np.empty(3)
+        pp = work[114:117]
         for i in range(3):
             pp[i] = phid[u_, i] * phid[k, i]
         for p in range(3):
@@ -251,8 +263,8 @@ def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
         ax = 0.0
         ay = 0.0
         az = 0.0
-        rdd = np.empty(3)
-        hdd = np.empty(3)
+        rdd = work[117:120]
+        hdd = work[120:123]
         for i in range(3):
             rdd[i] = ln * cphi[i] * phidd[i] - ln * sphi[i] * pp[i]
             hdd[i] = -ln * sphi[i] * phidd[i] - ln * cphi[i] * pp[i]

@@ -54,12 +54,14 @@ class ForcePlateContact(_Env):
 class CompliantAnkle(_Env):
     """A patient's strapped foot: springs and dampers about a neutral pose, plus limb weight.
 
+    ``neutral_z_m`` is the height (base frame) of the sensor origin at which the foot is
+    unloaded; the default puts it at the platform's home (z 0.633 m + 80 mm sensor offset).
     Defaults are of the order reported for the passive human ankle (rotational stiffness
     tens of N m/rad, heel-pad/leg vertical stiffness ~1e5 N/m).
     """
 
     kind: Literal["ankle"] = "ankle"
-    neutral_z_m: Finite = 0.633
+    neutral_z_m: Finite = 0.713
     neutral_roll_rad: Finite = 0.0
     neutral_pitch_rad: Finite = 0.0
     vertical_stiffness_n_per_m: NonNeg = 1.0e5

@@ -27,7 +27,7 @@ import math
 import numpy as np
 from numba import njit
 
-from rt.model.kernels import assemble, fk_solve, tree_maps
+from rt.model.kernels import TREE_MAPS_WORK, assemble, fk_solve, tree_maps_work
 
 ENV_FREE = 0.0
 ENV_PLATE = 1.0
@@ -111,15 +111,30 @@ def end_stop_force(q, qd, bodies):
     return f
 
 
+WORK_SIZE = TREE_MAPS_WORK + 64
+
+
 @njit(cache=True)
 def mass_and_bias(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h):
     """Actuated mass matrix M (kg) and bias forces h = C q̇ + G (N) at (q, q̇).
 
     ``phi`` must hold the solved rod angles; S, Ṡ and the twist map are filled here.
     """
-    spheres = np.empty((3, 3))
+    mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h,
+                       np.empty(WORK_SIZE))
+
+
+@njit(cache=True)
+def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, work):
+    """``mass_and_bias`` with caller-provided scratch (float64[WORK_SIZE]): no allocation."""
+    extra = work[TREE_MAPS_WORK:]
+    spheres = extra[0:9].reshape((3, 3))
+    iw = extra[9:18].reshape((3, 3))
+    rr = extra[18:27].reshape((3, 3))
+    av = extra[27:36].reshape((3, 3))
+    aw = extra[36:45].reshape((3, 3))
     assemble(geom, q, phi, rot, pos, spheres)
-    tree_maps(geom, q, phi, rot, qd, S, Sd, twist)
+    tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work)
     g = bodies[B_G]
     jr = bodies[B_J_REFL]
     ms = bodies[B_M_SLIDER]
@@ -152,8 +167,6 @@ def mass_and_bias(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h):
         rhoy = r10 * cx + r11 * cy + r12 * cz
         rhoz = r20 * cx + r21 * cy + r22 * cz
         # World inertia I_w = R I Rᵀ.
-        iw = np.empty((3, 3))
-        rr = np.empty((3, 3))
         rr[0, 0] = r00
         rr[0, 1] = r01
         rr[0, 2] = r02
@@ -173,8 +186,6 @@ def mass_and_bias(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h):
         tx = -st
         ty = ct
         # Columns: v_k = δ_ik ẑ + ω_k × ρ, ω_k = φ̇_ik t.
-        av = np.empty((3, 3))
-        aw = np.empty((3, 3))
         for k in range(3):
             pd = S[2 * i + 1, k]
             wx = pd * tx
@@ -229,7 +240,6 @@ def mass_and_bias(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h):
     rhox = rot[0, 0] * cx + rot[0, 1] * cy + rot[0, 2] * cz
     rhoy = rot[1, 0] * cx + rot[1, 1] * cy + rot[1, 2] * cz
     rhoz = rot[2, 0] * cx + rot[2, 1] * cy + rot[2, 2] * cz
-    iw = np.empty((3, 3))
     for a in range(3):
         for b in range(3):
             acc = 0.0
@@ -237,8 +247,6 @@ def mass_and_bias(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h):
                 for l in range(3):
                     acc += rot[a, k] * bodies[B_I_PLAT + 3 * k + l] * rot[b, l]
             iw[a, b] = acc
-    av = np.empty((3, 3))
-    aw = np.empty((3, 3))
     for k in range(3):
         wx = twist[3, k]
         wy = twist[4, k]
@@ -409,12 +417,12 @@ def environment_wrench(env, bodies, rot, pos, twist, qd, env_state, wrench_s, ta
 
 @njit(cache=True)
 def acceleration(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd, wrench_s,
-                 work_rot, work_pos, S, Sd, twist, M, h, tau_env, fr):
+                 work_rot, work_pos, S, Sd, twist, M, h, tau_env, fr, work):
     """q̈ (m/s²) for screw forces ``force`` (N); returns a status (FK failure -> 1)."""
     it = fk_solve(geom, q, phi, _FK_TOL, _FK_MAX_IT)
     if it < 0:
         return STATUS_FK_FAILED
-    mass_and_bias(geom, bodies, q, qd, phi, work_rot, work_pos, S, Sd, twist, M, h)
+    mass_and_bias_work(geom, bodies, q, qd, phi, work_rot, work_pos, S, Sd, twist, M, h, work)
     environment_wrench(env, bodies, work_rot, work_pos, twist, qd, env_state, wrench_s, tau_env)
     friction_force(qd, friction, fr)
     r0 = force[0] - h[0] - fr[0] + tau_env[0] + end_stop_force(q[0], qd[0], bodies)
@@ -460,10 +468,11 @@ def integrate(geom, bodies, friction, env, q, qd, phi, volts, n_steps, h_step, i
     hb = np.empty(3)
     tau_env = np.empty(3)
     fr = np.empty(3)
+    work = np.empty(WORK_SIZE)
     if integrator == INTEGRATOR_SYMPLECTIC_EULER:
         for _ in range(n_steps):
             st = acceleration(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd,
-                              wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+                              wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr, work)
             if st != STATUS_OK:
                 return st
             for i in range(3):
@@ -483,24 +492,24 @@ def integrate(geom, bodies, friction, env, q, qd, phi, volts, n_steps, h_step, i
                 q0[i] = q[i]
                 v0[i] = qd[i]
             st = acceleration(geom, bodies, friction, env, q0, v0, phi, force, env_state, k1,
-                              wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+                              wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr, work)
             for i in range(3):
                 qs[i] = q0[i] + 0.5 * h_step * v0[i]
                 vs[i] = v0[i] + 0.5 * h_step * k1[i]
             st += acceleration(geom, bodies, friction, env, qs, vs, phi, force, env_state, k2,
-                               wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+                               wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr, work)
             v2 = vs.copy()
             for i in range(3):
                 qs[i] = q0[i] + 0.5 * h_step * v2[i]
                 vs[i] = v0[i] + 0.5 * h_step * k2[i]
             st += acceleration(geom, bodies, friction, env, qs, vs, phi, force, env_state, k3,
-                               wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+                               wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr, work)
             v3 = vs.copy()
             for i in range(3):
                 qs[i] = q0[i] + h_step * v3[i]
                 vs[i] = v0[i] + h_step * k3[i]
             st += acceleration(geom, bodies, friction, env, qs, vs, phi, force, env_state, k4,
-                               wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+                               wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr, work)
             if st != STATUS_OK:
                 return STATUS_FK_FAILED
             v4 = vs
@@ -509,5 +518,5 @@ def integrate(geom, bodies, friction, env, q, qd, phi, volts, n_steps, h_step, i
                 qd[i] = v0[i] + h_step / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
         # Leave q̈ and the wrench consistent with the final state.
         return acceleration(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd,
-                            wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr)
+                            wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr, work)
     return STATUS_OK

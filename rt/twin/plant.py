@@ -52,9 +52,9 @@ class TwinPlant:
         fr = description.friction
         if not frictionless:
             self.friction[:] = (fr.viscous_n_s_per_m, fr.coulomb_n, fr.static_n,
-                                fr.stribeck_velocity_m_s, fr.coulomb_smoothing_m_s)
+                                fr.stribeck_velocity_m_s, fr.stiction_smoothing_m_s)
         else:
-            self.friction[3:] = (fr.stribeck_velocity_m_s, fr.coulomb_smoothing_m_s)
+            self.friction[3:] = (fr.stribeck_velocity_m_s, fr.stiction_smoothing_m_s)
         self.payload: Payload | None = None
         self._pack_bodies()
         self.environment = environment or FreeMotion()

@@ -1,0 +1,247 @@
+"""Real-time hygiene for the loop's thread (DESIGN 5, PLATFORM "Timing on these VMs").
+
+Each measure is *tried*: what it achieved is reported, and nothing fails hard when the process
+lacks the privilege (an unprivileged developer laptop still runs the loop, just with more
+jitter). Everything applied is undone on exit, so a test process is left as it was.
+
+* ``SCHED_FIFO`` for the calling thread (``os.sched_setscheduler(0, ...)`` acts on the calling
+  thread on Linux). The loop never spins a whole period: a busy FIFO thread is throttled
+  ≈ 50 ms per second by ``sched_rt_runtime_us``.
+* ``mlockall(MCL_CURRENT | MCL_FUTURE)`` through libc: no page fault in the cycle. Process-wide
+  and reference-counted, so nested/concurrent loops do not unlock each other's memory.
+* CPU affinity of the calling thread, if asked for.
+* Timer slack of 1 ns (``prctl(PR_SET_TIMERSLACK)``): a non-FIFO thread's ``sleep`` otherwise
+  overshoots by the default 50 µs slack.
+* GIL switch interval: another busy Python thread keeps the GIL for up to
+  ``sys.getswitchinterval()`` (5 ms by default) after the loop thread asks for it; a shorter
+  interval bounds that wait. Process-wide.
+* gc frozen and disabled while the loop runs (:func:`gc_paused`, reference-counted).
+"""
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import gc
+import os
+import platform
+import sys
+import threading
+from dataclasses import dataclass, field
+from typing import Iterable, Iterator
+
+# Linux values on x86, x86-64, ARM and RISC-V (alpha, powerpc and sparc differ).
+MCL_CURRENT = 1
+MCL_FUTURE = 2
+PR_SET_TIMERSLACK = 29
+PR_GET_TIMERSLACK = 30
+_MCL_ARCH_OK = not platform.machine().lower().startswith(("alpha", "ppc", "powerpc", "sparc"))
+
+_lock = threading.Lock()
+_gc_users = 0
+_gc_was_enabled = True
+_mlock_users = 0
+
+
+def _libc() -> ctypes.CDLL | None:
+    name = ctypes.util.find_library("c")
+    try:
+        return ctypes.CDLL(name, use_errno=True) if name else ctypes.CDLL(None, use_errno=True)
+    except OSError:
+        return None
+
+
+@dataclass
+class HygieneReport:
+    """What :func:`realtime_thread` achieved. ``*_detail`` say why when something was not done."""
+
+    fifo: bool = False
+    fifo_priority: int | None = None
+    fifo_detail: str = "not requested"
+    mlockall: bool = False
+    mlock_detail: str = "not requested"
+    affinity: tuple[int, ...] | None = None
+    affinity_detail: str = "not requested"
+    timer_slack_ns: int | None = None
+    timer_slack_detail: str = "not requested"
+    switch_interval_s: float | None = None
+    switch_interval_detail: str = "not requested"
+    notes: list[str] = field(default_factory=list)
+
+    def summary(self) -> str:
+        """One line per measure."""
+        return "\n".join([
+            f"SCHED_FIFO: {'yes, priority %d' % self.fifo_priority if self.fifo else 'no'} "
+            f"({self.fifo_detail})",
+            f"mlockall:   {'yes' if self.mlockall else 'no'} ({self.mlock_detail})",
+            f"affinity:   {list(self.affinity) if self.affinity else 'unchanged'} "
+            f"({self.affinity_detail})",
+            f"timerslack: {self.timer_slack_ns if self.timer_slack_ns is not None else '-'} ns "
+            f"({self.timer_slack_detail})",
+            f"GIL switch: {self.switch_interval_s if self.switch_interval_s else '-'} s "
+            f"({self.switch_interval_detail})",
+        ] + self.notes)
+
+
+# ---------------------------------------------------------------------- individual measures
+def try_sched_fifo(priority: int) -> tuple[bool, str, tuple[int, int] | None]:
+    """Put the calling thread in SCHED_FIFO at ``priority`` (1-99).
+
+    Returns (achieved, detail, previous (policy, priority) to restore, or None)."""
+    if not hasattr(os, "sched_setscheduler"):
+        return False, "os.sched_setscheduler unavailable on this platform", None
+    try:
+        lo, hi = os.sched_get_priority_min(os.SCHED_FIFO), os.sched_get_priority_max(os.SCHED_FIFO)
+        prio = max(lo, min(hi, int(priority)))
+        prev = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+    except PermissionError:
+        return False, "not permitted (needs root or CAP_SYS_NICE / an rtprio limit)", None
+    except OSError as exc:
+        return False, f"refused: {exc}", None
+    return True, "ok", prev
+
+
+def restore_scheduler(prev: tuple[int, int]) -> None:
+    """Undo :func:`try_sched_fifo` for the calling thread."""
+    with contextlib.suppress(OSError):
+        os.sched_setscheduler(0, prev[0], os.sched_param(prev[1]))
+
+
+def try_mlockall() -> tuple[bool, str]:
+    """Lock current and future pages of the process in RAM (reference-counted)."""
+    global _mlock_users
+    with _lock:
+        if _mlock_users > 0:
+            _mlock_users += 1
+            return True, "already locked by another loop"
+        if not sys.platform.startswith("linux") or not _MCL_ARCH_OK:
+            return False, f"unsupported on {sys.platform}/{platform.machine()}"
+        libc = _libc()
+        if libc is None:
+            return False, "libc not found"
+        if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
+            err = ctypes.get_errno()
+            return False, f"mlockall failed: {os.strerror(err)} (errno {err}; RLIMIT_MEMLOCK?)"
+        _mlock_users = 1
+        return True, "ok"
+
+
+def release_mlockall() -> None:
+    """Undo one successful :func:`try_mlockall`; unlocks when the last user leaves."""
+    global _mlock_users
+    with _lock:
+        if _mlock_users == 0:
+            return
+        _mlock_users -= 1
+        if _mlock_users == 0:
+            libc = _libc()
+            if libc is not None:
+                libc.munlockall()
+
+
+def try_affinity(cpus: Iterable[int]) -> tuple[bool, str, set[int] | None]:
+    """Pin the calling thread to ``cpus``; returns (achieved, detail, previous set)."""
+    if not hasattr(os, "sched_setaffinity"):
+        return False, "os.sched_setaffinity unavailable on this platform", None
+    wanted = set(int(c) for c in cpus)
+    try:
+        prev = os.sched_getaffinity(0)
+        os.sched_setaffinity(0, wanted)
+    except PermissionError:
+        return False, "not permitted", None
+    except OSError as exc:
+        return False, f"refused for {sorted(wanted)}: {exc}", None
+    return True, "ok", prev
+
+
+def try_timer_slack(ns: int) -> tuple[bool, str, int | None]:
+    """Set the calling thread's timer slack (ns); returns (achieved, detail, previous)."""
+    if not sys.platform.startswith("linux"):
+        return False, f"unsupported on {sys.platform}", None
+    libc = _libc()
+    if libc is None:
+        return False, "libc not found", None
+    prctl = libc.prctl
+    prctl.restype = ctypes.c_int
+    prev = prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0)
+    if prev < 0 or prctl(PR_SET_TIMERSLACK, ctypes.c_ulong(ns), 0, 0, 0) != 0:
+        return False, f"prctl failed: {os.strerror(ctypes.get_errno())}", None
+    return True, "ok", prev
+
+
+@contextlib.contextmanager
+def gc_paused() -> Iterator[None]:
+    """Collect once, freeze what survives, and disable gc until the last user leaves.
+
+    A frozen object is never scanned again, so a collection that would otherwise stall the
+    cycle for milliseconds cannot happen; the loop allocates nothing that needs collecting.
+    """
+    global _gc_users, _gc_was_enabled
+    with _lock:
+        if _gc_users == 0:
+            _gc_was_enabled = gc.isenabled()
+            gc.collect()
+            gc.freeze()
+            gc.disable()
+        _gc_users += 1
+    try:
+        yield
+    finally:
+        with _lock:
+            _gc_users -= 1
+            if _gc_users == 0:
+                gc.unfreeze()
+                if _gc_was_enabled:
+                    gc.enable()
+
+
+@contextlib.contextmanager
+def realtime_thread(priority: int | None = 80, cpus: Iterable[int] | None = None,
+                    lock_memory: bool = True, timer_slack_ns: int | None = 1,
+                    switch_interval_s: float | None = 0.0002) -> Iterator[HygieneReport]:
+    """Apply the hygiene measures to the calling thread for the duration of the ``with``.
+
+    ``None``/``False`` skips a measure. Yields a :class:`HygieneReport`; restores the previous
+    scheduler, affinity, timer slack, switch interval and memory locking on exit.
+    """
+    report = HygieneReport()
+    undo: list = []
+    try:
+        if priority is not None:
+            ok, detail, prev = try_sched_fifo(priority)
+            report.fifo, report.fifo_detail = ok, detail
+            if ok:
+                report.fifo_priority = os.sched_getparam(0).sched_priority
+                undo.append(lambda p=prev: restore_scheduler(p))
+        if lock_memory:
+            ok, report.mlock_detail = try_mlockall()
+            report.mlockall = ok
+            if ok:
+                undo.append(release_mlockall)
+        if cpus is not None:
+            ok, detail, prev_cpus = try_affinity(cpus)
+            report.affinity_detail = detail
+            if ok:
+                report.affinity = tuple(sorted(os.sched_getaffinity(0)))
+                undo.append(lambda p=prev_cpus: os.sched_setaffinity(0, p))
+        if timer_slack_ns is not None:
+            ok, detail, prev_slack = try_timer_slack(timer_slack_ns)
+            report.timer_slack_detail = detail
+            if ok:
+                report.timer_slack_ns = timer_slack_ns
+                undo.append(lambda p=prev_slack: try_timer_slack(p))
+        if switch_interval_s is not None:
+            prev_si = sys.getswitchinterval()
+            try:
+                sys.setswitchinterval(switch_interval_s)
+                report.switch_interval_s = sys.getswitchinterval()
+                report.switch_interval_detail = "ok (process-wide)"
+                undo.append(lambda p=prev_si: sys.setswitchinterval(p))
+            except ValueError as exc:
+                report.switch_interval_detail = f"refused: {exc}"
+        yield report
+    finally:
+        for fn in reversed(undo):
+            with contextlib.suppress(Exception):
+                fn()
