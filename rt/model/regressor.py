@@ -76,6 +76,7 @@ class Regressor:
             cols.extend(range(10 * (joint - 1), 10 * joint))
         self._tree_cols = np.array(cols)
         self._full = np.zeros((3, len(STANDARD_NAMES)))
+        self._zero_tree = np.zeros(dynamics.model.nv)
         self._state = State()
         self.base = self._find_base(samples, seed)
 
@@ -111,6 +112,36 @@ class Regressor:
     def __call__(self, st: State, qdd) -> np.ndarray:
         """Y_base (3 × n_base): τ = Y_base θ_base."""
         return self.standard(st, qdd)[:, self.base.base_index]
+
+    def mixed(self, st: State, qd_r, qdd_r) -> np.ndarray:
+        """Slotine-Li regressor (3 × n_base): Y θ = M q̈_r + C(q, q̇) q̇_r + G + F(q̇_r).
+
+        C here is the Christoffel form of M (Ṁ − 2C skew), C(q, q̇) q̇_r = Γ(q̇, q̇_r) with Γ the
+        symmetric bilinear form of the velocity terms. On the tree, with V± = S (q̇ ± q̇_r):
+        Sᵀ [Y_t(Q, 0, S q̈_r + Ṡ(q̇) q̇_r) + (Y_t(Q, V+, 0) − Y_t(Q, V−, 0)) / 4] — the first
+        term is M_t (S q̈_r + H(q̇, q̇_r)) + g_t, the difference 4 Γ_t(S q̇, S q̇_r) (gravity
+        cancels). Friction and rotor inertia act on q̇_r, q̈_r. The state must carry q̇.
+        """
+        d = self.dyn
+        model, data = d.model, d.data
+        qd_r = np.asarray(qd_r, dtype=float)
+        qdd_r = np.asarray(qdd_r, dtype=float)
+        S = st.S
+        zero = self._zero_tree
+        acc = S @ qdd_r + st.Sd @ qd_r
+        y = pin.computeJointTorqueRegressor(model, data, st.Q, zero, acc)[:, self._tree_cols].copy()
+        v_plus = S @ (st.qd + qd_r)
+        v_minus = S @ (st.qd - qd_r)
+        y += 0.25 * pin.computeJointTorqueRegressor(model, data, st.Q, v_plus, zero)[:, self._tree_cols]
+        y -= 0.25 * pin.computeJointTorqueRegressor(model, data, st.Q, v_minus, zero)[:, self._tree_cols]
+        full = self._full
+        full[:, :N_RIGID] = S.T @ y
+        full[:, N_RIGID:] = 0.0
+        for i in range(3):
+            full[i, N_RIGID + i] = qdd_r[i]
+            full[i, N_RIGID + 3 + i] = qd_r[i]
+            full[i, N_RIGID + 6 + i] = math.tanh(qd_r[i] / d.coulomb_v)
+        return full[:, self.base.base_index]
 
     def _find_base(self, samples: int, seed: int) -> BaseParameters:
         rng = np.random.default_rng(seed)

@@ -1,0 +1,120 @@
+"""Adaptive control (thesis 3.6.3) as the Slotine-Li passivity-based law, with projection.
+
+    s = ė + Λ e,   q̇_r = q̇_d − Λ e,   q̈_r = q̈_d − Λ ė
+    τ = Y(q, q̇, q̇_r, q̈_r) θ̂ − K_D s
+    θ̂̇ = −Γ Yᵀ s, then θ̂ projected onto its box [θ_lo, θ_hi]
+
+Y is the base-parameter regressor in Christoffel form (``Regressor.mixed``), so Ṁ − 2C is
+skew-symmetric and V = ½ sᵀ M s + ½ θ̃ᵀ Γ⁻¹ θ̃ gives V̇ = −sᵀ K_D s ≤ 0 (the projection only
+removes energy). Which parameters adapt, and their boxes, are derived from the payloads the
+robot is specified for: every base parameter that a payload of up to ``max_payload_kg`` (COM
+anywhere in a box on the platform) changes adapts inside the range those payloads span (plus
+margin), and the friction coefficients adapt within [½, 2]× nominal. Everything else stays at
+its nominal value (Γ = 0). The initial estimate is the nominal model, as in the thesis.
+"""
+from __future__ import annotations
+
+from typing import Annotated
+
+import numpy as np
+from pydantic import Field
+
+from rt.control.base import STATUS_OK, Controller, Gains, register
+from rt.model.dynamics import Payload
+from rt.model.regressor import Regressor
+
+Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+
+
+class AdaptiveGains(Gains):
+    lambda_per_s: Positive = 20.0
+    kd_n_s_per_m: Positive = 1.7e4
+    #: Adaptation rate: Γ_ii = rate · (half-width of parameter i's box)² (dimensionless rate
+    #: times the parameter's natural scale, so every parameter adapts on a similar time scale).
+    #: Tuned on the twin's payload-step experiment: 0.1-0.4 converge in ~1 s with no chatter;
+    #: above ~1 the estimates chase encoder quantization noise and tracking degrades.
+    adaptation_rate: NonNegative = 0.3
+    max_payload_kg: Positive = 150.0
+    payload_com_box_m: tuple[Positive, Positive, Positive] = (0.15, 0.15, 0.30)
+
+
+@register
+class Adaptive(Controller):
+    name = "adaptive"
+    gains_type = AdaptiveGains
+
+    def __init__(self, model, gains=None):
+        self.regressor = Regressor(model.dyn)
+        super().__init__(model, gains)
+
+    def _gains_changed(self) -> None:
+        self._set_bounds()
+
+    def _set_bounds(self) -> None:
+        g = self.gains
+        reg = self.regressor
+        dyn = self.dyn
+        saved = dyn.payload
+        nominal = reg.theta_base().copy()
+        lo, hi = nominal.copy(), nominal.copy()
+        box = g.payload_com_box_m
+        for mass in (0.25 * g.max_payload_kg, g.max_payload_kg):
+            for cx in (-box[0], 0.0, box[0]):
+                for cy in (-box[1], 0.0, box[1]):
+                    for cz in (0.0, box[2]):
+                        # A solid payload: inertia of a 0.3 m cube about its COM.
+                        i = mass * 0.3 ** 2 / 6.0
+                        dyn.set_payload(Payload(mass, (cx, cy, cz),
+                                                ((i, 0, 0), (0, i, 0), (0, 0, i))))
+                        theta = reg.theta_base()
+                        lo = np.minimum(lo, theta)
+                        hi = np.maximum(hi, theta)
+        dyn.set_payload(saved)
+        names = reg.base.names
+        for k, name in enumerate(names):
+            if name[:2] in ("fv", "fc"):
+                lo[k], hi[k] = 0.5 * nominal[k], 2.0 * nominal[k]
+        width = hi - lo
+        adapt = width > 1e-9 * (1.0 + np.abs(nominal))
+        margin = 0.1 * width
+        self.theta_lo = np.where(adapt, lo - margin, nominal)
+        self.theta_hi = np.where(adapt, hi + margin, nominal)
+        half = 0.5 * (self.theta_hi - self.theta_lo)
+        self.gamma = np.where(adapt, g.adaptation_rate * half ** 2, 0.0)
+        self.nominal = nominal
+        self.adapted_names = [n for n, a in zip(names, adapt) if a]
+
+    def reset(self) -> None:
+        super().reset()
+        if not hasattr(self, "theta_lo"):
+            self._set_bounds()
+        self.theta = self.nominal.copy()
+        self._qd_r = np.zeros(3)
+        self._qdd_r = np.zeros(3)
+        self._s = np.zeros(3)
+
+    def _law(self, st, ref, dt, out, dry_run):
+        g = self.gains
+        lam = g.lambda_per_s
+        q = st.cfg.q
+        e = np.array([q[0] - ref.q[0], q[1] - ref.q[1], q[2] - ref.q[2]])
+        ed = st.qd - ref.qd
+        s = self._s
+        np.multiply(e, lam, out=s)
+        s += ed
+        qd_r = ref.qd - lam * e
+        qdd_r = ref.qdd - lam * ed
+        y = self.regressor.mixed(st, qd_r, qdd_r)
+        np.dot(y, self.theta, out=out)
+        out -= g.kd_n_s_per_m * s
+        if not dry_run and dt > 0.0:
+            self.theta -= dt * self.gamma * (y.T @ s)
+            np.clip(self.theta, self.theta_lo, self.theta_hi, out=self.theta)
+        return STATUS_OK
+
+    def estimate(self, name: str) -> float:
+        """Current estimate of base parameter ``name``."""
+        return float(self.theta[self.regressor.base.names.index(name)])
+
+

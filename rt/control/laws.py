@@ -1,0 +1,157 @@
+"""The thesis's fixed-parameter laws (3.6.1, 3.6.2), all on the nominal model.
+
+Default gains put the closed loop's error dynamics near ω = 40 rad/s, ζ ≈ 1 for the ~210 kg per
+axis that the sliders weigh with their reflected rotor inertia: Kp = m ω², Kd = 2 ζ m ω. The
+model-based laws use the model's friction F(q̇_d) as feedforward (the thesis's C term of eq. 35
+holds the friction); PID and PD use none.
+"""
+from __future__ import annotations
+
+from typing import Annotated
+
+import numpy as np
+from pydantic import Field
+
+from rt.control.base import STATUS_OK, Controller, Gains, Reference, register
+from rt.model.dynamics import State
+
+Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+
+
+class PdGains(Gains):
+    kp_n_per_m: Positive = 3.4e5
+    kd_n_s_per_m: Positive = 1.7e4
+
+
+class PidGains(PdGains):
+    ki_n_per_m_s: NonNegative = 2.0e6
+    integral_limit_n: Positive = 1500.0
+
+
+class CtGains(Gains):
+    """Computed torque: gains on the linearised error dynamics (1/s², 1/s)."""
+
+    kp_per_s2: Positive = 1600.0
+    kd_per_s: Positive = 80.0
+
+
+def _pd(g: PdGains, st: State, ref: Reference, out: np.ndarray) -> None:
+    e = st.cfg.q[0] - ref.q[0], st.cfg.q[1] - ref.q[1], st.cfg.q[2] - ref.q[2]
+    for i in range(3):
+        out[i] = -g.kp_n_per_m * e[i] - g.kd_n_s_per_m * (st.qd[i] - ref.qd[i])
+
+
+@register
+class Pid(Controller):
+    """τ = −Kp e − Kd ė − Ki ∫e (thesis table 5), integral clamped (anti-windup)."""
+
+    name = "pid"
+    gains_type = PidGains
+
+    def reset(self) -> None:
+        super().reset()
+        self.integral = np.zeros(3)        # ∫ e dt (m s)
+
+    def _law(self, st, ref, dt, out, dry_run):
+        g = self.gains
+        _pd(g, st, ref, out)
+        limit = g.integral_limit_n / g.ki_n_per_m_s if g.ki_n_per_m_s > 0 else 0.0
+        for i in range(3):
+            integ = self.integral[i] + (st.cfg.q[i] - ref.q[i]) * dt
+            integ = max(-limit, min(limit, integ))
+            if not dry_run:
+                self.integral[i] = integ
+            out[i] -= g.ki_n_per_m_s * integ
+        return STATUS_OK
+
+    def _absorb(self, difference: np.ndarray) -> None:
+        # Bumpless: preload the integrator so the first output equals the previous one.
+        ki = self.gains.ki_n_per_m_s
+        if ki > 0:
+            self.integral -= difference / ki
+        else:
+            super()._absorb(difference)
+
+
+@register
+class PdG(Controller):
+    """PD+G: τ = −Kp e − Kd ė + G(q)."""
+
+    name = "pd_g"
+    gains_type = PdGains
+
+    def _law(self, st, ref, dt, out, dry_run):
+        _pd(self.gains, st, ref, out)
+        out += self.dyn.gravity(st)
+        return STATUS_OK
+
+
+@register
+class PdG0(Controller):
+    """PD+G0: τ = −Kp e − Kd ė + G(q_d); G at the desired position, cached while q_d holds."""
+
+    name = "pd_g0"
+    gains_type = PdGains
+
+    def reset(self) -> None:
+        super().reset()
+        self._g_at = None
+        self._g = np.zeros(3)
+        self._state_d = None
+
+    def _law(self, st, ref, dt, out, dry_run):
+        key = (float(ref.q[0]), float(ref.q[1]), float(ref.q[2]))
+        if key != self._g_at:
+            from rt.model.dynamics import State as _State
+            if self._state_d is None:
+                self._state_d = _State()
+            self._g[:] = self.dyn.gravity(self.dyn.state(ref.q, out=self._state_d))
+            self._g_at = key
+        _pd(self.gains, st, ref, out)
+        out += self._g
+        return STATUS_OK
+
+
+@register
+class PadenPanja(Controller):
+    """τ = M(q) q̈_d + C(q, q̇) q̇_d + G(q) + F(q̇_d) − Kp e − Kd ė (thesis eq. 19)."""
+
+    name = "paden_panja"
+    gains_type = PdGains
+
+    def _law(self, st, ref, dt, out, dry_run):
+        m, c, g = self.dyn.mcg(st)
+        _pd(self.gains, st, ref, out)
+        out += m @ ref.qdd + c @ ref.qd + g + self.dyn.friction(ref.qd)
+        return STATUS_OK
+
+
+@register
+class ComputedTorquePtp(Controller):
+    """τ = M(q)(−Kd q̇ − Kp e) + C q̇ + G + F(q̇) (thesis eq. 29): regulation to q_d."""
+
+    name = "computed_torque_ptp"
+    gains_type = CtGains
+
+    def _law(self, st, ref, dt, out, dry_run):
+        g_ = self.gains
+        m, c, g = self.dyn.mcg(st)
+        v = -g_.kd_per_s * st.qd - g_.kp_per_s2 * (np.asarray(st.cfg.q) - ref.q)
+        out[:] = m @ v + c @ st.qd + g + self.dyn.friction(st.qd)
+        return STATUS_OK
+
+
+@register
+class ComputedTorqueTrajectory(Controller):
+    """τ = M(q)(q̈_d − Kd ė − Kp e) + C q̇ + G + F(q̇) (thesis eq. 31): ë + Kd ė + Kp e = 0."""
+
+    name = "computed_torque"
+    gains_type = CtGains
+
+    def _law(self, st, ref, dt, out, dry_run):
+        g_ = self.gains
+        m, c, g = self.dyn.mcg(st)
+        v = ref.qdd - g_.kd_per_s * (st.qd - ref.qd) - g_.kp_per_s2 * (np.asarray(st.cfg.q) - ref.q)
+        out[:] = m @ v + c @ st.qd + g + self.dyn.friction(st.qd)
+        return STATUS_OK
