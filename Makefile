@@ -31,6 +31,8 @@ $(STAMP): pyproject.toml
 
 demo: setup
 	$(BIN)/talus model demo
+	@echo
+	$(BIN)/talus bench tracking --experiment payload-step
 
 test: setup
 	$(BIN)/pytest -q

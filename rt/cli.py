@@ -18,6 +18,7 @@ GROUPS: dict[str, tuple[str, str]] = {
     "model": ("rt.model.cli", "robot model: describe, ik, fk, dynamics (JSON lines)"),
     "twin": ("rt.twin.cli", "digital twin: step it, serve its ATI sensor"),
     "ati": ("rt.ati.cli", "ATI force/torque sensor client"),
+    "bench": ("rt.benchmarks.cli", "benchmarks: control loop timing, tracking experiments"),
 }
 
 

@@ -14,11 +14,13 @@ from typing import Callable
 import numpy as np
 
 from rt.control.base import Reference, create
+from rt.errors import ConfigurationError
+from rt.references.approach import Approach, ApproachStatus
 from rt.estimation.velocity import KalmanVelocityEstimator
 from rt.model import RobotModel
 from rt.model.dynamics import State
 from rt.twin.backends import TwinActuators, TwinEncoders
-from rt.twin.environment import FreeMotion
+from rt.twin.environment import FreeMotion, PayloadStep
 from rt.twin.twin import SimClock, Twin
 
 RefFn = Callable[[float, Reference], None]
@@ -26,12 +28,15 @@ RefFn = Callable[[float, Reference], None]
 
 @dataclass
 class TrackingLog:
-    t: np.ndarray           # s
+    """Samples of the trajectory phase (the approach, if any, is in ``approach_s`` only)."""
+
+    t: np.ndarray           # trajectory time (s)
     q: np.ndarray           # measured (m), (n, 3)
     q_ref: np.ndarray       # (n, 3)
     tau: np.ndarray         # commanded (N), (n, 3)
     volts: np.ndarray       # (n, 3)
     controller: object
+    approach_s: float = 0.0
 
     @property
     def error(self) -> np.ndarray:
@@ -56,15 +61,38 @@ def benchmark_reference(q0: float = 0.20) -> RefFn:
 
 def run_tracking(controller: str, seconds: float, reference: RefFn, environment=None,
                  gains: dict | None = None, rate_hz: float = 1000.0, seed: int = 0,
-                 model: RobotModel | None = None, twin_kwargs: dict | None = None) -> TrackingLog:
-    """Run ``controller`` on the twin for ``seconds`` following ``reference``."""
+                 model: RobotModel | None = None, twin_kwargs: dict | None = None,
+                 approach_from: tuple[float, float, float] | None = None) -> TrackingLog:
+    """Run ``controller`` on the twin for ``seconds`` of ``reference``.
+
+    With ``approach_from`` (slider positions, m) the robot starts there at rest and a ruckig
+    jerk-limited approach brings the reference to the trajectory's first state (position,
+    velocity, acceleration) before trajectory time 0; otherwise the robot starts on the
+    trajectory. Environment times (e.g. a payload step) count from trajectory time 0.
+    """
     model = model or RobotModel.load()
+    ref = Reference()
+    reference(0.0, ref)
+    approach = None
+    if approach_from is not None:
+        approach = Approach(dt=1.0 / rate_hz, stroke=tuple(model.description.limits.stroke_m))
+        approach.reset(approach_from)
+        status = approach.set_target(ref.q, ref.qd, ref.qdd)
+        if status != ApproachStatus.WORKING:
+            raise ConfigurationError(f"approach to the trajectory's first point refused: "
+                                     f"{status.name}")
+        t_offset = approach.duration
+    else:
+        t_offset = 0.0
+    if environment is not None and isinstance(environment, PayloadStep):
+        environment = environment.model_copy(update={"at_s": environment.at_s + t_offset})
     clock = SimClock()
     twin = Twin(model.description, environment or FreeMotion(), seed=seed, clock=clock,
                 **(twin_kwargs or {}))
-    ref = Reference()
-    reference(0.0, ref)
-    twin.place(ref.q, ref.qd)
+    if approach is not None:
+        twin.place(approach_from)
+    else:
+        twin.place(ref.q, ref.qd)
     enc = TwinEncoders(twin)
     card = TwinActuators(twin, 0)
     card.enable()
@@ -73,6 +101,7 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
     st = State()
     dt = 1.0 / rate_hz
     n = int(round(seconds * rate_hz))
+    n_approach = int(round(t_offset * rate_hz))
     per_volt = model.description.drive.force_per_volt_n
     limit = model.description.drive.command_limit_v
     q = np.zeros(3)
@@ -83,20 +112,25 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
     log_r = np.empty((n, 3))
     log_tau = np.empty((n, 3))
     log_v = np.empty((n, 3))
-    for k in range(n):
+    for k in range(-n_approach, n):
         t = k * dt
-        clock.t = t
+        clock.t = t + t_offset
         enc.read_positions_m(q)
         est.update(q, dt)
-        reference(t, ref)
+        if k < 0:
+            approach.update(ref.q, ref.qd, ref.qdd)
+        else:
+            reference(t, ref)
         model.dyn.state(q, est.qd, out=st)
         ctrl.update(st, ref, dt, tau)
         np.clip(tau / per_volt, -limit, limit, out=volts)
         card.write_volts(volts)
+        if k < 0:
+            continue
         log_t[k] = t
         log_q[k] = q
         log_r[k] = ref.q
         log_tau[k] = tau
         log_v[k] = volts
     card.close()
-    return TrackingLog(log_t, log_q, log_r, log_tau, log_v, ctrl)
+    return TrackingLog(log_t, log_q, log_r, log_tau, log_v, ctrl, t_offset)

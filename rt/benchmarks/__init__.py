@@ -1,0 +1,1 @@
+"""Benchmarks the product ships as commands (`talus bench ...`): figures, not pass/fail."""

@@ -1,0 +1,40 @@
+"""The tracking experiments' shape and their headline properties (short runs; the 26 s figures
+are produced by ``talus bench tracking`` and quoted in the closing notes)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from rt.benchmarks.tracking import run_experiment
+
+
+def test_payload_step_experiment_shape_and_ordering(monkeypatch):
+    import rt.benchmarks.tracking as tracking
+
+    # Same experiment with the step at 4 s of an 8 s run, to keep the suite fast.
+    monkeypatch.setattr(tracking, "STEP_S", 4.0)
+    monkeypatch.setitem(tracking.EXPERIMENTS, "payload-step", (
+        ("paden_panja", "adaptive"),
+        tracking.PayloadStep(mass_kg=100.0, at_s=4.0, com_m=(0.0, 0.0, 0.10))))
+    result = run_experiment("payload-step", seconds=8.0)
+    c = result["controllers"]
+    assert set(c) == {"paden_panja", "adaptive"}
+    for r in c.values():
+        assert set(r) == {"period1", "period2", "peak_abs_m"}
+        assert set(r["period1"]) == {"mean_abs_m", "rms_m"}
+    assert c["adaptive"]["period1"]["mean_abs_m"] < 0.3e-3
+    assert c["adaptive"]["period2"]["mean_abs_m"] < 0.3e-3
+    assert c["paden_panja"]["period2"]["mean_abs_m"] > 3 * c["adaptive"]["period2"]["mean_abs_m"]
+    assert result["approach_s"] > 0.0
+
+
+def test_bench_tracking_cli_json():
+    proc = subprocess.run([sys.executable, "-m", "rt.cli", "bench", "tracking", "--experiment",
+                           "pid-vs-paden", "--seconds", "4", "--json"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    pid, paden = out["controllers"]["pid"], out["controllers"]["paden_panja"]
+    assert pid["peak_abs_m"] > paden["peak_abs_m"]
+    assert out["thesis"]["pid"]["peak_abs_mm"] == 7.0
