@@ -219,7 +219,7 @@ class Component:
             raise InputError(
                 f"component {self.name!r} has no parameter {', '.join(map(repr, unknown))}; "
                 f"known: {', '.join(sorted(fields))}")
-        old = self.params
+        old: Any = self.params
         try:
             new = dataclasses.replace(old, **values)
             self.check_params(new)

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from time import perf_counter_ns
 from typing import Any
 
+import numpy as np
+
 from rt.engine.component import STATUS_EXCEPTION, Component, Lifecycle, LifecycleError
 from rt.engine.ports import InputPort, OutputPort, PortType, StructType, check_name
 from rt.engine.stats import (DEFAULT_CAPACITY, Fault, GraphStats, SlotStats, check_capacity,
@@ -177,18 +179,23 @@ class GraphBuilder:
 
     @staticmethod
     def _describe_cycle(left: set[str], edges: dict[str, list[tuple[str, Connection]]]) -> str:
-        # Every node left after Kahn has an incoming edge from another node left: walk
-        # backwards... simpler forwards: follow edges inside `left` until a node repeats.
+        # Every node Kahn could not order still has an incoming edge from another such node, so
+        # walking incoming edges backwards inside `left` never gets stuck and must revisit a
+        # node: the nodes between the two visits form a cycle.
+        incoming: dict[str, tuple[str, Connection]] = {}
+        for a in sorted(left):
+            for b, c in edges[a]:
+                if b in left and b not in incoming:
+                    incoming[b] = (a, c)
         node = min(left)
-        path: list[tuple[str, Connection]] = []
+        walk: list[Connection] = []
         seen: dict[str, int] = {}
         while node not in seen:
-            seen[node] = len(path)
-            nxt = next((b, c) for b, c in edges[node] if b in left)
-            path.append(nxt)
-            node = nxt[0]
-        cycle = path[seen[node]:]
-        hops = ", ".join(f"{c.source} -> {c.target}" for _, c in cycle)
+            seen[node] = len(walk)
+            node, conn = incoming[node]
+            walk.append(conn)
+        cycle = walk[seen[node]:][::-1]
+        hops = ", ".join(f"{c.source} -> {c.target}" for c in cycle)
         return (f"cycle without delay: {hops}; break it with connect(..., delay=1) on one of "
                 f"these connections")
 
@@ -479,6 +486,18 @@ class Graph:
         return GraphStats(self._cycles, summarize(self._cycle_ring, self._cycles, self._cycle_max),
                           comps, self.fault_count)
 
+    def timing_samples(self) -> dict:
+        """Copies of the timing rings (ns), aligned by cycle: ``{"cycle": int64[n],
+        "components": {slot: int64[n]}}`` over the last n = min(cycles, capacity) cycles,
+        oldest first; -1 marks a cycle in which a slot did not run. For benchmarks that need
+        more than the summaries (e.g. a cycle's time minus one block's)."""
+        capacity = len(self._cycle_ring)
+        n = min(self._cycles, capacity)
+        idx = np.arange(self._cycles - n, self._cycles) % capacity
+        return {"cycle": self._cycle_ring[idx].copy(),
+                "components": {slot: self._rings[k][idx].copy()
+                               for k, slot in enumerate(self._order)}}
+
     def reset_stats(self) -> None:
         """Forget all timing samples (not the cycle count)."""
         for k, ring in enumerate(self._rings):
@@ -507,30 +526,30 @@ class Graph:
         if new._graph is not None:
             raise InputError(f"swap into {slot!r}: {new!r} is already in a graph")
         problems = []
-        for name, port in new.inputs.items():
+        for name, inp in new.inputs.items():
             mine = old.inputs.get(name)
             if mine is None:
-                problems.append(f"input {name!r} ({port.type}) has no source in slot {slot!r} "
+                problems.append(f"input {name!r} ({inp.type}) has no source in slot {slot!r} "
                                 f"(its inputs: {', '.join(old.inputs) or 'none'})")
-            elif mine.type != port.type:
-                problems.append(f"input {name!r} is {port.type}, the slot's is {mine.type}")
-        for name, port in old.outputs.items():
+            elif mine.type != inp.type:
+                problems.append(f"input {name!r} is {inp.type}, the slot's is {mine.type}")
+        for name, out in old.outputs.items():
             theirs = new.outputs.get(name)
             if theirs is None:
-                problems.append(f"output {name!r} ({port.type}) is missing")
-            elif theirs.type != port.type:
-                problems.append(f"output {name!r} is {theirs.type}, the slot's is {port.type}")
+                problems.append(f"output {name!r} ({out.type}) is missing")
+            elif theirs.type != out.type:
+                problems.append(f"output {name!r} is {theirs.type}, the slot's is {out.type}")
         if new.lifecycle not in (Lifecycle.UNCONFIGURED, Lifecycle.INACTIVE):
             problems.append(f"it is {new.lifecycle.value}; it must be unconfigured or inactive")
         if problems:
             raise InputError(f"cannot swap {new.name!r} into slot {slot!r}: " + "; ".join(problems))
         new._graph = self  # reserved: it cannot be prepared twice
         new._sealed = True
-        for name, port in new.inputs.items():
+        for name, inp in new.inputs.items():
             src = old.inputs[name]
-            port._bind(src.data, src.source or "")
-        for name, port in old.outputs.items():
-            new.outputs[name]._adopt(port.data)
+            inp._bind(src.data, src.source or "")
+        for name, out in old.outputs.items():
+            new.outputs[name]._adopt(out.data)
         if new.lifecycle is Lifecycle.UNCONFIGURED:
             try:
                 new.configure()

@@ -22,6 +22,7 @@ Commands queued from any thread (rate, parameters, component swap; see
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import threading
 import time
@@ -114,7 +115,8 @@ class Loop:
     * ``max_behind_periods`` — re-phase when a cycle starts more than this many periods late.
     * ``rt_priority``, ``cpus``, ``lock_memory``, ``switch_interval_s`` — real-time hygiene
       tried in realtime mode (:func:`rt_hygiene.realtime_thread`); None/False skips one.
-    * ``manage_gc`` — freeze and disable gc while running (both modes).
+    * ``manage_gc`` — freeze and disable gc while running (both modes; the collection before
+      freezing is only done in realtime mode, where its tens of ms at start-up do not matter).
     """
 
     def __init__(self, graph: Graph, rate_hz: float = 1000.0, mode: str = "realtime",
@@ -144,8 +146,11 @@ class Loop:
         self._spin_us = float(spin_us)
         self._miss_tolerance = float(miss_tolerance)
         self._max_behind = float(max_behind_periods)
-        self._hygiene_args = dict(priority=rt_priority, cpus=None if cpus is None else list(cpus),
-                                  lock_memory=lock_memory, switch_interval_s=switch_interval_s)
+        cpu_list = None if cpus is None else list(cpus)
+        # Bound now, entered in the thread that runs the cycles (FIFO/affinity are per thread).
+        self._hygiene = functools.partial(
+            rt_hygiene.realtime_thread, priority=rt_priority, cpus=cpu_list,
+            lock_memory=lock_memory, switch_interval_s=switch_interval_s)
         self._manage_gc = manage_gc
         self._queue = CommandQueue(command_capacity)
         self._capacity = check_capacity(stats_capacity)
@@ -242,18 +247,18 @@ class Loop:
         try:
             with contextlib.ExitStack() as stack:
                 if self.mode == "realtime":
-                    self.hygiene = stack.enter_context(
-                        rt_hygiene.realtime_thread(**self._hygiene_args))
+                    self.hygiene = stack.enter_context(self._hygiene())
                 if self._manage_gc:
-                    stack.enter_context(rt_hygiene.gc_paused())
+                    stack.enter_context(rt_hygiene.gc_paused(collect=self.mode == "realtime"))
                 yield
         finally:
             self._in_run = False
 
-    def run(self, cycles: int | None = None, seconds: float | None = None) -> LoopStats:
+    def run(self, cycles: int | None = None, seconds: float | None = None) -> int:
         """Run in the calling thread for ``cycles`` cycles or ``seconds`` (wall time in
         realtime mode, simulated time in fast mode); configures and starts the graph if it is
-        not running, and leaves it running. Returns :meth:`stats`."""
+        not running, and leaves it running. Returns the number of cycles run (statistics:
+        :meth:`stats`)."""
         if (cycles is None) == (seconds is None):
             raise InputError("run() takes exactly one of cycles= or seconds=")
         if cycles is not None and (not isinstance(cycles, int) or cycles < 0):
@@ -264,9 +269,10 @@ class Loop:
             raise InputError("the loop runs in its thread; stop() it before run()")
         self._prepare_graph()
         self._stop_requested = False
+        before = self._cycles
         with self._running():
             self._cycle_loop(cycles, seconds)
-        return self.stats()
+        return self._cycles - before
 
     def start(self) -> None:
         """Run in a dedicated thread until :meth:`stop` (configures/starts the graph here)."""
@@ -295,7 +301,7 @@ class Loop:
         """Ask the loop to stop before its next cycle (any thread, or a component; no wait)."""
         self._stop_requested = True  # a bool store is atomic under the GIL; read every cycle
 
-    def stop(self, timeout: float = 5.0) -> LoopStats:
+    def stop(self, timeout: float = 5.0) -> None:
         """Stop the dedicated thread and join it (components stay active: ``graph.stop()``
         stops them). Raises TimeoutError if it does not end within ``timeout`` (s), and
         re-raises (as TalusError) an error that ended the thread."""
@@ -309,7 +315,6 @@ class Loop:
         err, self._thread_error = self._thread_error, None
         if err is not None:
             raise TalusError(f"the loop thread ended with {type(err).__name__}: {err}") from err
-        return self.stats()
 
     def _cycle_loop(self, cycles: int | None, seconds: float | None) -> None:
         if self.mode == "fast":

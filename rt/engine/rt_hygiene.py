@@ -70,16 +70,17 @@ class HygieneReport:
 
     def summary(self) -> str:
         """One line per measure."""
+        fifo = f"yes, priority {self.fifo_priority}" if self.fifo else "no"
+        si = (f"{self.switch_interval_s * 1e6:.0f} µs" if self.switch_interval_s is not None
+              else "unchanged")
         return "\n".join([
-            f"SCHED_FIFO: {'yes, priority %d' % self.fifo_priority if self.fifo else 'no'} "
-            f"({self.fifo_detail})",
+            f"SCHED_FIFO: {fifo} ({self.fifo_detail})",
             f"mlockall:   {'yes' if self.mlockall else 'no'} ({self.mlock_detail})",
             f"affinity:   {list(self.affinity) if self.affinity else 'unchanged'} "
             f"({self.affinity_detail})",
             f"timerslack: {self.timer_slack_ns if self.timer_slack_ns is not None else '-'} ns "
             f"({self.timer_slack_detail})",
-            f"GIL switch: {self.switch_interval_s if self.switch_interval_s else '-'} s "
-            f"({self.switch_interval_detail})",
+            f"GIL switch: {si} ({self.switch_interval_detail})",
         ] + self.notes)
 
 
@@ -171,17 +172,21 @@ def try_timer_slack(ns: int) -> tuple[bool, str, int | None]:
 
 
 @contextlib.contextmanager
-def gc_paused() -> Iterator[None]:
-    """Collect once, freeze what survives, and disable gc until the last user leaves.
+def gc_paused(collect: bool = True) -> Iterator[None]:
+    """Collect once (if ``collect``), freeze what survives, and disable gc until the last user
+    leaves.
 
-    A frozen object is never scanned again, so a collection that would otherwise stall the
-    cycle for milliseconds cannot happen; the loop allocates nothing that needs collecting.
+    Disabled, the collector cannot stall a cycle for milliseconds; frozen, the existing heap
+    stays out of any collection that someone triggers anyway (``gc.collect()`` in another
+    thread). The loop allocates nothing that needs collecting. The initial collection costs
+    tens of ms in a large process: worth it before a real-time run, skipped for fast runs.
     """
     global _gc_users, _gc_was_enabled
     with _lock:
         if _gc_users == 0:
             _gc_was_enabled = gc.isenabled()
-            gc.collect()
+            if collect:
+                gc.collect()
             gc.freeze()
             gc.disable()
         _gc_users += 1

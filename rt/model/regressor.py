@@ -79,6 +79,24 @@ class Regressor:
         self._zero_tree = np.zeros(dynamics.model.nv)
         self._state = State()
         self.base = self._find_base(samples, seed)
+        # For ``mixed``: where each base parameter lives (tree regressor column or drive term).
+        nv = dynamics.model.nv
+        self._y_tree = np.zeros((nv, 10 * (nv)))
+        self._y_tmp = np.zeros_like(self._y_tree)
+        rigid_pos, rigid_tree, drive_pos, drive = [], [], [], []
+        for pos, std in enumerate(self.base.base_index):
+            if std < N_RIGID:
+                rigid_pos.append(pos)
+                rigid_tree.append(int(self._tree_cols[std]))
+            else:
+                k = std - N_RIGID
+                drive_pos.append(pos)
+                drive.append((k // 3, k % 3))       # (0 Jr, 1 fv, 2 fc; axis)
+        self._base_rigid_pos = np.array(rigid_pos)
+        self._base_rigid_tree = np.array(rigid_tree)
+        self._base_drive_pos = drive_pos
+        self._base_drive = drive
+        self._mixed_out = np.zeros((3, len(self.base.base_index)))
 
     def theta_standard(self) -> np.ndarray:
         """The model's current standard parameters (payload included)."""
@@ -128,20 +146,26 @@ class Regressor:
         qdd_r = np.asarray(qdd_r, dtype=float)
         S = st.S
         zero = self._zero_tree
-        acc = S @ qdd_r + st.Sd @ qd_r
-        y = pin.computeJointTorqueRegressor(model, data, st.Q, zero, acc)[:, self._tree_cols].copy()
-        v_plus = S @ (st.qd + qd_r)
-        v_minus = S @ (st.qd - qd_r)
-        y += 0.25 * pin.computeJointTorqueRegressor(model, data, st.Q, v_plus, zero)[:, self._tree_cols]
-        y -= 0.25 * pin.computeJointTorqueRegressor(model, data, st.Q, v_minus, zero)[:, self._tree_cols]
-        full = self._full
-        full[:, :N_RIGID] = S.T @ y
-        full[:, N_RIGID:] = 0.0
-        for i in range(3):
-            full[i, N_RIGID + i] = qdd_r[i]
-            full[i, N_RIGID + 3 + i] = qd_r[i]
-            full[i, N_RIGID + 6 + i] = math.tanh(qd_r[i] / d.coulomb_v)
-        return full[:, self.base.base_index]
+        # Pinocchio returns a view of its internal buffer: copy the first, combine the others
+        # into it at the full-tree level, then project and pick the base columns once.
+        y = self._y_tree
+        np.copyto(y, pin.computeJointTorqueRegressor(model, data, st.Q, zero,
+                                                     S @ qdd_r + st.Sd @ qd_r))
+        tmp = self._y_tmp
+        np.multiply(pin.computeJointTorqueRegressor(model, data, st.Q, S @ (st.qd + qd_r), zero),
+                    0.25, out=tmp)
+        y += tmp
+        np.multiply(pin.computeJointTorqueRegressor(model, data, st.Q, S @ (st.qd - qd_r), zero),
+                    0.25, out=tmp)
+        y -= tmp
+        out = self._mixed_out
+        out[:, self._base_rigid_pos] = S.T @ y[:, self._base_rigid_tree]
+        for col, (kind, axis) in zip(self._base_drive_pos, self._base_drive):
+            value = (qdd_r[axis] if kind == 0 else qd_r[axis] if kind == 1
+                     else math.tanh(qd_r[axis] / d.coulomb_v))
+            out[:, col] = 0.0
+            out[axis, col] = value
+        return out
 
     def _find_base(self, samples: int, seed: int) -> BaseParameters:
         rng = np.random.default_rng(seed)

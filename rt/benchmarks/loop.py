@@ -1,0 +1,38 @@
+"""``talus bench loop``: the position loop on the twin, timed block by block.
+
+Whole-cycle figures include the ``twin`` block (the simulation's physics and sensor models),
+which does not exist on the rig; ``cycle_without_twin_us`` subtracts it cycle by cycle, which is
+the figure to compare with the rig's sensors→outputs budget. Twin figures, this machine.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from rt.position_loop import build_sim_position_loop
+
+
+def _summary(samples_ns: np.ndarray) -> dict[str, float]:
+    us = samples_ns / 1e3
+    return {"median": float(np.median(us)), "p99": float(np.percentile(us, 99)),
+            "max": float(us.max())}
+
+
+def run_loop_benchmark(controller: str, seconds: float, rate_hz: float = 1000.0,
+                       mode: str = "realtime") -> dict:
+    pl = build_sim_position_loop(controller, duration_s=max(1.0, seconds), rate_hz=rate_hz,
+                                 mode=mode)
+    cycles = pl.loop.run(seconds=seconds)
+    stats = pl.loop.stats()
+    graph = pl.graph
+    rings = graph.timing_samples()
+    cycle_ns = rings["cycle"]
+    twin_ns = rings["components"]["twin"]
+    valid = (cycle_ns >= 0) & (twin_ns >= 0)
+    components = {slot: _summary(ns[ns >= 0]) for slot, ns in rings["components"].items()}
+    without = cycle_ns[valid] - twin_ns[valid]
+    cycle_ns = cycle_ns[cycle_ns >= 0]
+    pl.graph.stop()
+    return {"controller": controller, "rate_hz": rate_hz, "mode": mode, "twin": True,
+            "cycles": int(cycles), "deadline_misses": int(stats.misses),
+            "cycle_us": _summary(cycle_ns), "cycle_without_twin_us": _summary(without),
+            "components": components}

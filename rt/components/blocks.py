@@ -1,0 +1,246 @@
+"""The real-time blocks of the position loop, in the thesis's modular layout (3.7.2):
+sensors → estimation → model → reference → controller → drive, each a ``Component`` with
+typed ports, triggered in dependency order by one periodic activity.
+
+Each block's ports are documented first thing in its docstring; units are SI.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from rt.control.base import Controller, Reference
+from rt.devices.interfaces import ActuatorOutputs, EncoderBank
+from rt.engine import Array, Component, Struct
+from rt.errors import InputError, KinematicsError, TalusError
+from rt.estimation.velocity import KalmanVelocityEstimator
+from rt.model import RobotModel
+from rt.model.dynamics import State
+from rt.references.approach import Approach, ApproachStatus
+
+STATUS_SENSOR = 10
+STATUS_FK = 11
+STATUS_REFERENCE = 12
+
+
+class EncoderReader(Component):
+    """Ports: out ``q``: float64[3], m — slider positions read from the encoder card."""
+
+    def __init__(self, name: str, encoders: EncoderBank):
+        super().__init__(name)
+        self.encoders = encoders
+        self.q = self.declare_output("q", Array(3), "slider positions (m)")
+
+    def update(self, t: float, dt: float) -> int:
+        self.encoders.read_positions_m(self.q.data)
+        return 0
+
+
+class VelocityEstimation(Component):
+    """Ports: in ``q_meas``: float64[3], m; out ``q``, ``qd``, ``qdd``: float64[3] (m, m/s,
+    m/s²) — the Kalman estimate from the quantized encoders."""
+
+    def __init__(self, name: str):
+        super().__init__(name)
+        self.q_meas = self.declare_input("q_meas", Array(3))
+        self.q = self.declare_output("q", Array(3))
+        self.qd = self.declare_output("qd", Array(3))
+        self.qdd = self.declare_output("qdd", Array(3))
+
+    def make_state(self):
+        return KalmanVelocityEstimator()
+
+    def update(self, t: float, dt: float) -> int:
+        est = self.state
+        status = est.update(self.q_meas.data, dt)
+        if status < 0 and status != -3:            # a flagged jump is the supervisor's business
+            return STATUS_SENSOR
+        self.q.data[:] = est.q
+        self.qd.data[:] = est.qd
+        self.qdd.data[:] = est.qdd
+        return 0
+
+
+class ModelState(Component):
+    """Ports: in ``q_meas``: float64[3], m (measured positions), in ``qd``: float64[3], m/s
+    (estimated velocities); out ``state``: model ``State`` — forward kinematics (warm-started),
+    the closed-chain maps S, Ṡ and the platform pose for this cycle. FK failure → status 11."""
+
+    def __init__(self, name: str, model: RobotModel):
+        super().__init__(name)
+        self.model = model
+        self.q_meas = self.declare_input("q_meas", Array(3))
+        self.qd = self.declare_input("qd", Array(3))
+        self.state_out = self.declare_output("state", Struct(State))
+
+    def update(self, t: float, dt: float) -> int:
+        try:
+            self.model.dyn.state(self.q_meas.data, self.qd.data, out=self.state_out.data)
+        except KinematicsError:
+            return STATUS_FK
+        return 0
+
+
+@dataclass
+class _RefState:
+    phase: int = 0            # 0 approach, 1 trajectory, 2 done (holding the last point)
+    t0: float = math.nan      # loop time at which the trajectory started (s)
+
+
+class TrajectoryReference(Component):
+    """Ports: in ``q_meas``: float64[3], m; out ``q_ref``, ``qd_ref``, ``qdd_ref``: float64[3]
+    (m, m/s, m/s²) and ``phase``: float64[1] (0 approach, 1 trajectory, 2 done).
+
+    A ruckig approach from the measured position at start to the trajectory's first state, then
+    ``trajectory(t, out)`` for ``duration_s``, then the last point held. Position limits are
+    checked by the approach generator (our code, not ruckig's).
+    """
+
+    def __init__(self, name: str, trajectory: Callable[[float, Reference], None],
+                 duration_s: float, stroke: tuple[float, float], rate_hz: float = 1000.0):
+        super().__init__(name)
+        self.trajectory = trajectory
+        self.duration_s = duration_s
+        self.approach = Approach(dt=1.0 / rate_hz, stroke=stroke)
+        self.q_meas = self.declare_input("q_meas", Array(3))
+        self.q_ref = self.declare_output("q_ref", Array(3))
+        self.qd_ref = self.declare_output("qd_ref", Array(3))
+        self.qdd_ref = self.declare_output("qdd_ref", Array(3))
+        self.phase = self.declare_output("phase", Array(1))
+        self._ref = Reference(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
+        self._first = Reference()
+
+    def make_state(self):
+        return _RefState()
+
+    def on_start(self) -> None:
+        self.state = _RefState()
+        self.approach.reset(self.q_meas.data.copy())
+        self.trajectory(0.0, self._first)
+        status = self.approach.set_target(self._first.q, self._first.qd, self._first.qdd)
+        if status != ApproachStatus.WORKING:
+            raise KinematicsError(f"approach to the trajectory refused: {status.name}")
+
+    def update(self, t: float, dt: float) -> int:
+        st = self.state
+        if st.phase == 0:
+            status = self.approach.update(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
+            if status < 0:
+                return STATUS_REFERENCE
+            if status == ApproachStatus.FINISHED:
+                st.phase = 1
+                st.t0 = t
+        if st.phase == 1:
+            tt = t - st.t0
+            if tt > self.duration_s:
+                st.phase = 2
+                self.qd_ref.data[:] = 0.0
+                self.qdd_ref.data[:] = 0.0
+            else:
+                self.trajectory(tt, self._ref)
+        self.phase.data[0] = st.phase
+        return 0
+
+
+class ControllerBlock(Component):
+    """Ports: in ``state``: model ``State``; in ``q_ref``, ``qd_ref``, ``qdd_ref``: float64[3];
+    out ``tau``: float64[3], N — the hosted control law's actuator forces.
+
+    Swapping this block for another ``ControllerBlock`` at a cycle boundary is bumpless: the new
+    law takes over from the old one's last force (``Controller.handover``).
+    """
+
+    def __init__(self, name: str, controller: Controller):
+        super().__init__(name)
+        self.controller = controller
+        self.state_in = self.declare_input("state", Struct(State))
+        self.q_ref = self.declare_input("q_ref", Array(3))
+        self.qd_ref = self.declare_input("qd_ref", Array(3))
+        self.qdd_ref = self.declare_input("qdd_ref", Array(3))
+        self.tau = self.declare_output("tau", Array(3))
+        self._ref = Reference()
+        self._dt = 1e-3
+
+    def _bind_reference(self) -> Reference:
+        self._ref.q = self.q_ref.data
+        self._ref.qd = self.qd_ref.data
+        self._ref.qdd = self.qdd_ref.data
+        return self._ref
+
+    def set_params(self, **values) -> None:
+        """Gains change at a cycle boundary (``loop.set_param("controller", name, value)``);
+        invalid gains are refused with ``InputError`` and nothing changes."""
+        try:
+            self.controller.set_gains(**values)
+        except TalusError as exc:
+            raise InputError(f"component {self.name!r}: rejected {values!r}: {exc}") from exc
+
+    def handover(self, old: "ControllerBlock") -> None:
+        # The outputs already hold the old law's last force (the engine adopts its buffers).
+        self.controller.handover(self.tau.data.copy(), self.state_in.data,
+                                 self._bind_reference(), self._dt)
+
+    def update(self, t: float, dt: float) -> int:
+        self._dt = dt
+        return self.controller.update(self.state_in.data, self._bind_reference(), dt,
+                                      self.tau.data)
+
+
+class DriveOutput(Component):
+    """Ports: in ``tau``: float64[3], N; out ``volts``: float64[3], V — forces converted to
+    amplifier commands (V = τ / (N per V)), saturated at ±command limit, written to the card."""
+
+    def __init__(self, name: str, card: ActuatorOutputs, force_per_volt_n: float,
+                 limit_v: float):
+        super().__init__(name)
+        self.card = card
+        self.k = 1.0 / force_per_volt_n
+        self.limit = limit_v
+        self.tau = self.declare_input("tau", Array(3))
+        self.volts = self.declare_output("volts", Array(3))
+
+    def update(self, t: float, dt: float) -> int:
+        v = self.volts.data
+        np.multiply(self.tau.data, self.k, out=v)
+        np.clip(v, -self.limit, self.limit, out=v)
+        self.card.write_volts(v)
+        return 0
+
+
+class RecorderTap(Component):
+    """Ports: in ``q``, ``qd``, ``q_ref``, ``tau``, ``volts``: float64[3]; no outputs.
+
+    The recording hand-off: copies the cycle's signals into a preallocated ring buffer that a
+    non-real-time thread drains (the writer; MCAP comes with the protocols work). The ring
+    drops the oldest rows when nobody drains it; ``dropped`` counts them.
+    """
+
+    WIDTH = 1 + 5 * 3
+
+    def __init__(self, name: str, capacity: int = 65536):
+        super().__init__(name)
+        self.capacity = capacity
+        self.inputs_ = [self.declare_input(n, Array(3)) for n in ("q", "qd", "q_ref", "tau",
+                                                                   "volts")]
+        self.ring = np.zeros((capacity, self.WIDTH))
+        self.written = 0
+
+    def update(self, t: float, dt: float) -> int:
+        row = self.ring[self.written % self.capacity]
+        row[0] = t
+        k = 1
+        for port in self.inputs_:
+            row[k:k + 3] = port.data
+            k += 3
+        self.written += 1
+        return 0
+
+    def drain(self, start: int) -> tuple[np.ndarray, int]:
+        """Rows written since ``start`` (a copy, oldest first) and the new start index."""
+        end = self.written
+        start = max(start, end - self.capacity)
+        idx = np.arange(start, end) % self.capacity
+        return self.ring[idx].copy(), end
