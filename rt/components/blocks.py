@@ -22,7 +22,6 @@ from rt.model.dynamics import State
 from rt.references.approach import Approach, ApproachStatus
 
 STATUS_SENSOR = 10
-STATUS_FK = 11
 STATUS_REFERENCE = 12
 
 
@@ -41,7 +40,8 @@ class EncoderReader(Component):
 
 class VelocityEstimation(Component):
     """Ports: in ``q_meas``: float64[3], m; out ``q``, ``qd``, ``qdd``: float64[3] (m, m/s,
-    m/s²) — the Kalman estimate from the quantized encoders."""
+    m/s²) — the Kalman estimate from the quantized encoders; out ``status``: float64[1] — the
+    estimator's status (−3 = implausible jump, for the supervisor)."""
 
     def __init__(self, name: str):
         super().__init__(name)
@@ -49,6 +49,7 @@ class VelocityEstimation(Component):
         self.q = self.declare_output("q", Array(3))
         self.qd = self.declare_output("qd", Array(3))
         self.qdd = self.declare_output("qdd", Array(3))
+        self.status = self.declare_output("status", Array(1))
 
     def make_state(self):
         return KalmanVelocityEstimator()
@@ -56,6 +57,7 @@ class VelocityEstimation(Component):
     def update(self, t: float, dt: float) -> int:
         est = self.state
         status = est.update(self.q_meas.data, dt)
+        self.status.data[0] = status
         if status < 0 and status != -3:            # a flagged jump is the supervisor's business
             return STATUS_SENSOR
         self.q.data[:] = est.q
@@ -67,7 +69,9 @@ class VelocityEstimation(Component):
 class ModelState(Component):
     """Ports: in ``q_meas``: float64[3], m (measured positions), in ``qd``: float64[3], m/s
     (estimated velocities); out ``state``: model ``State`` — forward kinematics (warm-started),
-    the closed-chain maps S, Ṡ and the platform pose for this cycle. FK failure → status 11."""
+    the closed-chain maps S, Ṡ and the platform pose for this cycle; out ``fk_ok``: float64[1]
+    — 0 when FK failed this cycle (the state then keeps the last good pose; the supervisor
+    stops the robot: the block itself keeps running, so the loop can still hold it safely)."""
 
     def __init__(self, name: str, model: RobotModel):
         super().__init__(name)
@@ -75,19 +79,23 @@ class ModelState(Component):
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.qd = self.declare_input("qd", Array(3))
         self.state_out = self.declare_output("state", Struct(State))
+        self.fk_ok = self.declare_output("fk_ok", Array(1))
 
     def update(self, t: float, dt: float) -> int:
         try:
             self.model.dyn.state(self.q_meas.data, self.qd.data, out=self.state_out.data)
+            self.fk_ok.data[0] = 1.0
         except KinematicsError:
-            return STATUS_FK
+            self.fk_ok.data[0] = 0.0
         return 0
 
 
 @dataclass
 class _RefState:
-    phase: int = 0            # 0 approach, 1 trajectory, 2 done (holding the last point)
+    phase: int = 0            # 0 approach, 1 trajectory, 2 back to rest, 3 stopped, 4 hold
     t0: float = math.nan      # loop time at which the trajectory started (s)
+    mode: float = 0.0         # the supervisor's mode seen last cycle
+    started: bool = False
 
 
 class TrajectoryReference(Component):
@@ -97,6 +105,11 @@ class TrajectoryReference(Component):
     A ruckig approach from the measured position at start to the trajectory's first state, then
     ``trajectory(t, out)`` for ``duration_s``, then the last point held. Position limits are
     checked by the approach generator (our code, not ruckig's).
+
+    In ``mode`` (float64[1], the supervisor's, one cycle late): on a soft stop the reference
+    brakes to a hold with the jerk-limited soft stop; during a hard stop it follows the measured
+    position (so nothing jumps when the drives come back); after a reset it holds where the
+    robot is (phase 4) until a new program is started.
     """
 
     def __init__(self, name: str, trajectory: Callable[[float, Reference], None],
@@ -106,6 +119,7 @@ class TrajectoryReference(Component):
         self.duration_s = duration_s
         self.approach = Approach(dt=1.0 / rate_hz, stroke=stroke)
         self.q_meas = self.declare_input("q_meas", Array(3))
+        self.mode = self.declare_input("mode", Array(1))
         self.q_ref = self.declare_output("q_ref", Array(3))
         self.qd_ref = self.declare_output("qd_ref", Array(3))
         self.qdd_ref = self.declare_output("qdd_ref", Array(3))
@@ -118,14 +132,43 @@ class TrajectoryReference(Component):
 
     def on_start(self) -> None:
         self.state = _RefState()
-        self.approach.reset(self.q_meas.data.copy())
+
+    def _begin(self) -> int:
+        """First cycle: plan the approach from where the encoders say the robot is."""
+        self.approach.reset(self.q_meas.data)
         self.trajectory(0.0, self._first)
         status = self.approach.set_target(self._first.q, self._first.qd, self._first.qdd)
         if status != ApproachStatus.WORKING:
-            raise KinematicsError(f"approach to the trajectory refused: {status.name}")
+            return STATUS_REFERENCE
+        self.state.started = True
+        return 0
 
     def update(self, t: float, dt: float) -> int:
         st = self.state
+        if not st.started and self._begin():
+            return STATUS_REFERENCE
+        mode = self.mode.data[0]
+        if mode != st.mode:
+            if mode >= 3.0:
+                pass                                        # follow (below)
+            elif mode >= 2.0:
+                self.approach.reset(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
+                self.approach.soft_stop()
+                st.phase = 3
+            else:                                           # reset: hold where the robot is
+                self.approach.reset(self.q_meas.data)
+                st.phase = 4
+            st.mode = mode
+        if mode >= 3.0:
+            self.q_ref.data[:] = self.q_meas.data
+            self.qd_ref.data[:] = 0.0
+            self.qdd_ref.data[:] = 0.0
+            self.phase.data[0] = 3
+            return 0
+        if st.phase >= 3:
+            self.approach.update(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
+            self.phase.data[0] = st.phase
+            return 0
         if st.phase == 0:
             status = self.approach.update(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
             if status < 0:
@@ -136,11 +179,14 @@ class TrajectoryReference(Component):
         if st.phase == 1:
             tt = t - st.t0
             if tt > self.duration_s:
+                # Back to rest, jerk-limited, from the trajectory's last state.
+                self.approach.reset(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
+                self.approach.soft_stop()
                 st.phase = 2
-                self.qd_ref.data[:] = 0.0
-                self.qdd_ref.data[:] = 0.0
             else:
                 self.trajectory(tt, self._ref)
+        if st.phase == 2:
+            self.approach.update(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
         self.phase.data[0] = st.phase
         return 0
 
@@ -160,9 +206,11 @@ class ControllerBlock(Component):
         self.q_ref = self.declare_input("q_ref", Array(3))
         self.qd_ref = self.declare_input("qd_ref", Array(3))
         self.qdd_ref = self.declare_input("qdd_ref", Array(3))
+        self.mode = self.declare_input("mode", Array(1))
         self.tau = self.declare_output("tau", Array(3))
         self._ref = Reference()
         self._dt = 1e-3
+        self._mode = 0.0
 
     def _bind_reference(self) -> Reference:
         self._ref.q = self.q_ref.data
@@ -185,29 +233,14 @@ class ControllerBlock(Component):
 
     def update(self, t: float, dt: float) -> int:
         self._dt = dt
+        mode = self.mode.data[0]
+        if mode != self._mode:
+            if self._mode >= 3.0 and mode < 3.0:
+                # Drives back after a hard stop: integrators and estimates start afresh.
+                self.controller.reset()
+            self._mode = mode
         return self.controller.update(self.state_in.data, self._bind_reference(), dt,
                                       self.tau.data)
-
-
-class DriveOutput(Component):
-    """Ports: in ``tau``: float64[3], N; out ``volts``: float64[3], V — forces converted to
-    amplifier commands (V = τ / (N per V)), saturated at ±command limit, written to the card."""
-
-    def __init__(self, name: str, card: ActuatorOutputs, force_per_volt_n: float,
-                 limit_v: float):
-        super().__init__(name)
-        self.card = card
-        self.k = 1.0 / force_per_volt_n
-        self.limit = limit_v
-        self.tau = self.declare_input("tau", Array(3))
-        self.volts = self.declare_output("volts", Array(3))
-
-    def update(self, t: float, dt: float) -> int:
-        v = self.volts.data
-        np.multiply(self.tau.data, self.k, out=v)
-        np.clip(v, -self.limit, self.limit, out=v)
-        self.card.write_volts(v)
-        return 0
 
 
 class RecorderTap(Component):

@@ -39,6 +39,11 @@ velocity up to ≈ 14 Hz and peaks at 1.6× near 30 Hz):
 
 Raising ``S_j`` tenfold raises ``ω_b`` by only 10^(1/6) ≈ 1.5, so the tuning is forgiving.
 
+Known limit: at speeds whose count pattern beats slowly (e.g. 1.95 counts per sample, a pattern
+repeating every ~20 ms) the quantization error is a 15-40 Hz sawtooth inside the passband, which
+no causal filter can tell from real motion; the worst case over 0-0.15 m/s is 1.45 mm/s RMS,
+3.1 mm/s peak (first difference: 8-10 mm/s RMS).
+
 Because the covariance recursion runs on-line (it is shared by the three axes, so it costs one
 axis worth of plain-float arithmetic), a change of ``dt`` at run time is handled exactly: F and Q
 are re-discretised with the new period and the gain follows. Once the gain has converged and the
@@ -52,8 +57,10 @@ Statuses (:class:`EstimatorStatus`; non-negative = measurement used):
   elapsed time is carried to the next valid sample.
 * ``ERROR_DT`` — dt not finite or outside (0, dt_max]; nothing changed.
 * ``JUMP`` — an implausible jump: |innovation| above the gate (see :class:`KalmanConfig`). The
-  sample is not fused (the filter coasts on its prediction). A single glitch passes; a real jump
-  keeps being flagged until ``reset()``. The safety supervisor reacts to it.
+  sample is not fused (the filter coasts on its prediction; the outputs keep the last estimate).
+  A single glitch passes (the next good sample is fused again); a real jump keeps being flagged
+  until ``reset()``, because the gate stops widening with the coasting time once a jump has been
+  flagged. The safety supervisor reacts to it (encoder-jump plausibility check, DESIGN.md §6).
 
 Per-cycle cost (plain floats, the PLATFORM.md VM): ≈ 3 µs median with the steady gain, ≈ 4 µs
 when the period changes every cycle (``tests/test_estimation.py`` checks < 15 µs).
@@ -159,6 +166,7 @@ class KalmanVelocityEstimator:
         self._k = (0.0, 0.0, 0.0)
         self._p = (0.0,) * 6
         self._jump_latched = False
+        self._latched_gate = 0.0
         self.q[:] = 0.0
         self.qd[:] = 0.0
         self.qdd[:] = 0.0
@@ -174,6 +182,11 @@ class KalmanVelocityEstimator:
     def gain(self) -> tuple[float, float, float]:
         """Current Kalman gain (position 1, velocity 1/s, acceleration 1/s²)."""
         return self._k
+
+    @property
+    def jump_latched(self) -> bool:
+        """True from a ``JUMP`` until a sample is fused again (or ``reset()``)."""
+        return self._jump_latched
 
     @property
     def converged(self) -> bool:
@@ -244,6 +257,10 @@ class KalmanVelocityEstimator:
         # Innovation gate: fixed floor + implausible speed × dt + n σ of the innovation.
         c = self.config
         gate = c.jump_floor_m + c.jump_velocity_m_s * t + c.jump_sigma * math.sqrt(s)
+        if self._jump_latched and gate > self._latched_gate:
+            # While rejecting, the gate does not widen with the coasting time: a real jump stays
+            # flagged until reset() instead of being swallowed after a few cycles.
+            gate = self._latched_gate
         x0, x1, x2 = self._x
         r0 = z0 - (x0[0] + t * x0[1] + h * x0[2])
         r1 = z1 - (x1[0] + t * x1[1] + h * x1[2])
@@ -253,7 +270,9 @@ class KalmanVelocityEstimator:
             self._pending_dt = t
             self._steady = False
             self._dt_gain = -1.0
-            self._jump_latched = True
+            if not self._jump_latched:
+                self._jump_latched = True
+                self._latched_gate = gate
             inn = self.innovation
             inn[0] = r0
             inn[1] = r1
@@ -340,7 +359,8 @@ class FirstDifferenceEstimator:
             self.qdd[:] = 0.0
             return EstimatorStatus.INITIALISED
         t = dt + self._pending_dt
-        alpha = 1.0 if self.cutoff_hz is None else 1.0 - math.exp(-2.0 * math.pi * self.cutoff_hz * t)
+        alpha = (1.0 if self.cutoff_hz is None
+                 else 1.0 - math.exp(-2.0 * math.pi * self.cutoff_hz * t))
         for i in range(N_AXES):
             raw = (z[i] - self._prev[i]) / t
             v = self._v[i] + alpha * (raw - self._v[i])

@@ -11,8 +11,10 @@ on its first sample with that sample's velocity, and the move can be retargeted 
 a limit and reporting ``Finished``). So every target is checked against the stroke before it is
 accepted, the whole trajectory is computed first and its position extrema checked (a target
 inside the stroke can still be overshot when the slider arrives fast), and every produced sample
-is checked again (clamped to the stroke with an error status if it ever leaves it). Intermediate
-waypoints are never used (they need ruckig's cloud service and raise).
+is checked again (clamped to the stroke with an error status if it ever leaves it). The extrema
+are computed by :func:`trajectory_position_extrema` from ruckig's phase profiles, because ruckig's
+own ``position_extrema`` misses some (see there). Intermediate waypoints are never used (they
+need ruckig's cloud service and raise).
 
 Default limits (per axis, SI): max velocity 0.15 m/s, max acceleration 0.5 m/s², max jerk 5 m/s³.
 
@@ -27,10 +29,12 @@ Statuses (:class:`ApproachStatus`; negative = error). ``set_target``/``soft_stop
 return one instead of raising, so the supervisor can call them inside the cycle; a refused target
 changes nothing (a running move continues).
 
-Per-cycle cost: ``update`` ≈ 3-4 µs (ruckig sampling ≈ 0.5 µs plus reading its Python lists);
-the cycle after a new target ≈ 10 µs. ``set_target`` (≈ 20 µs: it plans the move twice, once to
-check it) is an event, not a per-cycle call. The ruckig binding returns new 3-element Python
-lists when its outputs are read; apart from those no object is created per cycle.
+Costs (median, the PLATFORM.md VM): ``update`` ≈ 3 µs (ruckig sampling plus reading its Python
+lists), ≈ 9 µs on the cycle after a new target (ruckig replans); ``set_target`` ≈ 40 µs and
+``soft_stop`` ≈ 20 µs — events, not per-cycle calls: they plan the move on a second planner and
+integrate its phases for the extrema before touching the running one. The ruckig binding returns
+new 3-element Python lists when its outputs are read; apart from those no object is created per
+cycle.
 """
 from __future__ import annotations
 
@@ -53,6 +57,7 @@ DEFAULT_MAX_JERK_M_S3 = 5.0
 # Slack on the stroke check (m): ruckig's arithmetic lands on a target exactly at the limit within
 # ~1e-15 m; 1e-9 m is far below one encoder count (2e-5 m).
 POSITION_SLACK_M = 1e-9
+_ZERO3 = (0.0, 0.0, 0.0)
 
 
 class ApproachStatus(IntEnum):
@@ -73,10 +78,11 @@ class ApproachStatus(IntEnum):
 class Mode(IntEnum):
     """What the generator is doing."""
 
-    UNSET = 0
-    IDLE = 1
-    MOVING = 2
-    STOPPING = 3
+    UNSET = 0  # no current state yet
+    IDLE = 1  # holding the reset position
+    MOVING = 2  # position interface, towards a target state
+    STOPPING = 3  # velocity interface, braking to rest
+    HOLD = 4  # arrived (or stopped): holding the final position
 
 
 def _per_axis(value: float | Sequence[float], name: str) -> list[float]:
@@ -99,6 +105,58 @@ def _three(value: float | Sequence[float] | np.ndarray | None) -> list[float] | 
     if len(values) != N_AXES or not all(math.isfinite(v) for v in values):
         return None
     return values
+
+
+def _phase_extrema(p0: float, v0: float, a0: float, j: float, t: float,
+                   lo: float, hi: float) -> tuple[float, float]:
+    """Extend (lo, hi) by the positions of one constant-jerk phase of duration t (s)."""
+    def pos(tau: float) -> float:
+        return p0 + tau * (v0 + tau * (0.5 * a0 + tau * j / 6.0))
+
+    p_end = pos(t)
+    lo, hi = min(lo, p0, p_end), max(hi, p0, p_end)
+    # interior extrema where v(τ) = v0 + a0 τ + j τ²/2 = 0
+    roots: tuple[float, ...] = ()
+    if j != 0.0:
+        disc = a0 * a0 - 2.0 * j * v0
+        if disc >= 0.0:
+            sq = math.sqrt(disc)
+            roots = ((-a0 + sq) / j, (-a0 - sq) / j)
+    elif a0 != 0.0:
+        roots = (-v0 / a0,)
+    for tau in roots:
+        if 0.0 < tau < t:
+            x = pos(tau)
+            lo, hi = min(lo, x), max(hi, x)
+    return lo, hi
+
+
+def trajectory_position_extrema(traj: Trajectory) -> list[tuple[float, float]]:
+    """(min, max) position (m) per axis of a planned ruckig trajectory, from its profiles.
+
+    ruckig 0.19.4's own ``Trajectory.position_extrema`` misses extrema inside constant-
+    acceleration phases (e.g. from 0.0117 m at -0.094 m/s to 0.25 m it reports a minimum of
+    +3.2 mm while the trajectory reaches -1.5 mm; ``tests/test_references.py`` keeps that case).
+    This integrates each constant-jerk phase (the brake pre-phases, then the seven main ones)
+    and checks where the velocity crosses zero. One section only: we never use waypoints.
+    """
+    out = []
+    for prof in traj.profiles[0]:
+        brake = prof.brake
+        p = prof.p
+        lo = hi = p[0]
+        if brake.duration > 0.0:
+            bp, bv, ba, bj, bt = brake.p, brake.v, brake.a, brake.j, brake.t
+            lo = hi = bp[0]
+            for k in range(2):
+                if bt[k] > 0.0:
+                    lo, hi = _phase_extrema(bp[k], bv[k], ba[k], bj[k], bt[k], lo, hi)
+        v, a, j, t = prof.v, prof.a, prof.j, prof.t
+        for k in range(7):
+            if t[k] > 0.0:
+                lo, hi = _phase_extrema(p[k], v[k], a[k], j[k], t[k], lo, hi)
+        out.append((lo, hi))
+    return out
 
 
 class Approach:
@@ -144,14 +202,14 @@ class Approach:
             inp.max_acceleration = self.max_acceleration
             inp.max_jerk = self.max_jerk
             # Moves end on a cycle boundary, so the next phase (playback) starts on the next
-            # cycle with no fractional-period seam.
+            # cycle with no fractional-period seam (soft stops switch this off).
             inp.duration_discretization = DurationDiscretization.Discrete
-        self._lo3 = [lo] * N_AXES
-        self._hi3 = [hi] * N_AXES
         self.mode = Mode.UNSET
         self.duration = 0.0  # of the current move (s)
         self.last_checked_duration = 0.0  # of the last move planned by a check (s)
+        self._extrema: list[tuple[float, float]] = [(lo, lo)] * N_AXES
         self._hold = [0.0] * N_AXES
+        self._hold_at_rest = True
 
     # -- commands --------------------------------------------------------------------------------
     def reset(self, position: Sequence[float] | np.ndarray,
@@ -169,7 +227,8 @@ class Approach:
         self._inp.current_position = p
         self._inp.current_velocity = v
         self._inp.current_acceleration = a
-        self._hold = p
+        self._hold = list(p)
+        self._hold_at_rest = False
         self.mode = Mode.IDLE
         self.duration = 0.0
         return ApproachStatus.IDLE
@@ -218,6 +277,7 @@ class Approach:
         chk = self._chk_inp
         inp.control_interface = ControlInterface.Position
         inp.synchronization = Synchronization.Time  # all axes arrive together, on one state
+        inp.duration_discretization = DurationDiscretization.Discrete
         inp.target_position = chk.target_position
         inp.target_velocity = chk.target_velocity
         inp.target_acceleration = chk.target_acceleration
@@ -244,6 +304,7 @@ class Approach:
             return status
         inp.control_interface = ControlInterface.Velocity
         inp.synchronization = Synchronization.No
+        inp.duration_discretization = DurationDiscretization.Continuous
         inp.target_velocity = [0.0] * N_AXES
         inp.target_acceleration = [0.0] * N_AXES
         inp.minimum_duration = None
@@ -254,17 +315,26 @@ class Approach:
     # -- the per-cycle call ----------------------------------------------------------------------
     def update(self, out_pos: np.ndarray, out_vel: np.ndarray,
                out_acc: np.ndarray) -> ApproachStatus:
-        """Advance one cycle and write the reference into the (3,) output arrays (SI units)."""
+        """Advance one cycle and write the reference into the (3,) output arrays (SI units).
+
+        Returns ``WORKING`` while moving and ``FINISHED`` on the cycle whose sample is the target
+        state (for a move) or rest (for a soft stop), and on every later cycle. After that cycle
+        the output holds the final position with zero velocity and acceleration: a caller that
+        must continue at a non-zero target velocity takes over on the ``FINISHED`` cycle (as
+        ``ReferenceSequence`` does).
+        """
         mode = self.mode
-        if mode == Mode.UNSET:
-            return ApproachStatus.ERROR_NOT_READY
-        if mode == Mode.IDLE:
+        if mode == Mode.IDLE or mode == Mode.HOLD:
+            if not self._hold_at_rest:
+                self._settle_hold()
             h = self._hold
             for i in range(N_AXES):
                 out_pos[i] = h[i]
                 out_vel[i] = 0.0
                 out_acc[i] = 0.0
-            return ApproachStatus.IDLE
+            return ApproachStatus.IDLE if mode == Mode.IDLE else ApproachStatus.FINISHED
+        if mode == Mode.UNSET:
+            return ApproachStatus.ERROR_NOT_READY
         try:
             result = self._otg.update(self._inp, self._out)
         except RuckigError:
@@ -273,23 +343,63 @@ class Approach:
             return ApproachStatus.ERROR_RUCKIG
         out = self._out
         out.pass_to_input(self._inp)
-        p = out.new_position
-        v = out.new_velocity
-        a = out.new_acceleration
-        status = ApproachStatus.WORKING if result == Result.Working else ApproachStatus.FINISHED
+        # ruckig reports Finished only once its clock has passed the duration, i.e. possibly one
+        # cycle after the sample at the end. A move's duration is discretised, so its end falls
+        # on a cycle: arrival is detected by time and the exact target state is written. A stop's
+        # is not (each axis brakes time-optimally): it has arrived on the first sample at or past
+        # its end, which is rest.
+        margin = 0.5 * self.dt if mode == Mode.MOVING else 1e-9
+        arrived = result == Result.Finished or out.time >= self.duration - margin
+        if arrived and mode == Mode.MOVING:
+            inp = self._inp
+            p = inp.target_position
+            v = inp.target_velocity
+            a = inp.target_acceleration
+        elif arrived:  # stopped: exactly at rest (ruckig leaves ~1e-17 m/s of round-off)
+            p = out.new_position
+            v = a = _ZERO3
+        else:
+            p = out.new_position
+            v = out.new_velocity
+            a = out.new_acceleration
+        status = ApproachStatus.FINISHED if arrived else ApproachStatus.WORKING
         lo, hi = self.lo - POSITION_SLACK_M, self.hi + POSITION_SLACK_M
+        h = self._hold
         for i in range(N_AXES):
             pi = p[i]
             if lo <= pi <= hi:
                 out_pos[i] = pi
                 out_vel[i] = v[i]
                 out_acc[i] = a[i]
+                h[i] = pi
             else:  # never expected after the extrema check, except in an overshooting stop
-                out_pos[i] = self.lo if pi < lo else self.hi
+                pi = self.lo if pi < lo else self.hi
+                out_pos[i] = pi
                 out_vel[i] = 0.0
                 out_acc[i] = 0.0
+                h[i] = pi
                 status = ApproachStatus.ERROR_POSITION_LIMIT
+        if arrived:
+            if status == ApproachStatus.ERROR_POSITION_LIMIT:
+                v = a = (0.0, 0.0, 0.0)
+            self._enter_hold(p, v, a)
         return status
+
+    def _enter_hold(self, p: Sequence[float], v: Sequence[float], a: Sequence[float]) -> None:
+        """Arrived: the next move starts from the state just emitted (continuous retargeting on
+        the FINISHED cycle); from the next held cycle on, from rest at the held position."""
+        self.mode = Mode.HOLD
+        inp = self._inp
+        inp.current_position = self._hold
+        inp.current_velocity = [float(x) for x in v]
+        inp.current_acceleration = [float(x) for x in a]
+        self._hold_at_rest = False
+
+    def _settle_hold(self) -> None:
+        inp = self._inp
+        inp.current_velocity = [0.0] * N_AXES
+        inp.current_acceleration = [0.0] * N_AXES
+        self._hold_at_rest = True
 
     # -- helpers ---------------------------------------------------------------------------------
     def _in_stroke(self, p: Sequence[float]) -> bool:
@@ -325,10 +435,14 @@ class Approach:
                         or abs(ta[i]) > self.max_acceleration[i]):
                     return ApproachStatus.ERROR_LIMITS
             chk.synchronization = Synchronization.Time
+            chk.duration_discretization = DurationDiscretization.Discrete
             chk.target_position = tp
             chk.minimum_duration = minimum_duration
         else:
+            # Continuous: with Discrete, ruckig 0.19 synchronises the axes even with
+            # Synchronization.No, and the faster axes would brake later than they can.
             chk.synchronization = Synchronization.No
+            chk.duration_discretization = DurationDiscretization.Continuous
             chk.minimum_duration = None
         chk.target_velocity = tv
         chk.target_acceleration = ta
@@ -341,13 +455,14 @@ class Approach:
             return ApproachStatus.ERROR_RUCKIG
         traj = self._chk_traj
         self.last_checked_duration = traj.duration
+        self._extrema = trajectory_position_extrema(traj)
         lo, hi = self.lo - POSITION_SLACK_M, self.hi + POSITION_SLACK_M
-        for ext in traj.position_extrema:
-            if ext.min < lo or ext.max > hi:
+        for p_min, p_max in self._extrema:
+            if p_min < lo or p_max > hi:
                 return ApproachStatus.ERROR_OVERSHOOT
         return ApproachStatus.WORKING
 
     @property
     def position_extrema(self) -> list[tuple[float, float]]:
         """(min, max) position per axis (m) of the last planned/checked move."""
-        return [(e.min, e.max) for e in self._chk_traj.position_extrema]
+        return list(self._extrema)

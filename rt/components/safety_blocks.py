@@ -1,0 +1,218 @@
+"""The supervisor, force-sensor, stop-input and redundant-drive blocks of the loop."""
+from __future__ import annotations
+
+import math
+from typing import Callable, Sequence
+
+import numpy as np
+
+from rt.devices.interfaces import ActuatorOutputs, DigitalInputs, DigitalInputState, \
+    ForceTorqueSensor, Wrench
+from rt.engine import Array, Component, Struct
+from rt.errors import HardwareError
+from rt.model.dynamics import State
+from rt.safety.events import EventLog, Reaction, SafetyEvent
+from rt.safety.supervisor import Supervisor
+
+MODE_RUN = 0.0
+MODE_SOFT = 2.0
+MODE_HARD = 3.0
+
+
+class ForceReader(Component):
+    """Ports: out ``wrench``: float64[6], N and N m, sensor frame (NaN when never read);
+    out ``flags``: float64[2] — [stale, saturated] as 0/1."""
+
+    def __init__(self, name: str, sensor: ForceTorqueSensor):
+        super().__init__(name)
+        self.sensor = sensor
+        self.wrench = self.declare_output("wrench", Array(6), initial=np.full(6, math.nan))
+        self.flags = self.declare_output("flags", Array(2))
+        self._w = Wrench()
+
+    def on_start(self) -> None:
+        self.sensor.start()
+
+    def update(self, t: float, dt: float) -> int:
+        w = self.sensor.read(self._w)
+        out = self.wrench.data
+        out[0], out[1], out[2], out[3], out[4], out[5] = w.fx, w.fy, w.fz, w.tx, w.ty, w.tz
+        self.flags.data[0] = 1.0 if w.stale else 0.0
+        self.flags.data[1] = 1.0 if w.saturated else 0.0
+        return 0
+
+
+class StopInputs(Component):
+    """Ports: out ``inputs``: float64[2] — [hardware e-stop, hand-held stop] as 0/1."""
+
+    def __init__(self, name: str, inputs: DigitalInputs):
+        super().__init__(name)
+        self.device = inputs
+        self.stops = self.declare_output("inputs", Array(2))
+        self._state = DigitalInputState()
+
+    def update(self, t: float, dt: float) -> int:
+        s = self.device.read(self._state)
+        self.stops.data[0] = 1.0 if s.hardware_estop else 0.0
+        self.stops.data[1] = 1.0 if s.hand_stop else 0.0
+        return 0
+
+
+class SupervisorBlock(Component):
+    """Ports: in ``q``: float64[3] m (measured); ``est_status``: float64[1]; ``qd``, ``qdd``:
+    float64[3]; ``state``: model ``State``; ``fk_ok``: float64[1]; ``q_ref``, ``qd_ref``:
+    float64[3]; ``tau``: float64[3] N; ``wrench``: float64[6]; ``wrench_flags``: float64[2];
+    ``inputs``: float64[2]; ``drive_failed``: float64[1] (delayed one cycle).
+    Out ``volts``: float64[3] V — the commands, saturated, zero in a hard stop; ``enable``:
+    float64[1] — drives enabled (0 in a hard stop); ``mode``: float64[1] — 0 run, 2 soft stop,
+    3 hard stop (latched).
+
+    The supervisor owns the right to enable the drives: nothing else writes ``enable``.
+    """
+
+    def __init__(self, name: str, supervisor: Supervisor, force_per_volt_n: float):
+        super().__init__(name)
+        self.sup = supervisor
+        self.k = 1.0 / force_per_volt_n
+        self.q = self.declare_input("q", Array(3))
+        self.est_status = self.declare_input("est_status", Array(1))
+        self.qd = self.declare_input("qd", Array(3))
+        self.qdd = self.declare_input("qdd", Array(3))
+        self.state_in = self.declare_input("state", Struct(State))
+        self.fk_ok = self.declare_input("fk_ok", Array(1))
+        self.q_ref = self.declare_input("q_ref", Array(3))
+        self.qd_ref = self.declare_input("qd_ref", Array(3))
+        self.tau = self.declare_input("tau", Array(3))
+        self.wrench = self.declare_input("wrench", Array(6))
+        self.wrench_flags = self.declare_input("wrench_flags", Array(2))
+        self.stops = self.declare_input("inputs", Array(2))
+        self.drive_failed = self.declare_input("drive_failed", Array(1))
+        self.volts = self.declare_output("volts", Array(3))
+        self.enable = self.declare_output("enable", Array(1), initial=np.ones(1))
+        self.mode = self.declare_output("mode", Array(1))
+
+    def update(self, t: float, dt: float) -> int:
+        st = self.state_in.data
+        fk_ok = self.fk_ok.data[0] > 0.5 and st.cfg is not None
+        roll = pitch = roll_rate = pitch_rate = 0.0
+        if fk_ok:
+            cfg = st.cfg
+            roll, pitch = cfg.roll, cfg.pitch
+            S, qd = st.S, st.qd
+            roll_rate = S[11, 0] * qd[0] + S[11, 1] * qd[1] + S[11, 2] * qd[2]
+            pitch_rate = S[10, 0] * qd[0] + S[10, 1] * qd[1] + S[10, 2] * qd[2]
+        w = self.wrench.data
+        force = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        flags = self.wrench_flags.data
+        ins = self.stops.data
+        reaction = self.sup.check(
+            t, dt, self.q.data, int(self.est_status.data[0]), self.qd.data, self.qdd.data,
+            fk_ok, roll, pitch, roll_rate, pitch_rate, self.q_ref.data, self.qd_ref.data,
+            self.tau.data, force, flags[0] > 0.5, flags[1] > 0.5, ins[0] > 0.5, ins[1] > 0.5,
+            self.drive_failed.data[0] > 0.5)
+        v = self.volts.data
+        if reaction >= Reaction.HARD_STOP:
+            v[:] = 0.0
+            self.enable.data[0] = 0.0
+            self.mode.data[0] = MODE_HARD
+            return 0
+        limit = self.sup.limits.max_command_v
+        for i in range(3):
+            x = self.tau.data[i] * self.k
+            v[i] = limit if x > limit else (-limit if x < -limit else x)
+        self.enable.data[0] = 1.0
+        self.mode.data[0] = MODE_SOFT if reaction == Reaction.SOFT_STOP else MODE_RUN
+        return 0
+
+
+class RedundantDrive(Component):
+    """Ports: in ``volts``: float64[3] V; in ``enable``: float64[1]; out ``failed``: float64[1]
+    (1 when a channel has failed on both cards); out ``active_card``: float64[1].
+
+    Writes the commands to the active DAC card. An actuator-channel fault on that card — a
+    write error, or the amplifier input (read back through ``monitor``, the rig's current
+    monitors) disagreeing with the command for ``confirm_cycles`` cycles — moves all outputs to
+    the other card in the same cycle (thesis 3.7.3): the period is kept and an event recorded.
+    """
+
+    def __init__(self, name: str, cards: Sequence[ActuatorOutputs], log: EventLog,
+                 monitor: Callable[[], Sequence[float]] | None = None,
+                 tolerance_v: float = 0.1, confirm_cycles: int = 3):
+        super().__init__(name)
+        self.cards = list(cards)
+        self.log = log
+        self.monitor = monitor
+        self.tolerance_v = tolerance_v
+        self.confirm_cycles = confirm_cycles
+        self.volts = self.declare_input("volts", Array(3))
+        self.enable = self.declare_input("enable", Array(1))
+        self.failed = self.declare_output("failed", Array(1))
+        self.active_card = self.declare_output("active_card", Array(1))
+        self._card = 0
+        self._last = np.zeros(3)
+        self._mismatch = [0, 0, 0]
+        self._enabled = False
+
+    def on_start(self) -> None:
+        self._card = 0
+        self.cards[0].enable()
+        self._enabled = True
+
+    def _fail_over(self, t: float, channel: int, why: str) -> bool:
+        old = self._card
+        if old + 1 >= len(self.cards):
+            self.failed.data[0] = 1.0
+            self.log.append(SafetyEvent(t, "fault", "drive_channel", Reaction.HARD_STOP,
+                                        f"channel {channel} failed on the last card ({why})",
+                                        {"card": old, "channel": channel}))
+            return False
+        try:
+            self.cards[old].disable()
+        except HardwareError:
+            pass                               # the failing card may not even disable
+        self._card = old + 1
+        self.cards[self._card].enable()
+        self.active_card.data[0] = self._card
+        self._mismatch = [0, 0, 0]
+        self.log.append(SafetyEvent(t, "failover", f"dac_card_{old}", Reaction.FAILOVER,
+                                    f"channel {channel} failed on card {old} ({why}); card "
+                                    f"{self._card} took over", {"card": old,
+                                                                   "channel": channel}))
+        return True
+
+    def update(self, t: float, dt: float) -> int:
+        if self.failed.data[0] > 0.5:
+            return 0
+        v = self.volts.data
+        enabled = self.enable.data[0] > 0.5
+        card = self.cards[self._card]
+        if enabled and self.monitor is not None and self._enabled:
+            measured = self.monitor()
+            for i in range(3):
+                if abs(measured[i] - self._last[i]) > self.tolerance_v:
+                    self._mismatch[i] += 1
+                    if self._mismatch[i] >= self.confirm_cycles:
+                        if not self._fail_over(t, i, "amplifier input disagrees with the "
+                                                     "command"):
+                            return 0
+                        card = self.cards[self._card]
+                        break
+                else:
+                    self._mismatch[i] = 0
+        if enabled != self._enabled:
+            if enabled:
+                card.enable()
+            else:
+                card.disable()
+            self._enabled = enabled
+        if not enabled:
+            self._last[:] = 0.0
+            return 0
+        try:
+            card.write_volts(v)
+        except HardwareError as exc:
+            if not self._fail_over(t, -1, f"write failed: {exc}"):
+                return 0
+            self.cards[self._card].write_volts(v)
+        self._last[:] = v
+        return 0

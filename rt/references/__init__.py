@@ -1,0 +1,1 @@
+"""Reference generation: ruckig moves and soft stop, file playback, the benchmark trajectory."""

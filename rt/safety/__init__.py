@@ -1,0 +1,1 @@
+"""The safety supervisor: limits in three layers, checks every cycle, latched reactions."""

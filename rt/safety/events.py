@@ -1,0 +1,66 @@
+"""Safety events: what happened, when, why, with which values, and what was done about it."""
+from __future__ import annotations
+
+import enum
+import threading
+import time
+from collections import deque
+from dataclasses import asdict, dataclass, field
+from typing import Callable
+
+
+class Reaction(enum.IntEnum):
+    """Escalating reactions; a latched fault keeps the highest one until a reset."""
+
+    NONE = 0
+    WARN = 1
+    SOFT_STOP = 2     # jerk-limited braking to a hold, drives stay enabled (stop category 2)
+    HARD_STOP = 3     # outputs to zero, drives disabled (stop category 0)
+    FAILOVER = 4      # an actuator channel moved to the redundant card (not a stop)
+
+
+@dataclass
+class SafetyEvent:
+    """One event. ``t`` is loop time (s), ``wall`` the host's wall clock (s since the epoch)."""
+
+    t: float
+    kind: str                    # "fault", "warn", "reset", "reset_refused", "failover"
+    cause: str                   # machine-readable cause, e.g. "rom_roll_max", "estop_gui"
+    reaction: Reaction
+    message: str
+    values: dict = field(default_factory=dict)
+    wall: float = field(default_factory=time.time)
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["reaction"] = self.reaction.name.lower()
+        return d
+
+
+class EventLog:
+    """Bounded, thread-safe record of events; ``listener`` (e.g. the IPC publisher, which must
+    not block) is called with each new event's dict."""
+
+    def __init__(self, capacity: int = 4096, listener: Callable[[dict], None] | None = None):
+        self._events: deque[SafetyEvent] = deque(maxlen=capacity)
+        self._lock = threading.Lock()
+        self.listener = listener
+        self.count = 0
+
+    def append(self, event: SafetyEvent) -> None:
+        # Events are rare (a fault, a reset): allocating one here is acceptable in the cycle.
+        with self._lock:
+            self._events.append(event)
+            self.count += 1
+        if self.listener is not None:
+            self.listener(event.as_dict())
+
+    def snapshot(self) -> list[SafetyEvent]:
+        with self._lock:
+            return list(self._events)
+
+    def first(self, cause_prefix: str = "") -> SafetyEvent | None:
+        for e in self.snapshot():
+            if e.cause.startswith(cause_prefix):
+                return e
+        return None

@@ -1,0 +1,129 @@
+"""Limits in three layers (DESIGN 6): robot (the machine), patient (set by the clinician,
+stored with the patient), protocol (the exercise). The effective limit of each quantity is the
+most restrictive of the layers that set it.
+
+Angles in the files are degrees (what clinicians write); everything is converted to SI once.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+Pos = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Limits(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RobotLimits(_Limits):
+    """What the machine tolerates (nominal twin values)."""
+
+    stroke_margin_m: Annotated[float, Field(ge=0.0, le=0.05)] = 0.005
+    max_slider_speed_m_s: Pos = 0.20
+    max_slider_accel_m_s2: Pos = 5.0
+    max_command_v: Pos = 6.0
+    max_actuator_force_n: Pos = 2000.0
+    max_tracking_error_m: Pos = 0.003
+    max_platform_force_n: Pos = 1800.0
+    deadline_overruns: Annotated[int, Field(ge=1, le=1000)] = 5
+    heartbeat_timeout_s: Pos = 0.25
+    frozen_encoder_s: Pos = 0.05
+    frozen_min_ref_speed_m_s: Pos = 0.004
+
+
+class PatientLimits(_Limits):
+    """Set by the clinician per patient and session (Biodex-style ROM with end cushion)."""
+
+    roll_min_deg: Finite = -20.0
+    roll_max_deg: Finite = 20.0
+    pitch_min_deg: Finite = -20.0
+    pitch_max_deg: Finite = 20.0
+    max_force_n: Pos = 800.0
+    max_angular_speed_deg_s: Pos = 60.0
+    #: Stops still under way when this close to a ROM end are escalated (deg).
+    rom_tolerance_deg: Annotated[float, Field(gt=0.0, le=5.0)] = 0.5
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "PatientLimits":
+        if not self.roll_min_deg < self.roll_max_deg:
+            raise ValueError("roll_min_deg must be below roll_max_deg")
+        if not self.pitch_min_deg < self.pitch_max_deg:
+            raise ValueError("pitch_min_deg must be below pitch_max_deg")
+        return self
+
+
+class ProtocolLimits(_Limits):
+    """A protocol may only narrow the patient's limits; unset fields leave them as they are."""
+
+    roll_min_deg: Finite | None = None
+    roll_max_deg: Finite | None = None
+    pitch_min_deg: Finite | None = None
+    pitch_max_deg: Finite | None = None
+    max_force_n: Pos | None = None
+    max_angular_speed_deg_s: Pos | None = None
+
+
+@dataclass(frozen=True)
+class EffectiveLimits:
+    """The most restrictive combination, in SI units, as plain floats for the cycle."""
+
+    stroke_lo_m: float
+    stroke_hi_m: float
+    stroke_margin_m: float
+    max_slider_speed_m_s: float
+    max_slider_accel_m_s2: float
+    max_command_v: float
+    max_actuator_force_n: float
+    max_tracking_error_m: float
+    max_force_n: float
+    roll_min: float
+    roll_max: float
+    pitch_min: float
+    pitch_max: float
+    max_angular_speed: float
+    rom_tolerance: float
+    deadline_overruns: int
+    heartbeat_timeout_s: float
+    frozen_encoder_s: float
+    frozen_min_ref_speed_m_s: float
+
+
+def effective(stroke_m: tuple[float, float], robot: RobotLimits, patient: PatientLimits,
+              protocol: ProtocolLimits | None = None) -> EffectiveLimits:
+    """Combine the layers (most restrictive wins)."""
+    protocol = protocol or ProtocolLimits()
+
+    def narrow_min(a: float, b: float | None) -> float:
+        return a if b is None else max(a, b)
+
+    def narrow_max(a: float, b: float | None) -> float:
+        return a if b is None else min(a, b)
+
+    rad = math.radians
+    return EffectiveLimits(
+        stroke_lo_m=stroke_m[0], stroke_hi_m=stroke_m[1],
+        stroke_margin_m=robot.stroke_margin_m,
+        max_slider_speed_m_s=robot.max_slider_speed_m_s,
+        max_slider_accel_m_s2=robot.max_slider_accel_m_s2,
+        max_command_v=robot.max_command_v,
+        max_actuator_force_n=robot.max_actuator_force_n,
+        max_tracking_error_m=robot.max_tracking_error_m,
+        max_force_n=narrow_max(min(patient.max_force_n, robot.max_platform_force_n),
+                               protocol.max_force_n),
+        roll_min=rad(narrow_min(patient.roll_min_deg, protocol.roll_min_deg)),
+        roll_max=rad(narrow_max(patient.roll_max_deg, protocol.roll_max_deg)),
+        pitch_min=rad(narrow_min(patient.pitch_min_deg, protocol.pitch_min_deg)),
+        pitch_max=rad(narrow_max(patient.pitch_max_deg, protocol.pitch_max_deg)),
+        max_angular_speed=rad(narrow_max(patient.max_angular_speed_deg_s,
+                                         protocol.max_angular_speed_deg_s)),
+        rom_tolerance=rad(patient.rom_tolerance_deg),
+        deadline_overruns=robot.deadline_overruns,
+        heartbeat_timeout_s=robot.heartbeat_timeout_s,
+        frozen_encoder_s=robot.frozen_encoder_s,
+        frozen_min_ref_speed_m_s=robot.frozen_min_ref_speed_m_s,
+    )

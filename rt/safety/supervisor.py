@@ -1,0 +1,222 @@
+"""The safety supervisor's logic: every check, every cycle, on plain floats.
+
+Reactions escalate warn → soft stop → hard stop and latch until ``request_reset()``, which is
+honoured only if none of the latched causes is still present (the cause is re-checked). Every
+new cause is recorded once as a ``SafetyEvent`` with the loop time and the values that tripped it.
+
+Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
+
+* stop inputs: GUI/CLI/keyboard e-stop and the hardware e-stop chain → hard stop; the patient's
+  hand-held comfort stop → soft stop;
+* forward kinematics failed → hard stop (the platform pose is unknown);
+* encoder jump beyond physics (the estimator's innovation gate) → hard stop; encoder frozen while
+  the reference moves (no count change for ``frozen_encoder_s``) → hard stop;
+* stroke: inside the margin at either end → soft stop; beyond the end → hard stop;
+* slider speed beyond the robot's → soft stop; acceleration beyond it → warn;
+* patient ROM per axis with its end cushion: the cushion is the soft stop's own braking curve —
+  a soft stop is triggered when the angle plus the angle the soft stop still needs to brake
+  (from the measured angular rate) reaches the ROM end, so the stop ends inside the ROM; beyond
+  the end by more than the tolerance → hard stop; angular speed beyond the patient's → soft stop;
+* tracking error beyond the robot limit → soft stop, beyond three times it → hard stop;
+* platform force (ATI) above 90 % of the patient/protocol limit → soft stop, beyond it → hard
+  stop (only dropping the drive force is fast enough against a stiff contact); saturated or
+  implausible → soft stop; stale → soft stop when force control depends on it, else warn;
+* consecutive deadline overruns (measured period > 1.5 × nominal) → soft stop;
+* client heartbeat older than its timeout while a client drives the robot → soft stop;
+* both DAC cards failed on a channel → hard stop (a single card's failure is a failover).
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+from rt.safety.events import EventLog, Reaction, SafetyEvent
+from rt.safety.limits import EffectiveLimits
+
+JUMP_STATUS = -3
+#: Fraction of the force limit at which a soft stop begins (the force's end cushion).
+FORCE_CUSHION = 0.9
+
+
+class Supervisor:
+    """Checks + latch. The owning component fills the inputs and calls ``check`` each cycle."""
+
+    def __init__(self, limits: EffectiveLimits, period_s: float, log: EventLog | None = None,
+                 soft_stop_accel_m_s2: float = 0.5, soft_stop_jerk_m_s3: float = 5.0,
+                 lever_m_per_rad: float = 0.27):
+        self.limits = limits
+        self.period_s = period_s
+        self.log = log or EventLog()
+        # Braking of the soft stop seen as an angular deceleration of the platform: slider
+        # deceleration over the lever ∂q/∂angle (≈ 1.5 R_p for this geometry).
+        self.alpha_stop = soft_stop_accel_m_s2 / lever_m_per_rad
+        self.jerk_time = soft_stop_accel_m_s2 / soft_stop_jerk_m_s3
+        self.heartbeat_age: Callable[[], float] | None = None
+        self.heartbeat_required = False
+        self.force_control = False
+        # The force sensor's first samples arrive a few cycles after the loop starts.
+        self.startup_grace_s = 0.1
+        self.reset_state()
+
+    def reset_state(self) -> None:
+        self.reaction = Reaction.NONE
+        self.causes: dict[str, Reaction] = {}      # latched causes
+        self._active: set[str] = set()             # causes true in the last cycle
+        self._reported: set[str] = set()           # warn causes already logged
+        self._frozen_time = [0.0, 0.0, 0.0]
+        self._last_q = [math.nan, math.nan, math.nan]
+        self._overruns = 0
+        self._estop_request: str | None = None
+        self._stop_request = False
+        self._reset_request = False
+
+    # ------------------------------------------------------------------ requests (any thread)
+    def request_estop(self, source: str) -> None:
+        """E-stop from a client (``gui``, ``cli``, ``keyboard``); acted on next cycle."""
+        self._estop_request = source
+
+    def request_stop(self) -> None:
+        """Soft stop from a client."""
+        self._stop_request = True
+
+    def request_reset(self) -> None:
+        """Ask to clear the latched faults; refused next cycle if a cause persists."""
+        self._reset_request = True
+
+    # ------------------------------------------------------------------ the cycle
+    def check(self, t: float, dt: float, q, est_status: int, qd, qdd, fk_ok: bool, roll: float,
+              pitch: float, roll_rate: float, pitch_rate: float, q_ref, qd_ref, tau,
+              force_n: float, wrench_stale: bool, wrench_saturated: bool, hw_estop: bool,
+              hand_stop: bool, drive_failed: bool) -> Reaction:
+        """Run every check; returns the latched reaction for this cycle."""
+        lim = self.limits
+        active = self._active
+        active.clear()
+
+        def trip(cause: str, reaction: Reaction, message: str, **values) -> None:
+            active.add(cause)
+            if reaction == Reaction.WARN:
+                if cause not in self._reported:
+                    self._reported.add(cause)
+                    self.log.append(SafetyEvent(t, "warn", cause, reaction, message, values))
+                return
+            if self.causes.get(cause, Reaction.NONE) < reaction:
+                self.causes[cause] = reaction
+                self.log.append(SafetyEvent(t, "fault", cause, reaction, message, values))
+
+        # -- stop inputs
+        if self._estop_request is not None:
+            src = self._estop_request
+            self._estop_request = None
+            trip(f"estop_{src}", Reaction.HARD_STOP, f"e-stop from the {src}")
+        if hw_estop:
+            trip("estop_hardware", Reaction.HARD_STOP, "hardware e-stop pressed")
+        if hand_stop:
+            trip("hand_stop", Reaction.SOFT_STOP, "patient's hand-held stop pressed")
+        if self._stop_request:
+            self._stop_request = False
+            trip("stop_client", Reaction.SOFT_STOP, "stop requested by a client")
+        if drive_failed:
+            trip("drive_channel", Reaction.HARD_STOP, "an actuator channel failed on both cards")
+        # -- sensors and kinematics
+        if not fk_ok:
+            trip("fk_failed", Reaction.HARD_STOP, "forward kinematics failed: pose unknown")
+        if est_status == JUMP_STATUS:
+            trip("encoder_jump", Reaction.HARD_STOP, "encoder reading jumped beyond physics",
+                 q=list(q))
+        for i in range(3):
+            qi = q[i]
+            if abs(qd_ref[i]) >= lim.frozen_min_ref_speed_m_s and qi == self._last_q[i]:
+                self._frozen_time[i] += dt
+                if self._frozen_time[i] >= lim.frozen_encoder_s:
+                    trip(f"encoder_frozen_{i}", Reaction.HARD_STOP,
+                         f"encoder {i} frozen while commanded to move",
+                         frozen_s=self._frozen_time[i], qd_ref=float(qd_ref[i]))
+            else:
+                self._frozen_time[i] = 0.0
+            self._last_q[i] = qi
+            # -- stroke, speed, acceleration, tracking, actuator force
+            if qi < lim.stroke_lo_m or qi > lim.stroke_hi_m:
+                trip(f"stroke_{i}", Reaction.HARD_STOP, f"slider {i} beyond its stroke",
+                     q=qi)
+            elif qi < lim.stroke_lo_m + lim.stroke_margin_m or \
+                    qi > lim.stroke_hi_m - lim.stroke_margin_m:
+                trip(f"stroke_margin_{i}", Reaction.SOFT_STOP,
+                     f"slider {i} inside the stroke-end margin", q=qi)
+            if abs(qd[i]) > lim.max_slider_speed_m_s:
+                trip(f"speed_{i}", Reaction.SOFT_STOP, f"slider {i} too fast", qd=float(qd[i]))
+            if abs(qdd[i]) > lim.max_slider_accel_m_s2:
+                trip(f"accel_{i}", Reaction.WARN, f"slider {i} acceleration beyond the robot "
+                     "limit", qdd=float(qdd[i]))
+            err = abs(qi - q_ref[i])
+            if err > 3.0 * lim.max_tracking_error_m:
+                trip(f"tracking_{i}", Reaction.HARD_STOP, f"slider {i} tracking error", error=err)
+            elif err > lim.max_tracking_error_m:
+                trip(f"tracking_{i}", Reaction.SOFT_STOP, f"slider {i} tracking error", error=err)
+            if abs(tau[i]) > lim.max_actuator_force_n:
+                trip(f"actuator_force_{i}", Reaction.WARN, f"actuator {i} force command beyond "
+                     "the robot limit (saturated)", tau=float(tau[i]))
+        # -- patient ROM with the braking cushion, angular speed
+        if fk_ok:
+            for name, angle, rate, lo, hi in (("roll", roll, roll_rate, lim.roll_min,
+                                               lim.roll_max),
+                                              ("pitch", pitch, pitch_rate, lim.pitch_min,
+                                               lim.pitch_max)):
+                w = abs(rate)
+                braking = 1.25 * (w * (dt + 0.5 * self.jerk_time) + w * w / (2 * self.alpha_stop))
+                if angle > hi + lim.rom_tolerance or angle < lo - lim.rom_tolerance:
+                    trip(f"rom_{name}", Reaction.HARD_STOP, f"{name} beyond the patient's ROM",
+                         angle_deg=math.degrees(angle))
+                elif (rate >= 0.0 and angle + braking >= hi) or \
+                        (rate <= 0.0 and angle - braking <= lo):
+                    trip(f"rom_{name}", Reaction.SOFT_STOP,
+                         f"{name} reaching the patient's ROM end", angle_deg=math.degrees(angle),
+                         rate_deg_s=math.degrees(rate))
+                if w > lim.max_angular_speed:
+                    trip(f"angular_speed_{name}", Reaction.SOFT_STOP,
+                         f"{name} rate beyond the patient's limit", rate_deg_s=math.degrees(rate))
+        # -- force sensor
+        if wrench_saturated:
+            trip("force_saturated", Reaction.SOFT_STOP, "force sensor saturated (overload)")
+        if wrench_stale and t >= self.startup_grace_s:
+            trip("force_stale", Reaction.SOFT_STOP if self.force_control else Reaction.WARN,
+                 "force sensor data stale")
+        elif not wrench_saturated:
+            if math.isnan(force_n) and self.force_control:
+                trip("force_implausible", Reaction.SOFT_STOP, "force sensor reading invalid")
+            elif force_n > lim.max_force_n:
+                # Beyond the limit: drop the drive force at once, the only reaction fast enough
+                # against a stiff contact (2e6 N/m: 5 % of 800 N is 20 µm of travel).
+                trip("force_limit", Reaction.HARD_STOP, "platform force beyond the limit",
+                     force_n=force_n)
+            elif force_n > FORCE_CUSHION * lim.max_force_n:
+                trip("force_limit", Reaction.SOFT_STOP, "platform force reaching the limit",
+                     force_n=force_n)
+        # -- timing and clients
+        if dt > 1.5 * self.period_s:
+            self._overruns += 1
+            if self._overruns >= lim.deadline_overruns:
+                trip("deadline_overruns", Reaction.SOFT_STOP, "consecutive deadline overruns",
+                     count=self._overruns, dt=dt)
+        else:
+            self._overruns = 0
+        if self.heartbeat_required and self.heartbeat_age is not None:
+            age = self.heartbeat_age()
+            if age > lim.heartbeat_timeout_s:
+                trip("heartbeat_lost", Reaction.SOFT_STOP, "client heartbeat lost", age_s=age)
+        # -- latch and reset
+        if self._reset_request:
+            self._reset_request = False
+            persisting = sorted(c for c in self.causes if c in active)
+            if persisting:
+                self.log.append(SafetyEvent(t, "reset_refused", ",".join(persisting),
+                                            Reaction.NONE, "reset refused: cause still present",
+                                            {"causes": persisting}))
+            elif self.causes:
+                cleared = sorted(self.causes)
+                self.causes.clear()
+                self._reported.clear()
+                self.log.append(SafetyEvent(t, "reset", ",".join(cleared), Reaction.NONE,
+                                            "faults reset", {"cleared": cleared}))
+        self.reaction = max(self.causes.values(), default=Reaction.NONE)
+        return self.reaction
