@@ -19,6 +19,7 @@ GROUPS: dict[str, tuple[str, str]] = {
     "twin": ("rt.twin.cli", "digital twin: step it, serve its ATI sensor"),
     "ati": ("rt.ati.cli", "ATI force/torque sensor client"),
     "bench": ("rt.benchmarks.cli", "benchmarks: control loop timing, tracking experiments"),
+    "faults": ("rt.safety.cli", "safety: the fault matrix on the twin"),
     "rt": ("rt.ipc.cli", "RT process: status, stop, estop, reset (JSON)"),
 }
 

@@ -52,7 +52,8 @@ def build_sim_position_loop(controller: str = "paden_panja", gains: dict | None 
                             robot_limits: RobotLimits | None = None,
                             patient_limits: PatientLimits | None = None,
                             protocol_limits: ProtocolLimits | None = None,
-                            twin: Twin | None = None, **loop_kwargs) -> PositionLoop:
+                            twin: Twin | None = None, extra_blocks: list | None = None,
+                            **loop_kwargs) -> PositionLoop:
     """A configured, started position loop on the twin (run it with ``.loop.run(...)``)."""
     model = model or RobotModel.load()
     d = model.description
@@ -80,6 +81,8 @@ def build_sim_position_loop(controller: str = "paden_panja", gains: dict | None 
     b.add(SupervisorBlock("supervisor", supervisor, d.drive.force_per_volt_n))
     b.add(RedundantDrive("drive", cards, events, monitor=lambda: twin.amp_volts))
     rec = b.add(RecorderTap("recorder"))
+    for block in extra_blocks or ():
+        b.add(block)                       # port-less observers (e.g. the fault matrix probe)
     for src, dst in (
             ("encoders.q", "estimator.q_meas"), ("encoders.q", "model.q_meas"),
             ("estimator.qd", "model.qd"), ("encoders.q", "reference.q_meas"),

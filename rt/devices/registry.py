@@ -15,15 +15,18 @@ BACKENDS: dict[str, dict[str, str]] = {
     "encoders": {
         "pcl833": "rt.drivers.pcl833:Pcl833Encoders",
         "sim": "rt.twin.backends:TwinEncoders",
+        "twin_shm": "rt.twin.shm_backends:ShmEncoders",
     },
     "actuators": {
         "pci1720": "rt.drivers.pci1720:Pci1720Outputs",
         "sim": "rt.twin.backends:TwinActuators",
+        "twin_shm": "rt.twin.shm_backends:ShmActuators",
     },
     "force_torque": {
         "ati_rdt": "rt.ati.rdt_client:RdtForceTorqueSensor",
         "ati_can": "rt.ati.can_client:AtiCanForceTorqueSensor",
         "sim": "rt.twin.backends:TwinForceTorque",
+        "twin_shm": "rt.twin.shm_backends:ShmForceTorque",
     },
     "force_plate": {},
     "camera": {
@@ -32,6 +35,7 @@ BACKENDS: dict[str, dict[str, str]] = {
     },
     "digital_inputs": {
         "sim": "rt.twin.backends:TwinDigitalInputs",
+        "twin_shm": "rt.twin.shm_backends:ShmDigitalInputs",
     },
 }
 

@@ -28,7 +28,7 @@ def _add_connection_options(parser: argparse.ArgumentParser) -> None:
                         help="longest wait for the reply, s (default %(default)s)")
 
 
-def register(commands: argparse._SubParsersAction) -> None:
+def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``status``, ``stop``, ``estop``, ``reset`` to the ``rt`` group's subparsers."""
     specs = [
         ("status", "print the RT process's status"),

@@ -38,13 +38,13 @@ class _ReqChannel:
     stuck in its send/recv state machine, so after a timeout it is discarded and the next
     request opens a fresh one. Not thread-safe: one owner thread."""
 
-    def __init__(self, ctx: zmq.Context, endpoint: str) -> None:
+    def __init__(self, ctx: zmq.Context[Any], endpoint: str) -> None:
         self._ctx = ctx
         self.endpoint = endpoint
-        self._sock: zmq.Socket | None = None
+        self._sock: zmq.Socket[bytes] | None = None
 
-    def _open(self) -> zmq.Socket:
-        sock = self._ctx.socket(zmq.REQ)
+    def _open(self) -> zmq.Socket[bytes]:
+        sock: zmq.Socket[bytes] = self._ctx.socket(zmq.REQ)
         sock.setsockopt(zmq.LINGER, 0)  # a request nobody answered must not hold up close()
         try:
             sock.connect(self.endpoint)
@@ -96,7 +96,8 @@ class RtClient:
     """
 
     def __init__(self, endpoint: str = DEFAULT_ENDPOINT, client_id: str | None = None,
-                 timeout_s: float = 1.0, *, context: zmq.Context | None = None) -> None:
+                 timeout_s: float = 1.0, *,
+                 context: zmq.Context[Any] | None = None) -> None:
         if not timeout_s > 0:
             raise InputError(f"timeout_s must be > 0, got {timeout_s}")
         self.endpoint = endpoint
@@ -265,7 +266,7 @@ class Subscriber:
     """
 
     def __init__(self, pub_endpoint: str, topics: Iterable[str] = TOPICS, *,
-                 context: zmq.Context | None = None, rcvhwm: int = 10_000) -> None:
+                 context: zmq.Context[Any] | None = None, rcvhwm: int = 10_000) -> None:
         self.topics = tuple(topics)
         unknown = [t for t in self.topics if t not in TOPICS]
         if unknown or not self.topics:

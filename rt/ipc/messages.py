@@ -36,9 +36,9 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictInt, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from rt.errors import InputError, ProtocolError
 
@@ -53,7 +53,6 @@ TOPICS: tuple[str, ...] = ("telemetry", "event")
 #: Keys every publication of a topic must carry (besides ``v`` and ``topic``, added by the server).
 REQUIRED_KEYS: dict[str, tuple[str, ...]] = {"telemetry": ("t",), "event": ("t", "kind", "cause")}
 
-RequestId = Union[StrictInt, Annotated[str, Field(max_length=128)]]
 _NAME = Annotated[str, Field(min_length=1, max_length=128)]
 
 
@@ -122,10 +121,19 @@ class _Envelope(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
 
     v: Literal[1]
-    id: RequestId
+    id: int | str
     client: _NAME
     cmd: Annotated[str, Field(max_length=64)]
     args: dict[str, Any]
+
+    @field_validator("id", mode="plain")
+    @classmethod
+    def _check_id(cls, value: Any) -> int | str:
+        # A plain validator: one clear message instead of one per member of int | str.
+        rid = _peek_id({"id": value})
+        if rid is None:
+            raise ValueError("should be an integer or a string of at most 128 characters")
+        return rid
 
 
 # --------------------------------------------------------------------------- publications
@@ -218,7 +226,9 @@ def describe_validation_error(err: ValidationError) -> str:
         elif e["type"] == "extra_forbidden":
             parts.append(f"unknown key {loc!r}")
         else:
-            parts.append(f"{loc!r}: {e['msg']} (got {_short(e['input'])})")
+            # Our own validators' messages come without pydantic's "Value error, " prefix.
+            msg = str(e["ctx"]["error"]) if e["type"] == "value_error" else e["msg"]
+            parts.append(f"{loc!r}: {msg} (got {_short(e['input'])})")
     return "; ".join(parts)
 
 
@@ -388,7 +398,7 @@ def decode_publication(frames: list[bytes]) -> dict[str, Any]:
     if model is None:
         raise ProtocolError(f"publication on unknown topic {topic!r}")
     try:
-        obj = json.loads(frames[1])
+        obj: dict[str, Any] = json.loads(frames[1])
     except (ValueError, RecursionError) as exc:
         raise ProtocolError(f"publication on {topic!r} is not JSON: {exc}") from None
     try:

@@ -72,7 +72,8 @@ class RtServer:
 
     def __init__(self, handler: Handler, endpoint: str = DEFAULT_ENDPOINT,
                  pub_endpoint: str = DEFAULT_PUB_ENDPOINT, heartbeat_timeout_s: float = 0.25,
-                 *, publish_queue_len: int = 1024, context: zmq.Context | None = None,
+                 *, publish_queue_len: int = 1024,
+                 context: zmq.Context[Any] | None = None,
                  poll_interval_s: float = 0.05) -> None:
         missing = [m for m in HANDLER_METHODS if not callable(getattr(handler, m, None))]
         if missing:
@@ -86,8 +87,8 @@ class RtServer:
         self._poll_ms = max(1, int(poll_interval_s * 1000))
         self._own_context = context is None
         self._ctx = zmq.Context() if context is None else context
-        self._router: zmq.Socket | None = None
-        self._pub: zmq.Socket | None = None
+        self._router: zmq.Socket[bytes] | None = None
+        self._pub: zmq.Socket[bytes] | None = None
         self._wake_r, self._wake_w = socket.socketpair()
         try:
             self._router = self._bind(zmq.ROUTER, endpoint)
@@ -127,8 +128,8 @@ class RtServer:
 
     # ------------------------------------------------------------------ lifecycle
 
-    def _bind(self, kind: int, endpoint: str) -> zmq.Socket:
-        sock = self._ctx.socket(kind)
+    def _bind(self, kind: int, endpoint: str) -> zmq.Socket[bytes]:
+        sock: zmq.Socket[bytes] = self._ctx.socket(kind)
         sock.setsockopt(zmq.LINGER, 0)
         try:
             sock.bind(endpoint)

@@ -10,7 +10,9 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
   hand-held comfort stop → soft stop;
 * forward kinematics failed → hard stop (the platform pose is unknown);
 * encoder jump beyond physics (the estimator's innovation gate) → hard stop; encoder frozen while
-  the reference moves (no count change for ``frozen_encoder_s``) → hard stop;
+  commanded: no count change although the reference moved the axis for ``frozen_encoder_s``,
+  or although the commanded net force must have moved the free axis by ``FROZEN_COUNTS``
+  counts (a few ms at saturation) → hard stop;
 * stroke: inside the margin at either end → soft stop; beyond the end → hard stop;
 * slider speed beyond the robot's → soft stop; acceleration beyond it → warn;
 * patient ROM per axis with its end cushion: the cushion is the soft stop's own braking curve —
@@ -34,6 +36,8 @@ from rt.safety.events import EventLog, Reaction, SafetyEvent
 from rt.safety.limits import EffectiveLimits
 
 JUMP_STATUS = -3
+#: Counts a free axis must have moved under its commanded force before "frozen" is declared.
+FROZEN_COUNTS = 4
 #: Fraction of the force limit at which a soft stop begins (the force's end cushion).
 FORCE_CUSHION = 0.9
 
@@ -54,6 +58,13 @@ class Supervisor:
         self.heartbeat_age: Callable[[], float] | None = None
         self.heartbeat_required = False
         self.force_control = False
+        # Frozen-encoder physics: the axis' inertia (slider + reflected rotor, kg), the force a
+        # still axis may hold without moving (gravity share + static friction, N), the encoder
+        # count (m), and the platform force above which something pushes back (contact).
+        self.axis_mass_kg = 210.0
+        self.holding_force_n = 250.0
+        self.count_m = 2e-5
+        self.contact_force_n = 50.0
         # The force sensor's first samples arrive a few cycles after the loop starts.
         self.startup_grace_s = 0.1
         self.reset_state()
@@ -64,11 +75,20 @@ class Supervisor:
         self._active: set[str] = set()             # causes true in the last cycle
         self._reported: set[str] = set()           # warn causes already logged
         self._frozen_time = [0.0, 0.0, 0.0]
+        self._impulse = [0.0, 0.0, 0.0]
+        self._impulse_time = [0.0, 0.0, 0.0]
         self._last_q = [math.nan, math.nan, math.nan]
         self._overruns = 0
         self._estop_request: str | None = None
         self._stop_request = False
         self._reset_request = False
+
+    def braking_angle(self, rate: float, dt: float) -> float:
+        """Angle (rad) the platform still turns at ``rate`` (rad/s) before a soft stop started
+        now brings it to rest: one cycle of reaction, the jerk ramp, then constant braking;
+        25 % margin for the lever's variation over the workspace."""
+        w = abs(rate)
+        return 1.25 * (w * (dt + 0.5 * self.jerk_time) + w * w / (2.0 * self.alpha_stop))
 
     # ------------------------------------------------------------------ requests (any thread)
     def request_estop(self, source: str) -> None:
@@ -124,16 +144,36 @@ class Supervisor:
         if est_status == JUMP_STATUS:
             trip("encoder_jump", Reaction.HARD_STOP, "encoder reading jumped beyond physics",
                  q=list(q))
+        free = not (force_n > self.contact_force_n)         # NaN (no sensor) counts as free
         for i in range(3):
             qi = q[i]
-            if abs(qd_ref[i]) >= lim.frozen_min_ref_speed_m_s and qi == self._last_q[i]:
-                self._frozen_time[i] += dt
-                if self._frozen_time[i] >= lim.frozen_encoder_s:
+            if qi == self._last_q[i]:
+                # Two ways to know the slider must have moved although its count did not:
+                # the reference has been moving it for ``frozen_encoder_s``, or (when nothing
+                # pushes back on the platform) the commanded net force must have carried the
+                # axis' inertia over ``FROZEN_COUNTS`` counts: x = J T / (2 m), J = ∫F dt.
+                if abs(qd_ref[i]) >= lim.frozen_min_ref_speed_m_s:
+                    self._frozen_time[i] += dt
+                else:
+                    self._frozen_time[i] = 0.0
+                net = abs(tau[i]) - self.holding_force_n
+                if net > 0.0 and free:
+                    self._impulse[i] += net * dt
+                    self._impulse_time[i] += dt
+                else:
+                    self._impulse[i] = 0.0
+                    self._impulse_time[i] = 0.0
+                moved = self._impulse[i] * self._impulse_time[i] / (2.0 * self.axis_mass_kg)
+                if moved >= FROZEN_COUNTS * self.count_m or \
+                        self._frozen_time[i] >= lim.frozen_encoder_s:
                     trip(f"encoder_frozen_{i}", Reaction.HARD_STOP,
                          f"encoder {i} frozen while commanded to move",
-                         frozen_s=self._frozen_time[i], qd_ref=float(qd_ref[i]))
+                         frozen_s=self._frozen_time[i], expected_m=moved,
+                         qd_ref=float(qd_ref[i]))
             else:
                 self._frozen_time[i] = 0.0
+                self._impulse[i] = 0.0
+                self._impulse_time[i] = 0.0
             self._last_q[i] = qi
             # -- stroke, speed, acceleration, tracking, actuator force
             if qi < lim.stroke_lo_m or qi > lim.stroke_hi_m:
@@ -163,7 +203,7 @@ class Supervisor:
                                               ("pitch", pitch, pitch_rate, lim.pitch_min,
                                                lim.pitch_max)):
                 w = abs(rate)
-                braking = 1.25 * (w * (dt + 0.5 * self.jerk_time) + w * w / (2 * self.alpha_stop))
+                braking = self.braking_angle(w, dt)
                 if angle > hi + lim.rom_tolerance or angle < lo - lim.rom_tolerance:
                     trip(f"rom_{name}", Reaction.HARD_STOP, f"{name} beyond the patient's ROM",
                          angle_deg=math.degrees(angle))

@@ -1,0 +1,259 @@
+"""The fault matrix: every fault the twin can inject, plus client loss, e-stops, a ROM limit
+approached at speed and a force overload, each run on the twin with the full position loop and
+judged on what the supervisor did (``talus faults matrix``).
+
+Per fault: detected, reaction (the strongest), detection latency (fault → first event), time
+from the fault to zero drive output (hard stops), worst excursion beyond the patient's ROM (deg),
+the force limit (% of it) and the stroke (mm), time from detection to rest, final state.
+Targets (issue 5): every fault detected; hard stop ≤ 20 ms to zero output; soft stop to rest
+≤ 500 ms; ROM exceeded by ≤ 1°; force limit by ≤ 5 %. Twin figures, simulated time at 1 kHz.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from rt.control.base import Reference
+from rt.control.experiment import benchmark_reference
+from rt.engine import Component
+from rt.model import RobotModel
+from rt.position_loop import PositionLoop, build_sim_position_loop
+from rt.safety.events import Reaction
+from rt.safety.limits import PatientLimits
+from rt.twin.environment import CompliantAnkle, FreeMotion
+
+FAULT_AT_S = 3.0
+RUN_S = 5.0
+REST_SPEED_M_S = 1e-3
+REST_HOLD_S = 0.05
+
+
+class TruthProbe(Component):
+    """Ports: none. Records the twin's ground truth each cycle (matrix runs only)."""
+
+    def __init__(self, name: str, pl_ref: list, capacity: int):
+        super().__init__(name)
+        self._pl = pl_ref
+        self.rows = np.full((capacity, 12), np.nan)   # t, q(3), qd(3), amp(3), force, mode
+        self.n = 0
+
+    def update(self, t: float, dt: float) -> int:
+        pl: PositionLoop = self._pl[0]
+        plant = pl.twin.plant
+        r = self.rows[self.n % len(self.rows)]
+        r[0] = t
+        r[1:4] = plant.q
+        r[4:7] = plant.qd
+        r[7:10] = pl.twin.amp_volts
+        w = plant.wrench_s
+        r[10] = math.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
+        r[11] = pl.graph.output("supervisor.mode")[0]
+        self.n += 1
+        return 0
+
+
+@dataclass
+class Scenario:
+    name: str
+    inject: Callable[[PositionLoop, float], None]
+    environment: object = field(default_factory=FreeMotion)
+    trajectory: Callable | None = None
+    patient: PatientLimits = field(default_factory=PatientLimits)
+    mode: str = "fast"
+
+
+def _fault(kind: str, **kw) -> Callable[[PositionLoop, float], None]:
+    def inject(pl: PositionLoop, t: float) -> None:
+        pl.twin.faults.schedule(kind, t, **kw)
+    return inject
+
+
+def _roll_sweep(speed_deg_s: float, target_deg: float, model: RobotModel):
+    """Roll from 0 toward ``target_deg`` (beyond the patient's ROM), accelerating smoothly
+    (0.25 s) to ``speed_deg_s`` from t = 0.5 s: a runaway exercise, or a mis-set protocol."""
+    kin = model.kin
+    z = 0.633
+    w = math.radians(speed_deg_s)
+    ramp = 0.25
+
+    def angle_at(t: float) -> tuple[float, float]:
+        s = t - 0.5
+        if s <= 0.0:
+            return 0.0, 0.0
+        if s < ramp:
+            return 0.5 * w / ramp * s * s, w * s / ramp
+        a = 0.5 * w * ramp + w * (s - ramp)
+        return (a, w) if a < math.radians(target_deg) else (math.radians(target_deg), 0.0)
+
+    def ref(t: float, out: Reference) -> None:
+        angle, rate = angle_at(t)
+        cfg = kin.ik(z, angle, 0.0, check=False)
+        ahead = kin.ik(z, angle + rate * 1e-4, 0.0, check=False)
+        for i in range(3):
+            out.q[i] = cfg.q[i]
+            out.qd[i] = (ahead.q[i] - cfg.q[i]) / 1e-4
+            out.qdd[i] = 0.0
+    return ref
+
+
+def _rise(speed_m_s: float, model: RobotModel):
+    """Heave up from home at ``speed_m_s`` after 0.5 s (into the foot above)."""
+    kin = model.kin
+
+    def ref(t: float, out: Reference) -> None:
+        z = 0.633 + speed_m_s * max(0.0, t - 0.5)
+        cfg = kin.ik(z, 0.0, 0.0, check=False)
+        for i in range(3):
+            out.q[i] = cfg.q[i]
+            out.qd[i] = speed_m_s if t > 0.5 else 0.0
+            out.qdd[i] = 0.0
+    return ref
+
+
+def scenarios(model: RobotModel) -> list[Scenario]:
+    def heartbeat_lost(pl: PositionLoop, t_f: float) -> None:
+        pl.supervisor.heartbeat_required = True
+        clock = pl.twin.clock
+        pl.supervisor.heartbeat_age = lambda: max(0.0, clock.t - t_f)
+
+    def gui_estop(pl: PositionLoop, t_f: float) -> None:
+        pl._pending.append((t_f, lambda: pl.supervisor.request_estop("gui")))
+
+    return [
+        Scenario("encoder_freeze", _fault("encoder_freeze", axis=0)),
+        Scenario("encoder_jump", _fault("encoder_jump", axis=1, counts=300)),
+        Scenario("encoder_noise", _fault("encoder_noise", axis=2, sigma_counts=50.0)),
+        Scenario("dac_dead", _fault("dac_dead", card=0, channel=1)),
+        Scenario("dac_stuck", _fault("dac_stuck", card=0, channel=2)),
+        Scenario("ati_dropout", _fault("ati_dropout")),
+        Scenario("ati_stale", _fault("ati_stale")),
+        Scenario("ati_saturation", _fault("ati_saturation")),
+        Scenario("latency", _fault("latency", seconds=0.03)),
+        Scenario("hardware_estop", _fault("hardware_estop")),
+        Scenario("hand_stop", _fault("hand_stop")),
+        Scenario("gui_estop", gui_estop),
+        Scenario("client_loss", heartbeat_lost),
+        Scenario("rom_limit_at_speed", lambda pl, t: None,
+                 trajectory=_roll_sweep(40.0, 30.0, model),
+                 patient=PatientLimits(roll_min_deg=-10.0, roll_max_deg=10.0)),
+        Scenario("force_overload", lambda pl, t: None,
+                 environment=CompliantAnkle(neutral_z_m=0.713 - 0.001, limb_weight_n=0.0),
+                 trajectory=_rise(0.005, model), patient=PatientLimits(max_force_n=400.0)),
+    ]
+
+
+def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
+                 t_fault: float = FAULT_AT_S) -> dict:
+    holder: list = []
+    probe = TruthProbe("truth", holder, int(seconds * 1000) + 10)
+    pl = build_sim_position_loop("paden_panja", trajectory=sc.trajectory, duration_s=60.0,
+                                 environment=sc.environment, patient_limits=sc.patient,
+                                 model=model, extra_blocks=[probe])
+    holder.append(pl)
+    pl._pending = []
+    synthetic = sc.name in ("rom_limit_at_speed", "force_overload")
+    sc.inject(pl, t_fault)
+    pending = pl._pending
+    if pending:
+        pl.loop.run(seconds=pending[0][0])
+        pending[0][1]()
+        pl.loop.run(seconds=seconds - pending[0][0])
+    else:
+        pl.loop.run(seconds=seconds)
+    rows = probe.rows[:probe.n]
+    events = [e for e in pl.events.snapshot()
+              if e.kind in ("fault", "warn", "failover") and (synthetic or e.t >= t_fault - 1e-9)]
+    t = rows[:, 0]
+    result = {"name": sc.name, "detected": bool(events)}
+    if not events:
+        result.update(reaction="none", latency_ms=None, time_to_zero_output_ms=None,
+                      time_to_rest_ms=None, excursion=_excursions(rows, sc, model, t_fault),
+                      final_state="running")
+        return result
+    first = events[0]
+    strongest = max(events, key=lambda e: e.reaction).reaction
+    t0 = t_fault if not synthetic else _limit_onset(sc, rows, model, pl.supervisor)
+    result["reaction"] = {Reaction.HARD_STOP: "hard_stop", Reaction.SOFT_STOP: "soft_stop",
+                          Reaction.FAILOVER: "failover", Reaction.WARN: "warn"}[strongest]
+    result["cause"] = next(e.cause for e in events if e.reaction == strongest)
+    result["latency_ms"] = None if t0 is None else round((first.t - t0) * 1e3, 3)
+    result["detected_at_s"] = round(first.t, 3)
+    ref_t = first.t if t0 is None else min(t0, first.t)
+    zero = None
+    if strongest == Reaction.HARD_STOP:
+        after = (t >= ref_t) & np.all(np.abs(rows[:, 7:10]) < 1e-9, axis=1)
+        if after.any():
+            zero = round((t[after][0] - ref_t) * 1e3, 3)
+    result["time_to_zero_output_ms"] = zero
+    rest = None
+    if strongest in (Reaction.HARD_STOP, Reaction.SOFT_STOP):
+        speed = np.abs(rows[:, 4:7]).max(axis=1)
+        still = speed < REST_SPEED_M_S
+        hold = int(REST_HOLD_S * 1000)
+        for k in np.nonzero((t >= first.t) & still)[0]:
+            if still[k:k + hold].all() and k + hold <= len(still):
+                rest = round((t[k] - first.t) * 1e3, 3)
+                break
+    result["time_to_rest_ms"] = rest
+    result["excursion"] = _excursions(rows, sc, model, ref_t)
+    mode = rows[-1, 11]
+    result["final_state"] = ("hard_stop" if mode >= 3 else "soft_stop" if mode >= 2 else
+                             "running_on_backup" if strongest == Reaction.FAILOVER else "running")
+    return result
+
+
+def _limit_onset(sc: Scenario, rows: np.ndarray, model: RobotModel, sup) -> float | None:
+    """For the limit scenarios, when the truth first entered the zone the supervisor guards:
+    the force cushion (90 % of the limit), or the ROM braking cushion (angle plus the angle the
+    soft stop needs from the true rate reaches the ROM end)."""
+    t = rows[:, 0]
+    if sc.name == "force_overload":
+        hit = np.nonzero(rows[:, 10] >= 0.9 * sc.patient.max_force_n)[0]
+        return float(t[hit[0]]) if len(hit) else None
+    kin = model.kin
+    hi = math.radians(sc.patient.roll_max_deg)
+    prev = None
+    for k in range(len(rows)):
+        roll = kin.fk(rows[k, 1:4], check=False).roll
+        if prev is not None:
+            w = max(0.0, (roll - prev) / 1e-3)
+            if roll + sup.braking_angle(w, 1e-3) >= hi:
+                return float(t[k])
+        prev = roll
+    return None
+
+
+def _excursions(rows: np.ndarray, sc: Scenario, model: RobotModel, t_from: float) -> dict:
+    kin = model.kin
+    t = rows[:, 0]
+    sel = rows[t >= t_from]
+    rom = 0.0
+    for r in sel[::5]:
+        try:
+            cfg = kin.fk(r[1:4], check=False)
+        except Exception:
+            continue
+        p = sc.patient
+        over = max(math.degrees(cfg.roll) - p.roll_max_deg, p.roll_min_deg - math.degrees(cfg.roll),
+                   math.degrees(cfg.pitch) - p.pitch_max_deg,
+                   p.pitch_min_deg - math.degrees(cfg.pitch), 0.0)
+        rom = max(rom, over)
+    lo, hi = model.description.limits.stroke_m
+    stroke = max(0.0, float(np.max(sel[:, 1:4]) - hi), float(lo - np.min(sel[:, 1:4]))) * 1e3
+    force_limit = sc.patient.max_force_n
+    force_pct = max(0.0, (float(np.nanmax(sel[:, 10])) - force_limit) / force_limit * 100.0)
+    return {"rom_deg": round(rom, 3), "force_pct": round(force_pct, 2),
+            "stroke_mm": round(stroke, 3)}
+
+
+def run_matrix(names: list[str] | None = None) -> dict:
+    model = RobotModel.load()
+    out = []
+    for sc in scenarios(model):
+        if names and sc.name not in names:
+            continue
+        out.append(run_scenario(sc, model))
+    return {"twin": True, "rate_hz": 1000.0, "fault_at_s": FAULT_AT_S, "faults": out}

@@ -1,0 +1,78 @@
+"""Supervisor behaviour beyond the matrix: latching, resets that re-check the cause, limit
+layers, and a clean recovery after a hard stop."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from rt.position_loop import build_sim_position_loop
+from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
+
+
+def test_layers_take_the_most_restrictive():
+    lim = effective((0.0, 0.4), RobotLimits(max_platform_force_n=1500.0),
+                    PatientLimits(roll_min_deg=-15, roll_max_deg=12, max_force_n=900.0),
+                    ProtocolLimits(roll_max_deg=20.0, roll_min_deg=-5.0, max_force_n=600.0))
+    assert lim.roll_max == pytest.approx(math.radians(12.0))      # protocol cannot widen
+    assert lim.roll_min == pytest.approx(math.radians(-5.0))      # but can narrow
+    assert lim.max_force_n == 600.0
+    lim = effective((0.0, 0.4), RobotLimits(max_platform_force_n=500.0), PatientLimits())
+    assert lim.max_force_n == 500.0                                # robot caps the patient
+
+
+def test_bad_limits_are_refused():
+    with pytest.raises(ValidationError, match="roll_min_deg must be below roll_max_deg"):
+        PatientLimits(roll_min_deg=10, roll_max_deg=5)
+    with pytest.raises(ValidationError, match="max_force_n"):
+        PatientLimits(max_force_n=-1)
+    with pytest.raises(ValidationError, match="extra"):
+        RobotLimits(max_speed=1.0)
+
+
+def _mode(pl) -> float:
+    return float(pl.graph.output("supervisor.mode")[0])
+
+
+def test_reset_is_refused_while_the_cause_persists():
+    pl = build_sim_position_loop("paden_panja", duration_s=30.0)
+    pl.twin.faults.schedule("hand_stop", 2.0, 3.0)       # pressed for one second
+    pl.loop.run(seconds=2.5)
+    assert _mode(pl) == 2.0
+    pl.supervisor.request_reset()
+    pl.loop.run(seconds=0.01)
+    assert _mode(pl) == 2.0
+    refused = [e for e in pl.events.snapshot() if e.kind == "reset_refused"]
+    assert refused and "hand_stop" in refused[0].values["causes"]
+    pl.loop.run(seconds=0.6)                               # released at 3.0 s
+    pl.supervisor.request_reset()
+    pl.loop.run(seconds=0.01)
+    assert _mode(pl) == 0.0
+    assert any(e.kind == "reset" for e in pl.events.snapshot())
+    ev = next(e for e in pl.events.snapshot() if e.cause == "hand_stop")
+    assert ev.t == pytest.approx(2.001, abs=2e-3) and ev.reaction.name == "SOFT_STOP"
+
+
+def test_hard_stop_then_reset_resumes_without_a_jump():
+    pl = build_sim_position_loop("paden_panja", duration_s=30.0)
+    pl.loop.run(seconds=2.0)
+    pl.supervisor.request_estop("cli")
+    pl.loop.run(seconds=0.3)
+    assert _mode(pl) == 3.0
+    assert not pl.twin.drives_enabled and np.all(pl.twin.amp_volts == 0.0)
+    q_stopped = pl.twin.plant.q.copy()
+    pl.supervisor.request_reset()
+    pl.loop.run(seconds=0.5)
+    assert _mode(pl) == 0.0 and pl.twin.drives_enabled
+    # Back on, the robot holds where it stopped (the reference followed it during the stop).
+    assert np.abs(pl.twin.plant.q - q_stopped).max() < 0.5e-3
+    rows, _ = pl.recorder.drain(0)
+    assert np.abs(rows[-1, 1:4] - rows[-1, 7:10]).max() < 1e-4
+
+
+def test_normal_run_raises_no_event():
+    pl = build_sim_position_loop("paden_panja", duration_s=5.0)
+    pl.loop.run(seconds=7.0)
+    assert pl.events.snapshot() == []
