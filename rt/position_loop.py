@@ -53,8 +53,11 @@ def build_sim_position_loop(controller: str = "paden_panja", gains: dict | None 
                             patient_limits: PatientLimits | None = None,
                             protocol_limits: ProtocolLimits | None = None,
                             twin: Twin | None = None, extra_blocks: list | None = None,
-                            **loop_kwargs) -> PositionLoop:
-    """A configured, started position loop on the twin (run it with ``.loop.run(...)``)."""
+                            start_program: bool = True, **loop_kwargs) -> PositionLoop:
+    """A configured, started position loop on the twin (run it with ``.loop.run(...)``).
+
+    With ``start_program`` the trajectory (default: the benchmark) starts at the first cycle;
+    without, the robot holds where it is until a program is requested."""
     model = model or RobotModel.load()
     d = model.description
     clock = SimClock()
@@ -75,8 +78,9 @@ def build_sim_position_loop(controller: str = "paden_panja", gains: dict | None 
     b.add(StopInputs("stops", TwinDigitalInputs(twin)))
     b.add(VelocityEstimation("estimator"))
     b.add(ModelState("model", model))
-    ref = b.add(TrajectoryReference("reference", trajectory or benchmark_reference(),
-                                    duration_s, tuple(d.limits.stroke_m), rate_hz))
+    program = (trajectory or benchmark_reference()) if start_program else None
+    ref = b.add(TrajectoryReference("reference", program, duration_s,
+                                    tuple(d.limits.stroke_m), rate_hz))
     b.add(ControllerBlock("controller", create(controller, model, gains)), slot="controller")
     b.add(SupervisorBlock("supervisor", supervisor, d.drive.force_per_volt_n))
     b.add(RedundantDrive("drive", cards, events, monitor=lambda: twin.amp_volts))

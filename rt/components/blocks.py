@@ -99,55 +99,84 @@ class _RefState:
 
 
 class TrajectoryReference(Component):
-    """Ports: in ``q_meas``: float64[3], m; out ``q_ref``, ``qd_ref``, ``qdd_ref``: float64[3]
-    (m, m/s, m/s²) and ``phase``: float64[1] (0 approach, 1 trajectory, 2 done).
+    """Ports: in ``q_meas``: float64[3], m; in ``mode``: float64[1] (the supervisor's, one cycle
+    late); out ``q_ref``, ``qd_ref``, ``qdd_ref``: float64[3] (m, m/s, m/s²) and ``phase``:
+    float64[1] — 0 approach, 1 trajectory, 2 back to rest, 3 stopped by the supervisor,
+    4 holding (no program).
 
-    A ruckig approach from the measured position at start to the trajectory's first state, then
-    ``trajectory(t, out)`` for ``duration_s``, then the last point held. Position limits are
-    checked by the approach generator (our code, not ruckig's).
+    A program is a trajectory ``f(t, out)`` with a duration: a ruckig approach brings the
+    reference from where it is to the program's first state (position, velocity, acceleration),
+    the program plays, then a jerk-limited stop brings it back to rest. Position limits are
+    checked by the approach generator (our code, not ruckig's). ``request(...)`` starts a
+    program from any thread; it is taken at the next cycle boundary.
 
-    In ``mode`` (float64[1], the supervisor's, one cycle late): on a soft stop the reference
-    brakes to a hold with the jerk-limited soft stop; during a hard stop it follows the measured
-    position (so nothing jumps when the drives come back); after a reset it holds where the
-    robot is (phase 4) until a new program is started.
+    On a soft stop the reference brakes to a hold with the jerk-limited soft stop; during a hard
+    stop it follows the measured position (so nothing jumps when the drives come back); after a
+    reset it holds where the robot is until a new program is requested.
     """
 
-    def __init__(self, name: str, trajectory: Callable[[float, Reference], None],
+    def __init__(self, name: str, trajectory: Callable[[float, Reference], None] | None,
                  duration_s: float, stroke: tuple[float, float], rate_hz: float = 1000.0):
         super().__init__(name)
-        self.trajectory = trajectory
-        self.duration_s = duration_s
         self.approach = Approach(dt=1.0 / rate_hz, stroke=stroke)
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.mode = self.declare_input("mode", Array(1))
         self.q_ref = self.declare_output("q_ref", Array(3))
         self.qd_ref = self.declare_output("qd_ref", Array(3))
         self.qdd_ref = self.declare_output("qdd_ref", Array(3))
-        self.phase = self.declare_output("phase", Array(1))
+        self.phase = self.declare_output("phase", Array(1), initial=np.full(1, 4.0))
         self._ref = Reference(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
         self._first = Reference()
+        self._initial = None if trajectory is None else (trajectory, duration_s)
+        self._pending: tuple | None = None
+        self.trajectory: Callable[[float, Reference], None] | None = None
+        self.duration_s = 0.0
+        self.last_error = ""
 
     def make_state(self):
-        return _RefState()
+        return _RefState(phase=4)
 
     def on_start(self) -> None:
-        self.state = _RefState()
+        self.state = _RefState(phase=4)
+        self._pending = self._initial
 
-    def _begin(self) -> int:
-        """First cycle: plan the approach from where the encoders say the robot is."""
-        self.approach.reset(self.q_meas.data)
-        self.trajectory(0.0, self._first)
+    def request(self, trajectory: Callable[[float, Reference], None], duration_s: float) -> None:
+        """Start a program at the next cycle boundary (any thread)."""
+        self._pending = (trajectory, duration_s)
+
+    @property
+    def busy(self) -> bool:
+        return self.state is not None and self.state.phase in (0, 1, 2)
+
+    def _begin(self, trajectory, duration_s: float, from_hold: bool) -> bool:
+        """Plan the approach from the current reference (or the measured position at start)."""
+        if from_hold:
+            self.approach.reset(self.q_meas.data)
+        else:
+            self.approach.reset(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
+        trajectory(0.0, self._first)
         status = self.approach.set_target(self._first.q, self._first.qd, self._first.qdd)
         if status != ApproachStatus.WORKING:
-            return STATUS_REFERENCE
+            self.last_error = f"approach to the program refused: {status.name}"
+            self.approach.reset(self.q_meas.data if from_hold else self.q_ref.data)
+            self.state.phase = 4
+            return False
+        self.trajectory, self.duration_s = trajectory, duration_s
+        self.state.phase = 0
         self.state.started = True
-        return 0
+        return True
 
     def update(self, t: float, dt: float) -> int:
         st = self.state
-        if not st.started and self._begin():
-            return STATUS_REFERENCE
         mode = self.mode.data[0]
+        if not st.started and self._pending is None:
+            # Nothing to play yet: hold where the robot is.
+            self.approach.reset(self.q_meas.data)
+            st.started = True
+        if self._pending is not None and mode < 2.0:
+            trajectory, duration = self._pending
+            self._pending = None
+            self._begin(trajectory, duration, from_hold=not st.started or st.phase == 4)
         if mode != st.mode:
             if mode >= 3.0:
                 pass                                        # follow (below)
@@ -186,7 +215,9 @@ class TrajectoryReference(Component):
             else:
                 self.trajectory(tt, self._ref)
         if st.phase == 2:
-            self.approach.update(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
+            if self.approach.update(self.q_ref.data, self.qd_ref.data,
+                                    self.qdd_ref.data) == ApproachStatus.FINISHED:
+                st.phase = 4
         self.phase.data[0] = st.phase
         return 0
 

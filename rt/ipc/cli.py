@@ -45,6 +45,9 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
             p.add_argument("--source", choices=("cli", "keyboard", "gui"), default="cli",
                            help="reported source of the stop (default %(default)s)")
         p.set_defaults(func=cmd_request, rt_command=name)
+    from rt.service_cli import register_serve
+
+    register_serve(commands)
 
 
 def cmd_request(args: argparse.Namespace) -> int:

@@ -13,9 +13,10 @@ and the shared-memory segment (``rt.twin.shm``), runs in real time at ``rate_hz`
    counter changes while feeding has resumed;
 3. advances the physics to the instant the new commands took effect: the RT process stamps
    every card write with its ``time.monotonic()``, so a write between two rig periods is
-   applied at its own instant (zero-order hold, as a DAC); watchdog decisions take effect at
-   the period they are taken. Then it applies the gated commands to the twin's ``FakeComedi``
-   doubles and card enables, and advances the physics to now;
+   applied at its own instant (zero-order hold, as a DAC); a watchdog decision (trip,
+   re-arm) takes effect at the period it is taken, never earlier. Then it applies the gated
+   commands to the twin's ``FakeComedi`` doubles and card enables, and advances the physics
+   to now;
 4. publishes the sensor block (counters, ATI sample, inputs, amplifier state, heartbeat).
 
 So physics sees 0 V from the rig period in which the watchdog trips. Rig time 0 is
@@ -144,6 +145,7 @@ class RigProcess:
             # feed counter is then unchanged, so the watchdog trips if this persists.
             self.summary.command_read_failures += 1
         c = cmd.local
+        wd_before = self.wd_state
         self._watchdog(now, int(c.feed[0]), int(c.rearm[0]))
 
         twin = self.twin
@@ -152,7 +154,9 @@ class RigProcess:
         if write_count != self._write_count_seen:
             self._write_count_seen = write_count
             stamp = float(c.write_monotonic_s[0])
-            if math.isfinite(stamp):
+            # A watchdog decision taken now must not act before now: then the new codes
+            # wait for it (at most one period late).
+            if math.isfinite(stamp) and self.wd_state == wd_before:
                 t_apply = min(now, stamp)
             enabled, codes = self._cmd_enabled, self._cmd_codes
             for k in range(2):
@@ -243,9 +247,13 @@ class RigProcess:
         self._stop = True
 
     def run(self, seconds: float | None = None, stop: Any = None,
-            spin_s: float = DEFAULT_SPIN_S, fifo_priority: int | None = None) -> RigSummary:
+            spin_s: float = DEFAULT_SPIN_S, fifo_priority: int | None = None,
+            on_ready: Callable[["RigProcess"], None] | None = None) -> RigSummary:
         """Run periods in real time until ``seconds`` elapse, ``stop.is_set()``, or
         :meth:`request_stop`. ``fifo_priority`` asks for SCHED_FIFO (tried, not required).
+        ``on_ready(self)`` is called once the loop is set up (gc collected, ≈ 70 ms) and
+        the snapshot is fresh, right before the first period: clients attaching then find
+        the rig publishing.
 
         A ``TalusError`` from the physics (the mechanism left its assembly range) ends the run
         with ``rig_state`` failed and the error in the summary.
@@ -257,19 +265,23 @@ class RigProcess:
         tol_ns = period_ns // 5
         behind_ns = 2 * period_ns
         summary = self.summary
-        start_ns = clock_ns()
-        end_ns = start_ns + round(seconds * 1e9) if seconds is not None else None
-        deadline = start_ns
         late_max = 0
         with rt_hygiene.realtime_thread(priority=fifo_priority, lock_memory=False,
                                         timer_slack_ns=1, switch_interval_s=None), \
                 rt_hygiene.gc_paused():
+            start_ns = clock_ns()
+            end_ns = start_ns + round(seconds * 1e9) if seconds is not None else None
+            deadline = start_ns
             try:
+                if on_ready is not None:
+                    self.step(start_ns * 1e-9)
+                    on_ready(self)
+                    deadline = clock_ns()
                 while not self._stop:
                     if end_ns is not None and deadline >= end_ns:
                         break
                     # An mp.Event costs a semaphore call: look every 16 periods (16 ms).
-                    if stop is not None and summary.periods & 15 == 0 and stop.is_set():
+                    if stop is not None and (summary.periods & 15) == 0 and stop.is_set():
                         break
                     now = clock_ns()
                     if deadline - now > spin_ns:
@@ -324,6 +336,5 @@ def run_rig(shm_name: str, environment: Any = "free", seed: int = 0,
     (``talus twin rig``). Returns the run's :class:`RigSummary`.
     """
     with RigProcess(shm_name, environment, seed, rate_hz, watchdog_timeout_s) as rig:
-        if on_ready is not None:
-            on_ready(rig)
-        return rig.run(seconds=seconds, stop=stop, fifo_priority=fifo_priority)
+        return rig.run(seconds=seconds, stop=stop, fifo_priority=fifo_priority,
+                       on_ready=on_ready)

@@ -78,10 +78,13 @@ def cmd_rig(args: argparse.Namespace) -> int:
         try:
             if stop_requested:
                 rig.request_stop()
-            _emit({"rig": {"shm": rig.name, "pid": int(rig.seg.header.rig_pid[0]),
-                           "rate_hz": rig.rate_hz,
-                           "watchdog_ms": rig.watchdog_timeout_s * 1e3, "env": args.env}})
-            summary = rig.run(seconds=args.seconds, fifo_priority=args.fifo)
+
+            def ready(r: RigProcess) -> None:
+                _emit({"rig": {"shm": r.name, "pid": int(r.seg.header.rig_pid[0]),
+                               "rate_hz": r.rate_hz,
+                               "watchdog_ms": r.watchdog_timeout_s * 1e3, "env": args.env}})
+
+            summary = rig.run(seconds=args.seconds, fifo_priority=args.fifo, on_ready=ready)
         finally:
             rig.close()
     finally:

@@ -39,7 +39,7 @@ from rt.drivers.fake_comedi import FakeComedi
 from rt.drivers.fake_pcl833 import FakePcl833Port
 from rt.drivers.pci1720 import Pci1720Outputs
 from rt.drivers.pcl833 import COUNTER_MASK, MIDPOINT, Pcl833Encoders
-from rt.errors import ConfigurationError, HardwareError
+from rt.errors import ConfigurationError, HardwareError, InputError
 from rt.twin import shm as layout
 
 DEFAULT_RIG_TIMEOUT_S = 0.05
@@ -179,6 +179,8 @@ class ShmRig:
         """Publish card ``card``'s enable flag and DAC codes (channels 0-2, -1 = never
         written), stamped with ``time.monotonic()``. Used by ``ShmActuators``."""
         self._check_open()
+        if card not in (0, 1):
+            raise InputError(f"the rig has DAC cards 0 and 1, not {card}")
         cmd = self._cmd
         base = 3 * card
         with self._lock:
