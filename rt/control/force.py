@@ -1,0 +1,209 @@
+"""Force control of Fz through the ATI sensor (DESIGN 5; thesis 3.7.5), hybrid with position:
+force along the platform's z, roll and pitch held in position.
+
+Sign convention: ``F`` is the force the platform applies along its z axis to what it touches
+(N, positive pushing up), i.e. ``F = −w_S.fz`` of the sensor wrench (the environment's force
+on the platform). Task coordinates x = (z, roll, pitch); task forces map to the sliders through
+the forward-kinematics Jacobian: τ = J_fkᵀ Q_x (power: τᵀ q̇ = Q_xᵀ ẋ).
+
+* ``ExplicitForce`` — Q_z = F_d + Kp (F_d − F) + Ki ∫(F_d − F) − D (ż − ż_ff), plus the
+  feedforward of the motion the force profile implies through the contact stiffness k:
+  ż_ff = Ḟ_d / k, z̈_ff = F̈_d / k, compensated with the model (friction F(q̇_ff), inertia).
+  k is estimated online (recursive least squares on F against z, with forgetting) from an
+  initial guess. Roll/pitch: PD on the angles with gravity compensation G(q).
+* ``Admittance`` — the contact is rendered as a virtual mass-damper-spring in z driven by the
+  force error, M_a z̈_c + D_a ż_c = F − F_d, and the resulting pose (z_c, roll_d, pitch_d) is
+  tracked by the inner Paden-Panja position law (IK to slider references each cycle).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Annotated
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from rt.control.base import Reference, create
+from rt.errors import ConfigurationError
+from rt.model import RobotModel
+from rt.model.dynamics import State
+
+Pos = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+NonNeg = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+
+
+@dataclass
+class ForceReference:
+    """F_d (N), Ḟ_d (N/s), F̈_d (N/s²) and the held pose: z (m, used by admittance as the
+    starting height), roll, pitch (rad) with their rates (rad/s)."""
+
+    f: float = 0.0
+    f_dot: float = 0.0
+    f_ddot: float = 0.0
+    roll: float = 0.0
+    pitch: float = 0.0
+    roll_rate: float = 0.0
+    pitch_rate: float = 0.0
+
+
+class ExplicitForceGains(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    kp: NonNeg = 20.0                      # N/N
+    ki_per_s: NonNeg = 1000.0              # N/(N s)
+    damping_n_s_per_m: NonNeg = 2.0e4
+    integral_limit_n: Pos = 1500.0
+    angle_kp_n_m_per_rad: Pos = 4000.0
+    angle_kd_n_m_s_per_rad: Pos = 200.0
+    stiffness_guess_n_per_m: Annotated[float, Field(ge=1e3, le=1e8)] = 1.0e5
+    estimate_stiffness: bool = True
+    forgetting: Annotated[float, Field(gt=0.9, le=1.0)] = 0.999
+
+
+def _validate(model_type, gains) -> BaseModel:
+    try:
+        return model_type.model_validate(gains or {})
+    except ValidationError as exc:
+        msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        raise ConfigurationError(f"force controller gains invalid: {msgs}") from None
+
+
+@dataclass
+class _Rls:
+    """F ≈ k z + c by recursive least squares with forgetting (k in N/m)."""
+
+    theta: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    P: np.ndarray = field(default_factory=lambda: np.eye(2))
+
+    def update(self, z: float, f: float, lam: float) -> None:
+        phi0, phi1 = z, 1.0
+        P = self.P
+        p0 = P[0, 0] * phi0 + P[0, 1] * phi1
+        p1 = P[1, 0] * phi0 + P[1, 1] * phi1
+        denom = lam + phi0 * p0 + phi1 * p1
+        k0, k1 = p0 / denom, p1 / denom
+        err = f - (self.theta[0] * phi0 + self.theta[1] * phi1)
+        self.theta[0] += k0 * err
+        self.theta[1] += k1 * err
+        P[0, 0] = (P[0, 0] - k0 * p0) / lam
+        P[0, 1] = (P[0, 1] - k0 * p1) / lam
+        P[1, 0] = (P[1, 0] - k1 * p0) / lam
+        P[1, 1] = (P[1, 1] - k1 * p1) / lam
+
+
+class ExplicitForce:
+    """Hybrid explicit force (z) / position (roll, pitch) law; see the module docstring."""
+
+    name = "explicit_force"
+
+    def __init__(self, model: RobotModel, gains: dict | None = None):
+        self.model = model
+        self.dyn = model.dyn
+        self.gains = _validate(ExplicitForceGains, gains)
+        self.axis_inertia = model.description.drive.reflected_inertia_kg
+        self.reset()
+
+    def reset(self) -> None:
+        g = self.gains
+        self.integral = 0.0
+        self.rls = _Rls()
+        self.rls.theta[0] = g.stiffness_guess_n_per_m
+        self.rls.P[:] = np.diag([g.stiffness_guess_n_per_m ** 2 * 1e4, 1e8])
+        self._last_z = math.nan
+        self.k_est = g.stiffness_guess_n_per_m
+        self.tau = np.zeros(3)
+
+    def set_gains(self, **changes) -> None:
+        self.gains = _validate(ExplicitForceGains, {**self.gains.model_dump(), **changes})
+
+    def update(self, st: State, force_n: float, ref: ForceReference, dt: float,
+               out: np.ndarray) -> int:
+        """τ (N) into ``out``. ``force_n`` is the measured F (NaN → the law holds its integral
+        and runs on feedforward; the supervisor decides whether that is acceptable)."""
+        g = self.gains
+        cfg = st.cfg
+        S = st.S
+        qd = st.qd
+        zd = S[8, 0] * qd[0] + S[8, 1] * qd[1] + S[8, 2] * qd[2]
+        rd = S[11, 0] * qd[0] + S[11, 1] * qd[1] + S[11, 2] * qd[2]
+        pd = S[10, 0] * qd[0] + S[10, 1] * qd[1] + S[10, 2] * qd[2]
+        if not math.isnan(force_n):
+            e = ref.f - force_n
+            integ = self.integral + e * dt
+            limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
+            self.integral = max(-limit, min(limit, integ))
+            if g.estimate_stiffness and force_n > 20.0:
+                # Learn the contact's stiffness only while in contact and moving a little.
+                if not math.isnan(self._last_z) and abs(cfg.z - self._last_z) > 1e-7:
+                    self.rls.update(cfg.z, force_n, g.forgetting)
+                    self.k_est = min(1e8, max(1e3, float(self.rls.theta[0])))
+                self._last_z = cfg.z
+        else:
+            e = 0.0
+        k = self.k_est
+        z_dot_ff = ref.f_dot / k
+        z_ddot_ff = ref.f_ddot / k
+        fz = (ref.f + g.kp * e + g.ki_per_s * self.integral
+              - g.damping_n_s_per_m * (zd - z_dot_ff))
+        q_roll = (-g.angle_kp_n_m_per_rad * (cfg.roll - ref.roll)
+                  - g.angle_kd_n_m_s_per_rad * (rd - ref.roll_rate))
+        q_pitch = (-g.angle_kp_n_m_per_rad * (cfg.pitch - ref.pitch)
+                   - g.angle_kd_n_m_s_per_rad * (pd - ref.pitch_rate))
+        # τ = G + J_fkᵀ Q_x, J_fk = rows (z, roll, pitch) of S.
+        grav = self.dyn.gravity(st)
+        for i in range(3):
+            out[i] = grav[i] + S[8, i] * fz + S[11, i] * q_roll + S[10, i] * q_pitch
+        # Feedforward of the motion the force profile implies (slider space via J_ik).
+        j_ik = st.inverse_jacobian()
+        qd_ff = j_ik[:, 0] * z_dot_ff
+        qdd_ff = j_ik[:, 0] * z_ddot_ff
+        out += self.dyn.friction(qd_ff) + self.axis_inertia * qdd_ff
+        self.tau[:] = out
+        return 0
+
+
+class AdmittanceGains(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    virtual_mass_kg: Pos = 20.0
+    virtual_damping_n_s_per_m: Pos = 4000.0
+    virtual_stiffness_n_per_m: NonNeg = 0.0
+    max_speed_m_s: Pos = 0.05
+
+
+class Admittance:
+    """Force error → virtual mass-damper(-spring) in z → pose → inner Paden-Panja."""
+
+    name = "admittance"
+
+    def __init__(self, model: RobotModel, gains: dict | None = None,
+                 inner: str = "paden_panja", inner_gains: dict | None = None):
+        self.model = model
+        self.gains = _validate(AdmittanceGains, gains)
+        self.inner = create(inner, model, inner_gains)
+        self._ref = Reference()
+        self.reset()
+
+    def reset(self, z0: float | None = None) -> None:
+        self.z = z0
+        self.zd = 0.0
+        self.inner.reset()
+
+    def update(self, st: State, force_n: float, ref: ForceReference, dt: float,
+               out: np.ndarray) -> int:
+        g = self.gains
+        if self.z is None:
+            self.z = st.cfg.z
+        e = 0.0 if math.isnan(force_n) else force_n - ref.f      # pushing too hard → yield
+        zdd = (-e - g.virtual_damping_n_s_per_m * self.zd) / g.virtual_mass_kg
+        self.zd = max(-g.max_speed_m_s, min(g.max_speed_m_s, self.zd + zdd * dt))
+        self.z += self.zd * dt
+        kin = self.model.kin
+        cfg = kin.ik(self.z, ref.roll, ref.pitch, check=False)
+        ahead = kin.ik(self.z + self.zd * 1e-4, ref.roll + ref.roll_rate * 1e-4,
+                       ref.pitch + ref.pitch_rate * 1e-4, check=False)
+        r = self._ref
+        for i in range(3):
+            r.q[i] = cfg.q[i]
+            r.qd[i] = (ahead.q[i] - cfg.q[i]) / 1e-4
+            r.qdd[i] = 0.0
+        return self.inner.update(st, r, dt, out)
