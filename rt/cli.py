@@ -21,6 +21,7 @@ GROUPS: dict[str, tuple[str, str]] = {
     "bench": ("rt.benchmarks.cli", "benchmarks: control loop timing, tracking experiments"),
     "faults": ("rt.safety.cli", "safety: the fault matrix on the twin"),
     "rt": ("rt.ipc.cli", "RT process: status, stop, estop, reset (JSON)"),
+    "record": ("rt.recording.cli", "recordings: info, CSV export"),
 }
 
 

@@ -12,6 +12,7 @@ take the real encoder, DAC and sensor backends on the rig.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable, Sequence
 
 from rt.components.blocks import (ControllerBlock, EncoderReader, ModelState, RecorderTap,
                                   TrajectoryReference, VelocityEstimation)
@@ -19,7 +20,7 @@ from rt.components.safety_blocks import ForceReader, RedundantDrive, StopInputs,
 from rt.components.twin_step import TwinStep
 from rt.control.base import create
 from rt.control.experiment import RefFn, benchmark_reference
-from rt.engine import Graph, GraphBuilder, Loop
+from rt.engine import Component, Graph, GraphBuilder, Loop
 from rt.model import RobotModel
 from rt.safety.events import EventLog
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
@@ -39,43 +40,104 @@ class PositionLoop:
     reference: TrajectoryReference
     supervisor: Supervisor
     events: EventLog
+    devices: "Devices | None" = None
 
-    def close(self) -> None:
-        self.graph.stop() if self.loop.running else None
+
+@dataclass
+class Devices:
+    """What the loop talks to: the twin in-process ("sim"), the rig process over shared memory
+    ("twin_shm") or, on the rig, the real cards. ``monitor`` reads the amplifier inputs back
+    (the rig's current monitors); ``feed_watchdog`` is called at the end of every cycle;
+    ``first`` is a block run before everything else (the in-process twin's physics)."""
+
+    encoders: object
+    cards: list
+    force: object
+    stops: object
+    monitor: Callable[[], Sequence[float]] | None = None
+    feed_watchdog: Callable[[], None] | None = None
+    first: Component | None = None
+    twin: Twin | None = None
+    close: Callable[[], None] | None = None
+
+
+def sim_devices(twin: Twin, clock: SimClock) -> Devices:
+    """The in-process twin, advanced by the loop in lockstep."""
+    return Devices(TwinEncoders(twin), [TwinActuators(twin, 0), TwinActuators(twin, 1)],
+                   TwinForceTorque(twin), TwinDigitalInputs(twin),
+                   monitor=lambda: twin.amp_volts, first=TwinStep("twin", twin, clock),
+                   twin=twin)
+
+
+def shm_devices(shm_name: str) -> Devices:
+    """The rig process (``talus twin rig --shm NAME``) over shared memory; the loop feeds its
+    amplifier watchdog every cycle, so a dead or stalled loop drops the drives."""
+    from rt.twin.shm_backends import (ShmActuators, ShmDigitalInputs, ShmEncoders,
+                                      ShmForceTorque, ShmRig)
+
+    rig = ShmRig(shm_name)
+    cards = [ShmActuators(rig, 0), ShmActuators(rig, 1)]
+    return Devices(ShmEncoders(rig), cards, ShmForceTorque(rig), ShmDigitalInputs(rig),
+                   monitor=lambda: rig.amplifier_state().volts, feed_watchdog=rig.feed_watchdog,
+                   close=rig.close)
+
+
+class WatchdogFeed(Component):
+    """Ports: none. Feeds the amplifier watchdog at the end of each cycle: only a loop that
+    completes its cycles keeps the drives powered."""
+
+    def __init__(self, name: str, feed: Callable[[], None]):
+        super().__init__(name)
+        self.feed = feed
+
+    def update(self, t: float, dt: float) -> int:
+        self.feed()
+        return 0
 
 
 def build_sim_position_loop(controller: str = "paden_panja", gains: dict | None = None,
                             trajectory: RefFn | None = None, duration_s: float = 26.0,
                             environment=None, rate_hz: float = 1000.0, mode: str = "fast",
                             seed: int = 0, start_q: tuple[float, float, float] = (0.2, 0.2, 0.2),
-                            model: RobotModel | None = None,
-                            robot_limits: RobotLimits | None = None,
-                            patient_limits: PatientLimits | None = None,
-                            protocol_limits: ProtocolLimits | None = None,
-                            twin: Twin | None = None, extra_blocks: list | None = None,
-                            start_program: bool = True, **loop_kwargs) -> PositionLoop:
-    """A configured, started position loop on the twin (run it with ``.loop.run(...)``).
+                            model: RobotModel | None = None, twin: Twin | None = None,
+                            **kwargs) -> PositionLoop:
+    """A configured, started position loop on the in-process twin (``.loop.run(...)``)."""
+    model = model or RobotModel.load()
+    clock = SimClock()
+    if twin is None:
+        twin = Twin(model.description, environment or FreeMotion(), seed=seed, clock=clock)
+        twin.place(start_q)
+    else:
+        twin.clock = clock
+    return build_position_loop(sim_devices(twin, clock), controller, gains, trajectory,
+                               duration_s, rate_hz=rate_hz, mode=mode, model=model, **kwargs)
+
+
+def build_position_loop(devices: Devices, controller: str = "paden_panja",
+                        gains: dict | None = None, trajectory: RefFn | None = None,
+                        duration_s: float = 26.0, rate_hz: float = 1000.0, mode: str = "fast",
+                        model: RobotModel | None = None,
+                        robot_limits: RobotLimits | None = None,
+                        patient_limits: PatientLimits | None = None,
+                        protocol_limits: ProtocolLimits | None = None,
+                        extra_blocks: list | None = None, start_program: bool = True,
+                        **loop_kwargs) -> PositionLoop:
+    """The position loop over ``devices``, configured and started.
 
     With ``start_program`` the trajectory (default: the benchmark) starts at the first cycle;
     without, the robot holds where it is until a program is requested."""
     model = model or RobotModel.load()
     d = model.description
-    clock = SimClock()
-    if twin is None:
-        twin = Twin(d, environment or FreeMotion(), seed=seed, clock=clock)
-        twin.place(start_q)
-    else:
-        twin.clock = clock
-    cards = [TwinActuators(twin, 0), TwinActuators(twin, 1)]
     events = EventLog()
     limits = effective(tuple(d.limits.stroke_m), robot_limits or RobotLimits(),
                        patient_limits or PatientLimits(), protocol_limits)
     supervisor = Supervisor(limits, 1.0 / rate_hz, events)
     b = GraphBuilder()
-    b.add(TwinStep("twin", twin, clock))
-    b.add(EncoderReader("encoders", TwinEncoders(twin)))
-    b.add(ForceReader("force", TwinForceTorque(twin)))
-    b.add(StopInputs("stops", TwinDigitalInputs(twin)))
+    if devices.first is not None:
+        b.add(devices.first)
+    b.add(EncoderReader("encoders", devices.encoders))
+    b.add(ForceReader("force", devices.force))
+    b.add(StopInputs("stops", devices.stops))
     b.add(VelocityEstimation("estimator"))
     b.add(ModelState("model", model))
     program = (trajectory or benchmark_reference()) if start_program else None
@@ -83,8 +145,10 @@ def build_sim_position_loop(controller: str = "paden_panja", gains: dict | None 
                                     tuple(d.limits.stroke_m), rate_hz))
     b.add(ControllerBlock("controller", create(controller, model, gains)), slot="controller")
     b.add(SupervisorBlock("supervisor", supervisor, d.drive.force_per_volt_n))
-    b.add(RedundantDrive("drive", cards, events, monitor=lambda: twin.amp_volts))
+    b.add(RedundantDrive("drive", devices.cards, events, monitor=devices.monitor))
     rec = b.add(RecorderTap("recorder"))
+    if devices.feed_watchdog is not None:
+        b.add(WatchdogFeed("watchdog", devices.feed_watchdog))
     for block in extra_blocks or ():
         b.add(block)                       # port-less observers (e.g. the fault matrix probe)
     for src, dst in (
@@ -112,7 +176,7 @@ def build_sim_position_loop(controller: str = "paden_panja", gains: dict | None 
     graph.configure()
     loop = Loop(graph, rate_hz=rate_hz, mode=mode, **loop_kwargs)
     graph.start()
-    return PositionLoop(loop, graph, model, twin, rec, ref, supervisor, events)
+    return PositionLoop(loop, graph, model, devices.twin, rec, ref, supervisor, events, devices)
 
 
 def swap_controller(pl: PositionLoop, controller: str, gains: dict | None = None):

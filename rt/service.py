@@ -25,7 +25,8 @@ from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
 from rt.errors import ConfigurationError, InputError
 from rt.ipc.messages import DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT
-from rt.position_loop import PositionLoop, build_sim_position_loop
+from rt.position_loop import (PositionLoop, build_position_loop, build_sim_position_loop,
+                              shm_devices)
 from rt.safety.events import Reaction
 from rt.safety.limits import PatientLimits
 
@@ -35,7 +36,9 @@ class RtConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     schema_version: Literal[1] = 1
-    backend: Literal["sim"] = "sim"
+    backend: Literal["sim", "twin_shm"] = "sim"
+    #: With backend twin_shm: the rig process's shared-memory segment (talus twin rig --shm).
+    shm: str | None = None
     rate_hz: float = Field(1000.0, ge=100.0, le=2000.0)
     controller: str = "paden_panja"
     gains: dict[str, float] = Field(default_factory=dict)
@@ -184,10 +187,17 @@ def serve(config: RtConfig, stop_event: threading.Event, ready=None) -> dict:
     from rt.ipc.server import RtServer
     from rt.twin.environment import parse_environment
 
-    pl = build_sim_position_loop(config.controller, config.gains or None, trajectory=None,
-                                 environment=parse_environment(config.environment),
-                                 rate_hz=config.rate_hz, mode="realtime",
-                                 patient_limits=config.patient_limits, start_program=False)
+    common = dict(rate_hz=config.rate_hz, mode="realtime",
+                  patient_limits=config.patient_limits, start_program=False)
+    if config.backend == "twin_shm":
+        if not config.shm:
+            raise ConfigurationError("backend twin_shm needs the rig's segment name (--shm)")
+        pl = build_position_loop(shm_devices(config.shm), config.controller,
+                                 config.gains or None, **common)
+    else:
+        pl = build_sim_position_loop(config.controller, config.gains or None,
+                                     environment=parse_environment(config.environment),
+                                     **common)
     service = RtService(pl, config)
     with RtServer(service, config.endpoint, config.pub_endpoint,
                   heartbeat_timeout_s=config.heartbeat_timeout_s) as server:
@@ -213,6 +223,8 @@ def serve(config: RtConfig, stop_event: threading.Event, ready=None) -> dict:
         finally:
             pl.loop.stop()
             pl.graph.stop()
+            if pl.devices is not None and pl.devices.close is not None:
+                pl.devices.close()
     stats = pl.loop.stats()
     return {"cycles": stats.cycles, "deadline_misses": stats.misses,
             "events": [e.as_dict() for e in pl.events.snapshot()]}

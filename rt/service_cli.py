@@ -14,7 +14,10 @@ def register_serve(commands: argparse._SubParsersAction) -> None:
                             "sim) and the 1 kHz loop; serves commands and publishes telemetry "
                             "and events. Prints {\"serving\": ...} once ready, a summary at "
                             "exit.")
-    p.add_argument("--backend", choices=("sim",), default="sim")
+    p.add_argument("--backend", choices=("sim", "twin_shm"), default="sim",
+                   help="sim: the twin in this process; twin_shm: the rig process started with "
+                        "'talus twin rig --shm NAME' (its amplifier watchdog guards this process)")
+    p.add_argument("--shm", default=None, help="with --backend twin_shm: the rig's segment")
     p.add_argument("--config", default=None, help="RT config YAML (see rt.service.RtConfig)")
     p.add_argument("--endpoint", default=None, help="override the request endpoint")
     p.add_argument("--pub-endpoint", default=None, help="override the publish endpoint")
@@ -29,6 +32,8 @@ def _serve(args) -> int:
     try:
         config = load_config(args.config)
         updates = {"backend": args.backend}
+        if args.shm:
+            updates["shm"] = args.shm
         if args.endpoint:
             updates["endpoint"] = args.endpoint
         if args.pub_endpoint:

@@ -386,7 +386,7 @@ class SessionRecorder:
         Returns the summary: ``path``, ``complete`` (footer written), ``sha256`` and ``bytes``
         of the file, ``messages`` and ``dropped`` per topic, ``dropped_total``,
         ``duration_s`` (wall), ``writer_busy_s`` and ``writer_us_per_message`` (the thread's
-        cost), ``flushes``, ``error``. Safe to call twice (returns the same summary).
+        CPU time, encoding + compression + writing), ``flushes``, ``error``. Safe to call twice (returns the same summary).
         """
         with self._close_lock:
             if self._summary is not None:
@@ -483,7 +483,8 @@ class SessionRecorder:
             topic, t, payload = q.popleft()
             if topic == WRENCH:
                 fx, fy, fz, tx, ty, tz, stale, saturated = payload
-                payload = {"t": t, "fx": fx, "fy": fy, "fz": fz, "tx": tx, "ty": ty, "tz": tz,
+                payload = {"t": t, "fx": float(fx), "fy": float(fy), "fz": float(fz),
+                           "tx": float(tx), "ty": float(ty), "tz": float(tz),
                            "stale": bool(stale), "saturated": bool(saturated)}
             self._write(topic, t, encode_json(payload))
             written += 1
@@ -495,20 +496,20 @@ class SessionRecorder:
         try:
             while True:
                 stopping = self._stop.wait(self.drain_period_s)
-                t0 = time.perf_counter()
+                t0 = time.thread_time()    # CPU time: waits for the GIL are not the cost
                 self._pump()
                 if not stopping and time.monotonic() >= next_flush:
                     self._flush_chunk()
                     next_flush = time.monotonic() + self.flush_interval_s
-                self._busy_s += time.perf_counter() - t0
+                self._busy_s += time.thread_time() - t0
                 if stopping:
                     break
-            t0 = time.perf_counter()
+            t0 = time.thread_time()
             self._mcap.finish()
             self._stream.flush()
             if self._fsync:
                 os.fsync(self._stream.raw.fileno())
-            self._busy_s += time.perf_counter() - t0
+            self._busy_s += time.thread_time() - t0
         except Exception as exc:   # noqa: BLE001 - reported by close() and .error
             self._error = f"{type(exc).__name__}: {exc}"
             self._closed = True    # producers now count drops instead of filling the queue

@@ -256,4 +256,91 @@ def run_matrix(names: list[str] | None = None) -> dict:
         if names and sc.name not in names:
             continue
         out.append(run_scenario(sc, model))
+    if not names or "rt_process_loss" in names:
+        out.append(run_rt_process_loss())
     return {"twin": True, "rate_hz": 1000.0, "fault_at_s": FAULT_AT_S, "faults": out}
+
+
+def run_rt_process_loss(timeout_s: float = 10.0) -> dict:
+    """RT-process loss for real: the twin runs as the rig process (``talus twin rig``), the RT
+    process (``talus rt serve --backend twin_shm``) holds the robot and feeds the amplifier
+    watchdog; it is killed with SIGKILL and the rig's amplifiers must drop to zero.
+    Times are wall-clock (both processes' monotonic clock)."""
+    import json
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from rt.ipc.client import RtClient
+    from rt.twin.shm_backends import ShmEncoders, ShmRig
+
+    shm = f"talus-matrix-{os.getpid()}"
+    py = [sys.executable, "-m", "rt.cli"]
+    rig = subprocess.Popen(py + ["twin", "rig", "--shm", shm], stdout=subprocess.PIPE,
+                           stderr=subprocess.DEVNULL, text=True)
+    rt = None
+    result = {"name": "rt_process_loss", "detected": False, "reaction": "none",
+              "cause": "watchdog", "latency_ms": None, "time_to_zero_output_ms": None,
+              "time_to_rest_ms": None,
+              "excursion": {"rom_deg": 0.0, "force_pct": 0.0, "stroke_mm": 0.0},
+              "final_state": "unknown"}
+    try:
+        json.loads(rig.stdout.readline())
+        rt = subprocess.Popen(py + ["rt", "serve", "--backend", "twin_shm", "--shm", shm,
+                                    "--endpoint", "tcp://127.0.0.1:*",
+                                    "--pub-endpoint", "tcp://127.0.0.1:*"],
+                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        endpoint = json.loads(rt.stdout.readline())["serving"]["endpoint"]
+        with RtClient(endpoint, timeout_s=2.0) as client, ShmRig(shm) as handle:
+            client.start_heartbeat(0.05)
+            client.run("move", {"z": 0.64, "roll": 0.05, "hold_s": 30.0})
+            end = time.monotonic() + timeout_s
+            while time.monotonic() < end and max(abs(v) for v in
+                                                 handle.amplifier_state().volts) < 0.05:
+                time.sleep(0.01)
+            time.sleep(0.5)
+            client.stop_heartbeat()
+            killed = time.monotonic()
+            os.kill(rt.pid, signal.SIGKILL)
+            rt.wait()
+            state = None
+            while time.monotonic() < killed + 2.0:
+                s = handle.amplifier_state()
+                if s.tripped and s.volts == (0.0, 0.0, 0.0):
+                    state = s
+                    break
+                time.sleep(0.0005)
+            if state is not None:
+                latency = (state.trip_monotonic_s - killed) * 1e3
+                result.update(detected=True, reaction="hard_stop",
+                              latency_ms=round(latency, 3),
+                              time_to_zero_output_ms=round(latency, 3),
+                              final_state="drives_off_watchdog_tripped")
+                enc = ShmEncoders(handle)
+                q = np.zeros(3)
+                last, still_since = None, None
+                while time.monotonic() < killed + 3.0:
+                    enc.read_positions_m(q)
+                    if last is not None and np.abs(q - last).max() < 1e-9:
+                        still_since = still_since or time.monotonic()
+                        if time.monotonic() - still_since >= REST_HOLD_S:
+                            result["time_to_rest_ms"] = round(
+                                (still_since - state.trip_monotonic_s) * 1e3, 3)
+                            break
+                    else:
+                        still_since = None
+                    last = q.copy()
+                    time.sleep(0.001)
+                enc.close()
+    finally:
+        for p in (rt, rig):
+            if p is not None and p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+                try:
+                    p.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
+    return result

@@ -24,6 +24,9 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=_step)
     register_twin_commands(commands)
+    from rt.twin.rig_cli import register_rig_command
+
+    register_rig_command(commands)
 
 
 def _step(args) -> int:
