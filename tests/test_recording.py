@@ -313,6 +313,47 @@ def test_stalled_disk_gives_counted_drops_not_blocking(tmp_path: Path,
     assert ts == sorted(ts) and len(ts) == s["messages"][STATE]
 
 
+class _RacingRing:
+    """A ring source (t, position[3]) whose producer writes 3 rows while the first drain
+    copies: the rows it may have overwritten must be dropped and counted, not recorded."""
+
+    capacity = 8
+
+    def __init__(self) -> None:
+        self.ring = np.zeros((self.capacity, 4))
+        self.written = 0
+        self.race = True
+
+    def produce(self, n: int) -> None:
+        for _ in range(n):
+            self.ring[self.written % self.capacity] = [self.written / RATE_HZ] + [
+                float(self.written)] * 3
+            self.written += 1
+
+    def drain(self, start: int) -> tuple[np.ndarray, int]:
+        end = self.written
+        start = max(start, end - self.capacity)
+        rows = self.ring[np.arange(start, end) % self.capacity].copy()
+        if self.race:
+            self.race = False
+            self.produce(3)
+        return rows, end
+
+
+def test_generic_ring_rows_overwritten_during_the_copy_are_dropped(tmp_path: Path) -> None:
+    ring = _RacingRing()
+    ring.produce(8)                                   # full: rows 0..7
+    with SessionRecorder(tmp_path / "ring.mcap", METADATA_IN) as rec:
+        rec.attach_ring(REFERENCE, ring, (("t", 1), ("position", 3)), start=0)
+        time.sleep(0.1)                               # a few drain periods
+    s = rec.close()
+    got = read_recording(tmp_path / "ring.mcap")[REFERENCE]
+    # Rows 0..2 shared their slots with rows 8..10 written during the copy.
+    assert [m["t"] for m in got] == [k / RATE_HZ for k in range(3, 11)]
+    assert got[0]["position"] == [3.0, 3.0, 3.0]
+    assert s["dropped"][REFERENCE] == 3 and s["messages"][REFERENCE] == 8
+
+
 # ------------------------------------------------------------------ crash recovery
 
 CHILD = textwrap.dedent("""
@@ -491,3 +532,17 @@ def test_bad_metadata_and_unknown_channels_are_refused(tmp_path: Path) -> None:
     assert rec.closed and not rec.event({"t": 1.0}) and rec.close()["dropped"][EVENTS] == 0
     # (a drop after close is counted by dropped(), not in the frozen summary)
     assert rec.dropped()[EVENTS] == 1
+
+
+def test_a_channel_is_added_by_one_dict_entry(tmp_path: Path) -> None:
+    from rt.recording.channels import ChannelSpec
+    spec = ChannelSpec("/robot/temperature", "talus.Temperature", {
+        "type": "object", "required": ["t", "celsius"],
+        "properties": {"t": {"type": "number", "description": "loop time, s"},
+                       "celsius": {"type": "number", "description": "motor 1 temperature, °C"}}})
+    with SessionRecorder(tmp_path / "x.mcap", METADATA_IN,
+                         extra_channels={spec.topic: spec}) as rec:
+        assert rec.publish(spec.topic, {"t": 0.5, "celsius": 41.5})
+    data = read_recording(tmp_path / "x.mcap")
+    assert data["/robot/temperature"] == [{"t": 0.5, "celsius": 41.5}]
+    assert set(CHANNELS) < set(data)
