@@ -20,6 +20,7 @@ GROUPS: dict[str, tuple[str, str]] = {
     "ati": ("rt.ati.cli", "ATI force/torque sensor client"),
     "bench": ("rt.benchmarks.cli", "benchmarks: control loop timing, tracking experiments"),
     "faults": ("rt.safety.cli", "safety: the fault matrix on the twin"),
+    "session": ("protocols.session_cli", "run a protocol: pre-flight, run, record, summary"),
     "rt": ("rt.ipc.cli", "RT process: status, stop, estop, reset (JSON)"),
     "record": ("rt.recording.cli", "recordings: info, CSV export"),
 }

@@ -183,3 +183,70 @@ def swap_controller(pl: PositionLoop, controller: str, gains: dict | None = None
     """Swap the control law at the next cycle boundary, bumplessly; returns the command result."""
     return pl.loop.swap("controller", ControllerBlock(f"controller_{controller}",
                                                       create(controller, pl.model, gains)))
+
+
+def build_protocol_loop(devices: Devices, generator, model: RobotModel | None = None,
+                        rate_hz: float = 1000.0, mode: str = "fast",
+                        robot_limits: RobotLimits | None = None,
+                        patient_limits: PatientLimits | None = None,
+                        protocol_limits: ProtocolLimits | None = None,
+                        force_gains: dict | None = None, extra_blocks: list | None = None,
+                        extra_connections: list[tuple[str, str]] | None = None,
+                        **loop_kwargs) -> PositionLoop:
+    """The loop driven by a protocol generator: position protocols through Paden-Panja, force
+    protocols through the hybrid explicit-force law; the same supervisor, drive and recorder.
+    ``extra_blocks`` (e.g. a signal tap) are wired with ``extra_connections``."""
+    from rt.components.protocol_blocks import HybridController, ProtocolReference
+    from rt.control.force import ExplicitForce
+
+    model = model or RobotModel.load()
+    d = model.description
+    events = EventLog()
+    limits = effective(tuple(d.limits.stroke_m), robot_limits or RobotLimits(),
+                       patient_limits or PatientLimits(), protocol_limits)
+    supervisor = Supervisor(limits, 1.0 / rate_hz, events)
+    b = GraphBuilder()
+    if devices.first is not None:
+        b.add(devices.first)
+    b.add(EncoderReader("encoders", devices.encoders))
+    b.add(ForceReader("force", devices.force))
+    b.add(StopInputs("stops", devices.stops))
+    b.add(VelocityEstimation("estimator"))
+    b.add(ModelState("model", model))
+    ref = b.add(ProtocolReference("reference", generator, tuple(d.limits.stroke_m),
+                                  1.0 / rate_hz))
+    b.add(HybridController("controller", create("paden_panja", model),
+                           ExplicitForce(model, force_gains), supervisor))
+    b.add(SupervisorBlock("supervisor", supervisor, d.drive.force_per_volt_n))
+    b.add(RedundantDrive("drive", devices.cards, events, monitor=devices.monitor))
+    rec = b.add(RecorderTap("recorder"))
+    if devices.feed_watchdog is not None:
+        b.add(WatchdogFeed("watchdog", devices.feed_watchdog))
+    for block in extra_blocks or ():
+        b.add(block)
+    for src, dst in (
+            ("encoders.q", "estimator.q_meas"), ("encoders.q", "model.q_meas"),
+            ("estimator.qd", "model.qd"), ("encoders.q", "reference.q_meas"),
+            ("model.state", "controller.state"), ("reference.q_ref", "controller.q_ref"),
+            ("reference.qd_ref", "controller.qd_ref"), ("reference.qdd_ref", "controller.qdd_ref"),
+            ("reference.force", "controller.force"), ("reference.pose", "controller.pose"),
+            ("reference.ctrl_mode", "controller.ctrl_mode"), ("force.wrench", "controller.wrench"),
+            ("encoders.q", "supervisor.q"), ("estimator.status", "supervisor.est_status"),
+            ("estimator.qd", "supervisor.qd"), ("estimator.qdd", "supervisor.qdd"),
+            ("model.state", "supervisor.state"), ("model.fk_ok", "supervisor.fk_ok"),
+            ("reference.q_ref", "supervisor.q_ref"), ("reference.qd_ref", "supervisor.qd_ref"),
+            ("controller.tau", "supervisor.tau"), ("force.wrench", "supervisor.wrench"),
+            ("force.flags", "supervisor.wrench_flags"), ("stops.inputs", "supervisor.inputs"),
+            ("supervisor.volts", "drive.volts"), ("supervisor.enable", "drive.enable"),
+            ("encoders.q", "recorder.q"), ("estimator.qd", "recorder.qd"),
+            ("reference.q_ref", "recorder.q_ref"), ("controller.tau", "recorder.tau"),
+            ("supervisor.volts", "recorder.volts"), *(extra_connections or ())):
+        b.connect(src, dst)
+    b.connect("supervisor.mode", "reference.mode", delay=1)
+    b.connect("supervisor.mode", "controller.mode", delay=1)
+    b.connect("drive.failed", "supervisor.drive_failed", delay=1)
+    graph = b.build()
+    graph.configure()
+    loop = Loop(graph, rate_hz=rate_hz, mode=mode, **loop_kwargs)
+    graph.start()
+    return PositionLoop(loop, graph, model, devices.twin, rec, ref, supervisor, events, devices)

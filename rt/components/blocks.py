@@ -308,3 +308,38 @@ class RecorderTap(Component):
         start = max(start, end - self.capacity)
         idx = np.arange(start, end) % self.capacity
         return self.ring[idx].copy(), end
+
+
+class SignalTap(Component):
+    """Ports: one float64[n] input per declared signal; no outputs.
+
+    Copies the cycle's signals (after the loop time) into a preallocated ring that a
+    non-real-time thread drains — like ``RecorderTap``, for any set of signals.
+    """
+
+    def __init__(self, name: str, signals: list[tuple[str, int]], capacity: int = 65536):
+        super().__init__(name)
+        self.layout = [("t", 1), *signals]
+        self.ports = [self.declare_input(n, Array(w)) for n, w in signals]
+        self.width = 1 + sum(w for _, w in signals)
+        self.capacity = capacity
+        self.ring = np.zeros((capacity, self.width))
+        self.written = 0
+
+    def update(self, t: float, dt: float) -> int:
+        row = self.ring[self.written % self.capacity]
+        row[0] = t
+        k = 1
+        for port in self.ports:
+            n = port.data.shape[0]
+            row[k:k + n] = port.data
+            k += n
+        self.written += 1
+        return 0
+
+    def drain(self, start: int) -> tuple[np.ndarray, int]:
+        """Rows written since ``start`` (a copy, oldest first) and the new start index."""
+        end = self.written
+        start = max(start, end - self.capacity)
+        idx = np.arange(start, end) % self.capacity
+        return self.ring[idx].copy(), end

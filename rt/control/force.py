@@ -108,7 +108,9 @@ class ExplicitForce:
         self.integral = 0.0
         self.rls = _Rls()
         self.rls.theta[0] = g.stiffness_guess_n_per_m
-        self.rls.P[:] = np.diag([g.stiffness_guess_n_per_m ** 2 * 1e4, 1e8])
+        # Prior: the guess is good to about ±50 %; the offset c (= −k z_contact) is unknown.
+        self.rls.theta[1] = -g.stiffness_guess_n_per_m * 0.7
+        self.rls.P[:] = np.diag([(0.5 * g.stiffness_guess_n_per_m) ** 2 / 1e-4, 1e10])
         self._last_z = math.nan
         self.k_est = g.stiffness_guess_n_per_m
         self.tau = np.zeros(3)
@@ -132,11 +134,14 @@ class ExplicitForce:
             integ = self.integral + e * dt
             limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
             self.integral = max(-limit, min(limit, integ))
-            if g.estimate_stiffness and force_n > 20.0:
-                # Learn the contact's stiffness only while in contact and moving a little.
+            if g.estimate_stiffness and force_n > 50.0:
+                # Learn the contact's stiffness only while clearly in contact and moving a
+                # little; the estimate stays within 1/5..20× the guess, so a poorly excited
+                # stretch cannot turn the motion feedforward into nonsense.
                 if not math.isnan(self._last_z) and abs(cfg.z - self._last_z) > 1e-7:
                     self.rls.update(cfg.z, force_n, g.forgetting)
-                    self.k_est = min(1e8, max(1e3, float(self.rls.theta[0])))
+                    guess = g.stiffness_guess_n_per_m
+                    self.k_est = min(20.0 * guess, max(0.2 * guess, float(self.rls.theta[0])))
                 self._last_z = cfg.z
         else:
             e = 0.0

@@ -188,7 +188,8 @@ class Supervisor:
             if abs(qdd[i]) > lim.max_slider_accel_m_s2:
                 trip(f"accel_{i}", Reaction.WARN, f"slider {i} acceleration beyond the robot "
                      "limit", qdd=float(qdd[i]))
-            err = abs(qi - q_ref[i])
+            # In force control the position reference is only the contact's starting pose.
+            err = 0.0 if self.force_control else abs(qi - q_ref[i])
             if err > 3.0 * lim.max_tracking_error_m:
                 trip(f"tracking_{i}", Reaction.HARD_STOP, f"slider {i} tracking error", error=err)
             elif err > lim.max_tracking_error_m:

@@ -1,0 +1,61 @@
+"""``talus bench force``: force tracking on the twin through the whole session path (protocol
+generator → hybrid explicit-force law → supervisor → drives), against the patient's compliant
+foot: sine Fz 300 ± 100 N at 0.5, 1 and 2 Hz (RMS error % of amplitude over the full-amplitude
+cycles) and gait replay at real speed (RMS error % of the peak force). Twin figures.
+"""
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+SINE = """schema_version: 1
+kind: sine_fz
+name: bench sine {f} Hz
+description: bench
+pose: {{z_m: 0.63, roll_deg: 0.0, pitch_deg: 0.0}}
+mean_n: 300.0
+amplitude_n: 100.0
+frequency_hz: {f}
+cycles: {cycles}
+ramp_in_s: 2.0
+ramp_out_s: 2.0
+"""
+
+
+def _sine_error(freq: float) -> float:
+    from protocols.session import FREF, PHASE, W, SessionSetup, _build, _run
+    from rt.model import RobotModel
+
+    model = RobotModel.load()
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "sine.yaml"
+        path.write_text(SINE.format(f=freq, cycles=max(4, int(round(10 * freq)))))
+        protocol, gen, report, pl, tap = _build(SessionSetup(path), model, "fast")
+        _run(pl, tap, report.duration_s, None)
+    rows = tap.ring[:tap.written]
+    play = rows[:, PHASE] == 1
+    t = rows[:, 0]
+    t0 = t[play][0]
+    full = play & (t >= t0 + 2.0) & (t < t0 + report.duration_s - 2.0)
+    e = (rows[:, FREF] - (-rows[:, W + 2]))[full]
+    return float(np.sqrt(np.mean(e ** 2)) / 100.0 * 100.0)
+
+
+def _gait_error() -> float:
+    from protocols.library import list_library
+    from protocols.session import SessionSetup, run_session
+
+    path = next(p for p in list_library() if p.name == "gait_replay.yaml")
+    summary = run_session(SessionSetup(path, patient_weight_kg=75.0), None, realtime=False)
+    return float(summary["rms_error_pct"])
+
+
+def run_force_benchmark() -> dict:
+    return {"twin": True, "environment": "compliant foot (1e5 N/m)",
+            "sine_rms_pct": {"0.5": _sine_error(0.5), "1": _sine_error(1.0),
+                             "2": _sine_error(2.0)},
+            "gait_rms_pct_of_peak": _gait_error()}
+
+
