@@ -1,0 +1,84 @@
+"""Sessions end to end on the twin: pre-flight, run, recording, summary, refusals."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from protocols.library import list_library
+from protocols.session import SessionSetup, preflight, run_session
+from rt.errors import ProtocolValidationError
+from rt.recording.reader import read_recording
+from rt.safety.limits import PatientLimits
+
+LIB = {p.name: p for p in list_library()}
+
+
+def test_sine_fz_session_recorded_and_summarized(tmp_path):
+    out = tmp_path / "sine.mcap"
+    s = run_session(SessionSetup(LIB["sine_fz.yaml"]), out, realtime=False)
+    assert s["completed"] and s["stops"] == []
+    # Force tracking on the twin's compliant foot: ≤ 2 % of the amplitude at 1 Hz (issue 6).
+    assert s["rms_error_pct"] <= 2.0 and s["rms_error_basis"] == "amplitude"
+    assert 380.0 <= s["peak_force_n"] <= 420.0          # 300 + 100 N
+    rec = read_recording(out)
+    state = rec["/robot/state"]
+    assert len(state) > 20000                            # ≥ 20 s at 1 kHz
+    assert {"/robot/wrench", "/protocol/metadata", "/protocol/reference"} <= set(rec)
+    assert rec["/protocol/metadata"][0]["protocol_name"] == s["protocol"]
+    assert s["recording"]["sha256"] and len(s["recording"]["sha256"]) == 64
+
+
+def test_ankle_rom_reaches_its_range():
+    s = run_session(SessionSetup(LIB["ankle_rom.yaml"]), None, realtime=False)
+    assert s["completed"]
+    pitch = s["rom_deg"]["pitch"]
+    roll = s["rom_deg"]["roll"]
+    # ±10° dorsi/plantar and ±8° inversion/eversion, tracked within a tenth of a degree.
+    assert pitch[0] == pytest.approx(-10.0, abs=0.2) and pitch[1] == pytest.approx(10.0, abs=0.2)
+    assert roll[0] == pytest.approx(-8.0, abs=0.2) and roll[1] == pytest.approx(8.0, abs=0.2)
+
+
+def test_preflight_refuses_a_protocol_beyond_the_patients_rom():
+    narrow = PatientLimits(roll_min_deg=-5, roll_max_deg=5, pitch_min_deg=-5, pitch_max_deg=5)
+    with pytest.raises(ProtocolValidationError, match="exceeds the patient's ROM"):
+        preflight(SessionSetup(LIB["ankle_rom.yaml"], patient_limits=narrow))
+
+
+def test_preflight_refuses_a_force_beyond_the_patients_limit():
+    weak = PatientLimits(max_force_n=350.0)
+    with pytest.raises(ProtocolValidationError, match="peak force 400 N exceeds the limit 350 N"):
+        preflight(SessionSetup(LIB["sine_fz.yaml"], patient_limits=weak))
+
+
+def test_preflight_reports_predicted_peaks():
+    report = preflight(SessionSetup(LIB["gait_replay.yaml"], patient_weight_kg=75.0))
+    p = report["predicted"]
+    assert report["ok"] and p["peak_platform_force_n"] > 300.0
+    assert 0.0 < p["peak_actuator_force_n"] <= 2100.0
+    assert p["rms_error_pct"] <= 3.0
+
+
+def test_session_cli_json(tmp_path):
+    out = tmp_path / "gait.mcap"
+    proc = subprocess.run([sys.executable, "-m", "rt.cli", "session", "run", "--protocol",
+                           str(LIB["gait_replay.yaml"]), "--patient-weight", "75", "--record",
+                           str(out), "--fast", "--json"], capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    assert {"rms_error_pct", "peak_force_n", "rom_deg", "stops", "recording"} <= set(s)
+    assert s["rms_error_pct"] <= 3.0 and Path(s["recording"]["path"]).exists()
+
+
+def test_session_cli_refuses_a_bad_protocol(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("schema_version: 1\nkind: sine_fz\nname: x\nmean_n: -5\n")
+    proc = subprocess.run([sys.executable, "-m", "rt.cli", "session", "run", "--protocol",
+                           str(bad), "--fast", "--json"], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 2
+    assert "bad.yaml" in json.loads(proc.stdout)["error"]
