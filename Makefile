@@ -33,6 +33,12 @@ demo: setup
 	$(BIN)/talus model demo
 	@echo
 	$(BIN)/talus bench tracking --experiment payload-step
+	@echo
+	@mkdir -p out
+	$(BIN)/talus session run --protocol protocols/library/sine_fz.yaml --record out/sine_fz.mcap
+	@echo
+	$(BIN)/talus session run --protocol protocols/library/gait_replay.yaml --patient-weight 75 \
+	  --record out/gait_replay.mcap
 
 test: setup
 	$(BIN)/pytest -q
