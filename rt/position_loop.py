@@ -231,6 +231,7 @@ def build_protocol_loop(devices: Devices, generator, model: RobotModel | None = 
             ("reference.qd_ref", "controller.qd_ref"), ("reference.qdd_ref", "controller.qdd_ref"),
             ("reference.force", "controller.force"), ("reference.pose", "controller.pose"),
             ("reference.ctrl_mode", "controller.ctrl_mode"), ("force.wrench", "controller.wrench"),
+            ("force.wrench", "reference.wrench"),
             ("encoders.q", "supervisor.q"), ("estimator.status", "supervisor.est_status"),
             ("estimator.qd", "supervisor.qd"), ("estimator.qdd", "supervisor.qdd"),
             ("model.state", "supervisor.state"), ("model.fk_ok", "supervisor.fk_ok"),

@@ -27,7 +27,8 @@ class _State:
 
 
 class ProtocolReference(Component):
-    """Ports: in ``q_meas``: float64[3] m; in ``mode``: float64[1] (supervisor, one cycle late).
+    """Ports: in ``q_meas``: float64[3] m; in ``mode``: float64[1] (supervisor, one cycle late);
+    in ``wrench``: float64[6] (sensor frame: the patient's torques for interactive protocols).
     Out ``q_ref``, ``qd_ref``, ``qdd_ref``: float64[3] (m, m/s, m/s²); ``force``: float64[3]
     (F_d N, Ḟ_d N/s, F̈_d N/s²); ``pose``: float64[3] (z m, roll, pitch rad); ``ctrl_mode``:
     float64[1] (0 position, 1 force); ``phase``: float64[1] (0 approach, 1 play, 2 return to
@@ -48,6 +49,7 @@ class ProtocolReference(Component):
         self.force_ramp_s = force_ramp_s
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.mode = self.declare_input("mode", Array(1))
+        self.wrench = self.declare_input("wrench", Array(6))
         self.q_ref = self.declare_output("q_ref", Array(3))
         self.qd_ref = self.declare_output("qd_ref", Array(3))
         self.qdd_ref = self.declare_output("qdd_ref", Array(3))
@@ -57,6 +59,10 @@ class ProtocolReference(Component):
         self.phase = self.declare_output("phase", Array(1))
         self.progress = self.declare_output("progress", Array(1))
         self._n = max(1, int(round(generator.duration_s / dt)))
+        from protocols.output import GeneratorInput
+
+        # Interactive protocols (active assist) read the patient's torques each cycle.
+        self._inp = GeneratorInput()
         self._k = 0
 
     def make_state(self):
@@ -107,7 +113,12 @@ class ProtocolReference(Component):
                 st.phase = PHASE_PLAY
         elif st.phase == PHASE_PLAY:
             o = self.out
-            status = self.gen.update(o)
+            w = self.wrench.data
+            inp = self._inp
+            # The patient's torques on the platform about roll (x) and pitch (y), N·m.
+            inp.tau_roll_nm = 0.0 if math.isnan(w[3]) else float(w[3])
+            inp.tau_pitch_nm = 0.0 if math.isnan(w[4]) else float(w[4])
+            status = self.gen.update(o, inp)
             if status < 0:
                 return 21
             self._k += 1
