@@ -136,6 +136,8 @@ class TwinAtiSensorModel:
         self.params = params if params is not None else AtiSensorParams()
         self.seed = int(seed)
         self._manual: dict[str, bool] = {name: False for name in FAULTS}
+        # Skips the fault lookups in the per-sample path while no fault was ever switched on.
+        self._faults_possible = False
         self._schedule: list[_FaultWindow] = []
         p = self.params
         # Parameters as arrays once, so the per-sample path only does in-place arithmetic.
@@ -163,6 +165,7 @@ class TwinAtiSensorModel:
         """Switch fault ``name`` on or off now (independent of the schedule)."""
         self._check_fault(name)
         self._manual[name] = bool(active)
+        self._faults_possible = any(self._manual.values()) or bool(self._schedule)
 
     def schedule_fault(self, name: str, t_start: float, t_end: float | None = None) -> None:
         """Make fault ``name`` active for ``t_start <= t < t_end`` (s); ``t_end=None``: forever."""
@@ -170,12 +173,14 @@ class TwinAtiSensorModel:
         if t_end is not None and t_end <= t_start:
             raise InputError(f"fault {name!r}: t_end {t_end} must be after t_start {t_start}")
         self._schedule.append(_FaultWindow(name, float(t_start), t_end))
+        self._faults_possible = True
 
     def clear_faults(self) -> None:
         """Switch every fault off and forget the schedule."""
         for name in FAULTS:
             self._manual[name] = False
         self._schedule.clear()
+        self._faults_possible = False
 
     def fault_active(self, name: str, t: float) -> bool:
         """Whether fault ``name`` is on at time ``t`` (s)."""
@@ -197,9 +202,10 @@ class TwinAtiSensorModel:
         if len(true_wrench) != 6:
             raise InputError(f"true_wrench needs 6 values (N, N m), got {len(true_wrench)}")
         st = self._state
-        if self.fault_active("dropout", t):
+        faults = self._faults_possible
+        if faults and self.fault_active("dropout", t):
             return None
-        if st.last is not None and self.fault_active("stale", t):
+        if faults and st.last is not None and self.fault_active("stale", t):
             return st.last
 
         dt = 0.0 if st.t_last is None else t - st.t_last
@@ -228,7 +234,7 @@ class TwinAtiSensorModel:
                 v = r if v > r else -r
                 status |= STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE
             m[i] = v
-        if self.fault_active("saturate", t):
+        if faults and self.fault_active("saturate", t):
             status |= STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE
 
         st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF

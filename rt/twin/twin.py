@@ -159,7 +159,7 @@ class Twin:
         sample = self.ati.measure(self.plant.wrench_s, t)
         if sample is not None:
             self.ati_sample = sample
-        if any(f.kind == "latency" for f in self.faults.faults):
+        if self.faults.faults and any(f.kind == "latency" for f in self.faults.faults):
             self._history.append((t, port_counts(port), self.ati_sample))
 
     # ------------------------------------------------------------------ reads for backends
