@@ -8,6 +8,7 @@ is compared to 1e-9 relative or tighter.
 from __future__ import annotations
 
 import math
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -206,6 +207,20 @@ def test_c3d_round_trip_reads_the_plate_in_newtons(tmp_path):
     np.testing.assert_allclose(back.fz, rec.fz[:n], rtol=1e-6, atol=1e-4)
     np.testing.assert_allclose(back.fx, rec.fx[:n], rtol=1e-6, atol=1e-4)
     np.testing.assert_allclose(back.t, np.arange(n) / 1000.0, atol=1e-12)
+
+
+def test_c3d_analog_scale_is_applied(tmp_path):
+    """The reader uses the file's ANALOG:SCALE: patching the six SCALE floats of the parameter
+    section from 0.5 to 1.0 (raw samples untouched) doubles the force read."""
+    fz = -np.linspace(0.0, 800.0, 200)
+    path = write_c3d(tmp_path / "a.c3d", fz, scale=0.5)
+    np.testing.assert_allclose(gait.read_grf_c3d(path, 0).fz, -fz, rtol=1e-6)
+    data = path.read_bytes()
+    half, one = struct.pack("<6f", *[0.5] * 6), struct.pack("<6f", *[1.0] * 6)
+    assert data.count(half) == 1
+    patched = tmp_path / "b.c3d"
+    patched.write_bytes(data.replace(half, one))
+    np.testing.assert_allclose(gait.read_grf_c3d(patched, 0).fz, -2.0 * fz, rtol=1e-6)
 
 
 def test_c3d_second_plate_is_picked_by_index(tmp_path):

@@ -1,0 +1,325 @@
+"""Shared machinery of the protocol generators: the :class:`Generator` base, the precomputed
+(table) generators, slider references from a pose path, and the report helpers.
+
+Slider references from a pose path: q = ``kinematics.ik(z, roll, pitch)`` at every sample, and
+the derivatives of q along the local quadratic path g(h) = ik(p + h ṗ + h²/2 p̈) by central
+differences, q̇ = (g(H) - g(-H))/2H and q̈ = (g(H) - 2 g(0) + g(-H))/H² with H = 1 ms
+(truncation ~1e-10 m/s, round-off ~1e-10 m/s² for these motions). Holds reuse the previous
+sample's solution.
+
+Precomputed references are stored as one table: 136 B per sample in position mode (q, q̇, q̈,
+pose, pose rate, force target), 32 B in force mode (fz, ḟz, fx, fy); ``MAX_PRECOMPUTED_S``
+bounds it. ``update`` then copies one row into the caller's buffer.
+
+Foot mounting (:data:`FOOT_MOUNTING`): the foot lies along the platform's +x axis (toes towards
++x), the ankle axis along y. Plantarflexion (toes down) is positive pitch (R_y(β) takes +x
+down); inversion (medial border up) is positive roll for a right foot (medial side +y) and
+negative roll for a left foot.
+"""
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from protocols.output import (FORCE_BLOCK, FZ, FZ_DOT, N_FIELDS, POSE, POSE_DOT, POSITION_BLOCK,
+                              Q, QD, QDD, SHEAR, GeneratorInput, GeneratorStatus, Mode,
+                              ReferenceOutput, ValidationReport)
+from protocols.profiles import PITCH, PITCH_D, ROLL, ROLL_D, TARGET
+from protocols.schema import ProtocolModel
+from rt.errors import KinematicsError, ProtocolValidationError
+from rt.model.kinematics import Kinematics
+
+FOOT_MOUNTING = "foot along +x (toes +x); plantarflexion = +pitch; inversion = +roll (right foot)"
+#: Longest precomputed protocol (s): 20 min is 163 MB of position table at 1 kHz.
+MAX_PRECOMPUTED_S = 1200.0
+#: Step along the local path for the slider-velocity/acceleration differences (s).
+DERIVATIVE_STEP_S = 1.0e-3
+_SLACK_RAD = 1e-9
+#: Indices into ReferenceOutput.blocks (the columns a table generator writes per cycle).
+BLOCK_POSITION, BLOCK_FORCE = 0, 1
+
+
+def anatomical_to_platform(plantar_rad: float, inversion_rad: float, side: str
+                           ) -> tuple[float, float]:
+    """(roll, pitch) offsets (rad) for a plantarflexion and an inversion angle (rad; negative
+    values are dorsiflexion and eversion), for the ``side`` foot (:data:`FOOT_MOUNTING`)."""
+    sign = 1.0 if side == "right" else -1.0
+    return sign * inversion_rad, plantar_rad
+
+
+# ------------------------------------------------------------------------------ helpers
+def joint_references(kin: Kinematics, z: float, path: np.ndarray, dt: float,
+                     q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> str | None:
+    """Fill q, q̇, q̈ (n, 3) from an angle path (n, 7); returns the first workspace problem."""
+    h = DERIVATIVE_STEP_S
+    hh = 0.5 * h * h
+    for k in range(path.shape[0]):
+        r, p, vr, vp, ar, ap = (float(x) for x in path[k, :6])
+        still = vr == 0.0 and vp == 0.0 and ar == 0.0 and ap == 0.0
+        if still and k > 0 and r == path[k - 1, ROLL] and p == path[k - 1, PITCH]:
+            q[k] = q[k - 1]
+            qd[k] = qdd[k] = 0.0
+            continue
+        try:
+            c = kin.ik(z, r, p, check=True)
+        except KinematicsError as exc:
+            return f"t = {k * dt:.3f} s (roll {math.degrees(r):.2f} deg, pitch " \
+                   f"{math.degrees(p):.2f} deg): {exc}"
+        q[k] = c.q
+        if still:
+            qd[k] = qdd[k] = 0.0
+            continue
+        gp = kin.ik(z, r + h * vr + hh * ar, p + h * vp + hh * ap, check=False).q
+        gm = kin.ik(z, r - h * vr + hh * ar, p - h * vp + hh * ap, check=False).q
+        for i in range(3):
+            qd[k, i] = (gp[i] - gm[i]) / (2.0 * h)
+            qdd[k, i] = (gp[i] - 2.0 * c.q[i] + gm[i]) / (h * h)
+    return None
+
+
+def _nan_extrema(x: np.ndarray) -> tuple[float, float]:
+    if x.size == 0 or np.all(np.isnan(x)):
+        return math.nan, math.nan
+    return float(np.nanmin(x)), float(np.nanmax(x))
+
+
+def _fill_motion(report: ValidationReport, table: np.ndarray) -> None:
+    """Peaks of a position table (columns as ReferenceOutput.buf)."""
+    pose, pose_dot = table[:, POSE], table[:, POSE_DOT]
+    report.roll_range_rad = _nan_extrema(pose[:, 1])
+    report.pitch_range_rad = _nan_extrema(pose[:, 2])
+    report.peak_roll_rate_rad_s = float(np.max(np.abs(pose_dot[:, 1])))
+    report.peak_pitch_rate_rad_s = float(np.max(np.abs(pose_dot[:, 2])))
+    report.q_range_m = (float(table[:, Q].min()), float(table[:, Q].max()))
+    report.peak_slider_speed_m_s = float(np.max(np.abs(table[:, QD])))
+    report.peak_slider_accel_m_s2 = float(np.max(np.abs(table[:, QDD])))
+
+
+def _fill_force(report: ValidationReport, fz: np.ndarray, fz_dot: np.ndarray) -> None:
+    report.min_fz_n, report.peak_fz_n = _nan_extrema(fz)
+    rate = np.abs(fz_dot)
+    report.peak_fz_rate_n_s = math.nan if np.all(np.isnan(rate)) else float(np.nanmax(rate))
+
+
+def check_limits(report: ValidationReport, protocol: ProtocolModel) -> None:
+    """Append violations of the protocol's own ``limits`` block to the report."""
+    lim = protocol.limits
+    if lim is None:
+        return
+    deg, rad = math.degrees, math.radians
+    for axis, (lo, hi), rate in (("roll", report.roll_range_rad, report.peak_roll_rate_rad_s),
+                                 ("pitch", report.pitch_range_rad, report.peak_pitch_rate_rad_s)):
+        lim_lo, lim_hi = getattr(lim, f"{axis}_min_deg"), getattr(lim, f"{axis}_max_deg")
+        if lim_lo is not None and lo < rad(lim_lo) - _SLACK_RAD:
+            report.violations.append(f"limits.{axis}_min_deg: the reference reaches {axis} "
+                                     f"{deg(lo):.2f} deg, below the protocol's {lim_lo} deg")
+        if lim_hi is not None and hi > rad(lim_hi) + _SLACK_RAD:
+            report.violations.append(f"limits.{axis}_max_deg: the reference reaches {axis} "
+                                     f"{deg(hi):.2f} deg, above the protocol's {lim_hi} deg")
+        if lim.max_angular_speed_deg_s is not None and \
+                rate > rad(lim.max_angular_speed_deg_s) + _SLACK_RAD:
+            report.violations.append(f"limits.max_angular_speed_deg_s: the {axis} rate reaches "
+                                     f"{deg(rate):.2f} deg/s, above the protocol's "
+                                     f"{lim.max_angular_speed_deg_s} deg/s")
+    if lim.max_force_n is not None and report.peak_fz_n > lim.max_force_n:
+        report.violations.append(f"limits.max_force_n: the force reaches "
+                                 f"{report.peak_fz_n:.1f} N, above the protocol's "
+                                 f"{lim.max_force_n} N")
+
+
+# ------------------------------------------------------------------------------ base
+class Generator(ABC):
+    """One protocol's reference stream (module docstring for the API).
+
+    Attributes:
+        protocol: the validated protocol model.
+        dt: loop period (s).
+        mode: :class:`Mode` of every sample.
+        duration_s: time from the first to the last sample (s).
+        n_samples: samples emitted, the first at t = 0 and the last at ``duration_s``.
+        index: the sample the next ``update`` writes.
+    """
+
+    mode: Mode
+
+    def __init__(self, protocol: ProtocolModel, dt: float, kinematics: Kinematics,
+                 source: str) -> None:
+        self.protocol = protocol
+        self.dt = dt
+        self.kinematics = kinematics
+        self.source = source
+        self.index = 0
+        self.n_samples = 1
+        self.duration_s = 0.0
+        self._ready = False
+        self.last_report: ValidationReport | None = None
+
+    def _set_length(self, n_samples: int) -> None:
+        self.n_samples = n_samples
+        self.duration_s = (n_samples - 1) * self.dt
+
+    def _new_report(self) -> ValidationReport:
+        return ValidationReport(name=self.protocol.name, kind=self.protocol.kind,
+                                source=self.source, mode=self.mode, dt=self.dt,
+                                duration_s=self.duration_s, n_samples=self.n_samples)
+
+    def _refuse(self, field: str, reason: str) -> ProtocolValidationError:
+        return ProtocolValidationError(f"{self.source}: {field}: {reason}")
+
+    @abstractmethod
+    def validate(self) -> ValidationReport:
+        """Compute the reference and predict its peaks; ``update`` runs only if it is ok."""
+
+    def reset(self) -> None:
+        """Rewind: the next ``update`` writes sample 0."""
+        self.index = 0
+
+    @abstractmethod
+    def update(self, out: ReferenceOutput, inp: GeneratorInput | None = None) -> int:
+        """Write the next sample into ``out``; returns a :class:`GeneratorStatus`."""
+
+    @staticmethod
+    def new_output() -> ReferenceOutput:
+        """A fresh output struct (allocate once, before the run)."""
+        return ReferenceOutput()
+
+
+class TableGenerator(Generator):
+    """A generator whose whole reference is computed by ``validate`` into one table."""
+
+    _block_id: int
+
+    def __init__(self, protocol: ProtocolModel, dt: float, kinematics: Kinematics,
+                 source: str) -> None:
+        super().__init__(protocol, dt, kinematics, source)
+        self._const = np.zeros(N_FIELDS)  # columns outside the table's block
+        self._table = np.zeros((0, 0))
+
+    @abstractmethod
+    def _build(self, report: ValidationReport) -> np.ndarray | None:
+        """Return the table (None after appending a violation that prevents building it)."""
+
+    def validate(self) -> ValidationReport:
+        self._ready = False
+        report = self._new_report()
+        if self.duration_s > MAX_PRECOMPUTED_S:
+            report.violations.append(f"the protocol lasts {self.duration_s:.0f} s, longer than "
+                                     f"the {MAX_PRECOMPUTED_S:.0f} s a precomputed protocol may; "
+                                     "split it into several protocols")
+        else:
+            table = self._build(report)
+            if table is not None:
+                self._table = table
+                if self._block_id == BLOCK_POSITION:
+                    _fill_motion(report, table)
+                    _fill_force(report, table[:, FZ], table[:, FZ_DOT])
+                else:
+                    pose = self._const[POSE]
+                    report.roll_range_rad = (float(pose[1]), float(pose[1]))
+                    report.pitch_range_rad = (float(pose[2]), float(pose[2]))
+                    report.peak_roll_rate_rad_s = report.peak_pitch_rate_rad_s = 0.0
+                    q = self._const[Q]
+                    report.q_range_m = (float(q.min()), float(q.max()))
+                    report.peak_slider_speed_m_s = report.peak_slider_accel_m_s2 = 0.0
+                    _fill_force(report, table[:, 0], table[:, 1])
+                    if report.min_fz_n < -1e-9:
+                        report.violations.append(
+                            f"the force reference reaches {report.min_fz_n:.2f} N: below 0 N "
+                            "it would pull on a contact that can only push")
+                check_limits(report, self.protocol)
+        self.last_report = report
+        self._ready = report.ok
+        self.index = 0
+        return report
+
+    def update(self, out: ReferenceOutput, inp: GeneratorInput | None = None) -> int:
+        if not self._ready:
+            return GeneratorStatus.ERROR_NOT_VALIDATED
+        k = self.index
+        out.buf[:] = self._const
+        out.blocks[self._block_id][:] = self._table[k]
+        out.mode = self.mode
+        out.index = k
+        if k >= self.n_samples - 1:
+            out.done = True
+            return GeneratorStatus.FINISHED
+        out.done = False
+        self.index = k + 1
+        return GeneratorStatus.RUNNING
+
+    def samples(self) -> dict[str, np.ndarray]:
+        """The whole validated reference as arrays (copies), for plots, reports and tests.
+
+        Keys: ``t`` (s), ``q``, ``qd``, ``qdd`` (n, 3), ``pose``, ``pose_dot`` (n, 3),
+        ``fz``, ``fz_dot`` (n,), ``shear`` (n, 2).
+        """
+        if not self._ready:
+            raise ProtocolValidationError(f"{self.source}: validate() first (or it reported "
+                                          "violations)")
+        full = np.tile(self._const, (self.n_samples, 1))
+        block = POSITION_BLOCK if self._block_id == BLOCK_POSITION else FORCE_BLOCK
+        full[:, block] = self._table
+        return {"t": np.arange(self.n_samples) * self.dt, "q": full[:, Q], "qd": full[:, QD],
+                "qdd": full[:, QDD], "pose": full[:, POSE], "pose_dot": full[:, POSE_DOT],
+                "fz": full[:, FZ], "fz_dot": full[:, FZ_DOT], "shear": full[:, SHEAR]}
+
+
+class ForceGenerator(TableGenerator):
+    """Force in Z with the pose held: table columns fz, fz_dot, fx, fy."""
+
+    mode = Mode.FORCE
+    _block_id = BLOCK_FORCE
+
+    def _hold_pose(self, report: ValidationReport) -> bool:
+        pose = self.protocol.pose  # type: ignore[union-attr]
+        roll, pitch = math.radians(pose.roll_deg), math.radians(pose.pitch_deg)
+        try:
+            c = self.kinematics.ik(pose.z_m, roll, pitch, check=True)
+        except KinematicsError as exc:
+            report.violations.append(f"pose: {exc}")
+            return False
+        self._const[:] = 0.0
+        self._const[Q] = c.q
+        self._const[POSE] = (pose.z_m, roll, pitch)
+        return True
+
+
+class PositionGenerator(TableGenerator):
+    """Slider references from an angle path at constant heave."""
+
+    mode = Mode.POSITION
+    _block_id = BLOCK_POSITION
+
+    def __init__(self, protocol: ProtocolModel, dt: float, kinematics: Kinematics,
+                 source: str) -> None:
+        super().__init__(protocol, dt, kinematics, source)
+        self._path = self._build_path()
+        self._set_length(self._path.shape[0])
+
+    @abstractmethod
+    def _build_path(self) -> np.ndarray:
+        """The (n, 7) angle path (``protocols.profiles`` columns)."""
+
+    def _build(self, report: ValidationReport) -> np.ndarray | None:
+        z = self.protocol.pose.z_m  # type: ignore[union-attr]
+        path = self._path
+        n = path.shape[0]
+        table = np.zeros((n, POSITION_BLOCK.stop))
+        problem = joint_references(self.kinematics, z, path, self.dt, table[:, Q],
+                                   table[:, QD], table[:, QDD])
+        if problem is not None:
+            report.violations.append(problem)
+            return None
+        table[:, 9] = z
+        table[:, 10], table[:, 11] = path[:, ROLL], path[:, PITCH]
+        table[:, 13], table[:, 14] = path[:, ROLL_D], path[:, PITCH_D]
+        table[:, FZ] = path[:, TARGET]
+        table[:, FZ_DOT] = np.where(np.isnan(path[:, TARGET]), math.nan, 0.0)
+        self._const[:] = 0.0
+        return table
+
+    def _neutral(self) -> tuple[float, float]:
+        pose = self.protocol.pose  # type: ignore[union-attr]
+        return math.radians(pose.roll_deg), math.radians(pose.pitch_deg)
