@@ -93,23 +93,33 @@ class Adaptive(Controller):
         self._qd_r = np.zeros(3)
         self._qdd_r = np.zeros(3)
         self._s = np.zeros(3)
+        self._step = np.zeros(len(self.theta))
 
     def _law(self, st, ref, dt, out, dry_run):
         g = self.gains
         lam = g.lambda_per_s
+        kd = g.kd_n_s_per_m
         q = st.cfg.q
-        e = np.array([q[0] - ref.q[0], q[1] - ref.q[1], q[2] - ref.q[2]])
-        ed = st.qd - ref.qd
-        s = self._s
-        np.multiply(e, lam, out=s)
-        s += ed
-        qd_r = ref.qd - lam * e
-        qdd_r = ref.qdd - lam * ed
+        qd = st.qd
+        s, qd_r, qdd_r = self._s, self._qd_r, self._qdd_r
+        # Plain floats on 3-vectors (PLATFORM.md: small numpy calls cost µs each).
+        for i in range(3):
+            e = q[i] - ref.q[i]
+            ed = qd[i] - ref.qd[i]
+            s[i] = ed + lam * e
+            qd_r[i] = ref.qd[i] - lam * e
+            qdd_r[i] = ref.qdd[i] - lam * ed
         y = self.regressor.mixed(st, qd_r, qdd_r)
         np.dot(y, self.theta, out=out)
-        out -= g.kd_n_s_per_m * s
+        out[0] -= kd * s[0]
+        out[1] -= kd * s[1]
+        out[2] -= kd * s[2]
         if not dry_run and dt > 0.0:
-            self.theta -= dt * self.gamma * (y.T @ s)
+            step = self._step
+            np.dot(s, y, out=step)                        # Yᵀ s
+            step *= self.gamma
+            step *= dt
+            self.theta -= step
             np.clip(self.theta, self.theta_lo, self.theta_hi, out=self.theta)
         return STATUS_OK
 

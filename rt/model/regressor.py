@@ -97,6 +97,10 @@ class Regressor:
         self._base_drive_pos = drive_pos
         self._base_drive = drive
         self._mixed_out = np.zeros((3, len(self.base.base_index)))
+        self._acc = np.zeros(nv)
+        self._v_plus = np.zeros(nv)
+        self._v_minus = np.zeros(nv)
+        self._u = np.zeros(3)
 
     def theta_standard(self) -> np.ndarray:
         """The model's current standard parameters (payload included)."""
@@ -149,15 +153,20 @@ class Regressor:
         # Pinocchio returns a view of its internal buffer: copy the first, combine the others
         # into it at the full-tree level, then project and pick the base columns once.
         y = self._y_tree
-        np.copyto(y, pin.computeJointTorqueRegressor(model, data, st.Q, zero,
-                                                     S @ qdd_r + st.Sd @ qd_r))
+        acc, v_plus, v_minus, u = self._acc, self._v_plus, self._v_minus, self._u
+        np.dot(S, qdd_r, out=acc)
+        acc += np.dot(st.Sd, qd_r, out=v_minus)
+        np.add(st.qd, qd_r, out=u)
+        np.dot(S, u, out=v_plus)
+        np.subtract(st.qd, qd_r, out=u)
+        np.dot(S, u, out=v_minus)
+        np.copyto(y, pin.computeJointTorqueRegressor(model, data, st.Q, zero, acc))
+        # ¼ (Y(V+) − Y(V−)) = Γ: the difference first, one scaling.
         tmp = self._y_tmp
-        np.multiply(pin.computeJointTorqueRegressor(model, data, st.Q, S @ (st.qd + qd_r), zero),
-                    0.25, out=tmp)
+        np.copyto(tmp, pin.computeJointTorqueRegressor(model, data, st.Q, v_plus, zero))
+        tmp -= pin.computeJointTorqueRegressor(model, data, st.Q, v_minus, zero)
+        tmp *= 0.25
         y += tmp
-        np.multiply(pin.computeJointTorqueRegressor(model, data, st.Q, S @ (st.qd - qd_r), zero),
-                    0.25, out=tmp)
-        y -= tmp
         out = self._mixed_out
         out[:, self._base_rigid_pos] = S.T @ y[:, self._base_rigid_tree]
         for col, (kind, axis) in zip(self._base_drive_pos, self._base_drive):
