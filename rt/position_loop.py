@@ -128,55 +128,13 @@ def build_position_loop(devices: Devices, controller: str = "paden_panja",
     without, the robot holds where it is until a program is requested."""
     model = model or RobotModel.load()
     d = model.description
-    events = EventLog()
-    limits = effective(tuple(d.limits.stroke_m), robot_limits or RobotLimits(),
-                       patient_limits or PatientLimits(), protocol_limits)
-    supervisor = Supervisor(limits, 1.0 / rate_hz, events)
-    b = GraphBuilder()
-    if devices.first is not None:
-        b.add(devices.first)
-    b.add(EncoderReader("encoders", devices.encoders))
-    b.add(ForceReader("force", devices.force))
-    b.add(StopInputs("stops", devices.stops))
-    b.add(VelocityEstimation("estimator"))
-    b.add(ModelState("model", model))
     program = (trajectory or benchmark_reference()) if start_program else None
-    ref = b.add(TrajectoryReference("reference", program, duration_s,
-                                    tuple(d.limits.stroke_m), rate_hz))
-    b.add(ControllerBlock("controller", create(controller, model, gains)), slot="controller")
-    b.add(SupervisorBlock("supervisor", supervisor, d.drive.force_per_volt_n))
-    b.add(RedundantDrive("drive", devices.cards, events, monitor=devices.monitor))
-    rec = b.add(RecorderTap("recorder"))
-    if devices.feed_watchdog is not None:
-        b.add(WatchdogFeed("watchdog", devices.feed_watchdog))
-    for block in extra_blocks or ():
-        b.add(block)                       # port-less observers (e.g. the fault matrix probe)
-    for src, dst in (
-            ("encoders.q", "estimator.q_meas"), ("encoders.q", "model.q_meas"),
-            ("estimator.qd", "model.qd"), ("encoders.q", "reference.q_meas"),
-            ("model.state", "controller.state"), ("reference.q_ref", "controller.q_ref"),
-            ("reference.qd_ref", "controller.qd_ref"), ("reference.qdd_ref", "controller.qdd_ref"),
-            ("encoders.q", "supervisor.q"), ("estimator.status", "supervisor.est_status"),
-            ("estimator.qd", "supervisor.qd"), ("estimator.qdd", "supervisor.qdd"),
-            ("model.state", "supervisor.state"), ("model.fk_ok", "supervisor.fk_ok"),
-            ("reference.q_ref", "supervisor.q_ref"), ("reference.qd_ref", "supervisor.qd_ref"),
-            ("controller.tau", "supervisor.tau"), ("force.wrench", "supervisor.wrench"),
-            ("force.flags", "supervisor.wrench_flags"), ("stops.inputs", "supervisor.inputs"),
-            ("supervisor.volts", "drive.volts"), ("supervisor.enable", "drive.enable"),
-            ("encoders.q", "recorder.q"), ("estimator.qd", "recorder.qd"),
-            ("reference.q_ref", "recorder.q_ref"), ("controller.tau", "recorder.tau"),
-            ("supervisor.volts", "recorder.volts")):
-        b.connect(src, dst)
-    # The supervisor's verdict reaches the reference and the controller one cycle later, and
-    # the drive's failure flag the supervisor: these are the loop's only feedback edges.
-    b.connect("supervisor.mode", "reference.mode", delay=1)
-    b.connect("supervisor.mode", "controller.mode", delay=1)
-    b.connect("drive.failed", "supervisor.drive_failed", delay=1)
-    graph = b.build()
-    graph.configure()
-    loop = Loop(graph, rate_hz=rate_hz, mode=mode, **loop_kwargs)
-    graph.start()
-    return PositionLoop(loop, graph, model, devices.twin, rec, ref, supervisor, events, devices)
+    reference = TrajectoryReference("reference", program, duration_s,
+                                    tuple(d.limits.stroke_m), rate_hz)
+    return _assemble(devices, model, reference,
+                     lambda sup: ControllerBlock("controller", create(controller, model, gains)),
+                     [], rate_hz, mode, robot_limits, patient_limits, protocol_limits,
+                     extra_blocks, None, loop_kwargs)
 
 
 def swap_controller(pl: PositionLoop, controller: str, gains: dict | None = None):
@@ -200,6 +158,28 @@ def build_protocol_loop(devices: Devices, generator, model: RobotModel | None = 
     from rt.control.force import ExplicitForce
 
     model = model or RobotModel.load()
+    reference = ProtocolReference("reference", generator, tuple(model.description.limits.stroke_m),
+                                  1.0 / rate_hz)
+    return _assemble(
+        devices, model, reference,
+        lambda sup: HybridController("controller", create("paden_panja", model),
+                                     ExplicitForce(model, force_gains), sup),
+        [("reference.force", "controller.force"), ("reference.pose", "controller.pose"),
+         ("reference.ctrl_mode", "controller.ctrl_mode"), ("force.wrench", "controller.wrench"),
+         ("force.wrench", "reference.wrench")],
+        rate_hz, mode, robot_limits, patient_limits, protocol_limits, extra_blocks,
+        extra_connections, loop_kwargs)
+
+
+def _assemble(devices: Devices, model: RobotModel, reference: Component,
+              make_controller: Callable[[Supervisor], Component],
+              own_connections: list[tuple[str, str]], rate_hz: float, mode: str,
+              robot_limits: RobotLimits | None, patient_limits: PatientLimits | None,
+              protocol_limits: ProtocolLimits | None, extra_blocks: list | None,
+              extra_connections: list[tuple[str, str]] | None, loop_kwargs: dict) -> PositionLoop:
+    """Sensors → estimator → model → reference → controller → supervisor → redundant drive →
+    recorder (→ watchdog feed), the wiring every loop shares; ``own_connections`` add what the
+    chosen reference and controller need beyond it."""
     d = model.description
     events = EventLog()
     limits = effective(tuple(d.limits.stroke_m), robot_limits or RobotLimits(),
@@ -213,10 +193,8 @@ def build_protocol_loop(devices: Devices, generator, model: RobotModel | None = 
     b.add(StopInputs("stops", devices.stops))
     b.add(VelocityEstimation("estimator"))
     b.add(ModelState("model", model))
-    ref = b.add(ProtocolReference("reference", generator, tuple(d.limits.stroke_m),
-                                  1.0 / rate_hz))
-    b.add(HybridController("controller", create("paden_panja", model),
-                           ExplicitForce(model, force_gains), supervisor))
+    ref = b.add(reference)
+    b.add(make_controller(supervisor), slot="controller")
     b.add(SupervisorBlock("supervisor", supervisor, d.drive.force_per_volt_n))
     b.add(RedundantDrive("drive", devices.cards, events, monitor=devices.monitor))
     rec = b.add(RecorderTap("recorder"))
@@ -229,9 +207,6 @@ def build_protocol_loop(devices: Devices, generator, model: RobotModel | None = 
             ("estimator.qd", "model.qd"), ("encoders.q", "reference.q_meas"),
             ("model.state", "controller.state"), ("reference.q_ref", "controller.q_ref"),
             ("reference.qd_ref", "controller.qd_ref"), ("reference.qdd_ref", "controller.qdd_ref"),
-            ("reference.force", "controller.force"), ("reference.pose", "controller.pose"),
-            ("reference.ctrl_mode", "controller.ctrl_mode"), ("force.wrench", "controller.wrench"),
-            ("force.wrench", "reference.wrench"),
             ("encoders.q", "supervisor.q"), ("estimator.status", "supervisor.est_status"),
             ("estimator.qd", "supervisor.qd"), ("estimator.qdd", "supervisor.qdd"),
             ("model.state", "supervisor.state"), ("model.fk_ok", "supervisor.fk_ok"),
@@ -241,8 +216,11 @@ def build_protocol_loop(devices: Devices, generator, model: RobotModel | None = 
             ("supervisor.volts", "drive.volts"), ("supervisor.enable", "drive.enable"),
             ("encoders.q", "recorder.q"), ("estimator.qd", "recorder.qd"),
             ("reference.q_ref", "recorder.q_ref"), ("controller.tau", "recorder.tau"),
-            ("supervisor.volts", "recorder.volts"), *(extra_connections or ())):
+            ("supervisor.volts", "recorder.volts"), *own_connections,
+            *(extra_connections or ())):
         b.connect(src, dst)
+    # The supervisor's verdict reaches the reference and the controller one cycle later, and
+    # the drive's failure flag the supervisor: these are the loop's only feedback edges.
     b.connect("supervisor.mode", "reference.mode", delay=1)
     b.connect("supervisor.mode", "controller.mode", delay=1)
     b.connect("drive.failed", "supervisor.drive_failed", delay=1)

@@ -55,8 +55,8 @@ def synthetic_row(k: int) -> list[float]:
 def bound_tap(capacity: int = 65536) -> tuple[RecorderTap, list[np.ndarray]]:
     """A RecorderTap whose five inputs are bound to arrays the test fills (no graph needed)."""
     tap = RecorderTap("recorder", capacity=capacity)
-    arrays = [np.zeros(3) for _ in tap.inputs_]
-    for port, a in zip(tap.inputs_, arrays):
+    arrays = [np.zeros(3) for _ in tap.ports]
+    for port, a in zip(tap.ports, arrays):
         port.data = a
     return tap, arrays
 

@@ -106,39 +106,13 @@ def test_killed_client_soft_stops_within_the_heartbeat_timeout(rt_process):
         assert _wait_for(lambda: client.status()["state"] == "soft_stop")
 
 
-def test_rt_process_killed_drives_drop_within_50_ms(tmp_path):
-    """The RT process feeds the rig's amplifier watchdog every cycle; SIGKILL it and the rig
-    (a separate process, like the real amplifiers) must zero the drive outputs within 50 ms."""
-    from rt.twin.shm_backends import ShmRig
+def test_rt_process_killed_drives_drop_within_50_ms():
+    """The RT process (rt serve --backend twin_shm) feeds the rig's amplifier watchdog every
+    cycle; SIGKILL it and the rig — a separate process, like the real amplifiers — must zero
+    the drive outputs within 50 ms (the fault matrix's rt_process_loss row, run for real)."""
+    from rt.safety.fault_matrix import run_rt_process_loss
 
-    shm = f"talus-test-{os.getpid()}"
-    rig = subprocess.Popen([sys.executable, "-m", "rt.cli", "twin", "rig", "--shm", shm],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    rt = None
-    try:
-        assert "rig" in json.loads(rig.stdout.readline())
-        rt = subprocess.Popen(SERVE + ["--backend", "twin_shm", "--shm", shm],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        serving = json.loads(rt.stdout.readline())["serving"]
-        with RtClient(serving["endpoint"], timeout_s=2.0) as client, ShmRig(shm) as handle:
-            client.start_heartbeat(0.05)
-            assert _wait_for(lambda: handle.amplifier_state().watchdog == "fed")
-            # Drives hold the robot against gravity: non-zero amplifier inputs.
-            assert _wait_for(lambda: max(abs(v) for v in handle.amplifier_state().volts) > 0.05)
-            client.stop_heartbeat()
-            killed = time.monotonic()
-            os.kill(rt.pid, signal.SIGKILL)
-            rt.wait()
-            state = _wait_for(lambda: (s := handle.amplifier_state()).tripped and s, 1.0)
-            assert state and state.volts == (0.0, 0.0, 0.0) and not state.drives_enabled
-            latency = state.trip_monotonic_s - killed
-            assert latency <= 0.050, f"watchdog took {latency * 1e3:.1f} ms"
-    finally:
-        for p in (rt, rig):
-            if p is not None and p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(timeout=5)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+    r = run_rt_process_loss()
+    assert r["detected"] and r["reaction"] == "hard_stop", r
+    assert r["time_to_zero_output_ms"] <= 50.0, r
+    assert r["final_state"] == "drives_off_watchdog_tripped"

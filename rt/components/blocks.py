@@ -274,42 +274,6 @@ class ControllerBlock(Component):
                                       self.tau.data)
 
 
-class RecorderTap(Component):
-    """Ports: in ``q``, ``qd``, ``q_ref``, ``tau``, ``volts``: float64[3]; no outputs.
-
-    The recording hand-off: copies the cycle's signals into a preallocated ring buffer that a
-    non-real-time thread drains (the writer; MCAP comes with the protocols work). The ring
-    drops the oldest rows when nobody drains it; ``dropped`` counts them.
-    """
-
-    WIDTH = 1 + 5 * 3
-
-    def __init__(self, name: str, capacity: int = 65536):
-        super().__init__(name)
-        self.capacity = capacity
-        self.inputs_ = [self.declare_input(n, Array(3)) for n in ("q", "qd", "q_ref", "tau",
-                                                                   "volts")]
-        self.ring = np.zeros((capacity, self.WIDTH))
-        self.written = 0
-
-    def update(self, t: float, dt: float) -> int:
-        row = self.ring[self.written % self.capacity]
-        row[0] = t
-        k = 1
-        for port in self.inputs_:
-            row[k:k + 3] = port.data
-            k += 3
-        self.written += 1
-        return 0
-
-    def drain(self, start: int) -> tuple[np.ndarray, int]:
-        """Rows written since ``start`` (a copy, oldest first) and the new start index."""
-        end = self.written
-        start = max(start, end - self.capacity)
-        idx = np.arange(start, end) % self.capacity
-        return self.ring[idx].copy(), end
-
-
 class SignalTap(Component):
     """Ports: one float64[n] input per declared signal; no outputs.
 
@@ -343,3 +307,18 @@ class SignalTap(Component):
         start = max(start, end - self.capacity)
         idx = np.arange(start, end) % self.capacity
         return self.ring[idx].copy(), end
+
+
+class RecorderTap(SignalTap):
+    """Ports: in ``q``, ``qd``, ``q_ref``, ``tau``, ``volts``: float64[3]; no outputs.
+
+    The recording hand-off of the loop's state (``rt.recording`` drains it into /robot/state):
+    rows of t, q, q̇, q_ref, τ, V in a preallocated ring; the oldest rows are overwritten when
+    nobody drains it.
+    """
+
+    WIDTH = 1 + 5 * 3
+
+    def __init__(self, name: str, capacity: int = 65536):
+        super().__init__(name, [("q", 3), ("qd", 3), ("q_ref", 3), ("tau", 3), ("volts", 3)],
+                         capacity)
