@@ -126,17 +126,37 @@ def _check_static_limits(report, setup: SessionSetup) -> list[str]:
 
 def _run(pl: PositionLoop, tap: SignalTap, duration_s: float,
          progress: Callable[[float], None] | None) -> None:
+    """Run until the protocol is done and back at rest, or the supervisor stopped it.
+
+    In real time the loop runs in its own thread for the whole session, watched from here:
+    restarting a real-time loop costs a garbage collection and re-phasing, a gap the twin
+    would see as the drives holding their last command for that long. In fast mode (simulated
+    time) the loop is simply run in slices.
+    """
     end = duration_s + 10.0
-    step = 0.1
+
+    def finished() -> bool:
+        row = tap.ring[(tap.written - 1) % tap.capacity]
+        if progress is not None and tap.written:
+            progress(float(row[PROG]))
+        return bool(tap.written) and (row[PHASE] >= 4
+                                      or pl.supervisor.reaction >= Reaction.SOFT_STOP)
+
+    if pl.loop.mode == "realtime":
+        pl.loop.start()
+        try:
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < end and not finished():
+                time.sleep(0.1)
+            time.sleep(0.6)            # let it come to rest
+        finally:
+            pl.loop.stop()
+        return
     t = 0.0
     while t < end:
-        pl.loop.run(seconds=step)
-        t += step
-        rows = tap.ring[(tap.written - 1) % tap.capacity]
-        if progress is not None:
-            progress(float(rows[PROG]))
-        if rows[PHASE] >= 4 or pl.supervisor.reaction >= Reaction.SOFT_STOP:
-            # Done (back at rest), or stopped: let it come to rest, then end.
+        pl.loop.run(seconds=0.1)
+        t += 0.1
+        if finished():
             pl.loop.run(seconds=0.6)
             break
 
