@@ -82,3 +82,15 @@ def test_session_cli_refuses_a_bad_protocol(tmp_path):
                           timeout=300)
     assert proc.returncode == 2
     assert "bad.yaml" in json.loads(proc.stdout)["error"]
+
+
+def test_real_time_session_runs_without_gaps(tmp_path):
+    """In real time the loop must not be restarted during a session: a restart's gap is seen by
+    the twin as the drives holding their command (it once stopped sessions with encoder jumps)."""
+    from rt.benchmarks.force import SINE
+
+    path = tmp_path / "short_sine.yaml"
+    path.write_text(SINE.format(f=1.0, cycles=4))
+    s = run_session(SessionSetup(path), None, realtime=True)
+    assert s["completed"] and s["stops"] == []
+    assert s["rms_error_pct"] <= 3.0
