@@ -6,13 +6,10 @@ real drivers (``Pcl833Encoders``, ``Pci1720Outputs``) against the twin's registe
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from rt.ati.rdt import STATUS_ANY_ERROR
-from rt.devices.interfaces import (ActuatorOutputs, DigitalInputs, DigitalInputState,
-                                   EncoderBank, ForceTorqueSensor, Wrench)
+from rt.devices.interfaces import ActuatorOutputs, DigitalInputs, DigitalInputState, EncoderBank
+from rt.devices.sampled_ft import SampledForceTorque
 from rt.drivers.pci1720 import Pci1720Outputs
 from rt.drivers.pcl833 import Pcl833Encoders, decode_counts
 from rt.errors import HardwareError
@@ -91,59 +88,22 @@ class TwinActuators(ActuatorOutputs):
         self._driver.close()
 
 
-class TwinForceTorque(ForceTorqueSensor):
+class TwinForceTorque(SampledForceTorque):
     """The twin's ATI sensor read in-process (the RDT/CAN servers expose it on the wire).
 
     ``stale`` is set when the sensor's sample counter has not advanced for ``timeout_s``.
     """
 
     def __init__(self, twin: Twin, timeout_s: float = 0.05):
+        super().__init__(timeout_s)
         self.twin = twin
-        self.timeout_s = timeout_s
-        self._streaming = False
-        self._bias = np.zeros(6)
-        self._last_seq = -1
-        self._last_new_t = -math.inf
 
-    def start(self) -> None:
-        self._check_open()
-        self._streaming = True
-
-    def stop(self) -> None:
-        self._streaming = False
-
-    def bias(self) -> None:
-        """Software bias: subtract the current reading from later ones."""
-        self._check_open()
+    def _sample(self):
         self.twin.sync()
         _, sample = self.twin.delayed()
-        if sample is not None:
-            self._bias[:] = sample.wrench
-
-    def read(self, out: Wrench) -> Wrench:
-        self._check_open()
-        self.twin.sync()
-        t = self.twin.t
-        _, sample = self.twin.delayed()
-        if not self._streaming or sample is None:
-            out.stale = True
-            return out
-        if sample.ft_sequence != self._last_seq:
-            self._last_seq = sample.ft_sequence
-            self._last_new_t = t
-        w = sample.wrench
-        b = self._bias
-        out.fx, out.fy, out.fz = w[0] - float(b[0]), w[1] - float(b[1]), w[2] - float(b[2])
-        out.tx, out.ty, out.tz = w[3] - float(b[3]), w[4] - float(b[4]), w[5] - float(b[5])
-        out.t = t
-        out.sequence = sample.ft_sequence
-        out.status = sample.status
-        out.saturated = bool(sample.status & STATUS_ANY_ERROR)
-        out.stale = (t - self._last_new_t) > self.timeout_s
-        return out
-
-    def _close(self) -> None:
-        self._streaming = False
+        if sample is None:
+            return None
+        return sample.wrench, sample.ft_sequence, sample.status, self.twin.t
 
 
 class TwinDigitalInputs(DigitalInputs):

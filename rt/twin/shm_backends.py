@@ -24,7 +24,6 @@ writers (actuator cards, watchdog feeding thread), as the seqlock needs a single
 """
 from __future__ import annotations
 
-import math
 import os
 import time
 from dataclasses import dataclass
@@ -32,9 +31,9 @@ from typing import Sequence
 
 import numpy as np
 
-from rt.ati.rdt import STATUS_ANY_ERROR
 from rt.devices.interfaces import (ActuatorOutputs, DigitalInputs, DigitalInputState,
-                                   EncoderBank, ForceTorqueSensor, Wrench)
+                                   EncoderBank)
+from rt.devices.sampled_ft import SampledForceTorque
 from rt.drivers.fake_comedi import FakeComedi
 from rt.drivers.fake_pcl833 import FakePcl833Port
 from rt.drivers.pci1720 import Pci1720Outputs
@@ -366,62 +365,25 @@ class ShmActuators(ActuatorOutputs):
                 self.rig.close()
 
 
-class ShmForceTorque(ForceTorqueSensor):
+class ShmForceTorque(SampledForceTorque):
     """The rig's ATI sensor. ``stale`` when its sample counter has not advanced for
     ``timeout_s`` of rig time; ``Wrench.t`` is the snapshot's ``time.monotonic()`` (s)."""
 
     def __init__(self, rig: ShmRig | str, timeout_s: float = 0.05,
                  rig_timeout_s: float = DEFAULT_RIG_TIMEOUT_S):
+        super().__init__(timeout_s)
         self.rig, self._owns_rig = _rig_handle(rig, rig_timeout_s)
-        self.timeout_s = timeout_s
         self._s = self.rig.sensors
-        self._streaming = False
-        self._bias = np.zeros(6)
-        self._last_seq = -1
-        self._last_new_t = -math.inf
 
-    def start(self) -> None:
-        self._check_open()
-        self._streaming = True
-
-    def stop(self) -> None:
-        self._streaming = False
-
-    def bias(self) -> None:
-        """Software bias: subtract the current reading from later ones."""
-        self._check_open()
-        self.rig.read_sensors()
-        if self._s.ft_valid[0]:
-            self._bias[:] = self._s.wrench
-
-    def read(self, out: Wrench) -> Wrench:
-        self._check_open()
+    def _sample(self):
         self.rig.read_sensors()
         s = self._s
-        t = float(s.rig_monotonic_s[0])
-        if not self._streaming or not s.ft_valid[0]:
-            out.stale = True
-            return out
-        seq = int(s.ft_sequence[0])
-        if seq != self._last_seq:
-            self._last_seq = seq
-            self._last_new_t = t
-        w, b = s.wrench, self._bias
-        out.fx = float(w[0] - b[0])
-        out.fy = float(w[1] - b[1])
-        out.fz = float(w[2] - b[2])
-        out.tx = float(w[3] - b[3])
-        out.ty = float(w[4] - b[4])
-        out.tz = float(w[5] - b[5])
-        out.t = t
-        out.sequence = seq
-        out.status = int(s.ft_status[0])
-        out.saturated = bool(out.status & STATUS_ANY_ERROR)
-        out.stale = (t - self._last_new_t) > self.timeout_s
-        return out
+        if not s.ft_valid[0]:
+            return None
+        return s.wrench, int(s.ft_sequence[0]), int(s.ft_status[0]), float(s.rig_monotonic_s[0])
 
     def _close(self) -> None:
-        self._streaming = False
+        super()._close()
         if self._owns_rig:
             self.rig.close()
 
