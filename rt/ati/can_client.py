@@ -128,9 +128,7 @@ class AtiCanForceTorqueSensor(ForceTorqueSensor):
         now = time.monotonic()
         with self._lock:
             if self._sample < 0:
-                out.fx = out.fy = out.fz = out.tx = out.ty = out.tz = NAN
-                out.t, out.sequence, out.status = NAN, -1, 0
-                out.stale, out.saturated = True, False
+                out.invalidate()
                 return out
             out.set(self._latest)
             out.t, out.sequence = self._t_rx, self._sample

@@ -122,9 +122,7 @@ class RdtForceTorqueSensor(ForceTorqueSensor):
         now = time.monotonic()
         with self._cond:
             if self._rdt_sequence < 0:
-                out.fx = out.fy = out.fz = out.tx = out.ty = out.tz = NAN
-                out.t, out.sequence, out.status = NAN, -1, 0
-                out.stale, out.saturated = True, False
+                out.invalidate()
                 return out
             out.set(self._latest)
             out.t = self._t_rx

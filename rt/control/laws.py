@@ -103,9 +103,8 @@ class PdG0(Controller):
     def _law(self, st, ref, dt, out, dry_run):
         key = (float(ref.q[0]), float(ref.q[1]), float(ref.q[2]))
         if key != self._g_at:
-            from rt.model.dynamics import State as _State
             if self._state_d is None:
-                self._state_d = _State()
+                self._state_d = State()
             self._g[:] = self.dyn.gravity(self.dyn.state(ref.q, out=self._state_d))
             self._g_at = key
         _pd(self.gains, st, ref, out)
@@ -127,6 +126,12 @@ class PadenPanja(Controller):
         return STATUS_OK
 
 
+def _computed_torque(dyn, st: State, v: np.ndarray, out: np.ndarray) -> None:
+    """τ = M(q) v + C(q, q̇) q̇ + G(q) + F(q̇): the inverse-dynamics part both laws share."""
+    m, c, g = dyn.mcg(st)
+    out[:] = m @ v + c @ st.qd + g + dyn.friction(st.qd)
+
+
 @register
 class ComputedTorquePtp(Controller):
     """τ = M(q)(−Kd q̇ − Kp e) + C q̇ + G + F(q̇) (thesis eq. 29): regulation to q_d."""
@@ -136,9 +141,8 @@ class ComputedTorquePtp(Controller):
 
     def _law(self, st, ref, dt, out, dry_run):
         g_ = self.gains
-        m, c, g = self.dyn.mcg(st)
         v = -g_.kd_per_s * st.qd - g_.kp_per_s2 * (np.asarray(st.cfg.q) - ref.q)
-        out[:] = m @ v + c @ st.qd + g + self.dyn.friction(st.qd)
+        _computed_torque(self.dyn, st, v, out)
         return STATUS_OK
 
 
@@ -151,7 +155,6 @@ class ComputedTorqueTrajectory(Controller):
 
     def _law(self, st, ref, dt, out, dry_run):
         g_ = self.gains
-        m, c, g = self.dyn.mcg(st)
         v = ref.qdd - g_.kd_per_s * (st.qd - ref.qd) - g_.kp_per_s2 * (np.asarray(st.cfg.q) - ref.q)
-        out[:] = m @ v + c @ st.qd + g + self.dyn.friction(st.qd)
+        _computed_torque(self.dyn, st, v, out)
         return STATUS_OK

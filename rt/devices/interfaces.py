@@ -50,6 +50,12 @@ class Wrench:
             float(values[3]), float(values[4]), float(values[5]),
         )
 
+    def invalidate(self) -> None:
+        """No sample yet: every value NaN, no sequence, stale."""
+        self.fx = self.fy = self.fz = self.tx = self.ty = self.tz = NAN
+        self.t, self.sequence, self.status = NAN, -1, 0
+        self.stale, self.saturated = True, False
+
     def copy_from(self, other: "Wrench") -> None:
         """Copy every field of ``other`` into this wrench, in place."""
         self.fx, self.fy, self.fz = other.fx, other.fy, other.fz
