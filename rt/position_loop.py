@@ -15,16 +15,18 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 from rt.components.blocks import (ControllerBlock, EncoderReader, ModelState, RecorderTap,
-                                  TrajectoryReference, VelocityEstimation)
+                                  VelocityEstimation)
 from rt.components.safety_blocks import ForceReader, RedundantDrive, StopInputs, SupervisorBlock
 from rt.components.twin_step import TwinStep
 from rt.control.base import create
 from rt.control.experiment import RefFn, benchmark_reference
 from rt.engine import Component, Graph, GraphBuilder, Loop
 from rt.model import RobotModel
+from rt.references.program import Program, TrajectoryProgram
+from rt.references.sequencer import ProgramReference
 from rt.safety.events import EventLog
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
-from rt.safety.supervisor import Supervisor
+from rt.safety.supervisor import Supervisor, supervisor_physics
 from rt.twin.backends import TwinActuators, TwinDigitalInputs, TwinEncoders, TwinForceTorque
 from rt.twin.environment import FreeMotion
 from rt.twin.twin import SimClock, Twin
@@ -37,7 +39,7 @@ class PositionLoop:
     model: RobotModel
     twin: Twin | None
     recorder: RecorderTap
-    reference: TrajectoryReference
+    reference: ProgramReference
     supervisor: Supervisor
     events: EventLog
     devices: "Devices | None" = None
@@ -127,10 +129,10 @@ def build_position_loop(devices: Devices, controller: str = "paden_panja",
     With ``start_program`` the trajectory (default: the benchmark) starts at the first cycle;
     without, the robot holds where it is until a program is requested."""
     model = model or RobotModel.load()
-    d = model.description
-    program = (trajectory or benchmark_reference()) if start_program else None
-    reference = TrajectoryReference("reference", program, duration_s,
-                                    tuple(d.limits.stroke_m), rate_hz)
+    program = TrajectoryProgram(trajectory or benchmark_reference(), duration_s,
+                                1.0 / rate_hz) if start_program else None
+    reference = ProgramReference("reference", tuple(model.description.limits.stroke_m),
+                                 1.0 / rate_hz, program)
     return _assemble(devices, model, reference,
                      lambda sup: ControllerBlock("controller", create(controller, model, gains)),
                      [], rate_hz, mode, robot_limits, patient_limits, protocol_limits,
@@ -143,30 +145,32 @@ def swap_controller(pl: PositionLoop, controller: str, gains: dict | None = None
                                                       create(controller, pl.model, gains)))
 
 
-def build_protocol_loop(devices: Devices, generator, model: RobotModel | None = None,
-                        rate_hz: float = 1000.0, mode: str = "fast",
-                        robot_limits: RobotLimits | None = None,
+def build_protocol_loop(devices: Devices, program: Program | None = None,
+                        model: RobotModel | None = None, rate_hz: float = 1000.0,
+                        mode: str = "fast", robot_limits: RobotLimits | None = None,
                         patient_limits: PatientLimits | None = None,
                         protocol_limits: ProtocolLimits | None = None,
                         force_gains: dict | None = None, extra_blocks: list | None = None,
                         extra_connections: list[tuple[str, str]] | None = None,
+                        controller: str = "paden_panja", gains: dict | None = None,
                         **loop_kwargs) -> PositionLoop:
-    """The loop driven by a protocol generator: position protocols through Paden-Panja, force
-    protocols through the hybrid explicit-force law; the same supervisor, drive and recorder.
-    ``extra_blocks`` (e.g. a signal tap) are wired with ``extra_connections``."""
-    from rt.components.protocol_blocks import HybridController, ProtocolReference
+    """The loop that plays programs in position and in force mode: position samples through
+    ``controller`` (Paden-Panja by default), force samples through the hybrid explicit-force
+    law; the same supervisor, drive and recorder. ``program`` (e.g. a protocol's generator)
+    starts at the first cycle; without one the robot holds until one is requested (the RT
+    process). ``extra_blocks`` (e.g. a signal tap) are wired with ``extra_connections``."""
+    from rt.components.protocol_blocks import HybridController
     from rt.control.force import ExplicitForce
 
     model = model or RobotModel.load()
-    reference = ProtocolReference("reference", generator, tuple(model.description.limits.stroke_m),
-                                  1.0 / rate_hz)
+    reference = ProgramReference("reference", tuple(model.description.limits.stroke_m),
+                                 1.0 / rate_hz, program)
     return _assemble(
         devices, model, reference,
-        lambda sup: HybridController("controller", create("paden_panja", model),
+        lambda sup: HybridController("controller", create(controller, model, gains),
                                      ExplicitForce(model, force_gains), sup),
         [("reference.force", "controller.force"), ("reference.pose", "controller.pose"),
-         ("reference.ctrl_mode", "controller.ctrl_mode"), ("force.wrench", "controller.wrench"),
-         ("force.wrench", "reference.wrench")],
+         ("reference.ctrl_mode", "controller.ctrl_mode"), ("force.wrench", "controller.wrench")],
         rate_hz, mode, robot_limits, patient_limits, protocol_limits, extra_blocks,
         extra_connections, loop_kwargs)
 
@@ -184,7 +188,7 @@ def _assemble(devices: Devices, model: RobotModel, reference: Component,
     events = EventLog()
     limits = effective(tuple(d.limits.stroke_m), robot_limits or RobotLimits(),
                        patient_limits or PatientLimits(), protocol_limits)
-    supervisor = Supervisor(limits, 1.0 / rate_hz, events)
+    supervisor = Supervisor(limits, 1.0 / rate_hz, events, **supervisor_physics(d))
     b = GraphBuilder()
     if devices.first is not None:
         b.add(devices.first)
@@ -216,6 +220,7 @@ def _assemble(devices: Devices, model: RobotModel, reference: Component,
             ("supervisor.volts", "drive.volts"), ("supervisor.enable", "drive.enable"),
             ("encoders.q", "recorder.q"), ("estimator.qd", "recorder.qd"),
             ("reference.q_ref", "recorder.q_ref"), ("controller.tau", "recorder.tau"),
+            ("force.wrench", "reference.wrench"),
             ("supervisor.volts", "recorder.volts"), *own_connections,
             *(extra_connections or ())):
         b.connect(src, dst)

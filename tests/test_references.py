@@ -25,8 +25,12 @@ from rt.references.approach import (DEFAULT_MAX_ACCELERATION_M_S2 as AMAX,
                                     DEFAULT_MAX_VELOCITY_M_S as VMAX, STROKE_M, Approach,
                                     ApproachStatus, Mode, trajectory_position_extrema)
 from rt.references.benchmark_trajectory import BenchmarkTrajectory
-from rt.references.playback import (ReferenceSequence, ReferenceStatus, SequenceStatus,
-                                    TrajectoryPlayback, load_csv)
+from rt.references.playback import (ReferenceStatus, SourceProgram, TrajectoryPlayback,
+                                    load_csv)
+from rt.references.program import Mode as ProgramMode
+from rt.references.program import ReferenceOutput
+from rt.references.sequencer import Phase, ProgramReference
+from rt.safety.events import SupervisorMode
 
 DT = 1e-3
 LO, HI = STROKE_M
@@ -491,7 +495,43 @@ def test_interpolation_overshoot_refused(tmp_path: Path) -> None:
     TrajectoryPlayback.from_csv(path, interpolation="linear")  # no overshoot: accepted
 
 
-# -- the sequence ---------------------------------------------------------------------------------
+# -- the sequencer (approach → play → return → rest) ----------------------------------------------
+class Harness:
+    """The sequencer alone, its inputs bound to arrays: the measured position follows the
+    reference exactly (a perfect inner loop), the supervisor's mode is set by the test."""
+
+    def __init__(self, q0, dt: float = DT) -> None:
+        self.ref = ProgramReference("reference", STROKE_M, dt)
+        self.q = np.array(q0, float)
+        self.mode = np.zeros(1)
+        self.wrench = np.zeros(6)
+        self.ref.q_meas._bind(self.q, "test.q")
+        self.ref.mode._bind(self.mode, "test.mode")
+        self.ref.wrench._bind(self.wrench, "test.wrench")
+        self.ref.configure()
+        self.ref.start()
+        self.t = 0.0
+
+    def step(self) -> Phase:
+        assert self.ref.update(self.t, DT) == 0
+        self.t += DT
+        self.q[:] = self.ref.q_ref.data
+        return Phase(int(self.ref.phase.data[0]))
+
+    def run(self, n_max: int = 100_000, until=(Phase.REST,), skip_first: bool = True):
+        """Step until a phase in ``until`` (after the first cycle); (p, v, a, phases)."""
+        rows, phases = [], []
+        for k in range(n_max):
+            ph = self.step()
+            r = self.ref
+            rows.append(np.concatenate([r.q_ref.data, r.qd_ref.data, r.qdd_ref.data]))
+            phases.append(ph)
+            if ph in until and (k > 0 or not skip_first):
+                break
+        arr = np.array(rows)
+        return arr[:, :3], arr[:, 3:6], arr[:, 6:], phases
+
+
 def _seams(statuses):
     """Phases in order with their cycle counts."""
     out = []
@@ -503,18 +543,17 @@ def _seams(statuses):
     return out
 
 
-def test_sequence_states_in_order_and_seamless(tmp_path: Path, bench) -> None:
+def test_sequencer_phases_in_order_and_seamless(tmp_path: Path, bench) -> None:
     t = np.arange(0.0, 4.0 + 1e-9, 0.01)
     play = TrajectoryPlayback.from_csv(write_csv(tmp_path / "p.csv", t, bench.evaluate(t)[0]))
-    seq = ReferenceSequence(play)
-    seq.validate()
+    play.validate()
     start = [0.0, 0.0, 0.0]  # the thesis starts from the bottom of the stroke
-    assert seq.start(start) == ApproachStatus.WORKING
-    p, v, a, statuses = run(seq, stop_on=(SequenceStatus.DONE,))
-    phases = _seams(statuses)
-    assert [s for s, _ in phases] == [SequenceStatus.APPROACHING, SequenceStatus.PLAYING,
-                                      SequenceStatus.RETURNING, SequenceStatus.DONE]
-    n_app, n_play = phases[0][1], phases[1][1]
+    h = Harness(start)
+    h.ref.request(SourceProgram(play), rest_q=tuple(start))
+    p, v, a, phases = h.run()
+    seams = _seams(phases)
+    assert [s for s, _ in seams] == [Phase.APPROACH, Phase.PLAY, Phase.RETURN, Phase.REST]
+    n_app, n_play = seams[0][1], seams[1][1]
     assert n_play == play.n_samples - 1  # sample 0 was the approach's last sample
     first = (np.zeros(3), np.zeros(3), np.zeros(3))
     play.state_at(0, *first)  # the approach ends exactly on the first sample's state
@@ -525,52 +564,133 @@ def test_sequence_states_in_order_and_seamless(tmp_path: Path, bench) -> None:
     np.testing.assert_allclose(p[-1], start, atol=1e-12)  # back to rest where it started
     np.testing.assert_array_equal(v[-1], 0.0)
     assert_within_limits(start, [0] * 3, [0] * 3, p, v, a)  # no jump at any seam
-    assert seq.update(np.zeros(3), np.zeros(3), np.zeros(3)) == SequenceStatus.DONE
+    assert h.step() == Phase.REST and h.ref.epoch == 1 and not h.ref.busy
 
 
-def test_sequence_benchmark_with_thesis_8s_approach(bench) -> None:
-    seq = ReferenceSequence(bench, rest_position=[0.2, 0.2, 0.2], approach_minimum_duration=8.0,
-                            return_minimum_duration=8.0)
-    seq.validate()
-    assert seq.start([0.2, 0.2, 0.2]) == ApproachStatus.WORKING
-    p, v, a, statuses = run(seq, stop_on=(SequenceStatus.DONE,))
-    phases = _seams(statuses)
-    assert [(s, n) for s, n in phases] == [(SequenceStatus.APPROACHING, 8000),
-                                           (SequenceStatus.PLAYING, 26000),
-                                           (SequenceStatus.RETURNING, 7999),
-                                           (SequenceStatus.DONE, 1)]
+def test_sequencer_benchmark_with_thesis_8s_approach(bench) -> None:
+    bench.validate()
+    h = Harness([0.2, 0.2, 0.2])
+    h.ref.request(SourceProgram(bench), approach_min_s=8.0, rest_q=(0.2, 0.2, 0.2),
+                  return_min_s=8.0)
+    p, v, a, phases = h.run()
+    seams = _seams(phases)
+    # The request is taken on the first cycle, whose sample is the approach's first.
+    assert [(s, n) for s, n in seams] == [(Phase.APPROACH, 8000), (Phase.PLAY, 26000),
+                                          (Phase.RETURN, 7999), (Phase.REST, 1)]
     qa, va, aa = bench.evaluate(np.arange(1, 26001) * DT)
     np.testing.assert_allclose(p[8000:34000], qa, atol=1e-12)
     assert_within_limits([0.2] * 3, [0] * 3, [0] * 3, p, v, a)
 
 
-def test_sequence_soft_stop_while_playing(bench) -> None:
-    seq = ReferenceSequence(bench)
-    seq.validate()
-    seq.start([0.2, 0.2, 0.2])
-    p1, v1, a1, st1 = run(seq, n_max=5000, stop_on=())
-    assert st1[-1] == SequenceStatus.PLAYING
-    assert seq.soft_stop() == ApproachStatus.WORKING
-    p2, v2, a2, st2 = run(seq, stop_on=(SequenceStatus.STOPPED,))
-    assert set(st2[:-1]) == {SequenceStatus.STOPPING} and st2[-1] == SequenceStatus.STOPPED
-    assert len(st2) * DT <= 0.5
+def test_sequencer_soft_stop_while_playing_latches_until_reset(bench) -> None:
+    bench.validate()
+    h = Harness([0.2, 0.2, 0.2])
+    h.ref.request(SourceProgram(bench))
+    p1, v1, a1, ph1 = h.run(n_max=5000, until=())
+    assert ph1[-1] == Phase.PLAY
+    h.mode[0] = SupervisorMode.SOFT_STOP
+    p2, v2, a2, ph2 = h.run(n_max=2000, until=())
+    assert set(ph2) == {Phase.STOPPED}
+    stopped_at = np.argmax(np.all(np.abs(v2) == 0.0, axis=1))
+    assert 0 < stopped_at * DT <= 0.5
     np.testing.assert_array_equal(v2[-1], 0.0)
     assert_within_limits([0.2] * 3, [0] * 3, [0] * 3, np.vstack([p1, p2]), np.vstack([v1, v2]),
                          np.vstack([a1, a2]))
+    h.ref.request(SourceProgram(bench))  # refused while stopped
+    assert h.step() == Phase.STOPPED and h.ref.refused == 1
+    assert "reset the faults" in h.ref.last_error
+    h.mode[0] = SupervisorMode.RUN  # the supervisor was reset: hold where the robot is
+    held = h.q.copy()
+    assert h.step() == Phase.REST
+    np.testing.assert_allclose(h.ref.q_ref.data, held, atol=1e-12)
 
 
-def test_sequence_refusals(bench) -> None:
-    slow = Approach(max_velocity=0.10)
-    with pytest.raises(ProtocolValidationError,
-                       match=r"first sample of slider 0 moves at 0\.1037 m/s"):
-        ReferenceSequence(bench, approach=slow).validate()
-    with pytest.raises(ProtocolValidationError, match="dt"):
-        ReferenceSequence(bench, approach=Approach(dt=2e-3)).validate()
-    seq = ReferenceSequence(bench)
-    assert seq.start([0.2] * 3) == ApproachStatus.ERROR_NOT_READY  # not validated
-    seq.validate()
-    assert seq.start([0.2, 0.45, 0.2]) == ApproachStatus.ERROR_OUTSIDE_STROKE
-    assert seq.phase == SequenceStatus.IDLE
-    out = np.full(3, 7.0)
-    assert seq.update(out, out.copy(), out.copy()) == SequenceStatus.IDLE
-    np.testing.assert_array_equal(out, 7.0)  # outputs untouched when not running
+def test_sequencer_abort_returns_to_rest_without_fault(bench) -> None:
+    bench.validate()
+    h = Harness([0.2, 0.2, 0.2])
+    h.ref.request(SourceProgram(bench))
+    h.run(n_max=3000, until=())
+    h.ref.request_abort()
+    p, v, a, phases = h.run(n_max=5000)
+    assert phases[0] == Phase.RETURN and phases[-1] == Phase.REST
+    assert len(phases) * DT <= 0.5
+    np.testing.assert_array_equal(v[-1], 0.0)
+
+
+def test_sequencer_hard_stop_follows_the_measured_position(bench) -> None:
+    bench.validate()
+    h = Harness([0.2, 0.2, 0.2])
+    h.ref.request(SourceProgram(bench))
+    h.run(n_max=3000, until=())
+    h.mode[0] = SupervisorMode.HARD_STOP
+    h.q[:] = [0.21, 0.19, 0.2]                         # the platform sank while unpowered
+    assert h.step() == Phase.STOPPED
+    np.testing.assert_allclose(h.ref.q_ref.data, [0.21, 0.19, 0.2])
+    np.testing.assert_array_equal(h.ref.qd_ref.data, 0.0)
+
+
+def test_sequencer_refusals(bench) -> None:
+    bench.validate()
+    h = Harness([0.2, 0.45, 0.2])            # outside the stroke: no approach can start here
+    h.ref.request(SourceProgram(bench))
+    assert h.step() == Phase.REST
+    assert h.ref.refused == 1 and "refused" in h.ref.last_error and h.ref.epoch == 0
+    h = Harness([0.2, 0.2, 0.2])
+    h.ref.request(SourceProgram(bench))
+    h.step()
+    h.ref.request(SourceProgram(bench))      # one program at a time
+    assert h.step() == Phase.APPROACH
+    assert h.ref.refused == 1 and h.ref.last_error == "a program is running"
+    assert not SourceProgram(BenchmarkTrajectory()).update(ReferenceOutput()) >= 0  # unvalidated
+
+
+class _ForceHold:
+    """A force program: 300 N in z at the pose where it starts, for ``duration_s``."""
+
+    def __init__(self, q, duration_s: float = 2.0) -> None:
+        self.q = np.array(q, float)
+        self.duration_s = duration_s
+        self.n = int(round(duration_s / DT)) + 1
+        self.k = 0
+
+    @staticmethod
+    def new_output() -> ReferenceOutput:
+        return ReferenceOutput()
+
+    def reset(self) -> None:
+        self.k = 0
+
+    def update(self, out: ReferenceOutput, inp=None) -> int:
+        out.q_ref[:] = self.q
+        out.qd_ref[:] = 0.0
+        out.qdd_ref[:] = 0.0
+        out.buf[15], out.buf[16] = 300.0, 0.0
+        out.mode = ProgramMode.FORCE
+        out.done = self.k >= self.n - 1
+        self.k = min(self.k + 1, self.n - 1)
+        return 1 if out.done else 0
+
+
+def test_sequencer_abort_in_force_ramps_the_force_down_then_holds_where_the_robot_is() -> None:
+    h = Harness([0.2, 0.2, 0.2])
+    h.ref.request(_ForceHold([0.2, 0.2, 0.2]))
+    for _ in range(500):
+        h.step()
+    assert h.ref.ctrl_mode.data[0] == ProgramMode.FORCE and h.ref.force.data[0] == 300.0
+    h.q[:] = [0.195, 0.195, 0.195]          # pressed 5 mm into the foot
+    h.ref.request_abort()
+    forces = []
+    for _ in range(3000):
+        ph = Phase(int(h.ref.phase.data[0]))
+        h.ref.update(h.t, DT)
+        h.t += DT
+        forces.append(h.ref.force.data[0])
+        if Phase(int(h.ref.phase.data[0])) == Phase.REST:
+            break
+    f = np.array(forces)
+    assert np.all(np.diff(f) <= 0.0) and f[0] > 250.0      # monotonic ramp, no step to zero
+    # Exponential ramp, time constant 0.3 s, then zero below 1 N: ln(301) * 0.3 s ≈ 1.7 s.
+    assert 1.5 <= len(f) * DT <= 1.9 and f[-1] == 0.0
+    assert ph in (Phase.RETURN, Phase.REST)
+    assert h.ref.ctrl_mode.data[0] == ProgramMode.POSITION
+    np.testing.assert_allclose(h.ref.q_ref.data, [0.195] * 3)   # holds where it is, no jump

@@ -11,12 +11,8 @@ from rt.devices.interfaces import ActuatorOutputs, DigitalInputs, DigitalInputSt
 from rt.engine import Array, Component, Struct
 from rt.errors import HardwareError
 from rt.model.dynamics import State
-from rt.safety.events import EventLog, Reaction, SafetyEvent
+from rt.safety.events import EventLog, Reaction, SafetyEvent, SupervisorMode
 from rt.safety.supervisor import Supervisor
-
-MODE_RUN = 0.0
-MODE_SOFT = 2.0
-MODE_HARD = 3.0
 
 
 class ForceReader(Component):
@@ -64,8 +60,8 @@ class SupervisorBlock(Component):
     float64[3]; ``tau``: float64[3] N; ``wrench``: float64[6]; ``wrench_flags``: float64[2];
     ``inputs``: float64[2]; ``drive_failed``: float64[1] (delayed one cycle).
     Out ``volts``: float64[3] V — the commands, saturated, zero in a hard stop; ``enable``:
-    float64[1] — drives enabled (0 in a hard stop); ``mode``: float64[1] — 0 run, 2 soft stop,
-    3 hard stop (latched).
+    float64[1] — drives enabled (0 in a hard stop); ``mode``: float64[1] — the latched
+    :class:`SupervisorMode` (run, soft stop, hard stop).
 
     The supervisor owns the right to enable the drives: nothing else writes ``enable``.
     """
@@ -114,14 +110,14 @@ class SupervisorBlock(Component):
         if reaction >= Reaction.HARD_STOP:
             v[:] = 0.0
             self.enable.data[0] = 0.0
-            self.mode.data[0] = MODE_HARD
+            self.mode.data[0] = float(SupervisorMode.HARD_STOP)
             return 0
         limit = self.sup.limits.max_command_v
         for i in range(3):
             x = self.tau.data[i] * self.k
             v[i] = limit if x > limit else (-limit if x < -limit else x)
         self.enable.data[0] = 1.0
-        self.mode.data[0] = MODE_SOFT if reaction == Reaction.SOFT_STOP else MODE_RUN
+        self.mode.data[0] = float(SupervisorMode.of(reaction))
         return 0
 
 

@@ -31,9 +31,9 @@ per sample: 4.3 MB per minute at 1 kHz), so every sample that will be played has
 against the limits, and ``update`` only copies one row. A partial last period (file duration not
 a multiple of dt) is not played.
 
-Sources (playback, ``BenchmarkTrajectory``) share one per-cycle API, :class:`CycleSource`.
-:class:`ReferenceSequence` runs: ruckig approach from the robot's state to the source's first
-sample state → the source → ruckig return to rest, one status per cycle.
+Sources (playback, ``BenchmarkTrajectory``) share one per-cycle API, :class:`CycleSource`;
+:class:`SourceProgram` hands one to the loop's sequencer, which adds the ruckig approach from the
+robot's state to the source's first sample state and the return to rest.
 """
 from __future__ import annotations
 
@@ -49,7 +49,8 @@ from scipy.interpolate import CubicSpline
 
 from rt.errors import ConfigurationError, ProtocolValidationError
 from rt.references.approach import (DEFAULT_MAX_ACCELERATION_M_S2, DEFAULT_MAX_VELOCITY_M_S,
-                                    N_AXES, POSITION_SLACK_M, STROKE_M, Approach, ApproachStatus)
+                                    N_AXES, POSITION_SLACK_M, STROKE_M)
+from rt.references.program import Mode, ProgramInput, ProgramStatus, ReferenceOutput
 
 _AXES = ("q0", "q1", "q2")
 # Relative tolerance on a file's sample interval against its median: 0.1 % absorbs times written
@@ -390,174 +391,29 @@ class TrajectoryPlayback:
         return ReferenceStatus.PLAYING
 
 
-# -- the sequence ------------------------------------------------------------------------------
-class SequenceStatus(IntEnum):
-    """Per-cycle phase of :class:`ReferenceSequence`; negative = error."""
+# -- as a program ------------------------------------------------------------------------------
+class SourceProgram:
+    """A validated :class:`CycleSource` (file playback, the benchmark) as a program for the
+    loop's sequencer (``rt.references.sequencer.ProgramReference``), which adds the approach
+    from the robot's state and the return to rest."""
 
-    IDLE = 0  # not started
-    APPROACHING = 1  # ruckig move from the start state to the source's first sample
-    PLAYING = 2  # the source's samples
-    RETURNING = 3  # ruckig move from the last sample to rest
-    DONE = 4  # at rest after the return (from the cycle that reaches rest on)
-    STOPPING = 5  # soft stop in progress
-    STOPPED = 6  # at rest after a soft stop
-    ERROR = -1  # a generator failed (``last_detail`` has its status); outputs left unchanged,
-    # except during a soft stop, which keeps braking (clamped at the stroke) and reports ERROR
-
-
-class ReferenceSequence:
-    """Approach → source → return, the thesis's spline/file/spline structure done with ruckig.
-
-    Ports (per cycle): ``update(out_pos, out_vel, out_acc) -> SequenceStatus`` (m, m/s, m/s²).
-
-    The approach ends exactly on the source's first sample state (position, velocity and
-    acceleration) on a cycle boundary, so the next cycle plays the source's second sample: no
-    seam. At the source's last sample the return move starts from that sample's state.
-
-    Args:
-        source: a :class:`CycleSource` (``TrajectoryPlayback``, ``BenchmarkTrajectory``).
-        approach: the ruckig generator (its dt must equal the source's); default limits if None.
-        rest_position: where the return move ends (m); None = where ``start`` found the robot.
-        approach_minimum_duration, return_minimum_duration: slow the moves down (s), e.g. 8 s as
-            in the thesis; None = time-optimal within the approach's limits.
-    """
-
-    def __init__(self, source: CycleSource, approach: Approach | None = None,
-                 rest_position: Sequence[float] | None = None,
-                 approach_minimum_duration: float | None = None,
-                 return_minimum_duration: float | None = None) -> None:
+    def __init__(self, source: CycleSource) -> None:
         self.source = source
-        self.approach = approach if approach is not None else Approach(dt=source.dt)
-        self.rest_position = None if rest_position is None else [float(x) for x in rest_position]
-        self.approach_minimum_duration = approach_minimum_duration
-        self.return_minimum_duration = return_minimum_duration
-        self.phase = SequenceStatus.IDLE
-        self.last_detail: int = 0  # the sub-generator status behind an ERROR
-        self._validated = False
-        self._first = (np.zeros(N_AXES), np.zeros(N_AXES), np.zeros(N_AXES))
-        self._last = (np.zeros(N_AXES), np.zeros(N_AXES), np.zeros(N_AXES))
-        self._scratch = (np.zeros(N_AXES), np.zeros(N_AXES), np.zeros(N_AXES))
-        self._rest: list[float] = [0.0] * N_AXES
-        self._source_active = False
+        self.duration_s = (source.n_samples - 1) * source.dt
 
-    def validate(self) -> None:
-        """Validate the source and its fit with the approach; raises ProtocolValidationError."""
-        self._validated = False
-        ap = self.approach
-        if abs(ap.dt - self.source.dt) > 1e-12:
-            raise ProtocolValidationError(f"the approach runs at dt = {ap.dt} s but the source at "
-                                          f"{self.source.dt} s")
-        self.source.validate()
-        self.source.state_at(0, *self._first)
-        self.source.state_at(self.source.n_samples - 1, *self._last)
-        for name, (p, v, a) in (("first", self._first), ("last", self._last)):
-            for i in range(N_AXES):
-                if abs(v[i]) > ap.max_velocity[i] or abs(a[i]) > ap.max_acceleration[i]:
-                    raise ProtocolValidationError(
-                        f"the {name} sample of slider {i} moves at {v[i]:.4g} m/s, "
-                        f"{a[i]:.4g} m/s², beyond the approach limits {ap.max_velocity[i]} m/s, "
-                        f"{ap.max_acceleration[i]} m/s²: the approach cannot join it")
-        if self.rest_position is not None:
-            st = ap.check_move(self._last[0], self._last[1], self._last[2], self.rest_position,
-                               minimum_duration=self.return_minimum_duration)
-            if st != ApproachStatus.WORKING:
-                raise ProtocolValidationError(f"the return move from the last sample to rest "
-                                              f"{self.rest_position} m is refused: {st.name}")
-        self._validated = True
+    @staticmethod
+    def new_output() -> ReferenceOutput:
+        return ReferenceOutput()
 
-    def start(self, position: Sequence[float] | np.ndarray,
-              velocity: Sequence[float] | np.ndarray | None = None,
-              acceleration: Sequence[float] | np.ndarray | None = None) -> ApproachStatus:
-        """Begin from the robot's current state (m, m/s, m/s²); both moves are checked first.
-
-        Returns ``WORKING`` when started, or the approach's error status (nothing started).
-        """
-        if not self._validated:
-            return ApproachStatus.ERROR_NOT_READY
-        ap = self.approach
-        rest = self.rest_position if self.rest_position is not None else position
-        st = ap.check_move(self._last[0], self._last[1], self._last[2], rest,
-                           minimum_duration=self.return_minimum_duration)
-        if st != ApproachStatus.WORKING:
-            return st
-        st = ap.reset(position, velocity, acceleration)
-        if st != ApproachStatus.IDLE:
-            return st
-        st = ap.set_target(self._first[0], self._first[1], self._first[2],
-                           minimum_duration=self.approach_minimum_duration)
-        if st != ApproachStatus.WORKING:
-            return st
-        self._rest = [float(x) for x in rest]
+    def reset(self) -> None:
         self.source.reset(0)
-        self._source_active = False
-        self.phase = SequenceStatus.APPROACHING
-        return ApproachStatus.WORKING
 
-    def soft_stop(self) -> ApproachStatus:
-        """Brake to rest from the current reference state (the supervisor's soft stop)."""
-        if self.phase in (SequenceStatus.IDLE, SequenceStatus.DONE, SequenceStatus.STOPPED):
-            return ApproachStatus.FINISHED
-        ap = self.approach
-        if self._source_active:
-            # the source emitted sample index - 1 last (sample 0 was the approach's last sample)
-            src = self.source
-            p, v, a = self._scratch
-            src.state_at(src.index - 1, p, v, a)
-            st = ap.reset(p, v, a)
-            if st != ApproachStatus.IDLE:
-                return st
-            self._source_active = False
-        st = ap.soft_stop()
-        self.phase = SequenceStatus.STOPPING
-        return st
-
-    def update(self, out_pos: np.ndarray, out_vel: np.ndarray,
-               out_acc: np.ndarray) -> SequenceStatus:
-        """Advance one cycle; returns the phase that produced this cycle's reference."""
-        phase = self.phase
-        if phase == SequenceStatus.PLAYING:
-            st = self.source.update(out_pos, out_vel, out_acc)
-            if st < 0:
-                return self._fail(st)
-            if st == ReferenceStatus.FINISHED:
-                self._begin_return(out_pos, out_vel, out_acc)
-            return SequenceStatus.PLAYING
-        if phase in (SequenceStatus.APPROACHING, SequenceStatus.RETURNING,
-                     SequenceStatus.STOPPING, SequenceStatus.DONE, SequenceStatus.STOPPED):
-            st = self.approach.update(out_pos, out_vel, out_acc)
-            if st < 0:
-                if phase != SequenceStatus.STOPPING:
-                    return self._fail(st)
-                # an overshooting stop is clamped at the stroke end: keep braking, report it
-                self.last_detail = int(st)
-                return SequenceStatus.ERROR
-            if st == ApproachStatus.FINISHED:
-                if phase == SequenceStatus.APPROACHING:
-                    # this cycle emitted the first sample's state: play from the second one
-                    self.source.reset(1)
-                    self._source_active = True
-                    self.phase = SequenceStatus.PLAYING
-                    return SequenceStatus.APPROACHING
-                if phase == SequenceStatus.RETURNING:
-                    self.phase = SequenceStatus.DONE
-                elif phase == SequenceStatus.STOPPING:
-                    self.phase = SequenceStatus.STOPPED
-            return self.phase
-        return phase  # IDLE, ERROR: outputs untouched
-
-    def _begin_return(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:
-        # Event (once per run): the lists built here are not per-cycle allocations.
-        ap = self.approach
-        self._source_active = False
-        st = ap.reset(p, v, a)
-        if st == ApproachStatus.IDLE:
-            st = ap.set_target(self._rest, minimum_duration=self.return_minimum_duration)
-        if st != ApproachStatus.WORKING:
-            self._fail(st)
-            return
-        self.phase = SequenceStatus.RETURNING
-
-    def _fail(self, detail: int) -> SequenceStatus:
-        self.last_detail = int(detail)
-        self.phase = SequenceStatus.ERROR
-        return SequenceStatus.ERROR
+    def update(self, out: ReferenceOutput, inp: ProgramInput | None = None) -> int:
+        index = self.source.index
+        status = self.source.update(out.q_ref, out.qd_ref, out.qdd_ref)
+        if status < 0:
+            return ProgramStatus.ERROR_NOT_VALIDATED
+        out.mode = Mode.POSITION
+        out.index = index
+        out.done = status == ReferenceStatus.FINISHED
+        return ProgramStatus.FINISHED if out.done else ProgramStatus.RUNNING

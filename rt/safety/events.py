@@ -19,6 +19,27 @@ class Reaction(enum.IntEnum):
     FAILOVER = 4      # an actuator channel moved to the redundant card (not a stop)
 
 
+class SupervisorMode(enum.IntEnum):
+    """What the supervisor lets the loop do, carried on its ``mode`` port (float64[1]) to the
+    reference and the controller one cycle late. A warning does not change the mode."""
+
+    RUN = 0
+    SOFT_STOP = 2     # brake to a hold, ramp force down, drives enabled
+    HARD_STOP = 3     # outputs zero, drives disabled
+
+    @classmethod
+    def of(cls, reaction: Reaction) -> "SupervisorMode":
+        """The mode a latched reaction puts the loop in."""
+        if reaction >= Reaction.HARD_STOP and reaction != Reaction.FAILOVER:
+            return cls.HARD_STOP
+        return cls.SOFT_STOP if reaction == Reaction.SOFT_STOP else cls.RUN
+
+    @classmethod
+    def from_port(cls, value: float) -> "SupervisorMode":
+        """The mode a ``mode`` port carries."""
+        return cls(int(value))
+
+
 @dataclass
 class SafetyEvent:
     """One event. ``t`` is loop time (s), ``wall`` the host's wall clock (s since the epoch)."""

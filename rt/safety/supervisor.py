@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from typing import Callable
 
+from rt.model.description import RobotDescription
 from rt.safety.events import EventLog, Reaction, SafetyEvent
 from rt.safety.limits import EffectiveLimits
 
@@ -40,6 +41,31 @@ JUMP_STATUS = -3
 FROZEN_COUNTS = 4
 #: Fraction of the force limit at which a soft stop begins (the force's end cushion).
 FORCE_CUSHION = 0.9
+#: Margin on the holding force of a still axis (the frozen-encoder check must not trip on an
+#: axis that legitimately holds its share of an unmeasured load).
+HOLDING_MARGIN = 1.5
+#: Lever ∂q/∂angle of a slider per radian of platform tilt, in platform radii (≈ 1.5 R_p for
+#: a 3-PRS with the spheres on a circle: the farthest leg moves R_p·(1 + 1/2) per radian).
+LEVER_PER_PLATFORM_RADIUS = 1.5
+
+
+def supervisor_physics(d: RobotDescription) -> dict[str, float]:
+    """The supervisor's physical constants from the robot description (SI):
+
+    * ``axis_mass_kg``: slider mass + rotor inertia reflected through the screw;
+    * ``holding_force_n``: what a still axis may hold without moving: its gravity share (slider,
+      rod, a third of platform and sensor) plus the static friction, times
+      :data:`HOLDING_MARGIN`;
+    * ``count_m``: one encoder count;
+    * ``lever_m_per_rad``: slider travel per radian of tilt (the soft stop's braking cushion).
+    """
+    b = d.bodies
+    gravity_share = d.gravity_m_s2 * (b.slider.mass_kg + b.rod.mass_kg
+                                      + (b.platform.mass_kg + b.sensor.mass_kg) / 3.0)
+    return {"axis_mass_kg": b.slider.mass_kg + d.drive.reflected_inertia_kg,
+            "holding_force_n": HOLDING_MARGIN * (gravity_share + d.friction.static_n),
+            "count_m": d.encoder.m_per_count,
+            "lever_m_per_rad": LEVER_PER_PLATFORM_RADIUS * d.geometry.platform_radius_m}
 
 
 class Supervisor:
@@ -47,7 +73,10 @@ class Supervisor:
 
     def __init__(self, limits: EffectiveLimits, period_s: float, log: EventLog | None = None,
                  soft_stop_accel_m_s2: float = 0.5, soft_stop_jerk_m_s3: float = 5.0,
-                 lever_m_per_rad: float = 0.27):
+                 lever_m_per_rad: float = 0.27, axis_mass_kg: float = 207.3,
+                 holding_force_n: float = 203.0, count_m: float = 2e-5):
+        """The defaults are the nominal robot's (:func:`supervisor_physics`); the loop passes
+        the values of the robot it drives."""
         self.limits = limits
         self.period_s = period_s
         self.log = log or EventLog()
@@ -61,9 +90,9 @@ class Supervisor:
         # Frozen-encoder physics: the axis' inertia (slider + reflected rotor, kg), the force a
         # still axis may hold without moving (gravity share + static friction, N), the encoder
         # count (m), and the platform force above which something pushes back (contact).
-        self.axis_mass_kg = 210.0
-        self.holding_force_n = 250.0
-        self.count_m = 2e-5
+        self.axis_mass_kg = axis_mass_kg
+        self.holding_force_n = holding_force_n
+        self.count_m = count_m
         self.contact_force_n = 50.0
         # The force sensor's first samples arrive a few cycles after the loop starts.
         self.startup_grace_s = 0.1
