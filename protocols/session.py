@@ -1,53 +1,75 @@
-"""A clinical session without the GUI: check the protocol, run it on the twin first (pre-flight),
-then for real, record everything, summarize (``talus session run``).
+"""A clinical session's protocol side: check the protocol, run it on the twin first
+(pre-flight), compute the session's figures; the RT process runs the real session
+(``protocols.rt_session`` is what it is given to prepare one).
 
 Pre-flight refuses a protocol — with the reason — when its own validation reports a violation,
 when its references break the patient's or the robot's limits, or when running it on the twin
 as fast as possible makes the safety supervisor stop the robot. Its report gives the predicted
 peaks: actuator force, slider speed, platform angles and platform force.
+
+The figures (:class:`SessionFigures`) are computed from the session tap's rows
+(``rt.sessions.SESSION_SIGNALS``) as they stream, so an hour at 1 kHz is never held at once;
+pre-flight, the in-process twin run (benchmarks) and the RT process all use them.
 """
 from __future__ import annotations
 
 import math
 import sys
 import threading
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
 from protocols.generators import make_generator
 from protocols.library import load_protocol
+from protocols.schema import ProtocolModel
 from rt.components.blocks import SignalTap
 from rt.errors import ProtocolValidationError
 from rt.model import RobotModel
 from rt.position_loop import PositionLoop, build_protocol_loop, sim_devices
-from rt.safety.events import Reaction
+from rt.references.sequencer import Phase
+from rt.safety.events import Reaction, SafetyEvent
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits
+from rt.sessions import (COL_CTRL_MODE, COL_FREF, COL_FZ, COL_PHASE, COL_PROGRESS, COLUMNS,
+                         SESSION_SIGNALS, SESSION_SOURCES, record_rows)
 from rt.twin.environment import CompliantAnkle, parse_environment
 from rt.twin.twin import SimClock, Twin
 
 RATE_HZ = 1000.0
-#: Columns of the session tap (after t): wrench 6, flags 2, force ref 3, ctrl mode, phase,
-#: progress.
-SIGNALS = [("wrench", 6), ("flags", 2), ("force", 3), ("ctrl_mode", 1), ("phase", 1),
-           ("progress", 1)]
-W, FLAGS, FREF, CMODE, PHASE, PROG = 1, 7, 9, 12, 13, 14
+#: ROM figures use every n-th sample's forward kinematics (at 1 kHz: 100 Hz, ample for angles).
+ROM_DECIMATION = 10
 
 
 @dataclass
 class SessionSetup:
-    protocol_path: Path
+    """What a session needs: the protocol (a file, or a validated model whose relative data
+    files resolve in ``base_dir``), the patient, the limits, the twin's environment."""
+
+    protocol_path: Path | None = None
     patient_weight_kg: float | None = None
     patient_limits: PatientLimits = field(default_factory=PatientLimits)
     robot_limits: RobotLimits = field(default_factory=RobotLimits)
     environment: str | None = None
     seed: int = 0
+    protocol: ProtocolModel | None = None
+    base_dir: Path | None = None
+
+    def load(self) -> ProtocolModel:
+        if self.protocol is not None:
+            return self.protocol
+        if self.protocol_path is None:
+            raise ProtocolValidationError("a session needs a protocol (file or document)")
+        return load_protocol(self.protocol_path)
+
+    @property
+    def source(self) -> str:
+        return str(self.protocol_path) if self.protocol_path is not None else \
+            f"protocol {self.protocol.name!r}" if self.protocol is not None else "<none>"
 
 
-def _protocol_limits(protocol) -> ProtocolLimits | None:
+def protocol_limits_of(protocol) -> ProtocolLimits | None:
     lim = getattr(protocol, "limits", None)
     if lim is None:
         return None
@@ -65,34 +87,36 @@ def _environment(setup: SessionSetup, sensor_z: float, roll: float, pitch: float
 
 
 def _build(setup: SessionSetup, model: RobotModel, mode: str):
-    protocol = load_protocol(setup.protocol_path)
+    protocol = setup.load()
     gen = make_generator(protocol, dt=1.0 / RATE_HZ, kinematics=model.kin,
-                         patient_weight_kg=setup.patient_weight_kg)
+                         patient_weight_kg=setup.patient_weight_kg, base_dir=setup.base_dir)
     report = gen.validate()
     if not report.ok:
-        raise ProtocolValidationError(f"{setup.protocol_path}: " + "; ".join(report.violations))
+        raise ProtocolValidationError(f"{setup.source}: " + "; ".join(report.violations))
     clock = SimClock()
-    start = gen.new_output()
-    gen.update(start)
-    gen.reset()
-    z0, roll0, pitch0 = (float(x) for x in start.pose_ref)
+    z0, roll0, pitch0 = start_pose(gen)
     env = _environment(setup, z0 + model.description.sensor.offset_m[2], roll0, pitch0)
     twin = Twin(model.description, env, seed=setup.seed, clock=clock)
     twin.place(model.kin.ik(z0, roll0, pitch0).q)
     n = int((report.duration_s + 15.0) * RATE_HZ)
-    tap = SignalTap("session", SIGNALS, capacity=n)
+    tap = SignalTap("session", SESSION_SIGNALS, capacity=n)
     pl = build_protocol_loop(sim_devices(twin, clock), gen, model, RATE_HZ, mode,
                              robot_limits=setup.robot_limits,
                              patient_limits=setup.patient_limits,
-                             protocol_limits=_protocol_limits(protocol), extra_blocks=[tap],
-                             extra_connections=[
-                                 ("force.wrench", "session.wrench"),
-                                 ("force.flags", "session.flags"),
-                                 ("reference.force", "session.force"),
-                                 ("reference.ctrl_mode", "session.ctrl_mode"),
-                                 ("reference.phase", "session.phase"),
-                                 ("reference.progress", "session.progress")])
+                             protocol_limits=protocol_limits_of(protocol), extra_blocks=[tap],
+                             extra_connections=[(src, f"session.{name}")
+                                                for name, src in SESSION_SOURCES.items()])
     return protocol, gen, report, pl, tap
+
+
+def start_pose(gen) -> tuple[float, float, float]:
+    """The platform pose (z m, roll rad, pitch rad) of a generator's first sample."""
+    first = gen.new_output()
+    gen.reset()
+    gen.update(first)
+    gen.reset()
+    z, roll, pitch = (float(x) for x in first.pose_ref)
+    return z, roll, pitch
 
 
 def _check_static_limits(report, setup: SessionSetup) -> list[str]:
@@ -126,32 +150,18 @@ def _check_static_limits(report, setup: SessionSetup) -> list[str]:
 
 def _run(pl: PositionLoop, tap: SignalTap, duration_s: float,
          progress: Callable[[float], None] | None) -> None:
-    """Run until the protocol is done and back at rest, or the supervisor stopped it.
-
-    In real time the loop runs in its own thread for the whole session, watched from here:
-    restarting a real-time loop costs a garbage collection and re-phasing, a gap the twin
-    would see as the drives holding their last command for that long. In fast mode (simulated
-    time) the loop is simply run in slices.
-    """
+    """Run the in-process twin as fast as possible until the protocol is done and back at
+    rest, or the supervisor stopped it (then 0.6 s more, to come to rest). A real session runs
+    in the RT process, never here."""
     end = duration_s + 10.0
 
     def finished() -> bool:
         row = tap.ring[(tap.written - 1) % tap.capacity]
         if progress is not None and tap.written:
-            progress(float(row[PROG]))
-        return bool(tap.written) and (row[PHASE] >= 4
+            progress(float(row[COL_PROGRESS]))
+        return bool(tap.written) and (row[COL_PHASE] >= Phase.REST
                                       or pl.supervisor.reaction >= Reaction.SOFT_STOP)
 
-    if pl.loop.mode == "realtime":
-        pl.loop.start()
-        try:
-            t0 = time.monotonic()
-            while time.monotonic() - t0 < end and not finished():
-                time.sleep(0.1)
-            time.sleep(0.6)            # let it come to rest
-        finally:
-            pl.loop.stop()
-        return
     t = 0.0
     while t < end:
         pl.loop.run(seconds=0.1)
@@ -161,44 +171,94 @@ def _run(pl: PositionLoop, tap: SignalTap, duration_s: float,
             break
 
 
+class SessionFigures:
+    """A session's figures, accumulated from session-tap rows as they stream (twin figures on
+    the twin): force RMS error (% of the sine's amplitude, else of the peak reference) over the
+    samples played in force mode, peak platform force, ROM reached per axis, predicted peaks
+    (actuator force, slider speed), phases' durations; stops come from the events."""
+
+    def __init__(self, protocol: ProtocolModel, model: RobotModel):
+        self.protocol = protocol
+        self.kin = model.kin
+        self._se = 0.0                  # Σ e² over force-mode play samples, N²
+        self._n_force = 0
+        self._peak_ref = -math.inf
+        self._peak_force = -math.inf
+        self._rom = {"roll": [math.inf, -math.inf], "pitch": [math.inf, -math.inf]}
+        self._peak_tau = 0.0
+        self._peak_qd = 0.0
+        self._phase_time = {p.name.lower(): 0.0 for p in Phase}
+        self._last_phase = Phase.APPROACH
+        self._k = 0
+        self._t_last = math.nan
+        self._dt = 1.0 / RATE_HZ
+
+    def add(self, rows: np.ndarray) -> None:
+        if not len(rows):
+            return
+        phase = rows[:, COL_PHASE]
+        play = phase == Phase.PLAY
+        force = -rows[:, COL_FZ]
+        f_ref = rows[:, COL_FREF]
+        force_mode = play & (rows[:, COL_CTRL_MODE] > 0.5)
+        if force_mode.any():
+            e = (f_ref - force)[force_mode]
+            e = e[~np.isnan(e)]
+            self._se += float(np.sum(e ** 2))
+            self._n_force += len(e)
+            self._peak_ref = max(self._peak_ref, float(np.nanmax(f_ref[force_mode])))
+        valid = ~np.isnan(force)
+        if valid.any():
+            self._peak_force = max(self._peak_force, float(np.max(force[valid])))
+        self._peak_tau = max(self._peak_tau, float(np.abs(rows[:, COLUMNS["tau"]]).max()))
+        self._peak_qd = max(self._peak_qd, float(np.abs(rows[:, COLUMNS["qd"]]).max()))
+        for p in Phase:
+            self._phase_time[p.name.lower()] += float(np.count_nonzero(phase == p)) * self._dt
+        # Every ROM_DECIMATION-th sample of the whole stream (continuing across calls).
+        idx = np.arange(self._k, self._k + len(rows))
+        pick = play & (idx % ROM_DECIMATION == 0)
+        for q in rows[pick][:, COLUMNS["q"]]:
+            cfg = self.kin.fk(q, check=False)
+            for axis, angle in (("roll", cfg.roll), ("pitch", cfg.pitch)):
+                lo_hi = self._rom[axis]
+                lo_hi[0] = min(lo_hi[0], angle)
+                lo_hi[1] = max(lo_hi[1], angle)
+        self._k += len(rows)
+        self._last_phase = Phase(int(phase[-1]))
+
+    def result(self, events: list[SafetyEvent]) -> dict[str, Any]:
+        p = self.protocol
+        out: dict[str, Any] = {"protocol": p.name, "kind": p.kind, "twin": True}
+        if self._n_force:
+            # Sine: % of the protocol's amplitude; gait and others: % of the peak reference.
+            span = float(p.amplitude_n) if p.kind == "sine_fz" else self._peak_ref
+            out["rms_error_pct"] = math.sqrt(self._se / self._n_force) / span * 100.0 \
+                if span > 0 else None
+            out["rms_error_basis"] = "amplitude" if p.kind == "sine_fz" else "peak"
+        else:
+            out["rms_error_pct"] = None
+        out["peak_force_n"] = self._peak_force if math.isfinite(self._peak_force) else None
+        deg = math.degrees
+        out["rom_deg"] = {axis: [deg(lo), deg(hi)] if math.isfinite(lo) else None
+                          for axis, (lo, hi) in self._rom.items()}
+        out["peak_actuator_force_n"] = self._peak_tau
+        out["peak_slider_speed_m_s"] = self._peak_qd
+        out["phase_s"] = {k: round(v, 3) for k, v in self._phase_time.items() if v > 0.0}
+        out["stops"] = [{"t": round(e.t, 3), "cause": e.cause,
+                         "reaction": e.reaction.name.lower(), "message": e.message}
+                        for e in events if e.reaction >= Reaction.SOFT_STOP
+                        and e.kind == "fault"]
+        out["completed"] = self._last_phase == Phase.REST and not out["stops"] \
+            and self._phase_time["play"] > 0.0
+        return out
+
+
 def summarize(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel) -> dict:
-    """The session's figures (measured on the twin: twin figures)."""
-    rows = tap.ring[:tap.written]
-    state, _ = pl.recorder.drain(0)
-    n = min(len(rows), len(state))
-    rows, state = rows[:n], state[:n]
-    play = rows[:, PHASE] == 1
-    force = -rows[:, W + 2]
-    f_ref = rows[:, FREF]
-    force_mode = play & (rows[:, CMODE] > 0.5)
-    out: dict = {"protocol": protocol.name, "kind": protocol.kind, "twin": True}
-    if force_mode.any():
-        e = (f_ref - force)[force_mode]
-        e = e[~np.isnan(e)]
-        ref = f_ref[force_mode]
-        # Sine: % of the protocol's amplitude; gait and others: % of the peak reference.
-        span = float(protocol.amplitude_n) if protocol.kind == "sine_fz" \
-            else float(np.nanmax(ref))
-        out["rms_error_pct"] = float(np.sqrt(np.mean(e ** 2)) / span * 100.0) if span > 0 \
-            else None
-        out["rms_error_basis"] = "amplitude" if protocol.kind == "sine_fz" else "peak"
-    else:
-        out["rms_error_pct"] = None
-    valid = ~np.isnan(force)
-    out["peak_force_n"] = float(np.max(force[valid])) if valid.any() else None
-    rolls, pitches = [], []
-    for q in state[play][::10, 1:4]:
-        cfg = model.kin.fk(q, check=False)
-        rolls.append(cfg.roll)
-        pitches.append(cfg.pitch)
-    deg = math.degrees
-    out["rom_deg"] = {"roll": [deg(min(rolls)), deg(max(rolls))] if rolls else None,
-                      "pitch": [deg(min(pitches)), deg(max(pitches))] if pitches else None}
-    out["stops"] = [{"t": round(e.t, 3), "cause": e.cause, "reaction": e.reaction.name.lower(),
-                     "message": e.message} for e in pl.events.snapshot()
-                    if e.reaction >= Reaction.SOFT_STOP]
-    out["completed"] = bool(rows[-1, PHASE] >= 4) and not out["stops"]
-    return out
+    """The figures of an in-process run whose tap holds the whole session."""
+    figures = SessionFigures(protocol, model)
+    rows, _ = tap.drain(0)
+    figures.add(rows)
+    return figures.result(pl.events.snapshot())
 
 
 def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
@@ -207,40 +267,41 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     protocol, gen, report, pl, tap = _build(setup, model, "fast")
     problems = _check_static_limits(report, setup)
     if problems:
-        raise ProtocolValidationError(f"{setup.protocol_path}: refused by pre-flight: "
+        raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: "
                                       + "; ".join(problems))
     _run(pl, tap, report.duration_s, None)
     rows = tap.ring[:tap.written]
-    state, _ = pl.recorder.drain(0)
     stops = [e for e in pl.events.snapshot() if e.reaction >= Reaction.SOFT_STOP]
     summary = summarize(pl, tap, protocol, model)
     predicted = {
         "duration_s": report.duration_s,
-        "peak_actuator_force_n": float(np.abs(state[:, 10:13]).max()),
-        "peak_slider_speed_m_s": float(np.abs(state[:, 4:7]).max()),
+        "peak_actuator_force_n": summary["peak_actuator_force_n"],
+        "peak_slider_speed_m_s": summary["peak_slider_speed_m_s"],
         "platform_angles_deg": summary["rom_deg"],
         "peak_platform_force_n": summary["peak_force_n"],
         "rms_error_pct": summary["rms_error_pct"],
     }
     if stops:
         raise ProtocolValidationError(
-            f"{setup.protocol_path}: refused by pre-flight: on the twin the supervisor stopped "
+            f"{setup.source}: refused by pre-flight: on the twin the supervisor stopped "
             f"the robot at t = {stops[0].t:.3f} s ({stops[0].cause}: {stops[0].message})")
-    if len(rows) and rows[-1, PHASE] < 4:
-        raise ProtocolValidationError(f"{setup.protocol_path}: refused by pre-flight: the "
+    if len(rows) and rows[-1, COL_PHASE] < Phase.REST:
+        raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: the "
                                       "protocol did not finish on the twin")
     return {"ok": True, "predicted": predicted}
 
 
-def run_session(setup: SessionSetup, record: Path | None = None, realtime: bool = True,
+def run_session(setup: SessionSetup, record: Path | None = None,
                 progress: Callable[[float], None] | None = None,
                 model: RobotModel | None = None) -> dict:
-    """Pre-flight, then the real run (on the twin, in real time by default), recorded."""
+    """Pre-flight, then the whole session on the in-process twin as fast as possible,
+    optionally recorded: the engine of benchmarks and tests (twin figures). A patient's session
+    runs in the RT process (``talus session run``)."""
     from rt.recording.writer import SessionRecorder
 
     model = model or RobotModel.load()
     pre = preflight(setup, model)
-    protocol, gen, report, pl, tap = _build(setup, model, "realtime" if realtime else "fast")
+    protocol, gen, report, pl, tap = _build(setup, model, "fast")
     recorder = None
     pump = None
     stop_pump = threading.Event()
@@ -273,18 +334,12 @@ def run_session(setup: SessionSetup, record: Path | None = None, realtime: bool 
 
 
 def _pump(tap: SignalTap, recorder, stop: threading.Event) -> None:
-    """Non-real-time: the tap's wrench and reference rows → the recorder's channels."""
+    """Non-real-time: the tap's rows → the recorder's channels."""
     start = 0
     while True:
         final = stop.wait(0.05)
         rows, start = tap.drain(start)
-        for r in rows:
-            t = float(r[0])
-            recorder.wrench(t, *(float(x) for x in r[W:W + 6]), bool(r[FLAGS] > 0.5),
-                            bool(r[FLAGS + 1] > 0.5))
-            recorder.publish("/protocol/reference", {
-                "t": t, "force": [0.0, 0.0, float(r[FREF])],
-                "phase": ("approach", "play", "return", "stopped", "done")[int(r[PHASE])]})
+        record_rows(recorder, rows)
         if final:
             return
 

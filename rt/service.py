@@ -1,34 +1,70 @@
 """The RT process (``talus rt serve``): owns the hardware (the twin by default) and the loop,
-serves commands and publishes telemetry and safety events over ZeroMQ.
+runs motion programs and clinical sessions, records them, serves commands and publishes
+telemetry and safety events over ZeroMQ.
 
-    client ──request/heartbeat──▶ RtServer ──▶ RtService (this) ──▶ position loop (1 kHz)
-       ▲                              │                                  │
-       └──── telemetry, events ───────┘◀──── event log, recorder ring ──┘
+    client ──request/heartbeat──▶ RtServer ──▶ RtService (this) ──▶ loop (1 kHz)
+       ▲                              │                                │
+       └──── telemetry, events ───────┘◀──── event log, session tap ───┘──▶ recorder thread
 
 Commands act on the loop only through thread-safe requests taken at a cycle boundary (the
-supervisor's stop/e-stop/reset flags, the reference's program request, the loop's parameter
-commands), so a client never blocks the cycle. A client that starts a program must keep
-sending heartbeats: when none arrives for the timeout (0.25 s) the supervisor soft-stops.
+supervisor's stop/e-stop/reset requests, the sequencer's program request, the loop's parameter
+and call commands), so a client never blocks the cycle; a reply that depends on the cycle or on
+a pre-flight is deferred (``rt.ipc.server.Deferred``), never waited for on the IPC thread.
+
+Ownership (DESIGN §3): one client controls the robot (:class:`Ownership`). Motion, gains and
+resets only from the owner; stops from anyone. While a motion or a session runs, only the
+owner's heartbeat counts: when it is silent for ``heartbeat_timeout_s`` the supervisor
+soft-stops.
 """
 from __future__ import annotations
 
+import hashlib
+import logging
 import math
+import os
 import threading
 import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Callable, Literal
 
+import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from rt.components.blocks import SignalTap
 from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
-from rt.errors import ConfigurationError, InputError
-from rt.ipc.messages import DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT
-from rt.position_loop import (PositionLoop, build_position_loop, build_sim_position_loop,
-                              shm_devices)
-from rt.safety.events import Reaction
-from rt.safety.limits import PatientLimits
+from rt.errors import ConfigurationError, InputError, TalusError
+from rt.ipc.messages import (DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT, PatientArgs, RecordArgs,
+                             describe_validation_error)
+from rt.position_loop import PositionLoop, build_protocol_loop, shm_devices, sim_devices
+from rt.references.program import Program, TrajectoryProgram
+from rt.references.sequencer import Phase
+from rt.safety.events import Reaction, SafetyEvent, SupervisorMode
+from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
+from rt.sessions import (COL_FREF, COL_FZ, COL_PHASE, COL_PROGRESS, COLUMNS, SESSION_SIGNALS,
+                         SESSION_SOURCES, PatientInfo, PreparedSession, SessionContext,
+                         SessionFactory, record_rows, recording_name, unique_path)
+
+log = logging.getLogger(__name__)
+
+#: The robot counts as at rest below this slider speed (m/s): 1 mm/s.
+REST_SPEED_M_S = 1e-3
+#: Longest pre-flight the IPC client waits for before its session_start reply is an error (s).
+SESSION_START_TIMEOUT_S = 120.0
+#: GIL switch interval of the RT process (s).
+SWITCH_INTERVAL_S = 0.0002
+#: A program request not taken by the loop within this time is reported lost (s).
+PROGRAM_TAKE_TIMEOUT_S = 2.0
+
+
+def default_recordings_dir() -> Path:
+    """``<user data dir>/talus/recordings`` (XDG on Linux)."""
+    base = os.environ.get("XDG_DATA_HOME") or os.path.join(os.path.expanduser("~"),
+                                                            ".local", "share")
+    return Path(base) / "talus" / "recordings"
 
 
 class RtConfig(BaseModel):
@@ -40,14 +76,32 @@ class RtConfig(BaseModel):
     #: With backend twin_shm: the rig process's shared-memory segment (talus twin rig --shm).
     shm: str | None = None
     rate_hz: float = Field(1000.0, ge=100.0, le=2000.0)
+    #: "realtime" paces the loop by the clock; "fast" (the twin only) runs it back to back in
+    #: simulated time, for demos and tests.
+    loop_mode: Literal["realtime", "fast"] = "realtime"
     controller: str = "paden_panja"
     gains: dict[str, float] = Field(default_factory=dict)
+    #: What the twin's platform touches between sessions (backend sim).
     environment: str = "free"
+    #: On the twin, a session places the patient's foot (unloaded) at the protocol's start
+    #: pose ("patient_foot"), or keeps ``environment`` ("configured", e.g. a plate).
+    session_environment: Literal["patient_foot", "configured"] = "patient_foot"
     endpoint: str = DEFAULT_ENDPOINT
     pub_endpoint: str = DEFAULT_PUB_ENDPOINT
+    #: The owner's silence after which the supervisor soft-stops a motion (s).
     heartbeat_timeout_s: float = Field(0.25, gt=0.0, le=5.0)
-    telemetry_hz: float = Field(50.0, gt=0.0, le=500.0)
+    #: Telemetry publication rate for live GUIs (Hz).
+    telemetry_hz: float = Field(60.0, gt=0.0, le=500.0)
+    #: Limits in force outside sessions (a session brings its patient's).
     patient_limits: PatientLimits = Field(default_factory=PatientLimits)
+    #: Where sessions are recorded unless the client names a directory (default:
+    #: :func:`default_recordings_dir`).
+    recordings_dir: str | None = None
+    #: The robot description file (default: the nominal one shipped with talus).
+    robot: str | None = None
+
+    def recordings_path(self) -> Path:
+        return Path(self.recordings_dir) if self.recordings_dir else default_recordings_dir()
 
 
 def load_config(path: str | Path | None) -> RtConfig:
@@ -61,107 +115,512 @@ def load_config(path: str | Path | None) -> RtConfig:
     except yaml.YAMLError as exc:
         raise ConfigurationError(f"RT config {path} is not valid YAML: {exc}") from None
     except ValidationError as exc:
-        msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}"
+                         for e in exc.errors(include_url=False))
         raise ConfigurationError(f"RT config {path} is invalid: {msgs}") from None
+
+
+# ------------------------------------------------------------------------------ ownership
+@dataclass
+class Ownership:
+    """Who controls the robot. ``client`` is the envelope's client id, ``name`` the label the
+    owner gave (shown to the others)."""
+
+    client: str | None = None
+    name: str | None = None
+    since_wall: float | None = None
+
+    def as_dict(self, age_s: float | None) -> dict[str, Any] | None:
+        if self.client is None:
+            return None
+        return {"client": self.client, "name": self.name, "since": self.since_wall,
+                "heartbeat_age_s": age_s}
+
+
+# ------------------------------------------------------------------------------ sessions
+@dataclass
+class _Session:
+    """One session's life in the RT process (fields written by its worker and pump threads,
+    read by the IPC thread: each a single attribute assignment)."""
+
+    id: str
+    owner: str
+    patient: PatientInfo
+    record_dir: Path
+    state: str = "preflight"       # preflight → running → ended | refused
+    error: str | None = None
+    prepared: PreparedSession | None = None
+    recording: Path | None = None
+    t_start: float = math.nan       # loop time at the start (s)
+    started_wall: float = math.nan
+    phase: Phase = Phase.REST
+    progress: float = 0.0
+    force_ref_n: float = math.nan
+    force_n: float = math.nan
+    aborted_by: str | None = None
+    summary: dict[str, Any] | None = None
+    first_event: int = 0
+    start_latency_s: float = math.nan
+    stop: threading.Event = field(default_factory=threading.Event)
 
 
 class RtService:
     """The command handler behind the RT server (see ``rt.ipc.server.RtServer``)."""
 
-    def __init__(self, pl: PositionLoop, config: RtConfig):
+    def __init__(self, pl: PositionLoop, config: RtConfig, tap: SignalTap,
+                 sessions: SessionFactory | None = None,
+                 programs: dict[str, Callable[[dict[str, Any], "RtService"], Program]]
+                 | None = None):
         self.pl = pl
         self.config = config
-        self.server = None           # set by serve() once the server exists
-        self.programs = {"benchmark": self._benchmark, "move": self._move}
+        self.tap = tap
+        self.sessions = sessions
+        self.server: Any = None      # set by serve() once the server exists
+        self.endpoint = config.endpoint
+        self.programs: dict[str, Callable[[dict[str, Any], RtService], Program]] = {
+            "benchmark": _benchmark, "move": _move, **(programs or {})}
+        self.owner = Ownership()
+        self._lock = threading.Lock()           # ownership and session transitions
+        self.session: _Session | None = None
+        self.last_summary: dict[str, Any] | None = None
+        self._session_count = 0
+        self._base_limits = (pl.supervisor.limits)
+        pl.supervisor.heartbeat_required = True
+        pl.supervisor.heartbeat_age = self._owner_heartbeat_age
 
-    # -- commands ---------------------------------------------------------------------------
-    def status(self) -> dict[str, Any]:
+    # ------------------------------------------------------------------ helpers
+    def _now(self) -> float:
+        return time.monotonic()
+
+    def _owner_age(self) -> float:
+        if self.owner.client is None or self.server is None:
+            return math.inf
+        return self.server.last_seen_age_s(self.owner.client)
+
+    def _motion_active(self) -> bool:
+        s = self.session
+        return self.pl.reference.busy or (s is not None and s.state in ("preflight", "running"))
+
+    def _owner_heartbeat_age(self) -> float:
+        """What the supervisor checks every cycle: the owner's silence while a motion or a
+        session runs (0 when nothing moves: heartbeats are not required then)."""
+        if not self._motion_active():
+            return 0.0
+        return self._owner_age()
+
+    def _owner_lost(self) -> bool:
+        return self._owner_age() > self.config.heartbeat_timeout_s
+
+    def _at_rest(self) -> bool:
+        qd = self.pl.graph.output("estimator.qd")
+        return not self.pl.reference.busy and bool(np.all(np.abs(qd) < REST_SPEED_M_S))
+
+    def _require_owner(self, client: str, what: str) -> None:
+        if self.owner.client != client:
+            who = "nobody" if self.owner.client is None else \
+                f"{self.owner.name!r} ({self.owner.client})"
+            raise InputError(f"{what} refused: only the client that controls the robot may "
+                             f"do this (controlled by {who}); send control_acquire first")
+
+    def _mode(self) -> SupervisorMode:
+        return SupervisorMode.from_port(self.pl.graph.output("supervisor.mode")[0])
+
+    # ------------------------------------------------------------------ commands
+    def status(self, client: str | None = None) -> dict[str, Any]:
         pl = self.pl
         sup = pl.supervisor
         g = pl.graph
-        mode = float(g.output("supervisor.mode")[0])
         cfg = g.output("model.state").cfg
         stats = pl.loop.stats()
+        age = self._owner_age()
         return {
-            "state": "hard_stop" if mode >= 3 else "soft_stop" if mode >= 2 else "run",
-            "causes": sorted(sup.causes), "t": stats.t, "cycles": stats.cycles,
-            "deadline_misses": stats.misses, "rate_hz": self.config.rate_hz,
+            "state": self._mode().name.lower(),
+            "causes": sorted(sup.causes), "latched": sup.latched(),
+            "t": stats.t, "cycles": stats.cycles, "deadline_misses": stats.misses,
+            "rate_hz": self.config.rate_hz,
             "controller": g.component("controller").controller.name,
             "phase": int(g.output("reference.phase")[0]),
+            "phase_name": Phase(int(g.output("reference.phase")[0])).name.lower(),
             "q": g.output("encoders.q").tolist(),
             "pose": None if cfg is None else {"z": cfg.z, "roll": cfg.roll, "pitch": cfg.pitch},
             "drives_enabled": bool(g.output("supervisor.enable")[0] > 0.5),
             "active_card": int(g.output("drive.active_card")[0]),
-            "heartbeat_age_s": None if self.server is None else _finite(
-                self.server.heartbeat_age_s()),
+            "owner": self.owner.as_dict(_finite(age)),
+            "you_own": client is not None and client == self.owner.client,
+            "heartbeat_age_s": _finite(age),
+            "session": None if self.session is None else self.session.id,
+            "pid": os.getpid(),
         }
 
-    def heartbeat(self, client: str | None = None) -> dict[str, Any]:
-        return {}
+    def heartbeat(self, client: str) -> dict[str, Any]:
+        return {"owner": client == self.owner.client}
 
-    def stop(self) -> dict[str, Any]:
+    def stop(self, client: str) -> dict[str, Any]:
         self.pl.supervisor.request_stop()
         return {"requested": "soft_stop"}
 
-    def estop(self, source: str) -> dict[str, Any]:
+    def estop(self, client: str, source: str) -> dict[str, Any]:
         self.pl.supervisor.request_estop(source)
         return {"requested": "hard_stop", "source": source}
 
-    def reset(self) -> dict[str, Any]:
-        before = self.pl.events.count
-        self.pl.supervisor.request_reset()
-        deadline = time.monotonic() + 0.5
-        while self.pl.events.count == before and time.monotonic() < deadline:
-            time.sleep(0.002)
-        new = self.pl.events.snapshot()[-(self.pl.events.count - before):] \
-            if self.pl.events.count > before else []
-        refused = [e for e in new if e.kind == "reset_refused"]
-        if refused:
-            raise InputError(f"reset refused: cause still present ({refused[0].cause})")
-        return {"reset": True, "cleared": [e.cause for e in new if e.kind == "reset"]}
+    def control_acquire(self, client: str, name: str) -> dict[str, Any]:
+        with self._lock:
+            if self.owner.client == client:
+                self.owner.name = name
+                return {"owner": True, "name": name}
+            if self.owner.client is not None:
+                if not self._owner_lost():
+                    raise InputError(
+                        f"control refused: {self.owner.name!r} controls the robot and is "
+                        f"connected (last heard {self._owner_age():.2f} s ago)")
+                if not self._at_rest():
+                    raise InputError(
+                        f"control refused: {self.owner.name!r} was lost while the robot "
+                        "moves; wait until it has stopped")
+            previous = self.owner.name
+            self.owner = Ownership(client, name, time.time())
+        return {"owner": True, "name": name, "took_over_from": previous}
 
-    def set_gains(self, controller: str, gains: dict[str, float]) -> dict[str, Any]:
+    def control_release(self, client: str) -> dict[str, Any]:
+        with self._lock:
+            self._require_owner(client, "control_release")
+            if self._motion_active():
+                raise InputError("control_release refused while a motion or a session runs: "
+                                 "stop it first")
+            self.owner = Ownership()
+        return {"owner": False}
+
+    def reset(self, client: str, acknowledge: list[int]) -> Any:
+        from rt.ipc.server import Deferred
+
+        self._require_owner(client, "reset")
+        ticket = self.pl.supervisor.request_reset(acknowledge)
+
+        def outcome() -> dict[str, Any] | None:
+            if not ticket.done:
+                return None
+            if ticket.refused:
+                causes = ", ".join(f"{r['cause']} (event {r['id']})" for r in ticket.refused)
+                raise InputError(f"reset refused: cause still present: {causes}")
+            unknown = sorted(set(acknowledge) - {c["id"] for c in ticket.cleared})
+            return {"reset": bool(ticket.cleared), "cleared": ticket.cleared,
+                    "still_latched": ticket.still_latched, "not_latched": unknown}
+        return Deferred(outcome, timeout_s=2.0, what="reset")
+
+    def set_gains(self, client: str, controller: str, gains: dict[str, float]) -> dict[str, Any]:
+        self._require_owner(client, "set_gains")
         current = self.pl.graph.component("controller").controller.name
         if controller != current:
             raise InputError(f"controller {controller!r} is not running (running: {current!r})")
         self.pl.loop.set_params("controller", **gains).result(timeout=1.0)
         return {"controller": controller, "gains": gains}
 
-    def run(self, program: str, params: dict[str, Any]) -> dict[str, Any]:
+    def _check_can_move(self, client: str, what: str) -> None:
+        self._require_owner(client, what)
+        if self.pl.supervisor.reaction >= Reaction.SOFT_STOP:
+            raise InputError(f"{what} refused: the robot is stopped: reset the faults first")
+        if self._motion_active():
+            raise InputError(f"{what} refused: a motion or a session is already running")
+
+    def run(self, client: str, program: str, params: dict[str, Any]) -> dict[str, Any]:
         if program not in self.programs:
             raise InputError(f"unknown program {program!r}; known: {sorted(self.programs)}")
-        if self.pl.supervisor.reaction >= Reaction.SOFT_STOP:
-            raise InputError("the robot is stopped: reset the faults first")
-        trajectory, duration = self.programs[program](params)
-        self.pl.reference.request(trajectory, duration)
-        # From now on a client must keep the heartbeat going while the robot moves.
-        self.pl.supervisor.heartbeat_required = True
-        return {"program": program, "duration_s": duration}
+        with self._lock:
+            self._check_can_move(client, "run")
+            prog = self.programs[program](params, self)
+            self.pl.reference.request(prog)
+        return {"program": program, "duration_s": prog.duration_s}
 
-    # -- programs ---------------------------------------------------------------------------
-    def _benchmark(self, params: dict[str, Any]):
-        _only(params, {"duration_s"})
-        duration = _number(params, "duration_s", 26.0, 0.1, 3600.0)
-        return benchmark_reference(), duration
+    # ------------------------------------------------------------------ sessions
+    def session_start(self, client: str, protocol: dict[str, Any], patient: PatientArgs,
+                      record: RecordArgs) -> Any:
+        from rt.ipc.server import Deferred
 
-    def _move(self, params: dict[str, Any]):
-        _only(params, {"z", "roll", "pitch", "hold_s"})
-        kin = self.pl.model.kin
-        z = _number(params, "z", 0.633, 0.0, 2.0)
-        roll = _number(params, "roll", 0.0, -1.0, 1.0)
-        pitch = _number(params, "pitch", 0.0, -1.0, 1.0)
-        hold = _number(params, "hold_s", 0.5, 0.0, 3600.0)
+        if self.sessions is None:
+            raise InputError("this RT process offers no protocol sessions (started without "
+                             "the protocols package)")
         try:
-            cfg = kin.ik(z, roll, pitch)
-        except Exception as exc:
-            raise InputError(f"move: {exc}") from None
-        target = tuple(cfg.q)
+            limits = PatientLimits(**(patient.limits or {}))
+        except ValidationError as exc:
+            raise InputError(f"bad patient limits: {describe_validation_error(exc)}") from None
+        record_dir = Path(record.dir) if record.dir else self.config.recordings_path()
+        if record.dir is None:
+            record_dir.mkdir(parents=True, exist_ok=True)
+        if not record_dir.is_dir():
+            raise InputError(f"recording directory {record_dir} does not exist or is not a "
+                             "directory")
+        if not os.access(record_dir, os.W_OK):
+            raise InputError(f"recording directory {record_dir} is not writable")
+        with self._lock:
+            self._check_can_move(client, "session_start")
+            self._session_count += 1
+            stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+            session = _Session(id=f"S{stamp}-{os.getpid()}-{self._session_count}",
+                               owner=client, record_dir=record_dir,
+                               patient=PatientInfo(patient.id, patient.weight_kg, limits))
+            self.session = session
+        requested = self._now()
+        threading.Thread(target=self._session_worker, args=(session, protocol, requested),
+                         name=f"session-{session.id}", daemon=True).start()
 
-        def hold_pose(t: float, out: Reference) -> None:
-            out.q[:] = target
-            out.qd[:] = 0.0
-            out.qdd[:] = 0.0
-        return hold_pose, hold
+        def outcome() -> dict[str, Any] | None:
+            if session.state == "preflight":
+                return None
+            if session.state == "refused":
+                raise InputError(session.error or "session refused")
+            prep = session.prepared
+            assert prep is not None
+            return {"session_id": session.id, "protocol": prep.name, "kind": prep.kind,
+                    "duration_s": prep.program.duration_s, "preflight": prep.preflight,
+                    "recording": None if session.recording is None else str(session.recording),
+                    "start_latency_s": session.start_latency_s}
+        return Deferred(outcome, timeout_s=SESSION_START_TIMEOUT_S, what="session_start")
+
+    def session_status(self, client: str) -> dict[str, Any]:
+        s = self.session
+        if s is None:
+            return {"session": None, "last_summary": self.last_summary}
+        t = float(self.pl.loop.stats().t)
+        return {"session": s.id, "state": s.state, "phase": s.phase.name.lower(),
+                "progress": s.progress,
+                "elapsed_s": None if math.isnan(s.t_start) else max(0.0, t - s.t_start),
+                "force_ref_n": _finite(s.force_ref_n), "force_n": _finite(s.force_n),
+                "stops": self._stops(s), "error": s.error,
+                "summary": s.summary, "last_summary": self.last_summary}
+
+    def session_abort(self, client: str) -> dict[str, Any]:
+        s = self.session
+        if s is None or s.state not in ("preflight", "running"):
+            raise InputError("no session is running")
+        s.aborted_by = client
+        if s.state == "preflight":
+            s.stop.set()
+            return {"aborted": s.id, "during": "preflight"}
+        self.pl.reference.request_abort()
+        return {"aborted": s.id, "during": "run"}
+
+    def _stops(self, s: _Session) -> list[dict[str, Any]]:
+        return [_stop_dict(e) for e in self.pl.events.snapshot()
+                if e.id > s.first_event and e.kind == "fault"
+                and e.reaction >= Reaction.SOFT_STOP]
+
+    # -- worker: pre-flight, then start --------------------------------------------------
+    def _session_worker(self, s: _Session, protocol: dict[str, Any], requested: float) -> None:
+        assert self.sessions is not None
+        ctx = SessionContext(self.pl.model, RobotLimits(
+            heartbeat_timeout_s=self.config.heartbeat_timeout_s), self.config.rate_hz,
+            twin=self.pl.twin is not None)
+        try:
+            prep = self.sessions.prepare(protocol, s.patient, ctx)
+            if s.stop.is_set():
+                raise InputError("session aborted during pre-flight")
+            self._start(s, prep)
+            s.start_latency_s = self._now() - requested
+            s.state = "running"
+        except TalusError as exc:
+            s.error = str(exc)
+            s.state = "refused"
+            with self._lock:
+                if self.session is s:
+                    self.session = None
+            return
+        except Exception as exc:  # a bug must not leave the session hanging in "preflight"
+            log.exception("session %s failed to start", s.id)
+            s.error = f"internal error: {type(exc).__name__}: {exc}"
+            s.state = "refused"
+            with self._lock:
+                if self.session is s:
+                    self.session = None
+            return
+        self._pump(s)
+
+    def _start(self, s: _Session, prep: PreparedSession) -> None:
+        """At a cycle boundary: the session's limits, the twin's environment; then the program;
+        the recorder opens first so nothing of the session is missed."""
+        from rt.recording.writer import SessionRecorder
+
+        pl = self.pl
+        if pl.supervisor.reaction >= Reaction.SOFT_STOP or self._owner_lost() \
+                or self.owner.client != s.owner:
+            raise InputError("session_start refused: the robot stopped or its owner was lost "
+                             "during pre-flight")
+        d = pl.model.description
+        limits = effective(tuple(d.limits.stroke_m), RobotLimits(
+            heartbeat_timeout_s=self.config.heartbeat_timeout_s), s.patient.limits,
+            prep.protocol_limits)
+        started = datetime.now(timezone.utc)
+        s.recording = unique_path(s.record_dir, recording_name(
+            started.strftime("%Y%m%dT%H%M%SZ"), s.patient.id, prep.name))
+        t_now = float(pl.loop.stats().t)
+        meta = {**prep.metadata, "patient_id": s.patient.id,
+                "limits": s.patient.limits.model_dump(), "session_id": s.id,
+                "rt": {"pid": os.getpid(), "endpoint": self.endpoint,
+                       "backend": self.config.backend},
+                "robot_description": d.name, "preflight": prep.preflight}
+        recorder = SessionRecorder(s.recording, meta, loop_t0=t_now,
+                                   extra_channels={SUMMARY_CHANNEL.topic: SUMMARY_CHANNEL})
+        s.prepared = prep
+        s.started_wall = time.time()
+        s.first_event = pl.events.count
+        self._recorder = recorder
+        self._tap_start = self.tap.written
+        recorder.attach_state_ring(pl.recorder, start=pl.recorder.written)
+        pl.events.listener = self._event_listener(recorder)
+        env = None
+        if pl.twin is not None and self.config.session_environment == "patient_foot":
+            from rt.twin.environment import CompliantAnkle
+            z, roll, pitch = prep.start_pose
+            env = CompliantAnkle(neutral_z_m=z + d.sensor.offset_m[2], neutral_roll_rad=roll,
+                                 neutral_pitch_rad=pitch, limb_weight_n=0.0)
+
+        def begin(loop: Any) -> float:
+            pl.supervisor.limits = limits
+            if env is not None and pl.twin is not None:
+                pl.twin.set_environment(env)
+            pl.reference.request(prep.program)
+            return float(loop.t)
+        epoch = pl.reference.epoch
+        refused = pl.reference.refused
+        s.t_start = pl.loop.call(begin, f"start session {s.id}").result(timeout=2.0)
+        deadline = self._now() + PROGRAM_TAKE_TIMEOUT_S
+        while pl.reference.epoch == epoch:
+            if pl.reference.refused != refused:
+                recorder.close()
+                raise InputError(f"session_start refused: {pl.reference.last_error}")
+            if self._now() > deadline:
+                recorder.close()
+                raise InputError("session_start: the loop did not take the program")
+            time.sleep(0.002)
+
+    def _event_listener(self, recorder: Any) -> Callable[[dict], None]:
+        server = self.server
+
+        def listener(ev: dict) -> None:
+            recorder.event(ev)
+            if server is not None:
+                server.publish("event", ev)
+        return listener
+
+    # -- pump: recording channels, figures, the end --------------------------------------
+    def _pump(self, s: _Session) -> None:
+        """Non-real-time: the session tap's rows → the recorder's wrench and reference
+        channels and the figures; ends the session when the robot is back at rest."""
+        assert s.prepared is not None
+        recorder = self._recorder
+        figures = s.prepared.figures()
+        start = self._tap_start
+        seen_motion = False
+        still_since: float | None = None
+        fz, fr = COL_FZ, COL_FREF
+        qd = COLUMNS["qd"]
+        try:
+            while True:
+                time.sleep(0.05)
+                rows, start = self.tap.drain(start)
+                rows = rows[rows[:, 0] >= s.t_start]
+                if len(rows):
+                    figures.add(rows)
+                    record_rows(recorder, rows)
+                    last = rows[-1]
+                    s.phase = Phase(int(last[COL_PHASE]))
+                    s.progress = float(last[COL_PROGRESS])
+                    s.force_ref_n = float(last[fr])
+                    s.force_n = -float(last[fz])
+                    seen_motion = seen_motion or bool(np.any(rows[:, COL_PHASE] < Phase.STOPPED))
+                    if seen_motion and s.phase == Phase.REST:
+                        break
+                    if s.phase == Phase.STOPPED:
+                        moving = bool(np.any(np.abs(last[qd]) >= REST_SPEED_M_S))
+                        still_since = None if moving else (still_since or last[0])
+                        if still_since is not None and last[0] - still_since >= 0.2:
+                            break
+        finally:
+            self._finish(s, figures, recorder)
+
+    def _finish(self, s: _Session, figures: Any, recorder: Any) -> None:
+        pl = self.pl
+        events = [e for e in pl.events.snapshot() if e.id > s.first_event]
+        try:
+            summary = figures.result(events)
+        except Exception as exc:
+            log.exception("session %s: figures failed", s.id)
+            summary = {"error": f"figures failed: {type(exc).__name__}: {exc}"}
+        stops = [_stop_dict(e) for e in events
+                 if e.kind == "fault" and e.reaction >= Reaction.SOFT_STOP]
+        outcome = "completed" if summary.get("completed") and not stops else \
+            "aborted" if s.aborted_by is not None and not stops else "stopped"
+        summary.update({
+            "session_id": s.id, "patient_id": s.patient.id, "outcome": outcome,
+            "aborted_by": s.aborted_by, "stops": stops,
+            "preflight": None if s.prepared is None else s.prepared.preflight,
+            "rt": {"pid": os.getpid(), "endpoint": self.endpoint,
+                   "backend": self.config.backend},
+            "limits": s.patient.limits.model_dump(),
+            "started_wall": s.started_wall, "duration_s": float(pl.loop.stats().t) - s.t_start})
+        t_end = float(pl.loop.stats().t)
+        recorder.publish(SUMMARY_CHANNEL.topic, {"t": t_end, "summary": summary})
+        pl.events.listener = (lambda ev: self.server.publish("event", ev)) \
+            if self.server is not None else None
+        info = recorder.close()
+        summary["recording"] = {"path": str(s.recording), "sha256": info.get("sha256"),
+                                "bytes": info.get("bytes")}
+        pl.loop.call(lambda loop: setattr(pl.supervisor, "limits", self._base_limits),
+                     "restore the limits after a session")
+        s.summary = summary
+        s.state = "ended"
+        self.last_summary = summary
+        with self._lock:
+            if self.session is s:
+                self.session = None
+        if self.server is not None:
+            self.server.publish("event", {"t": t_end, "kind": "session_end",
+                                          "cause": outcome, "summary": summary})
+
+
+def _stop_dict(e: SafetyEvent) -> dict[str, Any]:
+    return {"id": e.id, "t": round(e.t, 3), "cause": e.cause,
+            "reaction": e.reaction.name.lower(), "message": e.message}
+
+
+# ------------------------------------------------------------------------------ the summary
+def _summary_channel() -> Any:
+    from rt.recording.channels import ChannelSpec
+    return ChannelSpec("/session/summary", "talus.SessionSummary", {
+        "type": "object", "title": "talus.SessionSummary",
+        "description": "The session's summary, written once by the RT process when it ends.",
+        "properties": {"t": {"type": "number", "description": "loop time, s"},
+                       "summary": {"type": "object"}},
+        "required": ["t", "summary"]})
+
+
+SUMMARY_CHANNEL = _summary_channel()
+
+
+# ------------------------------------------------------------------------------ programs
+def _benchmark(params: dict[str, Any], service: RtService) -> Program:
+    _only(params, {"duration_s"})
+    duration = _number(params, "duration_s", 26.0, 0.1, 3600.0)
+    return TrajectoryProgram(benchmark_reference(), duration, 1.0 / service.config.rate_hz)
+
+
+def _move(params: dict[str, Any], service: RtService) -> Program:
+    _only(params, {"z", "roll", "pitch", "hold_s"})
+    kin = service.pl.model.kin
+    z = _number(params, "z", 0.633, 0.0, 2.0)
+    roll = _number(params, "roll", 0.0, -1.0, 1.0)
+    pitch = _number(params, "pitch", 0.0, -1.0, 1.0)
+    hold = _number(params, "hold_s", 0.5, 0.0, 3600.0)
+    try:
+        cfg = kin.ik(z, roll, pitch)
+    except TalusError as exc:
+        raise InputError(f"move: {exc}") from None
+    target = tuple(float(x) for x in cfg.q)
+
+    def hold_pose(t: float, out: Reference) -> None:
+        out.q[:] = target
+        out.qd[:] = 0.0
+        out.qdd[:] = 0.0
+    return TrajectoryProgram(hold_pose, hold, 1.0 / service.config.rate_hz)
 
 
 def _only(params: dict, allowed: set[str]) -> None:
@@ -182,45 +641,69 @@ def _finite(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def serve(config: RtConfig, stop_event: threading.Event, ready=None) -> dict:
-    """Run the RT process until ``stop_event`` is set; returns a summary."""
-    from rt.ipc.server import RtServer
+# ------------------------------------------------------------------------------ the process
+def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
+    """The RT process's loop: every program (positions through the configured controller,
+    forces through the hybrid law), holding until one is requested, with the session tap."""
+    from rt.model import RobotModel
     from rt.twin.environment import parse_environment
+    from rt.twin.twin import SimClock, Twin
 
-    common = dict(rate_hz=config.rate_hz, mode="realtime",
-                  patient_limits=config.patient_limits, start_program=False)
+    model = RobotModel.load(config.robot) if config.robot else RobotModel.load()
+    tap = SignalTap("session", SESSION_SIGNALS, capacity=1 << 16)
+    common: dict[str, Any] = dict(
+        model=model, rate_hz=config.rate_hz, mode=config.loop_mode, controller=config.controller,
+        gains=config.gains or None, patient_limits=config.patient_limits,
+        robot_limits=RobotLimits(heartbeat_timeout_s=config.heartbeat_timeout_s),
+        extra_blocks=[tap],
+        extra_connections=[(src, f"session.{name}") for name, src in SESSION_SOURCES.items()])
+    if config.loop_mode == "fast" and config.backend != "sim":
+        raise ConfigurationError("loop_mode fast is for the in-process twin (backend sim) only")
     if config.backend == "twin_shm":
         if not config.shm:
             raise ConfigurationError("backend twin_shm needs the rig's segment name (--shm)")
-        pl = build_position_loop(shm_devices(config.shm), config.controller,
-                                 config.gains or None, **common)
+        devices = shm_devices(config.shm)
     else:
-        pl = build_sim_position_loop(config.controller, config.gains or None,
-                                     environment=parse_environment(config.environment),
-                                     **common)
-    service = RtService(pl, config)
+        clock = SimClock()
+        twin = Twin(model.description, parse_environment(config.environment), clock=clock)
+        twin.place((0.2, 0.2, 0.2))
+        devices = sim_devices(twin, clock)
+    return build_protocol_loop(devices, None, **common), tap
+
+
+def serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None = None,
+          sessions: SessionFactory | None = None,
+          programs: dict[str, Callable[[dict[str, Any], RtService], Program]] | None = None
+          ) -> dict:
+    """Run the RT process until ``stop_event`` is set; returns a summary. ``sessions`` and
+    ``programs`` are what the entry point composes in (``talus.composition``)."""
+    import sys
+
+    from rt.ipc.server import RtServer
+
+    # The loop, IPC, pre-flight and recording threads share the GIL: a short switch interval
+    # bounds how long a request waits for it (the default 5 ms per hand-over delays the owner's
+    # heartbeats by hundreds of ms when the loop runs back to back in fast mode).
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    pl, tap = build_rt_loop(config)
+    service = RtService(pl, config, tap, sessions, programs)
     with RtServer(service, config.endpoint, config.pub_endpoint,
                   heartbeat_timeout_s=config.heartbeat_timeout_s) as server:
         service.server = server
-        pl.supervisor.heartbeat_age = server.heartbeat_age_s
-        pl.events.listener = lambda ev: server.publish("event", {**ev, "t": ev["t"]})
+        service.endpoint = server.endpoint
+        pl.events.listener = lambda ev: server.publish("event", ev)
         pl.loop.start()
         if ready is not None:
             ready(server)
         period = 1.0 / config.telemetry_hz
-        g = pl.graph
         try:
             while not stop_event.wait(period):
-                rec = pl.recorder
-                server.publish("telemetry", {
-                    "t": float(rec.ring[(rec.written - 1) % rec.capacity, 0]),
-                    "q": g.output("encoders.q").tolist(),
-                    "q_ref": g.output("reference.q_ref").tolist(),
-                    "tau": g.output("controller.tau").tolist(),
-                    "volts": g.output("supervisor.volts").tolist(),
-                    "mode": float(g.output("supervisor.mode")[0]),
-                    "phase": float(g.output("reference.phase")[0])})
+                server.publish("telemetry", telemetry(service))
         finally:
+            s = service.session
+            if s is not None:
+                s.stop.set()
+                pl.reference.request_abort()
             pl.loop.stop()
             pl.graph.stop()
             if pl.devices is not None and pl.devices.close is not None:
@@ -228,3 +711,40 @@ def serve(config: RtConfig, stop_event: threading.Event, ready=None) -> dict:
     stats = pl.loop.stats()
     return {"cycles": stats.cycles, "deadline_misses": stats.misses,
             "events": [e.as_dict() for e in pl.events.snapshot()]}
+
+
+def telemetry(service: RtService) -> dict[str, Any]:
+    """One decimated sample for live plots (SI units; angles in rad)."""
+    pl = service.pl
+    g = pl.graph
+    cfg = g.output("model.state").cfg
+    rec = pl.recorder
+    w = g.output("force.wrench")
+    s = service.session
+    return {
+        "t": float(rec.ring[(rec.written - 1) % rec.capacity, 0]),
+        "q": g.output("encoders.q").tolist(),
+        "q_ref": g.output("reference.q_ref").tolist(),
+        "tau": g.output("controller.tau").tolist(),
+        "volts": g.output("supervisor.volts").tolist(),
+        "pose": None if cfg is None else [cfg.z, cfg.roll, cfg.pitch],
+        "pose_ref": g.output("reference.pose").tolist(),
+        "wrench": [None if math.isnan(x) else float(x) for x in w],
+        "force_ref_n": float(g.output("reference.force")[0]),
+        "force_n": None if math.isnan(w[2]) else -float(w[2]),
+        "ctrl_mode": int(g.output("reference.ctrl_mode")[0]),
+        "phase": Phase(int(g.output("reference.phase")[0])).name.lower(),
+        "progress": float(g.output("reference.progress")[0]),
+        "mode": service._mode().name.lower(),
+        "causes": sorted(pl.supervisor.causes),
+        "session": None if s is None else s.id,
+        "owner": service.owner.name,
+    }
+
+
+def sha256_of(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

@@ -6,9 +6,13 @@ import json
 import signal
 import sys
 import threading
+from typing import Any, Callable
 
 
-def register_serve(commands: argparse._SubParsersAction) -> None:
+def register_serve(commands: argparse._SubParsersAction,
+                   extensions: Callable[[], dict[str, Any]] | None = None) -> None:
+    """Add ``serve``; ``extensions()`` gives ``rt.service.serve`` its session factory and extra
+    programs (the entry point composes them)."""
     p = commands.add_parser("serve", help="run the RT process (loop + supervisor + IPC server)",
                             description="Owns the hardware (the digital twin with --backend "
                             "sim) and the 1 kHz loop; serves commands and publishes telemetry "
@@ -22,12 +26,24 @@ def register_serve(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--endpoint", default=None, help="override the request endpoint")
     p.add_argument("--pub-endpoint", default=None, help="override the publish endpoint")
     p.add_argument("--seconds", type=float, default=None, help="stop after this long")
-    p.set_defaults(func=_serve)
+    p.add_argument("--robot", default=None, help="robot description YAML (default: nominal)")
+    p.add_argument("--heartbeat-timeout", type=float, default=None,
+                   help="the owner's silence after which a motion soft-stops, s (default: the "
+                        "config's, 0.25)")
+    p.add_argument("--fast", action="store_true",
+                   help="with --backend sim: run the twin as fast as possible (demos, tests)")
+    p.add_argument("--recordings-dir", default=None,
+                   help="where sessions are recorded (default: the config's, else the user "
+                        "data directory)")
+    p.set_defaults(func=_serve, extensions=extensions)
 
 
 def _serve(args) -> int:
     from rt.errors import TalusError
-    from rt.service import load_config, serve
+    from pydantic import ValidationError
+
+    from rt.ipc.messages import describe_validation_error
+    from rt.service import RtConfig, load_config, serve
 
     try:
         config = load_config(args.config)
@@ -38,9 +54,21 @@ def _serve(args) -> int:
             updates["endpoint"] = args.endpoint
         if args.pub_endpoint:
             updates["pub_endpoint"] = args.pub_endpoint
-        config = config.model_copy(update=updates)
+        if args.robot:
+            updates["robot"] = args.robot
+        if args.fast:
+            updates["loop_mode"] = "fast"
+        if args.heartbeat_timeout is not None:
+            updates["heartbeat_timeout_s"] = args.heartbeat_timeout
+        config = RtConfig.model_validate({**config.model_dump(), **updates})
+        if args.recordings_dir:
+            updates["recordings_dir"] = args.recordings_dir
+
     except TalusError as exc:
         print(json.dumps({"error": str(exc)}))
+        return 2
+    except ValidationError as exc:
+        print(json.dumps({"error": f"bad option: {describe_validation_error(exc)}"}))
         return 2
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -53,7 +81,8 @@ def _serve(args) -> int:
                                       "pub_endpoint": server.pub_endpoint}}), flush=True)
 
     try:
-        summary = serve(config, stop, ready)
+        summary = serve(config, stop, ready,
+                        **(args.extensions() if args.extensions is not None else {}))
     except TalusError as exc:
         print(json.dumps({"error": str(exc)}))
         return 2

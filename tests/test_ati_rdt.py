@@ -390,14 +390,14 @@ def _read_line(proc: subprocess.Popen, timeout: float) -> str:
 
 
 def _talus(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rt.cli", *args], cwd=REPO, env=_env(),
+    return subprocess.run([sys.executable, "-m", "talus", *args], cwd=REPO, env=_env(),
                           capture_output=True, text=True, timeout=20)
 
 
 def test_cli_reads_the_twin_served_over_rdt():
     port = _free_udp_port()
     server = subprocess.Popen(
-        [sys.executable, "-m", "rt.cli", "twin", "serve-ati", "--port", str(port),
+        [sys.executable, "-m", "talus", "twin", "serve-ati", "--port", str(port),
          "--seconds", "20", "--seed", "3"],
         cwd=REPO, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

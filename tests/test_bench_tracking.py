@@ -30,7 +30,7 @@ def test_payload_step_experiment_shape_and_ordering(monkeypatch):
 
 
 def test_bench_tracking_cli_json():
-    proc = subprocess.run([sys.executable, "-m", "rt.cli", "bench", "tracking", "--experiment",
+    proc = subprocess.run([sys.executable, "-m", "talus", "bench", "tracking", "--experiment",
                            "pid-vs-paden", "--seconds", "4", "--json"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr

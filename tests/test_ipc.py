@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import zmq
 
-from rt.cli import main as talus_main
+from talus.cli import main as talus_main
 from rt.errors import ConfigurationError, InputError, ProtocolError, SafetyTrip
 from rt.ipc import messages
 from rt.ipc.client import RtClient, RtUnavailableError, Subscriber
@@ -35,6 +35,7 @@ class FakeHandler:
         self.fail: dict[str, BaseException] = {}
         self.results: dict[str, Any] = {}
         self.delay_s: dict[str, float] = {}
+        self.clients: list[str] = []
 
     def _do(self, cmd: str, **kwargs: Any) -> Any:
         self.calls.append((cmd, kwargs))
@@ -43,26 +44,16 @@ class FakeHandler:
             raise self.fail[cmd]
         return self.results.get(cmd, {"did": cmd, **kwargs})
 
-    def status(self) -> Any:
-        return self._do("status")
+    def __getattr__(self, cmd: str) -> Any:
+        # Every command of the protocol (rt.ipc.server.HANDLER_METHODS), with the caller.
+        from rt.ipc.server import HANDLER_METHODS
 
-    def heartbeat(self, client: str) -> Any:
-        return self._do("heartbeat", client=client)
-
-    def stop(self) -> Any:
-        return self._do("stop")
-
-    def estop(self, source: str) -> Any:
-        return self._do("estop", source=source)
-
-    def reset(self) -> Any:
-        return self._do("reset")
-
-    def set_gains(self, controller: str, gains: dict[str, float]) -> Any:
-        return self._do("set_gains", controller=controller, gains=gains)
-
-    def run(self, program: str, params: dict[str, Any]) -> Any:
-        return self._do("run", program=program, params=params)
+        if cmd not in HANDLER_METHODS:
+            raise AttributeError(cmd)
+        def call(client: str, **kwargs: Any) -> Any:
+            self.clients.append(client)
+            return self._do(cmd, **({"client": client} if cmd == "heartbeat" else kwargs))
+        return call
 
 
 @pytest.fixture(autouse=True)
@@ -146,7 +137,9 @@ def test_every_command_round_trips(server: RtServer, client: RtClient,
     assert client.heartbeat() == {"did": "heartbeat", "client": "test-client"}
     assert client.stop() == {"did": "stop"}
     assert client.estop("gui") == {"did": "estop", "source": "gui"}
-    assert client.reset() == {"did": "reset"}
+    assert client.reset([3, 5]) == {"did": "reset", "acknowledge": [3, 5]}
+    assert client.control_acquire("gui at bed 2") == {"did": "control_acquire",
+                                                      "name": "gui at bed 2"}
     assert client.set_gains("position", {"kp": 120, "kd": 3.5}) == {
         "did": "set_gains", "controller": "position", "gains": {"kp": 120.0, "kd": 3.5}}
     params = {"amplitude_n": 50.0, "freq_hz": 1.0, "axes": ["z"], "nested": {"a": [1, None]}}
@@ -155,8 +148,9 @@ def test_every_command_round_trips(server: RtServer, client: RtClient,
     assert client.subscribe_info() == {"pub_endpoint": server.pub_endpoint,
                                        "topics": ["telemetry", "event"]}
     assert [c for c, _ in handler.calls] == [
-        "status", "heartbeat", "stop", "estop", "reset", "set_gains", "run"]
-    assert handler.calls[5][1]["gains"] == {"kp": 120.0, "kd": 3.5}
+        "status", "heartbeat", "stop", "estop", "reset", "control_acquire", "set_gains", "run"]
+    assert handler.calls[6][1]["gains"] == {"kp": 120.0, "kd": 3.5}
+    assert set(handler.clients) == {"test-client"}  # every handler call knows its caller
     assert server.stats()["rejected"] == 0
 
 
@@ -286,7 +280,7 @@ def test_handler_talus_error_becomes_error_reply_and_server_keeps_serving(
         server: RtServer, client: RtClient, handler: FakeHandler) -> None:
     handler.fail["reset"] = SafetyTrip("cannot reset: e-stop input still pressed; release it")
     with pytest.raises(InputError, match="e-stop input still pressed"):
-        client.reset()
+        client.reset([1])
     assert client.status() == {"did": "status"}
     assert server.stats()["handler_errors"] == 1
 
@@ -405,7 +399,7 @@ def test_a_late_reply_is_not_mistaken_for_the_next_one(server: RtServer,
             c.run("slow", {})
         time.sleep(0.3)  # the server answers the old request to the discarded socket
         assert c.status() == {"did": "status"}
-        assert c.reset() == {"did": "reset"}
+        assert c.reset([1]) == {"did": "reset", "acknowledge": [1]}
 
 
 # --------------------------------------------------------------------------- publishing
@@ -561,7 +555,7 @@ def test_codec_round_trip_and_reply_validation() -> None:
 # --------------------------------------------------------------------------- CLI
 
 def run_cli(*args: str) -> tuple[int, list[dict[str, Any]]]:
-    proc = subprocess.run([sys.executable, "-m", "rt.cli", "rt", *args], capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "talus", "rt", *args], capture_output=True,
                           text=True, timeout=60, cwd=REPO)
     return proc.returncode, [json.loads(line) for line in proc.stdout.splitlines() if line]
 
@@ -590,7 +584,11 @@ def test_cli_commands_and_error_replies(server: RtServer, handler: FakeHandler,
     assert cli("stop") == (0, {"did": "stop"})
     assert cli("estop") == (0, {"did": "estop", "source": "cli"})
     assert cli("estop", "--source", "keyboard") == (0, {"did": "estop", "source": "keyboard"})
-    assert cli("reset") == (0, {"did": "reset"})
+    handler.results["status"] = {"latched": [{"id": 4, "cause": "estop_cli"}]}
+    assert cli("reset") == (0, {"did": "reset", "acknowledge": [4]})  # what status showed
+    assert cli("reset", "--ack", "4", "9") == (0, {"did": "reset", "acknowledge": [4, 9]})
+    assert [c for c, _ in handler.calls[-3:]] == ["control_acquire", "reset", "control_release"]
     handler.fail["reset"] = SafetyTrip("fault still present: encoder 2 frozen")
     assert cli("reset") == (2, {"error": "fault still present: encoder 2 frozen"})
+    assert handler.calls[-1][0] == "control_release"  # control given back after a refusal
     assert cli("status", "--timeout", "0") == (2, {"error": "timeout_s must be > 0, got 0.0"})

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-TALUS = [shutil.which("talus") or "", ] if shutil.which("talus") else [sys.executable, "-m", "rt.cli"]
+TALUS = [shutil.which("talus") or "", ] if shutil.which("talus") else [sys.executable, "-m", "talus"]
 
 
 def run(args: list[str], stdin: str = "") -> tuple[int, list[dict]]:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rt.cli import main as talus_main
+from talus.cli import main as talus_main
 from rt.components.blocks import RecorderTap
 from rt.errors import InputError
 from rt.recording import writer as writer_mod

@@ -64,7 +64,7 @@ def test_preflight_reports_predicted_peaks():
 
 def test_session_cli_json(tmp_path):
     out = tmp_path / "gait.mcap"
-    proc = subprocess.run([sys.executable, "-m", "rt.cli", "session", "run", "--protocol",
+    proc = subprocess.run([sys.executable, "-m", "talus", "session", "run", "--protocol",
                            str(LIB["gait_replay.yaml"]), "--patient-weight", "75", "--record",
                            str(out), "--fast", "--json"], capture_output=True, text=True,
                           timeout=600)
@@ -77,7 +77,7 @@ def test_session_cli_json(tmp_path):
 def test_session_cli_refuses_a_bad_protocol(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("schema_version: 1\nkind: sine_fz\nname: x\nmean_n: -5\n")
-    proc = subprocess.run([sys.executable, "-m", "rt.cli", "session", "run", "--protocol",
+    proc = subprocess.run([sys.executable, "-m", "talus", "session", "run", "--protocol",
                            str(bad), "--fast", "--json"], capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 2

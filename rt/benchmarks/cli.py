@@ -12,9 +12,6 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_tracking)
     register_loop(commands)
-    p = commands.add_parser("force", help="force tracking on the twin: sine Fz and gait replay")
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_force)
 
 
 def _tracking(args) -> int:
@@ -67,18 +64,4 @@ def _loop(args) -> int:
         for name, c in result["components"].items():
             print(f"  {name:16s} median {c['median']:7.1f}  p99 {c['p99']:7.1f}  max "
                   f"{c['max']:8.1f} µs")
-    return 0
-
-
-def _force(args) -> int:
-    from rt.benchmarks.force import run_force_benchmark
-
-    r = run_force_benchmark()
-    if args.json:
-        print(json.dumps(r))
-    else:
-        print(f"force tracking on the twin ({r['environment']})")
-        for f, v in r["sine_rms_pct"].items():
-            print(f"  sine Fz 300 ± 100 N at {f} Hz: RMS error {v:.2f} % of amplitude")
-        print(f"  gait replay at real speed: RMS error {r['gait_rms_pct_of_peak']:.2f} % of peak")
     return 0

@@ -164,3 +164,16 @@ class Swap(Command):
     def apply(self, loop: Any) -> Any:
         loop.graph.commit_swap(self.plan)
         return self.plan.new
+
+
+class Call(Command):
+    """Run ``fn(loop)`` in the loop's thread at the next boundary (an event, not a cycle: e.g.
+    the twin's environment changing when a patient's foot is placed); value = its return."""
+
+    def __init__(self, fn: Any, description: str) -> None:
+        self.fn = fn
+        self.description = description
+        super().__init__()
+
+    def apply(self, loop: Any) -> Any:
+        return self.fn(loop)

@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass
 from typing import Any, Callable, Iterable, Iterator
 
 from rt.engine import rt_hygiene
-from rt.engine.commands import CommandQueue, CommandResult, SetParams, SetRate, Swap
+from rt.engine.commands import Call, CommandQueue, CommandResult, SetParams, SetRate, Swap
 from rt.engine.component import Component
 from rt.engine.graph import Graph
 from rt.engine.stats import (DEFAULT_CAPACITY, Fault, GraphStats, TimingStats, check_capacity,
@@ -441,6 +441,16 @@ class Loop:
         if result.done() and not result.ok:  # queue full: release the reservation
             component._graph = None
         return result
+
+    def call(self, fn: Callable[["Loop"], Any], description: str) -> CommandResult:
+        """Run ``fn(loop)`` in the loop's thread at the next boundary (or at once when the loop
+        is not running); returns the command's result."""
+        cmd = Call(fn, description)
+        if not self.running:
+            self._queue.submit(cmd)
+            self._queue.drain(self, self._cycles)
+            return cmd.result
+        return self._queue.submit(cmd)
 
     # ------------------------------------------------------------------ reporting
     def stats(self) -> LoopStats:

@@ -1,8 +1,11 @@
-"""``talus rt status|stop|estop|reset``: one request to a running RT server.
+"""``talus rt status|stop|estop|reset``: requests to a running RT server.
 
 Each prints the reply's ``result`` as one JSON line and exits 0; a refused request or an
-unreachable server prints ``{"error": "..."}`` and exits 2. (``talus rt serve`` is added to this
-group by the RT process's own module.)
+unreachable server prints ``{"error": "..."}`` and exits 2. ``status``, ``stop`` and ``estop``
+need no control of the robot; ``reset`` takes control for the one request (refused while
+another client controls the robot) and acknowledges the latched faults it names with ``--ack``,
+or those ``status`` shows when it runs. (``talus rt serve`` is added to this group by the entry
+point, which composes what the RT process offers.)
 """
 from __future__ import annotations
 
@@ -44,10 +47,13 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         if name == "estop":
             p.add_argument("--source", choices=("cli", "keyboard", "gui"), default="cli",
                            help="reported source of the stop (default %(default)s)")
+        if name == "reset":
+            p.add_argument("--ack", type=int, nargs="+", default=None, metavar="EVENT_ID",
+                           help="the latched events to acknowledge (ids from `talus rt status`)"
+                                "; default: those latched when the reset is sent")
+            p.set_defaults(func=cmd_reset)
+            continue
         p.set_defaults(func=cmd_request, rt_command=name)
-    from rt.service_cli import register_serve
-
-    register_serve(commands)
 
 
 def cmd_request(args: argparse.Namespace) -> int:
@@ -60,6 +66,29 @@ def cmd_request(args: argparse.Namespace) -> int:
         with RtClient(args.endpoint, client_id=default_client_id("cli"),
                       timeout_s=args.timeout) as client:
             result = client.request(args.rt_command, **cmd_args)
+    except TalusError as exc:
+        _emit({"error": str(exc)})
+        return EXIT_ERROR
+    _emit(result)
+    return 0
+
+
+def cmd_reset(args: argparse.Namespace) -> int:
+    """Take control, reset the acknowledged faults, give control back."""
+    from rt.errors import TalusError
+    from rt.ipc.client import RtClient, default_client_id
+
+    try:
+        with RtClient(args.endpoint, client_id=default_client_id("cli"),
+                      timeout_s=args.timeout) as client:
+            ack = args.ack
+            if ack is None:
+                ack = [e["id"] for e in client.status()["latched"]]
+            client.request("control_acquire", name="talus rt reset (CLI)")
+            try:
+                result = client.request("reset", acknowledge=ack)
+            finally:
+                client.request("control_release")
     except TalusError as exc:
         _emit({"error": str(exc)})
         return EXIT_ERROR

@@ -119,10 +119,11 @@ class RtClient:
     # ------------------------------------------------------------------ requests
 
     def _call(self, channel: _ReqChannel, cmd: str, args: dict[str, Any],
-              cancel: threading.Event | None = None) -> dict[str, Any]:
+              cancel: threading.Event | None = None,
+              timeout_s: float | None = None) -> dict[str, Any]:
         request_id = next(self._ids)
         body = encode_request(request_id, self.client_id, cmd, args)  # refuses bad args here
-        reply = decode_reply(channel.request(body, self.timeout_s, cancel))
+        reply = decode_reply(channel.request(body, timeout_s or self.timeout_s, cancel))
         if reply.id != request_id:
             # Cannot happen with a fresh REQ socket per timeout; a server bug if it does.
             raise ProtocolError(f"RT server answered request {reply.id!r} to {request_id!r}")
@@ -131,8 +132,10 @@ class RtClient:
         assert reply.result is not None
         return reply.result
 
-    def request(self, cmd: str, /, **args: Any) -> dict[str, Any]:
-        """Send ``cmd`` with ``args`` and return the reply's ``result``.
+    def request(self, cmd: str, /, *, timeout_s: float | None = None,
+                **args: Any) -> dict[str, Any]:
+        """Send ``cmd`` with ``args`` and return the reply's ``result`` (waiting up to
+        ``timeout_s``, default the client's).
 
         Raises:
             InputError: the request is invalid (checked before sending) or the server refused
@@ -143,7 +146,7 @@ class RtClient:
         if self._closed:
             raise InputError("RtClient is closed")
         with self._lock:
-            return self._call(self._channel, cmd, args)
+            return self._call(self._channel, cmd, args, timeout_s=timeout_s)
 
     def status(self) -> dict[str, Any]:
         """The RT process's status (the handler's dict)."""
@@ -161,9 +164,37 @@ class RtClient:
         """Hard stop from ``source`` ("gui", "cli" or "keyboard")."""
         return self.request("estop", source=source)
 
-    def reset(self) -> dict[str, Any]:
-        """Reset latched faults."""
-        return self.request("reset")
+    def reset(self, acknowledge: list[int] | None = None) -> dict[str, Any]:
+        """Reset the latched faults with these event ids (default: those ``status`` shows now).
+        Only the owner may; the reply comes after the cycle that took the reset."""
+        if acknowledge is None:
+            acknowledge = [e["id"] for e in self.status()["latched"]]
+        return self.request("reset", acknowledge=list(acknowledge))
+
+    def control_acquire(self, name: str) -> dict[str, Any]:
+        """Become the client that controls the robot (``name`` is shown to the others)."""
+        return self.request("control_acquire", name=name)
+
+    def control_release(self) -> dict[str, Any]:
+        """Give control back (refused while a motion or a session runs)."""
+        return self.request("control_release")
+
+    def session_start(self, protocol: dict[str, Any], patient: dict[str, Any],
+                      record: dict[str, Any] | None = None,
+                      timeout_s: float = 120.0) -> dict[str, Any]:
+        """Start a session: the RT process validates and pre-flights the protocol (seconds),
+        then answers with the session id and the predicted peaks, or refuses with the reason.
+        Only the owner may; keep heartbeating while it runs."""
+        return self.request("session_start", timeout_s=timeout_s, protocol=protocol,
+                            patient=patient, record=record or {})
+
+    def session_status(self) -> dict[str, Any]:
+        """The running session's phase, progress, forces and stops, or the last summary."""
+        return self.request("session_status")
+
+    def session_abort(self) -> dict[str, Any]:
+        """Soft-stop the session, then return to rest (anyone may)."""
+        return self.request("session_abort")
 
     def set_gains(self, controller: str, gains: dict[str, float]) -> dict[str, Any]:
         """Set gains of ``controller`` (names and units are the controller's)."""

@@ -11,21 +11,42 @@ Replies (server → client, one frame)::
 
 Commands and their ``args`` (strict: no type coercion, unknown keys refused):
 
-==================  ============================================================
-``status``          ``{}``
-``heartbeat``       ``{}``
-``stop``            ``{}`` — soft stop
-``estop``           ``{"source": "gui" | "cli" | "keyboard"}`` — hard stop
-``reset``           ``{}`` — reset latched faults
-``set_gains``       ``{"controller": str, "gains": {str: finite number, ...}}``
-``run``             ``{"program": str, "params": {...}}`` — start a motion program
-``subscribe_info``  ``{}`` — answered by the server: the PUB endpoint and topics
-==================  ============================================================
+===================  ===========================================================  ========
+command              ``args``                                                     who
+===================  ===========================================================  ========
+``status``           ``{}`` — state, latched faults with their event ids, owner    anyone
+``heartbeat``        ``{}`` — only the owner's counts for the supervisor          anyone
+``stop``             ``{}`` — soft stop (latched until reset)                      anyone
+``estop``            ``{"source": "gui" | "cli" | "keyboard"}`` — hard stop        anyone
+``control_acquire``  ``{"name": str}`` — become the one controlling client         see below
+``control_release``  ``{}`` — give control back (refused while a motion runs)     owner
+``reset``            ``{"acknowledge": [event id, ...]}`` — clear exactly those    owner
+                     latched faults (ids from ``status``); all or nothing; the
+                     reply comes after the cycle that took it
+``set_gains``        ``{"controller": str, "gains": {str: finite number, ...}}``  owner
+``run``              ``{"program": str, "params": {...}}`` — a motion program      owner
+``session_start``    ``{"protocol": {...}, "patient": {"id": str, "weight_kg"?:   owner
+                     number, "limits"?: {...}}, "record": {"dir"?: str}}`` —
+                     validated and pre-flighted in the RT process, recorded by it;
+                     the reply comes after pre-flight: the session id and the
+                     predicted peaks, or the refusal's reason
+``session_status``   ``{}`` — phase, progress, elapsed, forces, stops; the last    anyone
+                     session's summary once it ended
+``session_abort``    ``{}`` — soft stop of the session, then return to rest        anyone
+``subscribe_info``   ``{}`` — answered by the server: the PUB endpoint and topics  anyone
+===================  ===========================================================  ========
+
+Ownership: one client controls the robot at a time (``control_acquire``). Taking control from
+a live owner is refused; after the owner went silent for the heartbeat timeout it is allowed
+once the robot is at rest. While a motion or a session runs the owner must keep heartbeating:
+when its requests stop for the timeout the supervisor soft-stops, whatever other clients do.
 
 Publications (server PUB socket, two frames: topic, body)::
 
-    telemetry: {"v": 1, "topic": "telemetry", "t": <s>, ...}
-    event:     {"v": 1, "topic": "event", "t": <s>, "kind": str, "cause": str, ...}
+    telemetry: {"v": 1, "topic": "telemetry", "t": <s>, ...}   (decimated loop state: q, pose,
+               wrench, force reference, phase, progress, supervisor mode and causes, session)
+    event:     {"v": 1, "topic": "event", "t": <s>, "kind": str, "cause": str, ...}  (safety
+               events; kind "session_end" carries the session's summary)
 
 Incoming requests larger than :data:`MAX_MESSAGE_BYTES`, not UTF-8, not JSON (NaN/Infinity
 tokens and duplicate keys included), not an object, of another version, with an unknown command
@@ -83,7 +104,52 @@ class EstopArgs(_Args):
 
 
 class ResetArgs(_Args):
-    """``reset`` (clear latched faults): no arguments."""
+    """``reset``: clear the latched faults whose event ids are listed (ids from ``status``)."""
+
+    acknowledge: list[Annotated[int, Field(ge=1)]] = Field(max_length=1024)
+
+
+class ControlAcquireArgs(_Args):
+    """``control_acquire``: become the controlling client; ``name`` says who (shown to others)."""
+
+    name: _NAME
+
+
+class ControlReleaseArgs(_Args):
+    """``control_release``: no arguments."""
+
+
+class PatientArgs(_Args):
+    """The patient of a session: a pseudonymous code (never identifying data), the body mass
+    (kg; gait replay scales to it) and the limits in force (``PatientLimits`` fields)."""
+
+    id: Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9._-]+$")]
+    weight_kg: Annotated[float, Field(gt=0.0, le=400.0)] | None = None
+    limits: dict[str, Any] | None = None
+
+
+class RecordArgs(_Args):
+    """Where the RT process writes the session's recording: ``dir`` (an existing directory;
+    default the RT process's ``recordings_dir``). The file name is the RT process's choice."""
+
+    dir: Annotated[str, Field(min_length=1, max_length=4096)] | None = None
+
+
+class SessionStartArgs(_Args):
+    """``session_start``: the protocol document (validated by the protocol schema in the RT
+    process), the patient, the recording."""
+
+    protocol: dict[str, Any]
+    patient: PatientArgs
+    record: RecordArgs = Field(default_factory=RecordArgs)
+
+
+class SessionStatusArgs(_Args):
+    """``session_status``: no arguments."""
+
+
+class SessionAbortArgs(_Args):
+    """``session_abort``: no arguments."""
 
 
 class SetGainsArgs(_Args):
@@ -111,8 +177,13 @@ COMMANDS: dict[str, type[_Args]] = {
     "stop": StopArgs,
     "estop": EstopArgs,
     "reset": ResetArgs,
+    "control_acquire": ControlAcquireArgs,
+    "control_release": ControlReleaseArgs,
     "set_gains": SetGainsArgs,
     "run": RunArgs,
+    "session_start": SessionStartArgs,
+    "session_status": SessionStatusArgs,
+    "session_abort": SessionAbortArgs,
     "subscribe_info": SubscribeInfoArgs,
 }
 

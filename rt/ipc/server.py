@@ -1,8 +1,10 @@
 """The RT process's command and telemetry server (ZeroMQ ROUTER + PUB, one thread).
 
 Requests are validated by :mod:`rt.ipc.messages` and dispatched to a plain handler object
-(``handler.<cmd>(**args)``) on the server thread. Every request gets exactly one reply; a bad
-request never reaches the handler and never stops the server.
+(``handler.<cmd>(client=<the caller's id>, **args)``) on the server thread. Every request gets
+exactly one reply; a bad request never reaches the handler and never stops the server. A handler
+that cannot answer at once returns a :class:`Deferred`: the server keeps serving (other clients'
+e-stops are never queued behind it) and replies when the deferred is ready.
 
 The RT loop talks to the server only through :meth:`RtServer.publish` (a bounded hand-over
 queue, never the network) and :meth:`RtServer.heartbeat_age_s` (one float read).
@@ -15,39 +17,51 @@ import socket
 import threading
 import time
 from collections import deque
-from typing import Any, Protocol
+from typing import Any, Callable, Protocol
 
 import zmq
 
 from rt.errors import ConfigurationError, InputError, TalusError
 from rt.ipc.messages import (
-    DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT, MAX_MESSAGE_BYTES, TOPICS, Request, RequestRejected,
+    COMMANDS, DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT, MAX_MESSAGE_BYTES, TOPICS, Request,
+    RequestRejected,
     check_publication, decode_request, encode_publication, error_reply, ok_reply,
 )
 
 log = logging.getLogger(__name__)
 
-#: Handler methods the server dispatches to (``subscribe_info`` is answered by the server).
-HANDLER_METHODS: tuple[str, ...] = (
-    "status", "heartbeat", "stop", "estop", "reset", "set_gains", "run")
+#: Handler methods the server dispatches to: every command but ``subscribe_info``, which the
+#: server answers itself.
+HANDLER_METHODS: tuple[str, ...] = tuple(c for c in COMMANDS if c != "subscribe_info")
 # libzmq disconnects a peer whose frame exceeds this; between MAX_MESSAGE_BYTES and this the
 # peer gets an error reply instead. It only guards the process's memory against a runaway peer.
 _HARD_FRAME_LIMIT = 16 * 1024 * 1024
 _MAX_REQUESTS_PER_TURN = 64  # so a flood of requests cannot starve publishing
+_MAX_CLIENTS_TRACKED = 1000
+
+
+class Deferred:
+    """A reply the handler cannot give at once: a reset answered after the cycle that took it,
+    a session start answered after its pre-flight. The server calls ``poll()`` on its own
+    thread every turn (1 ms apart while any is pending); ``poll`` returns the result dict when
+    ready, None while not, or raises :class:`TalusError` (the error reply). Past ``timeout_s``
+    the reply is an error naming ``what``."""
+
+    def __init__(self, poll: Callable[[], dict[str, Any] | None], timeout_s: float,
+                 what: str) -> None:
+        self.poll = poll
+        self.deadline = time.monotonic() + timeout_s
+        self.what = what
 
 
 class Handler(Protocol):
-    """What the server calls; each method returns a JSON-able dict (or None for ``{}``) or
-    raises :class:`rt.errors.TalusError`, whose message becomes the error reply. Called on the
-    server thread: hand work to the RT loop, do not block."""
+    """What the server calls, one method per command (:data:`HANDLER_METHODS`), each with the
+    caller's id as keyword ``client`` and the command's arguments. Each returns a JSON-able
+    dict (or None for ``{}``), or a :class:`Deferred`, or raises :class:`rt.errors.TalusError`,
+    whose message becomes the error reply. Called on the server thread: hand work to the RT
+    loop or a worker, never block."""
 
-    def status(self) -> dict[str, Any]: ...
-    def heartbeat(self, client: str) -> dict[str, Any]: ...
-    def stop(self) -> dict[str, Any]: ...
-    def estop(self, source: str) -> dict[str, Any]: ...
-    def reset(self) -> dict[str, Any]: ...
-    def set_gains(self, controller: str, gains: dict[str, float]) -> dict[str, Any]: ...
-    def run(self, program: str, params: dict[str, Any]) -> dict[str, Any]: ...
+    def status(self, client: str) -> dict[str, Any]: ...
 
 
 class RtServer:
@@ -115,6 +129,9 @@ class RtServer:
         self._clients_lock = threading.Lock()
         self._last_seen: dict[str, float] = {}
         self._last_any = -math.inf
+
+        # Replies the handler deferred: (routing envelope, request id, the deferred).
+        self._deferred: list[tuple[list[bytes], int | str, Deferred]] = []
 
         self._requests = 0
         self._rejected = 0
@@ -218,6 +235,14 @@ class RtServer:
         age = self.heartbeat_age_s(now)
         return math.isfinite(age) and age > self.heartbeat_timeout_s
 
+    def last_seen_age_s(self, client: str, now: float | None = None) -> float:
+        """Seconds since ``client``'s newest request (monotonic clock); ``inf`` if never seen.
+        One dict read, no lock: cheap enough for the RT loop to call every cycle."""
+        seen = self._last_seen.get(client)
+        if seen is None:
+            return math.inf
+        return (time.monotonic() if now is None else now) - seen
+
     def clients(self, now: float | None = None) -> dict[str, float]:
         """Every client id seen so far -> seconds since its last request (monotonic clock)."""
         t = time.monotonic() if now is None else now
@@ -252,11 +277,13 @@ class RtServer:
         poller.register(self._wake_r.fileno(), zmq.POLLIN)
         while not self._stop.is_set():
             try:
-                events = dict(poller.poll(self._poll_ms))
+                events = dict(poller.poll(1 if self._deferred else self._poll_ms))
                 if self._router in events:
                     self._handle_requests()
                 if self._wake_r.fileno() in events:
                     self._drain_wake()
+                if self._deferred:
+                    self._flush_deferred()
                 self._flush_publications()
             except zmq.ContextTerminated:
                 return
@@ -280,12 +307,42 @@ class RtServer:
                 return
             envelope, body = _split_envelope(frames)
             reply = self._reply_to(body)
-            try:
-                self._router.send_multipart([*envelope, reply], zmq.NOBLOCK)
-            except zmq.Again:
-                log.warning("RT server: reply dropped (client not reading)")
+            if isinstance(reply, tuple):           # deferred: answered by _flush_deferred
+                self._deferred.append((envelope, *reply))
+                continue
+            self._send(envelope, reply)
 
-    def _reply_to(self, body: list[bytes]) -> bytes:
+    def _send(self, envelope: list[bytes], reply: bytes) -> None:
+        assert self._router is not None
+        try:
+            self._router.send_multipart([*envelope, reply], zmq.NOBLOCK)
+        except zmq.Again:
+            log.warning("RT server: reply dropped (client not reading)")
+
+    def _flush_deferred(self) -> None:
+        now = time.monotonic()
+        pending = []
+        for envelope, request_id, deferred in self._deferred:
+            try:
+                result = deferred.poll()
+                if result is None:
+                    if now < deferred.deadline:
+                        pending.append((envelope, request_id, deferred))
+                        continue
+                    reply = error_reply(request_id, f"{deferred.what}: no outcome in time")
+                else:
+                    reply = ok_reply(request_id, result)
+            except TalusError as exc:
+                self._handler_errors += 1
+                reply = error_reply(request_id, str(exc) or type(exc).__name__)
+            except Exception as exc:  # a handler bug must not take the server down
+                self._internal_errors += 1
+                log.exception("RT server: deferred %s failed", deferred.what)
+                reply = error_reply(request_id, f"internal error: {type(exc).__name__}: {exc}")
+            self._send(envelope, reply)
+        self._deferred = pending
+
+    def _reply_to(self, body: list[bytes]) -> bytes | tuple[int | str, Deferred]:
         self._requests += 1
         try:
             if len(body) != 1:
@@ -305,17 +362,21 @@ class RtServer:
         now = time.monotonic()
         with self._clients_lock:
             self._last_seen[client] = now
+            if len(self._last_seen) > _MAX_CLIENTS_TRACKED:
+                # Forget clients silent for an hour (one-shot CLI calls each bring a new id).
+                for c in [c for c, seen in self._last_seen.items() if now - seen > 3600.0]:
+                    del self._last_seen[c]
         self._last_any = now
 
-    def _dispatch(self, request: Request) -> bytes:
+    def _dispatch(self, request: Request) -> bytes | tuple[int | str, Deferred]:
         cmd = request.cmd
         try:
             if cmd == "subscribe_info":
                 result: Any = {"pub_endpoint": self.pub_endpoint, "topics": list(TOPICS)}
-            elif cmd == "heartbeat":
-                result = self._handler.heartbeat(client=request.client)
             else:
-                result = getattr(self._handler, cmd)(**request.kwargs())
+                result = getattr(self._handler, cmd)(client=request.client, **request.kwargs())
+            if isinstance(result, Deferred):
+                return request.id, result
             if result is None:
                 result = {}
             if not isinstance(result, dict):

@@ -173,7 +173,7 @@ def software_version() -> str:
 
 def _open_output(path: Path) -> IO[bytes]:
     """The file the recorder writes (a seam for tests that simulate a slow disk)."""
-    return open(path, "wb")
+    return open(path, "xb")  # exclusive: a recording never replaces an existing file
 
 
 class _HashingStream:

@@ -51,6 +51,8 @@ class SafetyEvent:
     message: str
     values: dict = field(default_factory=dict)
     wall: float = field(default_factory=time.time)
+    #: Sequence number given by the log (1, 2, ...): what a reset acknowledges.
+    id: int = 0
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -71,8 +73,9 @@ class EventLog:
     def append(self, event: SafetyEvent) -> None:
         # Events are rare (a fault, a reset): allocating one here is acceptable in the cycle.
         with self._lock:
-            self._events.append(event)
             self.count += 1
+            event.id = self.count
+            self._events.append(event)
         if self.listener is not None:
             self.listener(event.as_dict())
 

@@ -21,7 +21,7 @@ from rt.control.experiment import benchmark_reference
 from rt.engine import Component
 from rt.model import RobotModel
 from rt.position_loop import PositionLoop, build_sim_position_loop
-from rt.safety.events import Reaction
+from rt.safety.events import Reaction, SupervisorMode
 from rt.safety.limits import PatientLimits
 from rt.twin.environment import CompliantAnkle, FreeMotion
 
@@ -199,8 +199,8 @@ def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
                 break
     result["time_to_rest_ms"] = rest
     result["excursion"] = _excursions(rows, sc, model, ref_t)
-    mode = rows[-1, 11]
-    result["final_state"] = ("hard_stop" if mode >= 3 else "soft_stop" if mode >= 2 else
+    mode = SupervisorMode.from_port(rows[-1, 11])
+    result["final_state"] = (mode.name.lower() if mode != SupervisorMode.RUN else
                              "running_on_backup" if strongest == Reaction.FAILOVER else "running")
     return result
 
@@ -277,7 +277,7 @@ def run_rt_process_loss(timeout_s: float = 10.0) -> dict:
     from rt.twin.shm_backends import ShmEncoders, ShmRig
 
     shm = f"talus-matrix-{os.getpid()}"
-    py = [sys.executable, "-m", "rt.cli"]
+    py = [sys.executable, "-m", "talus"]
     rig = subprocess.Popen(py + ["twin", "rig", "--shm", shm], stdout=subprocess.PIPE,
                            stderr=subprocess.DEVNULL, text=True)
     rt = None
@@ -294,6 +294,7 @@ def run_rt_process_loss(timeout_s: float = 10.0) -> dict:
                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         endpoint = json.loads(rt.stdout.readline())["serving"]["endpoint"]
         with RtClient(endpoint, timeout_s=2.0) as client, ShmRig(shm) as handle:
+            client.control_acquire("fault matrix")
             client.start_heartbeat(0.05)
             client.run("move", {"z": 0.64, "roll": 0.05, "hold_s": 30.0})
             end = time.monotonic() + timeout_s

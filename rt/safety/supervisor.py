@@ -30,7 +30,9 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Callable, Iterable
 
 from rt.model.description import RobotDescription
 from rt.safety.events import EventLog, Reaction, SafetyEvent
@@ -66,6 +68,22 @@ def supervisor_physics(d: RobotDescription) -> dict[str, float]:
             "holding_force_n": HOLDING_MARGIN * (gravity_share + d.friction.static_n),
             "count_m": d.encoder.m_per_count,
             "lever_m_per_rad": LEVER_PER_PLATFORM_RADIUS * d.geometry.platform_radius_m}
+
+
+@dataclass
+class ResetTicket:
+    """A reset request and, once the cycle has taken it (``done``), its outcome.
+
+    ``acknowledge`` holds the ids of the latched events the requester saw (``status``); only
+    those can be cleared, so a fault latched after the request was made stays latched. The
+    reset is all or nothing: if an acknowledged cause is still present, nothing is cleared.
+    """
+
+    acknowledge: frozenset[int]
+    done: bool = False
+    cleared: list[dict] = field(default_factory=list)
+    refused: list[dict] = field(default_factory=list)
+    still_latched: list[dict] = field(default_factory=list)
 
 
 class Supervisor:
@@ -108,9 +126,10 @@ class Supervisor:
         self._impulse_time = [0.0, 0.0, 0.0]
         self._last_q = [math.nan, math.nan, math.nan]
         self._overruns = 0
+        self.latched_ids: dict[str, int] = {}      # latched cause -> the event that latched it
         self._estop_request: str | None = None
         self._stop_request = False
-        self._reset_request = False
+        self._reset_tickets: deque[ResetTicket] = deque()
 
     def braking_angle(self, rate: float, dt: float) -> float:
         """Angle (rad) the platform still turns at ``rate`` (rad/s) before a soft stop started
@@ -128,9 +147,25 @@ class Supervisor:
         """Soft stop from a client."""
         self._stop_request = True
 
-    def request_reset(self) -> None:
-        """Ask to clear the latched faults; refused next cycle if a cause persists."""
-        self._reset_request = True
+    def latched(self) -> list[dict]:
+        """The latched faults: ``{"id", "cause", "reaction"}`` each (any thread)."""
+        for _ in range(3):   # the cycle may change the dict while another thread copies it
+            try:
+                items = list(self.latched_ids.items())
+                return [{"id": i, "cause": c, "reaction": self.causes.get(c, Reaction.NONE)
+                         .name.lower()} for c, i in items]
+            except RuntimeError:
+                continue
+        return []
+
+    def request_reset(self, acknowledge: Iterable[int] | None = None) -> ResetTicket:
+        """Ask to clear the latched faults whose event ids are in ``acknowledge`` (None: those
+        latched now); taken next cycle, refused if an acknowledged cause is still present."""
+        ids = frozenset(e["id"] for e in self.latched()) if acknowledge is None \
+            else frozenset(int(i) for i in acknowledge)
+        ticket = ResetTicket(ids)
+        self._reset_tickets.append(ticket)
+        return ticket
 
     # ------------------------------------------------------------------ the cycle
     def check(self, t: float, dt: float, q, est_status: int, qd, qdd, fk_ok: bool, roll: float,
@@ -151,7 +186,9 @@ class Supervisor:
                 return
             if self.causes.get(cause, Reaction.NONE) < reaction:
                 self.causes[cause] = reaction
-                self.log.append(SafetyEvent(t, "fault", cause, reaction, message, values))
+                event = SafetyEvent(t, "fault", cause, reaction, message, values)
+                self.log.append(event)
+                self.latched_ids[cause] = event.id
 
         # -- stop inputs
         if self._estop_request is not None:
@@ -275,18 +312,29 @@ class Supervisor:
             if age > lim.heartbeat_timeout_s:
                 trip("heartbeat_lost", Reaction.SOFT_STOP, "client heartbeat lost", age_s=age)
         # -- latch and reset
-        if self._reset_request:
-            self._reset_request = False
-            persisting = sorted(c for c in self.causes if c in active)
-            if persisting:
-                self.log.append(SafetyEvent(t, "reset_refused", ",".join(persisting),
-                                            Reaction.NONE, "reset refused: cause still present",
-                                            {"causes": persisting}))
-            elif self.causes:
-                cleared = sorted(self.causes)
-                self.causes.clear()
-                self._reported.clear()
-                self.log.append(SafetyEvent(t, "reset", ",".join(cleared), Reaction.NONE,
-                                            "faults reset", {"cleared": cleared}))
+        if self._reset_tickets:
+            self._take_reset(t, self._reset_tickets.popleft(), active)
         self.reaction = max(self.causes.values(), default=Reaction.NONE)
         return self.reaction
+
+    def _take_reset(self, t: float, ticket: ResetTicket, active: set[str]) -> None:
+        """Clear the acknowledged latched causes unless one of them is still present."""
+        acked = sorted(c for c, i in self.latched_ids.items() if i in ticket.acknowledge)
+        persisting = [c for c in acked if c in active]
+        if persisting:
+            self.log.append(SafetyEvent(t, "reset_refused", ",".join(persisting), Reaction.NONE,
+                                        "reset refused: cause still present",
+                                        {"causes": persisting}))
+            ticket.refused = [{"id": self.latched_ids[c], "cause": c} for c in persisting]
+        elif acked:
+            ticket.cleared = [{"id": self.latched_ids[c], "cause": c} for c in acked]
+            for c in acked:
+                del self.causes[c]
+                del self.latched_ids[c]
+            self._reported.clear()
+            self.log.append(SafetyEvent(t, "reset", ",".join(acked), Reaction.NONE,
+                                        "faults reset", {"cleared": acked,
+                                                         "ids": [x["id"] for x in
+                                                                 ticket.cleared]}))
+        ticket.still_latched = [{"id": i, "cause": c} for c, i in self.latched_ids.items()]
+        ticket.done = True

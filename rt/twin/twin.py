@@ -89,6 +89,13 @@ class Twin:
         self.plant.set_state(q, qd)
         self.encoder_port.set_positions_m(self.plant.q)
 
+    def set_environment(self, environment) -> None:
+        """Change what the platform touches (e.g. a patient's foot placed before a session);
+        call between physics steps (the loop's boundary)."""
+        self.environment = environment
+        self.plant.set_environment(environment)
+        self._payload_applied = False
+
     def home_encoders(self) -> None:
         """Preset the counters so the decoded positions are absolute (the rig's homing)."""
         for axis in range(3):

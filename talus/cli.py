@@ -1,8 +1,9 @@
 """The ``talus`` command line.
 
 Subcommand groups live next to what they drive (``rt/model/cli.py``, ``rt/twin/cli.py``,
-``rt/ati/cli.py``); a group's module is imported only when that group is used, so
-``talus model ik`` never imports OpenCV or python-can.
+``protocols/session_cli.py``); a group's modules are imported only when that group is used, so
+``talus model ik`` never imports OpenCV or python-can. This module is the composition point:
+it is the only place that knows every package (``rt`` imports nothing above itself).
 
 JSON-lines commands read one JSON object per line on stdin and write one per line on stdout;
 bad input gives ``{"error": "..."}`` on stdout and a non-zero exit code.
@@ -13,16 +14,19 @@ import argparse
 import importlib
 import sys
 
-#: group name -> (module with ``register(subparsers)``, help)
-GROUPS: dict[str, tuple[str, str]] = {
-    "model": ("rt.model.cli", "robot model: describe, ik, fk, dynamics (JSON lines)"),
-    "twin": ("rt.twin.cli", "digital twin: step it, serve its ATI sensor"),
-    "ati": ("rt.ati.cli", "ATI force/torque sensor client"),
-    "bench": ("rt.benchmarks.cli", "benchmarks: control loop timing, tracking experiments"),
-    "faults": ("rt.safety.cli", "safety: the fault matrix on the twin"),
-    "session": ("protocols.session_cli", "run a protocol: pre-flight, run, record, summary"),
-    "rt": ("rt.ipc.cli", "RT process: status, stop, estop, reset (JSON)"),
-    "record": ("rt.recording.cli", "recordings: info, CSV export"),
+#: group name -> (modules, each with ``register(subparsers)``, help)
+GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
+    "model": (("rt.model.cli",), "robot model: describe, ik, fk, dynamics (JSON lines)"),
+    "twin": (("rt.twin.cli",), "digital twin: step it, serve its ATI sensor"),
+    "ati": (("rt.ati.cli",), "ATI force/torque sensor client"),
+    "bench": (("rt.benchmarks.cli", "protocols.bench_force"),
+              "benchmarks: control loop timing, tracking and force experiments"),
+    "faults": (("rt.safety.cli",), "safety: the fault matrix on the twin"),
+    "session": (("protocols.session_cli",),
+                "run a protocol through the RT process: pre-flight, run, record, summary"),
+    "rt": (("rt.ipc.cli", "talus.rt_serve"),
+           "RT process: serve, status, control, stop, estop, reset (JSON)"),
+    "record": (("rt.recording.cli",), "recordings: info, CSV export"),
 }
 
 
@@ -31,11 +35,12 @@ def build_parser(group: str | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="talus", description="talus: 3-PRS rehabilitation and force-plate calibration robot")
     groups = parser.add_subparsers(dest="group", metavar="GROUP", required=True)
-    for name, (module_name, help_text) in GROUPS.items():
+    for name, (module_names, help_text) in GROUPS.items():
         group_parser = groups.add_parser(name, help=help_text)
         if group is None or group == name:
             commands = group_parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-            importlib.import_module(module_name).register(commands)
+            for module_name in module_names:
+                importlib.import_module(module_name).register(commands)
     return parser
 
 

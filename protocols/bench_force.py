@@ -25,8 +25,9 @@ ramp_out_s: 2.0
 
 
 def _sine_error(freq: float) -> float:
-    from protocols.session import FREF, PHASE, W, SessionSetup, _build, _run
+    from protocols.session import SessionSetup, _build, _run
     from rt.model import RobotModel
+    from rt.sessions import COL_FREF, COL_FZ, COL_PHASE
 
     model = RobotModel.load()
     with tempfile.TemporaryDirectory() as tmp:
@@ -35,11 +36,11 @@ def _sine_error(freq: float) -> float:
         protocol, gen, report, pl, tap = _build(SessionSetup(path), model, "fast")
         _run(pl, tap, report.duration_s, None)
     rows = tap.ring[:tap.written]
-    play = rows[:, PHASE] == 1
+    play = rows[:, COL_PHASE] == 1
     t = rows[:, 0]
     t0 = t[play][0]
     full = play & (t >= t0 + 2.0) & (t < t0 + report.duration_s - 2.0)
-    e = (rows[:, FREF] - (-rows[:, W + 2]))[full]
+    e = (rows[:, COL_FREF] - (-rows[:, COL_FZ]))[full]
     return float(np.sqrt(np.mean(e ** 2)) / 100.0 * 100.0)
 
 
@@ -48,7 +49,7 @@ def _gait_error() -> float:
     from protocols.session import SessionSetup, run_session
 
     path = next(p for p in list_library() if p.name == "gait_replay.yaml")
-    summary = run_session(SessionSetup(path, patient_weight_kg=75.0), None, realtime=False)
+    summary = run_session(SessionSetup(path, patient_weight_kg=75.0), None)
     return float(summary["rms_error_pct"])
 
 
@@ -59,3 +60,24 @@ def run_force_benchmark() -> dict:
             "gait_rms_pct_of_peak": _gait_error()}
 
 
+
+
+def register(commands) -> None:
+    """``talus bench force`` (composed into the bench group by the entry point)."""
+    p = commands.add_parser("force", help="force tracking on the twin: sine Fz and gait replay")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_force)
+
+
+def _force(args) -> int:
+    import json
+
+    r = run_force_benchmark()
+    if args.json:
+        print(json.dumps(r))
+    else:
+        print(f"force tracking on the twin ({r['environment']})")
+        for f, v in r["sine_rms_pct"].items():
+            print(f"  sine Fz 300 ± 100 N at {f} Hz: RMS error {v:.2f} % of amplitude")
+        print(f"  gait replay at real speed: RMS error {r['gait_rms_pct_of_peak']:.2f} % of peak")
+    return 0
