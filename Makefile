@@ -35,10 +35,10 @@ demo: setup
 	$(BIN)/talus bench tracking --experiment payload-step
 	@echo
 	@mkdir -p out
-	$(BIN)/talus session run --protocol protocols/library/sine_fz.yaml --record out/sine_fz.mcap
+	$(BIN)/talus session run --protocol protocols/library/sine_fz.yaml --record-dir out
 	@echo
 	$(BIN)/talus session run --protocol protocols/library/gait_replay.yaml --patient-weight 75 \
-	  --record out/gait_replay.mcap
+	  --record-dir out
 
 test: setup
 	$(BIN)/pytest -q

@@ -2,6 +2,11 @@
 protocol document a client sent, build its generator, pre-flight it on the twin, and give the
 RT process what it needs to run, record and summarize it.
 
+All of that is CPU-heavy Python (a 60 s ROM exercise's references take 2 s to compute, its
+pre-flight several more): it runs in a worker *process* (spawned once, kept warm), never in a
+thread of the RT process, whose loop would then share the GIL with it and miss its deadlines.
+The validated generator comes back pickled.
+
 Data files a protocol names (a gait record, a playback CSV) resolve in the protocol library
 directory when relative; a client that loaded its protocol from elsewhere sends them absolute
 (:func:`protocol_document`).
@@ -9,6 +14,9 @@ directory when relative; a client that loaded its protocol from elsewhere sends 
 from __future__ import annotations
 
 import hashlib
+import multiprocessing
+import threading
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 from typing import Any
@@ -61,14 +69,15 @@ def _sha256(path: Path) -> str | None:
 
 @dataclass
 class ProtocolSession:
-    """A prepared protocol session (``rt.sessions.PreparedSession``)."""
+    """A prepared protocol session (``rt.sessions.PreparedSession``). ``model`` is the RT
+    process's (set after the session came back from the worker process)."""
 
     protocol: ProtocolModel
     program: Program
-    model: RobotModel
     preflight: dict[str, Any]
     start_pose: tuple[float, float, float]
     metadata: dict[str, Any] = field(default_factory=dict)
+    model: RobotModel | None = None
 
     @property
     def name(self) -> str:
@@ -83,36 +92,86 @@ class ProtocolSession:
         return protocol_limits_of(self.protocol)
 
     def figures(self) -> SessionFigures:
+        assert self.model is not None
         return SessionFigures(self.protocol, self.model)
 
 
 class ProtocolSessions:
-    """The RT process's session factory (``rt.sessions.SessionFactory``)."""
+    """The RT process's session factory (``rt.sessions.SessionFactory``): each ``prepare``
+    runs :func:`prepare_session` in the worker process."""
 
-    def __init__(self, base_dir: Path = LIBRARY_DIR):
+    def __init__(self, base_dir: Path = LIBRARY_DIR, in_process: bool = False):
         self.base_dir = base_dir
+        self.in_process = in_process
+        self._pool: ProcessPoolExecutor | None = None
+        self._lock = threading.Lock()
+
+    def _worker(self) -> ProcessPoolExecutor:
+        with self._lock:
+            if self._pool is None:
+                # spawn: a fresh interpreter, nothing inherited from the RT process's threads.
+                self._pool = ProcessPoolExecutor(
+                    max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+            return self._pool
+
+    def warm(self, description: Any) -> None:
+        """Start the worker process and build its model now, so the first session's pre-flight
+        does not pay for it (returns at once)."""
+        if not self.in_process:
+            self._worker().submit(_warmed, description)
 
     def prepare(self, protocol: dict[str, Any], patient: PatientInfo,
                 context: SessionContext) -> ProtocolSession:
-        model_obj = validate_protocol_data(protocol, DOCUMENT_SOURCE)
-        setup = SessionSetup(patient_weight_kg=patient.weight_kg,
-                             patient_limits=patient.limits,
-                             robot_limits=context.robot_limits, protocol=model_obj,
-                             base_dir=self.base_dir)
-        pre = preflight(setup, context.model)
-        gen = make_generator(model_obj, dt=1.0 / context.rate_hz, kinematics=context.model.kin,
-                             patient_weight_kg=patient.weight_kg, base_dir=self.base_dir)
-        report = gen.validate()
-        if not report.ok:  # cannot differ from pre-flight's; kept as the program's own check
-            raise ProtocolValidationError(f"{DOCUMENT_SOURCE}: " + "; ".join(report.violations))
-        parameters = model_obj.model_dump(mode="json")
-        meta: dict[str, Any] = {"protocol_name": model_obj.name,
-                                "protocol_version": int(getattr(model_obj, "schema_version", 1)),
-                                "parameters": parameters}
-        name = _data_field(model_obj)
-        if name is not None:
-            data = Path(parameters[name])
-            data = data if data.is_absolute() else self.base_dir / data
-            meta["data_file"] = {"path": str(data), "sha256": _sha256(data)}
-        return ProtocolSession(model_obj, gen, context.model, pre["predicted"],
-                               start_pose(gen), meta)
+        args = (protocol, patient, context.model.description, context.robot_limits,
+                context.rate_hz, self.base_dir)
+        if self.in_process:
+            session = prepare_session(*args)
+        else:
+            session = self._worker().submit(prepare_session, *args).result()
+        session.model = context.model
+        return session
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+
+
+_MODELS: dict[str, RobotModel] = {}
+
+
+def _model_for(description: Any) -> RobotModel:
+    """The worker's model of ``description`` (built once per description)."""
+    key = hashlib.sha256(description.model_dump_json().encode()).hexdigest()
+    if key not in _MODELS:
+        _MODELS[key] = RobotModel.from_description(description)
+    return _MODELS[key]
+
+
+def _warmed(description: Any) -> str:
+    _model_for(description)
+    return "ready"
+
+
+def prepare_session(protocol: dict[str, Any], patient: PatientInfo, description: Any,
+                    robot_limits: Any, rate_hz: float, base_dir: Path) -> ProtocolSession:
+    """Validate, build, pre-flight (in the worker process); raises ProtocolValidationError."""
+    model = _model_for(description)
+    model_obj = validate_protocol_data(protocol, DOCUMENT_SOURCE)
+    setup = SessionSetup(patient_weight_kg=patient.weight_kg, patient_limits=patient.limits,
+                         robot_limits=robot_limits, protocol=model_obj, base_dir=base_dir)
+    pre = preflight(setup, model)
+    gen = make_generator(model_obj, dt=1.0 / rate_hz, kinematics=model.kin,
+                         patient_weight_kg=patient.weight_kg, base_dir=base_dir)
+    report = gen.validate()
+    if not report.ok:  # cannot differ from pre-flight's; kept as the program's own check
+        raise ProtocolValidationError(f"{DOCUMENT_SOURCE}: " + "; ".join(report.violations))
+    parameters = model_obj.model_dump(mode="json")
+    meta: dict[str, Any] = {"protocol_name": model_obj.name,
+                            "protocol_version": int(getattr(model_obj, "schema_version", 1)),
+                            "parameters": parameters}
+    name = _data_field(model_obj)
+    if name is not None:
+        data = Path(parameters[name])
+        data = data if data.is_absolute() else base_dir / data
+        meta["data_file"] = {"path": str(data), "sha256": _sha256(data)}
+    return ProtocolSession(model_obj, gen, pre["predicted"], start_pose(gen), meta)

@@ -197,14 +197,21 @@ class RtService:
             return math.inf
         return self.server.last_seen_age_s(self.owner.client)
 
-    def _motion_active(self) -> bool:
+    def _moving(self) -> bool:
+        """A program plays or a session runs: the owner must heartbeat."""
         s = self.session
-        return self.pl.reference.busy or (s is not None and s.state in ("preflight", "running"))
+        return self.pl.reference.busy or (s is not None and s.state == "running")
+
+    def _motion_active(self) -> bool:
+        """Moving, or a session in pre-flight (the robot does not move yet, but no other
+        motion may start; the owner must still be there when it does)."""
+        s = self.session
+        return self._moving() or (s is not None and s.state == "preflight")
 
     def _owner_heartbeat_age(self) -> float:
-        """What the supervisor checks every cycle: the owner's silence while a motion or a
-        session runs (0 when nothing moves: heartbeats are not required then)."""
-        if not self._motion_active():
+        """What the supervisor checks every cycle: the owner's silence while the robot moves
+        (0 otherwise: heartbeats are not required then)."""
+        if not self._moving():
             return 0.0
         return self._owner_age()
 
@@ -440,9 +447,11 @@ class RtService:
         from rt.recording.writer import SessionRecorder
 
         pl = self.pl
-        if pl.supervisor.reaction >= Reaction.SOFT_STOP or self._owner_lost() \
-                or self.owner.client != s.owner:
-            raise InputError("session_start refused: the robot stopped or its owner was lost "
+        if pl.supervisor.reaction >= Reaction.SOFT_STOP:
+            raise InputError("session_start refused: the robot was stopped during pre-flight "
+                             f"({', '.join(sorted(pl.supervisor.causes))})")
+        if self.owner.client != s.owner or self._owner_lost():
+            raise InputError("session_start refused: the client that started it was lost "
                              "during pre-flight")
         d = pl.model.description
         limits = effective(tuple(d.limits.stroke_m), RobotLimits(
@@ -547,8 +556,9 @@ class RtService:
             summary = {"error": f"figures failed: {type(exc).__name__}: {exc}"}
         stops = [_stop_dict(e) for e in events
                  if e.kind == "fault" and e.reaction >= Reaction.SOFT_STOP]
-        outcome = "completed" if summary.get("completed") and not stops else \
-            "aborted" if s.aborted_by is not None and not stops else "stopped"
+        outcome = "stopped" if stops else "aborted" if s.aborted_by is not None else \
+            "completed" if summary.get("completed") else "stopped"
+        summary["completed"] = outcome == "completed"
         summary.update({
             "session_id": s.id, "patient_id": s.patient.id, "outcome": outcome,
             "aborted_by": s.aborted_by, "stops": stops,
@@ -686,6 +696,9 @@ def serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None 
     # heartbeats by hundreds of ms when the loop runs back to back in fast mode).
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     pl, tap = build_rt_loop(config)
+    warm = getattr(sessions, "warm", None)
+    if warm is not None:
+        warm(pl.model.description)   # the pre-flight worker starts while the loop does
     service = RtService(pl, config, tap, sessions, programs)
     with RtServer(service, config.endpoint, config.pub_endpoint,
                   heartbeat_timeout_s=config.heartbeat_timeout_s) as server:
@@ -708,6 +721,9 @@ def serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None 
             pl.graph.stop()
             if pl.devices is not None and pl.devices.close is not None:
                 pl.devices.close()
+            close = getattr(sessions, "close", None)
+            if close is not None:
+                close()
     stats = pl.loop.stats()
     return {"cycles": stats.cycles, "deadline_misses": stats.misses,
             "events": [e.as_dict() for e in pl.events.snapshot()]}

@@ -39,9 +39,9 @@ def register_serve(commands: argparse._SubParsersAction,
 
 
 def _serve(args) -> int:
-    from rt.errors import TalusError
     from pydantic import ValidationError
 
+    from rt.errors import TalusError
     from rt.ipc.messages import describe_validation_error
     from rt.service import RtConfig, load_config, serve
 
@@ -60,10 +60,9 @@ def _serve(args) -> int:
             updates["loop_mode"] = "fast"
         if args.heartbeat_timeout is not None:
             updates["heartbeat_timeout_s"] = args.heartbeat_timeout
-        config = RtConfig.model_validate({**config.model_dump(), **updates})
         if args.recordings_dir:
             updates["recordings_dir"] = args.recordings_dir
-
+        config = RtConfig.model_validate({**config.model_dump(), **updates})
     except TalusError as exc:
         print(json.dumps({"error": str(exc)}))
         return 2

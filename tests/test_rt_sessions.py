@@ -1,0 +1,230 @@
+"""Clinical sessions run by the RT process (a real `talus rt serve` subprocess): pre-flight
+there, recording by it, summary published; refusals; abort; the owner killed mid-session while
+another client heartbeats; `talus session run` as a client with an embedded RT process."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from protocols.bench_force import SINE
+from protocols.library import LIBRARY_DIR
+from protocols.rt_session import protocol_document
+from rt.errors import InputError
+from rt.ipc.client import RtClient, Subscriber
+from rt.recording.reader import read_recording
+from test_rt_process import LOADED_MACHINE_SLACK_S, start_rt, stop_rt
+
+
+def _short_sine(tmp_path: Path, cycles: int = 2) -> dict:
+    path = tmp_path / "short_sine.yaml"
+    path.write_text(SINE.format(f=1.0, cycles=cycles))
+    return protocol_document(path)
+
+
+def _wait_end(client: RtClient, sid: str, timeout_s: float = 120.0) -> dict:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        st = client.session_status()
+        if st["session"] != sid:
+            assert st["last_summary"]["session_id"] == sid
+            return st["last_summary"]
+        time.sleep(0.1)
+    raise AssertionError(f"session {sid} did not end in {timeout_s} s")
+
+
+@pytest.fixture()
+def fast_rt(tmp_path):
+    """An RT process running the twin back to back (the heartbeat timeout is widened for a
+    loaded machine; the latency test below uses the real-time default)."""
+    proc, endpoint, pub = start_rt("--fast", "--heartbeat-timeout", "1.0", "--recordings-dir",
+                                   str(tmp_path / "recordings"))
+    try:
+        yield proc, endpoint, pub
+    finally:
+        stop_rt(proc)
+
+
+def test_session_round_trip_recorded_by_the_rt_process(fast_rt, tmp_path):
+    proc, endpoint, pub = fast_rt
+    sub = Subscriber(pub, ["event", "telemetry"])
+    doc = _short_sine(tmp_path)
+    with RtClient(endpoint, timeout_s=2.0) as client:
+        client.control_acquire("test")
+        client.start_heartbeat(0.05)
+        t0 = time.monotonic()
+        started = client.session_start(doc, {"id": "P-007", "weight_kg": 70.0})
+        start_latency = time.monotonic() - t0
+        sid = started["session_id"]
+        assert started["protocol"] == doc["name"] and started["preflight"]["duration_s"] > 5.0
+        rec = Path(started["recording"])
+        assert rec.parent == tmp_path / "recordings" and rec.suffix == ".mcap"
+        assert "P-007" in rec.name
+        st = client.session_status()
+        assert st["session"] == sid and st["state"] == "running"
+        s = _wait_end(client, sid)
+    print(f"\nsession_start round trip (pre-flight of a {started['duration_s']:.1f} s protocol "
+          f"on the twin): {start_latency:.2f} s")
+    assert s["outcome"] == "completed" and s["stops"] == [] and s["completed"]
+    assert s["rms_error_pct"] <= 3.0 and 350.0 <= s["peak_force_n"] <= 420.0
+    assert s["rt"]["pid"] == proc.pid and s["patient_id"] == "P-007"
+    assert s["recording"]["path"] == str(rec)
+    assert s["recording"]["sha256"] == hashlib.sha256(rec.read_bytes()).hexdigest()
+    meta = read_recording(rec, ["/protocol/metadata"])["/protocol/metadata"][0]
+    assert meta["rt"]["pid"] == proc.pid and meta["patient_id"] == "P-007"
+    assert meta["session_id"] == sid and meta["limits"]["max_force_n"] == 800.0
+    # The published end event carries the same summary; telemetry flowed meanwhile.
+    got = {"telemetry": 0, "end": None}
+    end = time.monotonic() + 5.0
+    while time.monotonic() < end and got["end"] is None:
+        msg = sub.recv(0.2)
+        if msg is None:
+            continue
+        if msg["topic"] == "telemetry":
+            got["telemetry"] += 1
+        elif msg.get("kind") == "session_end":
+            got["end"] = msg
+    sub.close()
+    assert got["end"] is not None and got["end"]["summary"]["session_id"] == sid
+    assert got["telemetry"] > 10
+
+
+def test_two_sessions_never_share_a_recording(fast_rt, tmp_path):
+    _, endpoint, _ = fast_rt
+    doc = _short_sine(tmp_path, cycles=1)
+    paths = []
+    with RtClient(endpoint, timeout_s=2.0) as client:
+        client.control_acquire("test")
+        client.start_heartbeat(0.05)
+        for _ in range(2):
+            started = client.session_start(doc, {"id": "P-1"}, {"dir": str(tmp_path)})
+            _wait_end(client, started["session_id"])
+            paths.append(Path(started["recording"]))
+    assert paths[0] != paths[1] and all(p.parent == tmp_path and p.exists() for p in paths)
+
+
+def test_session_refusals_name_the_reason_and_record_nothing(fast_rt, tmp_path):
+    _, endpoint, _ = fast_rt
+    with RtClient(endpoint, timeout_s=2.0) as client:
+        client.control_acquire("test")
+        client.start_heartbeat(0.05)
+        rom = protocol_document(LIBRARY_DIR / "ankle_rom.yaml")
+        narrow = {"roll_min_deg": -2.0, "roll_max_deg": 2.0, "pitch_min_deg": -2.0,
+                  "pitch_max_deg": 2.0}
+        with pytest.raises(InputError, match="refused by pre-flight.*ROM"):
+            client.session_start(rom, {"id": "P-1", "limits": narrow}, {"dir": str(tmp_path)})
+        with pytest.raises(InputError, match="mean_n"):
+            client.session_start({**_short_sine(tmp_path), "mean_n": -5.0}, {"id": "P-1"},
+                                 {"dir": str(tmp_path)})
+        with pytest.raises(InputError, match="bad patient limits.*max_force_n"):
+            client.session_start(rom, {"id": "P-1", "limits": {"max_force_n": -1.0}})
+        with pytest.raises(InputError, match="does not exist"):
+            client.session_start(rom, {"id": "P-1"}, {"dir": str(tmp_path / "nope")})
+        with pytest.raises(InputError, match="id"):
+            client.session_start(rom, {"id": "Núñez Gómez"})    # a code, never a name
+        assert not list(tmp_path.glob("*.mcap"))
+        assert client.session_status()["session"] is None
+
+
+def test_session_abort_returns_to_rest(fast_rt, tmp_path):
+    _, endpoint, _ = fast_rt
+    with RtClient(endpoint, timeout_s=2.0) as client, \
+            RtClient(endpoint, timeout_s=2.0) as other:
+        client.control_acquire("test")
+        client.start_heartbeat(0.05)
+        started = client.session_start(_short_sine(tmp_path, cycles=20), {"id": "P-1"},
+                                       {"dir": str(tmp_path)})
+        sid = started["session_id"]
+        assert _wait_for_phase(client, "play")
+        assert other.session_abort()["aborted"] == sid           # anyone may stop a session
+        s = _wait_end(client, sid)
+        assert s["outcome"] == "aborted" and s["stops"] == [] and not s["completed"]
+        st = client.status()
+        assert st["state"] == "run" and st["phase_name"] == "rest"
+        with pytest.raises(InputError, match="no session is running"):
+            client.session_abort()
+
+
+def _wait_for_phase(client: RtClient, phase: str, timeout_s: float = 60.0) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if client.session_status().get("phase") == phase:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_owner_killed_mid_session_soft_stops_although_another_client_heartbeats(tmp_path):
+    """The owner's heartbeat is the one that counts: an observer that keeps heartbeating does
+    not keep a session going whose owner died (SIGKILL)."""
+    proc, endpoint, pub = start_rt("--recordings-dir", str(tmp_path))
+    doc = _short_sine(tmp_path, cycles=30)
+    script = textwrap.dedent(f"""
+        import json, sys, time
+        from rt.ipc.client import RtClient
+        c = RtClient({endpoint!r}, client_id="doomed-owner", timeout_s=120.0)
+        c.control_acquire("owner about to be killed")
+        c.start_heartbeat(0.05)
+        r = c.session_start(json.loads(sys.stdin.readline()), {{"id": "P-9"}})
+        print(r["session_id"], flush=True)
+        time.sleep(300)
+    """)
+    child = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE, text=True)
+    sub = Subscriber(pub, ["event"])
+    try:
+        child.stdin.write(json.dumps(doc) + "\n")
+        child.stdin.flush()
+        sid = child.stdout.readline().strip()
+        with RtClient(endpoint, client_id="observer", timeout_s=2.0) as observer:
+            observer.start_heartbeat(0.05)
+            assert _wait_for_phase(observer, "play")
+            time.sleep(0.5)
+            killed_at = time.time()
+            os.kill(child.pid, signal.SIGKILL)
+            child.wait()
+            event = None
+            end = time.monotonic() + 5.0
+            while time.monotonic() < end and event is None:
+                msg = sub.recv(0.2)
+                if msg and msg.get("cause") == "heartbeat_lost":
+                    event = msg
+            assert event is not None and event["reaction"] == "soft_stop"
+            latency = event["wall"] - killed_at
+            print(f"\nsession owner killed → soft stop: {latency * 1e3:.0f} ms (timeout 250 ms)")
+            assert 0.2 <= latency <= 0.3 + LOADED_MACHINE_SLACK_S
+            s = _wait_end(observer, sid, timeout_s=30.0)
+            assert s["outcome"] == "stopped"
+            assert [x["cause"] for x in s["stops"]] == ["heartbeat_lost"]
+            assert Path(s["recording"]["path"]).exists()
+    finally:
+        if child.poll() is None:
+            child.kill()
+        sub.close()
+        stop_rt(proc)
+
+
+def test_session_cli_is_a_client_of_an_embedded_rt_process(tmp_path):
+    out = tmp_path / "recordings"
+    out.mkdir()
+    proc = subprocess.run([sys.executable, "-m", "talus", "session", "run", "--protocol",
+                           str(LIBRARY_DIR / "gait_replay.yaml"), "--patient-weight", "75",
+                           "--record-dir", str(out), "--fast", "--json",
+                           "--endpoint", "tcp://127.0.0.1:9"],   # nobody there: embedded
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    assert s["outcome"] == "completed" and s["rms_error_pct"] <= 3.0
+    rec = Path(s["recording"]["path"])
+    assert rec.parent == out and rec.exists()
+    meta = read_recording(rec, ["/protocol/metadata"])["/protocol/metadata"][0]
+    assert meta["rt"]["pid"] == s["rt"]["pid"] != os.getpid()
+    assert meta["data_file"]["sha256"] and meta["patient_id"] == "twin-demo"
