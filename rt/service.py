@@ -346,10 +346,7 @@ class RtService:
         if self.sessions is None:
             raise InputError("this RT process offers no protocol sessions (started without "
                              "the protocols package)")
-        try:
-            limits = PatientLimits(**(patient.limits or {}))
-        except ValidationError as exc:
-            raise InputError(f"bad patient limits: {describe_validation_error(exc)}") from None
+        limits = self._patient_limits(patient)
         record_dir = Path(record.dir) if record.dir else self.config.recordings_path()
         if record.dir is None:
             record_dir.mkdir(parents=True, exist_ok=True)
@@ -383,6 +380,45 @@ class RtService:
                     "start_latency_s": session.start_latency_s}
         return Deferred(outcome, timeout_s=SESSION_START_TIMEOUT_S, what="session_start")
 
+    def session_preflight(self, client: str, protocol: dict[str, Any],
+                          patient: PatientArgs) -> Any:
+        """The pre-flight alone (a GUI shows it before Start is enabled); nothing moves."""
+        from concurrent.futures import Future
+
+        from rt.ipc.server import Deferred
+
+        if self.sessions is None:
+            raise InputError("this RT process offers no protocol sessions")
+        info = PatientInfo(patient.id, patient.weight_kg, self._patient_limits(patient))
+        future: Future = Future()
+
+        def work() -> None:
+            try:
+                prep = self.sessions.prepare(protocol, info, self._context())  # type: ignore
+                future.set_result({"ok": True, "protocol": prep.name, "kind": prep.kind,
+                                   "duration_s": prep.program.duration_s,
+                                   "start_pose": list(prep.start_pose),
+                                   "predicted": prep.preflight})
+            except TalusError as exc:
+                future.set_exception(exc)
+            except Exception as exc:  # a bug must still answer the client
+                log.exception("session_preflight failed")
+                future.set_exception(InputError(f"internal error: {type(exc).__name__}: {exc}"))
+        threading.Thread(target=work, name="session-preflight", daemon=True).start()
+        return Deferred(lambda: future.result() if future.done() else None,
+                        timeout_s=SESSION_START_TIMEOUT_S, what="session_preflight")
+
+    def _patient_limits(self, patient: PatientArgs) -> PatientLimits:
+        try:
+            return PatientLimits(**(patient.limits or {}))
+        except ValidationError as exc:
+            raise InputError(f"bad patient limits: {describe_validation_error(exc)}") from None
+
+    def _context(self) -> SessionContext:
+        return SessionContext(self.pl.model, RobotLimits(
+            heartbeat_timeout_s=self.config.heartbeat_timeout_s), self.config.rate_hz,
+            twin=self.pl.twin is not None)
+
     def session_status(self, client: str) -> dict[str, Any]:
         s = self.session
         if s is None:
@@ -414,11 +450,8 @@ class RtService:
     # -- worker: pre-flight, then start --------------------------------------------------
     def _session_worker(self, s: _Session, protocol: dict[str, Any], requested: float) -> None:
         assert self.sessions is not None
-        ctx = SessionContext(self.pl.model, RobotLimits(
-            heartbeat_timeout_s=self.config.heartbeat_timeout_s), self.config.rate_hz,
-            twin=self.pl.twin is not None)
         try:
-            prep = self.sessions.prepare(protocol, s.patient, ctx)
+            prep = self.sessions.prepare(protocol, s.patient, self._context())
             if s.stop.is_set():
                 raise InputError("session aborted during pre-flight")
             self._start(s, prep)

@@ -132,6 +132,13 @@ def test_session_refusals_name_the_reason_and_record_nothing(fast_rt, tmp_path):
             client.session_start(rom, {"id": "Núñez Gómez"})    # a code, never a name
         assert not list(tmp_path.glob("*.mcap"))
         assert client.session_status()["session"] is None
+    # The pre-flight alone, for a GUI before Start: anyone may ask, nothing moves.
+    with RtClient(endpoint, timeout_s=2.0) as viewer:
+        pre = viewer.session_preflight(_short_sine(tmp_path), {"id": "P-1"})
+        assert pre["ok"] and 350.0 < pre["predicted"]["peak_platform_force_n"] < 420.0
+        with pytest.raises(InputError, match="refused by pre-flight.*ROM"):
+            viewer.session_preflight(rom, {"id": "P-1", "limits": narrow})
+        assert viewer.status()["phase_name"] == "rest"
 
 
 def test_session_abort_returns_to_rest(fast_rt, tmp_path):

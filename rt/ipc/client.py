@@ -188,6 +188,13 @@ class RtClient:
         return self.request("session_start", timeout_s=timeout_s, protocol=protocol,
                             patient=patient, record=record or {})
 
+    def session_preflight(self, protocol: dict[str, Any], patient: dict[str, Any],
+                          timeout_s: float = 120.0) -> dict[str, Any]:
+        """The pre-flight alone: ``{"ok", "predicted", "duration_s", ...}``, or the refusal's
+        reason as :class:`InputError`. Nothing moves; anyone may ask."""
+        return self.request("session_preflight", timeout_s=timeout_s, protocol=protocol,
+                            patient=patient)
+
     def session_status(self) -> dict[str, Any]:
         """The running session's phase, progress, forces and stops, or the last summary."""
         return self.request("session_status")

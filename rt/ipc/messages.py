@@ -30,6 +30,9 @@ command              ``args``                                                   
                      validated and pre-flighted in the RT process, recorded by it;
                      the reply comes after pre-flight: the session id and the
                      predicted peaks, or the refusal's reason
+``session_preflight``  same ``protocol`` and ``patient`` as ``session_start``: the    anyone
+                     pre-flight alone (predicted peaks or the refusal), nothing
+                     moves; the reply comes when it is done
 ``session_status``   ``{}`` — phase, progress, elapsed, forces, stops; the last    anyone
                      session's summary once it ended
 ``session_abort``    ``{}`` — soft stop of the session, then return to rest        anyone
@@ -144,6 +147,13 @@ class SessionStartArgs(_Args):
     record: RecordArgs = Field(default_factory=RecordArgs)
 
 
+class SessionPreflightArgs(_Args):
+    """``session_preflight``: the protocol document and the patient, as for ``session_start``."""
+
+    protocol: dict[str, Any]
+    patient: PatientArgs
+
+
 class SessionStatusArgs(_Args):
     """``session_status``: no arguments."""
 
@@ -182,6 +192,7 @@ COMMANDS: dict[str, type[_Args]] = {
     "set_gains": SetGainsArgs,
     "run": RunArgs,
     "session_start": SessionStartArgs,
+    "session_preflight": SessionPreflightArgs,
     "session_status": SessionStatusArgs,
     "session_abort": SessionAbortArgs,
     "subscribe_info": SubscribeInfoArgs,
