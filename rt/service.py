@@ -54,6 +54,8 @@ log = logging.getLogger(__name__)
 REST_SPEED_M_S = 1e-3
 #: Longest pre-flight the IPC client waits for before its session_start reply is an error (s).
 SESSION_START_TIMEOUT_S = 120.0
+#: How long a stopping RT process lets a running session abort and come to rest (s).
+SHUTDOWN_SESSION_WAIT_S = 10.0
 #: GIL switch interval of the RT process (s).
 SWITCH_INTERVAL_S = 0.0002
 #: A program request not taken by the loop within this time is reported lost (s).
@@ -184,7 +186,10 @@ class RtService:
         self.session: _Session | None = None
         self.last_summary: dict[str, Any] | None = None
         self._session_count = 0
-        self._base_limits = (pl.supervisor.limits)
+        self._base_limits = pl.supervisor.limits
+        #: Set when the RT process is stopping: a running session's pump finishes its
+        #: recording at once.
+        self.shutting_down = threading.Event()
         pl.supervisor.heartbeat_required = True
         pl.supervisor.heartbeat_age = self._owner_heartbeat_age
 
@@ -557,7 +562,11 @@ class RtService:
         qd = COLUMNS["qd"]
         try:
             while True:
-                time.sleep(0.05)
+                if self.shutting_down.wait(0.05):
+                    rows, start = self.tap.drain(start)
+                    figures.add(rows[rows[:, 0] >= s.t_start])
+                    record_rows(recorder, rows[rows[:, 0] >= s.t_start])
+                    break
                 rows, start = self.tap.drain(start)
                 rows = rows[rows[:, 0] >= s.t_start]
                 if len(rows):
@@ -748,8 +757,18 @@ def serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None 
         finally:
             s = service.session
             if s is not None:
+                # Stopping mid-session: abort it (soft stop, return to rest) while the loop
+                # still runs, then let its recording close whatever happened.
+                s.aborted_by = s.aborted_by or "the RT process (shutting down)"
                 s.stop.set()
                 pl.reference.request_abort()
+                end = time.monotonic() + SHUTDOWN_SESSION_WAIT_S
+                while s.state in ("preflight", "running") and time.monotonic() < end:
+                    time.sleep(0.05)
+                service.shutting_down.set()
+                end = time.monotonic() + 5.0
+                while s.state == "running" and time.monotonic() < end:
+                    time.sleep(0.05)
             pl.loop.stop()
             pl.graph.stop()
             if pl.devices is not None and pl.devices.close is not None:

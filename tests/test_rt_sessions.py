@@ -235,3 +235,23 @@ def test_session_cli_is_a_client_of_an_embedded_rt_process(tmp_path):
     meta = read_recording(rec, ["/protocol/metadata"])["/protocol/metadata"][0]
     assert meta["rt"]["pid"] == s["rt"]["pid"] != os.getpid()
     assert meta["data_file"]["sha256"] and meta["patient_id"] == "twin-demo"
+
+
+def test_rt_process_stopped_mid_session_closes_a_complete_recording(tmp_path):
+    proc, endpoint, _ = start_rt("--fast", "--heartbeat-timeout", "1.0")
+    try:
+        with RtClient(endpoint, timeout_s=2.0) as client:
+            client.control_acquire("test")
+            client.start_heartbeat(0.05)
+            started = client.session_start(_short_sine(tmp_path, cycles=30), {"id": "P-2"},
+                                           {"dir": str(tmp_path)})
+            assert _wait_for_phase(client, "play")
+            proc.send_signal(signal.SIGTERM)                 # the owner is still there
+            assert proc.wait(timeout=30) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    rec = read_recording(Path(started["recording"]), ["/session/summary"])
+    [last] = rec["/session/summary"]
+    assert last["summary"]["outcome"] == "aborted"
+    assert "shutting down" in last["summary"]["aborted_by"]
