@@ -25,6 +25,7 @@ from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
 from rt.errors import ConfigurationError, InputError
 from rt.ipc.messages import DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT
+from rt.ipc.security import ServerCurveConfig
 from rt.position_loop import (PositionLoop, build_position_loop, build_sim_position_loop,
                               shm_devices)
 from rt.safety.events import Reaction
@@ -48,6 +49,8 @@ class RtConfig(BaseModel):
     heartbeat_timeout_s: float = Field(0.25, gt=0.0, le=5.0)
     telemetry_hz: float = Field(50.0, gt=0.0, le=500.0)
     patient_limits: PatientLimits = Field(default_factory=PatientLimits)
+    #: CurveZMQ keys; required when an endpoint is not loopback (rt.ipc.security).
+    curve: ServerCurveConfig | None = None
 
 
 def load_config(path: str | Path | None) -> RtConfig:
@@ -200,7 +203,7 @@ def serve(config: RtConfig, stop_event: threading.Event, ready=None) -> dict:
                                      **common)
     service = RtService(pl, config)
     with RtServer(service, config.endpoint, config.pub_endpoint,
-                  heartbeat_timeout_s=config.heartbeat_timeout_s) as server:
+                  heartbeat_timeout_s=config.heartbeat_timeout_s, curve=config.curve) as server:
         service.server = server
         pl.supervisor.heartbeat_age = server.heartbeat_age_s
         pl.events.listener = lambda ev: server.publish("event", {**ev, "t": ev["t"]})
