@@ -23,9 +23,11 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
+from rt.devices.rig_config import RigConfig
 from rt.errors import ConfigurationError, InputError
 from rt.ipc.messages import DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT
 from rt.ipc.security import ServerCurveConfig
+from rt.model import RobotModel
 from rt.position_loop import (PositionLoop, build_position_loop, build_sim_position_loop,
                               shm_devices)
 from rt.safety.events import Reaction
@@ -37,9 +39,14 @@ class RtConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     schema_version: Literal[1] = 1
-    backend: Literal["sim", "twin_shm"] = "sim"
+    backend: Literal["sim", "twin_shm", "rig"] = "sim"
     #: With backend twin_shm: the rig process's shared-memory segment (talus twin rig --shm).
     shm: str | None = None
+    #: With backend rig: the rig's cards and wiring (rt.devices.rig_config; example:
+    #: rt/data/rig_example.yaml).
+    rig: RigConfig | None = None
+    #: Robot description YAML (None: the packaged nominal twin); a lab's identified robot.
+    robot: str | None = None
     rate_hz: float = Field(1000.0, ge=100.0, le=2000.0)
     controller: str = "paden_panja"
     gains: dict[str, float] = Field(default_factory=dict)
@@ -190,13 +197,22 @@ def serve(config: RtConfig, stop_event: threading.Event, ready=None) -> dict:
     from rt.ipc.server import RtServer
     from rt.twin.environment import parse_environment
 
+    model = RobotModel.load(config.robot)
     common = dict(rate_hz=config.rate_hz, mode="realtime",
-                  patient_limits=config.patient_limits, start_program=False)
+                  patient_limits=config.patient_limits, start_program=False, model=model)
     if config.backend == "twin_shm":
         if not config.shm:
             raise ConfigurationError("backend twin_shm needs the rig's segment name (--shm)")
         pl = build_position_loop(shm_devices(config.shm), config.controller,
                                  config.gains or None, **common)
+    elif config.backend == "rig":
+        from rt.rig_devices import rig_devices
+
+        if config.rig is None:
+            raise ConfigurationError("backend rig needs the config's rig: section (the cards' "
+                                     "device files and wiring; see rt/data/rig_example.yaml)")
+        pl = build_position_loop(rig_devices(config.rig, model.description),
+                                 config.controller, config.gains or None, **common)
     else:
         pl = build_sim_position_loop(config.controller, config.gains or None,
                                      environment=parse_environment(config.environment),

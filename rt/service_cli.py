@@ -14,9 +14,13 @@ def register_serve(commands: argparse._SubParsersAction) -> None:
                             "sim) and the 1 kHz loop; serves commands and publishes telemetry "
                             "and events. Prints {\"serving\": ...} once ready, a summary at "
                             "exit.")
-    p.add_argument("--backend", choices=("sim", "twin_shm"), default="sim",
-                   help="sim: the twin in this process; twin_shm: the rig process started with "
-                        "'talus twin rig --shm NAME' (its amplifier watchdog guards this process)")
+    p.add_argument("--backend", choices=("sim", "twin_shm", "rig"), default=None,
+                   help="sim: the twin in this process (the default); twin_shm: the rig process "
+                        "started with 'talus twin rig --shm NAME' (its amplifier watchdog guards "
+                        "this process); rig: the real cards described in the config's rig: "
+                        "section (see rt/data/rig_example.yaml)")
+    p.add_argument("--robot", default=None,
+                   help="robot description YAML (default: the packaged nominal twin)")
     p.add_argument("--shm", default=None, help="with --backend twin_shm: the rig's segment")
     p.add_argument("--config", default=None, help="RT config YAML (see rt.service.RtConfig)")
     p.add_argument("--endpoint", default=None, help="override the request endpoint")
@@ -31,7 +35,11 @@ def _serve(args) -> int:
 
     try:
         config = load_config(args.config)
-        updates = {"backend": args.backend}
+        updates = {}
+        if args.backend:
+            updates["backend"] = args.backend
+        if args.robot:
+            updates["robot"] = args.robot
         if args.shm:
             updates["shm"] = args.shm
         if args.endpoint:

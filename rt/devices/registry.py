@@ -34,6 +34,7 @@ BACKENDS: dict[str, dict[str, str]] = {
         "synthetic": "rt.drivers.synthetic_frames:SyntheticMarkerCamera",
     },
     "digital_inputs": {
+        "comedi": "rt.drivers.comedi_dio:ComediDigitalInputs",
         "sim": "rt.twin.backends:TwinDigitalInputs",
         "twin_shm": "rt.twin.shm_backends:ShmDigitalInputs",
     },

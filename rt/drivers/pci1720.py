@@ -51,6 +51,7 @@ from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError
 
 AREF_GROUND = 0
 UNIT_VOLT = 0
+COMEDI_INPUT = 0
 COMEDI_OUTPUT = 1
 #: adv_pci1720 range index of ±10 V (thesis 3.1.2).
 RANGE_BIPOLAR_10V = 3
@@ -89,6 +90,7 @@ def load_comedilib() -> Any:
         "comedi_data_write": (ctypes.c_int, (p, u, u, u, u, u)),
         "comedi_dio_config": (ctypes.c_int, (p, u, u, u)),
         "comedi_dio_write": (ctypes.c_int, (p, u, u, u)),
+        "comedi_dio_read": (ctypes.c_int, (p, u, u, ctypes.POINTER(ctypes.c_uint))),
         "comedi_errno": (ctypes.c_int, ()),
         "comedi_strerror": (ctypes.c_char_p, (ctypes.c_int,)),
     }
