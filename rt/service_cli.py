@@ -7,6 +7,8 @@ import signal
 import sys
 import threading
 
+from rt.model.robot_option import add_robot_option
+
 
 def register_serve(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("serve", help="run the RT process (loop + supervisor + IPC server)",
@@ -19,8 +21,7 @@ def register_serve(commands: argparse._SubParsersAction) -> None:
                         "started with 'talus twin rig --shm NAME' (its amplifier watchdog guards "
                         "this process); rig: the real cards described in the config's rig: "
                         "section (see rt/data/rig_example.yaml)")
-    p.add_argument("--robot", default=None,
-                   help="robot description YAML (default: the packaged nominal twin)")
+    add_robot_option(p)
     p.add_argument("--shm", default=None, help="with --backend twin_shm: the rig's segment")
     p.add_argument("--config", default=None, help="RT config YAML (see rt.service.RtConfig)")
     p.add_argument("--endpoint", default=None, help="override the request endpoint")
