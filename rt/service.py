@@ -194,9 +194,13 @@ def _finite(x: float) -> float | None:
 
 def serve(config: RtConfig, stop_event: threading.Event, ready=None) -> dict:
     """Run the RT process until ``stop_event`` is set; returns a summary."""
+    from rt.ipc.security import check_server_endpoint
     from rt.ipc.server import RtServer
     from rt.twin.environment import parse_environment
 
+    if config.curve is None:      # refuse before any hardware is opened (the server rechecks)
+        for address in (config.endpoint, config.pub_endpoint):
+            check_server_endpoint(address, None)
     model = RobotModel.load(config.robot)
     common = dict(rate_hz=config.rate_hz, mode="realtime",
                   patient_limits=config.patient_limits, start_program=False, model=model)

@@ -210,3 +210,9 @@ def test_a_200_mb_frame_is_dropped_without_being_read() -> None:
         if child.stdin is not None:
             child.stdin.close()
         child.wait(timeout=10)
+
+
+def test_rt_serve_refuses_a_network_endpoint_without_keys_before_starting(
+        capsys: pytest.CaptureFixture) -> None:
+    assert talus_main(["rt", "serve", "--endpoint", "tcp://0.0.0.0:5560", "--seconds", "1"]) == 2
+    assert "not loopback and no CurveZMQ keys" in capsys.readouterr().out

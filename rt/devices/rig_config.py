@@ -40,11 +40,11 @@ class EncoderCard(_Strict):
 
     backend: Literal["pcl833"] = "pcl833"
     #: I/O base address set on the card's DIP switches (YAML: 0x220).
-    base: int = Field(0x220, ge=0, le=0x3F0)
+    base: int = Field(default=0x220, ge=0, le=0x3F0)
     #: The kernel's port device (root needed).
     port_path: str = "/dev/port"
     #: Metres of slider travel per count; None: the robot description's encoder.m_per_count.
-    m_per_count: float | None = Field(None, gt=0.0)
+    m_per_count: float | None = Field(default=None, gt=0.0)
     #: +1 or -1 per axis, so that q grows upward along each guide.
     sign: tuple[Sign, Sign, Sign] = (1, 1, 1)
     #: Card channel (1-3) of each axis; thesis wiring: axis i on channel i+1.
@@ -90,12 +90,12 @@ class AtiRdt(_Strict):
 
     backend: Literal["ati_rdt"] = "ati_rdt"
     host: str = "192.168.1.1"
-    port: int = Field(RDT_PORT, ge=1, le=65535)
+    port: int = Field(default=RDT_PORT, ge=1, le=65535)
     #: counts/N and counts/(N m), from the sensor's configuration page.
-    counts_per_force: float = Field(DEFAULT_COUNTS_PER_FORCE, gt=0.0)
-    counts_per_torque: float = Field(DEFAULT_COUNTS_PER_TORQUE, gt=0.0)
+    counts_per_force: float = Field(default=DEFAULT_COUNTS_PER_FORCE, gt=0.0)
+    counts_per_torque: float = Field(default=DEFAULT_COUNTS_PER_TORQUE, gt=0.0)
     #: A reading older than this is stale (s).
-    timeout_s: float = Field(0.05, gt=0.0, le=1.0)
+    timeout_s: float = Field(default=0.05, gt=0.0, le=1.0)
     #: Several records per datagram (RDT command 0x0003).
     buffered: bool = False
 
@@ -108,11 +108,11 @@ class AtiCan(_Strict):
     channel: str = "can0"
     interface: str = "socketcan"
     #: The sensor's CAN base identifier (11 bit).
-    base_id: int = Field(0, ge=0, le=0x7F0)
-    counts_per_force: float = Field(16.0, gt=0.0)
-    counts_per_torque: float = Field(500.0, gt=0.0)
-    poll_rate_hz: float = Field(500.0, gt=0.0, le=2000.0)
-    timeout_s: float = Field(0.05, gt=0.0, le=1.0)
+    base_id: int = Field(default=0, ge=0, le=0x7F0)
+    counts_per_force: float = Field(default=16.0, gt=0.0)
+    counts_per_torque: float = Field(default=500.0, gt=0.0)
+    poll_rate_hz: float = Field(default=500.0, gt=0.0, le=2000.0)
+    timeout_s: float = Field(default=0.05, gt=0.0, le=1.0)
 
 
 class StopInputs(_Strict):
