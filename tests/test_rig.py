@@ -145,6 +145,8 @@ def test_stop_inputs_are_fail_safe() -> None:
         assert stops.read_failures == 2
     with pytest.raises(ConfigurationError, match="no line 9"):
         ComediDigitalInputs("/dev/comedi2", 0, 9, 1, lib=lib)
+    with pytest.raises(BackendUnavailableError, match="/dev/comedi7 does not exist"):
+        ComediDigitalInputs("/dev/comedi7", 0, 0, 1, lib=lib)
 
 
 def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> None:

@@ -23,12 +23,12 @@ the loop cannot see is treated as a stop.
 from __future__ import annotations
 
 import ctypes
-import os
 from typing import Any
 
 from rt.devices.interfaces import DigitalInputs, DigitalInputState
-from rt.drivers.pci1720 import COMEDI_INPUT, load_comedilib
-from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError
+from rt.drivers.pci1720 import (COMEDI_INPUT, comedi_error_text, comedi_open_device,
+                                load_comedilib)
+from rt.errors import ConfigurationError
 
 
 class ComediDigitalInputs(DigitalInputs):
@@ -57,15 +57,11 @@ class ComediDigitalInputs(DigitalInputs):
         self._lib = load_comedilib() if lib is None else lib
         self._bit = ctypes.c_uint(0)
         self._bit_ptr = ctypes.pointer(self._bit)      # allocated once, reused every read
-        self._dev = self._lib.comedi_open(device.encode())
-        if not self._dev:
-            reason = self._error_text()
+        try:
+            self._dev = comedi_open_device(self._lib, device, "stop-input card")
+        except BaseException:
             self._closed = True
-            if not os.path.exists(device):
-                raise BackendUnavailableError(
-                    f"{device} does not exist: load the comedi driver of the stop-input card "
-                    f"or choose the 'sim' backend ({reason})")
-            raise HardwareError(f"comedi_open({device}) failed: {reason}")
+            raise
         try:
             n = self._lib.comedi_get_n_channels(self._dev, self.subdevice)
             for ch in self.channels:
@@ -76,15 +72,11 @@ class ComediDigitalInputs(DigitalInputs):
                 if self._lib.comedi_dio_config(self._dev, self.subdevice, ch, COMEDI_INPUT) < 0:
                     raise ConfigurationError(
                         f"cannot make {device} subdevice {self.subdevice} line {ch} an input: "
-                        f"{self._error_text()}")
+                        f"{comedi_error_text(self._lib)}")
         except BaseException:
             self._lib.comedi_close(self._dev)
             self._closed = True
             raise
-
-    def _error_text(self) -> str:
-        msg = self._lib.comedi_strerror(self._lib.comedi_errno())
-        return msg.decode(errors="replace") if isinstance(msg, bytes) else str(msg)
 
     def _pressed(self, channel: int) -> bool:
         if self._lib.comedi_dio_read(self._dev, self.subdevice, channel, self._bit_ptr) < 0:

@@ -101,6 +101,26 @@ def load_comedilib() -> Any:
     return lib
 
 
+def comedi_error_text(lib: Any) -> str:
+    """comedilib's message for its last error (``comedi_strerror(comedi_errno())``)."""
+    msg = lib.comedi_strerror(lib.comedi_errno())
+    return msg.decode(errors="replace") if isinstance(msg, bytes) else str(msg)
+
+
+def comedi_open_device(lib: Any, path: str, card: str) -> Any:
+    """``comedi_open(path)``, or one clear error: ``BackendUnavailableError`` when the device
+    file does not exist (driver for ``card`` not loaded), ``HardwareError`` otherwise."""
+    handle = lib.comedi_open(path.encode())
+    if not handle:
+        reason = comedi_error_text(lib)
+        if not os.path.exists(path):
+            raise BackendUnavailableError(
+                f"{path} does not exist: load the comedi driver for the {card} or choose the "
+                f"'sim' backend ({reason})")
+        raise HardwareError(f"comedi_open({path}) failed: {reason}")
+    return handle
+
+
 def volts_to_code(volts: float, v_min: float = -10.0, v_max: float = 10.0,
                   maxdata: int = 4095) -> int:
     """DAC code for ``volts`` (V): ``floor((V - v_min) / (v_max - v_min) * maxdata + 0.5)``.
@@ -209,19 +229,10 @@ class Pci1720Outputs(ActuatorOutputs):
     # --- setup -------------------------------------------------------------------------
 
     def _error_text(self) -> str:
-        msg = self._lib.comedi_strerror(self._lib.comedi_errno())
-        return msg.decode(errors="replace") if isinstance(msg, bytes) else str(msg)
+        return comedi_error_text(self._lib)
 
     def _open(self, path: str) -> Any:
-        handle = self._lib.comedi_open(path.encode())
-        if not handle:
-            reason = self._error_text()
-            if not os.path.exists(path):
-                raise BackendUnavailableError(
-                    f"{path} does not exist: load the comedi driver for the card "
-                    f"(adv_pci1720) or choose the 'sim' backend ({reason})")
-            raise HardwareError(f"comedi_open({path}) failed: {reason}")
-        return handle
+        return comedi_open_device(self._lib, path, "card (adv_pci1720)")
 
     def _probe_channel(self, number: int) -> _Channel:
         lib, dev, sub = self._lib, self._dev, self.subdevice
