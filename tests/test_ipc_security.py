@@ -216,3 +216,28 @@ def test_rt_serve_refuses_a_network_endpoint_without_keys_before_starting(
         capsys: pytest.CaptureFixture) -> None:
     assert talus_main(["rt", "serve", "--endpoint", "tcp://0.0.0.0:5560", "--seconds", "1"]) == 2
     assert "not loopback and no CurveZMQ keys" in capsys.readouterr().out
+
+
+def test_rt_serve_with_curve_keys_from_its_config(keys: dict[str, Path], tmp_path: Path) -> None:
+    """The RT process itself, configured with curve: in its YAML, serves the allowed client
+    and nobody else."""
+    config = tmp_path / "rt.yaml"
+    config.write_text(json.dumps({                 # JSON is YAML
+        "endpoint": ANY_PORT, "pub_endpoint": ANY_PORT,
+        "curve": {"secret_key_file": str(keys["server_secret"]),
+                  "allowed_clients_dir": str(keys["allowed"])}}))
+    proc = subprocess.Popen([sys.executable, "-m", "rt.cli", "rt", "serve", "--config",
+                             str(config)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        serving = json.loads(proc.stdout.readline())["serving"]
+        allowed = ClientCurveConfig(secret_key_file=keys["client_secret"],
+                                    server_public_key_file=keys["server_pub"])
+        with RtClient(serving["endpoint"], timeout_s=5.0, curve=allowed) as client:
+            assert client.status()["state"] == "run"
+        with RtClient(serving["endpoint"], timeout_s=0.5) as plain:
+            with pytest.raises(RtUnavailableError):
+                plain.status()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)
