@@ -221,3 +221,35 @@ def test_rt_serve_rig_without_the_cards_fails_with_one_line(tmp_path, capsys) ->
     assert len(out) == 1 and "/nonexistent/port does not exist" in out[0]
     assert talus_main(["rt", "serve", "--backend", "rig", "--seconds", "1"]) == 2
     assert "needs the config's rig: section" in capsys.readouterr().out
+
+
+def test_rig_devices_with_the_ati_on_can(robot) -> None:
+    """The CAN variant of the rig's sensor, on python-can's virtual bus (PLATFORM.md: no vcan
+    here) with the twin's ATI answering as the Net F/T CAN device."""
+    from rt.ati.can_client import AtiCanResponder
+    from rt.devices.interfaces import Wrench
+    from rt.devices.rig_config import AtiCan
+
+    twin = Twin(robot.description, seed=4)
+    twin.place(HOLD_Q)
+    twin.sync(0.01)
+    rig = _test_rig(1).model_copy(update={
+        "force_torque": AtiCan(channel="talus-rig-can-test", interface="virtual")})
+    world_rdt = RdtServer(lambda: twin.ati_sample, host="127.0.0.1", port=0)
+    world = TwinWorld(rig, twin, world_rdt)
+    with AtiCanResponder(lambda: twin.ati_sample, channel="talus-rig-can-test"):
+        devices = rig_devices(rig, robot.description, port_io=twin.encoder_port,
+                              comedi=world.comedi)
+        try:
+            devices.force.start()
+            deadline = time.monotonic() + 5.0
+            w = Wrench()
+            while devices.force.read(w).stale and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert not w.stale
+            np.testing.assert_allclose(w.as_tuple()[:3], twin.ati_sample.wrench[:3], atol=0.5)
+            q = devices.encoders.read_positions_m(np.zeros(3))
+            np.testing.assert_allclose(q, twin.plant.q, atol=2.5e-5)
+        finally:
+            devices.close()
+            world.close()
