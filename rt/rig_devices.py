@@ -58,10 +58,17 @@ def rig_devices(config: RigConfig, description: RobotDescription, *,
         stops = open_("digital_inputs", s.backend, device=s.device, subdevice=s.subdevice,
                       estop_channel=s.estop_channel, hand_stop_channel=s.hand_stop_channel,
                       healthy_level=s.healthy_level, lib=comedi)
+        m = config.amplifier_monitor
+        monitor = None if m is None else open_(
+            "amplifier_monitor", m.backend, device=m.device, subdevice=m.subdevice,
+            channels=m.channels, range_index=m.range_index, volts_per_volt=m.volts_per_volt,
+            lib=comedi)
     except BaseException:
         _close_all(opened)
         raise
-    return Devices(encoders, cards, force, stops, close=lambda: _close_all(opened))
+    return Devices(encoders, cards, force, stops,
+                   monitor=None if monitor is None else monitor.read_volts,
+                   close=lambda: _close_all(opened))
 
 
 def _close_all(devices: list[Any]) -> None:

@@ -9,19 +9,21 @@ ATI sensor is served over UDP RDT on loopback.
 """
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import pytest
 
 from rt.ati.rdt_server import RdtServer
 from rt.devices.interfaces import DigitalInputState
-from rt.devices.rig_config import AtiRdt, RigConfig
+from rt.devices.rig_config import AmplifierMonitor, AtiRdt, RigConfig
 from rt.drivers.comedi_dio import ComediDigitalInputs
 from rt.drivers.fake_comedi import FakeComedi, FakeComediSystem
-from rt.errors import BackendUnavailableError, ConfigurationError
+from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError
 from rt.model import RobotModel
 from rt.position_loop import build_position_loop
 from rt.rig_devices import rig_devices
@@ -149,12 +151,19 @@ def test_stop_inputs_are_fail_safe() -> None:
         ComediDigitalInputs("/dev/comedi7", 0, 0, 1, lib=lib)
 
 
-def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> None:
+@contextlib.contextmanager
+def running_rig(robot, monitor: bool = False) -> Iterator[tuple]:
+    """The rig's loop holding HOLD_Q in real time on the twin's fakes: yields (loop, world,
+    devices); with ``monitor`` the amplifier inputs are read back by an analog-input card."""
     twin = Twin(robot.description, seed=3)
     twin.place(HOLD_Q)
     rdt = RdtServer(lambda: twin.ati_sample, host="127.0.0.1", port=0)
     rig = _test_rig(rdt.port)
+    if monitor:
+        rig = rig.model_copy(update={"amplifier_monitor": AmplifierMonitor()})
     world = TwinWorld(rig, twin, rdt)
+    world.comedi.devices[AmplifierMonitor().device] = FakeComedi(
+        ai_source=lambda ch: float(twin.amp_volts[ch]))
     devices = None
     pl = None
     try:
@@ -164,6 +173,19 @@ def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> Non
                                  model=robot)
         world.start()
         pl.loop.start()
+        yield pl, world, devices
+    finally:
+        if pl is not None:
+            pl.loop.stop()
+            pl.graph.stop()
+        if devices is not None and devices.close is not None:
+            devices.close()
+        world.close()
+
+
+def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> None:
+    with running_rig(robot) as (pl, world, devices):
+        twin = world.twin
         time.sleep(1.0)
         healthy_wrench = pl.graph.output("force.wrench").copy()
         healthy_flags = pl.graph.output("force.flags").copy()
@@ -177,13 +199,6 @@ def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> Non
         world.press_estop()
         time.sleep(0.2)
         mode_after_estop = float(pl.graph.output("supervisor.mode")[0])
-    finally:
-        if pl is not None:
-            pl.loop.stop()
-            pl.graph.stop()
-        if devices is not None and devices.close is not None:
-            devices.close()
-        world.close()
     stats = pl.loop.stats()
     assert stats.cycles > 500        # ≈ 2200 at 1 kHz; a loaded machine stalls the loop
     # The encoders read the twin's sliders through the real driver: within a count or two
@@ -253,3 +268,34 @@ def test_rig_devices_with_the_ati_on_can(robot) -> None:
         finally:
             devices.close()
             world.close()
+
+
+def test_the_amplifier_monitor_catches_a_dead_dac_channel(robot) -> None:
+    """A channel that accepts writes but outputs nothing: only the read-back sees it, and the
+    second card takes over within a few cycles, the sliders held."""
+    with running_rig(robot, monitor=True) as (pl, world, devices):
+        time.sleep(0.7)
+        commanded = float(pl.graph.output("supervisor.volts")[1])
+        assert abs(commanded) > 0.1          # holding against gravity: a dead 0 V is visible
+        world.twin.faults.schedule("dac_dead", world.twin.t, card=0, channel=1)
+        time.sleep(0.5)
+        active = pl.graph.output("drive.active_card")[0]
+    failovers = [e for e in pl.events.snapshot() if e.kind == "failover"]
+    assert len(failovers) == 1 and "channel 1 failed on card 0" in failovers[0].message
+    assert active == 1 and world.max_excursion_m < 1e-3, world.max_excursion_m
+
+
+def test_amplifier_monitor_reads_volts_and_refuses_bad_wiring() -> None:
+    from rt.drivers.comedi_ai import ComediAmplifierMonitor
+
+    card = FakeComedi(ai_source=lambda ch: (0.5, -1.25, 5.9)[ch])
+    lib = FakeComediSystem({"/dev/comedi3": card})
+    with ComediAmplifierMonitor("/dev/comedi3", lib=lib, volts_per_volt=2.0) as mon:
+        np.testing.assert_allclose(mon.read_volts(), (1.0, -2.5, 11.8), atol=2 * 20 / 4095)
+        card.fail_ai_reads = True
+        with pytest.raises(HardwareError, match="comedi_data_read on /dev/comedi3"):
+            mon.read_volts()
+    with pytest.raises(ConfigurationError, match="no input 16"):
+        ComediAmplifierMonitor("/dev/comedi3", channels=(0, 1, 16), lib=lib)
+    with pytest.raises(ConfigurationError, match="no voltage range 7"):
+        ComediAmplifierMonitor("/dev/comedi3", range_index=7, lib=lib)

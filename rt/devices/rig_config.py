@@ -17,6 +17,10 @@ RT config for that rig. What each card is:
   (python-can channel); counts per unit from the sensor's configuration page.
 * ``stop_inputs``: the hardware e-stop chain and the hand-held stop on the digital I/O card's
   inputs (subdevice 0, lines 0 and 1), normally closed (``rt.drivers.comedi_dio``).
+* ``amplifier_monitor`` (optional, *assumed* wiring, default none): the three amplifier
+  inputs read back by an analog-input card (``rt.drivers.comedi_ai``), so the failover also
+  catches a DAC channel that accepts writes but outputs nothing. Without it the failover
+  reacts to write errors only (a dead output then shows as a tracking error: soft stop).
 """
 from __future__ import annotations
 
@@ -127,6 +131,20 @@ class StopInputs(_Strict):
     healthy_level: Literal[0, 1] = 1
 
 
+class AmplifierMonitor(_Strict):
+    """Amplifier inputs read back; see ``rt.drivers.comedi_ai.ComediAmplifierMonitor``."""
+
+    backend: Literal["comedi_ai"] = "comedi_ai"
+    device: str = "/dev/comedi3"
+    subdevice: Axis = 0
+    #: Input of each axis.
+    channels: tuple[int, int, int] = (0, 1, 2)
+    #: A range covering the ±6 V commands (PCI-1711 range 0: ±10 V).
+    range_index: Axis = 0
+    #: Amplifier-input volts per volt read (1: wired directly).
+    volts_per_volt: float = 1.0
+
+
 class RigConfig(_Strict):
     """The rig's device files and wiring (module docstring)."""
 
@@ -136,6 +154,7 @@ class RigConfig(_Strict):
     dac_cards: list[DacCard] = Field(default_factory=_default_cards, min_length=1, max_length=2)
     force_torque: Annotated[AtiRdt | AtiCan, Field(discriminator="backend")] = AtiRdt()
     stop_inputs: StopInputs = StopInputs()
+    amplifier_monitor: AmplifierMonitor | None = None
 
     @model_validator(mode="after")
     def _distinct_wiring(self) -> "RigConfig":

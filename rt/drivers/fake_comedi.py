@@ -5,9 +5,9 @@ their device files, as one comedilib sees a machine's cards."""
 from __future__ import annotations
 
 import ctypes
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
-from rt.drivers.pci1720 import ComediRange
+from rt.drivers.pci1720 import ComediRange, volts_to_code
 
 
 class FakeComedi:
@@ -15,7 +15,9 @@ class FakeComedi:
     PCI-1720 (adv_pci1720: subdevice 0 = AO, 4 channels, maxdata 4095, ranges 0-5, 0-10,
     ±5, ±10 V) plus digital-I/O subdevices (``dio_subdevices``, default 2; 8 lines each,
     configured as input or output with ``comedi_dio_config``, like an 8255 port) on the same
-    "device". A digital I/O card alone is ``FakeComedi(dio_subdevices=(0, 1))``.
+    "device". A digital I/O card alone is ``FakeComedi(dio_subdevices=(0, 1))``; an
+    analog-input card (PCI-1711-like: 16 inputs, 12 bit, ranges ±10, ±5, ±2.5, ±1.25,
+    ±0.625 V) is ``FakeComedi(ai_source=volts_of_channel)``, its inputs on subdevice 0.
 
     Records ``writes`` as (handle, subdevice, channel, range, aref, code) and ``dio`` as
     (handle, subdevice, channel, bit). ``fail_open`` / ``fail_writes`` inject errors.
@@ -26,8 +28,12 @@ class FakeComedi:
     DIO_CHANNELS = 8
 
     RANGES = ((0.0, 5.0), (0.0, 10.0), (-5.0, 5.0), (-10.0, 10.0))
+    AI_RANGES = ((-10.0, 10.0), (-5.0, 5.0), (-2.5, 2.5), (-1.25, 1.25), (-0.625, 0.625))
+    AI_SUBDEVICE = 0
+    AI_CHANNELS = 16
 
-    def __init__(self, keep_log: bool = True, dio_subdevices: tuple[int, ...] = (2,)) -> None:
+    def __init__(self, keep_log: bool = True, dio_subdevices: tuple[int, ...] = (2,),
+                 ai_source: Callable[[int], float] | None = None) -> None:
         # The twin keeps no log (it runs for hours); tests keep every write.
         self.keep_log = keep_log
         self.last_code: dict[int, int] = {}
@@ -40,6 +46,9 @@ class FakeComedi:
         self.fail_writes = False
         self.fail_dio_reads = False
         self.dio_subdevices = tuple(dio_subdevices)
+        self.ai_source = ai_source
+        self.fail_ai_reads = False
+        self._ai_ranges = [ComediRange(lo, hi, 0) for lo, hi in self.AI_RANGES]
         self._levels = {sub: [0] * self.DIO_CHANNELS for sub in self.dio_subdevices}
         self._errno = 0
         # comedi_get_range returns a pointer valid until close; keep the structures alive.
@@ -58,7 +67,12 @@ class FakeComedi:
         self.closed.append(handle)
         return 0
 
+    def _is_ai(self, subdevice: int) -> bool:
+        return self.ai_source is not None and subdevice == self.AI_SUBDEVICE
+
     def comedi_get_n_channels(self, handle, subdevice: int) -> int:
+        if self._is_ai(subdevice):
+            return self.AI_CHANNELS
         if subdevice in self.dio_subdevices:
             return self.DIO_CHANNELS
         return 4 if subdevice == 0 else -1
@@ -67,6 +81,10 @@ class FakeComedi:
         return 4095 if subdevice == 0 and subdevice not in self.dio_subdevices else 1
 
     def comedi_get_range(self, handle, subdevice: int, channel: int, rng: int):
+        if self._is_ai(subdevice):
+            if not 0 <= rng < len(self._ai_ranges):
+                return ctypes.POINTER(ComediRange)()
+            return ctypes.pointer(self._ai_ranges[rng])
         if subdevice != 0 or subdevice in self.dio_subdevices or not 0 <= rng < len(self._ranges):
             return ctypes.POINTER(ComediRange)()       # NULL
         return ctypes.pointer(self._ranges[rng])
@@ -89,6 +107,16 @@ class FakeComedi:
             self._errno = 22
             return False
         return True
+
+    def comedi_data_read(self, handle, subdevice, channel, rng, aref, data) -> int:
+        """``data`` is a ``POINTER(c_uint)``: the code of ``ai_source(channel)`` volts."""
+        if not self._is_ai(subdevice) or self.fail_ai_reads or not 0 <= rng < len(self.AI_RANGES):
+            self._errno = 5 if self.fail_ai_reads else 22
+            return -1
+        assert self.ai_source is not None
+        lo, hi = self.AI_RANGES[rng]
+        data[0] = volts_to_code(self.ai_source(channel), lo, hi, 4095)
+        return 1
 
     def comedi_dio_config(self, handle, subdevice, channel, direction) -> int:
         if not self._dio_ok(subdevice, channel):
