@@ -131,9 +131,13 @@ class RtService:
         return {"reset": True, "cleared": [e.cause for e in new if e.kind == "reset"]}
 
     def set_gains(self, controller: str, gains: dict[str, float]) -> dict[str, Any]:
-        current = self.pl.graph.component("controller").controller.name
-        if controller != current:
-            raise InputError(f"controller {controller!r} is not running (running: {current!r})")
+        law = self.pl.graph.component("controller").controller
+        if controller != law.name:
+            raise InputError(f"controller {controller!r} is not running (running: {law.name!r})")
+        try:
+            law.check_gains(**gains)      # refused at once, with the range, not a cycle later
+        except ConfigurationError as exc:
+            raise InputError(str(exc)) from None
         self.pl.loop.set_params("controller", **gains).result(timeout=1.0)
         return {"controller": controller, "gains": gains}
 

@@ -98,3 +98,11 @@ def test_loop_set_params_and_service_set_gains_refuse_out_of_range() -> None:
     finally:
         pl.loop.stop()
     assert pl.graph.component("controller").controller.gains.kp_n_per_m == 2.0e5
+
+
+def test_service_refuses_out_of_range_gains_even_with_the_loop_stopped() -> None:
+    pl = build_sim_position_loop("computed_torque", duration_s=1.0, start_program=False)
+    service = RtService(pl, RtConfig(controller="computed_torque"))
+    with pytest.raises(InputError, match=r"kd_per_s = 900 1/s is outside its range \[5, 600\]"):
+        service.set_gains("computed_torque", {"kd_per_s": 900.0})
+    assert pl.graph.component("controller").controller.gains.kd_per_s == 80.0

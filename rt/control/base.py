@@ -128,10 +128,14 @@ class Controller(abc.ABC):
         return {name: {"default": getattr(defaults, name), **rng.as_dict()}
                 for name, rng in cls.gain_ranges.items()}
 
+    def check_gains(self, **changes: Any) -> Gains:
+        """The gains ``changes`` would give, validated (ranges included); changes nothing.
+        Raises ``ConfigurationError`` naming the gain and its range."""
+        return self._validate({**self.gains.model_dump(), **changes})
+
     def set_gains(self, **changes: Any) -> None:
         """Change gains at run time; invalid values raise and change nothing."""
-        merged = {**self.gains.model_dump(), **changes}
-        self.gains = self._validate(merged)
+        self.gains = self.check_gains(**changes)
         self._gains_changed()
 
     def _gains_changed(self) -> None:
