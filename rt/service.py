@@ -36,9 +36,11 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from rt.components.blocks import SignalTap
 from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
+from rt.devices.rig_config import RigConfig
 from rt.errors import ConfigurationError, InputError, TalusError
 from rt.ipc.messages import (DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT, PatientArgs, RecordArgs,
                              describe_validation_error)
+from rt.ipc.security import ServerCurveConfig
 from rt.position_loop import PositionLoop, build_protocol_loop, shm_devices, sim_devices
 from rt.references.program import Program, TrajectoryProgram
 from rt.references.sequencer import Phase
@@ -74,9 +76,16 @@ class RtConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     schema_version: Literal[1] = 1
-    backend: Literal["sim", "twin_shm"] = "sim"
+    backend: Literal["sim", "twin_shm", "rig"] = "sim"
     #: With backend twin_shm: the rig process's shared-memory segment (talus twin rig --shm).
     shm: str | None = None
+    #: With backend rig: the rig's cards and wiring (rt.devices.rig_config; example:
+    #: rt/data/rig_example.yaml).
+    rig: RigConfig | None = None
+    #: Robot description YAML (None: the packaged nominal twin); a lab's identified robot.
+    robot: str | None = None
+    #: CurveZMQ keys; required when an endpoint is not loopback (rt.ipc.security).
+    curve: ServerCurveConfig | None = None
     rate_hz: float = Field(1000.0, ge=100.0, le=2000.0)
     #: "realtime" paces the loop by the clock; "fast" (the twin only) runs it back to back in
     #: simulated time, for demos and tests.
@@ -96,11 +105,16 @@ class RtConfig(BaseModel):
     telemetry_hz: float = Field(60.0, gt=0.0, le=500.0)
     #: Limits in force outside sessions (a session brings its patient's).
     patient_limits: PatientLimits = Field(default_factory=PatientLimits)
+    #: The machine's limits (stroke margin, speeds, forces, overruns ...); its heartbeat
+    #: timeout is ``heartbeat_timeout_s`` above.
+    robot_limits: RobotLimits = Field(default_factory=RobotLimits)
     #: Where sessions are recorded unless the client names a directory (default:
     #: :func:`default_recordings_dir`).
     recordings_dir: str | None = None
-    #: The robot description file (default: the nominal one shipped with talus).
-    robot: str | None = None
+
+    def limits_of_robot(self) -> RobotLimits:
+        return self.robot_limits.model_copy(
+            update={"heartbeat_timeout_s": self.heartbeat_timeout_s})
 
     def recordings_path(self) -> Path:
         return Path(self.recordings_dir) if self.recordings_dir else default_recordings_dir()
@@ -321,9 +335,13 @@ class RtService:
 
     def set_gains(self, client: str, controller: str, gains: dict[str, float]) -> dict[str, Any]:
         self._require_owner(client, "set_gains")
-        current = self.pl.graph.component("controller").controller.name
-        if controller != current:
-            raise InputError(f"controller {controller!r} is not running (running: {current!r})")
+        law = self.pl.graph.component("controller").controller
+        if controller != law.name:
+            raise InputError(f"controller {controller!r} is not running (running: {law.name!r})")
+        try:
+            law.check_gains(**gains)      # refused at once, with the range, not a cycle later
+        except ConfigurationError as exc:
+            raise InputError(str(exc)) from None
         self.pl.loop.set_params("controller", **gains).result(timeout=1.0)
         return {"controller": controller, "gains": gains}
 
@@ -420,8 +438,7 @@ class RtService:
             raise InputError(f"bad patient limits: {describe_validation_error(exc)}") from None
 
     def _context(self) -> SessionContext:
-        return SessionContext(self.pl.model, RobotLimits(
-            heartbeat_timeout_s=self.config.heartbeat_timeout_s), self.config.rate_hz,
+        return SessionContext(self.pl.model, self.config.limits_of_robot(), self.config.rate_hz,
             twin=self.pl.twin is not None)
 
     def session_status(self, client: str) -> dict[str, Any]:
@@ -492,8 +509,8 @@ class RtService:
             raise InputError("session_start refused: the client that started it was lost "
                              "during pre-flight")
         d = pl.model.description
-        limits = effective(tuple(d.limits.stroke_m), RobotLimits(
-            heartbeat_timeout_s=self.config.heartbeat_timeout_s), s.patient.limits,
+        limits = effective(tuple(d.limits.stroke_m), self.config.limits_of_robot(),
+                           s.patient.limits,
             prep.protocol_limits)
         started = datetime.now(timezone.utc)
         s.recording = unique_path(s.record_dir, recording_name(
@@ -706,7 +723,7 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
     common: dict[str, Any] = dict(
         model=model, rate_hz=config.rate_hz, mode=config.loop_mode, controller=config.controller,
         gains=config.gains or None, patient_limits=config.patient_limits,
-        robot_limits=RobotLimits(heartbeat_timeout_s=config.heartbeat_timeout_s),
+        robot_limits=config.limits_of_robot(),
         extra_blocks=[tap],
         extra_connections=[(src, f"session.{name}") for name, src in SESSION_SOURCES.items()])
     if config.loop_mode == "fast" and config.backend != "sim":
@@ -715,6 +732,13 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
         if not config.shm:
             raise ConfigurationError("backend twin_shm needs the rig's segment name (--shm)")
         devices = shm_devices(config.shm)
+    elif config.backend == "rig":
+        from rt.rig_devices import rig_devices
+
+        if config.rig is None:
+            raise ConfigurationError("backend rig needs the config's rig: section "
+                                     "(see rt/data/rig_example.yaml)")
+        devices = rig_devices(config.rig, model.description)
     else:
         clock = SimClock()
         twin = Twin(model.description, parse_environment(config.environment), clock=clock)
@@ -737,13 +761,18 @@ def serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None 
     # bounds how long a request waits for it (the default 5 ms per hand-over delays the owner's
     # heartbeats by hundreds of ms when the loop runs back to back in fast mode).
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+    if config.curve is None:
+        # Refused before any device is opened: off loopback, only with CurveZMQ.
+        from rt.ipc.security import check_server_endpoint
+        check_server_endpoint(config.endpoint, None)
+        check_server_endpoint(config.pub_endpoint, None)
     pl, tap = build_rt_loop(config)
     warm = getattr(sessions, "warm", None)
     if warm is not None:
         warm(pl.model.description)   # the pre-flight worker starts while the loop does
     service = RtService(pl, config, tap, sessions, programs)
     with RtServer(service, config.endpoint, config.pub_endpoint,
-                  heartbeat_timeout_s=config.heartbeat_timeout_s) as server:
+                  heartbeat_timeout_s=config.heartbeat_timeout_s, curve=config.curve) as server:
         service.server = server
         service.endpoint = server.endpoint
         pl.events.listener = lambda ev: server.publish("event", ev)

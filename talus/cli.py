@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import sys
 
 #: group name -> (modules, each with ``register(subparsers)``, help)
@@ -48,8 +49,15 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     group = argv[0] if argv and argv[0] in GROUPS else None
     args = build_parser(group).parse_args(argv)
+    from rt.errors import TalusError
+
     try:
         return int(args.func(args) or 0)
+    except TalusError as exc:
+        # A command that did not report its own error: one line, exit code 2 (a bad --robot
+        # file, a missing card), never a traceback.
+        print(json.dumps({"error": str(exc)}), flush=True)
+        return 2
     except BrokenPipeError:
         # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
         sys.stderr.close()

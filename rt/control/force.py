@@ -24,7 +24,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from rt.control.base import Reference, create
+from rt.control.base import GainRange, Reference, check_gain_ranges, check_range_table, create
 from rt.errors import ConfigurationError
 from rt.model import RobotModel
 from rt.model.dynamics import State
@@ -60,12 +60,38 @@ class ExplicitForceGains(BaseModel):
     forgetting: Annotated[float, Field(gt=0.9, le=1.0)] = 0.999
 
 
-def _validate(model_type, gains) -> BaseModel:
+#: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
+#: (1e5-1e7 N/m) ring at 1 kHz; damping and angle gains follow the PD laws' 5-150 rad/s family
+#: (platform ≈ 630 kg through the legs in z, ≈ 8 kg m² in roll/pitch); integral clamp below
+#: the drives' ≈ 2 kN per axis.
+EXPLICIT_FORCE_RANGES = {
+    "kp": GainRange(0.0, 50.0, "N/N"),
+    "ki_per_s": GainRange(0.0, 5000.0, "1/s"),
+    "damping_n_s_per_m": GainRange(0.0, 1.0e5, "N s/m"),
+    "integral_limit_n": GainRange(1.0, 2500.0, "N"),
+    "angle_kp_n_m_per_rad": GainRange(100.0, 5.0e4, "N m/rad"),
+    "angle_kd_n_m_s_per_rad": GainRange(1.0, 2000.0, "N m s/rad"),
+    "stiffness_guess_n_per_m": GainRange(1.0e3, 1.0e8, "N/m"),
+    "forgetting": GainRange(0.9, 1.0, ""),
+}
+#: Admittance: a virtual mass below 1 kg or a rate above 0.2 m/s would let the platform jump
+#: at a patient's push; above 500 kg / 1e5 N s/m it no longer yields to a person.
+ADMITTANCE_RANGES = {
+    "virtual_mass_kg": GainRange(1.0, 500.0, "kg"),
+    "virtual_damping_n_s_per_m": GainRange(100.0, 1.0e5, "N s/m"),
+    "virtual_stiffness_n_per_m": GainRange(0.0, 1.0e6, "N/m"),
+    "max_speed_m_s": GainRange(0.001, 0.2, "m/s"),
+}
+
+
+def _validate(owner: str, model_type, ranges, gains) -> BaseModel:
     try:
-        return model_type.model_validate(gains or {})
+        validated = model_type.model_validate(gains or {})
     except ValidationError as exc:
         msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
         raise ConfigurationError(f"force controller gains invalid: {msgs}") from None
+    check_gain_ranges(owner, ranges, validated)
+    return validated
 
 
 @dataclass
@@ -95,11 +121,13 @@ class ExplicitForce:
     """Hybrid explicit force (z) / position (roll, pitch) law; see the module docstring."""
 
     name = "explicit_force"
+    gains_type = ExplicitForceGains
+    gain_ranges = EXPLICIT_FORCE_RANGES
 
     def __init__(self, model: RobotModel, gains: dict | None = None):
         self.model = model
         self.dyn = model.dyn
-        self.gains = _validate(ExplicitForceGains, gains)
+        self.gains = _validate(self.name, ExplicitForceGains, self.gain_ranges, gains)
         self.axis_inertia = model.description.drive.reflected_inertia_kg
         self.reset()
 
@@ -116,7 +144,8 @@ class ExplicitForce:
         self.tau = np.zeros(3)
 
     def set_gains(self, **changes) -> None:
-        self.gains = _validate(ExplicitForceGains, {**self.gains.model_dump(), **changes})
+        self.gains = _validate(self.name, ExplicitForceGains, self.gain_ranges,
+                               {**self.gains.model_dump(), **changes})
 
     def update(self, st: State, force_n: float, ref: ForceReference, dt: float,
                out: np.ndarray) -> int:
@@ -179,14 +208,21 @@ class Admittance:
     """Force error → virtual mass-damper(-spring) in z → pose → inner Paden-Panja."""
 
     name = "admittance"
+    gains_type = AdmittanceGains
+    gain_ranges = ADMITTANCE_RANGES
 
     def __init__(self, model: RobotModel, gains: dict | None = None,
                  inner: str = "paden_panja", inner_gains: dict | None = None):
         self.model = model
-        self.gains = _validate(AdmittanceGains, gains)
+        self.gains = _validate(self.name, AdmittanceGains, self.gain_ranges, gains)
         self.inner = create(inner, model, inner_gains)
         self._ref = Reference()
         self.reset()
+
+    def set_gains(self, **changes) -> None:
+        """Change gains at run time; a value outside its range is refused, nothing changes."""
+        self.gains = _validate(self.name, AdmittanceGains, self.gain_ranges,
+                               {**self.gains.model_dump(), **changes})
 
     def reset(self, z0: float | None = None) -> None:
         self.z = z0
@@ -212,3 +248,7 @@ class Admittance:
             r.qd[i] = (ahead.q[i] - cfg.q[i]) / 1e-4
             r.qdd[i] = 0.0
         return self.inner.update(st, r, dt, out)
+
+
+for _law in (ExplicitForce, Admittance):
+    check_range_table(_law.name, _law.gain_ranges, _law.gains_type)

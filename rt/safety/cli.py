@@ -4,12 +4,15 @@ from __future__ import annotations
 import argparse
 import json
 
+from rt.model.robot_option import add_robot_option
+
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("matrix", help="inject every fault on the twin and report the "
                                            "supervisor's reaction")
     p.add_argument("--json", action="store_true")
     p.add_argument("--only", nargs="*", default=None, help="run only these faults")
+    add_robot_option(p)
     p.set_defaults(func=_matrix)
 
 
@@ -18,9 +21,16 @@ def _fmt(v) -> str:
 
 
 def _matrix(args) -> int:
+    from rt.errors import TalusError
+    from rt.model import RobotModel
     from rt.safety.fault_matrix import run_matrix
 
-    result = run_matrix(args.only)
+    try:
+        model = RobotModel.load(args.robot)
+    except TalusError as exc:
+        print(json.dumps({"error": str(exc)}))
+        return 2
+    result = run_matrix(args.only, model=model)
     if args.json:
         print(json.dumps(result))
         return 0

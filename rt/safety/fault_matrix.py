@@ -249,8 +249,8 @@ def _excursions(rows: np.ndarray, sc: Scenario, model: RobotModel, t_from: float
             "stroke_mm": round(stroke, 3)}
 
 
-def run_matrix(names: list[str] | None = None) -> dict:
-    model = RobotModel.load()
+def run_matrix(names: list[str] | None = None, model: RobotModel | None = None) -> dict:
+    model = model or RobotModel.load()
     out = []
     for sc in scenarios(model):
         if names and sc.name not in names:

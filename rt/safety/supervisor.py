@@ -127,6 +127,7 @@ class Supervisor:
         self._last_q = [math.nan, math.nan, math.nan]
         self._overruns = 0
         self.latched_ids: dict[str, int] = {}      # latched cause -> the event that latched it
+        self._latched_wall: dict[str, float] = {}  # ... and its wall-clock time (s)
         self._estop_request: str | None = None
         self._stop_request = False
         self._reset_tickets: deque[ResetTicket] = deque()
@@ -153,7 +154,7 @@ class Supervisor:
             try:
                 items = list(self.latched_ids.items())
                 return [{"id": i, "cause": c, "reaction": self.causes.get(c, Reaction.NONE)
-                         .name.lower()} for c, i in items]
+                         .name.lower(), "wall": self._latched_wall.get(c)} for c, i in items]
             except RuntimeError:
                 continue
         return []
@@ -189,6 +190,7 @@ class Supervisor:
                 event = SafetyEvent(t, "fault", cause, reaction, message, values)
                 self.log.append(event)
                 self.latched_ids[cause] = event.id
+                self._latched_wall[cause] = event.wall
 
         # -- stop inputs
         if self._estop_request is not None:
