@@ -7,8 +7,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 # Debian packages the project needs at run or test time (none beyond the image's Python yet;
-# later parts add Xvfb and poppler-utils here).
-APT_PACKAGES :=
+# later parts add Xvfb and poppler-utils here). postgresql: the clinical record's tests start
+# a throw-away server (tests/pg_server.py).
+APT_PACKAGES := postgresql
 
 .PHONY: demo test setup system-deps bench clean
 
