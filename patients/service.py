@@ -32,7 +32,7 @@ from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 from sqlalchemy.orm.exc import StaleDataError
 
-from patients import audit, db as dbmod, passwords
+from patients import audit, db as dbmod, passwords, transfer
 from patients.anatomy import ClinicalRom, to_clinical
 from patients.errors import (AccountLocked, AlreadyExists, AuthenticationFailed,
                              ConcurrentUpdate, InputError, NotFound, RecordError)
@@ -568,6 +568,77 @@ class ClinicalRecord:
             d = _session_dict(s, _code_of(db, s.patient_id), full=True)
             d["protocol_yaml"] = s.protocol_yaml
             return d
+
+    # ------------------------------------------------------------ export / import
+    def export_patient(self, actor: Actor, code: str) -> dict[str, Any]:
+        """The patient's pseudonymous record (patients.transfer), JSON-ready."""
+        with self._tx() as db:
+            self._require(db, actor, Action.RECORD_EXPORT)
+            p = self._patient(db, code)
+            sessions = db.execute(sa.select(TherapySession)
+                                  .where(TherapySession.patient_id == p.id)
+                                  .order_by(TherapySession.started_at, TherapySession.id)).scalars().all()
+            plans = db.execute(sa.select(Plan).where(Plan.patient_id == p.id)
+                               .order_by(Plan.id)).scalars().all()
+            doc = {
+                "kind": transfer.KIND, "schema_version": transfer.SCHEMA_VERSION,
+                "exported_at": _iso(self.clock()), "exported_by": actor.username,
+                "patient": {k: v for k, v in _patient_dict(p, None).items() if k != "version"},
+                "limits": [{k: v for k, v in _limits_record(r, None).items() if k != "clinical"}
+                           for r in p.limits],
+                "plans": [{**_plan_dict(x), "protocol_yaml": x.protocol_yaml} for x in plans],
+                "sessions": [{**{k: v for k, v in _session_dict(s, code, full=True).items()
+                                 if k != "patient"}, "protocol_yaml": s.protocol_yaml}
+                             for s in sessions],
+                "recordings": [{"session_uid": s.uid, "path": s.recording_path,
+                                "sha256": s.recording_sha256}
+                               for s in sessions if s.recording_path],
+            }
+            self._audit(db, actor, "record.export", "patient", code,
+                        after={"sessions": len(sessions)})
+            return doc
+
+    def import_patient(self, actor: Actor, document: Any) -> dict[str, Any]:
+        """Import an exported record as a new patient with the same code (refused if the code
+        or a session uid exists here). Returns ``show``'s dict."""
+        rec = transfer.parse(document)
+        code = _check_code(rec.patient.code)
+        with self._tx() as db:
+            self._require(db, actor, Action.RECORD_IMPORT)
+            if db.execute(sa.select(Patient.id).where(Patient.code == code)).first():
+                raise AlreadyExists(f"patient code {code!r} exists in this database")
+            uids = [s.uid for s in rec.sessions]
+            clash = db.execute(sa.select(TherapySession.uid)
+                               .where(TherapySession.uid.in_(uids))).scalars().first() \
+                if uids else None
+            if clash:
+                raise AlreadyExists(f"session {clash} exists in this database")
+            data = rec.patient.model_dump()
+            clinical = _clinical({k: data[k] for k in CLINICAL_FIELDS})
+            p = Patient(code=code, created_at=data["created_at"], created_by=data["created_by"],
+                        forgotten_at=data["forgotten_at"], **clinical)
+            db.add(p)
+            db.flush()
+            for lim in rec.limits:
+                db.add(PatientLimitsRow(patient_id=p.id, **lim.model_dump()))
+            plan_ids: dict[int, int] = {}
+            for plan in rec.plans:
+                fields = plan.model_dump()
+                old_id = fields.pop("id")
+                row = Plan(patient_id=p.id, **fields)
+                db.add(row)
+                db.flush()
+                plan_ids[old_id] = row.id
+            for s in rec.sessions:
+                fields = s.model_dump()
+                fields["plan_id"] = plan_ids.get(fields["plan_id"]) if fields["plan_id"] else None
+                _enum(Outcome, fields["outcome"], "outcome")
+                db.add(TherapySession(patient_id=p.id, **fields))
+            self._audit(db, actor, "record.import", "patient", code,
+                        after={"sessions": len(rec.sessions), "limits": len(rec.limits),
+                               "plans": len(rec.plans), "exported_at": rec.exported_at})
+            db.flush()
+            return _patient_dict(p, self._limits_row(db, p))
 
     # ------------------------------------------------------------ calibrations
     def add_calibration(self, actor: Actor, record: dict[str, Any],
