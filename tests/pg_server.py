@@ -82,7 +82,8 @@ class PostgresServer:
 
     def pg_dump(self, url: str) -> str:
         """The plain-SQL dump of the database at ``url`` (its text)."""
-        database = url.split("/")[-1].split("?")[0]
+        from sqlalchemy.engine import make_url
+        database = make_url(url).database or "postgres"
         cmd = [str(PG_BIN / "pg_dump"), "-h", str(self.root), "-p", str(PORT), "-U", RUN_AS,
                database]
         if os.geteuid() == 0:
