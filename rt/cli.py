@@ -23,6 +23,11 @@ GROUPS: dict[str, tuple[str, str]] = {
     "session": ("protocols.session_cli", "run a protocol: pre-flight, run, record, summary"),
     "rt": ("rt.ipc.cli", "RT process: status, stop, estop, reset (JSON)"),
     "record": ("rt.recording.cli", "recordings: info, CSV export"),
+    "db": ("patients.db_cli", "clinical database: upgrade, backup, restore, demo"),
+    "users": ("patients.users_cli", "users and roles: init, add, passwd, list"),
+    "patients": ("patients.patients_cli", "patients: add, list, show, limits, forget, export"),
+    "sessions": ("patients.sessions_cli", "stored therapy sessions: list, show"),
+    "audit": ("patients.audit_cli", "audit log: verify, export"),
 }
 
 
