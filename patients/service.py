@@ -548,18 +548,25 @@ class ClinicalRecord:
         ``full`` adds the summary and the limits snapshot (what reports need)."""
         with self._tx() as db:
             self._require(db, actor, Action.SESSION_READ)
-            stmt = sa.select(TherapySession, Patient.code).join(Patient)
+            # Plain columns, not ORM objects: listing 10 000 sessions is a report's daily
+            # bread (bench/patients.py).
+            t = TherapySession
+            columns = [t.uid, Patient.code.label("patient"), t.clinician, t.plan_id,
+                       t.protocol_name, t.protocol_sha256, t.started_at, t.ended_at, t.outcome,
+                       t.stopped_by, t.recording_path, t.recording_sha256]
+            if full:
+                columns += [t.limits, t.body_mass_kg, t.summary]
+            stmt = sa.select(*columns).join(Patient, Patient.id == t.patient_id)
             if code is not None:
-                stmt = stmt.where(TherapySession.patient_id == self._patient(db, code).id)
+                stmt = stmt.where(t.patient_id == self._patient(db, code).id)
             if since is not None:
-                stmt = stmt.where(TherapySession.started_at >= since)
+                stmt = stmt.where(t.started_at >= since)
             if until is not None:
-                stmt = stmt.where(TherapySession.started_at < until)
-            if not full:
-                stmt = stmt.options(sa.orm.defer(TherapySession.protocol_yaml),
-                                    sa.orm.defer(TherapySession.summary))
-            stmt = stmt.order_by(TherapySession.started_at, TherapySession.id)
-            return [_session_dict(s, c, full) for s, c in db.execute(stmt)]
+                stmt = stmt.where(t.started_at < until)
+            stmt = stmt.order_by(t.started_at, t.id)
+            return [{**row, "started_at": _iso(row["started_at"]),
+                     "ended_at": _iso(row["ended_at"])}
+                    for row in db.execute(stmt).mappings()]
 
     def get_session(self, actor: Actor, uid: str) -> dict[str, Any]:
         with self._tx() as db:

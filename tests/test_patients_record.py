@@ -192,6 +192,8 @@ def test_a_session_stores_snapshots_outcome_and_recording(record, people, clock)
     shown = record.get_session(people.engineer, started["uid"])
     assert shown["summary"] == summary and shown["protocol_yaml"] == PROTOCOL_YAML
     assert (shown["outcome"], shown["stopped_by"]) == ("stopped_by_fault", "max_force_n")
+    listed = record.list_sessions(people.viewer, code, full=True)
+    assert listed == [{k: v for k, v in shown.items() if k != "protocol_yaml"}]
     with pytest.raises(InputError, match="already finished"):
         record.finish_session(people.clinician, started["uid"], Outcome.COMPLETED)
     with pytest.raises(InputError, match="needs stopped_by"):
