@@ -1,0 +1,81 @@
+"""A therapy session run for a patient and stored in the clinical record.
+
+``run_for_patient`` is the glue ``talus session run --patient CODE`` calls: it opens the session
+row (the protocol and the limits in force, snapshotted), builds the session setup from the
+stored limits and body mass, runs it with the given runner (today
+``protocols.session.run_session``; the RT process's client once issue 9 lands, same contract:
+``runner(setup, record_path) -> summary dict``), and closes the row with the outcome, who or
+which fault stopped it, the summary and the recording's path and sha256. A refused pre-flight,
+a crash or Ctrl-C close the row too: no session stays "running" because of us.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from patients.errors import InputError
+from patients.models import Outcome
+from patients.service import LIMIT_FIELDS, Actor, ClinicalRecord
+from rt.errors import ProtocolValidationError
+
+Runner = Callable[[Any, Path | None], dict[str, Any]]
+
+#: Supervisor causes a person triggers (rt/safety/supervisor.py): who, for ``stopped_by``.
+PERSON_CAUSES = {"hand_stop": "patient", "stop_client": "operator",
+                 "estop_hardware": "operator"}
+
+
+def outcome_of(summary: dict[str, Any]) -> tuple[Outcome, str | None]:
+    """Outcome and ``stopped_by`` from a session summary (protocols/session.py's dict)."""
+    stops = summary.get("stops") or []
+    if summary.get("completed") and not stops:
+        return Outcome.COMPLETED, None
+    if not stops:
+        return Outcome.STOPPED_BY_FAULT, "did not finish (no supervisor stop recorded)"
+    first = stops[0]
+    cause = str(first.get("cause", "unknown"))
+    who = PERSON_CAUSES.get(cause) or ("operator" if cause.startswith("estop_") else None)
+    if who is not None:
+        return Outcome.STOPPED_BY_USER, f"{who}: {cause}"
+    return Outcome.STOPPED_BY_FAULT, f"{cause}: {first.get('message', '')}".strip(": ")
+
+
+def run_for_patient(record: ClinicalRecord, actor: Actor, code: str, protocol_path: Path,
+                    recording: Path | None, runner: Runner,
+                    plan_id: int | None = None, **setup_options: Any) -> dict[str, Any]:
+    """Run ``protocol_path`` for patient ``code`` and store it; returns the stored session.
+
+    ``setup_options`` go to ``protocols.session.SessionSetup`` (e.g. ``environment``).
+    """
+    from protocols.session import SessionSetup
+    from rt.safety.limits import PatientLimits
+
+    try:
+        text = Path(protocol_path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read {protocol_path}: {exc}") from None
+    started = record.start_session(actor, code, text, plan_id=plan_id)
+    uid = started["uid"]
+    setup = SessionSetup(Path(protocol_path), patient_weight_kg=started["body_mass_kg"],
+                         patient_limits=PatientLimits(**{k: started["limits"][k]
+                                                         for k in LIMIT_FIELDS}),
+                         **setup_options)
+    try:
+        summary = runner(setup, recording)
+    except ProtocolValidationError as exc:
+        record.finish_session(actor, uid, Outcome.REFUSED, stopped_by=f"pre-flight: {exc}"[:200])
+        raise
+    except KeyboardInterrupt:
+        record.finish_session(actor, uid, Outcome.STOPPED_BY_USER,
+                              stopped_by=f"operator: {actor.username} interrupted the program")
+        raise
+    except BaseException as exc:
+        record.finish_session(actor, uid, Outcome.STOPPED_BY_FAULT,
+                              stopped_by=f"software: {type(exc).__name__}: {exc}"[:200])
+        raise
+    outcome, stopped_by = outcome_of(summary)
+    rec = summary.get("recording") or {}
+    return record.finish_session(actor, uid, outcome, stopped_by=stopped_by, summary=summary,
+                                 recording_path=rec.get("path"),
+                                 recording_sha256=rec.get("sha256"))
