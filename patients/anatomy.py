@@ -1,6 +1,7 @@
 """Clinical names of the limits and their signs on the robot.
 
-The robot's limits are ``rt.safety.limits.PatientLimits``: roll and pitch of the platform frame
+The convention is the protocols' (``protocols.base.FOOT_MOUNTING``, ``anatomical_to_platform``):
+this module uses their function, so the two cannot drift apart. The robot's limits are ``rt.safety.limits.PatientLimits``: roll and pitch of the platform frame
 P (robot_nominal.yaml: z up, right-handed; roll about P's x, pitch about P's y). The foot is
 strapped with the toes towards P's +x (the heel towards -x). Then:
 
@@ -48,10 +49,15 @@ def _foot(side: Side | str | None) -> Side:
     return foot
 
 
+def _inversion_sign(foot: Side) -> float:
+    """+1 when positive roll is inversion for this foot (right), -1 when eversion (left)."""
+    from protocols.base import anatomical_to_platform
+    return anatomical_to_platform(0.0, 1.0, foot.value)[0]
+
+
 def to_robot(rom: ClinicalRom, side: Side | str | None) -> dict[str, float]:
     """``PatientLimits`` roll/pitch fields (deg) for ``rom`` on the ``side`` foot."""
-    foot = _foot(side)
-    if foot is Side.RIGHT:
+    if _inversion_sign(_foot(side)) > 0:
         roll_min, roll_max = -rom.eversion_deg, rom.inversion_deg
     else:
         roll_min, roll_max = -rom.inversion_deg, rom.eversion_deg
@@ -65,7 +71,7 @@ def to_clinical(limits: dict[str, float], side: Side | str | None) -> ClinicalRo
         foot = _foot(side)
     except InputError:
         return None
-    if foot is Side.RIGHT:
+    if _inversion_sign(foot) > 0:
         inversion, eversion = limits["roll_max_deg"], -limits["roll_min_deg"]
     else:
         inversion, eversion = -limits["roll_min_deg"], limits["roll_max_deg"]

@@ -28,12 +28,22 @@ def clinic(tmp_path):
     record.close()
 
 
+def _short_rom(tmp_path: Path) -> Path:
+    """ankle_rom, one repetition of pitch only: a short real twin run."""
+    text = (LIB / "ankle_rom.yaml").read_text()
+    text = text.replace("repetitions: 3", "repetitions: 1").replace(
+        "sequence: [dorsi_plantar, inversion_eversion]", "sequence: [dorsi_plantar]")
+    path = tmp_path / "short_rom.yaml"
+    path.write_text(text)
+    return path
+
+
 def test_a_twin_session_is_stored_with_the_patients_limits(clinic, tmp_path):
     record, people, code = clinic
     record.set_limits(people.clinician, code, pitch_min_deg=-12, pitch_max_deg=12,
                       roll_min_deg=-9, roll_max_deg=9)
     mcap = tmp_path / "rom.mcap"
-    stored = run_for_patient(record, people.clinician, code, LIB / "ankle_rom.yaml", mcap,
+    stored = run_for_patient(record, people.clinician, code, _short_rom(tmp_path), mcap,
                              fast_runner)
     assert stored["outcome"] == "completed" and stored["stopped_by"] is None
     assert stored["limits"]["pitch_max_deg"] == 12 and stored["body_mass_kg"] == 75
