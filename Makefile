@@ -6,9 +6,8 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-# Debian packages the project needs at run or test time (none beyond the image's Python yet;
-# later parts add Xvfb and poppler-utils here). postgresql: the clinical record's tests start
-# a throw-away server (tests/pg_server.py).
+# Debian packages the project needs at run or test time. postgresql: the clinical record's
+# tests start a throw-away server (tests/pg_server.py); later parts add Xvfb and poppler-utils.
 APT_PACKAGES := postgresql
 
 .PHONY: demo test setup system-deps bench clean
@@ -36,6 +35,8 @@ demo: setup
 	$(BIN)/talus bench tracking --experiment payload-step
 	@echo
 	@mkdir -p out
+	$(BIN)/talus db demo --db out/demo.db
+	@echo
 	$(BIN)/talus session run --protocol protocols/library/sine_fz.yaml --record out/sine_fz.mcap
 	@echo
 	$(BIN)/talus session run --protocol protocols/library/gait_replay.yaml --patient-weight 75 \

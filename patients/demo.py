@@ -18,7 +18,7 @@ from patients.errors import RecordError
 from patients.service import ClinicalRecord
 
 ADMIN, CLINICIAN, PATIENT = "demo-admin", "demo-clinician", "DEMO-001"
-DEMO_PATIENT = {"body_mass_kg": 75.0, "height_m": 1.75, "affected_side": "right",
+DEMO_PATIENT: dict[str, Any] = {"body_mass_kg": 75.0, "height_m": 1.75, "affected_side": "right",
                 "diagnosis": "lateral ankle sprain, grade II (demo)"}
 #: Wider than the shipped protocols need (ankle_rom: ±10° pitch, ±8° roll).
 DEMO_LIMITS = {"roll_min_deg": -12.0, "roll_max_deg": 12.0, "pitch_min_deg": -15.0,

@@ -227,16 +227,17 @@ class ClinicalRecord:
 
     def add_user(self, actor: Actor, username: str, role: Role | str, password: str) -> dict[str, Any]:
         _check_username(username)
-        role = _enum(Role, role, "role")
+        role_: Role = _enum(Role, role, "role")
         passwords.check_new_password(username, password)
         with self._tx() as db:
             self._require(db, actor, Action.USERS_MANAGE)
             if db.execute(sa.select(User.id).where(User.username == username)).first():
                 raise AlreadyExists(f"user {username!r} exists")
-            user = User(username=username, role=role.value, password_hash=self.hasher.hash(password),
-                        created_at=self.clock(), created_by=actor.username)
+            user = User(username=username, role=role_.value,
+                        password_hash=self.hasher.hash(password), created_at=self.clock(),
+                        created_by=actor.username)
             db.add(user)
-            self._audit(db, actor, "user.create", "user", username, after={"role": role.value})
+            self._audit(db, actor, "user.create", "user", username, after={"role": role_.value})
             db.flush()
             return _user_dict(user)
 
@@ -520,12 +521,12 @@ class ClinicalRecord:
                        recording_sha256: str | None = None) -> dict[str, Any]:
         """Close a running session: outcome, who or which fault stopped it, the summary dict
         (``protocols.session.run_session``'s), and the recording's path and sha256."""
-        outcome = _enum(Outcome, outcome, "outcome")
-        if outcome is Outcome.RUNNING:
+        end: Outcome = _enum(Outcome, outcome, "outcome")
+        if end is Outcome.RUNNING:
             raise InputError("a session is finished with completed, stopped_by_user, "
                              "stopped_by_fault or refused")
-        if outcome in (Outcome.STOPPED_BY_USER, Outcome.STOPPED_BY_FAULT) and not stopped_by:
-            raise InputError(f"outcome {outcome.value} needs stopped_by (who, or which fault)")
+        if end in (Outcome.STOPPED_BY_USER, Outcome.STOPPED_BY_FAULT) and not stopped_by:
+            raise InputError(f"outcome {end.value} needs stopped_by (who, or which fault)")
         if recording_sha256 is not None and not re.fullmatch(r"[0-9a-f]{64}", recording_sha256):
             raise InputError("recording_sha256 must be 64 lower-case hex digits")
         with self._tx() as db:
@@ -533,11 +534,11 @@ class ClinicalRecord:
             s = _session(db, uid, lock=True)
             if s.outcome != Outcome.RUNNING.value:
                 raise InputError(f"session {uid} already finished ({s.outcome})")
-            s.ended_at, s.outcome, s.stopped_by = self.clock(), outcome.value, stopped_by
+            s.ended_at, s.outcome, s.stopped_by = self.clock(), end.value, stopped_by
             s.summary = summary
             s.recording_path, s.recording_sha256 = recording_path, recording_sha256
             self._audit(db, actor, "session.finish", "session", uid,
-                        after={"outcome": outcome.value, "stopped_by": stopped_by,
+                        after={"outcome": end.value, "stopped_by": stopped_by,
                                "recording_sha256": recording_sha256})
             return _session_dict(s, _code_of(db, s.patient_id), full=True)
 
@@ -551,7 +552,7 @@ class ClinicalRecord:
             # Plain columns, not ORM objects: listing 10 000 sessions is a report's daily
             # bread (bench/patients.py).
             t = TherapySession
-            columns = [t.uid, Patient.code.label("patient"), t.clinician, t.plan_id,
+            columns: list[Any] = [t.uid, Patient.code.label("patient"), t.clinician, t.plan_id,
                        t.protocol_name, t.protocol_sha256, t.started_at, t.ended_at, t.outcome,
                        t.stopped_by, t.recording_path, t.recording_sha256]
             if full:
