@@ -133,6 +133,10 @@ class ClinicalRecord:
         except StaleDataError:
             raise ConcurrentUpdate("someone else changed this record at the same time; "
                                    "reload it and apply your change again") from None
+        except sa.exc.IntegrityError as exc:
+            # A unique key taken by another workstation between our check and our insert.
+            raise ConcurrentUpdate(f"conflicting change saved at the same time elsewhere; "
+                                   f"nothing was changed ({exc.orig or exc})") from None
         except sa.exc.OperationalError as exc:
             raise RecordError(f"database error: {exc.orig or exc}") from None
 
@@ -141,15 +145,17 @@ class ClinicalRecord:
         name = actor.username if isinstance(actor, Actor) else actor
         audit.append(db, self.clock(), name, action, entity, key, before, after)
 
-    def _require(self, db: Session, actor: Actor, action: Action) -> User:
-        """The acting user, re-read: a disabled account or changed role takes effect at once."""
+    def _require(self, db: Session, actor: Actor, action: Action | None) -> User:
+        """The acting user, re-read: a disabled account or changed role takes effect at once.
+        ``action`` None: any role (e.g. changing one's own password)."""
         if self._logins.get(actor.token) != actor.username:
             raise AuthenticationFailed("not logged in: authenticate first")
         user = db.execute(sa.select(User).where(User.username == actor.username)) \
             .scalar_one_or_none()
         if user is None or user.disabled:
             raise AuthenticationFailed(f"user {actor.username!r} is disabled")
-        require(Role(user.role), action, user.username)
+        if action is not None:
+            require(Role(user.role), action, user.username)
         return user
 
     @staticmethod
@@ -247,7 +253,7 @@ class ClinicalRecord:
         passwords.check_new_password(username, new_password)
         with self._tx() as db:
             if username == actor.username and old_password is not None:
-                me = self._require(db, actor, Action.SESSION_READ)  # any logged-in role
+                me = self._require(db, actor, None)
                 if not passwords.verify(self.hasher, me.password_hash, old_password):
                     raise AuthenticationFailed("the current password is wrong")
                 user = me
@@ -387,20 +393,29 @@ class ClinicalRecord:
             patient.forgotten_at = self.clock()
             self._audit(db, actor, "patient.forget", "patient", code,
                         after={"identity_erased": had})
-        self._scrub()
-        return {"code": code, "identity_erased": had}
+        return {"code": code, "identity_erased": had, "storage_scrubbed": self._scrub()}
 
-    def _scrub(self) -> None:
-        # Outside any transaction (neither statement may run inside one).
-        if dbmod.is_sqlite(self.engine.url):
-            raw = self.engine.raw_connection()
-            try:
-                raw.driver_connection.execute("PRAGMA wal_checkpoint(TRUNCATE)")  # type: ignore[union-attr]
-            finally:
-                raw.close()
-        else:
+    def _scrub(self) -> bool:
+        """Push the erasure out of the WAL (SQLite) or the table's dead rows (PostgreSQL).
+
+        Outside any transaction (neither statement may run inside one). False when it could
+        not complete (a long reader on SQLite; not the table's owner on PostgreSQL): the data
+        are deleted either way, and the next checkpoint/autovacuum finishes the job.
+        """
+        try:
+            if dbmod.is_sqlite(self.engine.url):
+                raw = self.engine.raw_connection()
+                try:
+                    busy = raw.driver_connection.execute(  # type: ignore[union-attr]
+                        "PRAGMA wal_checkpoint(TRUNCATE)").fetchone()[0]
+                finally:
+                    raw.close()
+                return busy == 0
             with self.engine.connect().execution_options(isolation_level="AUTOCOMMIT") as conn:
                 conn.exec_driver_sql("VACUUM patient_identities")
+            return True
+        except sa.exc.DBAPIError:
+            return False
 
     # ------------------------------------------------------------ limits and plans
     @staticmethod

@@ -249,3 +249,22 @@ def test_calibration_records_round_trip(record, people):
     assert full["record"] == rec and full["matrix"] == rec["matrix"]
     with pytest.raises(InputError, match="schema_version"):
         record.add_calibration(people.engineer, {**rec, "id": "CAL-2", "schema_version": 9})
+
+
+def test_users_change_their_own_password_only_with_the_current_one(record, people):
+    with pytest.raises(AuthenticationFailed, match="current password is wrong"):
+        record.set_password(people.viewer, "viewer", "a new password 22", old_password="nope")
+    with pytest.raises(PermissionDenied, match="users.manage"):
+        record.set_password(people.viewer, "clinician", "a new password 22")
+    with pytest.raises(InputError, match="at least 10"):
+        record.set_password(people.viewer, "viewer", "short", old_password=PASSWORD)
+    record.set_password(people.viewer, "viewer", "a new password 22", old_password=PASSWORD)
+    with pytest.raises(AuthenticationFailed):
+        record.authenticate("viewer", PASSWORD)
+    record.authenticate("viewer", "a new password 22")
+
+
+def test_a_taken_code_is_refused_clearly(record, people):
+    record.add_patient(people.clinician, "KNEE-1")
+    with pytest.raises(AlreadyExists, match="taken"):
+        record.add_patient(people.clinician, "KNEE-1")
