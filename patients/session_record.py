@@ -60,7 +60,7 @@ def run_for_patient(record: ClinicalRecord, actor: Actor, code: str, protocol_pa
     setup = SessionSetup(Path(protocol_path), patient_weight_kg=started["body_mass_kg"],
                          patient_limits=PatientLimits(**{k: started["limits"][k]
                                                          for k in LIMIT_FIELDS}),
-                         **setup_options)
+                         patient_code=code, **setup_options)
     try:
         summary = runner(setup, recording)
     except ProtocolValidationError as exc:

@@ -51,6 +51,9 @@ def test_a_twin_session_is_stored_with_the_patients_limits(clinic, tmp_path):
     import hashlib
     assert hashlib.sha256(mcap.read_bytes()).hexdigest() == stored["recording_sha256"]
     assert stored["summary"]["rom_deg"]["pitch"][1] == pytest.approx(10.0, abs=0.2)
+    from rt.recording.reader import read_recording
+    meta = read_recording(mcap)["/protocol/metadata"][0]
+    assert meta["patient_id"] == code  # the pseudonym, nothing identifying
 
 
 def test_a_refused_preflight_is_stored_as_refused(clinic):
