@@ -22,6 +22,7 @@ from typing import Any, Iterator
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
 
+from patients.errors import AuditChainBroken, InputError
 from patients.models import AuditEntry, AuditHead
 
 GENESIS = "0" * 64
@@ -50,9 +51,9 @@ def append(db: Session, at: dt.datetime, username: str | None, action: str, enti
     """Add one entry to the chain inside the caller's transaction (committed with it)."""
     head = db.execute(sa.select(AuditHead).where(AuditHead.id == 1)
                       .with_for_update()).scalar_one_or_none()
-    if head is None:
-        head = AuditHead(id=1, seq=0, hash=GENESIS)
-        db.add(head)
+    if head is None:  # created by migration 0001; gone only if someone deleted it
+        raise AuditChainBroken("the audit log's head record is missing: run `talus audit "
+                               "verify` and restore the database from a backup")
     fields: dict[str, Any] = {
         "seq": head.seq + 1, "at": at.astimezone(dt.timezone.utc).isoformat(),
         "username": username, "action": action, "entity": entity, "entity_key": entity_key,
@@ -70,14 +71,31 @@ class Verification:
     ok: bool
     entries: int
     problems: list[str]
+    #: "SEQ:HASH" of the last entry: note it outside the database (a ticket, the paper log) and
+    #: give it to a later ``verify(anchor=...)``; a chain rewritten from scratch cannot match.
+    head: str
 
     def as_dict(self) -> dict[str, Any]:
-        return {"ok": self.ok, "entries": self.entries, "problems": self.problems}
+        return {"ok": self.ok, "entries": self.entries, "problems": self.problems,
+                "head": self.head}
 
 
-def verify(db: Session) -> Verification:
-    """Walk the chain; every broken link, edited row, gap and truncated tail is reported."""
+def parse_anchor(text: str) -> tuple[int, str]:
+    """"SEQ:HASH" (as printed by verify) -> (seq, hash)."""
+    seq, _, digest = text.partition(":")
+    if not seq.isdigit() or len(digest) != 64:
+        raise InputError(f"anchor {text!r}: expected SEQ:HASH as printed by `talus audit verify`")
+    return int(seq), digest.lower()
+
+
+def verify(db: Session, anchor: tuple[int, str] | None = None) -> Verification:
+    """Walk the chain; every broken link, edited row, gap and truncated tail is reported.
+
+    ``anchor`` (seq, hash): an entry noted outside the database earlier, which must still be in
+    the chain with that hash (catches a chain rewritten whole by someone with write access).
+    """
     problems: list[str] = []
+    anchor_seen = anchor is None
     prev, expected_seq, count = GENESIS, 1, 0
     for e in _entries(db):
         count += 1
@@ -92,14 +110,22 @@ def verify(db: Session) -> Verification:
         fields = {k: getattr(e, k) for k in _FIELDS}
         if row_hash(e.prev_hash, fields) != e.hash:
             problems.append(f"entry {e.seq}: its content does not match its hash (edited)")
+        if anchor is not None and e.seq == anchor[0]:
+            anchor_seen = True
+            if e.hash != anchor[1]:
+                problems.append(f"entry {e.seq} is not the one noted (anchor hash differs): "
+                                "the chain was rewritten")
         prev, expected_seq = e.hash, e.seq + 1
     head = db.get(AuditHead, 1)
-    if head is not None and (head.seq != expected_seq - 1 or head.hash != prev):
+    if head is None:
+        problems.append("the chain's head record is missing (deleted)")
+    elif head.seq != expected_seq - 1 or head.hash != prev:
         problems.append(f"the chain ends at entry {expected_seq - 1} but was last extended to "
                         f"entry {head.seq} (entries at the end were deleted or edited)")
-    if head is None and count:
-        problems.append("the chain's head record is missing")
-    return Verification(not problems, count, problems)
+    if not anchor_seen:
+        assert anchor is not None
+        problems.append(f"anchor entry {anchor[0]} is not in the chain (deleted or rewritten)")
+    return Verification(not problems, count, problems, f"{expected_seq - 1}:{prev}")
 
 
 def _entries(db: Session) -> Iterator[AuditEntry]:

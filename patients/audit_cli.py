@@ -13,6 +13,9 @@ def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("verify", help="check the audit log's hash chain; exit code 1 if "
                                            "an entry was edited, inserted or deleted")
     add_common(p)
+    p.add_argument("--anchor", default=None,
+                   help="SEQ:HASH printed by an earlier verify and kept outside the database: "
+                        "that entry must still be in the chain")
     p.set_defaults(func=_verify)
 
     p = commands.add_parser("export", help="the audit log as JSON lines")
@@ -25,9 +28,10 @@ def register(commands: argparse._SubParsersAction) -> None:
 @command
 def _verify(args: argparse.Namespace) -> int:
     with open_record(args) as record:
-        result = record.verify_audit(login(record, args))
+        result = record.verify_audit(login(record, args), args.anchor)
     emit(args, result.as_dict(), lambda r: (
-        f"audit log intact: {r['entries']} entries" if r["ok"] else
+        f"audit log intact: {r['entries']} entries; head {r['head']} (note it outside the "
+        "database to check later with --anchor)" if r["ok"] else
         f"AUDIT LOG BROKEN ({r['entries']} entries):\n  " + "\n  ".join(r["problems"])))
     return 0 if result.ok else EXIT_BROKEN
 

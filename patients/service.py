@@ -698,10 +698,12 @@ class ClinicalRecord:
             return _calibration_dict(cal, full=True)
 
     # ------------------------------------------------------------ audit
-    def verify_audit(self, actor: Actor) -> audit.Verification:
+    def verify_audit(self, actor: Actor, anchor: str | None = None) -> audit.Verification:
+        """Check the chain; ``anchor`` "SEQ:HASH" is a head noted outside earlier."""
+        point = audit.parse_anchor(anchor) if anchor else None
         with self._tx() as db:
             self._require(db, actor, Action.AUDIT_READ)
-            return audit.verify(db)
+            return audit.verify(db, point)
 
     def export_audit(self, actor: Actor) -> list[dict[str, Any]]:
         with self._tx() as db:

@@ -156,7 +156,7 @@ def _drop_append_only_triggers(conn: sa.Connection) -> None:
 def test_the_database_refuses_changes_to_the_audit_log(record, people):
     _populated(record, people)
     for sql in ("UPDATE audit_log SET username = 'x' WHERE seq = 2",
-                "DELETE FROM audit_log WHERE seq = 2"):
+                "DELETE FROM audit_log WHERE seq = 2", "DELETE FROM audit_head"):
         with pytest.raises(sa.exc.DatabaseError, match="append-only"):
             with record.engine.begin() as conn:
                 conn.exec_driver_sql(sql)
@@ -188,6 +188,22 @@ def test_audit_verify_detects_direct_tampering(record, people, tamper, expected)
     result = record.verify_audit(people.admin)
     assert not result.ok
     assert any(expected in p for p in result.problems), result.problems
+
+
+def test_an_anchor_kept_outside_catches_a_chain_rewritten_whole(record, people):
+    _populated(record, people)
+    anchor = record.verify_audit(people.admin).head
+    seq, digest = anchor.split(":")
+    assert int(seq) == record.verify_audit(people.admin).entries and len(digest) == 64
+    with record.engine.begin() as conn:
+        _drop_append_only_triggers(conn)
+        conn.exec_driver_sql("DELETE FROM audit_log")
+        conn.execute(sa.text("UPDATE audit_head SET seq = 0, hash = :g"), {"g": "0" * 64})
+    assert record.verify_audit(people.admin).ok  # an empty chain is self-consistent...
+    result = record.verify_audit(people.admin, anchor)  # ...but not the one noted
+    assert not result.ok and f"anchor entry {seq} is not in the chain" in result.problems[0]
+    with pytest.raises(InputError, match="SEQ:HASH"):
+        record.verify_audit(people.admin, "12:abc")
 
 
 # ------------------------------------------------------------------ concurrency
