@@ -324,7 +324,8 @@ class ClinicalRecord:
                 out.append(d)
             if include_identity:
                 self._audit(db, actor, "identity.read", "patient", None,
-                            after={"patients": len(out), "fields": list(IDENTITY_FIELDS)})
+                            after={"codes": [d["code"] for d in out],
+                                   "fields": list(IDENTITY_FIELDS)})
             return out
 
     def get_patient(self, actor: Actor, code: str, include_identity: bool = False) -> dict[str, Any]:

@@ -190,3 +190,35 @@ def test_a_missing_database_is_not_created_by_a_read(tmp_path, capsys):
     code, _, err = run(capsys, "patients", "list", "--db", str(db), "--user", "ana",
                        password=CLIN_PW)
     assert code == 2 and "no database" in err and not db.exists()
+
+
+def test_db_upgrade_creates_then_finds_nothing_to_do(tmp_path, capsys):
+    db = str(tmp_path / "new.db")
+    code, out, _ = run(capsys, "db", "upgrade", "--db", db, "--json")
+    assert code == 0 and json.loads(out)["from"] is None and json.loads(out)["to"]
+    code, out, _ = run(capsys, "db", "upgrade", "--db", db, "--json")
+    head = json.loads(out)["to"]
+    assert code == 0 and json.loads(out)["from"] == head
+    assert stat.S_IMODE(Path(db).stat().st_mode) == 0o600
+
+
+def test_users_list_disable_and_the_audit_anchor(clinic, capsys):
+    admin = ["--db", clinic, "--user", "root", "--json"]
+    code, out, _ = run(capsys, "users", "list", *admin, password=ADMIN_PW)
+    assert [(u["username"], u["role"]) for u in json.loads(out)] == [("ana", "clinician"),
+                                                                    ("root", "admin")]
+    assert "password" not in out  # no hash leaves the service
+    assert run(capsys, "users", "disable", "ana", *admin, password=ADMIN_PW)[0] == 0
+    code, _, err = run(capsys, "patients", "list", "--db", clinic, "--user", "ana",
+                       password=CLIN_PW)
+    assert code == 2
+    code, out, _ = run(capsys, "users", "list", "--db", clinic, "--user", "ana", "--json",
+                       password=CLIN_PW)
+    assert code == 2
+    code, out, _ = run(capsys, "audit", "verify", *admin, password=ADMIN_PW)
+    head = json.loads(out)["head"]
+    code, out, _ = run(capsys, "audit", "verify", "--anchor", head, *admin, password=ADMIN_PW)
+    assert code == 0 and json.loads(out)["ok"]
+    code, out, _ = run(capsys, "audit", "verify", "--anchor", "999999:" + "0" * 64, *admin,
+                       password=ADMIN_PW)
+    assert code == 1 and "anchor entry 999999" in json.loads(out)["problems"][-1]
