@@ -39,8 +39,10 @@ class PostgresServer:
         self.data = self.root / "data"
         self.log = self.root / "server.log"
         self._names = itertools.count(1)
-        user = pwd.getpwnam(RUN_AS)
-        os.chown(self.root, user.pw_uid, user.pw_gid)
+        self.user = RUN_AS if os.geteuid() == 0 else pwd.getpwuid(os.geteuid()).pw_name
+        if os.geteuid() == 0:  # the server refuses root: hand the directory to postgres
+            owner = pwd.getpwnam(RUN_AS)
+            os.chown(self.root, owner.pw_uid, owner.pw_gid)
 
     def _run(self, *args: str) -> None:
         cmd = ["runuser", "-u", RUN_AS, "--", *args] if os.geteuid() == 0 else list(args)
@@ -50,7 +52,7 @@ class PostgresServer:
             raise RuntimeError(f"{' '.join(args)} failed: {done.stderr}{done.stdout}\n{log}")
 
     def start(self) -> None:
-        self._run(str(PG_BIN / "initdb"), "-D", str(self.data), "-U", RUN_AS, "-A", "trust",
+        self._run(str(PG_BIN / "initdb"), "-D", str(self.data), "-U", self.user, "-A", "trust",
                   "-E", "UTF8", "--no-sync")
         options = (f"-c listen_addresses='' -k {self.root} -p {PORT} -c fsync=off "
                    "-c synchronous_commit=off -c full_page_writes=off")
@@ -66,7 +68,7 @@ class PostgresServer:
             shutil.rmtree(self.root, ignore_errors=True)
 
     def url(self, database: str = "postgres") -> str:
-        return f"postgresql+psycopg://{RUN_AS}@/{database}?host={self.root}&port={PORT}"
+        return f"postgresql+psycopg://{self.user}@/{database}?host={self.root}&port={PORT}"
 
     def create_database(self) -> str:
         """A new empty database; returns its URL."""
@@ -84,7 +86,7 @@ class PostgresServer:
         """The plain-SQL dump of the database at ``url`` (its text)."""
         from sqlalchemy.engine import make_url
         database = make_url(url).database or "postgres"
-        cmd = [str(PG_BIN / "pg_dump"), "-h", str(self.root), "-p", str(PORT), "-U", RUN_AS,
+        cmd = [str(PG_BIN / "pg_dump"), "-h", str(self.root), "-p", str(PORT), "-U", self.user,
                database]
         if os.geteuid() == 0:
             cmd = ["runuser", "-u", RUN_AS, "--", *cmd]
