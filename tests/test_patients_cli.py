@@ -222,3 +222,27 @@ def test_users_list_disable_and_the_audit_anchor(clinic, capsys):
     code, out, _ = run(capsys, "audit", "verify", "--anchor", "999999:" + "0" * 64, *admin,
                        password=ADMIN_PW)
     assert code == 1 and "anchor entry 999999" in json.loads(out)["problems"][-1]
+
+
+def test_sessions_list_and_show(clinic, capsys):
+    from patients.service import ClinicalRecord
+    record = ClinicalRecord.open(clinic)
+    try:
+        me = record.authenticate("ana", CLIN_PW)
+        code = record.add_patient(me, body_mass_kg=64)["code"]
+        record.set_limits(me, code)
+        uid = record.start_session(me, code, Path(PROTOCOL).read_text())["uid"]
+        record.finish_session(me, uid, "stopped_by_user", stopped_by="patient: hand_stop",
+                              summary={"completed": False, "peak_force_n": 120.5})
+    finally:
+        record.close()
+    db = ["--db", clinic, "--user", "ana"]
+    code_, out, _ = run(capsys, "sessions", "list", "--full", "--json", *db, password=CLIN_PW)
+    [listed] = json.loads(out)
+    assert listed["uid"] == uid and listed["summary"]["peak_force_n"] == 120.5
+    code_, out, _ = run(capsys, "sessions", "show", uid, *db, password=CLIN_PW)
+    assert code_ == 0 and "stopped_by_user" in out and "patient: hand_stop" in out
+    assert "peak_force_n=120.5" in out
+    code_, _, err = run(capsys, "sessions", "list", "--since", "yesterday", *db,
+                        password=CLIN_PW)
+    assert code_ == 2 and "--since 'yesterday'" in err
