@@ -86,10 +86,13 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--reason", default=None, help="why (kept with the prescription)")
     p.set_defaults(func=_limits)
 
-    p = commands.add_parser("plan", help="assign a protocol (YAML file, validated) to a patient")
+    p = commands.add_parser("plan", help="assign a protocol (YAML file, validated) to a "
+                                         "patient, or --end a plan")
     add_common(p)
     p.add_argument("code")
-    p.add_argument("--protocol", required=True, help="protocol YAML file")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--protocol", help="protocol YAML file to assign")
+    what.add_argument("--end", type=int, metavar="PLAN_ID", help="end this plan")
     p.add_argument("--parameters", default=None, help="JSON object of plan parameters")
     p.set_defaults(func=_plan)
 
@@ -246,6 +249,11 @@ def _limits(args: argparse.Namespace) -> int:
 
 @command
 def _plan(args: argparse.Namespace) -> int:
+    if args.end is not None:
+        with open_record(args) as record:
+            ended = record.end_plan(login(record, args), args.code, args.end)
+        emit(args, ended, f"plan {args.end} of {args.code} ended")
+        return 0
     try:
         text = Path(args.protocol).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:

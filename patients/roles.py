@@ -56,7 +56,7 @@ PERMISSIONS: dict[Action, tuple[frozenset[Role], str]] = {
     Action.IDENTITY_WRITE: (frozenset({A, C}), "enter or correct identifying data"),
     Action.PATIENT_FORGET: (frozenset({A}), "erase identifying data (GDPR art. 17)"),
     Action.LIMITS_SET: (frozenset({C}), "prescribe ROM, force and speed limits"),
-    Action.PLAN_ASSIGN: (frozenset({C}), "assign a protocol to a patient"),
+    Action.PLAN_ASSIGN: (frozenset({C}), "assign a protocol to a patient, end a plan"),
     Action.SESSION_RUN: (frozenset({C}), "start and finish a therapy session"),
     Action.SESSION_READ: (frozenset({A, C, E, V}), "list and show sessions (pseudonymous)"),
     Action.RECORD_EXPORT: (frozenset({A, C}), "export a patient's pseudonymous record"),

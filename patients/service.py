@@ -489,6 +489,21 @@ class ClinicalRecord:
                                "sha256": plan.protocol_sha256})
             return _plan_dict(plan)
 
+    def end_plan(self, actor: Actor, code: str, plan_id: int) -> dict[str, Any]:
+        """Mark a plan finished (kept, with the sessions that used it)."""
+        with self._tx() as db:
+            self._require(db, actor, Action.PLAN_ASSIGN)
+            patient = self._patient(db, code)
+            plan = db.get(Plan, plan_id)
+            if plan is None or plan.patient_id != patient.id:
+                raise NotFound(f"patient {code} has no plan {plan_id}")
+            if not plan.active:
+                raise InputError(f"plan {plan_id} of {code} has already ended")
+            plan.active = False
+            self._audit(db, actor, "plan.end", "patient", code, before={"plan": plan_id,
+                        "active": True}, after={"plan": plan_id, "active": False})
+            return _plan_dict(plan)
+
     def plans(self, actor: Actor, code: str) -> list[dict[str, Any]]:
         with self._tx() as db:
             self._require(db, actor, Action.PATIENT_READ)
@@ -513,6 +528,8 @@ class ClinicalRecord:
                 plan = db.get(Plan, plan_id)
                 if plan is None or plan.patient_id != patient.id:
                     raise NotFound(f"patient {code} has no plan {plan_id}")
+                if not plan.active:
+                    raise InputError(f"plan {plan_id} of {code} has ended: assign a new one")
             row = self._limits_row(db, patient)
             if row is None:
                 raise NotFound(f"patient {code} has no limits prescribed: a clinician sets them "

@@ -198,6 +198,12 @@ def test_a_session_stores_snapshots_outcome_and_recording(record, people, clock)
         record.finish_session(people.clinician, started["uid"], Outcome.COMPLETED)
     with pytest.raises(InputError, match="needs stopped_by"):
         record.finish_session(people.clinician, started["uid"], Outcome.STOPPED_BY_USER)
+    ended = record.end_plan(people.clinician, code, plan["id"])
+    assert ended["active"] is False and record.plans(people.viewer, code)[0]["active"] is False
+    with pytest.raises(InputError, match="has ended"):
+        record.start_session(people.clinician, code, PROTOCOL_YAML, plan_id=plan["id"])
+    with pytest.raises(PermissionDenied):
+        record.end_plan(people.viewer, code, plan["id"])
 
 
 def test_sessions_over_a_date_range(record, people, clock):
