@@ -91,6 +91,7 @@ class ClinicalRecord:
         self.hasher = hasher or passwords.default_hasher()
         self.lockout = lockout
         self._logins: dict[str, str] = {}  # token -> username
+        self._dummy: str | None = None
 
     @classmethod
     def open(cls, db: str | None = None, *, create: bool = False, **kwargs: Any) -> ClinicalRecord:
@@ -201,6 +202,9 @@ class ClinicalRecord:
             user = db.execute(sa.select(User).where(User.username == username)
                               .with_for_update()).scalar_one_or_none()
             if user is None or user.disabled:
+                # Spend the time a real check takes: the answer's delay must not tell
+                # whether the account exists.
+                passwords.verify(self.hasher, self._dummy_hash(), password)
                 self._audit(db, username, "login.failed", "user", username,
                             after={"reason": "unknown or disabled user"})
                 failure = AuthenticationFailed("wrong user name or password")
@@ -227,6 +231,11 @@ class ClinicalRecord:
         if failure is not None:  # raised after the commit: the failure stays counted
             raise failure
         return self._login(username, role)
+
+    def _dummy_hash(self) -> str:
+        if self._dummy is None:
+            self._dummy = self.hasher.hash(secrets.token_hex(16))
+        return self._dummy
 
     def logout(self, actor: Actor) -> None:
         self._logins.pop(actor.token, None)
@@ -368,12 +377,12 @@ class ClinicalRecord:
                 raise InputError(f"patient {code} was forgotten (GDPR erasure); identifying "
                                  "data cannot be attached again")
             action = "identity.update" if patient.identity else "identity.create"
+            row = _identity_row(identity)  # validated before anything changes
             if patient.identity is None:
-                patient.identity = _identity_row(identity)
+                patient.identity = row
             else:
-                for k, v in _identity_row(identity).__dict__.items():
-                    if k in IDENTITY_FIELDS:
-                        setattr(patient.identity, k, v)
+                for k in IDENTITY_FIELDS:
+                    setattr(patient.identity, k, getattr(row, k))
             self._audit(db, actor, action, "patient", code, after={"fields": _present(identity)})
 
     def forget_patient(self, actor: Actor, code: str) -> dict[str, Any]:
