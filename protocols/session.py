@@ -45,9 +45,6 @@ class SessionSetup:
     robot_limits: RobotLimits = field(default_factory=RobotLimits)
     environment: str | None = None
     seed: int = 0
-    #: The patient's pseudonymous code (patients/), written to the recording's metadata; never
-    #: identifying data.
-    patient_code: str | None = None
 
 
 def _protocol_limits(protocol) -> ProtocolLimits | None:
@@ -252,8 +249,7 @@ def run_session(setup: SessionSetup, record: Path | None = None, realtime: bool 
                 "protocol_version": int(getattr(protocol, "schema_version", 1)),
                 "parameters": protocol.model_dump(mode="json", exclude={"loaded_from"})
                 if hasattr(protocol, "model_dump") else {},
-                "patient_id": setup.patient_code or "twin-demo",
-                "robot_description": model.description.name}
+                "patient_id": "twin-demo", "robot_description": model.description.name}
         recorder = SessionRecorder(record, meta)
         recorder.attach_state_ring(pl.recorder, start=0)
         pl.events.listener = recorder.event

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from patients.models import Outcome
-from patients.session_record import outcome_of, run_for_patient
+from patients.session_record import outcome_of, rt_patient, run_for_patient, twin_runner
 from rt.errors import ProtocolValidationError
 
 from patients_helpers import open_record, staff
@@ -14,9 +14,14 @@ from patients_helpers import open_record, staff
 LIB = Path(__file__).resolve().parents[1] / "protocols" / "library"
 
 
-def fast_runner(setup, recording):
+def fast(protocol_path):
+    """The in-process twin, as fast as possible (this branch's run_session takes realtime=;
+    once sessions run in the RT process, run_session is always fast and has no such option)."""
+    import inspect
     from protocols.session import run_session
-    return run_session(setup, recording, realtime=False)
+    fast_option = {"realtime": False} if "realtime" in inspect.signature(run_session).parameters \
+        else {}
+    return twin_runner(protocol_path, **fast_option)
 
 
 @pytest.fixture()
@@ -43,17 +48,14 @@ def test_a_twin_session_is_stored_with_the_patients_limits(clinic, tmp_path):
     record.set_limits(people.clinician, code, pitch_min_deg=-12, pitch_max_deg=12,
                       roll_min_deg=-9, roll_max_deg=9)
     mcap = tmp_path / "rom.mcap"
-    stored = run_for_patient(record, people.clinician, code, _short_rom(tmp_path), mcap,
-                             fast_runner)
+    protocol = _short_rom(tmp_path)
+    stored = run_for_patient(record, people.clinician, code, protocol, mcap, fast(protocol))
     assert stored["outcome"] == "completed" and stored["stopped_by"] is None
     assert stored["limits"]["pitch_max_deg"] == 12 and stored["body_mass_kg"] == 75
     assert stored["recording_path"] == str(mcap) and len(stored["recording_sha256"]) == 64
     import hashlib
     assert hashlib.sha256(mcap.read_bytes()).hexdigest() == stored["recording_sha256"]
     assert stored["summary"]["rom_deg"]["pitch"][1] == pytest.approx(10.0, abs=0.2)
-    from rt.recording.reader import read_recording
-    meta = read_recording(mcap)["/protocol/metadata"][0]
-    assert meta["patient_id"] == code  # the pseudonym, nothing identifying
 
 
 def test_a_refused_preflight_is_stored_as_refused(clinic):
@@ -63,7 +65,7 @@ def test_a_refused_preflight_is_stored_as_refused(clinic):
                       roll_min_deg=-5, roll_max_deg=5)
     with pytest.raises(ProtocolValidationError, match="ROM"):
         run_for_patient(record, people.clinician, code, LIB / "ankle_rom.yaml", None,
-                        fast_runner)
+                        fast(LIB / "ankle_rom.yaml"))
     [s] = record.list_sessions(people.clinician, code)
     assert s["outcome"] == "refused" and "pre-flight" in s["stopped_by"]
 
@@ -79,6 +81,22 @@ def test_a_crashing_runner_leaves_no_running_session(clinic):
     [s] = record.list_sessions(people.clinician, code)
     assert (s["outcome"], s["stopped_by"]) == ("stopped_by_fault",
                                                "software: RuntimeError: backend lost")
+
+
+def test_the_rt_process_gets_the_code_mass_and_limits_in_force(clinic):
+    record, people, code = clinic
+    record.set_limits(people.clinician, code, max_force_n=300)
+    seen = {}
+
+    def rt_client(started, recording):  # what a runner built on run_remote receives
+        seen.update(rt_patient(started))
+        return {"completed": True, "stops": [], "recording": {"path": "r.mcap",
+                                                                "sha256": "c" * 64}}
+    stored = run_for_patient(record, people.clinician, code, LIB / "ankle_rom.yaml", None,
+                             rt_client)
+    assert seen["id"] == code and seen["weight_kg"] == 75
+    assert seen["limits"]["max_force_n"] == 300 and len(seen["limits"]) == 7
+    assert (stored["outcome"], stored["recording_sha256"]) == ("completed", "c" * 64)
 
 
 @pytest.mark.parametrize("summary, expected", [
