@@ -6,9 +6,9 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-# Debian packages the project needs at run or test time (none beyond the image's Python yet;
-# later parts add Xvfb and poppler-utils here).
-APT_PACKAGES :=
+# Debian packages the project needs at run or test time. postgresql: the clinical record's
+# tests start a throw-away server (tests/pg_server.py); later parts add Xvfb and poppler-utils.
+APT_PACKAGES := postgresql
 
 .PHONY: demo test setup system-deps bench clean
 
@@ -35,10 +35,15 @@ demo: setup
 	$(BIN)/talus bench tracking --experiment payload-step
 	@echo
 	@mkdir -p out
-	$(BIN)/talus session run --protocol protocols/library/sine_fz.yaml --record-dir out
+	$(BIN)/talus db demo --db out/demo.db
 	@echo
-	$(BIN)/talus session run --protocol protocols/library/gait_replay.yaml --patient-weight 75 \
-	  --record-dir out
+	export TALUS_PASSWORD="$${TALUS_PASSWORD:-$$($(BIN)/python -c 'import json; \
+	  print(json.load(open("out/talus-demo-credentials.json"))["password"])')}"; \
+	for p in sine_fz gait_replay; do \
+	  $(BIN)/talus session run --protocol protocols/library/$$p.yaml --record-dir out \
+	    --db out/demo.db --user demo-clinician --patient DEMO-001 || exit 1; echo; \
+	done; \
+	$(BIN)/talus sessions list --patient DEMO-001 --db out/demo.db --user demo-clinician
 
 test: setup
 	$(BIN)/pytest -q

@@ -23,11 +23,17 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
     "bench": (("rt.benchmarks.cli", "protocols.bench_force"),
               "benchmarks: control loop timing, tracking and force experiments"),
     "faults": (("rt.safety.cli",), "safety: the fault matrix on the twin"),
-    "session": (("protocols.session_cli",),
+    "session": (("talus.session_cli",),
                 "run a protocol through the RT process: pre-flight, run, record, summary"),
     "rt": (("rt.ipc.cli", "talus.rt_serve"),
            "RT process: serve, status, control, stop, estop, reset (JSON)"),
     "record": (("rt.recording.cli",), "recordings: info, CSV export"),
+    "db": (("patients.db_cli",), "clinical database: upgrade, backup, restore, demo"),
+    "users": (("patients.users_cli",), "users and roles: init, add, passwd, list"),
+    "patients": (("patients.patients_cli",),
+                 "patients: add, list, show, limits, forget, export"),
+    "sessions": (("patients.sessions_cli",), "stored therapy sessions: list, show"),
+    "audit": (("patients.audit_cli",), "audit log: verify, export"),
 }
 
 
