@@ -35,6 +35,8 @@ RATE_HZ = 1000.0
 SIGNALS = [("wrench", 6), ("flags", 2), ("force", 3), ("ctrl_mode", 1), ("phase", 1),
            ("progress", 1)]
 W, FLAGS, FREF, CMODE, PHASE, PROG = 1, 7, 9, 12, 13, 14
+#: Sensor noise allowed below the preload before pre-flight calls it unloading (N).
+PRELOAD_TOLERANCE_N = 2.0
 
 
 @dataclass
@@ -93,35 +95,6 @@ def _build(setup: SessionSetup, model: RobotModel, mode: str):
                                  ("reference.phase", "session.phase"),
                                  ("reference.progress", "session.progress")])
     return protocol, gen, report, pl, tap
-
-
-def _check_static_limits(report, setup: SessionSetup) -> list[str]:
-    """The references themselves against the patient's and the robot's limits."""
-    p, r = setup.patient_limits, setup.robot_limits
-    out = []
-    rad = math.radians
-    lo, hi = report.roll_range_rad
-    if not math.isnan(lo) and (lo < rad(p.roll_min_deg) or hi > rad(p.roll_max_deg)):
-        out.append(f"roll range [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg exceeds the "
-                   f"patient's ROM [{p.roll_min_deg}, {p.roll_max_deg}] deg")
-    lo, hi = report.pitch_range_rad
-    if not math.isnan(lo) and (lo < rad(p.pitch_min_deg) or hi > rad(p.pitch_max_deg)):
-        out.append(f"pitch range [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg exceeds "
-                   f"the patient's ROM [{p.pitch_min_deg}, {p.pitch_max_deg}] deg")
-    if not math.isnan(report.peak_fz_n) and report.peak_fz_n > min(p.max_force_n,
-                                                                   r.max_platform_force_n):
-        out.append(f"peak force {report.peak_fz_n:.0f} N exceeds the limit "
-                   f"{min(p.max_force_n, r.max_platform_force_n):.0f} N")
-    for name, value in (("roll", report.peak_roll_rate_rad_s),
-                        ("pitch", report.peak_pitch_rate_rad_s)):
-        if not math.isnan(value) and value > rad(p.max_angular_speed_deg_s):
-            out.append(f"{name} rate {math.degrees(value):.0f} deg/s exceeds the patient's "
-                       f"{p.max_angular_speed_deg_s} deg/s")
-    if not math.isnan(report.peak_slider_speed_m_s) and \
-            report.peak_slider_speed_m_s > r.max_slider_speed_m_s:
-        out.append(f"slider speed {report.peak_slider_speed_m_s:.3f} m/s exceeds the robot's "
-                   f"{r.max_slider_speed_m_s} m/s")
-    return out
 
 
 def _run(pl: PositionLoop, tap: SignalTap, duration_s: float,
@@ -186,8 +159,15 @@ def summarize(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel) -> 
         out["rms_error_pct"] = None
     valid = ~np.isnan(force)
     out["peak_force_n"] = float(np.max(force[valid])) if valid.any() else None
+    # The least force measured in contact under force control (N; ``_in_contact``): below 0
+    # the platform would be pulling on the foot.
+    contact = _in_contact(rows, _preload(pl)) & valid
+    out["min_force_n"] = float(np.min(force[contact])) if contact.any() else None
+    gen = getattr(pl.reference, "gen", None)
+    if gen is not None and gen.info:
+        out["source"] = gen.info
     rolls, pitches = [], []
-    for q in state[play][::10, 1:4]:
+    for q in state[play][::10, _columns(pl.recorder)["q"]]:
         cfg = model.kin.fk(q, check=False)
         rolls.append(cfg.roll)
         pitches.append(cfg.pitch)
@@ -201,35 +181,121 @@ def summarize(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel) -> 
     return out
 
 
+def _columns(tap: SignalTap) -> dict[str, slice]:
+    """Column slices of a tap's rows by signal name (``t`` first)."""
+    out, k = {}, 0
+    for name, width in tap.layout:
+        out[name] = slice(k, k + width)
+        k += width
+    return out
+
+
+def _longest_run(flags: np.ndarray) -> tuple[int, int]:
+    """(first index, length) of the longest run of True in ``flags`` ((0, 0) when none)."""
+    edges = np.diff(np.concatenate(([0], flags.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    if starts.size == 0:
+        return 0, 0
+    k = int(np.argmax(ends - starts))
+    return int(starts[k]), int(ends[k] - starts[k])
+
+
+def _check_drives_and_contact(pl: PositionLoop, tap: SignalTap, setup: SessionSetup,
+                              preload_n: float) -> list[str]:
+    """What the twin run predicts against the actuators and the unilateral contact: the
+    actuator force asked beyond the robot's limit, or the drives saturated, for longer than
+    ``max_saturation_s``; the measured force in force control below the preload once the
+    contact has reached it (less ``PRELOAD_TOLERANCE`` for the sensor's noise), i.e. the
+    platform unloading the foot below its floor or pulling on it."""
+    r = setup.robot_limits
+    state, _ = pl.recorder.drain(0)
+    cols = _columns(pl.recorder)
+    t = state[:, 0]
+    out = []
+    dt = 1.0 / RATE_HZ
+    tau = np.abs(state[:, cols["tau"]])
+    volts = np.abs(state[:, cols["volts"]])
+    for what, values, limit, unit in (("actuator force", tau, r.max_actuator_force_n, "N"),
+                                      ("drive command", volts, r.max_command_v, "V")):
+        over = values.max(axis=1) >= limit - 1e-9
+        k0, length = _longest_run(over)
+        if length * dt > r.max_saturation_s:
+            peak = float(values[k0:k0 + length].max())
+            out.append(f"{what} {peak:.4g} {unit} at the robot's limit {limit:g} {unit} for "
+                       f"{length * dt * 1e3:.0f} ms from t = {t[k0]:.3f} s (the drives saturate; "
+                       f"at most {r.max_saturation_s * 1e3:.0f} ms allowed)")
+    rows = tap.ring[:tap.written]
+    force = -rows[:, W + 2]
+    low = _in_contact(rows, preload_n) & (force < preload_n - PRELOAD_TOLERANCE_N)
+    if low.any():
+        k = int(np.argmin(np.where(low, force, np.inf)))
+        out.append(f"the force falls to {force[k]:.1f} N at t = {rows[k, 0]:.3f} s, below the "
+                   f"{preload_n:g} N preload (the platform would unload or pull on the foot)")
+    return out
+
+
+def _in_contact(rows: np.ndarray, preload_n: float) -> np.ndarray:
+    """Samples of force-controlled play from the moment the contact first carries the preload
+    (each stretch of force control counts anew): before it, the platform is still bringing the
+    unloaded foot up to the preload and the sensor reads its noise around 0 N."""
+    force = -rows[:, W + 2]
+    in_force = (rows[:, PHASE] == 1) & (rows[:, CMODE] > 0.5)
+    held = np.zeros(len(rows), dtype=bool)
+    on = False
+    for k in range(len(rows)):
+        on = bool(in_force[k]) and (on or force[k] >= preload_n)
+        held[k] = on
+    return held
+
+
 def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
-    """Check and simulate the protocol; raises ``ProtocolValidationError`` with the reason."""
+    """Check and simulate the protocol; raises ``ProtocolValidationError`` with the reason.
+
+    Refused: the references against the patient's and the robot's limits
+    (``ValidationReport.check_against``); on the twin, a supervisor stop, a protocol that does
+    not finish, drives saturated or actuator force beyond the limit for longer than
+    ``RobotLimits.max_saturation_s``, or a force below the preload (every reason named with its
+    time and value).
+    """
     model = model or RobotModel.load()
     protocol, gen, report, pl, tap = _build(setup, model, "fast")
-    problems = _check_static_limits(report, setup)
+    problems = report.check_against(setup.patient_limits, setup.robot_limits)
     if problems:
         raise ProtocolValidationError(f"{setup.protocol_path}: refused by pre-flight: "
                                       + "; ".join(problems))
     _run(pl, tap, report.duration_s, None)
     rows = tap.ring[:tap.written]
     state, _ = pl.recorder.drain(0)
+    cols = _columns(pl.recorder)
     stops = [e for e in pl.events.snapshot() if e.reaction >= Reaction.SOFT_STOP]
     summary = summarize(pl, tap, protocol, model)
     predicted = {
         "duration_s": report.duration_s,
-        "peak_actuator_force_n": float(np.abs(state[:, 10:13]).max()),
-        "peak_slider_speed_m_s": float(np.abs(state[:, 4:7]).max()),
+        "peak_actuator_force_n": float(np.abs(state[:, cols["tau"]]).max()),
+        "peak_slider_speed_m_s": float(np.abs(state[:, cols["qd"]]).max()),
         "platform_angles_deg": summary["rom_deg"],
         "peak_platform_force_n": summary["peak_force_n"],
+        "min_platform_force_n": summary["min_force_n"],
         "rms_error_pct": summary["rms_error_pct"],
     }
     if stops:
         raise ProtocolValidationError(
             f"{setup.protocol_path}: refused by pre-flight: on the twin the supervisor stopped "
             f"the robot at t = {stops[0].t:.3f} s ({stops[0].cause}: {stops[0].message})")
+    problems = _check_drives_and_contact(pl, tap, setup, _preload(pl))
+    if problems:
+        raise ProtocolValidationError(f"{setup.protocol_path}: refused by pre-flight: on the "
+                                      "twin " + "; ".join(problems))
     if len(rows) and rows[-1, PHASE] < 4:
         raise ProtocolValidationError(f"{setup.protocol_path}: refused by pre-flight: the "
                                       "protocol did not finish on the twin")
     return {"ok": True, "predicted": predicted}
+
+
+def _preload(pl: PositionLoop) -> float:
+    """The force law's preload (N) of a protocol loop's hybrid controller."""
+    controller = pl.graph.component("controller")
+    return float(getattr(controller, "preload_n", 0.0))
 
 
 def run_session(setup: SessionSetup, record: Path | None = None, realtime: bool = True,
@@ -250,6 +316,8 @@ def run_session(setup: SessionSetup, record: Path | None = None, realtime: bool 
                 "parameters": protocol.model_dump(mode="json", exclude={"loaded_from"})
                 if hasattr(protocol, "model_dump") else {},
                 "patient_id": "twin-demo", "robot_description": model.description.name}
+        if gen.info:
+            meta["source"] = gen.info          # traceability of the replayed record
         recorder = SessionRecorder(record, meta)
         recorder.attach_state_ring(pl.recorder, start=0)
         pl.events.listener = recorder.event

@@ -109,7 +109,7 @@ class SupervisorBlock(Component):
             t, dt, self.q.data, int(self.est_status.data[0]), self.qd.data, self.qdd.data,
             fk_ok, roll, pitch, roll_rate, pitch_rate, self.q_ref.data, self.qd_ref.data,
             self.tau.data, force, flags[0] > 0.5, flags[1] > 0.5, ins[0] > 0.5, ins[1] > 0.5,
-            self.drive_failed.data[0] > 0.5)
+            self.drive_failed.data[0] > 0.5, -w[2])
         v = self.volts.data
         if reaction >= Reaction.HARD_STOP:
             v[:] = 0.0
