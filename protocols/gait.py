@@ -88,6 +88,8 @@ SUPPORTED_PLATE_TYPES = (2, 3, 4)
 #: window at most max(QUIET_STD_N, 3 × the steadiest window's).
 QUIET_WINDOW_S = 0.05
 QUIET_STD_N = 2.0
+#: ... and never above this (N): a record whose steadiest window moves more has no quiet one.
+QUIET_MAX_STD_N = 10.0
 #: A quiet level with samples this far below it (N, or 8σ) was a loaded stretch, not the
 #: unloaded plate (a plate reads no less than unloaded, but for noise and ringing).
 FLOOR_TOLERANCE_N = 10.0
@@ -267,8 +269,8 @@ def quiet_baseline(fz: np.ndarray, rate_hz: float) -> tuple[np.ndarray, float]:
     """The quiet (unloaded) samples of a plate's record and the σ of their Fz (N).
 
     Windows of ``QUIET_WINDOW_S``; a window is steady when its Fz standard deviation is at most
-    max(``QUIET_STD_N``, 3 × the steadiest window's); the quiet windows are the steady ones
-    whose mean lies within max(5 N, 5σ) of the lowest steady mean (an unloaded plate reads its
+    max(``QUIET_STD_N``, 3 × the steadiest window's), never above ``QUIET_MAX_STD_N``; the quiet
+    windows are the steady ones whose mean lies within max(5 N, 5σ) of the lowest steady mean (an unloaded plate reads its
     lowest level: a foot only adds load). That level must be the record's floor: when samples
     read more than max(``FLOOR_TOLERANCE_N``, 8σ) below it, the steadiest low stretch was a
     loaded one and the record has no unloaded stretch. Returns a boolean mask of the quiet
@@ -281,7 +283,9 @@ def quiet_baseline(fz: np.ndarray, rate_hz: float) -> tuple[np.ndarray, float]:
         return mask, math.nan
     win = fz[:n_win * w].reshape(n_win, w)
     means, stds = win.mean(axis=1), win.std(axis=1)
-    steady = stds <= max(QUIET_STD_N, 3.0 * float(stds.min()))
+    steady = stds <= min(QUIET_MAX_STD_N, max(QUIET_STD_N, 3.0 * float(stds.min())))
+    if not steady.any():
+        return mask, math.nan
     sigma = float(np.median(stds[steady]))
     level = float(means[steady].min())
     if float(fz.min()) < level - max(FLOOR_TOLERANCE_N, 8.0 * sigma):

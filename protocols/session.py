@@ -146,6 +146,8 @@ def summarize(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel) -> 
     force_mode = play & (rows[:, CMODE] > 0.5)
     out: dict = {"protocol": protocol.name, "kind": protocol.kind, "twin": True}
     if force_mode.any():
+        # Against the reference the force law tracked: the protocol's, floored at the preload.
+        f_ref = np.maximum(f_ref, _preload(pl))
         e = (f_ref - force)[force_mode]
         e = e[~np.isnan(e)]
         ref = f_ref[force_mode]

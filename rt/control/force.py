@@ -131,11 +131,6 @@ class ExplicitForce:
     def set_gains(self, **changes) -> None:
         self.gains = _validate(ExplicitForceGains, {**self.gains.model_dump(), **changes})
 
-    def _integrate(self, e: float, dt: float) -> None:
-        g = self.gains
-        limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
-        self.integral = max(-limit, min(limit, self.integral + e * dt))
-
     def update(self, st: State, force_n: float, ref: ForceReference, dt: float,
                out: np.ndarray) -> int:
         """τ (N) into ``out``. ``force_n`` is the measured F (NaN → the law holds its integral
@@ -156,8 +151,11 @@ class ExplicitForce:
         z_dot_ff = max(-vmax, min(vmax, f_dot / k))
         amax = g.max_feedforward_accel_m_s2
         z_ddot_ff = max(-amax, min(amax, f_ddot / k)) if abs(f_dot / k) < vmax else 0.0
+        integral = self.integral
         if not math.isnan(force_n):
             e = f_d - force_n
+            limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
+            integral = max(-limit, min(limit, integral + e * dt))
             if g.estimate_stiffness and force_n > 50.0:
                 # Learn the contact's stiffness only while clearly in contact and moving a
                 # little; the estimate stays within 1/5..20× the guess, so a poorly excited
@@ -169,18 +167,18 @@ class ExplicitForce:
                 self._last_z = cfg.z
         else:
             e = 0.0
-        fz = f_d + g.kp * e + g.ki_per_s * self.integral - g.damping_n_s_per_m * (zd - z_dot_ff)
+        fz = f_d + g.kp * e + g.ki_per_s * integral - g.damping_n_s_per_m * (zd - z_dot_ff)
         if fz < floor and not force_n > floor:
             # Never pull: with the foot carrying no more than the preload (or no reading) the
             # command is held at the preload, and the integral only moves up (conditional
-            # integration: it does not wind while the command is held). Above the preload the
-            # feedback may command less than it: that moves the platform down against its
-            # friction while the foot still pushes on it.
+            # integration: it does not wind down while the command is held). Above the
+            # preload the feedback may command less than it: that moves the platform down
+            # against its friction while the foot still pushes on it.
             fz = floor
-            if e > 0.0:
-                self._integrate(e, dt)
-        elif not math.isnan(force_n):
-            self._integrate(e, dt)
+            if integral > self.integral:
+                self.integral = integral
+        else:
+            self.integral = integral
         q_roll = (-g.angle_kp_n_m_per_rad * (cfg.roll - ref.roll)
                   - g.angle_kd_n_m_s_per_rad * (rd - ref.roll_rate))
         q_pitch = (-g.angle_kp_n_m_per_rad * (cfg.pitch - ref.pitch)
