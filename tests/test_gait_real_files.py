@@ -114,8 +114,7 @@ def test_relabelled_units_change_nothing_but_a_wrong_scale_is_refused(tmp_path, 
     gen = _gen(tmp_path, robot, tmp_path / "relabelled.c3d", 0)
     assert gen.validate().ok and 1.1 < gen.info["source_peak_bw"] < 1.25
     c = ezc3d.c3d(str(DATA / "functional_walk.c3d"))
-    c["parameters"]["ANALOG"]["SCALE"]["value"] = np.asarray(
-        c["parameters"]["ANALOG"]["SCALE"]["value"]) / 4.448   # as if in lbf
+    c["data"]["analogs"] = c["data"]["analogs"] / 4.448   # the same forces in lbf
     c.write(str(tmp_path / "lbf.c3d"))
     with pytest.raises(ProtocolValidationError) as exc:
         _gen(tmp_path, robot, tmp_path / "lbf.c3d", 0)
