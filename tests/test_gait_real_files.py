@@ -104,6 +104,11 @@ def test_broken_variants_are_refused(tmp_path):
     c.write(str(tmp_path / "type1.c3d"))
     with pytest.raises(ProtocolValidationError, match="type 1 is not supported"):
         gait.read_grf_c3d(tmp_path / "type1.c3d", 0)
+    for name in ("type2_vicon.c3d", "functional_walk.c3d"):
+        data = (DATA / name).read_bytes()
+        (tmp_path / name).write_bytes(data[: len(data) // 2])
+        with pytest.raises(ProtocolValidationError, match="the file is truncated"):
+            gait.read_grf_c3d(tmp_path / name, 0)
 
 
 def test_relabelled_units_change_nothing_but_a_wrong_scale_is_refused(tmp_path, robot):
