@@ -269,9 +269,9 @@ def quiet_baseline(fz: np.ndarray, rate_hz: float) -> tuple[np.ndarray, float]:
     """The quiet (unloaded) samples of a plate's record and the σ of their Fz (N).
 
     Windows of ``QUIET_WINDOW_S``; a window is steady when its Fz standard deviation is at most
-    max(``QUIET_STD_N``, 3 × the steadiest window's), never above ``QUIET_MAX_STD_N``; the quiet
-    windows are the steady ones whose mean lies within max(5 N, 5σ) of the lowest steady mean (an unloaded plate reads its
-    lowest level: a foot only adds load). That level must be the record's floor: when samples
+    max(``QUIET_STD_N``, 3 × the steadiest window's), never above ``QUIET_MAX_STD_N``; the
+    quiet windows are the steady ones whose mean lies within max(5 N, 5σ) of the lowest steady
+    mean (an unloaded plate reads its lowest level: a foot only adds load). That level must be the record's floor: when samples
     read more than max(``FLOOR_TOLERANCE_N``, 8σ) below it, the steadiest low stretch was a
     loaded one and the record has no unloaded stretch. Returns a boolean mask of the quiet
     samples (all False when there is none) and their σ (NaN then).
