@@ -76,7 +76,8 @@ def replay(case: Case, data: Path, workdir: Path) -> dict:
 
     path = workdir / f"{Path(case.file).stem}_{case.plate}.yaml"
     path.write_text(protocol_text(case, data))
-    proc = subprocess.run([sys.executable, "-m", "rt.cli", "session", "run", "--protocol",
+    talus = Path(sys.executable).with_name("talus")       # the console script, as installed
+    proc = subprocess.run([str(talus), "session", "run", "--protocol",
                            str(path), "--patient-weight", f"{PATIENT_KG:g}", "--fast", "--json"],
                           capture_output=True, text=True, cwd=REPO, timeout=600)
     out = json.loads(proc.stdout) if proc.stdout.strip() else {"error": proc.stderr.strip()}
