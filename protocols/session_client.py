@@ -68,6 +68,19 @@ def print_summary(s: dict) -> None:
         w(f"  force RMS error   {s['rms_error_pct']:.2f} % of {s['rms_error_basis']}\n")
     if s["peak_force_n"] is not None:
         w(f"  peak force        {s['peak_force_n']:.1f} N\n")
+    if s.get("min_force_n") is not None:
+        w(f"  least force       {s['min_force_n']:.1f} N (in contact, force control)\n")
+    src = s.get("source")
+    if src:
+        plate = "" if src["plate_index"] is None else f", plate {src['plate_index']}"
+        off = src["offset_removed_n"]["fz"]
+        w(f"  source            {src['source']}{plate} (sha256 "
+          f"{(src['source_sha256'] or '?')[:16]}…)\n"
+          f"                    stance {src['stance_window_s'][0]:.3f} .. "
+          f"{src['stance_window_s'][1]:.3f} s, "
+          + (f"offset removed {off:.2f} N" if src["offset_measured"] else "offset not measured")
+          + f", scale {src['scale_factor']:.4f}, source body mass "
+          f"{src['source_body_mass_kg']:g} kg ({src['source_body_mass_from']})\n")
     for axis, rng in s["rom_deg"].items():
         if rng:
             w(f"  {axis:5s} reached    {rng[0]:+.1f} .. {rng[1]:+.1f} deg\n")

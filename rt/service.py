@@ -571,7 +571,8 @@ class RtService:
         channels and the figures; ends the session when the robot is back at rest."""
         assert s.prepared is not None
         recorder = self._recorder
-        figures = s.prepared.figures()
+        figures = s.prepared.figures(float(getattr(
+            self.pl.graph.component("controller"), "preload_n", 0.0)))
         start = self._tap_start
         seen_motion = False
         still_since: float | None = None

@@ -10,10 +10,7 @@ from pathlib import Path
 import pytest
 import sqlalchemy as sa
 
-try:  # the entry point moved to talus/cli.py when sessions went into the RT process (issue 9)
-    from talus.cli import main
-except ImportError:
-    from rt.cli import main
+from talus.cli import main
 
 from patients_helpers import PROTOCOL, fast_hasher
 

@@ -15,13 +15,8 @@ LIB = Path(__file__).resolve().parents[1] / "protocols" / "library"
 
 
 def fast(protocol_path):
-    """The in-process twin, as fast as possible (this branch's run_session takes realtime=;
-    once sessions run in the RT process, run_session is always fast and has no such option)."""
-    import inspect
-    from protocols.session import run_session
-    fast_option = {"realtime": False} if "realtime" in inspect.signature(run_session).parameters \
-        else {}
-    return twin_runner(protocol_path, **fast_option)
+    """The in-process twin, as fast as possible (``run_session``, the engine of tests)."""
+    return twin_runner(protocol_path)
 
 
 @pytest.fixture()

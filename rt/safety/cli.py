@@ -43,6 +43,6 @@ def _matrix(args) -> int:
         print(f"{f['name']:20s} {'yes' if f['detected'] else 'NO':4s} {f['reaction']:10s} "
               f"{f.get('cause', '-'):18s} {_fmt(f['latency_ms']):>8s} "
               f"{_fmt(f['time_to_zero_output_ms']):>7s} {_fmt(f['time_to_rest_ms']):>8s} "
-              f"{e['rom_deg']:6.2f} {e['force_pct']:6.2f} {e['stroke_mm']:6.2f}  "
+              f"{_fmt(e['rom_deg']):>6s} {e['force_pct']:6.2f} {e['stroke_mm']:6.2f}  "
               f"{f['final_state']}")
     return 0
