@@ -6,6 +6,8 @@ import json
 import sys
 from pathlib import Path
 
+from rt.cli_args import finite_float
+
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser(
@@ -17,7 +19,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", required=True, help="protocol YAML (see protocols/library)")
     p.add_argument("--backend", choices=("sim",), default="sim")
     p.add_argument("--record", default=None, help="MCAP file to write")
-    p.add_argument("--patient-weight", type=float, default=None, help="kg (gait replay)")
+    p.add_argument("--patient-weight", type=finite_float(10.0, 300.0, unit="kg"), default=None,
+                   help="kg (gait replay)")
     p.add_argument("--env", default=None,
                    help="what the platform touches (default: the patient's foot, unloaded at "
                         "the protocol's start pose); e.g. plate:0.74")

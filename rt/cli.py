@@ -6,12 +6,22 @@ Subcommand groups live next to what they drive (``rt/model/cli.py``, ``rt/twin/c
 
 JSON-lines commands read one JSON object per line on stdin and write one per line on stdout;
 bad input gives ``{"error": "..."}`` on stdout and a non-zero exit code.
+
+Errors: bad arguments are refused by argparse (types in ``rt.cli_args``) with exit code 2;
+a ``TalusError`` escaping a command becomes one ``{"error": "..."}`` line on stdout and exit
+code 2, never a traceback. Anything else is a bug and keeps its traceback.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import sys
+
+from rt.errors import TalusError
+
+#: Exit code of every refused command (argparse uses the same for bad arguments).
+EXIT_ERROR = 2
 
 #: group name -> (module with ``register(subparsers)``, help)
 GROUPS: dict[str, tuple[str, str]] = {
@@ -45,10 +55,18 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser(group).parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except TalusError as exc:
+        print(error_line(exc), flush=True)
+        return EXIT_ERROR
     except BrokenPipeError:
         # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
         sys.stderr.close()
         return 0
+
+
+def error_line(exc: TalusError | str) -> str:
+    """The one JSON line a refused command prints: ``{"error": "..."}``."""
+    return json.dumps({"error": str(exc)})
 
 
 if __name__ == "__main__":

@@ -47,3 +47,14 @@ class SafetyTrip(TalusError):
 
 class ProtocolValidationError(TalusError):
     """A therapy/calibration protocol file failed validation."""
+
+
+def validation_summary(exc: object) -> str:
+    """A pydantic ``ValidationError`` as ``field.path: message; ...``.
+
+    ``str(exc)`` of a pydantic error carries help URLs and echoes the whole input value (a
+    file's contents, a 5000-digit number); this keeps the location and the message only.
+    """
+    errors = exc.errors(include_url=False, include_input=False)  # type: ignore[attr-defined]
+    return "; ".join(f"{'.'.join(str(p) for p in e['loc']) or '(top level)'}: {e['msg']}"
+                     for e in errors)

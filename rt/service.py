@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
-from rt.errors import ConfigurationError, InputError
+from rt.errors import ConfigurationError, InputError, validation_summary
 from rt.ipc.messages import DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT
 from rt.position_loop import (PositionLoop, build_position_loop, build_sim_position_loop,
                               shm_devices)
@@ -61,8 +61,7 @@ def load_config(path: str | Path | None) -> RtConfig:
     except yaml.YAMLError as exc:
         raise ConfigurationError(f"RT config {path} is not valid YAML: {exc}") from None
     except ValidationError as exc:
-        msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
-        raise ConfigurationError(f"RT config {path} is invalid: {msgs}") from None
+        raise ConfigurationError(f"RT config {path} is invalid: {validation_summary(exc)}") from None
 
 
 class RtService:

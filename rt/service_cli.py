@@ -7,6 +7,8 @@ import signal
 import sys
 import threading
 
+from rt.cli_args import seconds
+
 
 def register_serve(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("serve", help="run the RT process (loop + supervisor + IPC server)",
@@ -21,7 +23,8 @@ def register_serve(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--config", default=None, help="RT config YAML (see rt.service.RtConfig)")
     p.add_argument("--endpoint", default=None, help="override the request endpoint")
     p.add_argument("--pub-endpoint", default=None, help="override the publish endpoint")
-    p.add_argument("--seconds", type=float, default=None, help="stop after this long")
+    p.add_argument("--seconds", type=seconds(hi=30 * 24 * 3600.0), default=None,
+                   help="stop after this long (s)")
     p.set_defaults(func=_serve)
 
 

@@ -14,7 +14,8 @@ from dataclasses import asdict
 from typing import Any
 
 from rt.ati.rdt import DEFAULT_COUNTS_PER_FORCE, DEFAULT_COUNTS_PER_TORQUE, RDT_PORT
-from rt.errors import TalusError
+from rt.cli_args import bounded_int, finite_float, port_number, rate_hz, seconds, seed
+from rt.errors import InputError, TalusError
 
 EXIT_ERROR = 2
 
@@ -25,9 +26,10 @@ def _emit(obj: dict[str, Any]) -> None:
 
 
 def _add_counts_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--counts-per-force", type=float, default=DEFAULT_COUNTS_PER_FORCE,
+    counts = finite_float(1.0, 1e9, unit="counts per unit")
+    parser.add_argument("--counts-per-force", type=counts, default=DEFAULT_COUNTS_PER_FORCE,
                         help="counts per N (sensor configuration; default %(default)g)")
-    parser.add_argument("--counts-per-torque", type=float, default=DEFAULT_COUNTS_PER_TORQUE,
+    parser.add_argument("--counts-per-torque", type=counts, default=DEFAULT_COUNTS_PER_TORQUE,
                         help="counts per N m (sensor configuration; default %(default)g)")
 
 
@@ -38,10 +40,12 @@ def register(commands: argparse._SubParsersAction) -> None:
         description="Print one JSON line per record: t (host monotonic s), seq (rdt_sequence), "
                     "fx fy fz (N), tx ty tz (N m), status (raw status word).")
     p.add_argument("--host", default="192.168.1.1", help="sensor address (default %(default)s)")
-    p.add_argument("--port", type=int, default=RDT_PORT, help="RDT port (default %(default)s)")
-    p.add_argument("--samples", type=int, default=1, help="records to read (default 1)")
+    p.add_argument("--port", type=port_number(allow_zero=False), default=RDT_PORT,
+                   help="RDT port (default %(default)s)")
+    p.add_argument("--samples", type=bounded_int(1, 10_000_000), default=1,
+                   help="records to read (default 1)")
     p.add_argument("--bias", action="store_true", help="software-bias the sensor first")
-    p.add_argument("--timeout", type=float, default=1.0,
+    p.add_argument("--timeout", type=seconds(hi=60.0), default=1.0,
                    help="longest wait for each record, s (default %(default)s)")
     p.add_argument("--buffered", action="store_true",
                    help="use buffered streaming (several records per datagram)")
@@ -57,22 +61,23 @@ def register_twin_commands(commands: argparse._SubParsersAction) -> None:
                     "protocol. Prints {\"serving\": ...} once bound (port 0 = ephemeral) and "
                     "the server counters when it stops.")
     p.add_argument("--host", default="127.0.0.1", help="bind address (default %(default)s)")
-    p.add_argument("--port", type=int, default=RDT_PORT,
+    p.add_argument("--port", type=port_number(), default=RDT_PORT,
                    help="UDP port, 0 = ephemeral (default %(default)s)")
-    p.add_argument("--rate", type=float, default=1000.0, help="record rate, Hz (default 1000)")
-    p.add_argument("--seconds", type=float, default=None,
+    p.add_argument("--rate", type=rate_hz(1.0, 7000.0), default=1000.0,
+                   help="record rate, Hz (1-7000, the Net F/T's range; default 1000)")
+    p.add_argument("--seconds", type=seconds(hi=30 * 24 * 3600.0), default=None,
                    help="stop after this many seconds (default: until interrupted)")
-    p.add_argument("--seed", type=int, default=0, help="noise/drift seed (default 0)")
-    p.add_argument("--wrench", type=float, nargs=6, metavar=("FX", "FY", "FZ", "TX", "TY", "TZ"),
+    p.add_argument("--seed", type=seed(), default=0, help="noise/drift seed (default 0)")
+    p.add_argument("--wrench", type=finite_float(-1e4, 1e4), nargs=6, metavar=("FX", "FY", "FZ", "TX", "TY", "TZ"),
                    default=[0.0, 0.0, -50.0, 0.0, 0.0, 0.0],
                    help="true wrench, N and N m (default 0 0 -50 0 0 0: light static load)")
-    p.add_argument("--buffer", type=int, default=10,
+    p.add_argument("--buffer", type=bounded_int(1, 40), default=10,
                    help="records per datagram in buffered mode (default %(default)s)")
     p.add_argument("--env", default=None,
                    help="run the full twin in real time in this environment (free, "
                         "payload:KG[@S], plate[:HEIGHT_M], ankle) and serve its sensor instead "
                         "of a constant wrench")
-    p.add_argument("--volts", type=float, nargs=3, default=None, metavar=("V1", "V2", "V3"),
+    p.add_argument("--volts", type=finite_float(-10.0, 10.0, unit="V"), nargs=3, default=None, metavar=("V1", "V2", "V3"),
                    help="with --env: amplifier commands held on the twin (default: the "
                         "gravity-compensating voltages at home)")
     _add_counts_options(p)
@@ -118,6 +123,9 @@ def cmd_serve_ati(args: argparse.Namespace) -> int:
     from rt.ati.rdt_server import RdtServer
     from rt.ati.twin_sensor import TwinAtiSensorModel
 
+    if args.volts is not None and args.env is None:
+        raise InputError("--volts holds the twin's amplifier commands: it needs --env "
+                         "(a constant --wrench has no amplifiers to command)")
     try:
         if args.env is not None:
             from rt.twin.serve import twin_wrench_source

@@ -15,7 +15,7 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from rt.errors import ConfigurationError
+from rt.errors import ConfigurationError, validation_summary
 
 SCHEMA_VERSION = 1
 
@@ -184,11 +184,7 @@ class RobotDescription(_Strict):
 
 
 def _format_validation_error(exc: ValidationError, source: str) -> str:
-    parts = []
-    for err in exc.errors():
-        where = ".".join(str(p) for p in err["loc"]) or "(top level)"
-        parts.append(f"{where}: {err['msg']}")
-    return f"robot description {source} is invalid: " + "; ".join(parts)
+    return f"robot description {source} is invalid: {validation_summary(exc)}"
 
 
 def description_from_dict(data: Any, source: str = "<dict>") -> RobotDescription:

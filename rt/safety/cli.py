@@ -9,8 +9,28 @@ def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("matrix", help="inject every fault on the twin and report the "
                                            "supervisor's reaction")
     p.add_argument("--json", action="store_true")
-    p.add_argument("--only", nargs="*", default=None, help="run only these faults")
+    p.add_argument("--only", nargs="+", default=None, metavar="FAULT",
+                   help="run only these faults ('-' and '_' alike; an unknown name is refused "
+                        "with the list)")
     p.set_defaults(func=_matrix)
+
+
+def _selected(only: list[str] | None) -> list[str] | None:
+    """The fault names to run, in their declared spelling; InputError names unknown ones."""
+    if only is None:
+        return None
+    from rt.cli_args import canonical_name
+    from rt.errors import InputError
+    from rt.model import RobotModel
+    from rt.safety.fault_matrix import RT_PROCESS_LOSS, scenarios
+
+    known = {canonical_name(n): n
+             for n in [sc.name for sc in scenarios(RobotModel.load())] + [RT_PROCESS_LOSS]}
+    unknown = [n for n in only if canonical_name(n) not in known]
+    if unknown:
+        raise InputError(f"unknown fault(s) {', '.join(unknown)}; known: "
+                         f"{', '.join(sorted(known.values()))}")
+    return [known[canonical_name(n)] for n in only]
 
 
 def _fmt(v) -> str:
@@ -20,7 +40,7 @@ def _fmt(v) -> str:
 def _matrix(args) -> int:
     from rt.safety.fault_matrix import run_matrix
 
-    result = run_matrix(args.only)
+    result = run_matrix(_selected(args.only))
     if args.json:
         print(json.dumps(result))
         return 0
