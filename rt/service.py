@@ -18,7 +18,6 @@ import time
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from rt.control.base import Reference
@@ -27,6 +26,7 @@ from rt.errors import ConfigurationError, InputError, validation_summary
 from rt.ipc.messages import DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT
 from rt.position_loop import (PositionLoop, build_position_loop, build_sim_position_loop,
                               shm_devices)
+from rt.safe_yaml import load_yaml_file
 from rt.safety.events import Reaction
 from rt.safety.limits import PatientLimits
 
@@ -53,13 +53,12 @@ class RtConfig(BaseModel):
 def load_config(path: str | Path | None) -> RtConfig:
     if path is None:
         return RtConfig()
+    data = load_yaml_file(path, "RT config") or {}
+    if not isinstance(data, dict):
+        raise ConfigurationError(f"RT config {path} must be a YAML mapping, "
+                                 f"got {type(data).__name__}")
     try:
-        data = yaml.safe_load(Path(path).read_text()) or {}
         return RtConfig.model_validate(data)
-    except OSError as exc:
-        raise ConfigurationError(f"cannot read RT config {path}: {exc}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigurationError(f"RT config {path} is not valid YAML: {exc}") from None
     except ValidationError as exc:
         raise ConfigurationError(f"RT config {path} is invalid: {validation_summary(exc)}") from None
 
