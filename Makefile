@@ -35,10 +35,12 @@ demo: setup
 	$(BIN)/talus bench tracking --experiment payload-step
 	@echo
 	@mkdir -p out
-	$(BIN)/talus session run --protocol protocols/library/sine_fz.yaml --record out/sine_fz.mcap
+	@# --force: the demo's own recordings in out/ are replaced on each run (once complete).
+	$(BIN)/talus session run --protocol protocols/library/sine_fz.yaml --record out/sine_fz.mcap \
+	  --force
 	@echo
 	$(BIN)/talus session run --protocol protocols/library/gait_replay.yaml --patient-weight 75 \
-	  --record out/gait_replay.mcap
+	  --record out/gait_replay.mcap --force
 
 test: setup
 	$(BIN)/pytest -q

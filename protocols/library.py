@@ -79,6 +79,16 @@ def load_protocol(path: str | Path) -> ProtocolModel:
     return protocol
 
 
+def protocol_files(protocol: ProtocolModel) -> list[Path]:
+    """The files a protocol is read from: itself and the data files it names (a gait source,
+    a playback CSV; relative names resolve next to the protocol). Outputs must not be these."""
+    if protocol.loaded_from is None:
+        return []
+    here = Path(protocol.loaded_from)
+    named = [getattr(protocol, key, None) for key in ("source", "file")]
+    return [here] + [here.parent / n for n in named if isinstance(n, str)]
+
+
 def list_library() -> list[Path]:
     """The shipped protocol files, sorted by name."""
     return sorted(LIBRARY_DIR.glob("*.yaml"))

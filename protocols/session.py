@@ -234,9 +234,19 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
 
 def run_session(setup: SessionSetup, record: Path | None = None, realtime: bool = True,
                 progress: Callable[[float], None] | None = None,
-                model: RobotModel | None = None) -> dict:
-    """Pre-flight, then the real run (on the twin, in real time by default), recorded."""
+                model: RobotModel | None = None, force: bool = False) -> dict:
+    """Pre-flight, then the real run (on the twin, in real time by default), recorded.
+
+    ``record`` must not exist (unless ``force``: replaced once the new one is complete) and
+    must not be the protocol or a file it reads (``rt.output_files``).
+    """
+    from protocols.library import load_protocol, protocol_files
+    from rt.output_files import check_output
     from rt.recording.writer import SessionRecorder
+
+    inputs = protocol_files(load_protocol(setup.protocol_path))
+    if record is not None:      # before the pre-flight: a refusal costs nothing
+        check_output(record, inputs, force=force, what="recording")
 
     model = model or RobotModel.load()
     pre = preflight(setup, model)
@@ -250,7 +260,7 @@ def run_session(setup: SessionSetup, record: Path | None = None, realtime: bool 
                 "parameters": protocol.model_dump(mode="json", exclude={"loaded_from"})
                 if hasattr(protocol, "model_dump") else {},
                 "patient_id": "twin-demo", "robot_description": model.description.name}
-        recorder = SessionRecorder(record, meta)
+        recorder = SessionRecorder(record, meta, force=force, inputs=inputs)
         recorder.attach_state_ring(pl.recorder, start=0)
         pl.events.listener = recorder.event
         pump = threading.Thread(target=_pump, args=(tap, recorder, stop_pump), daemon=True)

@@ -18,7 +18,10 @@ def register(commands: argparse._SubParsersAction) -> None:
                     "real time), records it to MCAP and prints a summary.")
     p.add_argument("--protocol", required=True, help="protocol YAML (see protocols/library)")
     p.add_argument("--backend", choices=("sim",), default="sim")
-    p.add_argument("--record", default=None, help="MCAP file to write")
+    p.add_argument("--record", default=None,
+                   help="MCAP file to write (refused if it exists or is one of the inputs)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing --record file, once the new recording is complete")
     p.add_argument("--patient-weight", type=finite_float(10.0, 300.0, unit="kg"), default=None,
                    help="kg (gait replay)")
     p.add_argument("--env", default=None,
@@ -32,17 +35,12 @@ def register(commands: argparse._SubParsersAction) -> None:
 
 def _run(args) -> int:
     from protocols.session import SessionSetup, progress_bar, run_session
-    from rt.errors import TalusError
 
     setup = SessionSetup(Path(args.protocol), patient_weight_kg=args.patient_weight,
                          environment=args.env)
-    try:
-        summary = run_session(setup, Path(args.record) if args.record else None,
-                              realtime=not args.fast,
-                              progress=None if args.json else progress_bar())
-    except TalusError as exc:
-        print(json.dumps({"error": str(exc)}))
-        return 2
+    summary = run_session(setup, Path(args.record) if args.record else None,
+                          realtime=not args.fast, force=args.force,
+                          progress=None if args.json else progress_bar())
     if args.json:
         print(json.dumps(summary))
         return 0
