@@ -26,7 +26,7 @@ def _emit(obj: dict[str, Any]) -> None:
 
 
 def _add_counts_options(parser: argparse.ArgumentParser) -> None:
-    counts = finite_float(1.0, 1e9, unit="counts per unit")
+    counts = bounded_int(1, 2**32 - 1)   # whole counts: the sensor reports them as uint32
     parser.add_argument("--counts-per-force", type=counts, default=DEFAULT_COUNTS_PER_FORCE,
                         help="counts per N (sensor configuration; default %(default)g)")
     parser.add_argument("--counts-per-torque", type=counts, default=DEFAULT_COUNTS_PER_TORQUE,
@@ -77,6 +77,14 @@ def register_twin_commands(commands: argparse._SubParsersAction) -> None:
                    help="run the full twin in real time in this environment (free, "
                         "payload:KG[@S], plate[:HEIGHT_M], ankle) and serve its sensor instead "
                         "of a constant wrench")
+    p.add_argument("--http-port", type=port_number(), default=None,
+                   help="also serve the sensor's configuration page /netftapi2.xml (counts per "
+                        "unit, units) over HTTP on this port, as a Net F/T does on port 80, for "
+                        "clients that read their scaling from the sensor (0 = ephemeral; "
+                        "default: off)")
+    p.add_argument("--tcp-port", type=port_number(), default=None,
+                   help="also answer the Net F/T TCP calibration command (READCALINFO) on this "
+                        "port (the device uses 49151; 0 = ephemeral; default: off)")
     p.add_argument("--volts", type=finite_float(-10.0, 10.0, unit="V"), nargs=3, default=None, metavar=("V1", "V2", "V3"),
                    help="with --env: amplifier commands held on the twin (default: the "
                         "gravity-compensating voltages at home)")
@@ -119,6 +127,8 @@ def _raise_terminate(signum: int, frame: object) -> None:
 
 def cmd_serve_ati(args: argparse.Namespace) -> int:
     """Serve the twin sensor until ``--seconds`` elapse, Ctrl-C or SIGTERM."""
+    from rt.ati.config_server import NetFtConfigServer
+    from rt.ati.netft_config import NetFtConfiguration
     from rt.ati.rdt import CountsPerUnit
     from rt.ati.rdt_server import RdtServer
     from rt.ati.twin_sensor import TwinAtiSensorModel
@@ -134,22 +144,27 @@ def cmd_serve_ati(args: argparse.Namespace) -> int:
         else:
             model = TwinAtiSensorModel(seed=args.seed)
             source = model.make_source(args.wrench)
+        config = NetFtConfiguration(args.counts_per_force, args.counts_per_torque)
         server = RdtServer(source, host=args.host, port=args.port, rate_hz=args.rate,
                            buffer_records=args.buffer,
                            counts=CountsPerUnit(args.counts_per_force, args.counts_per_torque))
-    except TalusError as exc:
-        _emit({"error": str(exc)})
-        return EXIT_ERROR
     except OSError as exc:
-        _emit({"error": f"cannot serve RDT on {args.host}:{args.port}: {exc}"})
-        return EXIT_ERROR
+        raise InputError(f"cannot serve RDT on {args.host}:{args.port}: {exc}") from None
+    try:
+        config_server = NetFtConfigServer(config, host=args.host, http_port=args.http_port,
+                                          tcp_port=args.tcp_port)
+    except OSError as exc:
+        server.close()
+        raise InputError(f"cannot serve the configuration on {args.host} (HTTP port "
+                         f"{args.http_port}, TCP port {args.tcp_port}): {exc}") from None
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _raise_terminate)
     try:
-        with server:
+        with server, config_server:
             _emit({"serving": {"host": server.host, "port": server.port,
-                               "rate_hz": server.rate_hz}})
+                               "rate_hz": server.rate_hz, "http_port": config_server.http_port,
+                               "tcp_port": config_server.tcp_port}})
             try:
                 threading.Event().wait(args.seconds)
             except (KeyboardInterrupt, _Terminate):
