@@ -16,7 +16,9 @@ Crash tolerance: the file is chunked (zstd). Besides closing a chunk when it exc
 every ``flush_interval_s``. A process killed at any instant therefore leaves on disk every
 message produced more than about ``flush_interval_s + drain_period_s`` (+ one pump's work)
 earlier; with the defaults ≈ 0.27 s (measured: at most 0.26 s over 20 SIGKILLs of a 1 kHz
-recording, also with two CPU hogs running; ``tests/test_recording.py`` asserts ≤ 0.5 s). ``rt.recording.reader.recover`` reads such a file up to its last complete chunk.
+recording, also with two CPU hogs running; ``bench/costs.py --crash`` measures it, the tests
+check that what is recovered is an exact prefix). ``rt.recording.reader.recover`` reads such a
+file up to its last complete chunk.
 Data reaches the OS page cache, which survives a process crash; surviving a power loss needs
 ``fsync=True`` (an fsync per flush).
 """
