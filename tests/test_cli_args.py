@@ -122,3 +122,11 @@ def test_names_where_dash_and_underscore_are_the_same():
     assert pick("paden-panja") == "paden_panja"
     with pytest.raises(argparse.ArgumentTypeError, match="choose from paden_panja, pid-vs-paden"):
         pick("paden")
+
+
+def test_messages_quote_numpy_scalars_as_plain_numbers():
+    import numpy as np
+
+    import rt  # noqa: F401  (sets the print options)
+
+    assert f"{np.float64(0.05)!r}" == "0.05" and f"{np.int64(3)!r}" == "3"
