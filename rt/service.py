@@ -60,7 +60,8 @@ def load_config(path: str | Path | None) -> RtConfig:
     try:
         return RtConfig.model_validate(data)
     except ValidationError as exc:
-        raise ConfigurationError(f"RT config {path} is invalid: {validation_summary(exc)}") from None
+        raise ConfigurationError(
+            f"RT config {path} is invalid: {validation_summary(exc)}") from None
 
 
 class RtService:

@@ -659,6 +659,20 @@ def test_flipped_bytes_outside_chunks_are_caught_by_the_section_crcs(
     assert not (tmp_path / "x.csv").exists()
 
 
+def test_a_damaged_record_length_in_a_finished_file_is_damage_not_a_crash(
+        session: dict, tmp_path: Path) -> None:
+    from rt.recording.reader import recording_info
+
+    data = bytearray(session["path"].read_bytes())
+    _, offset, _ = [r for r in _records(bytes(data)) if r[0] == CHUNK][1]
+    data[offset + 1 + 5] ^= 0x40            # the chunk's length field: framing breaks there
+    bad = tmp_path / "length.mcap"
+    bad.write_bytes(bytes(data))
+    info = recording_info(bad)
+    assert not info["complete"] and info["corrupt"]
+    assert f"break at byte {offset}" in info["problem"]
+
+
 def test_export_never_overwrites_or_eats_its_input(session: dict, tmp_path: Path,
                                                    capsys) -> None:
     rec = tmp_path / "rec.mcap"

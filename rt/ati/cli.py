@@ -68,7 +68,8 @@ def register_twin_commands(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--seconds", type=seconds(hi=30 * 24 * 3600.0), default=None,
                    help="stop after this many seconds (default: until interrupted)")
     p.add_argument("--seed", type=seed(), default=0, help="noise/drift seed (default 0)")
-    p.add_argument("--wrench", type=finite_float(-1e4, 1e4), nargs=6, metavar=("FX", "FY", "FZ", "TX", "TY", "TZ"),
+    p.add_argument("--wrench", type=finite_float(-1e4, 1e4), nargs=6,
+                   metavar=("FX", "FY", "FZ", "TX", "TY", "TZ"),
                    default=[0.0, 0.0, -50.0, 0.0, 0.0, 0.0],
                    help="true wrench, N and N m (default 0 0 -50 0 0 0: light static load)")
     p.add_argument("--buffer", type=bounded_int(1, 40), default=10,
@@ -85,7 +86,8 @@ def register_twin_commands(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--tcp-port", type=port_number(), default=None,
                    help="also answer the Net F/T TCP calibration command (READCALINFO) on this "
                         "port (the device uses 49151; 0 = ephemeral; default: off)")
-    p.add_argument("--volts", type=finite_float(-10.0, 10.0, unit="V"), nargs=3, default=None, metavar=("V1", "V2", "V3"),
+    p.add_argument("--volts", type=finite_float(-10.0, 10.0, unit="V"), nargs=3, default=None,
+                   metavar=("V1", "V2", "V3"),
                    help="with --env: amplifier commands held on the twin (default: the "
                         "gravity-compensating voltages at home)")
     _add_counts_options(p)

@@ -172,6 +172,15 @@ class RecordingScan:
         return RecordedMessage(channel.topic, msg.log_time, payload)
 
     def __iter__(self) -> Iterator[RecordedMessage]:
+        yield from self._scan()
+        info = self.info
+        if not info.complete and not info.corrupt and _has_closing_magic(self.path):
+            # A finished file (it ends with the closing magic) whose records break before
+            # the footer was damaged afterwards (e.g. a record length), not cut by a crash.
+            info.crc_errors.append(f"the file was finished but its records break at byte "
+                                   f"{info.recovered_bytes} ({info.tail}): damaged")
+
+    def _scan(self) -> Iterator[RecordedMessage]:
         info = self.info
         try:
             f = open(self.path, "rb")

@@ -58,8 +58,13 @@ def _step(args) -> int:
         encoders.read_positions_m(q)
         sensor.read(w)
         sys.stdout.write(json.dumps({
-            "t": round(clock.t, 9), "q": q.tolist(), "qd": twin.plant.qd.tolist(),
-            "wrench": [None if math.isnan(v) else v for v in w.as_tuple()]},
+            "t": round(clock.t, 9), "q": _finite(q.tolist()),
+            "qd": _finite(twin.plant.qd.tolist()), "wrench": _finite(w.as_tuple())},
             allow_nan=False) + "\n")
     card.close()
     return 0
+
+
+def _finite(values) -> list[float | None]:
+    """JSON has no NaN or infinity: a value that is not finite (no sample yet) is null."""
+    return [v if math.isfinite(v) else None for v in values]
