@@ -48,5 +48,5 @@ def twin_wrench_source(env: str, volts: Sequence[float] | None, seed: int,
         twin.sync(twin_t[0])
         return twin.ati_sample
 
-    source.twin = twin          # for tests and introspection
+    source.twin = twin  # type: ignore[attr-defined]  # for tests and introspection
     return source
