@@ -370,11 +370,21 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
 
 def run_session(setup: SessionSetup, record: Path | None = None,
                 progress: Callable[[float], None] | None = None,
-                model: RobotModel | None = None) -> dict:
+                model: RobotModel | None = None, force: bool = False) -> dict:
     """Pre-flight, then the whole session on the in-process twin as fast as possible,
     optionally recorded: the engine of benchmarks and tests (twin figures). A patient's session
-    runs in the RT process (``talus session run``)."""
+    runs in the RT process (``talus session run``).
+
+    ``record`` must not exist (unless ``force``: replaced once the new one is complete) and
+    must not be the protocol or a file it reads (``rt.output_files``).
+    """
+    from protocols.library import protocol_files
+    from rt.output_files import check_output
     from rt.recording.writer import SessionRecorder
+
+    inputs = protocol_files(setup.load())
+    if record is not None:      # before the pre-flight: a refusal costs nothing
+        check_output(record, inputs, force=force, what="recording")
 
     model = model or RobotModel.load()
     pre = preflight(setup, model)
@@ -390,7 +400,7 @@ def run_session(setup: SessionSetup, record: Path | None = None,
                 "patient_id": "twin-demo", "robot_description": model.description.name}
         if getattr(gen, "info", None):
             meta["source"] = gen.info          # traceability of the replayed record
-        recorder = SessionRecorder(record, meta)
+        recorder = SessionRecorder(record, meta, force=force, inputs=inputs)
         recorder.attach_state_ring(pl.recorder, start=0)
         pl.events.listener = recorder.event
         pump = threading.Thread(target=_pump, args=(tap, recorder, stop_pump), daemon=True)

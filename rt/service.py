@@ -37,10 +37,11 @@ from rt.components.blocks import SignalTap
 from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
 from rt.devices.rig_config import RigConfig
-from rt.errors import ConfigurationError, InputError, TalusError
+from rt.errors import ConfigurationError, InputError, TalusError, validation_summary
 from rt.ipc.messages import (DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT, PatientArgs, RecordArgs,
                              describe_validation_error)
 from rt.ipc.security import ServerCurveConfig
+from rt.safe_yaml import load_yaml_file
 from rt.position_loop import PositionLoop, build_protocol_loop, shm_devices, sim_devices
 from rt.references.program import Program, TrajectoryProgram
 from rt.references.sequencer import Phase
@@ -123,17 +124,15 @@ class RtConfig(BaseModel):
 def load_config(path: str | Path | None) -> RtConfig:
     if path is None:
         return RtConfig()
+    data = load_yaml_file(path, "RT config") or {}
+    if not isinstance(data, dict):
+        raise ConfigurationError(f"RT config {path} must be a YAML mapping, "
+                                 f"got {type(data).__name__}")
     try:
-        data = yaml.safe_load(Path(path).read_text()) or {}
         return RtConfig.model_validate(data)
-    except OSError as exc:
-        raise ConfigurationError(f"cannot read RT config {path}: {exc}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigurationError(f"RT config {path} is not valid YAML: {exc}") from None
     except ValidationError as exc:
-        msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}"
-                         for e in exc.errors(include_url=False))
-        raise ConfigurationError(f"RT config {path} is invalid: {msgs}") from None
+        raise ConfigurationError(
+            f"RT config {path} is invalid: {validation_summary(exc)}") from None
 
 
 # ------------------------------------------------------------------------------ ownership

@@ -10,6 +10,8 @@ from typing import Any, Callable
 
 from rt.model.robot_option import add_robot_option
 
+from rt.cli_args import seconds
+
 
 def register_serve(commands: argparse._SubParsersAction,
                    extensions: Callable[[], dict[str, Any]] | None = None) -> None:
@@ -30,8 +32,9 @@ def register_serve(commands: argparse._SubParsersAction,
     p.add_argument("--config", default=None, help="RT config YAML (see rt.service.RtConfig)")
     p.add_argument("--endpoint", default=None, help="override the request endpoint")
     p.add_argument("--pub-endpoint", default=None, help="override the publish endpoint")
-    p.add_argument("--seconds", type=float, default=None, help="stop after this long")
-    p.add_argument("--heartbeat-timeout", type=float, default=None,
+    p.add_argument("--seconds", type=seconds(hi=30 * 24 * 3600.0), default=None,
+                   help="stop after this long (s)")
+    p.add_argument("--heartbeat-timeout", type=seconds(hi=5.0), default=None,
                    help="the owner's silence after which a motion soft-stops, s (default: the "
                         "config's, 0.25)")
     p.add_argument("--fast", action="store_true",

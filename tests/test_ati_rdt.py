@@ -50,7 +50,8 @@ def no_leftover_threads():
     pytest.fail(f"threads left running: {alive}")
 
 
-def wait_until(pred: Callable[[], bool], timeout: float = 2.0) -> bool:
+def wait_until(pred: Callable[[], bool], timeout: float = 30.0) -> bool:
+    """Poll ``pred`` until true; the timeout only guards against a hang."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if pred():
@@ -204,11 +205,12 @@ def test_streaming_delivers_the_load_in_si(pair):
     elapsed = time.monotonic() - t0
     w = client.read(Wrench())
     assert w.as_tuple() == pytest.approx(LOAD, abs=QUANTUM)
-    assert not w.stale and not w.saturated and w.status == 0 and w.sequence >= 100
-    assert abs(w.t - time.monotonic()) < 0.5
-    # 100 records at 1 kHz take 0.1 s; allow a slow CI machine 10x. Pacing is what matters:
-    # the server must not dump records as fast as it can (100 records would take ~ms).
-    assert 0.07 < elapsed < 1.0
+    assert w.sequence >= 100 and not w.saturated and w.status == 0
+    assert t0 <= w.t <= time.monotonic()            # stamped on receipt, on this clock
+    # Pacing: the server must not dump records as fast as it can (100 would take ~ms); at
+    # 1 kHz the 100th leaves ≥ 99 ms after the first. Only a lower bound: a loaded machine
+    # is slower, never faster.
+    assert elapsed >= 0.099 - 0.002
     assert client.counters.sequence_gaps == 0 and client.counters.malformed == 0
 
 

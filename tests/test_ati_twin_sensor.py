@@ -171,7 +171,7 @@ def test_source_reader_numbers_biases_and_passes_sequences_through():
     r = SourceReader(lambda: next(values))
     assert r.poll() and r.ft_sequence == 1 and r.value == [1.0, 2, 3, 4, 5, 6]
     assert not r.poll() and r.ft_sequence == 1  # dropout: nothing changes
-    assert r.set_bias()  # pulls a fresh sample, then zeroes at it
+    assert r.set_bias(samples=1)  # pulls a fresh sample, then zeroes at it
     assert r.value == [0.0] * 6 and r.bias == [2.0, 2, 3, 4, 5, 6] and r.status == 9
     assert r.poll() and r.ft_sequence == 77 and r.value == [1.0, -2, -3, -4, -5, -6]
     with pytest.raises(InputError, match="3 wrench values"):

@@ -69,7 +69,7 @@ def test_bad_field_is_refused_by_name(raw, path, value, expected):
 def test_bad_files(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("geometry: [unclosed\n")
-    with pytest.raises(ConfigurationError, match="not valid YAML"):
+    with pytest.raises(ConfigurationError, match="bad.yaml, line 2, column 1: YAML syntax error"):
         load_description(bad)
     bad.write_text("- just\n- a list\n")
     with pytest.raises(ConfigurationError, match="must be a YAML mapping"):

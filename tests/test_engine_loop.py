@@ -106,22 +106,21 @@ def test_fast_mode_advances_simulated_time_by_exactly_the_period():
 
 
 def test_realtime_mode_at_1khz_reports_lateness_and_misses():
-    """Sanity only (PLATFORM.md: no hard-deadline assertions on these VMs)."""
+    """On the real clock: consistency only, nothing about how fast this machine is (it may
+    be loaded: PLATFORM.md). Exact pacing is tested with an injected clock below; the
+    figures (lateness percentiles, misses) come from ``bench/loop_overhead.py``."""
     g, p, _ = probe_graph()
     loop = Loop(g, rate_hz=1000.0, mode="realtime")
-    t0 = time.perf_counter()
     n = loop.run(seconds=0.5)
-    wall = time.perf_counter() - t0
     s = loop.stats()
-    assert 0.45 < wall < 1.5
-    assert 350 <= n <= 501 and s.cycles == n and s.lateness.count == n
-    assert s.lateness.p50_us < 1000.0
+    # Paced by deadlines, never early: at most one cycle per period (plus the first).
+    assert 1 <= n <= 501 and s.cycles == n and s.lateness.count == n
     assert 0.0 <= s.lateness.p50_us <= s.lateness.p99_us <= s.lateness.max_us
     assert 0 <= s.misses <= n and s.miss_tolerance_us == pytest.approx(200.0)
     assert s.rephases <= s.misses
-    # dt is the measured period: about 1 ms in the median, first cycle nominal
+    # dt is the measured period: the first cycle gets the nominal one, then real intervals
     assert p.dts[0] == 1e-3
-    assert np.median(p.dts[1:n]) == pytest.approx(1e-3, rel=0.2)
+    assert np.all(p.dts[1:n] > 0.0)
     assert np.all(np.diff(p.ts[:n]) > 0)
     assert isinstance(s.hygiene, HygieneReport)
     assert "lateness p50" in s.summary()
@@ -166,7 +165,7 @@ def test_a_component_raising_in_the_threaded_loop_is_reported_and_the_loop_lives
     loop = Loop(g, rate_hz=1000.0, mode="realtime")
     loop.start()
     try:
-        deadline = time.monotonic() + 5.0
+        deadline = time.monotonic() + 60.0        # a hang guard, not a speed requirement
         while f.n < 150 and time.monotonic() < deadline:
             time.sleep(0.01)
         assert loop.running
@@ -191,7 +190,9 @@ def test_thread_start_stop_and_exclusive_running():
             loop.run(cycles=1)
         with pytest.raises(InputError, match="already running"):
             loop.start()
-        time.sleep(0.05)
+        deadline = time.monotonic() + 60.0        # a hang guard, not a speed requirement
+        while loop.cycles <= 5 and time.monotonic() < deadline:
+            time.sleep(0.01)
     finally:
         loop.stop()
     n = loop.cycles

@@ -112,7 +112,9 @@ def request_bytes(**overrides: Any) -> bytes:
     return json.dumps(msg).encode()
 
 
-def wait_until(pred: Callable[[], bool], timeout_s: float = 2.0) -> bool:
+def wait_until(pred: Callable[[], bool], timeout_s: float = 30.0) -> bool:
+    """Poll ``pred`` until true; the timeout only guards against a hang (a loaded machine
+    may be slow, never wrong)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if pred():
@@ -331,8 +333,11 @@ def test_heartbeat_age_tracks_requests_and_the_heartbeat_thread(server: RtServer
                                                                 client: RtClient) -> None:
     assert server.heartbeat_age_s() == float("inf") and not server.heartbeat_lost()
     assert server.clients() == {}
+    # Ages are checked against the time measured around the request, never against a fixed
+    # window: a loaded machine makes them larger, never wrong.
+    before = time.monotonic()
     client.status()  # any request counts
-    assert server.heartbeat_age_s() < 0.1
+    assert server.heartbeat_age_s() <= time.monotonic() - before
     assert set(server.clients()) == {"test-client"}
     t0 = time.monotonic()
     assert server.heartbeat_age_s(now=t0 + 1.0) == pytest.approx(
@@ -342,12 +347,9 @@ def test_heartbeat_age_tracks_requests_and_the_heartbeat_thread(server: RtServer
 
     client.start_heartbeat(period_s=0.02)
     assert client.heartbeat_running
-    assert wait_until(lambda: server.heartbeat_age_s() < 0.05)
-    ages = []
-    for _ in range(15):  # 0.3 s of heartbeats: never stale
-        time.sleep(0.02)
-        ages.append(server.heartbeat_age_s())
-    assert max(ages) < 0.15 and not server.heartbeat_lost()
+    for _ in range(5):  # heartbeats keep arriving: each wait sees one newer than its start
+        mark = time.monotonic()
+        assert wait_until(lambda: server.heartbeat_age_s() < time.monotonic() - mark)
     assert client.heartbeat_failures == 0 and client.last_heartbeat_error is None
     # Commands from the main thread go through while heartbeats run (separate sockets).
     assert client.status() == {"did": "status"}
@@ -357,9 +359,11 @@ def test_heartbeat_age_tracks_requests_and_the_heartbeat_thread(server: RtServer
     time.sleep(0.3)
     assert server.heartbeat_age_s() >= 0.3 and server.heartbeat_lost()
 
+    before = time.monotonic()
     with RtClient(server.endpoint, client_id="gui") as other:
         other.heartbeat()
-    assert server.heartbeat_age_s() < 0.1  # the newest heartbeat from any client
+    # The newest heartbeat from any client:
+    assert server.heartbeat_age_s() <= time.monotonic() - before
     ages_by_client = server.clients()
     assert set(ages_by_client) == {"test-client", "gui"}
     assert ages_by_client["test-client"] > ages_by_client["gui"]
@@ -370,9 +374,8 @@ def test_heartbeat_thread_survives_a_missing_server() -> None:
         c.start_heartbeat(period_s=0.01)
         assert wait_until(lambda: c.heartbeat_failures >= 2)
         assert "no reply" in (c.last_heartbeat_error or "")
-        t0 = time.monotonic()
         c.stop_heartbeat()
-        assert time.monotonic() - t0 < 0.5
+        assert not c.heartbeat_running
 
 
 # --------------------------------------------------------------------------- timeouts
@@ -385,7 +388,7 @@ def test_timeout_on_a_dead_endpoint_then_works_once_a_server_appears(
             t0 = time.monotonic()
             with pytest.raises(RtUnavailableError, match="no reply from the RT server"):
                 c.status()
-            assert 0.28 <= time.monotonic() - t0 < 0.8
+            assert time.monotonic() - t0 >= 0.3 - 0.005   # never gives up early
         with RtServer(handler, endpoint, ANY_PORT):
             assert c.status() == {"did": "status"}
             assert c.estop("cli") == {"did": "estop", "source": "cli"}
@@ -476,15 +479,14 @@ def test_subscriber_topic_filter(server: RtServer) -> None:
 
 def test_publish_never_blocks_without_or_with_a_slow_subscriber(server: RtServer) -> None:
     def burst(n: int) -> None:
-        durations = np.empty(n)
-        for i in range(n):
-            t0 = time.perf_counter()
-            server.publish("telemetry", {"t": i * 1e-3, "seq": i})
-            durations[i] = time.perf_counter() - t0
-        # A blocking publish would stall for the subscriber (forever); a preempted one shows up
-        # only in the far tail on a busy machine, hence a loose worst case and a tight p99.
-        p99, worst, mean = np.percentile(durations, 99), durations.max(), durations.mean()
-        assert mean < 200e-6 and p99 < 1e-3 and worst < 0.5, (mean, p99, worst)
+        # A blocking publish would wait for the subscriber forever: the burst would never
+        # end. Whether it ends is the test (the join is only a hang guard); how fast it goes
+        # is a figure (bench/costs.py), not asserted on a machine that may be loaded.
+        worker = threading.Thread(target=lambda: [
+            server.publish("telemetry", {"t": i * 1e-3, "seq": i}) for i in range(n)])
+        worker.start()
+        worker.join(timeout=120.0)
+        assert not worker.is_alive(), "publish blocked"
 
     burst(20_000)  # nobody subscribed
     # A subscriber that never reads, with a tiny queue: the PUB socket drops for it.
@@ -591,7 +593,10 @@ def test_cli_commands_and_error_replies(server: RtServer, handler: FakeHandler,
     handler.fail["reset"] = SafetyTrip("fault still present: encoder 2 frozen")
     assert cli("reset") == (2, {"error": "fault still present: encoder 2 frozen"})
     assert handler.calls[-1][0] == "control_release"  # control given back after a refusal
-    assert cli("status", "--timeout", "0") == (2, {"error": "timeout_s must be > 0, got 0.0"})
+    with pytest.raises(SystemExit) as refused:        # argparse refuses it before any I/O
+        talus_main(["rt", "status", "--timeout", "0", "--endpoint", server.endpoint])
+    assert refused.value.code == 2
+    assert "--timeout: must be in (0, 60] s, got 0" in capsys.readouterr().err
 
 
 def test_a_deferred_reply_never_holds_up_other_clients(handler: FakeHandler) -> None:

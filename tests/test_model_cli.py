@@ -48,7 +48,7 @@ def test_dynamics_with_payload_through_the_cli():
     ("ik", "not json", "not valid JSON"),
     ("ik", '[1, 2]', "must be a JSON object"),
     ("ik", '{"z": 0.6, "roll": 0}', 'missing key "pitch"'),
-    ("ik", '{"z": 0.6, "roll": 0, "pitch": 0, "yaw": 1}', "unknown key(s) ['yaw']"),
+    ("ik", '{"z": 0.6, "roll": 0, "pitch": 0, "yaw": 1}', 'unknown key(s) ["yaw"]'),
     ("ik", '{"z": 0.6, "roll": 1.0, "pitch": 0}', "roll 57.30 deg exceeds"),
     ("fk", '{"q": [0.1, 0.2]}', '"q" must be a list of 3 numbers'),
     ("fk", '{"q": [0.1, 0.2, 0.9]}', "outside the stroke"),
@@ -83,3 +83,46 @@ def test_bad_description_file_is_refused(tmp_path):
     bad.write_text("schema_version: 1\nname: x\n")
     code, out = run(["model", "ik", "--robot", str(bad)], '{"z": 0.6, "roll": 0, "pitch": 0}\n')
     assert code == 2 and "geometry: Field required" in out[0]["error"]
+
+
+#: (number as written, part of the error); each is put where a command expects a number.
+HOSTILE_NUMBERS = [
+    ("1" + "0" * 5000, "4300 digits"),        # an integer too long for Python to parse
+    ("1" + "0" * 400, "finite number"),       # parses, but beyond the float range
+    ("0." + "1" * 5000, ""),                  # parses to 0.111..: answered, error or not
+    ("NaN", "NaN is not JSON"),
+    ("-Infinity", "-Infinity is not JSON"),
+]
+#: (whole line, part of the error)
+HOSTILE_LINES = [
+    ('{"q": ' + "[" * 30_000 + "]" * 30_000 + "}", "nested too deeply"),
+    ("[" * 100_000 + "]" * 100_000, "characters, more than"),
+    ('{"q": [' + ",".join(["1"] * 20_000) + "]}", ""),
+]
+
+
+def _with_number(command: str, number: str) -> str:
+    if command == "ik":
+        return f'{{"z": {number}, "roll": 0, "pitch": 0}}'
+    return f'{{"q": [{number}, 0.2, 0.2]}}'
+
+
+@pytest.mark.parametrize("command", ["ik", "fk", "dynamics"])
+def test_hostile_lines_are_answered_one_by_one_with_valid_json(command):
+    good = {"ik": '{"z": 0.63, "roll": 0, "pitch": 0}', "fk": '{"q": [0.2, 0.2, 0.2]}',
+            "dynamics": '{"q": [0.2, 0.2, 0.2]}'}[command]
+    hostile = [(_with_number(command, n), m) for n, m in HOSTILE_NUMBERS] + HOSTILE_LINES
+    stdin = "".join(f"{line}\n{good}\n" for line, _ in hostile)
+    proc = subprocess.run(TALUS + ["model", command], input=stdin, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stderr == ""
+    # Strict JSON: Python's parser would accept NaN/Infinity, so refuse them explicitly.
+    out = [json.loads(line, parse_constant=lambda c: pytest.fail(f"{c} in the output"))
+           for line in proc.stdout.splitlines()]
+    assert len(out) == 2 * len(hostile)
+    for k, (_, message) in enumerate(hostile):
+        answer, after = out[2 * k], out[2 * k + 1]
+        if message:
+            assert message in answer["error"] and answer["line"] == 2 * k + 1
+        assert len(answer.get("error", "")) < 300      # the input is never echoed back
+        assert "error" not in after                      # the stream goes on

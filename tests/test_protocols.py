@@ -158,7 +158,7 @@ def test_malformed_protocol_files_are_refused_naming_file_field_and_reason(tmp_p
 
 
 def test_unreadable_and_binary_files_are_refused(tmp_path):
-    with pytest.raises(ProtocolValidationError, match="cannot read the file"):
+    with pytest.raises(ProtocolValidationError, match="cannot read protocol .*missing.yaml"):
         load_protocol(tmp_path / "missing.yaml")
     path = tmp_path / "binary.yaml"
     path.write_bytes(b"\xff\xfe\x00kind")

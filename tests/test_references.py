@@ -9,7 +9,6 @@ whose quotient divides a difference of O(1e-3) m/s² values by 1e-3 s).
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -289,28 +288,8 @@ def test_soft_stop_mid_move_is_continuous() -> None:
                          np.vstack([v1, v2]), np.vstack([a1, a2]))
 
 
-def _median_us(fn, n: int = 3000) -> float:
-    times = np.empty(n)
-    for i in range(n):
-        t0 = time.perf_counter_ns()
-        fn()
-        times[i] = time.perf_counter_ns() - t0
-    return float(np.median(times)) / 1e3
-
-
-def test_per_cycle_costs() -> None:
-    p, v, a = np.zeros(3), np.zeros(3), np.zeros(3)
-    ap = Approach()
-    ap.reset([0.0] * 3)
-    ap.set_target([0.4] * 3, minimum_duration=20.0)
-    assert _median_us(lambda: ap.update(p, v, a)) < 15.0  # measured ≈ 3 µs
-    bench = BenchmarkTrajectory()
-    bench.validate()
-    assert _median_us(lambda: bench.update(p, v, a)) < 15.0  # ≈ 2-3 µs
-    t = np.arange(0.0, 26.0 + 1e-9, 0.01)
-    play = TrajectoryPlayback(t, bench.evaluate(t)[0])
-    play.validate()
-    assert _median_us(lambda: play.update(p, v, a)) < 15.0  # ≈ 2 µs
+# Per-cycle costs (approach ≈ 3 µs, benchmark ≈ 2-3 µs, playback ≈ 2 µs per update) are
+# figures printed by bench/costs.py, not asserted: a loaded machine would fail any bound.
 
 
 # -- benchmark trajectory -------------------------------------------------------------------------

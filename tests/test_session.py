@@ -30,6 +30,43 @@ def test_sine_fz_session_recorded_and_summarized(tmp_path):
     assert {"/robot/wrench", "/protocol/metadata", "/protocol/reference"} <= set(rec)
     assert rec["/protocol/metadata"][0]["protocol_name"] == s["protocol"]
     assert s["recording"]["sha256"] and len(s["recording"]["sha256"]) == 64
+    _first_messages_validate(out)
+
+
+def _first_messages_validate(path: Path) -> None:
+    """The first message of every channel validates against the channel's own schema (the
+    first wrench once carried nulls from before the sensor's first sample)."""
+    import jsonschema
+    from mcap.reader import make_reader
+
+    seen: set[str] = set()
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f, validate_crcs=True).iter_messages():
+            if channel.topic not in seen:
+                seen.add(channel.topic)
+                jsonschema.validate(json.loads(message.data), json.loads(schema.data),
+                                    cls=jsonschema.Draft202012Validator)
+    assert {"/robot/wrench", "/robot/state", "/protocol/metadata"} <= seen
+
+
+@pytest.mark.parametrize("record_as, force, message", [
+    ("protocol", ["--force"], "is also an input"),
+    ("existing", [], "exists; refused"),
+])
+def test_session_run_never_overwrites_its_inputs_or_a_file(tmp_path, record_as, force, message):
+    protocol = tmp_path / "sine.yaml"
+    protocol.write_text(LIB["sine_fz.yaml"].read_text())
+    existing = tmp_path / "old.mcap"
+    existing.write_bytes(b"last week's session")
+    target = {"protocol": protocol, "existing": existing}[record_as]
+    before = target.read_bytes()
+    proc = subprocess.run([sys.executable, "-m", "rt.cli", "session", "run", "--protocol",
+                           str(protocol), "--record", str(target), "--fast", "--json"] + force,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert message in json.loads(proc.stdout)["error"]
+    assert target.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.mcap", "sine.yaml"]
 
 
 def test_ankle_rom_reaches_its_range():

@@ -14,6 +14,8 @@ from dataclasses import asdict
 from typing import Any
 
 from rt.ati.rdt import DEFAULT_COUNTS_PER_FORCE, DEFAULT_COUNTS_PER_TORQUE, RDT_PORT
+from rt.cli_args import bounded_int, finite_float, port_number, rate_hz, seconds, seed
+from rt.errors import InputError, TalusError
 from rt.errors import TalusError
 from rt.model.robot_option import add_robot_option
 
@@ -26,9 +28,10 @@ def _emit(obj: dict[str, Any]) -> None:
 
 
 def _add_counts_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--counts-per-force", type=float, default=DEFAULT_COUNTS_PER_FORCE,
+    counts = bounded_int(1, 2**32 - 1)   # whole counts: the sensor reports them as uint32
+    parser.add_argument("--counts-per-force", type=counts, default=DEFAULT_COUNTS_PER_FORCE,
                         help="counts per N (sensor configuration; default %(default)g)")
-    parser.add_argument("--counts-per-torque", type=float, default=DEFAULT_COUNTS_PER_TORQUE,
+    parser.add_argument("--counts-per-torque", type=counts, default=DEFAULT_COUNTS_PER_TORQUE,
                         help="counts per N m (sensor configuration; default %(default)g)")
 
 
@@ -39,10 +42,12 @@ def register(commands: argparse._SubParsersAction) -> None:
         description="Print one JSON line per record: t (host monotonic s), seq (rdt_sequence), "
                     "fx fy fz (N), tx ty tz (N m), status (raw status word).")
     p.add_argument("--host", default="192.168.1.1", help="sensor address (default %(default)s)")
-    p.add_argument("--port", type=int, default=RDT_PORT, help="RDT port (default %(default)s)")
-    p.add_argument("--samples", type=int, default=1, help="records to read (default 1)")
+    p.add_argument("--port", type=port_number(allow_zero=False), default=RDT_PORT,
+                   help="RDT port (default %(default)s)")
+    p.add_argument("--samples", type=bounded_int(1, 10_000_000), default=1,
+                   help="records to read (default 1)")
     p.add_argument("--bias", action="store_true", help="software-bias the sensor first")
-    p.add_argument("--timeout", type=float, default=1.0,
+    p.add_argument("--timeout", type=seconds(hi=60.0), default=1.0,
                    help="longest wait for each record, s (default %(default)s)")
     p.add_argument("--buffered", action="store_true",
                    help="use buffered streaming (several records per datagram)")
@@ -58,22 +63,33 @@ def register_twin_commands(commands: argparse._SubParsersAction) -> None:
                     "protocol. Prints {\"serving\": ...} once bound (port 0 = ephemeral) and "
                     "the server counters when it stops.")
     p.add_argument("--host", default="127.0.0.1", help="bind address (default %(default)s)")
-    p.add_argument("--port", type=int, default=RDT_PORT,
+    p.add_argument("--port", type=port_number(), default=RDT_PORT,
                    help="UDP port, 0 = ephemeral (default %(default)s)")
-    p.add_argument("--rate", type=float, default=1000.0, help="record rate, Hz (default 1000)")
-    p.add_argument("--seconds", type=float, default=None,
+    p.add_argument("--rate", type=rate_hz(1.0, 7000.0), default=1000.0,
+                   help="record rate, Hz (1-7000, the Net F/T's range; default 1000)")
+    p.add_argument("--seconds", type=seconds(hi=30 * 24 * 3600.0), default=None,
                    help="stop after this many seconds (default: until interrupted)")
-    p.add_argument("--seed", type=int, default=0, help="noise/drift seed (default 0)")
-    p.add_argument("--wrench", type=float, nargs=6, metavar=("FX", "FY", "FZ", "TX", "TY", "TZ"),
+    p.add_argument("--seed", type=seed(), default=0, help="noise/drift seed (default 0)")
+    p.add_argument("--wrench", type=finite_float(-1e4, 1e4), nargs=6,
+                   metavar=("FX", "FY", "FZ", "TX", "TY", "TZ"),
                    default=[0.0, 0.0, -50.0, 0.0, 0.0, 0.0],
                    help="true wrench, N and N m (default 0 0 -50 0 0 0: light static load)")
-    p.add_argument("--buffer", type=int, default=10,
+    p.add_argument("--buffer", type=bounded_int(1, 40), default=10,
                    help="records per datagram in buffered mode (default %(default)s)")
     p.add_argument("--env", default=None,
                    help="run the full twin in real time in this environment (free, "
                         "payload:KG[@S], plate[:HEIGHT_M], ankle) and serve its sensor instead "
                         "of a constant wrench")
-    p.add_argument("--volts", type=float, nargs=3, default=None, metavar=("V1", "V2", "V3"),
+    p.add_argument("--http-port", type=port_number(), default=None,
+                   help="also serve the sensor's configuration page /netftapi2.xml (counts per "
+                        "unit, units) over HTTP on this port, as a Net F/T does on port 80, for "
+                        "clients that read their scaling from the sensor (0 = ephemeral; "
+                        "default: off)")
+    p.add_argument("--tcp-port", type=port_number(), default=None,
+                   help="also answer the Net F/T TCP calibration command (READCALINFO) on this "
+                        "port (the device uses 49151; 0 = ephemeral; default: off)")
+    p.add_argument("--volts", type=finite_float(-10.0, 10.0, unit="V"), nargs=3, default=None,
+                   metavar=("V1", "V2", "V3"),
                    help="with --env: amplifier commands held on the twin (default: the "
                         "gravity-compensating voltages at home)")
     _add_counts_options(p)
@@ -116,10 +132,15 @@ def _raise_terminate(signum: int, frame: object) -> None:
 
 def cmd_serve_ati(args: argparse.Namespace) -> int:
     """Serve the twin sensor until ``--seconds`` elapse, Ctrl-C or SIGTERM."""
+    from rt.ati.config_server import NetFtConfigServer
+    from rt.ati.netft_config import NetFtConfiguration
     from rt.ati.rdt import CountsPerUnit
     from rt.ati.rdt_server import RdtServer
     from rt.ati.twin_sensor import TwinAtiSensorModel
 
+    if args.volts is not None and args.env is None:
+        raise InputError("--volts holds the twin's amplifier commands: it needs --env "
+                         "(a constant --wrench has no amplifiers to command)")
     try:
         if args.env is not None:
             from rt.twin.serve import twin_wrench_source
@@ -131,22 +152,27 @@ def cmd_serve_ati(args: argparse.Namespace) -> int:
         else:
             model = TwinAtiSensorModel(seed=args.seed)
             source = model.make_source(args.wrench)
+        config = NetFtConfiguration(args.counts_per_force, args.counts_per_torque)
         server = RdtServer(source, host=args.host, port=args.port, rate_hz=args.rate,
                            buffer_records=args.buffer,
                            counts=CountsPerUnit(args.counts_per_force, args.counts_per_torque))
-    except TalusError as exc:
-        _emit({"error": str(exc)})
-        return EXIT_ERROR
     except OSError as exc:
-        _emit({"error": f"cannot serve RDT on {args.host}:{args.port}: {exc}"})
-        return EXIT_ERROR
+        raise InputError(f"cannot serve RDT on {args.host}:{args.port}: {exc}") from None
+    try:
+        config_server = NetFtConfigServer(config, host=args.host, http_port=args.http_port,
+                                          tcp_port=args.tcp_port)
+    except OSError as exc:
+        server.close()
+        raise InputError(f"cannot serve the configuration on {args.host} (HTTP port "
+                         f"{args.http_port}, TCP port {args.tcp_port}): {exc}") from None
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, _raise_terminate)
     try:
-        with server:
+        with server, config_server:
             _emit({"serving": {"host": server.host, "port": server.port,
-                               "rate_hz": server.rate_hz}})
+                               "rate_hz": server.rate_hz, "http_port": config_server.http_port,
+                               "tcp_port": config_server.tcp_port}})
             try:
                 threading.Event().wait(args.seconds)
             except (KeyboardInterrupt, _Terminate):

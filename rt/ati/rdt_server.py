@@ -191,7 +191,9 @@ class RdtServer:
             self._next_t = time.monotonic()
         elif command == CMD_SET_SOFTWARE_BIAS:
             try:
-                self._reader.set_bias()
+                # Averages BIAS_SAMPLES fresh samples, waiting one record period for each
+                # the source has not produced yet (≈ 16 ms at 1 kHz; requests wait meanwhile).
+                self._reader.set_bias(wait=lambda: time.sleep(self._period))
             except Exception as exc:  # a faulty source must not kill the server thread
                 self.counters.source_errors += 1
                 self.last_error = f"source failed during bias: {exc!r}"

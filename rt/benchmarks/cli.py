@@ -5,12 +5,18 @@ import argparse
 import json
 
 from rt.model.robot_option import add_robot_option
+from rt.cli_args import name_choice, rate_hz, seconds
+
+#: The controllers rt.control registers (kept here so --help imports no numpy).
+CONTROLLER_NAMES = ("pid", "pd_g", "pd_g0", "paden_panja", "computed_torque_ptp",
+                    "computed_torque", "adaptive")
 
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("tracking", help="thesis fig. 48/50 tracking experiments on the twin")
     p.add_argument("--experiment", choices=("pid-vs-paden", "payload-step"), required=True)
-    p.add_argument("--seconds", type=float, default=26.0)
+    p.add_argument("--seconds", type=seconds(hi=600.0), default=26.0,
+                   help="experiment duration, s (default %(default)s)")
     p.add_argument("--json", action="store_true")
     add_robot_option(p)
     p.set_defaults(func=_tracking)
@@ -43,11 +49,12 @@ def register_loop(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser(
         "loop", help="run the position loop on the twin and report per-block and whole-cycle "
                      "execution times and deadline misses")
-    p.add_argument("--controller", default="paden_panja",
-                   help="pid, pd_g, pd_g0, paden_panja, computed_torque_ptp, computed_torque, "
-                        "adaptive")
-    p.add_argument("--seconds", type=float, default=10.0)
-    p.add_argument("--rate", type=float, default=1000.0, help="loop rate, Hz (100-2000)")
+    p.add_argument("--controller", type=name_choice(CONTROLLER_NAMES), default="paden_panja",
+                   help=", ".join(CONTROLLER_NAMES) + " ('-' and '_' alike)")
+    p.add_argument("--seconds", type=seconds(hi=600.0), default=10.0,
+                   help="run length, s (default %(default)s)")
+    p.add_argument("--rate", type=rate_hz(100.0, 2000.0), default=1000.0,
+                   help="loop rate, Hz (100-2000)")
     p.add_argument("--mode", choices=("realtime", "fast"), default="realtime",
                    help="realtime: paced by the clock (deadline misses meaningful); fast: "
                         "back-to-back in simulated time")

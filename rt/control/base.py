@@ -191,8 +191,10 @@ def create(name: str, model: RobotModel, gains: dict | None = None) -> Controlle
     import rt.control.laws  # noqa: F401  (registers the laws)
     import rt.control.adaptive  # noqa: F401
 
+    from rt.cli_args import canonical_name
+
     try:
-        cls = CONTROLLERS[name]
+        cls = CONTROLLERS[canonical_name(name)]
     except KeyError:
         raise ConfigurationError(f"unknown controller {name!r}; known: "
                                  f"{', '.join(sorted(CONTROLLERS))}") from None

@@ -14,6 +14,7 @@ import json
 import sys
 from typing import Any
 
+from rt.cli_args import seconds
 from rt.ipc.messages import DEFAULT_ENDPOINT
 
 EXIT_ERROR = 2
@@ -27,7 +28,7 @@ def _emit(obj: dict[str, Any]) -> None:
 def _add_connection_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--endpoint", default=DEFAULT_ENDPOINT,
                         help="RT server request address (default %(default)s)")
-    parser.add_argument("--timeout", type=float, default=1.0,
+    parser.add_argument("--timeout", type=seconds(hi=60.0), default=1.0,
                         help="longest wait for the reply, s (default %(default)s)")
     parser.add_argument("--curve-secret", default=None, metavar="FILE",
                         help="this client's CurveZMQ NAME.key_secret (needed off loopback)")

@@ -34,14 +34,35 @@ def register(commands: argparse._SubParsersAction) -> None:
         p.set_defaults(func=func)
 
 
+#: Longest input line (characters): a request is a few numbers, never a megabyte.
+MAX_LINE_CHARS = 65_536
+
+
 # ---------------------------------------------------------------------- input validation
+def _brief(value: object, limit: int = 40) -> str:
+    """A value for an error message, cut short: never echo a 100 000-character input back."""
+    text = json.dumps(value) if isinstance(value, (list, dict, str)) else repr(value)
+    return text if len(text) <= limit else text[:limit] + f"… ({len(text)} characters)"
+
+
+def _finite(value: object) -> float | None:
+    """``value`` as a finite float, or None (bools, strings, ±inf, NaN, 400-digit integers)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:  # an integer beyond ±1.8e308
+        return None
+    return number if math.isfinite(number) else None
+
+
 def _number(obj: dict, key: str) -> float:
     if key not in obj:
         raise InputError(f'missing key "{key}"')
-    value = obj[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise InputError(f'"{key}" must be a finite number, got {value!r}')
-    return float(value)
+    number = _finite(obj[key])
+    if number is None:
+        raise InputError(f'"{key}" must be a finite number, got {_brief(obj[key])}')
+    return number
 
 
 def _vector(obj: dict, key: str, n: int = 3, default: list[float] | None = None) -> list[float]:
@@ -51,17 +72,18 @@ def _vector(obj: dict, key: str, n: int = 3, default: list[float] | None = None)
         raise InputError(f'missing key "{key}" (a list of {n} numbers)')
     value = obj[key]
     if not isinstance(value, list) or len(value) != n:
-        raise InputError(f'"{key}" must be a list of {n} numbers, got {value!r}')
-    for v in value:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise InputError(f'"{key}" must hold finite numbers, got {v!r}')
-    return [float(v) for v in value]
+        raise InputError(f'"{key}" must be a list of {n} numbers, got {_brief(value)}')
+    numbers = [_finite(v) for v in value]
+    for v, number in zip(value, numbers):
+        if number is None:
+            raise InputError(f'"{key}" must hold finite numbers, got {_brief(v)}')
+    return [float(v) for v in numbers if v is not None]
 
 
 def _only_keys(obj: dict, allowed: set[str]) -> None:
     extra = sorted(set(obj) - allowed)
     if extra:
-        raise InputError(f"unknown key(s) {extra}; allowed: {sorted(allowed)}")
+        raise InputError(f"unknown key(s) {_brief(extra)}; allowed: {sorted(allowed)}")
 
 
 def _payload(obj: dict) -> Payload | None:
@@ -81,23 +103,55 @@ def _payload(obj: dict) -> Payload | None:
     return Payload(mass, tuple(com), tuple(tuple(r) for r in rows))
 
 
+def _parse_line(line: str, lineno: int) -> dict:
+    """One request line as a JSON object; InputError for anything else.
+
+    Python's parser refuses integers over 4300 digits (ValueError) and recurses once per
+    nesting level (RecursionError on 100 000 brackets): both are bad lines, not crashes.
+    """
+    if len(line) > MAX_LINE_CHARS:
+        raise InputError(f"line {lineno} is {len(line)} characters, more than the "
+                         f"{MAX_LINE_CHARS} a request can be")
+    try:
+        obj = json.loads(line, parse_constant=_refuse_constant)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"line {lineno} is not valid JSON: {exc.msg}") from None
+    except ValueError as exc:
+        raise InputError(f"line {lineno} is not usable JSON: {str(exc).split(';')[0]}") from None
+    except RecursionError:
+        raise InputError(f"line {lineno} is nested too deeply") from None
+    if not isinstance(obj, dict):
+        raise InputError(f"line {lineno} must be a JSON object")
+    return obj
+
+
+def _refuse_constant(name: str) -> float:
+    raise ValueError(f"{name} is not JSON (numbers must be finite)")
+
+
+def _answer(obj: dict, lineno: int, handle: Callable[[dict], dict]) -> str:
+    """The answer line: the result, or ``{"error"}`` (also when a result is not finite)."""
+    try:
+        return json.dumps(handle(obj), allow_nan=False)
+    except TalusError as exc:
+        return json.dumps({"error": str(exc), "line": lineno})
+    except ValueError:  # allow_nan=False: the model produced NaN or inf for this input
+        return json.dumps({"error": "the result is not finite (NaN or infinity) for this "
+                                    "input", "line": lineno})
+
+
 def _json_lines(stdin: TextIO, stdout: TextIO, handle: Callable[[dict], dict]) -> int:
     status = 0
     for lineno, line in enumerate(stdin, start=1):
         if not line.strip():
             continue
         try:
-            try:
-                obj = json.loads(line)
-            except json.JSONDecodeError as exc:
-                raise InputError(f"line {lineno} is not valid JSON: {exc.msg}") from None
-            if not isinstance(obj, dict):
-                raise InputError(f"line {lineno} must be a JSON object")
-            answer = handle(obj)
-        except TalusError as exc:
-            answer = {"error": str(exc), "line": lineno}
+            answer = _answer(_parse_line(line, lineno), lineno, handle)
+        except InputError as exc:
+            answer = json.dumps({"error": str(exc), "line": lineno})
+        if answer.startswith('{"error"'):
             status = 2
-        stdout.write(json.dumps(answer) + "\n")
+        stdout.write(answer + "\n")
         stdout.flush()
     return status
 
@@ -107,11 +161,7 @@ def _load(args) -> RobotModel:
 
 
 def _run_lines(args, handle: Callable[[RobotModel, dict], dict]) -> int:
-    try:
-        model = _load(args)
-    except TalusError as exc:
-        print(json.dumps({"error": str(exc)}))
-        return 2
+    model = _load(args)  # a bad --robot is one {"error"} line from rt.cli.main
     return _json_lines(sys.stdin, sys.stdout, lambda obj: handle(model, obj))
 
 
@@ -198,22 +248,12 @@ def describe(model: RobotModel) -> dict[str, Any]:
 
 
 def _describe(args) -> int:
-    try:
-        model = _load(args)
-    except TalusError as exc:
-        print(json.dumps({"error": str(exc)}))
-        return 2
-    print(json.dumps(describe(model), indent=2))
+    print(json.dumps(describe(_load(args)), indent=2))
     return 0
 
 
 def _demo(args) -> int:
     from rt.model.demo import run_demo
 
-    try:
-        model = _load(args)
-    except TalusError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    run_demo(model, sys.stdout)
+    run_demo(_load(args), sys.stdout)
     return 0

@@ -12,10 +12,10 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from rt.errors import ConfigurationError
+from rt.errors import ConfigurationError, validation_summary
+from rt.safe_yaml import parse_yaml, read_text_file
 
 SCHEMA_VERSION = 1
 
@@ -184,11 +184,7 @@ class RobotDescription(_Strict):
 
 
 def _format_validation_error(exc: ValidationError, source: str) -> str:
-    parts = []
-    for err in exc.errors():
-        where = ".".join(str(p) for p in err["loc"]) or "(top level)"
-        parts.append(f"{where}: {err['msg']}")
-    return f"robot description {source} is invalid: " + "; ".join(parts)
+    return f"robot description {source} is invalid: {validation_summary(exc)}"
 
 
 def description_from_dict(data: Any, source: str = "<dict>") -> RobotDescription:
@@ -208,13 +204,7 @@ def load_description(path: str | Path | None = None) -> RobotDescription:
         text = resources.files("rt.data").joinpath("robot_nominal.yaml").read_text()
         source = "robot_nominal.yaml (packaged)"
     else:
-        try:
-            text = Path(path).read_text()
-        except OSError as exc:
-            raise ConfigurationError(f"cannot read robot description {path}: {exc}") from None
+        text = read_text_file(path, "robot description")
         source = str(path)
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigurationError(f"robot description {source} is not valid YAML: {exc}") from None
+    data, _ = parse_yaml(text, f"robot description {source}")
     return description_from_dict(data, source)

@@ -12,7 +12,10 @@ Conventions, shared by all channels:
 * SI units, stated in every field's ``description``.
 * JSON has no NaN or infinity: a non-finite number is written as ``null``. Numeric fields stay
   ``"type": "number"`` (not ``["number", "null"]``) because viewers derive plot paths from a
-  single type; a ``null`` therefore marks a value that was not finite when recorded.
+  single type; a ``null`` therefore marks a value that was not finite when recorded. The one
+  exception: a ``/robot/wrench`` with no finite sample (the sensor has not answered yet) is not
+  a measurement and is not written (the recorder counts it, ``wrench_without_sample``), so the
+  wrench channel's messages, the first included, validate against its schema.
 
 Adding a channel is one entry in :data:`CHANNELS`; the writer registers every entry.
 """

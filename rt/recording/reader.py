@@ -16,6 +16,7 @@ import json
 import math
 import os
 import struct
+import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator, NamedTuple
@@ -24,10 +25,11 @@ from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Header, Message, Schema
+from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Message, Schema
 from mcap.stream_reader import breakup_chunk
 
 from rt.errors import InputError
+from rt.output_files import atomic_output
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
@@ -69,16 +71,42 @@ class ScanInfo:
     start_ns: int | None = None         # first/last message log time
     end_ns: int | None = None
     library: str = ""
+    #: Records that failed their CRC or could not be decoded: offset, record, reason. Without
+    #: salvage the scan stops at the first one; with salvage it skips each and goes on.
+    bad_chunks: list[dict[str, Any]] = field(default_factory=list)
+    crc_errors: list[str] = field(default_factory=list)      # DataEnd / Footer CRC mismatches
+    data_crc_checked: bool = False      # the file carried a data-section CRC and it was read
+    sequence_gaps: dict[str, int] = field(default_factory=dict)   # per topic: messages missing
+    orphan_messages: int = 0            # messages whose channel is unknown (not decodable)
 
     @property
     def message_total(self) -> int:
         return sum(self.messages.values())
+
+    @property
+    def corrupt(self) -> bool:
+        """A CRC failed or a whole record could not be decoded (not merely cut short)."""
+        return bool(self.bad_chunks or self.crc_errors)
+
+    def problem(self) -> str | None:
+        """One sentence naming the first damage found, None for an undamaged file."""
+        if self.bad_chunks:
+            bad = self.bad_chunks[0]
+            more = len(self.bad_chunks) - 1
+            return (f"{bad['record']} at byte {bad['offset']} is corrupt ({bad['reason']})"
+                    + (f"; {more} more damaged records" if more else ""))
+        if self.crc_errors:
+            return self.crc_errors[0]
+        return None
 
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["message_total"] = self.message_total
         d["lost_tail_bytes"] = self.file_bytes - self.recovered_bytes
         d["duration_s"] = _duration(self.start_ns, self.end_ns)
+        d["corrupt"] = self.corrupt
+        d["first_bad_chunk"] = self.bad_chunks[0] if self.bad_chunks else None
+        d["problem"] = self.problem()
         return d
 
 
@@ -100,12 +128,15 @@ class RecordingScan:
     :class:`RecordingFileError` for a file that is not MCAP at all.
     """
 
-    def __init__(self, path: str | os.PathLike[str], topics: Iterable[str] | None = None):
+    def __init__(self, path: str | os.PathLike[str], topics: Iterable[str] | None = None,
+                 salvage: bool = False):
         self.path = Path(path)
         self.topics = None if topics is None else frozenset(topics)
+        self.salvage = salvage
         self.info = ScanInfo(str(self.path))
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
+        self._sequence: dict[str, int] = {}     # last sequence number seen per topic
 
     def schema_for(self, topic: str) -> dict[str, Any] | None:
         """The JSON Schema (a dict) of ``topic``'s channel, if the file declared one."""
@@ -119,20 +150,37 @@ class RecordingScan:
     def topic_names(self) -> list[str]:
         return [c.topic for c in self.channels.values()]
 
-    def _message(self, msg: Message) -> RecordedMessage | None:
+    def _message(self, msg: Message, payload: Any = None) -> RecordedMessage | None:
         channel = self.channels.get(msg.channel_id)
         if channel is None:
-            return None     # a message before its channel: not written by talus; skip it
+            self.info.orphan_messages += 1   # a message whose channel was never declared
+            return None
         info = self.info
+        last = self._sequence.get(channel.topic)
+        if last is not None and msg.sequence > last + 1:
+            gaps = info.sequence_gaps
+            gaps[channel.topic] = gaps.get(channel.topic, 0) + msg.sequence - last - 1
+        self._sequence[channel.topic] = msg.sequence
         info.messages[channel.topic] = info.messages.get(channel.topic, 0) + 1
         info.start_ns = msg.log_time if info.start_ns is None else min(info.start_ns,
                                                                        msg.log_time)
         info.end_ns = msg.log_time if info.end_ns is None else max(info.end_ns, msg.log_time)
         if self.topics is not None and channel.topic not in self.topics:
             return None
-        return RecordedMessage(channel.topic, msg.log_time, _decode(channel, msg.data))
+        if payload is None:
+            payload = _decode(channel, msg.data)
+        return RecordedMessage(channel.topic, msg.log_time, payload)
 
     def __iter__(self) -> Iterator[RecordedMessage]:
+        yield from self._scan()
+        info = self.info
+        if not info.complete and not info.corrupt and _has_closing_magic(self.path):
+            # A finished file (it ends with the closing magic) whose records break before
+            # the footer was damaged afterwards (e.g. a record length), not cut by a crash.
+            info.crc_errors.append(f"the file was finished but its records break at byte "
+                                   f"{info.recovered_bytes} ({info.tail}): damaged")
+
+    def _scan(self) -> Iterator[RecordedMessage]:
         info = self.info
         try:
             f = open(self.path, "rb")
@@ -147,8 +195,12 @@ class RecordingScan:
                 raise RecordingFileError(
                     self.path, f"not an MCAP recording (starts with {magic!r}, expected the "
                                f"MCAP magic {MAGIC!r})")
+            if self.salvage:
+                self._channels_from_summary()
             offset = len(MAGIC)
             info.recovered_bytes = offset
+            data_crc = zlib.crc32(MAGIC)     # of the data section, checked against DataEnd
+            summary_crc: int | None = None   # of the summary section, checked by the Footer
             first = True
             while True:
                 head = f.read(_RECORD_HEAD.size)
@@ -170,20 +222,34 @@ class RecordingScan:
                     info.tail = f"zero bytes from byte {offset} on"
                     break
                 body = f.read(length)
+                if opcode == Opcode.DATA_END:
+                    self._check_data_crc(body, data_crc, offset)
+                    summary_crc = 0
+                elif summary_crc is None:
+                    data_crc = zlib.crc32(body, zlib.crc32(head, data_crc))
+                elif opcode != Opcode.FOOTER:
+                    summary_crc = zlib.crc32(body, zlib.crc32(head, summary_crc))
                 try:
                     out = self._record(opcode, length, body)
-                except Exception as exc:   # noqa: BLE001 - any corrupt record ends the scan
+                except Exception as exc:   # noqa: BLE001 - any corrupt record is reported
                     if first:
                         raise RecordingFileError(
                             self.path, f"corrupt MCAP header record: {exc}") from exc
-                    info.tail = f"{_opname(opcode)} record at byte {offset} unreadable: {exc}"
-                    break
+                    what = (f"chunk {info.chunks + len(info.bad_chunks)}"
+                            if opcode == Opcode.CHUNK else f"{_opname(opcode)} record")
+                    info.bad_chunks.append({"offset": offset, "record": what,
+                                            "reason": _reason(exc)})
+                    if not self.salvage:
+                        info.tail = f"{what} at byte {offset} is corrupt: {_reason(exc)}"
+                        break
+                    out = []
                 first = False
                 offset += _RECORD_HEAD.size + length
                 info.recovered_bytes = offset
                 for rec in out:
                     yield rec
                 if opcode == Opcode.FOOTER:
+                    self._check_summary_crc(head, body, summary_crc or 0, offset - length - 9)
                     closing = f.read(len(MAGIC))
                     info.complete = closing == MAGIC
                     if info.complete:
@@ -191,6 +257,35 @@ class RecordingScan:
                     else:
                         info.tail = "footer without the closing magic"
                     break
+
+    def _check_data_crc(self, body: bytes, computed: int, offset: int) -> None:
+        stored = DataEnd.read(ReadDataStream(io.BytesIO(body))).data_section_crc
+        self.info.data_crc_checked = stored != 0     # 0: the writer did not compute it
+        if stored != 0 and stored != computed:
+            self.info.crc_errors.append(
+                f"data section CRC mismatch (DataEnd at byte {offset}: stored {stored:#010x}, "
+                f"computed {computed:#010x})")
+
+    def _check_summary_crc(self, head: bytes, body: bytes, computed: int, offset: int) -> None:
+        footer = Footer.read(ReadDataStream(io.BytesIO(body)))
+        if footer.summary_crc == 0:
+            return
+        computed = zlib.crc32(head + body[:16], computed)
+        if computed != footer.summary_crc:
+            self.info.crc_errors.append(
+                f"summary section CRC mismatch (Footer at byte {offset})")
+
+    def _channels_from_summary(self) -> None:
+        """Salvage: learn schemas and channels from the summary too, in case the chunk that
+        declared them is the damaged one."""
+        try:
+            with open(self.path, "rb") as f:
+                summary = make_reader(f).get_summary()
+        except Exception:   # noqa: BLE001 - a damaged summary just teaches us nothing
+            return
+        if summary is not None:
+            self.schemas.update(summary.schemas)
+            self.channels.update(summary.channels)
 
     def _record(self, opcode: int, length: int, body: bytes) -> list[RecordedMessage]:
         stream = ReadDataStream(io.BytesIO(body))
@@ -206,26 +301,37 @@ class RecordingScan:
             rec = self._message(Message.read(stream, length))
             return [] if rec is None else [rec]
         elif opcode == Opcode.CHUNK:
-            # The chunk is decoded and CRC-checked whole before any of its messages is
-            # returned: a damaged chunk yields nothing rather than half its messages.
+            # The chunk is decoded, CRC-checked and its JSON parsed whole before any of its
+            # messages is returned: a damaged chunk yields nothing rather than half of it.
             records = breakup_chunk(Chunk.read(stream), validate_crc=True)
-            out: list[RecordedMessage] = []
+            schemas: list[Schema] = []
+            channels: list[Channel] = []
             pending: list[Message] = []
             for r in records:
                 if isinstance(r, Schema):
-                    self.schemas[r.id] = r
+                    schemas.append(r)
                 elif isinstance(r, Channel):
-                    self.channels[r.id] = r
+                    channels.append(r)
                 elif isinstance(r, Message):
                     pending.append(r)
-            for m in pending:
-                rec = self._message(m)
-                if rec is not None:
-                    out.append(rec)
+            self.schemas.update((x.id, x) for x in schemas)
+            self.channels.update((x.id, x) for x in channels)
+            decoded = [self._decoded(m) for m in pending]
+            out = [rec for rec in (self._message(m, payload) for m, payload in decoded)
+                   if rec is not None]
             self.info.chunks += 1
             return out
-        # Indexes, statistics, summary offsets, data end, footer: nothing to return.
+        # Indexes, statistics, summary offsets, footer: nothing to return.
         return []
+
+    def _decoded(self, msg: Message) -> tuple[Message, Any]:
+        channel = self.channels.get(msg.channel_id)
+        return msg, None if channel is None else _decode(channel, msg.data)
+
+
+def _reason(exc: BaseException) -> str:
+    text = str(exc) or type(exc).__name__
+    return text if len(text) <= 200 else text[:200] + "…"
 
 
 def _opname(opcode: int) -> str:
@@ -272,7 +378,7 @@ def read_recording(path: str | os.PathLike[str],
     out: dict[str, list[dict[str, Any]]] = {}
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)
             summary = reader.get_summary()
             if summary is not None:
                 for ch in summary.channels.values():
@@ -306,30 +412,16 @@ def recover(path: str | os.PathLike[str], topics: Iterable[str] | None = None
 
 
 def recording_info(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Channels, message counts, duration, chunks, complete or truncated, of a recording.
+    """Channels, message counts, duration, chunks, complete or truncated, and damage.
 
-    A complete file is answered from its summary section (fast); a truncated one is scanned.
+    Every record is read and every CRC checked (chunks, the data section against DataEnd,
+    the summary against the Footer): a summary can say "complete" over flipped bytes.
+    ``corrupt`` is True when something failed; ``first_bad_chunk`` and ``problem`` say what
+    and where. Reading stops at the first damaged chunk, as export does without ``salvage``.
     """
     path = Path(path)
     if not path.is_file():
         raise RecordingFileError(path, "no such file")
-    if _has_closing_magic(path):
-        try:
-            with open(path, "rb") as f:
-                summary = make_reader(f).get_summary()
-        except (McapError, struct.error, ValueError):
-            summary = None
-        if summary is not None and summary.statistics is not None:
-            st = summary.statistics
-            counts = {ch.topic: st.channel_message_counts.get(cid, 0)
-                      for cid, ch in summary.channels.items()}
-            start, end = (st.message_start_time, st.message_end_time) if st.message_count \
-                else (None, None)
-            return {"path": str(path), "complete": True, "channels": sorted(counts),
-                    "messages": counts, "message_total": st.message_count,
-                    "chunks": st.chunk_count, "duration_s": _duration(start, end),
-                    "start_ns": start, "end_ns": end, "file_bytes": path.stat().st_size,
-                    "tail": None}
     scan = RecordingScan(path)
     for _ in scan:
         pass
@@ -379,47 +471,56 @@ def _cell(value: Any) -> str:
     return str(value)
 
 
-def export_csv(path: str | os.PathLike[str], channel: str,
-               out_csv: str | os.PathLike[str]) -> dict[str, Any]:
+def export_csv(path: str | os.PathLike[str], channel: str, out_csv: str | os.PathLike[str],
+               *, force: bool = False, salvage: bool = False) -> dict[str, Any]:
     """Write one channel of a recording (complete or truncated) to a CSV file.
 
     Columns: ``log_time_ns`` then the channel's fields in schema order, fixed-length arrays
     flattened (``q0, q1, q2``), objects as JSON, ``null`` as an empty cell. Returns
-    ``{"out", "channel", "rows", "columns", "complete", "tail"}``. Raises
-    :class:`RecordingFileError` for a non-MCAP file and :class:`InputError` for a channel the
-    recording does not have (no output file is left behind then).
+    ``{"out", "channel", "rows", "columns", "complete", "tail", "bad_chunks",
+    "sequence_gaps"}``.
+
+    Nothing is lost (``rt.output_files``): an existing ``out_csv`` is refused unless
+    ``force``, the recording itself always; the CSV is written to a partial file renamed
+    only when complete, so a refusal leaves no file and any previous one untouched.
+
+    A damaged chunk (CRC) stops the export with :class:`RecordingFileError` naming it;
+    with ``salvage`` damaged chunks are skipped and listed, and ``sequence_gaps`` counts the
+    messages of the channel they held. Raises :class:`InputError` for a channel the
+    recording does not have.
     """
     out_path = Path(out_csv)
-    scan = RecordingScan(path, topics=[channel])
+    scan = RecordingScan(path, topics=[channel], salvage=salvage)
     rows = 0
     cols: list[tuple[str, str, int]] | None = None
-    ok = False
-    try:
-        with open(out_path, "w", newline="") as f:
-            writer = csv.writer(f)
-            for rec in scan:
-                if cols is None:
-                    cols = _columns(scan.schema_for(channel), rec.payload)
-                    writer.writerow(["log_time_ns"] + [c for c, _, _ in cols])
-                p = rec.payload
-                cells = [str(rec.log_time_ns)]
-                for _, name, i in cols:
-                    v = p.get(name) if isinstance(p, dict) else None
-                    if i >= 0:
-                        v = v[i] if isinstance(v, list) and i < len(v) else None
-                    cells.append(_cell(v))
-                writer.writerow(cells)
-                rows += 1
-            if channel not in scan.topic_names():
-                raise InputError(f"{path}: no channel {channel!r} (channels: "
-                                 f"{', '.join(scan.topic_names()) or 'none'})")
-            if cols is None:        # a channel without messages: the header alone
-                cols = _columns(scan.schema_for(channel), None)
+    with atomic_output(out_path, "w", newline="", force=force, inputs=[path],
+                       what="CSV output") as f:
+        writer = csv.writer(f)
+        for rec in scan:
+            if cols is None:
+                cols = _columns(scan.schema_for(channel), rec.payload)
                 writer.writerow(["log_time_ns"] + [c for c, _, _ in cols])
-        ok = True
-    finally:
-        if not ok:
-            out_path.unlink(missing_ok=True)
+            p = rec.payload
+            cells = [str(rec.log_time_ns)]
+            for _, name, i in cols:
+                v = p.get(name) if isinstance(p, dict) else None
+                if i >= 0:
+                    v = v[i] if isinstance(v, list) and i < len(v) else None
+                cells.append(_cell(v))
+            writer.writerow(cells)
+            rows += 1
+        problem = scan.info.problem()
+        if problem is not None and not salvage:
+            raise RecordingFileError(path, f"{problem}; nothing written (--salvage exports "
+                                           "the readable chunks)")
+        if channel not in scan.topic_names():
+            raise InputError(f"{path}: no channel {channel!r} (channels: "
+                             f"{', '.join(scan.topic_names()) or 'none'})")
+        if cols is None:        # a channel without messages: the header alone
+            cols = _columns(scan.schema_for(channel), None)
+            writer.writerow(["log_time_ns"] + [c for c, _, _ in cols])
     return {"out": str(out_path), "channel": channel, "rows": rows,
             "columns": ["log_time_ns"] + [c for c, _, _ in cols],
-            "complete": scan.info.complete, "tail": scan.info.tail}
+            "complete": scan.info.complete, "tail": scan.info.tail,
+            "bad_chunks": scan.info.bad_chunks, "crc_errors": scan.info.crc_errors,
+            "sequence_gaps": scan.info.sequence_gaps.get(channel, 0)}

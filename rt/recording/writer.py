@@ -16,7 +16,9 @@ Crash tolerance: the file is chunked (zstd). Besides closing a chunk when it exc
 every ``flush_interval_s``. A process killed at any instant therefore leaves on disk every
 message produced more than about ``flush_interval_s + drain_period_s`` (+ one pump's work)
 earlier; with the defaults ≈ 0.27 s (measured: at most 0.26 s over 20 SIGKILLs of a 1 kHz
-recording, also with two CPU hogs running; ``tests/test_recording.py`` asserts ≤ 0.5 s). ``rt.recording.reader.recover`` reads such a file up to its last complete chunk.
+recording, also with two CPU hogs running; ``bench/costs.py --crash`` measures it, the tests
+check that what is recovered is an exact prefix). ``rt.recording.reader.recover`` reads such a
+file up to its last complete chunk.
 Data reaches the OS page cache, which survives a process crash; surviving a power loss needs
 ``fsync=True`` (an fsync per flush).
 """
@@ -40,6 +42,7 @@ import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from rt.errors import InputError, TalusError
+from rt.output_files import PARTIAL_SUFFIX, check_output, commit_output, partial_path
 from rt.recording.channels import (CHANNELS, EVENTS, MESSAGE_ENCODING, METADATA,
                                    METADATA_REQUIRED_FROM_CALLER, REFERENCE, SCHEMA_ENCODING,
                                    STATE, STATE_ROW_LAYOUT, WRENCH, ChannelSpec)
@@ -172,8 +175,12 @@ def software_version() -> str:
 
 
 def _open_output(path: Path) -> IO[bytes]:
-    """The file the recorder writes (a seam for tests that simulate a slow disk)."""
-    return open(path, "xb")  # exclusive: a recording never replaces an existing file
+    """The file the recorder writes (a seam for tests that simulate a slow disk).
+
+    ``path`` is a new name (created exclusively: never an existing file) or the empty partial
+    file ``rt.output_files.partial_path`` just created for a ``force`` replacement.
+    """
+    return open(path, "wb" if path.name.endswith(PARTIAL_SUFFIX) else "xb")
 
 
 class _HashingStream:
@@ -236,7 +243,8 @@ class SessionRecorder:
                  drain_period_s: float = DEFAULT_DRAIN_PERIOD_S,
                  queue_capacity: int = DEFAULT_QUEUE_CAPACITY, loop_t0: float = 0.0,
                  start_wall_ns: int | None = None,
-                 extra_channels: dict[str, ChannelSpec] | None = None, fsync: bool = False):
+                 extra_channels: dict[str, ChannelSpec] | None = None, fsync: bool = False,
+                 force: bool = False, inputs: Iterable[str | os.PathLike[str]] = ()):
         if compression not in _COMPRESSION:
             raise InputError(f"compression must be one of {sorted(_COMPRESSION)}, "
                              f"got {compression!r}")
@@ -250,7 +258,13 @@ class SessionRecorder:
                              f"{list(METADATA_REQUIRED_FROM_CALLER)})")
         if not isinstance(metadata["parameters"], dict):
             raise InputError("session metadata 'parameters' must be a dict")
-        self.path = Path(path)
+        # Nothing lost (rt.output_files): an existing file is refused unless ``force``, an input
+        # always. A new recording is written in place, created exclusively, so that after a
+        # crash its data are where the user looks (``recover`` reads them). A replacement is
+        # written to a partial file beside the old one and renamed over it only when complete:
+        # the old recording survives a failed or crashed new one.
+        self.path = check_output(path, inputs, force=force, what="recording")
+        self._partial = partial_path(self.path) if os.path.lexists(self.path) else None
         # Every standard channel is always registered; more are one dict entry away.
         self.channels = {**CHANNELS, **(extra_channels or {})}
         for topic, spec in self.channels.items():
@@ -272,6 +286,7 @@ class SessionRecorder:
         self._dropped = {topic: 0 for topic in self.channels}
         self._messages = {topic: 0 for topic in self.channels}
         self._error: str | None = None
+        self._wrench_without_sample = 0
         self._busy_s = 0.0
         self._flushes = 0
         self._summary: dict[str, Any] | None = None
@@ -281,12 +296,16 @@ class SessionRecorder:
 
         self.metadata = self._complete_metadata(metadata)
         try:
-            self._stream = _HashingStream(_open_output(self.path))
+            self._stream = _HashingStream(_open_output(self._partial or self.path))
         except OSError as exc:
+            if self._partial is not None:
+                self._partial.unlink(missing_ok=True)
             raise RecordingError(f"cannot create recording {self.path}: {exc}") from exc
         try:
+            # Data-section CRC in DataEnd (besides the chunk and summary CRCs): a flipped byte
+            # outside any chunk (a message index) is detected too.
             self._mcap = Writer(self._stream, chunk_size=int(chunk_size),  # type: ignore[arg-type]
-                                compression=_COMPRESSION[compression])
+                                compression=_COMPRESSION[compression], enable_data_crcs=True)
             self._mcap.start(profile="", library=f"talus {software_version()}; "
                                                  f"{LIBRARY_IDENTIFIER}")
             self._channel_ids: dict[str, int] = {}
@@ -303,6 +322,7 @@ class SessionRecorder:
             self._flush_chunk()
         except (OSError, ValueError) as exc:
             self._stream.close()
+            (self._partial or self.path).unlink(missing_ok=True)   # we created it, empty
             raise RecordingError(f"cannot start recording {self.path}: {exc}") from exc
         self._thread = threading.Thread(target=self._run, name="talus-recorder", daemon=True)
         self._thread.start()
@@ -400,7 +420,9 @@ class SessionRecorder:
         Returns the summary: ``path``, ``complete`` (footer written), ``sha256`` and ``bytes``
         of the file, ``messages`` and ``dropped`` per topic, ``dropped_total``,
         ``duration_s`` (wall), ``writer_busy_s`` and ``writer_us_per_message`` (the thread's
-        CPU time, encoding + compression + writing), ``flushes``, ``error``. Safe to call twice (returns the same summary).
+        CPU time, encoding + compression + writing), ``flushes``, ``error``,
+        ``wrench_without_sample`` (wrenches not written: no finite sample yet). Safe to call
+        twice (returns the same summary).
         """
         with self._close_lock:
             if self._summary is not None:
@@ -419,6 +441,14 @@ class SessionRecorder:
                 for tap in self._taps:
                     dropped[tap.topic] += max(0, tap.source.written - tap.start)
             n = sum(self._messages.values())
+            if self._error is None and self._partial is not None:
+                try:
+                    commit_output(self._partial, self.path, force=True)
+                except TalusError as exc:
+                    self._error = str(exc)
+            elif self._partial is not None:
+                self._error += f"; the previous {self.path} is untouched, this recording " \
+                               f"is in {self._partial}"
             complete = self._error is None
             self._summary = {
                 "path": str(self.path),
@@ -428,6 +458,7 @@ class SessionRecorder:
                 "messages": dict(self._messages),
                 "dropped": dropped,
                 "dropped_total": sum(dropped.values()),
+                "wrench_without_sample": self._wrench_without_sample,
                 "duration_s": time.monotonic() - self._t_open,
                 "writer_busy_s": self._busy_s,
                 "writer_us_per_message": 1e6 * self._busy_s / n if n else 0.0,
@@ -459,9 +490,11 @@ class SessionRecorder:
 
     def _write(self, topic: str, t: float, data: bytes) -> None:
         ns = self._log_time(t)
-        self._mcap.add_message(channel_id=self._channel_ids[topic], log_time=ns, data=data,
-                               publish_time=ns)
+        # Per-channel sequence numbers 1, 2, 3...: a reader sees exactly which messages a
+        # skipped (damaged) chunk held, per channel.
         self._messages[topic] += 1
+        self._mcap.add_message(channel_id=self._channel_ids[topic], log_time=ns, data=data,
+                               publish_time=ns, sequence=self._messages[topic])
 
     def _flush_chunk(self) -> None:
         flush = getattr(self._mcap, "flush", None)
@@ -506,6 +539,11 @@ class SessionRecorder:
             topic, t, payload = q.popleft()
             if topic == WRENCH:
                 fx, fy, fz, tx, ty, tz, stale, saturated = payload
+                if not all(math.isfinite(v) for v in (fx, fy, fz, tx, ty, tz)):
+                    # No sample yet (the sensor's NaN): not a measurement, and as nulls it
+                    # would break the channel's schema (numbers). Counted, not written.
+                    self._wrench_without_sample += 1
+                    continue
                 payload = {"t": t, "fx": float(fx), "fy": float(fy), "fz": float(fz),
                            "tx": float(tx), "ty": float(ty), "tz": float(tz),
                            "stale": bool(stale), "saturated": bool(saturated)}

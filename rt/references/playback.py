@@ -171,9 +171,9 @@ def load_csv(path: str | Path, sample_rate_hz: float | None = None
             t[k] = values[0]
             q[k] = values[1:]
             if k > 0 and not t[k] > t[k - 1]:
-                raise _refuse(source, line, f"time {t[k]!r} s is not after the previous sample's "
-                              f"{t[k - 1]!r} s (line {lines[k - 1]}): times must increase "
-                              "strictly")
+                raise _refuse(source, line, f"time {float(t[k])!r} s is not after the previous "
+                              f"sample's {float(t[k - 1])!r} s (line {lines[k - 1]}): times must "
+                              "increase strictly")
         else:
             t[k] = k / sample_rate_hz  # type: ignore[operator]
             q[k] = values

@@ -11,9 +11,29 @@ def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("matrix", help="inject every fault on the twin and report the "
                                            "supervisor's reaction")
     p.add_argument("--json", action="store_true")
-    p.add_argument("--only", nargs="*", default=None, help="run only these faults")
+    p.add_argument("--only", nargs="+", default=None, metavar="FAULT",
+                   help="run only these faults ('-' and '_' alike; an unknown name is refused "
+                        "with the list)")
     add_robot_option(p)
     p.set_defaults(func=_matrix)
+
+
+def _selected(only: list[str] | None) -> list[str] | None:
+    """The fault names to run, in their declared spelling; InputError names unknown ones."""
+    if only is None:
+        return None
+    from rt.cli_args import canonical_name
+    from rt.errors import InputError
+    from rt.model import RobotModel
+    from rt.safety.fault_matrix import RT_PROCESS_LOSS, scenarios
+
+    known = {canonical_name(n): n
+             for n in [sc.name for sc in scenarios(RobotModel.load())] + [RT_PROCESS_LOSS]}
+    unknown = [n for n in only if canonical_name(n) not in known]
+    if unknown:
+        raise InputError(f"unknown fault(s) {', '.join(unknown)}; known: "
+                         f"{', '.join(sorted(known.values()))}")
+    return [known[canonical_name(n)] for n in only]
 
 
 def _fmt(v) -> str:
@@ -30,7 +50,7 @@ def _matrix(args) -> int:
     except TalusError as exc:
         print(json.dumps({"error": str(exc)}))
         return 2
-    result = run_matrix(args.only, model=model)
+    result = run_matrix(_selected(args.only), model=model)
     if args.json:
         print(json.dumps(result))
         return 0

@@ -30,6 +30,8 @@ FAULT_AT_S = 3.0
 RUN_S = 5.0
 REST_SPEED_M_S = 1e-3
 REST_HOLD_S = 0.05
+#: The matrix entry run as two real processes (``run_rt_process_loss``), not a Scenario.
+RT_PROCESS_LOSS = "rt_process_loss"
 
 
 class TruthProbe(Component):
@@ -265,7 +267,7 @@ def run_matrix(names: list[str] | None = None, model: RobotModel | None = None) 
         if names and sc.name not in names:
             continue
         out.append(run_scenario(sc, model))
-    if not names or "rt_process_loss" in names:
+    if not names or RT_PROCESS_LOSS in names:
         out.append(run_rt_process_loss())
     return {"twin": True, "rate_hz": 1000.0, "fault_at_s": FAULT_AT_S, "faults": out}
 

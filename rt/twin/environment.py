@@ -86,7 +86,8 @@ class PayloadStep(_Env):
     """
 
     kind: Literal["payload"] = "payload"
-    mass_kg: NonNeg = 100.0
+    #: Up to 500 kg: three 2 kN drives hold about 600 kg of platform and payload statically.
+    mass_kg: Annotated[float, Field(ge=0.0, le=500.0, allow_inf_nan=False)] = 100.0
     at_s: NonNeg = 13.0
     com_m: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.10)
 
@@ -100,7 +101,9 @@ Environment = Annotated[Union[FreeMotion, ForcePlateContact, CompliantAnkle, Pay
 
 def parse_environment(text: str) -> FreeMotion | ForcePlateContact | CompliantAnkle | PayloadStep:
     """Parse the CLI form ``free``, ``payload:100[@13]``, ``plate[:height_m]``, ``ankle``."""
-    from rt.errors import InputError
+    from pydantic import ValidationError
+
+    from rt.errors import InputError, validation_summary
 
     name, _, arg = text.partition(":")
     try:
@@ -114,8 +117,10 @@ def parse_environment(text: str) -> FreeMotion | ForcePlateContact | CompliantAn
             return ForcePlateContact(**({"plate_height_m": float(arg)} if arg else {}))
         if name == "ankle" and not arg:
             return CompliantAnkle()
-    except ValueError as exc:
-        raise InputError(f"environment {text!r}: {exc}") from None
+    except ValidationError as exc:
+        raise InputError(f"environment {text!r}: {validation_summary(exc)}") from None
+    except ValueError:
+        raise InputError(f"environment {text!r}: {arg!r} is not a number") from None
     raise InputError(f"unknown environment {text!r}; use free, payload:KG[@S], plate[:HEIGHT_M] "
                      "or ankle")
 

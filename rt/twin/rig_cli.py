@@ -16,6 +16,7 @@ import sys
 import threading
 from typing import Any
 
+from rt.cli_args import bounded_int, finite_float, rate_hz, seconds, seed
 from rt.model.robot_option import add_robot_option
 
 EXIT_ERROR = 2
@@ -37,14 +38,15 @@ def register_rig_command(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--shm", required=True, help="shared-memory name (appears as /dev/shm/NAME)")
     p.add_argument("--env", default="free",
                    help="free | payload:KG[@S] | plate[:HEIGHT_M] | ankle (default free)")
-    p.add_argument("--seed", type=int, default=0, help="sensor noise seed (default 0)")
-    p.add_argument("--seconds", type=float, default=None,
+    p.add_argument("--seed", type=seed(), default=0, help="sensor noise seed (default 0)")
+    p.add_argument("--seconds", type=seconds(hi=30 * 24 * 3600.0), default=None,
                    help="stop after this many seconds (default: until SIGTERM/SIGINT)")
-    p.add_argument("--watchdog-ms", type=float, default=20.0,
+    p.add_argument("--watchdog-ms", type=finite_float(1.0, 1000.0, unit="ms"), default=20.0,
                    help="amplifier watchdog timeout, ms (default 20)")
-    p.add_argument("--rate", type=float, default=1000.0, help="rig rate, Hz (default 1000)")
+    p.add_argument("--rate", type=rate_hz(100.0, 5000.0), default=1000.0,
+                   help="rig rate, Hz (100-5000; default 1000)")
     add_robot_option(p)
-    p.add_argument("--fifo", type=int, default=None, metavar="PRIORITY",
+    p.add_argument("--fifo", type=bounded_int(1, 99), default=None, metavar="PRIORITY",
                    help="try SCHED_FIFO at this priority (default: normal scheduling)")
     p.set_defaults(func=cmd_rig)
 
@@ -55,9 +57,6 @@ def cmd_rig(args: argparse.Namespace) -> int:
     from rt.model.description import load_description
     from rt.twin.rig import RigProcess
 
-    if args.seconds is not None and not args.seconds > 0.0:
-        _emit({"error": f"--seconds must be positive, got {args.seconds}"})
-        return EXIT_ERROR
     stop_requested = False
     rig: RigProcess | None = None
 

@@ -31,7 +31,7 @@ from rt.drivers.pcl833 import encode_position
 from rt.errors import InputError
 from rt.model.description import RobotDescription, load_description
 from rt.model.dynamics import Payload
-from rt.twin.environment import FreeMotion, PayloadStep
+from rt.twin.environment import ForcePlateContact, FreeMotion, PayloadStep
 from rt.twin.faults import FaultPlan
 from rt.twin.plant import TwinPlant
 
@@ -49,6 +49,21 @@ class SimClock:
         return self.t
 
 
+def _check_reachable(environment: object, plant: TwinPlant) -> None:
+    """Refuse a force plate the tool tip cannot meet from outside (InputError).
+
+    A plate below the tip's lowest point starts the robot deep inside it: the contact spring
+    then throws the platform at tens of m/s. A plate above its highest point is never touched.
+    """
+    if not isinstance(environment, ForcePlateContact):
+        return
+    offset_z = plant.kin.description.sensor.offset_m[2] + environment.tool_length_m
+    lo, hi = (plant.kin.fk([s] * 3).z + offset_z for s in plant.kin.description.limits.stroke_m)
+    if not lo < environment.plate_height_m < hi:
+        raise InputError(f"plate height {environment.plate_height_m:g} m is outside the tool "
+                         f"tip's reach ({lo:.3f} .. {hi:.3f} m, level platform)")
+
+
 class Twin:
     """The robot, its sensors and environment in one object (see module docstring)."""
 
@@ -61,6 +76,7 @@ class Twin:
         self.environment = environment or FreeMotion()
         self.plant = TwinPlant(self.description, self.environment, physics_rate_hz, integrator,
                                frictionless)
+        _check_reachable(self.environment, self.plant)
         self.rng = np.random.default_rng(seed)
         self.clock = clock
         self.faults = FaultPlan()
