@@ -17,6 +17,7 @@ import argparse
 import json
 from typing import Any
 
+from rt.cli_args import finite_float
 from rt.errors import InputError
 from rt.ipc.messages import DEFAULT_ENDPOINT
 
@@ -37,7 +38,8 @@ def register(commands: argparse._SubParsersAction) -> None:
                    help="the RT process's request address (default %(default)s)")
     p.add_argument("--patient", default="twin-demo",
                    help="the patient's pseudonymous code (default %(default)s)")
-    p.add_argument("--patient-weight", type=float, default=None, help="kg (gait replay)")
+    p.add_argument("--patient-weight", type=finite_float(1.0, 400.0, unit="kg"), default=None,
+                   help="kg (gait replay)")
     p.add_argument("--record-dir", default=None,
                    help="directory for the recording (default: the RT process's recordings "
                         "directory); the RT process names the file, never overwriting one")

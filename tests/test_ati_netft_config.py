@@ -101,7 +101,7 @@ def test_pynetft_reads_its_scaling_from_the_twin():
 
 
 def test_serve_ati_cli_serves_the_page_and_reports_its_ports():
-    proc = subprocess.Popen([sys.executable, "-m", "rt.cli", "twin", "serve-ati", "--port", "0",
+    proc = subprocess.Popen([sys.executable, "-m", "talus", "twin", "serve-ati", "--port", "0",
                              "--http-port", "0", "--tcp-port", "0", "--counts-per-force",
                              "1000", "--seconds", "30"], stdout=subprocess.PIPE, text=True)
     try:

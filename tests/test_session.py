@@ -50,21 +50,23 @@ def _first_messages_validate(path: Path) -> None:
 
 
 @pytest.mark.parametrize("record_as, force, message", [
-    ("protocol", ["--force"], "is also an input"),
-    ("existing", [], "exists; refused"),
+    ("protocol", True, "is also an input"),
+    ("existing", False, "exists; refused"),
 ])
-def test_session_run_never_overwrites_its_inputs_or_a_file(tmp_path, record_as, force, message):
+def test_a_recorded_twin_run_never_overwrites_its_inputs_or_a_file(tmp_path, record_as, force,
+                                                                   message):
+    """The in-process run (benchmarks, tests); the RT process names its recordings itself and
+    creates them exclusively (tests/test_rt_sessions.py)."""
+    from rt.errors import TalusError
+
     protocol = tmp_path / "sine.yaml"
     protocol.write_text(LIB["sine_fz.yaml"].read_text())
     existing = tmp_path / "old.mcap"
     existing.write_bytes(b"last week's session")
     target = {"protocol": protocol, "existing": existing}[record_as]
     before = target.read_bytes()
-    proc = subprocess.run([sys.executable, "-m", "rt.cli", "session", "run", "--protocol",
-                           str(protocol), "--record", str(target), "--fast", "--json"] + force,
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr
-    assert message in json.loads(proc.stdout)["error"]
+    with pytest.raises(TalusError, match=message):
+        run_session(SessionSetup(protocol), target, force=force)
     assert target.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["old.mcap", "sine.yaml"]
 

@@ -14,7 +14,7 @@ import json
 import sys
 from typing import Any
 
-from rt.cli_args import seconds
+from rt.cli_args import bounded_int, seconds
 from rt.ipc.messages import DEFAULT_ENDPOINT
 
 EXIT_ERROR = 2
@@ -66,7 +66,8 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
             p.add_argument("--source", choices=("cli", "keyboard", "gui"), default="cli",
                            help="reported source of the stop (default %(default)s)")
         if name == "reset":
-            p.add_argument("--ack", type=int, nargs="+", default=None, metavar="EVENT_ID",
+            p.add_argument("--ack", type=bounded_int(1, 2**31), nargs="+", default=None,
+                           metavar="EVENT_ID",
                            help="the latched events to acknowledge (ids from `talus rt status`)"
                                 "; default: those latched when the reset is sent")
             p.set_defaults(func=cmd_reset)

@@ -161,7 +161,7 @@ def _load(args) -> RobotModel:
 
 
 def _run_lines(args, handle: Callable[[RobotModel, dict], dict]) -> int:
-    model = _load(args)  # a bad --robot is one {"error"} line from rt.cli.main
+    model = _load(args)  # a bad --robot is one {"error"} line from talus.cli.main
     return _json_lines(sys.stdin, sys.stdout, lambda obj: handle(model, obj))
 
 
