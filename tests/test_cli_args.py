@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from rt import cli
+from talus import cli
 from rt.benchmarks.cli import CONTROLLER_NAMES
 from rt.cli_args import bounded_int, finite_float, name_choice, port_number, seconds, seed
 
