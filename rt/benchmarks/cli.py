@@ -6,10 +6,21 @@ import json
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    p = commands.add_parser("tracking", help="thesis fig. 48/50 tracking experiments on the twin")
-    p.add_argument("--experiment", choices=("pid-vs-paden", "payload-step"), required=True)
+    p = commands.add_parser(
+        "tracking", help="thesis fig. 48/50 tracking experiments through the position loop on "
+                         "the realistic twin")
+    p.add_argument("--experiment", choices=("pid-vs-paden", "parameter-step", "payload-step"),
+                   help="one experiment (default: all three with --profile thesis)")
+    p.add_argument("--profile", choices=("product", "thesis"), default="product",
+                   help="product: 1 kHz; thesis: 100 Hz and 1 kHz, beside the thesis's figures")
+    p.add_argument("--rate", type=float, help="one loop rate, Hz (default: the profile's)")
     p.add_argument("--seconds", type=float, default=26.0)
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--truth", help="the twin's description file (default: the seeded "
+                                   "perturbation of the nominal one)")
+    p.add_argument("--robot", help="the description the controllers believe (default: nominal)")
+    p.add_argument("--ideal", action="store_true",
+                   help="ideal twin: truth = the model, no unmodelled effect")
+    p.add_argument("--json", action="store_true", help="one JSON object per run (JSON lines)")
     p.set_defaults(func=_tracking)
     register_loop(commands)
     p = commands.add_parser("force", help="force tracking on the twin: sine Fz and gait replay")
@@ -18,18 +29,35 @@ def register(commands: argparse._SubParsersAction) -> None:
 
 
 def _tracking(args) -> int:
-    from rt.benchmarks.tracking import fig50_table, run_experiment
+    from rt.benchmarks.tracking import EXPERIMENTS, run_experiment, table
+    from rt.errors import InputError
+    from rt.model.description import load_description
 
-    result = run_experiment(args.experiment, args.seconds)
-    if args.json:
-        print(json.dumps(result))
-    elif args.experiment == "payload-step":
-        print(fig50_table(result))
+    if args.seconds <= 0.0:
+        raise InputError(f"--seconds must be > 0, got {args.seconds}")
+    if args.rate is not None and not 100.0 <= args.rate <= 2000.0:
+        raise InputError(f"--rate must be in [100, 2000] Hz, got {args.rate}")
+    truth = load_description(args.truth) if args.truth else None
+    robot = load_description(args.robot) if args.robot else None
+    if args.experiment:
+        experiments = [args.experiment]
+    elif args.profile == "thesis":
+        experiments = list(EXPERIMENTS)
     else:
-        for ctrl, r in result["controllers"].items():
-            print(f"{ctrl:12s} peak |e| {r['peak_abs_m'] * 1e3:.3f} mm, mean |e| "
-                  f"{r['period1']['mean_abs_m'] * 1e3:.3f} / {r['period2']['mean_abs_m'] * 1e3:.3f}"
-                  " mm (periods 1/2)")
+        raise InputError("--experiment is required with --profile product")
+    rates = ([args.rate] if args.rate else [100.0, 1000.0] if args.profile == "thesis"
+             else [1000.0])
+    results = []
+    for rate in rates:
+        for name in experiments:
+            r = run_experiment(name, args.seconds, rate, args.profile, truth, robot, args.ideal)
+            results.append(r)
+            if args.json:
+                print(json.dumps(r), flush=True)
+    if not args.json:
+        kind = "ideal twin" if args.ideal else "realistic twin (truth apart from the model)"
+        print(f"tracking through the position loop on the {kind}; thesis: real rig, 100 Hz")
+        print(table(results))
     return 0
 
 
