@@ -23,6 +23,8 @@ GROUPS: dict[str, tuple[str, str]] = {
     "session": ("protocols.session_cli", "run a protocol: pre-flight, run, record, summary"),
     "rt": ("rt.ipc.cli", "RT process: status, stop, estop, reset (JSON)"),
     "record": ("rt.recording.cli", "recordings: info, CSV export"),
+    "identify": ("rt.identification.cli", "dynamic identification: excite, estimate, write a "
+                                          "description file"),
 }
 
 
@@ -43,8 +45,13 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     group = argv[0] if argv and argv[0] in GROUPS else None
     args = build_parser(group).parse_args(argv)
+    from rt.errors import TalusError
+
     try:
         return int(args.func(args) or 0)
+    except TalusError as exc:
+        print(f"talus {args.group}: {exc}", file=sys.stderr)
+        return 2
     except BrokenPipeError:
         # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
         sys.stderr.close()

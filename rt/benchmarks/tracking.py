@@ -114,7 +114,7 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
     ``robot`` is the description the controllers believe (default the nominal one); ``truth``
     the twin's (default: the realistic twin's truth; with ``ideal`` the model itself).
     """
-    model = RobotModel(robot) if robot is not None else RobotModel.load()
+    model = RobotModel.from_description(robot) if robot is not None else RobotModel.load()
     if gains is None:
         st = model.dyn.state((Q0_M, Q0_M, Q0_M))
         gains = gains_for_rate(controller, rate_hz, float(model.dyn.mass_matrix(st)[0, 0]))

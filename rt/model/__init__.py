@@ -19,7 +19,10 @@ class RobotModel:
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> "RobotModel":
-        desc = load_description(path)
+        return cls.from_description(load_description(path))
+
+    @classmethod
+    def from_description(cls, desc: RobotDescription) -> "RobotModel":
         kin = Kinematics(desc)
         return cls(desc, kin, Dynamics(desc, kin))
 
