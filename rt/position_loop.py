@@ -100,12 +100,13 @@ def build_sim_position_loop(controller: str = "paden_panja", gains: dict | None 
                             environment=None, rate_hz: float = 1000.0, mode: str = "fast",
                             seed: int = 0, start_q: tuple[float, float, float] = (0.2, 0.2, 0.2),
                             model: RobotModel | None = None, twin: Twin | None = None,
-                            **kwargs) -> PositionLoop:
+                            imperfections=None, **kwargs) -> PositionLoop:
     """A configured, started position loop on the in-process twin (``.loop.run(...)``)."""
     model = model or RobotModel.load()
     clock = SimClock()
     if twin is None:
-        twin = Twin(model.description, environment or FreeMotion(), seed=seed, clock=clock)
+        twin = Twin(model.description, environment or FreeMotion(), seed=seed, clock=clock,
+                    imperfections=imperfections)
         twin.place(start_q)
     else:
         twin.clock = clock
