@@ -2,6 +2,8 @@
 the adaptive law learns a payload; switches are bumpless; gains are validated."""
 from __future__ import annotations
 
+from rt.twin.realism import RigImperfections
+
 import math
 
 import numpy as np
@@ -31,7 +33,10 @@ def _step_reference(q_from: float, q_to: float, t_step: float = 0.2):
 
 @pytest.mark.parametrize("name", ALL)
 def test_converges_on_a_step(name):
-    log = run_tracking(name, 2.5, _step_reference(0.20, 0.205))
+    # Ideal twin: the 60 µm PID bound is about the law; on the realistic twin backlash and
+    # stiction leave a ~0.1 mm limit cycle (issue 15's note).
+    log = run_tracking(name, 2.5, _step_reference(0.20, 0.205),
+                       twin_kwargs={"imperfections": RigImperfections.none()})
     late = log.t > 2.0
     # 5 mm step. Only PID has integral action and holds within 3 encoder counts (60 µm); for the
     # others static friction (≤ 75 N, not in the model at rest) over a stiffness of 3.4e5 N/m
