@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from rt.twin.realism import add_twin_arguments
+
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser(
@@ -15,11 +17,8 @@ def register(commands: argparse._SubParsersAction) -> None:
                    help="product: 1 kHz; thesis: 100 Hz and 1 kHz, beside the thesis's figures")
     p.add_argument("--rate", type=float, help="one loop rate, Hz (default: the profile's)")
     p.add_argument("--seconds", type=float, default=26.0)
-    p.add_argument("--truth", help="the twin's description file (default: the seeded "
-                                   "perturbation of the nominal one)")
     p.add_argument("--robot", help="the description the controllers believe (default: nominal)")
-    p.add_argument("--ideal", action="store_true",
-                   help="ideal twin: truth = the model, no unmodelled effect")
+    add_twin_arguments(p)
     p.add_argument("--json", action="store_true", help="one JSON object per run (JSON lines)")
     p.set_defaults(func=_tracking)
     register_loop(commands)
@@ -37,8 +36,8 @@ def _tracking(args) -> int:
         raise InputError(f"--seconds must be > 0, got {args.seconds}")
     if args.rate is not None and not 100.0 <= args.rate <= 2000.0:
         raise InputError(f"--rate must be in [100, 2000] Hz, got {args.rate}")
-    truth = load_description(args.truth) if args.truth else None
     robot = load_description(args.robot) if args.robot else None
+    truth = load_description(args.truth) if args.truth else None
     if args.experiment:
         experiments = [args.experiment]
     elif args.profile == "thesis":
@@ -50,12 +49,13 @@ def _tracking(args) -> int:
     results = []
     for rate in rates:
         for name in experiments:
-            r = run_experiment(name, args.seconds, rate, args.profile, truth, robot, args.ideal)
+            r = run_experiment(name, args.seconds, rate, args.profile, truth, robot,
+                               args.ideal_twin)
             results.append(r)
             if args.json:
                 print(json.dumps(r), flush=True)
     if not args.json:
-        kind = "ideal twin" if args.ideal else "realistic twin (truth apart from the model)"
+        kind = "ideal twin" if args.ideal_twin else "realistic twin (truth apart from the model)"
         print(f"tracking through the position loop on the {kind}; thesis: real rig, 100 Hz")
         print(table(results))
     return 0

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from rt.control.experiment import benchmark_reference
+from rt.errors import TalusError
 from rt.model import RobotModel
 from rt.model.description import RobotDescription
 from rt.model.dynamics import Payload
@@ -63,6 +64,10 @@ EXPERIMENTS = {
     "parameter-step": ("paden_panja", "adaptive"),
     "payload-step": ("paden_panja", "adaptive", "pid"),
 }
+
+
+class StoppedBySupervisor(TalusError):
+    """The product's supervisor stopped the experiment (the reason is in the message)."""
 
 
 def gains_for_rate(controller: str, rate_hz: float, axis_mass_kg: float) -> dict | None:
@@ -133,8 +138,8 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
         pl.loop.run(cycles=1)
         approach_cycles += 1
         if approach_cycles * dt > 30.0 or pl.reference.phase.data[0] == 3.0:
-            raise RuntimeError(f"tracking benchmark: {controller} at {rate_hz:g} Hz did not "
-                               f"reach the trajectory: {_events(pl)}")
+            raise StoppedBySupervisor(f"{controller} at {rate_hz:g} Hz did not reach the "
+                                      f"trajectory: {_events(pl)}")
     _, start = pl.recorder.drain(0)
     n = int(round(seconds * rate_hz))
     n_step = min(n, int(round(STEP_S * rate_hz)))
@@ -148,8 +153,8 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
             twin.plant.set_payload(Payload(PAYLOAD_KG, PAYLOAD_COM_M))
         pl.loop.run(cycles=n - n_step)
     if pl.reference.phase.data[0] == 3.0:
-        raise RuntimeError(f"tracking benchmark: {controller} at {rate_hz:g} Hz stopped by the "
-                           f"supervisor: {_events(pl)}")
+        raise StoppedBySupervisor(f"{controller} at {rate_hz:g} Hz stopped by the supervisor: "
+                                  f"{_events(pl)}")
     rows, _ = pl.recorder.drain(start)
     rows = rows[:n]
     q = rows[:, 1:4]
@@ -169,7 +174,11 @@ def run_experiment(name: str, seconds: float = DURATION_S, rate_hz: float = 1000
     results = {}
     approach = 0.0
     for ctrl in EXPERIMENTS[name]:
-        t, err, approach = run_one(name, ctrl, seconds, rate_hz, truth, robot, ideal)
+        try:
+            t, err, approach = run_one(name, ctrl, seconds, rate_hz, truth, robot, ideal)
+        except StoppedBySupervisor as exc:
+            results[ctrl] = {"stopped_by_supervisor": str(exc)}
+            continue
         results[ctrl] = metrics(t, err)
     return {"experiment": name, "profile": profile, "twin": "ideal" if ideal else "realistic",
             "rate_hz": rate_hz, "duration_s": seconds, "approach_s": approach,
@@ -182,6 +191,10 @@ def table(results: list[dict]) -> str:
              f"{'twin mm':>9s} {'thesis mm':>10s} {'ratio':>6s}"]
     for r in results:
         for ctrl, m in r["controllers"].items():
+            if "stopped_by_supervisor" in m:
+                lines.append(f"{r['experiment']:15s} {r['rate_hz']:6.0f} {ctrl:12s} stopped: "
+                             f"{m['stopped_by_supervisor'].split(': ', 1)[-1][:70]}")
+                continue
             th = r["thesis"].get(ctrl, {})
             rows = [("peak", m["peak_abs_m"], th.get("peak_abs_mm"))]
             for p in ("period1", "period2"):

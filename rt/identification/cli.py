@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from rt.twin.realism import add_twin_arguments
+
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser(
@@ -19,10 +21,9 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="description file to write (YAML)")
     p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     p.add_argument("--seconds", type=float, default=40.0, help="excitation length (s)")
-    p.add_argument("--truth", help="the twin's description (default: the seeded perturbation)")
     p.add_argument("--robot", help="the description believed before identification "
                                    "(default: nominal)")
-    p.add_argument("--ideal", action="store_true", help="no unmodelled effects on the twin")
+    add_twin_arguments(p)
     p.add_argument("--compare-tracking", action="store_true",
                    help="also run Paden-Panja and computed torque with the nominal vs the "
                         "identified model (13 s each)")
@@ -53,7 +54,7 @@ def _run(args) -> int:
     from rt.model import RobotModel
     from rt.model.description import load_description
     from rt.model.regressor import Regressor
-    from rt.twin.realism import RigImperfections, default_truth
+    from rt.twin.realism import default_truth, twin_setup
 
     if args.seconds < 20.0:
         raise InputError(f"--seconds must be ≥ 20 (two excitation periods), got {args.seconds}")
@@ -61,8 +62,8 @@ def _run(args) -> int:
     if out.exists() and not args.force:
         raise InputError(f"{out} exists; use --force to overwrite it")
     nominal = load_description(args.robot) if args.robot else load_description()
-    truth = load_description(args.truth) if args.truth else default_truth()
-    imp = RigImperfections.none() if args.ideal else None
+    truth_arg, imp = twin_setup(args, nominal)
+    truth = truth_arg or default_truth()
     model = RobotModel.from_description(nominal)
     excitation = optimize_excitation(model)
     data = record(excitation, args.seconds, model, truth, imp)
@@ -88,7 +89,7 @@ def _run(args) -> int:
         for ctrl in ("paden_panja", "computed_torque"):
             for label, robot in (("nominal", nominal), ("identified", ident)):
                 t, e, _ = run_one("pid-vs-paden", ctrl, 13.0, 1000.0, truth, robot,
-                                  args.ideal)
+                                  args.ideal_twin)
                 tracking[f"{ctrl}/{label}"] = {"mean_abs_m": float(np.abs(e).mean()),
                                                "rms_m": float(np.sqrt(np.mean(e ** 2)))}
         result["tracking"] = tracking

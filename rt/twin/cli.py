@@ -9,6 +9,7 @@ import sys
 
 def register(commands: argparse._SubParsersAction) -> None:
     from rt.ati.cli import register_twin_commands
+    from rt.twin.realism import add_twin_arguments
 
     p = commands.add_parser(
         "step", help="run the twin with constant amplifier commands; JSON lines out",
@@ -22,6 +23,7 @@ def register(commands: argparse._SubParsersAction) -> None:
                    help="free | payload:KG[@S] | plate[:HEIGHT_M] | ankle (default free)")
     p.add_argument("--rate", type=float, default=100.0, help="output lines per second")
     p.add_argument("--seed", type=int, default=0)
+    add_twin_arguments(p)
     p.set_defaults(func=_step)
     register_twin_commands(commands)
     from rt.twin.rig_cli import register_rig_command
@@ -36,6 +38,7 @@ def _step(args) -> int:
     from rt.errors import TalusError
     from rt.twin.backends import TwinActuators, TwinEncoders, TwinForceTorque
     from rt.twin.environment import parse_environment
+    from rt.twin.realism import twin_setup
     from rt.twin.twin import SimClock, Twin
 
     try:
@@ -44,7 +47,9 @@ def _step(args) -> int:
         if not 1.0 <= args.rate <= 5000.0:
             raise_input(f"--rate must be in [1, 5000] Hz, got {args.rate}")
         clock = SimClock()
-        twin = Twin(environment=parse_environment(args.env), seed=args.seed, clock=clock)
+        truth, imperfections = twin_setup(args)
+        twin = Twin(truth, parse_environment(args.env), seed=args.seed, clock=clock,
+                    imperfections=imperfections)
         encoders = TwinEncoders(twin)
         card = TwinActuators(twin, 0)
         sensor = TwinForceTorque(twin)

@@ -159,3 +159,22 @@ def screw_damping_n_s_per_m(imp: RigImperfections, moving_mass_kg: float) -> flo
     """Damping (N s/m) of the screw spring for its damping ratio with ``moving_mass_kg``."""
     return 2.0 * imp.screw_damping_ratio * math.sqrt(imp.screw_stiffness_n_per_m
                                                      * moving_mass_kg)
+
+
+def add_twin_arguments(parser) -> None:
+    """``--truth FILE`` and ``--ideal-twin`` for commands that build a twin."""
+    parser.add_argument("--truth", metavar="FILE",
+                        help="the twin's own robot description (default: the nominal one "
+                             "perturbed by the documented, seeded amount)")
+    parser.add_argument("--ideal-twin", action="store_true",
+                        help="an ideal twin: no unmodelled effect, truth = the model (or "
+                             "--truth), for comparisons")
+
+
+def twin_setup(args, model: RobotDescription | None = None
+               ) -> tuple[RobotDescription | None, RigImperfections | None]:
+    """(truth, imperfections) from ``add_twin_arguments``' options; ``None`` = the defaults."""
+    truth = load_description(args.truth) if args.truth else None
+    if args.ideal_twin:
+        return truth or model or load_description(), RigImperfections.none()
+    return truth, None

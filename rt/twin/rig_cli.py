@@ -43,6 +43,9 @@ def register_rig_command(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--rate", type=float, default=1000.0, help="rig rate, Hz (default 1000)")
     p.add_argument("--fifo", type=int, default=None, metavar="PRIORITY",
                    help="try SCHED_FIFO at this priority (default: normal scheduling)")
+    from rt.twin.realism import add_twin_arguments
+
+    add_twin_arguments(p)
     p.set_defaults(func=cmd_rig)
 
 
@@ -70,8 +73,12 @@ def cmd_rig(args: argparse.Namespace) -> int:
             previous[sig] = signal.signal(sig, _stop)
     try:
         try:
+            from rt.twin.realism import twin_setup
+
+            truth, imperfections = twin_setup(args)
             rig = RigProcess(args.shm, args.env, args.seed, rate_hz=args.rate,
-                             watchdog_timeout_s=args.watchdog_ms * 1e-3)
+                             watchdog_timeout_s=args.watchdog_ms * 1e-3, truth=truth,
+                             imperfections=imperfections)
         except TalusError as exc:
             _emit({"error": str(exc)})
             return EXIT_ERROR
