@@ -150,3 +150,58 @@ def test_ati_cable_pulls_the_platform_down():
     plant.advance(0.001, (0.0, 0.0, 0.0))
     # Level platform: each slider carries a third of the cable's pull.
     np.testing.assert_allclose(plant.cable_tau, -2.0 / 3.0, rtol=0.01)
+
+
+def test_a_failover_card_switch_does_not_close_the_brakes():
+    plant = TwinPlant(load_description(), imperfections=only(brake_holding_force_n=2500.0))
+    plant.set_drives_enabled(True)
+    for _ in range(50):                                     # brakes open after 30 ms
+        plant.advance(0.001, (0.0, 0.0, 0.0))
+    assert not plant.brakes_engaged
+    plant.set_drives_enabled(False)                         # card 0 off, card 1 on: same instant
+    plant.set_drives_enabled(True)
+    for _ in range(50):
+        plant.advance(0.001, (0.0, 0.0, 0.0))
+        assert not plant.brakes_engaged
+    plant.set_drives_enabled(False)                         # a real stop: closed after 20 ms
+    plant.advance(0.015, (0.0, 0.0, 0.0))
+    plant.advance(0.001, (0.0, 0.0, 0.0))
+    assert not plant.brakes_engaged
+    plant.advance(0.010, (0.0, 0.0, 0.0))
+    plant.advance(0.001, (0.0, 0.0, 0.0))
+    assert plant.brakes_engaged
+
+
+def _frozen_trip_time(sup, t0: float, seconds: float, qd_ref: float = 0.01) -> float | None:
+    """Feed a still encoder and a reference moving at ``qd_ref`` (m/s) from t0; time of the
+    frozen-encoder trip."""
+    dt = sup.period_s
+    z3 = (0.0, 0.0, 0.0)
+    for k in range(int(seconds / dt)):
+        t = t0 + (k + 1) * dt
+        sup.check(t, dt, (0.2, 0.2, 0.2), 0, z3, z3, True, 0.0, 0.0, 0.0, 0.0,
+                  (0.2, 0.2, 0.2), (qd_ref,) * 3, z3, 0.0, False, False, False, False,
+                  False)
+        if any(c.startswith("encoder_frozen") for c in sup.causes):
+            return t
+    return None
+
+
+def test_supervisor_waits_for_the_brakes_before_judging_a_frozen_encoder():
+    from rt.safety.limits import PatientLimits, RobotLimits, effective
+    from rt.safety.supervisor import Supervisor
+
+    lim = effective((0.0, 0.4), RobotLimits(), PatientLimits())
+    sup = Supervisor(lim, 0.001)
+    # At start the drives were just enabled: the brakes hold the axes for brake_release_s,
+    # then the 50 ms frozen window runs.
+    t = _frozen_trip_time(sup, 0.0, 0.3)
+    assert t == pytest.approx(sup.brake_release_s + RobotLimits().frozen_encoder_s, abs=2e-3)
+    # After a hard stop and its reset the same wait applies again.
+    sup = Supervisor(lim, 0.001)
+    sup.request_estop("cli")
+    _frozen_trip_time(sup, 1.0, 0.01, qd_ref=0.0)    # stopped: the reference follows the robot
+    sup.request_reset()
+    t = _frozen_trip_time(sup, 2.0, 0.3)
+    assert t == pytest.approx(2.0 + sup.brake_release_s + RobotLimits().frozen_encoder_s,
+                              abs=3e-3)

@@ -21,7 +21,6 @@ from rt.control.experiment import benchmark_reference
 from rt.engine import Component
 from rt.model import RobotModel
 from rt.position_loop import PositionLoop, build_sim_position_loop
-from rt.twin.realism import RigImperfections
 from rt.safety.events import Reaction
 from rt.safety.limits import PatientLimits
 from rt.twin.environment import CompliantAnkle, FreeMotion
@@ -150,10 +149,8 @@ def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
                  t_fault: float = FAULT_AT_S) -> dict:
     holder: list = []
     probe = TruthProbe("truth", holder, int(seconds * 1000) + 10)
-    # Judged on the ideal twin for now: on the realistic one (issue 15) seven rows miss their
-    # targets and have not been retuned yet (see issue 15's closing note).
+    # On the default, realistic twin (truth apart from the model, the rig's imperfections).
     pl = build_sim_position_loop("paden_panja", trajectory=sc.trajectory, duration_s=60.0,
-                                 imperfections=RigImperfections.none(),
                                  environment=sc.environment, patient_limits=sc.patient,
                                  model=model, extra_blocks=[probe])
     holder.append(pl)

@@ -561,6 +561,18 @@ def drive_current(volts, bodies, out):
 
 
 @njit(cache=True)
+def coulomb_level(q, v, friction, i):
+    """Axis i's Coulomb/Stribeck friction level (N, ≥ 0) at position q and velocity v."""
+    x = v / friction[9]
+    level = friction[3 + i] + (friction[6 + i] - friction[3 + i]) * math.exp(-x * x)
+    ripple = friction[17]
+    if ripple != 0.0:
+        level *= 1.0 + ripple * math.sin(2.0 * math.pi * q / friction[18]
+                                         + 2.0 * math.pi * i / 3.0)
+    return friction[14 + i] * level
+
+
+@njit(cache=True)
 def _toward_zero(v, dv):
     """A Coulomb force that can remove at most ``dv`` of velocity this step: sticks at 0."""
     if v > dv:
@@ -571,8 +583,9 @@ def _toward_zero(v, dv):
 
 
 @njit(cache=True)
-def integrate_real(geom, bodies, friction, env, real, q, qd, phi, xm, vm, current, cable_tau,
-                   volts, volts_prev, delay_steps, n_steps, h_step, env_state, qdd, wrench_s):
+def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi, xm, vm, current,
+                   cable_tau, volts, volts_prev, delay_steps, n_steps, h_step, env_state, qdd,
+                   wrench_s):
     """Semi-implicit Euler with the rig's imperfections (``real``, see ``R_*``).
 
     State beyond (q, q̇): motor positions/velocities at the slider ``xm``, ``vm`` (m, m/s; equal
@@ -580,7 +593,12 @@ def integrate_real(geom, bodies, friction, env, real, q, qd, phi, xm, vm, curren
     forces ``cable_tau`` (N, from the previous substep's pose: the cable changes slowly).
     The amplifiers see ``volts_prev`` for the first ``delay_steps`` substeps, then ``volts``.
     With a compliant screw, ``bodies`` must carry zero rotor inertia (the rotors are integrated
-    here with ``real[R_JR:R_JR+3]``). Brakes remove at most hold·h/m of velocity per substep
+    here with ``real[R_JR:R_JR+3]``), ``friction`` is the slider side's share (guides, seals)
+    and ``friction_motor`` the motor side's (screw bearings, nut drag), acting on v_m. The
+    slider is light (a few kg) and its stiction is sharp (≈ 1e5-1e6 N s/m near zero), beyond
+    what an explicit step can integrate at 5 kHz: its Coulomb/Stribeck part is applied
+    implicitly (the velocity update it can remove, with exact stick), its viscous part
+    explicitly. Brakes remove at most hold·h/m of velocity per substep
     (exact stick when the net force is below the holding force).
     """
     cmd_new = np.empty(3)
@@ -598,7 +616,10 @@ def integrate_real(geom, bodies, friction, env, real, q, qd, phi, xm, vm, curren
     hb = np.empty(3)
     tau_env = np.empty(3)
     fr = np.empty(3)
+    frm = np.zeros(3)
     work = np.empty(WORK_SIZE)
+    viscous_only = friction.copy()
+    viscous_only[14:17] = 0.0
     fpa = bodies[B_F_PER_A]
     alpha = real[R_AMP_ALPHA]
     k = real[R_SCREW_K]
@@ -629,16 +650,20 @@ def integrate_real(geom, bodies, friction, env, real, q, qd, phi, xm, vm, curren
         else:
             for i in range(3):
                 force[i] = fpa * current[i] + cable_tau[i]
-        st = acceleration(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd,
-                          wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr, work)
+        st = acceleration(geom, bodies, viscous_only if k > 0.0 else friction, env, q, qd, phi,
+                          force, env_state, qdd, wrench_s, rot, pos, S, Sd, twist, M, hb,
+                          tau_env, fr, work)
         if st != STATUS_OK:
             return st
+        if k > 0.0:
+            friction_force(xm, vm, friction_motor, frm)
         for i in range(3):
             if k > 0.0:
-                qd[i] += h_step * qdd[i]
+                level = coulomb_level(q[i], qd[i], friction, i)
+                qd[i] = _toward_zero(qd[i] + h_step * qdd[i], h_step * level / M[i, i])
                 q[i] += h_step * qd[i]
                 jr = real[R_JR + i]
-                v = vm[i] + h_step * (fpa * current[i] - spring[i]) / jr
+                v = vm[i] + h_step * (fpa * current[i] - spring[i] - frm[i]) / jr
                 if brake:
                     v = _toward_zero(v, h_step * hold / jr)
                 vm[i] = v

@@ -69,6 +69,12 @@ class TwinPlant:
         imp = self.imperfections
         self.friction[17:19] = (imp.friction_ripple, imp.friction_ripple_period_m)
         self.temperature_rise_k = np.full(3, imp.initial_temperature_rise_k)
+        # With a compliant screw the friction is split (RigImperfections.motor_side_friction):
+        # ``friction`` stays the whole (for heat and reports), the kernels get the two shares.
+        split = imp.motor_side_friction if imp.screw_stiffness_n_per_m > 0.0 else 0.0
+        self._friction_split = split
+        self.friction_slider = self.friction.copy()
+        self.friction_motor = self.friction.copy()
         self._update_temperature_scales()
         self.real = np.zeros(physics.N_REAL)
         self.payload: Payload | None = None
@@ -121,6 +127,12 @@ class TwinPlant:
             dt_k = self.temperature_rise_k[i]
             self.friction[11 + i] = max(0.2, 1.0 + imp.viscous_per_k * dt_k)
             self.friction[14 + i] = max(0.2, 1.0 + imp.coulomb_per_k * dt_k)
+        if hasattr(self, "friction_slider"):
+            split = self._friction_split
+            self.friction_slider[:] = self.friction
+            self.friction_slider[11:17] *= 1.0 - split
+            self.friction_motor[:] = self.friction
+            self.friction_motor[11:17] *= split
 
     def _rise(self) -> float:
         g = self.description.geometry
@@ -195,14 +207,18 @@ class TwinPlant:
         return bool(self.real[physics.R_BRAKE_ON] > 0.5)
 
     def _update_brakes(self) -> None:
+        """The brakes' state: engaged ``brake_engage_s`` after the drives went off, released
+        ``brake_release_s`` after they came back on; a shorter interruption (a DAC failover's
+        card switch) changes nothing."""
         imp = self.imperfections
         if imp.brake_holding_force_n <= 0.0:
             return
         since = self.t - self._drives_changed_t
-        if self._drives_on:
-            on = since < imp.brake_release_s
-        else:
-            on = since >= imp.brake_engage_s
+        on = self.real[physics.R_BRAKE_ON] > 0.5
+        if self._drives_on and on and since >= imp.brake_release_s:
+            on = False
+        elif not self._drives_on and not on and since >= imp.brake_engage_s:
+            on = True
         self.real[physics.R_BRAKE_ON] = 1.0 if on else 0.0
 
     def advance(self, dt: float, volts) -> None:
@@ -224,7 +240,8 @@ class TwinPlant:
                 self._delay_left = int(self.real[physics.R_AMP_DELAY_STEPS])
             self._update_brakes()
             status = physics.integrate_real(
-                self.geom, self.bodies, self.friction, self.env, self.real, self.q, self.qd,
+                self.geom, self.bodies, self.friction_slider, self.friction_motor, self.env,
+                self.real, self.q, self.qd,
                 self.phi, self.xm, self.vm, self.current, self.cable_tau, v, self._volts_prev,
                 self._delay_left, n, dt / n, self.env_state, self.qdd, self.wrench_s)
             self._delay_left = max(0, self._delay_left - n)

@@ -20,6 +20,10 @@ Two things separate a real rig from the model its controllers use:
      series with nut (≈ 3e8) and support bearings (≈ 4e8), ≈ 6e7 N/m; structural damping ratio
      ``screw_damping_ratio`` 5 %; ``backlash_m`` 20 µm total (a rolled, non-preloaded nut plus
      coupling slack: catalogue values 10-50 µm);
+   * friction split across the screw (``motor_side_friction``: half of the friction the lab
+     measures at the slider acts on the motor side — the screw's support bearings and the
+     nut's preload drag torque — and half on the slider — linear guides and seals); it
+     matters once the screw is compliant and backlashed;
    * friction: the Coulomb level ripples with position (``friction_ripple``, ±8 % once per screw
      revolution: nut preload varies with the screw's straightness and the balls' recirculation),
      and viscous and Coulomb levels fall as the grease warms (``viscous_per_k`` −1.5 %/K,
@@ -70,6 +74,7 @@ class RigImperfections(BaseModel):
     screw_stiffness_n_per_m: NonNeg = 6.0e7
     screw_damping_ratio: NonNeg = 0.05
     backlash_m: Annotated[float, Field(ge=0.0, le=0.001)] = 2.0e-5
+    motor_side_friction: Fraction = 0.5
     friction_ripple: Fraction = 0.08
     friction_ripple_period_m: Annotated[float, Field(gt=0.0)] = 0.005
     viscous_per_k: Annotated[float, Field(ge=-0.05, le=0.0)] = -0.015
@@ -88,7 +93,7 @@ class RigImperfections(BaseModel):
     @classmethod
     def none(cls) -> "RigImperfections":
         """Every effect off: the ideal twin (rigid, instantaneous, no brake, no cable)."""
-        return cls(current_loop_bandwidth_hz=0.0, amplifier_delay_s=0.0,
+        return cls(current_loop_bandwidth_hz=0.0, amplifier_delay_s=0.0, motor_side_friction=0.0,
                    screw_stiffness_n_per_m=0.0, backlash_m=0.0, friction_ripple=0.0,
                    viscous_per_k=0.0, coulomb_per_k=0.0, encoder_latency_s=0.0,
                    ati_filter_hz=0.0, brake_holding_force_n=0.0, cable_weight_n=0.0,
