@@ -44,3 +44,25 @@ def test_bench_tracking_cli_json():
     pid, paden = out["controllers"]["pid"], out["controllers"]["paden_panja"]
     assert pid["peak_abs_m"] > paden["peak_abs_m"]
     assert out["thesis"]["pid"]["peak_abs_mm"] == 7.0
+
+
+def test_thesis_profile_at_100_hz_keeps_the_shape_and_the_fig50_ordering():
+    proc = subprocess.run([sys.executable, "-m", "rt.cli", "bench", "tracking", "--profile",
+                           "thesis", "--experiment", "parameter-step", "--rate", "100",
+                           "--seconds", "16", "--json"],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["rate_hz"] == 100.0 and out["profile"] == "thesis"
+    assert out["twin"] == "realistic"
+    pp, ad = out["controllers"]["paden_panja"], out["controllers"]["adaptive"]
+    # Fig. 50's ordering: after the parameter change Paden-Panja's error grows, the adaptive
+    # law's does not.
+    assert pp["period2"]["mean_abs_m"] > 3 * pp["period1"]["mean_abs_m"]
+    assert pp["period2"]["mean_abs_m"] > 3 * ad["period2"]["mean_abs_m"]
+
+
+def test_bench_tracking_refuses_bad_options():
+    proc = subprocess.run([sys.executable, "-m", "rt.cli", "bench", "tracking", "--profile",
+                           "thesis", "--rate", "50"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "--rate" in proc.stderr

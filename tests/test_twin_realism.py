@@ -205,3 +205,18 @@ def test_supervisor_waits_for_the_brakes_before_judging_a_frozen_encoder():
     t = _frozen_trip_time(sup, 2.0, 0.3)
     assert t == pytest.approx(2.0 + sup.brake_release_s + RobotLimits().frozen_encoder_s,
                               abs=3e-3)
+
+
+def test_ati_reading_carries_its_tool_side_weight_turning_with_the_tilt():
+    imp = only(ati_tool_mass_kg=0.4, ati_tool_com_m=0.03)
+    twin = Twin(load_description(), imperfections=imp)
+    mg = 0.4 * 9.81
+    level = twin._filtered_wrench(0.001).copy()
+    np.testing.assert_allclose(level[:3], (0.0, 0.0, -mg), atol=1e-9)
+    cfg = twin.plant.kin.ik(0.633, 0.2, 0.0)                 # 0.2 rad roll
+    twin.place(cfg.q)
+    tilted = twin._filtered_wrench(0.001)
+    # The weight seen in S: |F| unchanged, a component along y_S of m g sin(roll).
+    assert np.linalg.norm(tilted[:3]) == pytest.approx(mg)
+    assert abs(tilted[1]) == pytest.approx(mg * math.sin(0.2), rel=1e-3)
+    assert tilted[3] == pytest.approx(-0.03 * tilted[1])    # M = c × F, c = (0, 0, h)

@@ -23,6 +23,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_tracking)
     register_loop(commands)
     p = commands.add_parser("force", help="force tracking on the twin: sine Fz and gait replay")
+    p.add_argument("--robot", help="the description the controllers use (default: nominal)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_force)
 
@@ -101,7 +102,9 @@ def _loop(args) -> int:
 def _force(args) -> int:
     from rt.benchmarks.force import run_force_benchmark
 
-    r = run_force_benchmark()
+    from rt.model.description import load_description
+
+    r = run_force_benchmark(load_description(args.robot) if args.robot else None)
     if args.json:
         print(json.dumps(r))
     else:

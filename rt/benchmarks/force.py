@@ -24,11 +24,11 @@ ramp_out_s: 2.0
 """
 
 
-def _sine_error(freq: float) -> float:
+def _sine_error(freq: float, model=None) -> float:
     from protocols.session import FREF, PHASE, W, SessionSetup, _build, _run
     from rt.model import RobotModel
 
-    model = RobotModel.load()
+    model = model or RobotModel.load()
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "sine.yaml"
         path.write_text(SINE.format(f=freq, cycles=max(4, int(round(10 * freq)))))
@@ -43,19 +43,28 @@ def _sine_error(freq: float) -> float:
     return float(np.sqrt(np.mean(e ** 2)) / 100.0 * 100.0)
 
 
-def _gait_error() -> float:
+def _gait_error(model=None) -> float:
     from protocols.library import list_library
     from protocols.session import SessionSetup, run_session
 
     path = next(p for p in list_library() if p.name == "gait_replay.yaml")
-    summary = run_session(SessionSetup(path, patient_weight_kg=75.0), None, realtime=False)
+    summary = run_session(SessionSetup(path, patient_weight_kg=75.0), None, realtime=False,
+                          model=model)
     return float(summary["rms_error_pct"])
 
 
-def run_force_benchmark() -> dict:
+def run_force_benchmark(robot=None) -> dict:
+    """The figures on the default (realistic) twin, the controllers using ``robot`` (a
+    description; default the nominal one)."""
+    from rt.model import RobotModel
+
+    def model():
+        return RobotModel.from_description(robot) if robot is not None else RobotModel.load()
+
     return {"twin": True, "environment": "compliant foot (1e5 N/m)",
-            "sine_rms_pct": {"0.5": _sine_error(0.5), "1": _sine_error(1.0),
-                             "2": _sine_error(2.0)},
-            "gait_rms_pct_of_peak": _gait_error()}
+            "robot": "nominal" if robot is None else robot.name,
+            "sine_rms_pct": {"0.5": _sine_error(0.5, model()), "1": _sine_error(1.0, model()),
+                             "2": _sine_error(2.0, model())},
+            "gait_rms_pct_of_peak": _gait_error(model())}
 
 

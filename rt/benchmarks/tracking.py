@@ -211,7 +211,3 @@ def table(results: list[dict]) -> str:
                              f"{ratio:>6s}")
     return "\n".join(lines)
 
-
-def fig50_table(result: dict) -> str:
-    """Kept for the demo: the fig. 50 table of one payload/parameter-step result."""
-    return table([result])

@@ -585,7 +585,7 @@ def _toward_zero(v, dv):
 @njit(cache=True)
 def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi, xm, vm, current,
                    cable_tau, volts, volts_prev, delay_steps, n_steps, h_step, env_state, qdd,
-                   wrench_s):
+                   wrench_s, rot_out):
     """Semi-implicit Euler with the rig's imperfections (``real``, see ``R_*``).
 
     State beyond (q, q̇): motor positions/velocities at the slider ``xm``, ``vm`` (m, m/s; equal
@@ -681,4 +681,7 @@ def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi
             fz = -(cable_w + cable_k * (pos[2] - real[R_CABLE_Z]))
             for j in range(3):
                 cable_tau[j] = twist[2, j] * fz
+    for a in range(3):
+        for b in range(3):
+            rot_out[a, b] = rot[a, b]
     return STATUS_OK

@@ -92,6 +92,7 @@ class TwinPlant:
         self.cable_tau = np.zeros(3)
         self.phi = np.full(3, self.kin.phi_nominal)
         self.wrench_s = np.zeros(6)
+        self.rot = np.eye(3)            # R_BP after the last advance (realistic path)
         self.t = 0.0
         self._volts = np.zeros(3)
         self._volts_prev = np.zeros(3)
@@ -189,6 +190,7 @@ class TwinPlant:
         self.xm[:] = q
         self.vm[:] = qd
         self.cable_tau[:] = 0.0
+        self.rot[:] = np.array(cfg.rotation).reshape(3, 3)
 
     @property
     def motor_position(self) -> np.ndarray:
@@ -243,7 +245,7 @@ class TwinPlant:
                 self.geom, self.bodies, self.friction_slider, self.friction_motor, self.env,
                 self.real, self.q, self.qd,
                 self.phi, self.xm, self.vm, self.current, self.cable_tau, v, self._volts_prev,
-                self._delay_left, n, dt / n, self.env_state, self.qdd, self.wrench_s)
+                self._delay_left, n, dt / n, self.env_state, self.qdd, self.wrench_s, self.rot)
             self._delay_left = max(0, self._delay_left - n)
             self._heat(dt)
         if status != physics.STATUS_OK:

@@ -38,6 +38,10 @@ Two things separate a real rig from the model its controllers use:
      a 2 N m brake through a 5 mm lead ≈ 2500 N) that engages ``brake_engage_s`` after the
      drives are disabled (spring brakes: 15-30 ms) and releases ``brake_release_s`` after they
      are enabled again;
+   * the ATI's own mass on its measuring side: the tool-side half of the transducer, its
+     adapter and the tool tip (``ati_tool_mass_kg`` 0.4 kg, COM ``ati_tool_com_m`` 30 mm
+     above the measurement origin) hang on the gauges, so the reading carries their weight,
+     turning with the platform's tilt (the product must bias the sensor before force work);
    * the ATI cable, hanging from the platform to a fixed point: its weight share and the
      stiffness of the loop it forms pull the platform down (``cable_weight_n`` 2 N at home,
      ``cable_stiffness_n_per_m`` 30 N/m per metre of heave).
@@ -87,6 +91,8 @@ class RigImperfections(BaseModel):
     brake_holding_force_n: NonNeg = 2500.0
     brake_engage_s: NonNeg = 0.02
     brake_release_s: NonNeg = 0.03
+    ati_tool_mass_kg: NonNeg = 0.4
+    ati_tool_com_m: Annotated[float, Field(ge=0.0, le=0.5)] = 0.03
     cable_weight_n: NonNeg = 2.0
     cable_stiffness_n_per_m: NonNeg = 30.0
 
@@ -96,7 +102,8 @@ class RigImperfections(BaseModel):
         return cls(current_loop_bandwidth_hz=0.0, amplifier_delay_s=0.0, motor_side_friction=0.0,
                    screw_stiffness_n_per_m=0.0, backlash_m=0.0, friction_ripple=0.0,
                    viscous_per_k=0.0, coulomb_per_k=0.0, encoder_latency_s=0.0,
-                   ati_filter_hz=0.0, brake_holding_force_n=0.0, cable_weight_n=0.0,
+                   ati_filter_hz=0.0, brake_holding_force_n=0.0, ati_tool_mass_kg=0.0,
+                   cable_weight_n=0.0,
                    cable_stiffness_n_per_m=0.0)
 
     @property

@@ -77,6 +77,9 @@ class Twin:
         self._ati_tau_s = (0.0 if self.imperfections.ati_filter_hz <= 0.0
                            else 1.0 / (2.0 * math.pi * self.imperfections.ati_filter_hz))
         self._wrench_filtered = np.zeros(6)
+        self._wrench_sensed = np.zeros(6)
+        self._tool_mg = self.imperfections.ati_tool_mass_kg * self.description.gravity_m_s2
+        self._tool_com = self.imperfections.ati_tool_com_m
         self._encoder_q = np.zeros(3)
         self.rng = np.random.default_rng(seed)
         self.clock = clock
@@ -113,6 +116,8 @@ class Twin:
         self.plant.set_state(q, qd)
         self.encoder_port.set_positions_m(self.plant.q)
         self._wrench_filtered[:] = self.plant.wrench_s
+        if self._ati_tau_s != 0.0:
+            self._wrench_filtered[:] = self._filtered_wrench(1e9)      # settled at placement
 
     def home_encoders(self) -> None:
         """Preset the counters so the decoded positions are absolute (the rig's homing)."""
@@ -175,13 +180,30 @@ class Twin:
         return e
 
     def _filtered_wrench(self, dt: float) -> np.ndarray:
-        """The true wrench through the sensor's first-order low-pass filter (exact for a
-        wrench held over ``dt``)."""
+        """What the gauges feel — the environment's wrench plus the weight of the sensor's
+        tool side (static: its inertial part is < 4 % of it at the robot's accelerations) —
+        through the sensor's first-order low-pass filter (exact for a wrench held over
+        ``dt``)."""
+        w_in = self.plant.wrench_s
+        if self._tool_mg != 0.0:
+            # Weight −m g ẑ_B in the sensor frame S (axes of P): −m g R_BPᵀ ẑ = −m g (row 2 of
+            # R); its moment about the origin, the COM at c = (0, 0, h) in S: c × F.
+            r = self.plant.rot
+            w_in = self._wrench_sensed
+            w_in[:] = self.plant.wrench_s
+            fx, fy, fz = (-self._tool_mg * r[2, 0], -self._tool_mg * r[2, 1],
+                          -self._tool_mg * r[2, 2])
+            h = self._tool_com
+            w_in[0] += fx
+            w_in[1] += fy
+            w_in[2] += fz
+            w_in[3] += -h * fy
+            w_in[4] += h * fx
         if self._ati_tau_s == 0.0:
-            return self.plant.wrench_s
+            return w_in
         a = 1.0 - math.exp(-dt / self._ati_tau_s)
         w = self._wrench_filtered
-        w += a * (self.plant.wrench_s - w)
+        w += a * (w_in - w)
         return w
 
     def _update_sensors(self, chunk: float) -> None:
