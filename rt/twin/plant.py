@@ -27,6 +27,9 @@ END_STOP_MARGIN_M = 0.005
 END_STOP_STIFFNESS_N_PER_M = 5.0e6
 END_STOP_DAMPING_N_S_PER_M = 2.0e4
 
+#: How often the temperatures and friction scales are updated (s).
+_HEAT_PERIOD_S = 0.1
+
 INTEGRATORS = {"symplectic_euler": physics.INTEGRATOR_SYMPLECTIC_EULER,
                "rk4": physics.INTEGRATOR_RK4}
 
@@ -69,6 +72,8 @@ class TwinPlant:
         imp = self.imperfections
         self.friction[17:19] = (imp.friction_ripple, imp.friction_ripple_period_m)
         self.temperature_rise_k = np.full(3, imp.initial_temperature_rise_k)
+        self._heat_energy = [0.0, 0.0, 0.0]      # J since the last temperature update
+        self._heat_time = 0.0
         # With a compliant screw the friction is split (RigImperfections.motor_side_friction):
         # ``friction`` stays the whole (for heat and reports), the kernels get the two shares.
         split = imp.motor_side_friction if imp.screw_stiffness_n_per_m > 0.0 else 0.0
@@ -254,17 +259,27 @@ class TwinPlant:
         self.t += dt
 
     def _heat(self, dt: float) -> None:
-        """First-order thermal model per axis: friction power in, convection out."""
+        """First-order thermal model per axis: friction power in, convection out. The friction
+        power is sampled every call; the temperature and the friction scales are updated every
+        ``_HEAT_PERIOD_S`` (the thermal time constant is minutes: R C = 400 s)."""
         imp = self.imperfections
         if imp.viscous_per_k == 0.0 and imp.coulomb_per_k == 0.0:
             return
         fr = self.friction
-        cap = imp.heat_capacity_j_per_k
-        res = imp.thermal_resistance_k_per_w
+        acc = self._heat_energy
         for i in range(3):
             v = float(self.qd[i])
-            power = fr[11 + i] * fr[i] * v * v + fr[14 + i] * fr[3 + i] * abs(v)
-            self.temperature_rise_k[i] += dt * (power - self.temperature_rise_k[i] / res) / cap
+            acc[i] += dt * (fr[11 + i] * fr[i] * v * v + fr[14 + i] * fr[3 + i] * abs(v))
+        self._heat_time += dt
+        if self._heat_time < _HEAT_PERIOD_S:
+            return
+        cap = imp.heat_capacity_j_per_k
+        res = imp.thermal_resistance_k_per_w
+        span = self._heat_time
+        for i in range(3):
+            self.temperature_rise_k[i] += (acc[i] - span * self.temperature_rise_k[i] / res) / cap
+            acc[i] = 0.0
+        self._heat_time = 0.0
         self._update_temperature_scales()
 
     @property
