@@ -32,7 +32,7 @@ $(STAMP): pyproject.toml
 demo: setup
 	$(BIN)/talus model demo
 	@echo
-	$(BIN)/talus bench tracking --experiment payload-step
+	$(BIN)/talus bench tracking --experiment parameter-step --rate 100
 	@echo
 	@mkdir -p out
 	$(BIN)/talus db demo --db out/demo.db

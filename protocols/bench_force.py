@@ -52,11 +52,13 @@ def _gait_error(model) -> float:
 
 
 def run_force_benchmark(model=None) -> dict:
-    """Sine Fz and gait figures on ``model`` (default: the nominal robot)."""
+    """The figures on the default (realistic) twin, the controllers using ``model`` (default:
+    the nominal robot)."""
     from rt.model import RobotModel
 
     model = model or RobotModel.load()
     return {"twin": True, "environment": "compliant foot (1e5 N/m)",
+            "robot": model.description.name,
             "sine_rms_pct": {"0.5": _sine_error(0.5, model), "1": _sine_error(1.0, model),
                              "2": _sine_error(2.0, model)},
             "gait_rms_pct_of_peak": _gait_error(model)}

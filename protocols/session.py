@@ -98,7 +98,8 @@ def _build(setup: SessionSetup, model: RobotModel, mode: str):
     clock = SimClock()
     z0, roll0, pitch0 = start_pose(gen)
     env = _environment(setup, z0 + model.description.sensor.offset_m[2], roll0, pitch0)
-    twin = Twin(model.description, env, seed=setup.seed, clock=clock)
+    # The twin is "the real rig" (its own perturbed truth and imperfections), not the model.
+    twin = Twin(None, env, seed=setup.seed, clock=clock)
     twin.place(model.kin.ik(z0, roll0, pitch0).q)
     n = int((report.duration_s + 15.0) * RATE_HZ)
     tap = SignalTap("session", SESSION_SIGNALS, capacity=n)

@@ -24,11 +24,13 @@ from rt.engine import Component, Graph, GraphBuilder, Loop
 from rt.model import RobotModel
 from rt.references.program import Program, TrajectoryProgram
 from rt.references.sequencer import ProgramReference
+from rt.model.description import RobotDescription
 from rt.safety.events import EventLog
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
 from rt.safety.supervisor import Supervisor, supervisor_physics
 from rt.twin.backends import TwinActuators, TwinDigitalInputs, TwinEncoders, TwinForceTorque
 from rt.twin.environment import FreeMotion
+from rt.twin.realism import RigImperfections
 from rt.twin.twin import SimClock, Twin
 
 
@@ -102,12 +104,18 @@ def build_sim_position_loop(controller: str = "paden_panja", gains: dict | None 
                             environment=None, rate_hz: float = 1000.0, mode: str = "fast",
                             seed: int = 0, start_q: tuple[float, float, float] = (0.2, 0.2, 0.2),
                             model: RobotModel | None = None, twin: Twin | None = None,
+                            truth: RobotDescription | None = None,
+                            imperfections: RigImperfections | None = None,
                             **kwargs) -> PositionLoop:
-    """A configured, started position loop on the in-process twin (``.loop.run(...)``)."""
+    """A configured, started position loop on the in-process twin (``.loop.run(...)``).
+
+    The controllers use ``model`` (what the lab believes); the twin is ``twin``, or one built
+    from ``truth`` (default: the realistic twin's perturbed truth) and ``imperfections``."""
     model = model or RobotModel.load()
     clock = SimClock()
     if twin is None:
-        twin = Twin(model.description, environment or FreeMotion(), seed=seed, clock=clock)
+        twin = Twin(truth, environment or FreeMotion(), seed=seed, clock=clock,
+                    imperfections=imperfections)
         twin.place(start_q)
     else:
         twin.clock = clock

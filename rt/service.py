@@ -87,6 +87,11 @@ class RtConfig(BaseModel):
     robot: str | None = None
     #: CurveZMQ keys; required when an endpoint is not loopback (rt.ipc.security).
     curve: ServerCurveConfig | None = None
+    #: Backend sim: the twin's own description (default: ``robot`` perturbed by the
+    #: documented, seeded amount, with the rig's imperfections; rt.twin.realism).
+    truth: str | None = None
+    #: Backend sim: an ideal twin (truth = the model, no unmodelled effect), for comparisons.
+    ideal_twin: bool = False
     rate_hz: float = Field(1000.0, ge=100.0, le=2000.0)
     #: "realtime" paces the loop by the clock; "fast" (the twin only) runs it back to back in
     #: simulated time, for demos and tests.
@@ -740,8 +745,16 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
                                      "(see rt/data/rig_example.yaml)")
         devices = rig_devices(config.rig, model.description)
     else:
+        from rt.model.description import load_description
+        from rt.twin.realism import DEFAULT_TRUTH_SEED, RigImperfections, perturbed_truth
+
         clock = SimClock()
-        twin = Twin(model.description, parse_environment(config.environment), clock=clock)
+        imperfections = RigImperfections.none() if config.ideal_twin else None
+        truth = load_description(config.truth) if config.truth else \
+            model.description if config.ideal_twin else \
+            perturbed_truth(model.description, DEFAULT_TRUTH_SEED) if config.robot else None
+        twin = Twin(truth, parse_environment(config.environment), clock=clock,
+                    imperfections=imperfections)
         twin.place((0.2, 0.2, 0.2))
         devices = sim_devices(twin, clock)
     return build_protocol_loop(devices, None, **common), tap

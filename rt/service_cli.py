@@ -37,6 +37,11 @@ def register_serve(commands: argparse._SubParsersAction,
     p.add_argument("--heartbeat-timeout", type=seconds(hi=5.0), default=None,
                    help="the owner's silence after which a motion soft-stops, s (default: the "
                         "config's, 0.25)")
+    p.add_argument("--truth", default=None, metavar="FILE",
+                   help="with --backend sim: the twin's own description (default: the robot "
+                        "perturbed by the documented amount)")
+    p.add_argument("--ideal-twin", action="store_true",
+                   help="with --backend sim: truth = the model, no unmodelled effect")
     p.add_argument("--fast", action="store_true",
                    help="with --backend sim: run the twin as fast as possible (demos, tests)")
     p.add_argument("--recordings-dir", default=None,
@@ -67,6 +72,10 @@ def _serve(args) -> int:
             updates["robot"] = args.robot
         if args.fast:
             updates["loop_mode"] = "fast"
+        if args.truth:
+            updates["truth"] = args.truth
+        if args.ideal_twin:
+            updates["ideal_twin"] = True
         if args.heartbeat_timeout is not None:
             updates["heartbeat_timeout_s"] = args.heartbeat_timeout
         if args.recordings_dir:

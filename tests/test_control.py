@@ -2,6 +2,8 @@
 the adaptive law learns a payload; switches are bumpless; gains are validated."""
 from __future__ import annotations
 
+from rt.twin.realism import RigImperfections
+
 import math
 
 import numpy as np
@@ -31,7 +33,10 @@ def _step_reference(q_from: float, q_to: float, t_step: float = 0.2):
 
 @pytest.mark.parametrize("name", ALL)
 def test_converges_on_a_step(name):
-    log = run_tracking(name, 2.5, _step_reference(0.20, 0.205))
+    # Ideal twin: the 60 µm PID bound is about the law; on the realistic twin backlash and
+    # stiction leave a ~0.1 mm limit cycle (issue 15's note).
+    log = run_tracking(name, 2.5, _step_reference(0.20, 0.205),
+                       twin_kwargs={"imperfections": RigImperfections.none()})
     late = log.t > 2.0
     # 5 mm step. Only PID has integral action and holds within 3 encoder counts (60 µm); for the
     # others static friction (≤ 75 N, not in the model at rest) over a stiffness of 3.4e5 N/m
@@ -87,10 +92,22 @@ def test_adaptive_learns_the_payload(robot):
     paden = run_tracking("paden_panja", 8.0, benchmark_reference(), env)
     ctrl = adaptive.controller
     k = ctrl.regressor.base.names.index("slider0.m")
-    nominal = ctrl.nominal[k]
     # The payload's 100 kg load the three legs about equally: slider0.m's base combination holds
-    # platform.m / 3 (plus first-moment terms of the 0.1 m-high COM): ≈ +33 kg.
-    assert ctrl.theta[k] - nominal > 0.8 * 100.0 / 3.0
+    # platform.m / 3 (plus first-moment terms of the 0.1 m-high COM): ≈ +33 kg. The twin is the
+    # realistic one, so the estimate must reach the *truth's* loaded value (its masses differ
+    # from the nominal ones by up to 8 %) within 25 % of the payload's share: the estimate also
+    # absorbs what the model lacks (per-axis friction, screw compliance), and 5 s of this
+    # trajectory are not a persistent excitation — the law is a controller, not an identifier.
+    from rt.model import RobotModel
+    from rt.model.dynamics import Payload
+    from rt.model.regressor import Regressor
+    from rt.twin.realism import default_truth
+
+    truth = RobotModel.from_description(default_truth())
+    truth.dyn.set_payload(Payload(100.0, env.com_m))
+    loaded = Regressor(truth.dyn).theta_base()[k]
+    assert abs(ctrl.theta[k] - loaded) < 0.25 * 100.0 / 3.0
+    assert ctrl.theta[k] - ctrl.nominal[k] > 0.6 * 100.0 / 3.0
     after = adaptive.t > 4.0
     assert np.abs(adaptive.error[after]).mean() < 0.2 * np.abs(paden.error[after]).mean()
 

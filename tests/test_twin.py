@@ -1,4 +1,8 @@
-"""The digital twin: its physics is the model's, it behaves like the rig, and it fails like it."""
+"""The ideal twin (truth = the nominal model, ``RigImperfections.none()``): its physics
+checked against the model. The rig's imperfections have their signatures in
+``tests/test_twin_realism.py``.
+
+The digital twin: its physics is the model's, it behaves like the rig, and it fails like it."""
 from __future__ import annotations
 
 import math
@@ -24,7 +28,7 @@ M_PER_COUNT = 2e-5
 def _rig(**kwargs):
     """A twin on a simulated clock with every backend open and card 0 driving."""
     clock = SimClock()
-    twin = Twin(clock=clock, **kwargs)
+    twin = Twin.ideal(clock=clock, **kwargs)
     enc = TwinEncoders(twin)
     card0 = TwinActuators(twin, 0)
     card1 = TwinActuators(twin, 1)
@@ -45,7 +49,7 @@ def _run(clock, twin, seconds, dt=0.001):
 @pytest.mark.parametrize("seed", range(5))
 def test_compiled_dynamics_equal_the_pinocchio_model(robot, seed):
     rng = np.random.default_rng(seed)
-    twin = Twin(frictionless=True)
+    twin = Twin.ideal(frictionless=True)
     plant = twin.plant
     cfg = robot.kin.ik(rng.uniform(0.5, 0.78), rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3))
     q, qd = np.array(cfg.q), rng.normal(0.0, 0.2, 3)
@@ -69,7 +73,7 @@ def test_compiled_dynamics_equal_the_pinocchio_model(robot, seed):
     ("rk4", 1e-9),
 ])
 def test_frictionless_unforced_twin_conserves_energy(robot, integrator, tolerance_j):
-    twin = Twin(frictionless=True, integrator=integrator)
+    twin = Twin.ideal(frictionless=True, integrator=integrator)
     twin.place(robot.kin.ik(0.63, 0.05, -0.03).q, (0.05, -0.08, 0.06))
 
     def energy() -> float:
@@ -308,7 +312,7 @@ def test_stop_inputs_follow_the_fault_plan():
     (dict(kind="ati_dropout", t_start=1.0, t_end=0.5), "must be after"),
 ])
 def test_bad_fault_requests_are_refused(kwargs, message):
-    twin = Twin()
+    twin = Twin.ideal()
     with pytest.raises(InputError, match=message):
         twin.faults.schedule(**kwargs)
     assert twin.faults.faults == []
@@ -326,7 +330,7 @@ def test_bad_twin_configuration_is_refused():
 
 
 def test_sim_backends_come_from_the_registry():
-    twin = Twin()
+    twin = Twin.ideal()
     enc = registry.create("encoders", "sim", twin=twin)
     card = registry.create("actuators", "sim", twin=twin, card=1)
     assert isinstance(enc, TwinEncoders) and isinstance(card, TwinActuators)
@@ -337,7 +341,7 @@ def test_sim_backends_come_from_the_registry():
 
 
 def test_payload_parameter_matches_model(robot):
-    twin = Twin(frictionless=True)
+    twin = Twin.ideal(frictionless=True)
     twin.plant.set_payload(Payload(50.0, (0.01, 0.0, 0.05)))
     assert twin.plant.bodies[physics.B_M_PLAT] == pytest.approx(8.0 + 0.9 + 50.0)
 
@@ -350,7 +354,7 @@ def test_rdt_client_reads_the_running_twin_over_udp():
 
     # Plate 2 mm above the tool tip; the drives push ~170 N per axis beyond gravity, so within
     # ~0.1 s the twin (running in real time behind the server) presses the plate.
-    volts = (holding_volts(Twin()) + 0.5).tolist()
+    volts = (holding_volts(Twin.ideal()) + 0.5).tolist()
     source = twin_wrench_source("plate:0.735", volts, seed=1)
     with RdtServer(source, host="127.0.0.1", port=0) as server, \
             RdtForceTorqueSensor("127.0.0.1", server.port, timeout_s=0.2) as client:
@@ -371,7 +375,7 @@ def test_can_client_reads_the_twin_on_the_virtual_bus():
     from rt.ati.can_client import AtiCanForceTorqueSensor, AtiCanResponder
     from rt.twin.serve import twin_wrench_source
 
-    source = twin_wrench_source("plate:0.735", (holding_volts(Twin()) + 0.5).tolist(), seed=2)
+    source = twin_wrench_source("plate:0.735", (holding_volts(Twin.ideal()) + 0.5).tolist(), seed=2)
     bus_twin = can.Bus(interface="virtual", channel="talus-twin-test")
     bus_host = can.Bus(interface="virtual", channel="talus-twin-test")
     try:

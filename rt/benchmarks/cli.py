@@ -4,8 +4,9 @@ from __future__ import annotations
 import argparse
 import json
 
-from rt.model.robot_option import add_robot_option
 from rt.cli_args import name_choice, rate_hz, seconds
+from rt.model.robot_option import add_robot_option
+from rt.twin.realism import add_twin_arguments
 
 #: The controllers rt.control registers (kept here so --help imports no numpy).
 CONTROLLER_NAMES = ("pid", "pd_g", "pd_g0", "paden_panja", "computed_torque_ptp",
@@ -13,35 +14,51 @@ CONTROLLER_NAMES = ("pid", "pd_g", "pd_g0", "paden_panja", "computed_torque_ptp"
 
 
 def register(commands: argparse._SubParsersAction) -> None:
-    p = commands.add_parser("tracking", help="thesis fig. 48/50 tracking experiments on the twin")
-    p.add_argument("--experiment", choices=("pid-vs-paden", "payload-step"), required=True)
+    p = commands.add_parser(
+        "tracking", help="thesis fig. 48/50 tracking experiments through the position loop on "
+                         "the realistic twin")
+    p.add_argument("--experiment", choices=("pid-vs-paden", "parameter-step", "payload-step"),
+                   help="one experiment (default: all three with --profile thesis)")
+    p.add_argument("--profile", choices=("product", "thesis"), default="product",
+                   help="product: 1 kHz; thesis: 100 Hz and 1 kHz, beside the thesis's figures")
+    p.add_argument("--rate", type=rate_hz(100.0, 2000.0), help="one loop rate, Hz (default: "
+                   "the profile's)")
     p.add_argument("--seconds", type=seconds(hi=600.0), default=26.0,
                    help="experiment duration, s (default %(default)s)")
-    p.add_argument("--json", action="store_true")
-    add_robot_option(p)
+    p.add_argument("--robot", help="the description the controllers believe (default: nominal)")
+    add_twin_arguments(p)
+    p.add_argument("--json", action="store_true", help="one JSON object per run (JSON lines)")
     p.set_defaults(func=_tracking)
     register_loop(commands)
 
 
-def _model(args):
-    from rt.model import RobotModel
-
-    return RobotModel.load(args.robot)
-
-
 def _tracking(args) -> int:
-    from rt.benchmarks.tracking import fig50_table, run_experiment
+    from rt.benchmarks.tracking import EXPERIMENTS, run_experiment, table
+    from rt.errors import InputError
+    from rt.model.description import load_description
 
-    result = run_experiment(args.experiment, args.seconds, model=_model(args))
-    if args.json:
-        print(json.dumps(result))
-    elif args.experiment == "payload-step":
-        print(fig50_table(result))
+    robot = load_description(args.robot) if args.robot else None
+    truth = load_description(args.truth) if args.truth else None
+    if args.experiment:
+        experiments = [args.experiment]
+    elif args.profile == "thesis":
+        experiments = list(EXPERIMENTS)
     else:
-        for ctrl, r in result["controllers"].items():
-            print(f"{ctrl:12s} peak |e| {r['peak_abs_m'] * 1e3:.3f} mm, mean |e| "
-                  f"{r['period1']['mean_abs_m'] * 1e3:.3f} / {r['period2']['mean_abs_m'] * 1e3:.3f}"
-                  " mm (periods 1/2)")
+        raise InputError("--experiment is required with --profile product")
+    rates = ([args.rate] if args.rate else [100.0, 1000.0] if args.profile == "thesis"
+             else [1000.0])
+    results = []
+    for rate in rates:
+        for name in experiments:
+            r = run_experiment(name, args.seconds, rate, args.profile, truth, robot,
+                               args.ideal_twin)
+            results.append(r)
+            if args.json:
+                print(json.dumps(r), flush=True)
+    if not args.json:
+        kind = "ideal twin" if args.ideal_twin else "realistic twin (truth apart from the model)"
+        print(f"tracking through the position loop on the {kind}; thesis: real rig, 100 Hz")
+        print(table(results))
     return 0
 
 
@@ -61,6 +78,12 @@ def register_loop(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true")
     add_robot_option(p)
     p.set_defaults(func=_loop)
+
+
+def _model(args):
+    from rt.model import RobotModel
+
+    return RobotModel.load(args.robot)
 
 
 def _loop(args) -> int:

@@ -87,8 +87,11 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
     if environment is not None and isinstance(environment, PayloadStep):
         environment = environment.model_copy(update={"at_s": environment.at_s + t_offset})
     clock = SimClock()
-    twin = Twin(model.description, environment or FreeMotion(), seed=seed, clock=clock,
-                **(twin_kwargs or {}))
+    # The twin is "the real rig" (default truth and imperfections) unless twin_kwargs say
+    # otherwise (e.g. {"imperfections": RigImperfections.none(), "description": ...}).
+    kwargs = dict(twin_kwargs or {})
+    twin = Twin(kwargs.pop("description", None), environment or FreeMotion(), seed=seed,
+                clock=clock, **kwargs)
     if approach is not None:
         twin.place(approach_from)
     else:

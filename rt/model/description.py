@@ -100,8 +100,14 @@ class SensorMount(_Strict):
     offset_m: Vector3
 
 
+PositiveVector3 = Annotated[list[PositiveFloat], Field(min_length=3, max_length=3)]
+NonNegativeVector3 = Annotated[list[NonNegativeFloat], Field(min_length=3, max_length=3)]
+
+
 class Drive(_Strict):
     rotor_inertia_kg_m2: PositiveFloat
+    #: Optional per-axis rotor inertias (kg m²), e.g. from identification; overrides the above.
+    rotor_inertia_per_axis_kg_m2: PositiveVector3 | None = None
     screw_lead_m: PositiveFloat
     screw_efficiency: Annotated[float, Field(gt=0.0, le=1.0)]
     torque_constant_n_m_per_a: PositiveFloat
@@ -113,6 +119,14 @@ class Drive(_Strict):
     def reflected_inertia_kg(self) -> float:
         """Rotor inertia seen at the slider: J (2π / lead)² (kg)."""
         return self.rotor_inertia_kg_m2 * (2.0 * math.pi / self.screw_lead_m) ** 2
+
+    @property
+    def reflected_inertia_axes_kg(self) -> tuple[float, float, float]:
+        """Per-axis reflected rotor inertia (kg): the per-axis values when given, else the
+        common one on every axis."""
+        rotor = self.rotor_inertia_per_axis_kg_m2 or [self.rotor_inertia_kg_m2] * 3
+        k = (2.0 * math.pi / self.screw_lead_m) ** 2
+        return (rotor[0] * k, rotor[1] * k, rotor[2] * k)
 
     @property
     def force_per_amp_n(self) -> float:
@@ -133,6 +147,28 @@ class Friction(_Strict):
     static_n: NonNegativeFloat
     stribeck_velocity_m_s: PositiveFloat
     stiction_smoothing_m_s: PositiveFloat
+    #: Optional per-axis values (identified, or the twin's truth); override the common ones.
+    viscous_per_axis_n_s_per_m: NonNegativeVector3 | None = None
+    coulomb_per_axis_n: NonNegativeVector3 | None = None
+    static_per_axis_n: NonNegativeVector3 | None = None
+
+    @property
+    def viscous_axes(self) -> tuple[float, float, float]:
+        """Viscous coefficient per axis (N s/m)."""
+        v = self.viscous_per_axis_n_s_per_m or [self.viscous_n_s_per_m] * 3
+        return (v[0], v[1], v[2])
+
+    @property
+    def coulomb_axes(self) -> tuple[float, float, float]:
+        """Coulomb level per axis (N)."""
+        v = self.coulomb_per_axis_n or [self.coulomb_n] * 3
+        return (v[0], v[1], v[2])
+
+    @property
+    def static_axes(self) -> tuple[float, float, float]:
+        """Static break-away level per axis (N)."""
+        v = self.static_per_axis_n or [self.static_n] * 3
+        return (v[0], v[1], v[2])
 
 
 class Encoder(_Strict):

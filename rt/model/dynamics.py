@@ -144,10 +144,11 @@ class Dynamics:
         self.data = self.model.createData()
         self._platform_nominal = self.model.inertias[PLATFORM_JOINT].copy()
         self.payload: Payload | None = None
-        self.reflected_inertia = description.drive.reflected_inertia_kg
+        # Per axis (kg, N s/m, N): a description may carry identified per-axis values.
+        self.reflected_inertia = np.array(description.drive.reflected_inertia_axes_kg)
         fr = description.friction
-        self.viscous = fr.viscous_n_s_per_m
-        self.coulomb = fr.coulomb_n
+        self.viscous = np.array(fr.viscous_axes)
+        self.coulomb = np.array(fr.coulomb_axes)
         self.coulomb_v = fr.coulomb_smoothing_m_s
         self.sensor_offset = np.array(description.sensor.offset_m, dtype=float)
         self._state = State()
@@ -192,9 +193,10 @@ class Dynamics:
     def mass_matrix(self, st: State) -> np.ndarray:
         """M(q) (kg), symmetric positive definite, including the reflected motor inertia."""
         m = st.S.T @ (self._tree_mass(st.Q) @ st.S)
-        m[0, 0] += self.reflected_inertia
-        m[1, 1] += self.reflected_inertia
-        m[2, 2] += self.reflected_inertia
+        jr = self.reflected_inertia
+        m[0, 0] += jr[0]
+        m[1, 1] += jr[1]
+        m[2, 2] += jr[2]
         return m
 
     def mcg(self, st: State) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -206,9 +208,10 @@ class Dynamics:
         s_t = st.S.T
         ms = m_tree @ st.S
         m = s_t @ ms
-        m[0, 0] += self.reflected_inertia
-        m[1, 1] += self.reflected_inertia
-        m[2, 2] += self.reflected_inertia
+        jr = self.reflected_inertia
+        m[0, 0] += jr[0]
+        m[1, 1] += jr[1]
+        m[2, 2] += jr[2]
         c = s_t @ (m_tree @ st.Sd + c_tree @ st.S)
         g = s_t @ g_tree
         return m, c, g

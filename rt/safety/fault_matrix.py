@@ -152,6 +152,7 @@ def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
                  t_fault: float = FAULT_AT_S) -> dict:
     holder: list = []
     probe = TruthProbe("truth", holder, int(seconds * 1000) + 10)
+    # On the default, realistic twin (truth apart from the model, the rig's imperfections).
     pl = build_sim_position_loop("paden_panja", trajectory=sc.trajectory, duration_s=60.0,
                                  environment=sc.environment, patient_limits=sc.patient,
                                  model=model, extra_blocks=[probe])

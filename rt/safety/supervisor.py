@@ -117,6 +117,11 @@ class Supervisor:
         self.contact_force_n = 50.0
         # The force sensor's first samples arrive a few cycles after the loop starts.
         self.startup_grace_s = 0.1
+        # The motors' spring-applied holding brakes close when the drives are off and open
+        # ≈ 30 ms after they are enabled (datasheet order; the twin's RigImperfections): until
+        # then an axis cannot move whatever the command, so the frozen-encoder check waits
+        # this long (s, with margin) after every enable — at start and after a hard stop's reset.
+        self.brake_release_s = 0.05
         self.reset_state()
 
     def reset_state(self) -> None:
@@ -135,6 +140,7 @@ class Supervisor:
         self._estop_request: str | None = None
         self._stop_request = False
         self._reset_tickets: deque[ResetTicket] = deque()
+        self._brakes_open_at = self.brake_release_s      # drives enabled at t = 0
 
     def braking_angle(self, rate: float, dt: float) -> float:
         """Angle (rad) the platform still turns at ``rate`` (rad/s) before a soft stop started
@@ -218,9 +224,10 @@ class Supervisor:
             trip("encoder_jump", Reaction.HARD_STOP, "encoder reading jumped beyond physics",
                  q=list(q))
         free = not (force_n > self.contact_force_n)         # NaN (no sensor) counts as free
+        brakes_open = t >= self._brakes_open_at
         for i in range(3):
             qi = q[i]
-            if qi == self._last_q[i]:
+            if qi == self._last_q[i] and brakes_open:
                 # Two ways to know the slider must have moved although its count did not:
                 # the reference has been moving it for ``frozen_encoder_s``, or (when nothing
                 # pushes back on the platform) the commanded net force must have carried the
@@ -328,7 +335,10 @@ class Supervisor:
         # -- latch and reset
         if self._reset_tickets:
             self._take_reset(t, self._reset_tickets.popleft(), active)
+        previous = self.reaction
         self.reaction = max(self.causes.values(), default=Reaction.NONE)
+        if previous >= Reaction.HARD_STOP and self.reaction < Reaction.HARD_STOP:
+            self._brakes_open_at = t + self.brake_release_s    # drives back on, brakes closed
         return self.reaction
 
     def _take_reset(self, t: float, ticket: ResetTicket, active: set[str]) -> None:

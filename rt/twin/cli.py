@@ -14,6 +14,7 @@ VOLTS = finite_float(-10.0, 10.0, unit="V")
 
 def register(commands: argparse._SubParsersAction) -> None:
     from rt.ati.cli import register_twin_commands
+    from rt.twin.realism import add_twin_arguments
 
     p = commands.add_parser(
         "step", help="run the twin with constant amplifier commands; JSON lines out",
@@ -29,6 +30,7 @@ def register(commands: argparse._SubParsersAction) -> None:
                    help="output lines per second (1-5000)")
     p.add_argument("--seed", type=seed(), default=0)
     add_robot_option(p)
+    add_twin_arguments(p)
     p.set_defaults(func=_step)
     register_twin_commands(commands)
     from rt.twin.rig_cli import register_rig_command
@@ -43,11 +45,14 @@ def _step(args) -> int:
     from rt.model.description import load_description
     from rt.twin.backends import TwinActuators, TwinEncoders, TwinForceTorque
     from rt.twin.environment import parse_environment
+    from rt.twin.realism import twin_setup
     from rt.twin.twin import SimClock, Twin
 
     clock = SimClock()
-    twin = Twin(load_description(args.robot), environment=parse_environment(args.env),
-                seed=args.seed, clock=clock)
+    truth, imperfections = twin_setup(
+        args, load_description(args.robot) if args.robot else None)
+    twin = Twin(truth, parse_environment(args.env), seed=args.seed, clock=clock,
+                imperfections=imperfections)
     encoders = TwinEncoders(twin)
     card = TwinActuators(twin, 0)
     sensor = TwinForceTorque(twin)

@@ -15,8 +15,15 @@ Parameter arrays (packed by ``rt.twin.plant``):
   end-stop low, end-stop high (m), end-stop stiffness (N/m) and damping (N s/m), spare];
   rod quantities in the rod frame, platform ones in P (payload and sensor included), inertias
   about the COM.
-* ``friction`` (float64[5]): [f_v (N s/m), f_c (N), f_s static (N), v_stribeck (m/s),
-  v_smooth (m/s)].  F = f_v v + (f_c + (f_s − f_c) exp(−(v/v_st)²)) tanh(v/v_smooth).
+  ``B_J_REFL`` holds axis 0's reflected inertia, ``B_J_REFL_AXES`` (3) every axis's.
+* ``friction`` (float64[N_FRICTION]): per axis f_v (N s/m) [0:3], f_c (N) [3:6], f_s static
+  (N) [6:9]; v_stribeck (m/s) [9], v_smooth (m/s) [10]; the multipliers of the rig's
+  imperfections: viscous scale [11:14], Coulomb scale [14:17] (temperature), ripple amplitude
+  [17] and period (m) [18].
+  F_i = s_v f_v v + s_c (f_c + (f_s − f_c) exp(−(v/v_st)²)) (1 + r sin(2π q / p + 2πi/3))
+  tanh(v/v_smooth).
+* ``real`` (float64[N_REAL]): the unmodelled effects of ``rt.twin.realism`` (``R_*`` below);
+  used by ``integrate_real`` only.
 * ``env`` (float64[16]): env[0] selects the environment (see ``ENV_*``), the rest its
   parameters (documented in ``rt.twin.environment``).
 """
@@ -50,7 +57,24 @@ B_STOP_LO = 35
 B_STOP_HI = 36
 B_STOP_K = 37
 B_STOP_C = 38
-N_BODY_PARAMS = 40
+B_J_REFL_AXES = 40
+N_BODY_PARAMS = 44
+
+N_FRICTION = 19
+
+# The rig's imperfections (``real`` array), see rt.twin.realism.
+R_AMP_ALPHA = 0          # current-loop lag per substep: 1 − exp(−h/τ) (1 = instantaneous)
+R_AMP_DELAY_STEPS = 1    # transport delay in substeps
+R_SCREW_K = 2            # screw stiffness (N/m); 0 = rigid (rotor lumped with the slider)
+R_SCREW_C = 3            # screw damping (N s/m)
+R_BACKLASH = 4           # total backlash (m)
+R_BRAKE_ON = 5           # 1 while the holding brakes are engaged
+R_BRAKE_HOLD = 6         # holding force at the slider (N)
+R_CABLE_W = 7            # cable weight share on the platform at z_ref (N)
+R_CABLE_K = 8            # cable stiffness (N/m of platform heave)
+R_CABLE_Z = 9            # z_ref (m)
+R_JR = 10                # per-axis rotor inertia at the slider (kg), 3 slots (compliant case)
+N_REAL = 14
 
 STATUS_OK = 0
 STATUS_FK_FAILED = 1
@@ -80,17 +104,22 @@ def drive_force(volts, bodies, out):
 
 
 @njit(cache=True)
-def friction_force(qd, friction, out):
-    """Stribeck friction (N) per axis, smooth through zero velocity."""
-    fv = friction[0]
-    fc = friction[1]
-    fs = friction[2]
-    vst = friction[3]
-    vsm = friction[4]
+def friction_force(q, qd, friction, out):
+    """Stribeck friction (N) per axis, smooth through zero velocity, with the temperature
+    scales and the position ripple of the rig's imperfections (see module docstring)."""
+    vst = friction[9]
+    vsm = friction[10]
+    ripple = friction[17]
+    period = friction[18]
     for i in range(3):
         v = qd[i]
         x = v / vst
-        out[i] = fv * v + (fc + (fs - fc) * math.exp(-x * x)) * math.tanh(v / vsm)
+        level = friction[3 + i] + (friction[6 + i] - friction[3 + i]) * math.exp(-x * x)
+        if ripple != 0.0:
+            level *= 1.0 + ripple * math.sin(2.0 * math.pi * q[i] / period
+                                             + 2.0 * math.pi * i / 3.0)
+        out[i] = (friction[11 + i] * friction[i] * v
+                  + friction[14 + i] * level * math.tanh(v / vsm))
 
 
 @njit(cache=True)
@@ -136,13 +165,12 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
     assemble(geom, q, phi, rot, pos, spheres)
     tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work)
     g = bodies[B_G]
-    jr = bodies[B_J_REFL]
     ms = bodies[B_M_SLIDER]
     for a in range(3):
         h[a] = ms * g
         for b in range(3):
             M[a, b] = 0.0
-        M[a, a] = jr + ms
+        M[a, a] = bodies[B_J_REFL_AXES + a] + ms
     # ---- rods: rotation about the leg tangent t_i, pivot moving with the slider.
     mr = bodies[B_M_ROD]
     for i in range(3):
@@ -424,7 +452,7 @@ def acceleration(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd,
         return STATUS_FK_FAILED
     mass_and_bias_work(geom, bodies, q, qd, phi, work_rot, work_pos, S, Sd, twist, M, h, work)
     environment_wrench(env, bodies, work_rot, work_pos, twist, qd, env_state, wrench_s, tau_env)
-    friction_force(qd, friction, fr)
+    friction_force(q, qd, friction, fr)
     r0 = force[0] - h[0] - fr[0] + tau_env[0] + end_stop_force(q[0], qd[0], bodies)
     r1 = force[1] - h[1] - fr[1] + tau_env[1] + end_stop_force(q[1], qd[1], bodies)
     r2 = force[2] - h[2] - fr[2] + tau_env[2] + end_stop_force(q[2], qd[2], bodies)
@@ -519,4 +547,141 @@ def integrate(geom, bodies, friction, env, q, qd, phi, volts, n_steps, h_step, i
         # Leave q̈ and the wrench consistent with the final state.
         return acceleration(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd,
                             wrench_s, rot, pos, S, Sd, twist, M, hb, tau_env, fr, work)
+    return STATUS_OK
+
+
+@njit(cache=True)
+def drive_current(volts, bodies, out):
+    """Current command (A) per axis for amplifier inputs ``volts``: gain, current-limited."""
+    gain = bodies[B_AMP_GAIN]
+    limit = bodies[B_I_LIMIT]
+    for i in range(3):
+        c = gain * volts[i]
+        out[i] = limit if c > limit else (-limit if c < -limit else c)
+
+
+@njit(cache=True)
+def coulomb_level(q, v, friction, i):
+    """Axis i's Coulomb/Stribeck friction level (N, ≥ 0) at position q and velocity v."""
+    x = v / friction[9]
+    level = friction[3 + i] + (friction[6 + i] - friction[3 + i]) * math.exp(-x * x)
+    ripple = friction[17]
+    if ripple != 0.0:
+        level *= 1.0 + ripple * math.sin(2.0 * math.pi * q / friction[18]
+                                         + 2.0 * math.pi * i / 3.0)
+    return friction[14 + i] * level
+
+
+@njit(cache=True)
+def _toward_zero(v, dv):
+    """A Coulomb force that can remove at most ``dv`` of velocity this step: sticks at 0."""
+    if v > dv:
+        return v - dv
+    if v < -dv:
+        return v + dv
+    return 0.0
+
+
+@njit(cache=True)
+def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi, xm, vm, current,
+                   cable_tau, volts, volts_prev, delay_steps, n_steps, h_step, env_state, qdd,
+                   wrench_s, rot_out):
+    """Semi-implicit Euler with the rig's imperfections (``real``, see ``R_*``).
+
+    State beyond (q, q̇): motor positions/velocities at the slider ``xm``, ``vm`` (m, m/s; equal
+    to q, q̇ when the screw is rigid), motor currents ``current`` (A), and the cable's actuator
+    forces ``cable_tau`` (N, from the previous substep's pose: the cable changes slowly).
+    The amplifiers see ``volts_prev`` for the first ``delay_steps`` substeps, then ``volts``.
+    With a compliant screw, ``bodies`` must carry zero rotor inertia (the rotors are integrated
+    here with ``real[R_JR:R_JR+3]``), ``friction`` is the slider side's share (guides, seals)
+    and ``friction_motor`` the motor side's (screw bearings, nut drag), acting on v_m. The
+    slider is light (a few kg) and its stiction is sharp (≈ 1e5-1e6 N s/m near zero), beyond
+    what an explicit step can integrate at 5 kHz: its Coulomb/Stribeck part is applied
+    implicitly (the velocity update it can remove, with exact stick), its viscous part
+    explicitly. Brakes remove at most hold·h/m of velocity per substep
+    (exact stick when the net force is below the holding force).
+    """
+    cmd_new = np.empty(3)
+    cmd_old = np.empty(3)
+    drive_current(volts, bodies, cmd_new)
+    drive_current(volts_prev, bodies, cmd_old)
+    force = np.empty(3)
+    spring = np.zeros(3)
+    rot = np.empty((3, 3))
+    pos = np.empty(3)
+    S = np.empty((12, 3))
+    Sd = np.empty((12, 3))
+    twist = np.empty((6, 3))
+    M = np.empty((3, 3))
+    hb = np.empty(3)
+    tau_env = np.empty(3)
+    fr = np.empty(3)
+    frm = np.zeros(3)
+    work = np.empty(WORK_SIZE)
+    viscous_only = friction.copy()
+    viscous_only[14:17] = 0.0
+    fpa = bodies[B_F_PER_A]
+    alpha = real[R_AMP_ALPHA]
+    k = real[R_SCREW_K]
+    c = real[R_SCREW_C]
+    half_b = 0.5 * real[R_BACKLASH]
+    brake = real[R_BRAKE_ON] > 0.5
+    hold = real[R_BRAKE_HOLD]
+    cable_w = real[R_CABLE_W]
+    cable_k = real[R_CABLE_K]
+    cable = cable_w != 0.0 or cable_k != 0.0
+    for s in range(n_steps):
+        for i in range(3):
+            target = cmd_old[i] if s < delay_steps else cmd_new[i]
+            current[i] += alpha * (target - current[i])
+        if k > 0.0:
+            for i in range(3):
+                d = xm[i] - q[i]
+                e = 0.0
+                if d > half_b:
+                    e = d - half_b
+                elif d < -half_b:
+                    e = d + half_b
+                fs = 0.0
+                if e != 0.0:
+                    fs = k * e + c * (vm[i] - qd[i])
+                spring[i] = fs
+                force[i] = fs + cable_tau[i]
+        else:
+            for i in range(3):
+                force[i] = fpa * current[i] + cable_tau[i]
+        st = acceleration(geom, bodies, viscous_only if k > 0.0 else friction, env, q, qd, phi,
+                          force, env_state, qdd, wrench_s, rot, pos, S, Sd, twist, M, hb,
+                          tau_env, fr, work)
+        if st != STATUS_OK:
+            return st
+        if k > 0.0:
+            friction_force(xm, vm, friction_motor, frm)
+        for i in range(3):
+            if k > 0.0:
+                level = coulomb_level(q[i], qd[i], friction, i)
+                qd[i] = _toward_zero(qd[i] + h_step * qdd[i], h_step * level / M[i, i])
+                q[i] += h_step * qd[i]
+                jr = real[R_JR + i]
+                v = vm[i] + h_step * (fpa * current[i] - spring[i] - frm[i]) / jr
+                if brake:
+                    v = _toward_zero(v, h_step * hold / jr)
+                vm[i] = v
+                xm[i] += h_step * v
+            else:
+                v = qd[i] + h_step * qdd[i]
+                if brake:
+                    v = _toward_zero(v, h_step * hold / M[i, i])
+                qd[i] = v
+                q[i] += h_step * v
+                xm[i] = q[i]
+                vm[i] = v
+        if cable:
+            # Vertical pull at the platform origin: weight share plus the loop's stiffness.
+            fz = -(cable_w + cable_k * (pos[2] - real[R_CABLE_Z]))
+            for j in range(3):
+                cable_tau[j] = twist[2, j] * fz
+    for a in range(3):
+        for b in range(3):
+            rot_out[a, b] = rot[a, b]
     return STATUS_OK

@@ -2,7 +2,11 @@
 
 ``TwinPlant.advance(dt, volts)`` holds the amplifier commands for ``dt`` seconds and integrates
 the robot's forward dynamics  M q̈ = τ(V) − C q̇ − G − F(q̇) + J_Sᵀ w_env  at the physics rate
-(default 5 kHz) with the compiled kernels of ``rt.twin.physics``.
+(default 5 kHz) with the compiled kernels of ``rt.twin.physics``. With the rig's
+imperfections (``rt.twin.realism.RigImperfections``; ``RigImperfections.none()`` is the ideal
+rigid plant) the motors are separate bodies behind a compliant, backlashed screw, the motor
+currents lag the commands, friction depends on temperature and position, the brakes hold when
+the drives are off and the ATI cable pulls on the platform.
 """
 from __future__ import annotations
 
@@ -17,10 +21,14 @@ from rt.model.dynamics import Payload
 from rt.model.kinematics import Kinematics
 from rt.twin import physics
 from rt.twin.environment import FreeMotion
+from rt.twin.realism import RigImperfections, screw_damping_n_s_per_m
 
 END_STOP_MARGIN_M = 0.005
 END_STOP_STIFFNESS_N_PER_M = 5.0e6
 END_STOP_DAMPING_N_S_PER_M = 2.0e4
+
+#: How often the temperatures and friction scales are updated (s).
+_HEAT_PERIOD_S = 0.1
 
 INTEGRATORS = {"symplectic_euler": physics.INTEGRATOR_SYMPLECTIC_EULER,
                "rk4": physics.INTEGRATOR_RK4}
@@ -35,26 +43,45 @@ class TwinPlant:
 
     def __init__(self, description: RobotDescription, environment=None,
                  physics_rate_hz: float = 5000.0, integrator: str = "symplectic_euler",
-                 frictionless: bool = False):
+                 frictionless: bool = False, imperfections: RigImperfections | None = None):
         if not 5000.0 <= physics_rate_hz <= 100_000.0:
             raise ConfigurationError(f"physics_rate_hz must be in [5000, 100000] Hz, got "
                                      f"{physics_rate_hz}")
         if integrator not in INTEGRATORS:
             raise ConfigurationError(f"integrator must be one of {sorted(INTEGRATORS)}, got "
                                      f"{integrator!r}")
+        self.imperfections = imperfections if imperfections is not None else RigImperfections()
+        self.realistic = not self.imperfections.ideal
+        if self.realistic and integrator != "symplectic_euler":
+            raise ConfigurationError("the rig's imperfections are integrated with "
+                                     "symplectic_euler only; use RigImperfections.none() for rk4")
         self.description = description
         self.kin = Kinematics(description)
         self.geom = self.kin.geom
         self.physics_rate_hz = float(physics_rate_hz)
         self.integrator = INTEGRATORS[integrator]
         self.bodies = np.zeros(physics.N_BODY_PARAMS)
-        self.friction = np.zeros(5)
+        self.friction = np.zeros(physics.N_FRICTION)
         fr = description.friction
         if not frictionless:
-            self.friction[:] = (fr.viscous_n_s_per_m, fr.coulomb_n, fr.static_n,
-                                fr.stribeck_velocity_m_s, fr.stiction_smoothing_m_s)
-        else:
-            self.friction[3:] = (fr.stribeck_velocity_m_s, fr.stiction_smoothing_m_s)
+            self.friction[0:3] = fr.viscous_axes
+            self.friction[3:6] = fr.coulomb_axes
+            self.friction[6:9] = fr.static_axes
+        self.friction[9:11] = (fr.stribeck_velocity_m_s, fr.stiction_smoothing_m_s)
+        self.friction[11:17] = 1.0
+        imp = self.imperfections
+        self.friction[17:19] = (imp.friction_ripple, imp.friction_ripple_period_m)
+        self.temperature_rise_k = np.full(3, imp.initial_temperature_rise_k)
+        self._heat_energy = [0.0, 0.0, 0.0]      # J since the last temperature update
+        self._heat_time = 0.0
+        # With a compliant screw the friction is split (RigImperfections.motor_side_friction):
+        # ``friction`` stays the whole (for heat and reports), the kernels get the two shares.
+        split = imp.motor_side_friction if imp.screw_stiffness_n_per_m > 0.0 else 0.0
+        self._friction_split = split
+        self.friction_slider = self.friction.copy()
+        self.friction_motor = self.friction.copy()
+        self._update_temperature_scales()
+        self.real = np.zeros(physics.N_REAL)
         self.payload: Payload | None = None
         self._pack_bodies()
         self.environment = environment or FreeMotion()
@@ -63,12 +90,55 @@ class TwinPlant:
         self.q = np.zeros(3)
         self.qd = np.zeros(3)
         self.qdd = np.zeros(3)
+        # Motor side (at the slider, m and m/s), motor currents (A), cable forces (N).
+        self.xm = np.zeros(3)
+        self.vm = np.zeros(3)
+        self.current = np.zeros(3)
+        self.cable_tau = np.zeros(3)
         self.phi = np.full(3, self.kin.phi_nominal)
         self.wrench_s = np.zeros(6)
+        self.rot = np.eye(3)            # R_BP after the last advance (realistic path)
         self.t = 0.0
         self._volts = np.zeros(3)
+        self._volts_prev = np.zeros(3)
+        self._delay_left = 0
+        self._drives_on = False
+        self._drives_changed_t = -1.0e9     # powered off since forever: brakes on
         home = self.kin.ik(0.5 * sum(self.kin.stroke) + self._rise(), 0.0, 0.0)
+        self._pack_real(home.z)
         self.set_state(home.q)
+
+    def _pack_real(self, z_home: float) -> None:
+        imp = self.imperfections
+        r = self.real
+        h = 1.0 / self.physics_rate_hz
+        bw = imp.current_loop_bandwidth_hz
+        r[physics.R_AMP_ALPHA] = 1.0 if bw <= 0.0 else 1.0 - math.exp(-2.0 * math.pi * bw * h)
+        r[physics.R_AMP_DELAY_STEPS] = round(imp.amplifier_delay_s * self.physics_rate_hz)
+        r[physics.R_SCREW_K] = imp.screw_stiffness_n_per_m
+        # Damping ratio referred to the slider's own share of the moving mass (slider + rod).
+        d = self.description.bodies
+        r[physics.R_SCREW_C] = screw_damping_n_s_per_m(imp, d.slider.mass_kg + d.rod.mass_kg)
+        r[physics.R_BACKLASH] = imp.backlash_m
+        r[physics.R_BRAKE_HOLD] = imp.brake_holding_force_n
+        r[physics.R_BRAKE_ON] = 1.0 if imp.brake_holding_force_n > 0.0 else 0.0
+        r[physics.R_CABLE_W] = imp.cable_weight_n
+        r[physics.R_CABLE_K] = imp.cable_stiffness_n_per_m
+        r[physics.R_CABLE_Z] = z_home
+        r[physics.R_JR:physics.R_JR + 3] = self.description.drive.reflected_inertia_axes_kg
+
+    def _update_temperature_scales(self) -> None:
+        imp = self.imperfections
+        for i in range(3):
+            dt_k = self.temperature_rise_k[i]
+            self.friction[11 + i] = max(0.2, 1.0 + imp.viscous_per_k * dt_k)
+            self.friction[14 + i] = max(0.2, 1.0 + imp.coulomb_per_k * dt_k)
+        if hasattr(self, "friction_slider"):
+            split = self._friction_split
+            self.friction_slider[:] = self.friction
+            self.friction_slider[11:17] *= 1.0 - split
+            self.friction_motor[:] = self.friction
+            self.friction_motor[11:17] *= split
 
     def _rise(self) -> float:
         g = self.description.geometry
@@ -91,7 +161,11 @@ class TwinPlant:
         b[physics.B_I_PLAT:physics.B_I_PLAT + 9] = plat.inertia.ravel()
         b[physics.B_SENSOR:physics.B_SENSOR + 3] = d.sensor.offset_m
         b[physics.B_G] = d.gravity_m_s2
-        b[physics.B_J_REFL] = d.drive.reflected_inertia_kg
+        jr = d.drive.reflected_inertia_axes_kg
+        b[physics.B_J_REFL] = jr[0]
+        # With a compliant screw the rotors are separate bodies (``real[R_JR:]``), not in M.
+        compliant = self.imperfections.screw_stiffness_n_per_m > 0.0
+        b[physics.B_J_REFL_AXES:physics.B_J_REFL_AXES + 3] = (0.0, 0.0, 0.0) if compliant else jr
         b[physics.B_F_PER_A] = d.drive.force_per_amp_n
         b[physics.B_I_LIMIT] = d.drive.current_limit_a
         b[physics.B_AMP_GAIN] = d.drive.amplifier_gain_a_per_v
@@ -118,18 +192,95 @@ class TwinPlant:
         self.qd[:] = qd
         self.qdd[:] = 0.0
         self.phi[:] = cfg.phi
+        self.xm[:] = q
+        self.vm[:] = qd
+        self.cable_tau[:] = 0.0
+        self.rot[:] = np.array(cfg.rotation).reshape(3, 3)
+
+    @property
+    def motor_position(self) -> np.ndarray:
+        """Motor positions at the slider (m): what the motor-mounted encoders count."""
+        return self.xm
+
+    def set_drives_enabled(self, enabled: bool) -> None:
+        """The amplifiers were enabled or disabled now: the brakes release or engage after
+        their delays (``RigImperfections.brake_release_s`` / ``brake_engage_s``)."""
+        if enabled != self._drives_on:
+            self._drives_on = enabled
+            self._drives_changed_t = self.t
+
+    @property
+    def brakes_engaged(self) -> bool:
+        return bool(self.real[physics.R_BRAKE_ON] > 0.5)
+
+    def _update_brakes(self) -> None:
+        """The brakes' state: engaged ``brake_engage_s`` after the drives went off, released
+        ``brake_release_s`` after they came back on; a shorter interruption (a DAC failover's
+        card switch) changes nothing."""
+        imp = self.imperfections
+        if imp.brake_holding_force_n <= 0.0:
+            return
+        since = self.t - self._drives_changed_t
+        on = self.real[physics.R_BRAKE_ON] > 0.5
+        if self._drives_on and on and since >= imp.brake_release_s:
+            on = False
+        elif not self._drives_on and not on and since >= imp.brake_engage_s:
+            on = True
+        self.real[physics.R_BRAKE_ON] = 1.0 if on else 0.0
 
     def advance(self, dt: float, volts) -> None:
         """Hold amplifier commands ``volts`` (V, after the DAC) for ``dt`` s and integrate."""
         n = max(1, int(round(dt * self.physics_rate_hz)))
-        self._volts[:] = volts
-        status = physics.integrate(self.geom, self.bodies, self.friction, self.env, self.q,
-                                   self.qd, self.phi, self._volts, n, dt / n, self.integrator,
-                                   self.env_state, self.qdd, self.wrench_s)
+        if not self.realistic:
+            self._volts[:] = volts
+            status = physics.integrate(self.geom, self.bodies, self.friction, self.env, self.q,
+                                       self.qd, self.phi, self._volts, n, dt / n,
+                                       self.integrator, self.env_state, self.qdd, self.wrench_s)
+            self.xm[:] = self.q
+            self.vm[:] = self.qd
+        else:
+            v = self._volts
+            if v[0] != volts[0] or v[1] != volts[1] or v[2] != volts[2]:
+                # A new command: the amplifiers keep acting on the old one for the delay.
+                self._volts_prev[:] = v
+                v[:] = volts
+                self._delay_left = int(self.real[physics.R_AMP_DELAY_STEPS])
+            self._update_brakes()
+            status = physics.integrate_real(
+                self.geom, self.bodies, self.friction_slider, self.friction_motor, self.env,
+                self.real, self.q, self.qd,
+                self.phi, self.xm, self.vm, self.current, self.cable_tau, v, self._volts_prev,
+                self._delay_left, n, dt / n, self.env_state, self.qdd, self.wrench_s, self.rot)
+            self._delay_left = max(0, self._delay_left - n)
+            self._heat(dt)
         if status != physics.STATUS_OK:
             raise KinematicsError(f"twin: forward kinematics failed at q = {self.q.tolist()} m "
                                   f"(t = {self.t:.4f} s); the mechanism left its assembly range")
         self.t += dt
+
+    def _heat(self, dt: float) -> None:
+        """First-order thermal model per axis: friction power in, convection out. The friction
+        power is sampled every call; the temperature and the friction scales are updated every
+        ``_HEAT_PERIOD_S`` (the thermal time constant is minutes: R C = 400 s)."""
+        imp = self.imperfections
+        if imp.viscous_per_k == 0.0 and imp.coulomb_per_k == 0.0:
+            return
+        fr = self.friction
+        acc = self._heat_energy
+        for i in range(3):
+            v = float(self.qd[i])
+            acc[i] += dt * (fr[11 + i] * fr[i] * v * v + fr[14 + i] * fr[3 + i] * abs(v))
+        self._heat_time += dt
+        if self._heat_time < _HEAT_PERIOD_S:
+            return
+        cap = imp.heat_capacity_j_per_k
+        res = imp.thermal_resistance_k_per_w
+        span = self._heat_time
+        for i in range(3):
+            self.temperature_rise_k[i] += (acc[i] - span * self.temperature_rise_k[i] / res) / cap
+            acc[i] = 0.0
+        self._heat_time = 0.0
+        self._update_temperature_scales()
 
     @property
     def in_contact(self) -> bool:

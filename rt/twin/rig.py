@@ -82,7 +82,7 @@ class RigProcess:
                  rate_hz: float = DEFAULT_RATE_HZ,
                  watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
                  twin: Twin | None = None, clock: Callable[[], float] = time.monotonic,
-                 description: RobotDescription | None = None):
+                 truth=None, imperfections=None):
         layout.check_shm_name(shm_name)
         if not 100.0 <= rate_hz <= 5000.0:
             raise ConfigurationError(f"rig rate must be 100-5000 Hz, got {rate_hz}")
@@ -96,8 +96,8 @@ class RigProcess:
         self.watchdog_timeout_s = float(watchdog_timeout_s)
         self.clock = clock
         # The twin first (≈ 1 s): the segment appears only when the rig can serve it.
-        self.twin = twin if twin is not None else Twin(description, environment=environment,
-                                                       seed=seed)
+        self.twin = twin if twin is not None else Twin(truth, environment, seed=seed,
+                                                       imperfections=imperfections)
         self.twin.home_encoders()             # the rig's counters read absolute positions
         self.summary = RigSummary(shm=shm_name)
         self._stop = False

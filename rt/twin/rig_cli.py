@@ -48,6 +48,9 @@ def register_rig_command(commands: argparse._SubParsersAction) -> None:
     add_robot_option(p)
     p.add_argument("--fifo", type=bounded_int(1, 99), default=None, metavar="PRIORITY",
                    help="try SCHED_FIFO at this priority (default: normal scheduling)")
+    from rt.twin.realism import add_twin_arguments
+
+    add_twin_arguments(p)
     p.set_defaults(func=cmd_rig)
 
 
@@ -73,9 +76,13 @@ def cmd_rig(args: argparse.Namespace) -> int:
             previous[sig] = signal.signal(sig, _stop)
     try:
         try:
+            from rt.twin.realism import twin_setup
+
+            truth, imperfections = twin_setup(
+                args, load_description(args.robot) if args.robot else None)
             rig = RigProcess(args.shm, args.env, args.seed, rate_hz=args.rate,
-                             watchdog_timeout_s=args.watchdog_ms * 1e-3,
-                             description=load_description(args.robot))
+                             watchdog_timeout_s=args.watchdog_ms * 1e-3, truth=truth,
+                             imperfections=imperfections)
         except TalusError as exc:
             _emit({"error": str(exc)})
             return EXIT_ERROR

@@ -10,6 +10,14 @@
   the environment applies to the platform at the sensor.
 * Digital inputs: hardware e-stop chain and the patient's hand-held stop.
 
+Truth and imperfections: by default the twin is "the real rig" — its own description
+(``rt.twin.realism.default_truth()``, the nominal one perturbed by a seeded, documented amount;
+``description=`` gives another truth) and the unmodelled effects of ``RigImperfections``
+(``imperfections=RigImperfections.none()`` and ``description=load_description()`` give the
+ideal twin whose physics equals the model's). The encoders count the motor shafts (behind the
+screw's compliance and backlash) a latency late; the ATI reading passes the sensor's low-pass
+filter.
+
 Time: the plant advances only through ``sync(t)``, holding the amplifier inputs constant
 between calls (zero-order hold, as the real amplifiers see a DAC). The device backends call
 ``sync(clock())`` before every read, so the twin runs in lockstep with whatever clock the loop
@@ -17,6 +25,7 @@ uses: simulated time (as fast as possible) or the monotonic clock (real time).
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Callable
 
@@ -34,6 +43,7 @@ from rt.model.dynamics import Payload
 from rt.twin.environment import ForcePlateContact, FreeMotion, PayloadStep
 from rt.twin.faults import FaultPlan
 from rt.twin.plant import TwinPlant
+from rt.twin.realism import RigImperfections, default_truth
 
 #: Longest stretch integrated with one held command and one fault/schedule check (s).
 _MAX_CHUNK_S = 0.001
@@ -71,11 +81,21 @@ class Twin:
                  seed: int = 0, physics_rate_hz: float = 5000.0,
                  integrator: str = "symplectic_euler", frictionless: bool = False,
                  ati_params: AtiSensorParams | None = None,
-                 clock: Callable[[], float] | None = None):
-        self.description = description or load_description()
+                 clock: Callable[[], float] | None = None,
+                 imperfections: RigImperfections | None = None):
+        self.imperfections = imperfections if imperfections is not None else RigImperfections()
+        self.description = description or default_truth()
         self.environment = environment or FreeMotion()
         self.plant = TwinPlant(self.description, self.environment, physics_rate_hz, integrator,
-                               frictionless)
+                               frictionless, self.imperfections)
+        self._encoder_latency_s = self.imperfections.encoder_latency_s
+        self._ati_tau_s = (0.0 if self.imperfections.ati_filter_hz <= 0.0
+                           else 1.0 / (2.0 * math.pi * self.imperfections.ati_filter_hz))
+        self._wrench_filtered = np.zeros(6)
+        self._wrench_sensed = np.zeros(6)
+        self._tool_mg = self.imperfections.ati_tool_mass_kg * self.description.gravity_m_s2
+        self._tool_com = self.imperfections.ati_tool_com_m
+        self._encoder_q = np.zeros(3)
         _check_reachable(self.environment, self.plant)
         self.rng = np.random.default_rng(seed)
         self.clock = clock
@@ -100,10 +120,20 @@ class Twin:
         self.plant.set_payload(None)
 
     # ------------------------------------------------------------------ setup
+    @classmethod
+    def ideal(cls, description: RobotDescription | None = None, **kwargs) -> "Twin":
+        """A twin whose physics is the model's: truth = ``description`` (default the nominal
+        one) and no unmodelled effect. For tests of the ideal physics, not of the product."""
+        return cls(description or load_description(), imperfections=RigImperfections.none(),
+                   **kwargs)
+
     def place(self, q, qd=(0.0, 0.0, 0.0)) -> None:
         """Put the robot at slider positions ``q`` (m); the encoder counters then read q."""
         self.plant.set_state(q, qd)
         self.encoder_port.set_positions_m(self.plant.q)
+        self._wrench_filtered[:] = self.plant.wrench_s
+        if self._ati_tau_s != 0.0:
+            self._wrench_filtered[:] = self._filtered_wrench(1e9)      # settled at placement
 
     def set_environment(self, environment) -> None:
         """Change what the platform touches (e.g. a patient's foot placed before a session);
@@ -141,7 +171,7 @@ class Twin:
                     chunk = min(chunk, remaining)
             self._update_amplifier_input()
             self.plant.advance(chunk, self.amp_volts)
-            self._update_sensors()
+            self._update_sensors(chunk)
 
     def _update_amplifier_input(self) -> None:
         t = self.plant.t
@@ -160,7 +190,46 @@ class Twin:
                         v = self._stuck_volts.setdefault((card, ch), v)
             self.amp_volts[ch] = max(-self.command_limit_v, min(self.command_limit_v, v))
 
-    def _update_sensors(self) -> None:
+    def _encoder_positions(self) -> np.ndarray:
+        """What the motor encoders hold now: the motor position ``latency`` ago (to first
+        order, x − v·latency)."""
+        p = self.plant
+        lat = self._encoder_latency_s
+        if lat == 0.0:
+            return p.xm
+        e = self._encoder_q
+        for i in range(3):
+            e[i] = p.xm[i] - p.vm[i] * lat
+        return e
+
+    def _filtered_wrench(self, dt: float) -> np.ndarray:
+        """What the gauges feel — the environment's wrench plus the weight of the sensor's
+        tool side (static: its inertial part is < 4 % of it at the robot's accelerations) —
+        through the sensor's first-order low-pass filter (exact for a wrench held over
+        ``dt``)."""
+        w_in = self.plant.wrench_s
+        if self._tool_mg != 0.0:
+            # Weight −m g ẑ_B in the sensor frame S (axes of P): −m g R_BPᵀ ẑ = −m g (row 2 of
+            # R); its moment about the origin, the COM at c = (0, 0, h) in S: c × F.
+            r = self.plant.rot
+            w_in = self._wrench_sensed
+            w_in[:] = self.plant.wrench_s
+            fx, fy, fz = (-self._tool_mg * r[2, 0], -self._tool_mg * r[2, 1],
+                          -self._tool_mg * r[2, 2])
+            h = self._tool_com
+            w_in[0] += fx
+            w_in[1] += fy
+            w_in[2] += fz
+            w_in[3] += -h * fy
+            w_in[4] += h * fx
+        if self._ati_tau_s == 0.0:
+            return w_in
+        a = 1.0 - math.exp(-dt / self._ati_tau_s)
+        w = self._wrench_filtered
+        w += a * (w_in - w)
+        return w
+
+    def _update_sensors(self, chunk: float) -> None:
         t = self.plant.t
         port = self.encoder_port
         if self.faults.faults:
@@ -178,8 +247,8 @@ class Twin:
                 self.ati.set_fault(name, bool(self.faults.active(kind, t)))
             self.inputs.hardware_estop = bool(self.faults.active("hardware_estop", t))
             self.inputs.hand_stop = bool(self.faults.active("hand_stop", t))
-        port.set_positions_m(self.plant.q)
-        sample = self.ati.measure(self.plant.wrench_s, t)
+        port.set_positions_m(self._encoder_positions())
+        sample = self.ati.measure(self._filtered_wrench(chunk), t)
         if sample is not None:
             self.ati_sample = sample
         if self.faults.faults and any(f.kind == "latency" for f in self.faults.faults):
@@ -206,6 +275,7 @@ class Twin:
         if card not in (0, 1):
             raise InputError(f"DAC card must be 0 or 1, got {card}")
         self.card_enabled[card] = enabled
+        self.plant.set_drives_enabled(any(self.card_enabled))
 
     @property
     def drives_enabled(self) -> bool:

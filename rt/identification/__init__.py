@@ -1,0 +1,1 @@
+"""Dynamic parameter identification (DESIGN §7): excitation, estimation, a description file."""

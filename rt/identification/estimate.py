@@ -1,0 +1,220 @@
+"""Least-squares identification of the robot's dynamics from a recorded excitation.
+
+Data: slider positions from the encoders and the actuator forces the drives were commanded
+(current-mode amplifiers: force = command V × force per volt), recorded at the loop rate.
+Positions and forces pass the same zero-phase low-pass filter (4th-order Butterworth, 8 Hz,
+forward-backward so no lag), velocities and accelerations are central differences of the
+filtered positions, and the data are decimated to 100 Hz.
+
+Two estimates from the same data:
+
+* **base parameters** (``rt.model.regressor``): ordinary least squares W θ = τ, with standard
+  deviations σ_θ = sqrt(diag(σ² (WᵀW)⁻¹)), σ² = |r|²/(n − p) (Gautier's method) — the
+  statistically identifiable quantities, reported per parameter;
+* **a robot description** a lab loads with ``--robot``: the description's own physical
+  parameters (slider mass; rod and platform mass, first moments and inertia; per-axis reflected
+  rotor inertia, viscous and Coulomb friction) by bounded least squares (masses, inertias and
+  friction positive) with a weak prior toward the nominal values for directions the data do
+  not determine. The result must be a physical body set (positive masses, inertia tensors
+  about the COMs positive semi-definite and meeting the triangle inequality): otherwise it is
+  refused with ``IdentificationError``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import scipy.optimize
+import scipy.signal
+
+from rt.errors import ConfigurationError, TalusError
+from rt.model import RobotModel
+from rt.model.description import RobotDescription, description_from_dict
+from rt.model.regressor import INERTIAL_NAMES, N_RIGID, STANDARD_NAMES, Regressor
+
+FILTER_HZ = 8.0
+DECIMATE_TO_HZ = 100.0
+EDGE_S = 1.0
+#: Weight of the prior toward the nominal description, relative to the data (dimensionless).
+PRIOR_WEIGHT = 1e-3
+
+PHYSICAL_NAMES = (["slider.m"] + [f"rod.{n}" for n in INERTIAL_NAMES]
+                  + [f"platform.{n}" for n in INERTIAL_NAMES]
+                  + [f"Jr{i}" for i in range(3)] + [f"fv{i}" for i in range(3)]
+                  + [f"fc{i}" for i in range(3)])
+
+
+class IdentificationError(TalusError):
+    """The data or the identified parameters cannot make a robot description."""
+
+
+@dataclass
+class IdentificationData:
+    """Filtered, decimated samples: q, q̇, q̈ (m, m/s, m/s²) and τ (N), each (n, 3)."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+
+
+def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float) -> IdentificationData:
+    """Filter, differentiate and decimate a recording (see module docstring)."""
+    q = np.asarray(q, float)
+    tau = np.asarray(tau, float)
+    if q.shape != tau.shape or q.ndim != 2 or q.shape[1] != 3:
+        raise IdentificationError(f"q and tau must both be (n, 3); got {q.shape}, {tau.shape}")
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(tau))):
+        raise IdentificationError("the recording holds non-finite samples")
+    edge = int(EDGE_S * rate_hz)
+    if len(q) < 4 * edge + 100:
+        raise IdentificationError(f"recording too short: {len(q) / rate_hz:.1f} s")
+    sos = scipy.signal.butter(4, FILTER_HZ, fs=rate_hz, output="sos")
+    qf = scipy.signal.sosfiltfilt(sos, q, axis=0)
+    tf = scipy.signal.sosfiltfilt(sos, tau, axis=0)
+    dt = 1.0 / rate_hz
+    qd = np.gradient(qf, dt, axis=0)
+    qdd = np.gradient(qd, dt, axis=0)
+    step = max(1, int(round(rate_hz / DECIMATE_TO_HZ)))
+    sl = slice(edge, len(q) - edge, step)
+    return IdentificationData(qf[sl], qd[sl], qdd[sl], tf[sl])
+
+
+def _standard_rows(reg: Regressor, data: IdentificationData) -> np.ndarray:
+    rows = np.empty((3 * len(data.q), len(STANDARD_NAMES)))
+    st = None
+    for j in range(len(data.q)):
+        st = reg.dyn.state(data.q[j], data.qd[j], out=st)
+        rows[3 * j:3 * j + 3] = reg.standard(st, data.qdd[j])
+    return rows
+
+
+@dataclass
+class BaseEstimate:
+    names: list[str]
+    theta: np.ndarray
+    sigma: np.ndarray
+    residual_rms_n: float
+
+
+def estimate_base(reg: Regressor, data: IdentificationData) -> BaseEstimate:
+    """OLS on the base parameters with their standard deviations."""
+    w = _standard_rows(reg, data)[:, reg.base.base_index]
+    y = data.tau.reshape(-1)
+    theta, *_ = np.linalg.lstsq(w, y, rcond=None)
+    r = y - w @ theta
+    dof = max(1, len(y) - len(theta))
+    var = float(r @ r) / dof
+    cov = var * np.linalg.pinv(w.T @ w)
+    return BaseEstimate(reg.base.names, theta, np.sqrt(np.maximum(np.diag(cov), 0.0)),
+                        float(np.sqrt(np.mean(r ** 2))))
+
+
+def _physical_columns(std_rows: np.ndarray) -> np.ndarray:
+    """Regressor in the description's parameters: legs share one slider and one rod."""
+    idx = {n: k for k, n in enumerate(STANDARD_NAMES)}
+    cols = [sum(std_rows[:, idx[f"slider{i}.m"]] for i in range(3))]
+    for n in INERTIAL_NAMES:
+        cols.append(sum(std_rows[:, idx[f"rod{i}.{n}"]] for i in range(3)))
+    for n in INERTIAL_NAMES:
+        cols.append(std_rows[:, idx[f"platform.{n}"]])
+    for k in range(9):
+        cols.append(std_rows[:, N_RIGID + k])
+    return np.column_stack(cols)
+
+
+def _dyn_params(body) -> np.ndarray:
+    return pin.Inertia(body.mass_kg, np.array(body.com_m, float),
+                       np.array(body.inertia_kg_m2, float)).toDynamicParameters()
+
+
+def nominal_physical(description: RobotDescription) -> np.ndarray:
+    b = description.bodies
+    plat = _dyn_params(b.platform) + _dyn_params(b.sensor)
+    return np.concatenate(([b.slider.mass_kg], _dyn_params(b.rod), plat,
+                           description.drive.reflected_inertia_axes_kg,
+                           description.friction.viscous_axes, description.friction.coulomb_axes))
+
+
+def estimate_physical(reg: Regressor, data: IdentificationData,
+                      nominal: RobotDescription) -> np.ndarray:
+    """Bounded LS in the description's parameters with a weak prior (module docstring)."""
+    a = _physical_columns(_standard_rows(reg, data))
+    y = data.tau.reshape(-1)
+    p0 = nominal_physical(nominal)
+    scale = np.maximum(np.abs(p0), 1e-3)
+    scale[1:4] = max(scale[0], 0.1) * 0.05              # rod first moments: ~ kg × 5 cm
+    scale[11:14] = 0.5                                  # platform first moments
+    y_scale = max(float(np.sqrt(np.mean(y ** 2))), 1e-9)
+    # Prior rows: a relative deviation of 1 from the nominal costs PRIOR_WEIGHT × the data's
+    # mean square force, so only directions the data leave open follow the prior.
+    prior = math.sqrt(PRIOR_WEIGHT * len(y)) * y_scale * np.diag(1.0 / scale)
+    lhs = np.vstack((a, prior))
+    rhs = np.concatenate((y, prior @ p0))
+    lo = np.full(len(p0), -np.inf)
+    hi = np.full(len(p0), np.inf)
+    for k in (0, 1, 11):                                # masses
+        lo[k] = 1e-3
+    for base in (1, 11):                                # inertia diagonals about the origin
+        for off in (4, 6, 9):
+            lo[base + off] = 0.0
+    lo[21:30] = 0.0                                     # rotor inertia, friction
+    lo[21:24] = 1e-3
+    res = scipy.optimize.lsq_linear(lhs, rhs, bounds=(lo, hi), method="trf")
+    return res.x
+
+
+def description_from_physical(p: np.ndarray, nominal: RobotDescription,
+                              name: str) -> RobotDescription:
+    """Build (and validate) the identified description; physically impossible sets are
+    refused with IdentificationError naming the body."""
+    p = np.asarray(p, float)
+    if p.shape != (len(PHYSICAL_NAMES),) or not np.all(np.isfinite(p)):
+        raise IdentificationError(f"identified parameters must be {len(PHYSICAL_NAMES)} finite "
+                                  f"values")
+    data = nominal.model_dump()
+    if p[0] <= 0.0:
+        raise IdentificationError(f"identified slider mass {p[0]:.4g} kg is not positive")
+    data["bodies"]["slider"]["mass_kg"] = float(p[0])
+    sensor = _dyn_params(nominal.bodies.sensor)
+    for body, params in (("rod", p[1:11]), ("platform", p[11:21] - sensor)):
+        if params[0] <= 0.0:
+            raise IdentificationError(f"identified {body} mass {params[0]:.4g} kg is not "
+                                      f"positive")
+        inertia = pin.Inertia.FromDynamicParameters(np.asarray(params, float))
+        about_com = np.asarray(inertia.inertia)
+        data["bodies"][body] = {"mass_kg": float(inertia.mass),
+                                "com_m": [float(v) for v in inertia.lever],
+                                "inertia_kg_m2": [[float(v) for v in row]
+                                                  for row in 0.5 * (about_com + about_com.T)]}
+    lead = nominal.drive.screw_lead_m
+    data["drive"]["rotor_inertia_per_axis_kg_m2"] = [float(j / (2 * math.pi / lead) ** 2)
+                                                     for j in p[21:24]]
+    fr = data["friction"]
+    fr["viscous_per_axis_n_s_per_m"] = [float(v) for v in p[24:27]]
+    fr["coulomb_per_axis_n"] = [float(v) for v in p[27:30]]
+    ratio = [s / c if c > 0 else 1.0 for s, c in zip(nominal.friction.static_axes,
+                                                        nominal.friction.coulomb_axes)]
+    fr["static_per_axis_n"] = [float(v) * r for v, r in zip(p[27:30], ratio)]
+    data["name"] = name
+    try:
+        return description_from_dict(data, f"identified set {name!r}")
+    except ConfigurationError as exc:
+        raise IdentificationError(f"identified parameters are not physically feasible: "
+                                  f"{exc}") from None
+
+
+def force_prediction_error(description: RobotDescription, data: IdentificationData) -> dict:
+    """Predicted vs measured actuator forces on a (validation) data set."""
+    model = RobotModel.from_description(description)
+    pred = np.empty_like(data.tau)
+    st = None
+    for j in range(len(data.q)):
+        st = model.dyn.state(data.q[j], data.qd[j], out=st)
+        pred[j] = model.dyn.inverse_dynamics(st, data.qdd[j])
+    err = pred - data.tau
+    peak = float(np.abs(data.tau).max())
+    rms = float(np.sqrt(np.mean(err ** 2)))
+    return {"rms_n": rms, "peak_n": peak, "rms_pct_of_peak": 100.0 * rms / peak}
