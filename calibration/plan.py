@@ -97,8 +97,8 @@ class Plan(_Model):
     sine: Sine = Sine()
     gait: Gait = Gait()
     tilted: list[TiltedPush] = Field(default_factory=lambda: [
-        TiltedPush(roll_deg=5.0), TiltedPush(roll_deg=-5.0), TiltedPush(pitch_deg=5.0),
-        TiltedPush(pitch_deg=-5.0)])
+        TiltedPush(roll_deg=2.0), TiltedPush(roll_deg=-2.0), TiltedPush(pitch_deg=2.0),
+        TiltedPush(pitch_deg=-2.0)])
     sine_sites: Literal["centre_and_corners", "centre", "none"] = "centre_and_corners"
     gait_sites: Literal["centre", "none"] = "centre"
     repeat_centre_steps: bool = True
