@@ -38,7 +38,7 @@ class TruthSettings:
     bending_corner_mm: float = 10.0
     bending_shape: float = 2.0
     nonlinearity: float = 0.003
-    hysteresis: float = 0.0005
+    hysteresis: float = 0.0001
     noise_v: float = 5e-4
     zero_offset_v: float = 5e-3
     drift_v_per_s: float = 2e-5
