@@ -62,6 +62,11 @@ def _zeroed(t: np.ndarray, x: np.ndarray, span_s: float) -> np.ndarray:
     return x - (x0 + (x1 - x0) * u)
 
 
+def zeroed_channels(d: TrialData) -> np.ndarray:
+    """The trial's plate channels zeroed on its unloaded baselines (module docstring, 1)."""
+    return _zeroed(d.t_plate, d.channels, BASELINE_S)
+
+
 def reference_in_plate(d: TrialData, origin_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(w_ref (n,6) about O in F, load point (n,3) in F) of a trial (module docstring)."""
     ati = _zeroed(d.t_robot, d.ati, BASELINE_S)
@@ -86,7 +91,7 @@ def align_clocks(plate: PlateDescription, trials: list[TrialData],
     for d in trials:
         w, _ = reference_in_plate(d, np.array(plate.origin_m))
         lags.append(trial_lag(d.trial_id, d.t_robot, w[:, 2], d.t_plate,
-                              nominal_fz(plate, _zeroed(d.t_plate, d.channels, BASELINE_S)),
+                              nominal_fz(plate, zeroed_channels(d)),
                               max_offset_s))
     return clock_model(lags)
 
@@ -99,7 +104,7 @@ def build_samples(plate: PlateDescription, trials: list[TrialData], sites: list[
     rows: dict[str, list[np.ndarray]] = {k: [] for k in ("v", "w", "p", "f", "trial", "site")}
     for k, (d, site) in enumerate(zip(trials, sites)):
         w, p = reference_in_plate(d, origin)
-        v_plate = _zeroed(d.t_plate, d.channels, BASELINE_S)
+        v_plate = zeroed_channels(d)
         t_on_robot = clock.to_robot(d.t_plate)
         inside = (d.t_robot >= t_on_robot[0]) & (d.t_robot <= t_on_robot[-1])
         if inside.sum() < 10:
