@@ -87,6 +87,7 @@ def load_comedilib() -> Any:
         "comedi_get_maxdata": (u, (p, u, u)),
         "comedi_get_range": (ctypes.POINTER(ComediRange), (p, u, u, u)),
         "comedi_data_write": (ctypes.c_int, (p, u, u, u, u, u)),
+        "comedi_data_read": (ctypes.c_int, (p, u, u, u, u, ctypes.POINTER(u))),
         "comedi_dio_config": (ctypes.c_int, (p, u, u, u)),
         "comedi_dio_write": (ctypes.c_int, (p, u, u, u)),
         "comedi_errno": (ctypes.c_int, ()),
