@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 
 from calibration import dataset, fit, metrics
-from calibration.plan import Plan, expand, force_profile, sites
+from calibration.plan import Plan, Trial, expand, force_profile, sites
 from calibration.plate import PlateDescription, cop_F, load_plate
 from calibration.trial import (CAMPAIGN_FILE, CAMPAIGN_KIND, TRIALS_DIR, TrialData,
                                TrialRunner, read_campaign, sha256_file, write_json_atomic)
@@ -62,12 +62,13 @@ def software_version() -> str:
 def run_campaign(plan: Plan, plate_file: Path, runner: TrialRunner, out: Path,
                  truth: PlateTruth | None = None,
                  progress: Callable[[int, int, str], None] | None = None,
-                 only: list[str] | None = None) -> dict:
-    """Run every trial of ``plan`` (or the ids in ``only``) into the new folder ``out``."""
+                 only: list[str] | None = None, trials: list[Trial] | None = None) -> dict:
+    """Run every trial of ``plan`` (or the ids in ``only``, or the explicit ``trials``) into the
+    new folder ``out``."""
     plate = load_plate(plate_file)
     if out.exists() and any(out.iterdir()):
         raise InputError(f"{out} exists and is not empty; choose a new campaign folder")
-    trials = expand(plan, plate.size_m)
+    trials = list(trials) if trials is not None else expand(plan, plate.size_m)
     if only:
         unknown = sorted(set(only) - {t.id for t in trials})
         if unknown:

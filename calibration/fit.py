@@ -197,6 +197,15 @@ class NonlinearCorrection:
         out[ok, 5] = tz[ok] + (px - ox) * f[:, 1] - (py - oy) * f[:, 0]
         return out
 
+    @classmethod
+    def from_record(cls, entry: dict, origin_m: tuple[float, float, float]
+                    ) -> "NonlinearCorrection":
+        """Rebuild the correction from the record's ``nonlinear_correction`` block."""
+        return cls(int(entry["degree"]), tuple(entry["half_size_m"]),  # type: ignore[arg-type]
+                   origin_m, np.array(entry["cop_x_m"]), np.array(entry["cop_y_m"]),
+                   np.array(entry["fz_gain"]), float(entry["fz_quadratic"]),
+                   float(entry["full_scale_fz_n"]))
+
     def record_entry(self) -> dict:
         return {"model": "polynomial_cop_correction", "degree": self.degree,
                 "variables": "u = COPx/half_x, v = COPy/half_y of the linearly calibrated COP; "

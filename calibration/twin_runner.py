@@ -20,13 +20,13 @@ import numpy as np
 from calibration import registration as reg
 from calibration.plate import PlateDescription
 from calibration.trial import TrialData, TrialRunner
-from calibration.twin_plate import TwinPlate
+from calibration.twin_plate import PlateTruth, TwinPlate, draw_truth
 from protocols.base import ForceGenerator
 from protocols.output import ValidationReport
 from protocols.schema import Pose
 from rt.components.blocks import SignalTap
 from rt.engine import Array, Component
-from rt.errors import SafetyTrip
+from rt.errors import BackendUnavailableError, InputError, SafetyTrip
 from rt.model import RobotModel
 from rt.position_loop import build_protocol_loop, sim_devices
 from rt.safety.events import Reaction
@@ -286,3 +286,22 @@ class DirectTrialRunner(TrialRunner):
         return TrialData(trial_id, t_robot, ati, np.tile(p_BS, (n, 1)),
                          np.tile(R_BS.ravel(), (n, 1)), np.asarray(profile_n, float), t_plate,
                          channels, T_BF, 0.0, 0.0, TOOL_LENGTH_M)
+
+
+def make_runner(backend: str, plate: PlateDescription, seed: int, registration: str
+                ) -> tuple[TrialRunner, PlateTruth]:
+    """The runner named ``backend`` (``twin``, ``direct``) on a twin plate drawn from ``seed``.
+
+    ``rt`` (trials as force-control sessions in the RT process) is refused until the RT
+    process can start sessions (issue 9)."""
+    if backend == "rt":
+        raise BackendUnavailableError(
+            "the RT-process trial runner (campaign trials as force-control sessions over "
+            "ZeroMQ) comes with the RT process's session_start (issue 9); use --backend twin")
+    truth = draw_truth(plate, seed=seed)
+    twin_plate = TwinPlate(plate, truth, seed=seed + 1)
+    if backend == "direct":
+        return DirectTrialRunner(plate, twin_plate, seed=seed), truth
+    if backend != "twin":
+        raise InputError(f"unknown backend {backend!r}: use twin, direct or rt")
+    return TwinTrialRunner(plate, twin_plate, registration=registration, seed=seed), truth
