@@ -121,7 +121,8 @@ class Processed:
 
 
 def process(folder: Path, degree: int = 3, estimate_angles: bool = True,
-            allow_partial: bool = False) -> Processed:
+            allow_partial: bool = False, tool_squareness_rad: float = fit.TOOL_SQUARENESS_RAD
+            ) -> Processed:
     """Align, fit and evaluate a campaign folder (no file written)."""
     t0 = time.perf_counter()
     index = read_campaign(folder)
@@ -145,7 +146,14 @@ def process(folder: Path, degree: int = 3, estimate_angles: bool = True,
                          f"{6 * plate.n_channels} matrix entries")
     if len(held) == 0:
         raise InputError(f"{folder}: no held-out trial: the fit cannot be validated")
-    lin = fit.fit_linear(plate, train, estimate_angles=estimate_angles)
+    # Each site's angle prior: its registration's rotation uncertainty and the tool's
+    # squareness, combined.
+    angle_prior = {}
+    for e, d in zip(entries, trials):
+        angle_prior[e["site"]] = max(angle_prior.get(e["site"], 0.0),
+                                     math.hypot(d.sigma_rotation_rad, tool_squareness_rad))
+    lin = fit.fit_linear(plate, train, estimate_angles=estimate_angles,
+                         angle_prior_rad=angle_prior)
     nl = fit.fit_nonlinear(plate, lin, train, degree)
     C0 = plate.nominal_C()
 

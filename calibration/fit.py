@@ -9,10 +9,13 @@ error, tool out of square): the reference force is rotated by R(θ_s) about the 
 its moment about O follows. Unknowns: C (6×N) and every θ_s,
 solved by alternating least squares (C given θ: linear per row; θ given C: 3×3 linear per site,
 linearized about the current angles), ``iterations`` times. A constant misalignment shared by
-every site cannot be told from crosstalk with loads that all point the same way: the angles
-have a zero-mean prior (``PRIOR_ANGLE_RAD``, what the registration allows), so that common
-part goes to the matrix (whose prior is much wider) and to the uncertainty budget, and the
-angles the loads cannot reach (a rotation about a vertical load's own line) stay at zero.
+every site cannot be told from crosstalk with loads that all point the same way: the sites'
+mean angle is held at zero (``MEAN_ANGLE_SIGMA_RAD``), so that common part goes to the
+matrix and to the uncertainty budget (the registration's rotation uncertainty); each angle
+has a zero-mean prior: the registration's rotation uncertainty at that site combined with
+the tool's squareness (``TOOL_SQUARENESS_RAD``). The prior matters: angles free to move far
+would soak up what the linear matrix cannot model (the top plate's bending leaks into the
+shear channels through crosstalk) and bias the matrix at the other sites.
 
 Each row of C is a Bayesian linear regression with a prior centred on the nominal matrix
 (``PRIOR_PCT_FS`` of the axis's full scale at the channel's full range, 1 σ): an entry the
@@ -40,13 +43,22 @@ from calibration.plate import PlateDescription, cop_F
 from calibration.registration import small_rotation
 
 PRIOR_PCT_FS = 5.0
-#: Prior on the misalignment angles (rad, 1 σ): a load direction out by more than a few
-#: degrees is a set-up error, not something to fit away. It also pins the angles the loads do
-#: not reach (a rotation about a vertical load's own line).
-PRIOR_ANGLE_RAD = math.radians(2.0)
+#: The load applicator's squareness on the ATI (rad, 1 σ), added to the registration's
+#: rotation uncertainty in the prior of each site's misalignment angles.
+TOOL_SQUARENESS_RAD = math.radians(0.1)
+#: The sites' mean misalignment is held at zero to within this (rad): a misalignment shared
+#: by every site is indistinguishable from crosstalk and is given to the matrix.
+MEAN_ANGLE_SIGMA_RAD = math.radians(0.001)
 #: Residual floor, as a fraction of the axis's full scale (noise-free synthetic data).
-RESIDUAL_FLOOR_FS = 1e-7
+RESIDUAL_FLOOR_FS = 1e-6
 IDENTIFIED_RATIO = 0.2
+#: A channel direction whose RMS excitation is below this fraction of the channel's range is
+#: "not excited" (noise and crosstalk only).
+MIN_EXCITATION = 1e-3
+#: A column is not identified when more than this share of its unit direction is unexcited.
+MAX_UNEXCITED_SHARE = 0.3
+#: Weight (in prior units) holding the unexcited directions at the nominal matrix.
+HOLD_WEIGHT = 1e6
 COP_MIN_LOAD_N = 150.0
 
 
@@ -87,72 +99,133 @@ def _prior_sigma(plate: PlateDescription) -> np.ndarray:
     return PRIOR_PCT_FS / 100.0 * fs[:, None] / plate.channel_ranges()[None, :]
 
 
-def _solve_rows(V: np.ndarray, W: np.ndarray, C0: np.ndarray, prior: np.ndarray,
-                fs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per row: posterior mean, standard errors and residual RMS (Bayesian LS, prior C0)."""
-    n, N = V.shape
-    C = np.empty_like(C0)
-    se = np.empty_like(C0)
-    rms = np.empty(6)
-    G = V.T @ V
-    for i in range(6):
-        y = W[:, i]
-        # Two passes: the residual variance sets the prior's weight.
-        floor = (RESIDUAL_FLOOR_FS * fs[i]) ** 2
-        s2 = max(float(np.var(y - V @ C0[i])), floor)
-        for _ in range(3):
-            A = G + s2 * np.diag(1.0 / prior[i] ** 2)
-            C[i] = C0[i] + np.linalg.solve(A, V.T @ (y - V @ C0[i]))
-            r = y - V @ C[i]
-            s2 = max(float(r @ r) / max(n - N, 1), floor)
-        A = G + s2 * np.diag(1.0 / prior[i] ** 2)
-        se[i] = np.sqrt(np.abs(np.diag(s2 * np.linalg.inv(A))))
-        rms[i] = math.sqrt(float(np.mean(r ** 2)))
-    return C, se, rms
+def _rotation_jacobian(w: np.ndarray, p: np.ndarray, origin: np.ndarray, angles: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The reference rotated by ``angles`` (n, 6) and its derivative (n, 6, 2) with respect to
+    the rotations about x and y (finite differences of the exact rotation)."""
+    base = rotate_reference(w, p, origin, small_rotation(angles))
+    J = np.empty((*base.shape, 2))
+    h = 1e-7
+    for a in range(2):
+        d = angles.copy()
+        d[a] += h
+        J[:, :, a] = (rotate_reference(w, p, origin, small_rotation(d)) - base) / h
+    return base, J
 
 
 def fit_linear(plate: PlateDescription, s: Samples, estimate_angles: bool = True,
-               iterations: int = 8) -> LinearFit:
-    """The linear stage (module docstring) on training samples ``s``."""
+               iterations: int = 6, angle_prior_rad: dict[str, float] | float | None = None
+               ) -> LinearFit:
+    """The linear stage (module docstring) on training samples ``s``.
+
+    Gauss-Newton on the joint unknowns x = (C row by row, θ per site), the rotation linearized
+    about the current angles; the rows of each wrench axis weighted by that axis' residual
+    RMS; the priors (nominal matrix, zero angles) as extra rows. The posterior covariance
+    (the inverse of the normal matrix) gives the standard errors, the angles' uncertainty
+    included. ``angle_prior_rad``: per site name (or one for all) the angles' prior σ;
+    default ``TOOL_SQUARENESS_RAD``.
+    """
     origin = np.array(plate.origin_m)
     C0 = plate.nominal_C()
+    n_ch = plate.n_channels
     prior = _prior_sigma(plate)
-    angles = {name: np.zeros(3) for name in s.site_names}
-    sites = np.unique(s.site)
-    W = s.w_ref.copy()
     fs = plate.full_scale()
-    C, se, rms = _solve_rows(s.v, W, C0, prior, fs)
+    sites = [int(k) for k in np.unique(s.site)] if estimate_angles else []
+    n_c, n_x = 6 * n_ch, 6 * n_ch + 2 * len(sites)
+    angles = {s.site_names[k]: np.zeros(3) for k in np.unique(s.site)}
+    prior_theta = np.array([
+        (angle_prior_rad.get(s.site_names[k], TOOL_SQUARENESS_RAD)
+         if isinstance(angle_prior_rad, dict) else
+         (TOOL_SQUARENESS_RAD if angle_prior_rad is None else float(angle_prior_rad)))
+        for k in sites for _ in range(2)])
+    # Channel directions the loads do not excite (in units of each channel's range): their
+    # columns cannot be identified; the fit keeps the nominal matrix along them.
+    ranges = plate.channel_ranges()
+    _, sv, vt = np.linalg.svd(s.v / ranges / math.sqrt(max(len(s), 1)), full_matrices=False)
+    null = vt[sv < MIN_EXCITATION]                     # rows: unexcited unit directions
+    null_proj = null.T @ null                          # projector, channel/range units
+    unexcited_share = np.sqrt(np.diag(null_proj))      # of each channel's unit direction
+    C = C0.copy()
+    sigma = fs * 1e-3                       # axis residual scale, refined each iteration
+    V = s.v
+    G = V.T @ V
+    cov = np.eye(n_x)
     done = 0
-    for done in range(1, (iterations if estimate_angles else 0) + 1):
-        for k in sites:
+    for done in range(1, iterations + 1):
+        W = s.w_ref.copy()
+        Js: dict[int, np.ndarray] = {}
+        for k in np.unique(s.site):
             m = s.site == k
-            name = s.site_names[k]
-            target = s.v[m] @ C.T
-            # Linearize R(θ + δ) w about θ: derivative by finite rotations of each axis.
-            base = rotate_reference(s.w_ref[m], s.p_ref[m], origin, small_rotation(angles[name]))
-            J = np.empty((base.size, 2))
-            h = 1e-6
+            W[m], J = _rotation_jacobian(s.w_ref[m], s.p_ref[m], origin,
+                                         angles[s.site_names[k]])
+            Js[int(k)] = J
+        N = np.zeros((n_x, n_x))
+        rhs = np.zeros(n_x)
+        x0 = np.concatenate([C.ravel(), np.concatenate([angles[s.site_names[k]][:2]
+                                                        for k in sites]) if sites else []])
+        R = V @ C.T - W                      # residual (n, 6) at the current point
+        for i in range(6):
+            wi = 1.0 / sigma[i] ** 2
+            ci = slice(i * n_ch, (i + 1) * n_ch)
+            N[ci, ci] += G * wi
+            rhs[ci] -= V.T @ R[:, i] * wi
+            for q, k in enumerate(sites):
+                m = s.site == k
+                ti = slice(n_c + 2 * q, n_c + 2 * q + 2)
+                Ji = -Js[k][:, i, :]           # d r / d θ = -d W / d θ
+                cross = V[m].T @ Ji * wi
+                N[ci, ti] += cross
+                N[ti, ci] += cross.T
+                N[ti, ti] += Ji.T @ Ji * wi
+                rhs[ti] -= Ji.T @ R[m, i] * wi
+        # Priors: (C - C0)/σ_p and θ/σ_θ; the unexcited channel directions held at nominal.
+        p_c = 1.0 / prior.ravel() ** 2
+        N[:n_c, :n_c] += np.diag(p_c)
+        rhs[:n_c] -= (x0[:n_c] - C0.ravel()) * p_c
+        for i in range(6):
+            ci = slice(i * n_ch, (i + 1) * n_ch)
+            hold = null_proj / prior[i][:, None] / prior[i][None, :] * HOLD_WEIGHT
+            N[ci, ci] += hold
+            rhs[ci] -= hold @ (C[i] - C0[i])
+        if sites:
+            N[n_c:, n_c:] += np.diag(1.0 / prior_theta ** 2)
+            rhs[n_c:] -= x0[n_c:] / prior_theta ** 2
+            # The sites' mean angle is held at zero: the common part is crosstalk.
             for a in range(2):
-                d = angles[name].copy()
-                d[a] += h
-                J[:, a] = ((rotate_reference(s.w_ref[m], s.p_ref[m], origin, small_rotation(d))
-                            - base) / h).ravel()
-            # Weight the rows by the inverse residual scale of each axis.
-            wts = np.tile(1.0 / np.maximum(rms, RESIDUAL_FLOOR_FS * fs), base.shape[0])
-            # The prior on the angles enters as three extra rows: (θ + δ)/σ_θ ≈ 0.
-            A = np.vstack([J * wts[:, None], np.eye(2) / PRIOR_ANGLE_RAD])
-            b = np.concatenate([(target - base).ravel() * wts,
-                                -angles[name][:2] / PRIOR_ANGLE_RAD])
-            delta, *_ = np.linalg.lstsq(A, b, rcond=None)
-            angles[name][:2] += delta
-        for k in sites:
+                e = np.zeros(n_x)
+                e[n_c + a::2] = 1.0
+                N += np.outer(e, e) / MEAN_ANGLE_SIGMA_RAD ** 2
+                rhs -= e * (e @ x0) / MEAN_ANGLE_SIGMA_RAD ** 2
+        # Solve in units of the prior standard deviations (the prior block becomes the
+        # identity), by eigen-decomposition: the directions the data do not reach keep their
+        # prior accurately however stiff the others are.
+        D = np.concatenate([prior.ravel(), prior_theta])
+        lam, Q = np.linalg.eigh(N * D[:, None] * D[None, :])
+        lam = np.maximum(lam, 1e-12)
+        cov_scaled = (Q / lam) @ Q.T
+        cov = cov_scaled * D[:, None] * D[None, :]
+        step = D * (cov_scaled @ (D * rhs))
+        x = x0 + step
+        C = x[:n_c].reshape(6, n_ch)
+        for q, k in enumerate(sites):
+            angles[s.site_names[k]][:2] = x[n_c + 2 * q:n_c + 2 * q + 2]
+        W = s.w_ref.copy()
+        for k in np.unique(s.site):
             m = s.site == k
             W[m] = rotate_reference(s.w_ref[m], s.p_ref[m], origin,
                                     small_rotation(angles[s.site_names[k]]))
-        C, se, rms = _solve_rows(s.v, W, C0, prior, fs)
-    identified = se < IDENTIFIED_RATIO * prior
+        resid = V @ C.T - W
+        rms = np.sqrt(np.mean(resid ** 2, axis=0))
+        sigma = np.maximum(rms, RESIDUAL_FLOOR_FS * fs)
+        if np.max(np.abs(step[n_c:]), initial=0.0) < 1e-9 and done > 1:
+            break
+    se = np.sqrt(np.abs(np.diag(cov)[:n_c])).reshape(6, n_ch)
+    # A column along an unexcited direction is held, not known: its uncertainty is the prior.
+    held = np.broadcast_to(unexcited_share > MAX_UNEXCITED_SHARE, se.shape)
+    se = np.where(held, prior, se)
+    identified = (se < IDENTIFIED_RATIO * prior) & ~held
     return LinearFit(C, se, identified, {s.site_names[k]: angles[s.site_names[k]]
-                                         for k in sites}, rms, done)
+                                         for k in np.unique(s.site)}, rms, done)
 
 
 # ------------------------------------------------------------------------------ nonlinear
