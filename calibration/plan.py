@@ -11,7 +11,7 @@ Profiles (all start and end with ``baseline_s`` unloaded, used to zero both sens
   reached by a raised-cosine ramp of ``ramp_s`` and held ``hold_s`` (CalTester, ASTM F3109).
 * ``sine`` — mean ± amplitude at ``frequency_hz`` for ``cycles``, cosine ramps in and out.
 * ``gait`` — a gait-like double-hump vertical force (heel strike, mid-stance valley, push off)
-  of ``gait_peak_n`` over ``stance_s``, repeated.
+  of ``peak_n`` over ``stance_s``, repeated on a small preload (the tool keeps contact).
 * ``tilted`` — static steps with the platform tilted (roll, pitch): the load's line of action
   and its point move, exciting the moments (and shear where the contact's friction allows).
 
@@ -71,10 +71,15 @@ class Sine(_Model):
 
 
 class Gait(_Model):
+    """Stances of ``stance_s`` peaking at ``peak_n``, separated by ``rest_s`` at ``preload_n``
+    (the tool stays in contact: a robot pressing a rigid plate must not let go and come
+    back between steps)."""
+
     peak_n: Load = 1200.0
-    stance_s: Annotated[float, Field(ge=0.3, le=3.0)] = 0.8
+    stance_s: Annotated[float, Field(ge=0.3, le=3.0)] = 1.0
     repetitions: Annotated[int, Field(ge=1, le=20)] = 3
     rest_s: Pos = 0.5
+    preload_n: Annotated[float, Field(ge=0.0, le=500.0)] = 50.0
 
 
 class TiltedPush(_Model):
@@ -223,17 +228,23 @@ def force_profile(plan: Plan, trial: Trial, dt: float) -> np.ndarray:
                           0.0)
     g = plan.gait
     period = g.stance_s + g.rest_s
-    duration = b + g.repetitions * period + b
+    ramp = 0.5
+    first = b + ramp
+    duration = first + g.repetitions * period + ramp + b
     t = np.arange(int(round(duration / dt)) + 1) * dt
     f = np.zeros_like(t)
     for k in range(g.repetitions):
-        u = (t - b - k * period) / g.stance_s
+        u = (t - first - k * period) / g.stance_s
         inside = (u >= 0.0) & (u <= 1.0)
         # Double hump: sin(πu) envelope with a mid-stance valley at 75 % of the peak.
         shape = np.sin(math.pi * u) ** 2 * (1.0 - 0.45 * np.sin(math.pi * u) ** 8) \
             + 0.35 * np.sin(2 * math.pi * u) ** 2
         f += np.where(inside, shape, 0.0)
-    return f / max(float(f.max()), 1e-12) * g.peak_n
+    f = f / max(float(f.max()), 1e-12) * (g.peak_n - g.preload_n)
+    # The preload, reached and left by raised-cosine ramps around the stances.
+    end = first + g.repetitions * period
+    f += g.preload_n * _smooth(t, b, ramp) * (1.0 - _smooth(t, end, ramp))
+    return f
 
 
 def load_plan(path: str | Path) -> Plan:
