@@ -28,8 +28,10 @@ held-out validation is the honest figure.
 Nonlinear stage (after Cappello 2011's position-dependent matrix). From the linearly
 calibrated wrench: COP error ΔCOP(x, y) and vertical-force gain g(x, y) + k Fz as bivariate
 polynomials of the (linearly calibrated) COP, normalized to the plate's half-sizes, fitted on
-loaded training samples (Fz ≥ ``COP_MIN_LOAD_N``); the corrected moments follow from the
-corrected COP and forces, the free moment kept.
+loaded training samples (Fz ≥ ``COP_MIN_LOAD_N``); the COP polynomial's degree is chosen by
+leave-one-site-out cross-validation (a degree with as many terms as sites would interpolate
+the sites and swing between them); the corrected moments follow from the corrected COP and
+forces, the free moment kept.
 """
 from __future__ import annotations
 
@@ -246,6 +248,7 @@ class NonlinearCorrection:
     gain: np.ndarray = field(default_factory=lambda: np.zeros(0))
     fz_quadratic: float = 0.0
     full_scale_fz_n: float = 1.0
+    cross_validation_mm: dict[int, float] = field(default_factory=dict)
 
     def apply(self, w_lin: np.ndarray) -> np.ndarray:
         """Corrected wrenches (n, 6) about O from linearly calibrated ones."""
@@ -257,8 +260,8 @@ class NonlinearCorrection:
         u = cop[ok, 0] / self.half_size_m[0]
         v = cop[ok, 1] / self.half_size_m[1]
         T = _poly_terms(u, v, self.degree)
-        px = cop[ok, 0] + T @ self.cop_x
-        py = cop[ok, 1] + T @ self.cop_y
+        px = cop[ok, 0] + (T @ self.cop_x if self.degree > 0 else 0.0)
+        py = cop[ok, 1] + (T @ self.cop_y if self.degree > 0 else 0.0)
         f = w_lin[ok, :3].copy()
         fz = f[:, 2]
         f[:, 2] = fz * (1.0 + _poly_terms(u, v, 2) @ self.gain
@@ -287,28 +290,65 @@ class NonlinearCorrection:
                 "cop_y_m": self.cop_y.tolist(), "fz_gain_degree": 2,
                 "fz_gain": self.gain.tolist(), "fz_quadratic": self.fz_quadratic,
                 "full_scale_fz_n": self.full_scale_fz_n,
+                "degree_cross_validation_mm": {str(k): v
+                                               for k, v in self.cross_validation_mm.items()},
                 "applies_to": "wrench = cal_matrix · channels, then COP and Fz corrected, "
                               "moments recomputed about O with the free moment kept"}
 
 
+def _n_terms(degree: int) -> int:
+    return (degree + 1) * (degree + 2) // 2
+
+
+def _cop_polys(T: np.ndarray, target: np.ndarray) -> np.ndarray:
+    coef, *_ = np.linalg.lstsq(T, target, rcond=None)
+    return coef
+
+
+def choose_degree(u: np.ndarray, v: np.ndarray, dx: np.ndarray, dy: np.ndarray,
+                  site: np.ndarray, max_degree: int) -> tuple[int, dict[int, float]]:
+    """The COP polynomial's degree by leave-one-site-out cross-validation (RMS COP error of
+    each left-out site predicted from the others, m); degrees whose term count would not
+    leave at least two sites over are not tried."""
+    sites = np.unique(site)
+    scores: dict[int, float] = {}
+    for d in range(1, max_degree + 1):
+        if _n_terms(d) > len(sites) - 2:
+            break
+        err = []
+        for k in sites:
+            out = site == k
+            T = _poly_terms(u[~out], v[~out], d)
+            T_out = _poly_terms(u[out], v[out], d)
+            ex = T_out @ _cop_polys(T, dx[~out]) - dx[out]
+            ey = T_out @ _cop_polys(T, dy[~out]) - dy[out]
+            err.append(np.concatenate([ex, ey]))
+        scores[d] = float(np.sqrt(np.mean(np.concatenate(err) ** 2)))
+    if not scores:
+        return 0, scores
+    return min(scores, key=lambda d: scores[d]), scores
+
+
 def fit_nonlinear(plate: PlateDescription, lin: LinearFit, s: Samples, degree: int = 3
                   ) -> NonlinearCorrection:
-    """The position-dependent stage on training samples ``s`` (module docstring)."""
+    """The position-dependent stage on training samples ``s`` (module docstring); ``degree``
+    is the highest tried, the one used is chosen by leave-one-site-out cross-validation
+    (:func:`choose_degree`); 0 (no COP correction) when the sites are too few."""
     hx, hy = plate.size_m[0] / 2, plate.size_m[1] / 2
-    corr = NonlinearCorrection(degree, (hx, hy), tuple(plate.origin_m),  # type: ignore[arg-type]
-                               full_scale_fz_n=float(plate.force_range_n[2]))
     w_lin = s.v @ lin.C.T
     cop, _ = cop_F(w_lin, plate.origin_m)
     use = (s.w_ref[:, 2] >= COP_MIN_LOAD_N) & np.isfinite(cop[:, 0])
-    if use.sum() < 3 * (degree + 1) * (degree + 2) // 2:
-        corr.cop_x = np.zeros((degree + 1) * (degree + 2) // 2)
-        corr.cop_y = corr.cop_x.copy()
-        corr.gain = np.zeros(6)
-        return corr
     u, v = cop[use, 0] / hx, cop[use, 1] / hy
-    T = _poly_terms(u, v, degree)
-    corr.cop_x, *_ = np.linalg.lstsq(T, s.p_ref[use, 0] - cop[use, 0], rcond=None)
-    corr.cop_y, *_ = np.linalg.lstsq(T, s.p_ref[use, 1] - cop[use, 1], rcond=None)
+    dx, dy = s.p_ref[use, 0] - cop[use, 0], s.p_ref[use, 1] - cop[use, 1]
+    chosen, scores = choose_degree(u, v, dx, dy, s.site[use], degree)
+    corr = NonlinearCorrection(chosen, (hx, hy), tuple(plate.origin_m),  # type: ignore[arg-type]
+                               full_scale_fz_n=float(plate.force_range_n[2]))
+    corr.cross_validation_mm = {d: e * 1e3 for d, e in scores.items()}
+    T = _poly_terms(u, v, chosen)
+    if chosen == 0:
+        corr.cop_x = corr.cop_y = np.zeros(1)
+    else:
+        corr.cop_x, corr.cop_y = _cop_polys(T, dx), _cop_polys(T, dy)
     fz = w_lin[use, 2]
     G = np.column_stack([_poly_terms(u, v, 2) * fz[:, None],
                          fz ** 2 / corr.full_scale_fz_n])

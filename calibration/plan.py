@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from calibration import yaml_files
 
@@ -110,12 +110,13 @@ class Plan(_Model):
     pose_z_m: Annotated[float, Field(gt=0.4, lt=1.0)] = 0.63
     registration: Literal["nominal", "camera"] = "camera"
 
-    @model_validator(mode="after")
-    def _sorted_loads(self) -> "Plan":
-        if list(self.loads_n) != sorted(set(self.loads_n)):
-            raise ValueError("loads_n: must be strictly increasing (steps go up through them, "
-                             "then down)")
-        return self
+    @field_validator("loads_n")
+    @classmethod
+    def _sorted_loads(cls, loads: list[float]) -> list[float]:
+        if list(loads) != sorted(set(loads)):
+            raise ValueError("must be strictly increasing (steps go up through them, then "
+                             "down)")
+        return loads
 
 
 class Site(_Model):
