@@ -94,8 +94,10 @@ class TrialData:
             raise ConfigurationError(f"{where}: trial too short ({n} robot, {m} plate samples)")
         if np.any(np.diff(self.t_robot) <= 0) or np.any(np.diff(self.t_plate) <= 0):
             raise ConfigurationError(f"{where}: time stamps are not increasing")
-        if not np.isfinite(self.channels).all():
-            raise ConfigurationError(f"{where}: plate channels hold NaN or infinite values")
+        for name, arr in (("plate channels", self.channels), ("ATI readings", self.ati),
+                          ("sensor poses", self.p_BS)):
+            if not np.isfinite(arr).all():
+                raise ConfigurationError(f"{where}: {name} hold NaN or infinite values")
 
 
 class TrialRunner(abc.ABC):

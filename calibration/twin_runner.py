@@ -26,7 +26,7 @@ from protocols.output import ValidationReport
 from protocols.schema import Pose
 from rt.components.blocks import SignalTap
 from rt.engine import Array, Component
-from rt.errors import BackendUnavailableError, InputError, SafetyTrip
+from rt.errors import BackendUnavailableError, HardwareError, InputError, SafetyTrip
 from rt.model import RobotModel
 from rt.position_loop import build_protocol_loop, sim_devices
 from rt.safety.events import Reaction
@@ -221,6 +221,15 @@ class TwinTrialRunner(TrialRunner):
         true_rows = truth.ring[:truth.written]
         m = min(len(rows), len(true_rows))
         rows, true_rows = rows[:m], true_rows[:m]
+        # The ATI reads NaN until its first sample arrives: start the recording there.
+        finite = np.isfinite(rows[:, 1:7]).all(axis=1)
+        if not finite.any():
+            raise HardwareError(f"trial {trial_id}: the ATI sensor gave no reading")
+        first = int(np.argmax(finite))
+        rows, true_rows = rows[first:], true_rows[first:]
+        if not np.isfinite(rows[:, 1:7]).all():
+            raise HardwareError(f"trial {trial_id}: the ATI sensor's readings stopped during "
+                                "the trial (NaN); repeat it")
         t_robot = rows[:, 0] - rows[0, 0] + self._t_offset
         p_BS, R_BS = sensor_poses(model, rows[:, 7:10])
         # The plate's side: true load (on the plate = minus the environment's on the platform).
