@@ -39,6 +39,10 @@ demo: setup
 	@echo
 	$(BIN)/talus session run --protocol protocols/library/gait_replay.yaml --patient-weight 75 \
 	  --record out/gait_replay.mcap
+	@echo
+	@# out/calibration is this target's own output (a campaign folder must be new).
+	rm -rf out/calibration
+	$(BIN)/talus calibrate demo --out out/calibration
 
 test: setup
 	$(BIN)/pytest -q

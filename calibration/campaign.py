@@ -148,7 +148,7 @@ def process(folder: Path, degree: int = 3, estimate_angles: bool = True,
         raise InputError(f"{folder}: no held-out trial: the fit cannot be validated")
     # Each site's angle prior: its registration's rotation uncertainty and the tool's
     # squareness, combined.
-    angle_prior = {}
+    angle_prior: dict[str, float] = {}
     for e, d in zip(entries, trials):
         angle_prior[e["site"]] = max(angle_prior.get(e["site"], 0.0),
                                      math.hypot(d.sigma_rotation_rad, tool_squareness_rad))
@@ -205,7 +205,10 @@ def uncertainty(p: Processed, ref: ReferenceSensor, sig_t: float, sig_r: float) 
         {"source": "reference moment accuracy at the median load (COP)",
          "value": u_cop_ref * 1e3, "unit": "mm"},
     ]
-    return {"k": 2, "force_n": (2.0 * u_force).tolist(), "moment_nm": (2.0 * u_moment).tolist(),
+    # The contract's force_n has six entries: the expanded uncertainty per wrench axis
+    # (Fx, Fy, Fz in N, then Mx, My, Mz in N·m, repeated in moment_nm).
+    return {"k": 2, "force_n": (2.0 * np.r_[u_force, u_moment]).tolist(),
+            "moment_nm": (2.0 * u_moment).tolist(),
             "cop_mm": 2.0 * u_cop * 1e3, "budget": budget,
             "standard_uncertainties": "budget values are 1 σ; force_n, moment_nm, cop_mm are "
                                       "expanded (k = 2)"}
@@ -230,7 +233,7 @@ def build_record(folder: Path, p: Processed, thresholds: metrics.Thresholds,
                                  {"before": p.stages_all["before"],
                                   "after": p.stages_all["nonlinear"]}, site_xy)
     # Registration: the trials' registrations (one per site), summarized.
-    regs = {}
+    regs: dict[str, tuple[np.ndarray, float, float]] = {}
     for e in trials:
         d = TrialData.load(folder / TRIALS_DIR / f"{e['id']}.npz")
         regs.setdefault(e["site"], (d.T_BF, d.sigma_translation_m, d.sigma_rotation_rad))

@@ -212,7 +212,7 @@ def _summary(record: dict) -> dict:
             "cop_max_mm": {k: m[k]["cop_max_mm"] for k in m},
             "force_pct_fs": {k: max(x for x in m[k]["force_pct_fs"][:3] if x is not None)
                              for k in m},
-            "uncertainty_k2": {"force_n": record["uncertainty"]["force_n"],
+            "uncertainty_k2": {"force_n": record["uncertainty"]["force_n"][:3],
                                "cop_mm": record["uncertainty"]["cop_mm"]},
             "not_identified": [f"{r}<-{c}" for i, r in enumerate(record["matrix"]["row_order"])
                                for j, c in enumerate(record["matrix"]["channel_order"])

@@ -57,7 +57,7 @@ class TrialData:
         fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp.npz")
         os.close(fd)
         try:
-            np.savez_compressed(tmp, **arrays)
+            np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
             digest = sha256_file(Path(tmp))
             os.replace(tmp, path)
         except BaseException:

@@ -97,6 +97,7 @@ def test_fit_writes_a_record_following_the_contract(campaign_dir: Path, tmp_path
     assert np.array(record["matrix"]["cal_matrix"]).shape == (6, 6)
     assert np.array(record["registration"]["T_robot_plate"]).shape == (4, 4)
     assert record["uncertainty"]["k"] == 2
+    assert len(record["uncertainty"]["force_n"]) == 6 and len(record["uncertainty"]["moment_nm"]) == 3
     assert record["verdict"]["stage"] == "nonlinear"
     assert out["cop_rms_mm"]["nonlinear"] < out["cop_rms_mm"]["before"]
     # The Mz channel is never excited: its column is not claimed.
