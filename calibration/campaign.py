@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.metadata
-import json
 import math
 import shutil
 import time
@@ -21,7 +20,8 @@ from calibration import dataset, fit, metrics
 from calibration.plan import Plan, Trial, expand, force_profile, sites
 from calibration.plate import PlateDescription, cop_F, load_plate
 from calibration.trial import (CAMPAIGN_FILE, CAMPAIGN_KIND, TRIALS_DIR, TrialData,
-                               TrialRunner, read_campaign, sha256_file, write_json_atomic)
+                               TrialRunner, read_campaign, read_json_of_kind, sha256_file,
+                               write_json_atomic)
 from calibration.twin_plate import PlateTruth, expected_matrix
 from rt.ati.twin_sensor import DELTA_SI_660_60_RANGES
 from rt.errors import ConfigurationError, InputError
@@ -305,10 +305,4 @@ def record_json(record: dict) -> dict:
 
 
 def read_record(path: Path) -> dict:
-    try:
-        record = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ConfigurationError(f"{path}: unreadable calibration record: {exc}") from None
-    if not isinstance(record, dict) or record.get("kind") != RECORD_KIND:
-        raise ConfigurationError(f"{path}: not a talus calibration record")
-    return record
+    return read_json_of_kind(path, RECORD_KIND, "talus calibration record")

@@ -146,17 +146,23 @@ def write_json_atomic(path: Path, data: Any, force: bool = False) -> None:
         raise
 
 
+def read_json_of_kind(path: Path, kind: str, what: str) -> dict:
+    """A JSON object whose ``kind`` is ``kind``; ConfigurationError naming ``what`` otherwise."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ConfigurationError(f"{path}: unreadable {what}: {exc}") from None
+    if not isinstance(data, dict) or data.get("kind") != kind:
+        raise ConfigurationError(f"{path}: not a {what}")
+    return data
+
+
 def read_campaign(folder: Path) -> dict:
     """The campaign's index, checked: every listed trial file present and unchanged."""
     index_path = folder / CAMPAIGN_FILE
     if not index_path.is_file():
         raise ConfigurationError(f"{folder}: not a campaign folder (no {CAMPAIGN_FILE})")
-    try:
-        index = json.loads(index_path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ConfigurationError(f"{index_path}: unreadable: {exc}") from None
-    if not isinstance(index, dict) or index.get("kind") != CAMPAIGN_KIND:
-        raise ConfigurationError(f"{index_path}: not a talus calibration campaign")
+    index = read_json_of_kind(index_path, CAMPAIGN_KIND, "talus calibration campaign")
     for entry in index.get("trials", []):
         path = folder / TRIALS_DIR / f"{entry['id']}.npz"
         if not path.is_file():

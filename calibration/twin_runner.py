@@ -171,8 +171,6 @@ class TwinTrialRunner(TrialRunner):
         model = self.model
         z0, roll, pitch = pose
         q0 = np.array(model.kin.ik(z0, roll, pitch).q)
-        p0, R0 = sensor_poses(model, q0[None, :])
-        tip0 = tip_points_B(p0, R0, TOOL_LENGTH_M)[0]
         # The plate's height is the same for every pose: set by the level pose's tool tip.
         p_lvl, R_lvl = sensor_poses(model, np.array([model.kin.ik(z0, 0.0, 0.0).q]))
         tip_lvl = tip_points_B(p_lvl, R_lvl, TOOL_LENGTH_M)[0]

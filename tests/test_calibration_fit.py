@@ -11,7 +11,7 @@ import pytest
 from calibration import campaign, dataset, fit
 from calibration.alignment import ClockAlignmentError, clock_model, trial_lag
 from calibration.plan import default_plan, expand
-from calibration.plate import TWIN_PLATE_FILE, load_plate, wrench_at_point
+from calibration.plate import TWIN_PLATE_FILE, load_plate
 from calibration.twin_plate import TruthSettings, TwinPlate, draw_truth, expected_matrix
 from calibration.registration import small_rotation
 from calibration.twin_runner import DirectTrialRunner
