@@ -34,14 +34,18 @@ TRUTH_FILE = "twin_truth.json"
 
 @dataclass(frozen=True)
 class ReferenceSensor:
-    """The reference load cell and its certificate (defaults: the twin's ATI Delta SI-660-60;
-    accuracies typical of its datasheet, % FS per axis, 1 σ taken as uniform over ±value)."""
+    """The reference load cell and its certificate (defaults: the twin's ATI Delta SI-660-60).
+
+    ``accuracy_pct_fs``: the certificate's measurement uncertainty per axis, % of full scale,
+    read as expanded (95 %, k = 2) values. The defaults are of the order ATI states for its
+    Delta sensors, not a certificate: replace them with the real sensor's.
+    """
 
     model: str = "ATI Delta SI-660-60 (digital twin)"
     serial: str = "TWIN-ATI"
     calibration_certificate: str = "twin (no certificate)"
     calibration_date: str = ""
-    accuracy_pct_fs: tuple[float, ...] = (0.25, 0.25, 0.25, 0.25, 0.25, 0.25)
+    accuracy_pct_fs: tuple[float, ...] = (1.25, 1.25, 0.75, 1.0, 1.0, 1.5)
     full_scale: tuple[float, ...] = DELTA_SI_660_60_RANGES
 
     def record_entry(self) -> dict:
@@ -169,11 +173,11 @@ def uncertainty(p: Processed, ref: ReferenceSensor, sig_t: float, sig_r: float) 
     """Expanded uncertainty (k = 2) of the calibrated plate's forces, moments and COP.
 
     Sources (standard uncertainties, combined in quadrature): the reference sensor's accuracy
-    (uniform over ± accuracy % FS), the registration (rotation → shear from the largest vertical
+    (its certificate's 95 % values halved), the registration (rotation → shear from the largest vertical
     load; translation → COP and moments), the fit's held-out residual (nonlinear stage, RMS).
     """
     fs_ref = np.array(ref.full_scale)
-    u_ref = np.array(ref.accuracy_pct_fs) / 100.0 * fs_ref / math.sqrt(3.0)
+    u_ref = np.array(ref.accuracy_pct_fs) / 100.0 * fs_ref / 2.0
     fz_max = float(np.max(p.all_samples.w_ref[:, 2]))
     e = p.stages_held["nonlinear"] - p.held.w_ref
     u_fit = np.sqrt(np.mean(e ** 2, axis=0))

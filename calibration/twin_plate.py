@@ -181,5 +181,4 @@ def _play(v: np.ndarray, half_width: np.ndarray) -> np.ndarray:
     for k in range(v.shape[0]):
         y = np.minimum(np.maximum(y, v[k] - half_width), v[k] + half_width)
         out[k] = y
-    # Centre the loop on the input so the unloaded plate still reads ~ its zero.
     return out
