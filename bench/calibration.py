@@ -113,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
         folder = Path(args.out or tempfile.mkdtemp(prefix="talus-cal-")) / "campaign"
         plate = load_plate(TWIN_PLATE_FILE)
         plan = default_plan()
-        runner, truth = make_runner(args.backend, plate, args.seed, plan.registration)
+        runner, truth = make_runner(args.backend, plate, args.seed, plan.registration,
+                                    plan.level_sigma_rad())
         t0 = time.perf_counter()
         campaign.run_campaign(plan, TWIN_PLATE_FILE, runner, folder, truth)
         wall = time.perf_counter() - t0

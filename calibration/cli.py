@@ -181,7 +181,8 @@ def _run(args: argparse.Namespace) -> dict:
     plan = _load_plan(args)
     plate_file = _plate_file(args)
     plate = load_plate(plate_file)
-    runner, truth = make_runner(args.backend, plate, args.seed, plan.registration)
+    runner, truth = make_runner(args.backend, plate, args.seed, plan.registration,
+                                    plan.level_sigma_rad())
     only = [t.strip() for t in args.trials.split(",")] if args.trials else None
     t0 = time.perf_counter()
     index = run_campaign(plan, plate_file, runner, Path(args.out), truth, _progress, only)
@@ -266,7 +267,8 @@ def _demo(args: argparse.Namespace) -> dict:
         raise InputError(f"{out} exists and is not empty; choose a new folder")
     plan = default_plan()
     plate = load_plate(TWIN_PLATE_FILE)
-    runner, truth = make_runner(args.backend, plate, args.seed, plan.registration)
+    runner, truth = make_runner(args.backend, plate, args.seed, plan.registration,
+                                    plan.level_sigma_rad())
     t0 = time.perf_counter()
     campaign = out / "campaign"
     index = run_campaign(plan, TWIN_PLATE_FILE, runner, campaign, truth, _progress)

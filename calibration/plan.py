@@ -109,6 +109,12 @@ class Plan(_Model):
     repeat_centre_steps: bool = True
     pose_z_m: Annotated[float, Field(gt=0.4, lt=1.0)] = 0.63
     registration: Literal["nominal", "camera"] = "camera"
+    #: The plate and the robot's base are levelled to within this (deg, 1 σ); the camera's
+    #: tilt estimate is fused with it. null: not levelled, the camera's tilt alone.
+    level_sigma_deg: Annotated[float, Field(gt=0.0, le=5.0)] | None = 0.1
+
+    def level_sigma_rad(self) -> float | None:
+        return None if self.level_sigma_deg is None else math.radians(self.level_sigma_deg)
 
     @field_validator("loads_n")
     @classmethod

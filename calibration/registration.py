@@ -185,6 +185,43 @@ def camera_registration(frame: np.ndarray, rig: MarkerRig, T_B_R: np.ndarray,
     return Registration("camera", T_BF, sigma_t, sigma_r)
 
 
+def average_registrations(regs: list[Registration]) -> Registration:
+    """The mean of several frames' registrations (translation mean; rotation: the mean
+    rotation vector relative to the first); σ shrinks as √n for the frames' independent noise
+    but not below the frames' own scatter over √n."""
+    n = len(regs)
+    R0 = regs[0].T_BF[:3, :3]
+    vecs = np.array([cv2.Rodrigues(r.T_BF[:3, :3] @ R0.T)[0].ravel() for r in regs])
+    ps = np.array([r.T_BF[:3, 3] for r in regs])
+    R = small_rotation(vecs.mean(axis=0)) @ R0
+    sig_t = max(float(np.mean([r.sigma_translation_m for r in regs])) / math.sqrt(n),
+                float(np.sqrt(np.mean(np.var(ps, axis=0)))) / math.sqrt(n) if n > 1 else 0.0)
+    sig_r = max(float(np.mean([r.sigma_rotation_rad for r in regs])) / math.sqrt(n),
+                float(np.sqrt(np.mean(np.var(vecs, axis=0)))) / math.sqrt(n) if n > 1 else 0.0)
+    return Registration(regs[0].method, transform(R, ps.mean(axis=0)), sig_t, sig_r)
+
+
+def with_level_prior(r: Registration, level_sigma_rad: float | None) -> Registration:
+    """Fuse the registration's tilt with the knowledge that plate and robot are levelled
+    (a force plate is installed level to within ``level_sigma_rad``, 1 σ; the robot's base
+    too): the tilt (rotation about the base's x and y) is shrunk toward level by inverse-
+    variance weighting; the yaw and the translation stay the camera's. A monocular camera's
+    tilt of a plane seen face-on is its weakest estimate, and the one the shear channels
+    are most sensitive to."""
+    if level_sigma_rad is None:
+        return r
+    R = r.T_BF[:3, :3]
+    yaw = math.atan2(R[1, 0], R[0, 0])
+    tilt_vec = cv2.Rodrigues(rot_z(yaw).T @ R)[0].ravel()      # R = Rz(yaw) · R_tilt
+    w = level_sigma_rad ** 2 / (level_sigma_rad ** 2 + r.sigma_rotation_rad ** 2)
+    R_new = rot_z(yaw) @ small_rotation(tilt_vec * w)
+    fused = 1.0 / math.sqrt(1.0 / level_sigma_rad ** 2 + 1.0 / r.sigma_rotation_rad ** 2) \
+        if r.sigma_rotation_rad > 0 else 0.0
+    # The yaw keeps the camera's σ; report the per-axis RMS of (tilt, tilt, yaw).
+    sigma = math.sqrt((2 * fused ** 2 + r.sigma_rotation_rad ** 2) / 3.0)
+    return Registration(r.method, transform(R_new, r.T_BF[:3, 3]), r.sigma_translation_m, sigma)
+
+
 def render_rig(rig: MarkerRig, T_BF_true: np.ndarray, T_BF_nominal: np.ndarray,
                rng: np.random.Generator) -> np.ndarray:
     """The twin camera's frame: both boards at their true poses, sensor noise added."""

@@ -44,6 +44,8 @@ FK_DECIMATION = 20
 #: The operator's placement scatter when moving the plate between sites (1 σ).
 PLACEMENT_SIGMA_M = 2.0e-3
 PLACEMENT_SIGMA_YAW_RAD = math.radians(0.3)
+#: Camera frames averaged per registration.
+CAMERA_FRAMES = 4
 
 
 @dataclass(frozen=True)
@@ -125,8 +127,9 @@ def tip_points_B(p_BS: np.ndarray, R_BS: np.ndarray, tool_length_m: float) -> np
 class _SiteMoves:
     """The operator moving the plate between sites: the true pose, then its registration."""
 
-    def __init__(self, method: str, seed: int) -> None:
+    def __init__(self, method: str, seed: int, level_sigma_rad: float | None) -> None:
         self.method = method
+        self.level_sigma_rad = level_sigma_rad
         self.rng = np.random.default_rng(seed)
         self.rig = reg.MarkerRig()
         self.T_BF_centre: np.ndarray | None = None
@@ -143,9 +146,12 @@ class _SiteMoves:
                               np.r_[self.rng.normal(0.0, PLACEMENT_SIGMA_M, 2), 0.0])
         true = planned @ error
         if self.method == "camera":
-            frame = reg.render_rig(self.rig, true, self.T_BF_centre, self.rng)
-            registered = reg.camera_registration(frame, self.rig,
-                                                 self.rig.T_B_R(self.T_BF_centre))
+            registered = reg.average_registrations([
+                reg.camera_registration(reg.render_rig(self.rig, true, self.T_BF_centre,
+                                                       self.rng),
+                                        self.rig, self.rig.T_B_R(self.T_BF_centre))
+                for _ in range(CAMERA_FRAMES)])
+            registered = reg.with_level_prior(registered, self.level_sigma_rad)
         else:
             registered = reg.nominal(tip_B, site)
         self.current = (site, true, registered)
@@ -157,12 +163,13 @@ class TwinTrialRunner(TrialRunner):
 
     def __init__(self, plate: PlateDescription, twin_plate: TwinPlate,
                  registration: str = "camera", seed: int = 0,
-                 model: RobotModel | None = None) -> None:
+                 model: RobotModel | None = None,
+                 level_sigma_rad: float | None = math.radians(0.1)) -> None:
         self.plate = plate
         self.twin_plate = twin_plate
         self.model = model or RobotModel.load()
         self.seed = seed
-        self.moves = _SiteMoves(registration, seed)
+        self.moves = _SiteMoves(registration, seed, level_sigma_rad)
         self.robot_time_s = 0.0
         self._t_offset = 0.0      # robot clock across trials (s)
 
@@ -295,7 +302,8 @@ class DirectTrialRunner(TrialRunner):
                          channels, T_BF, 0.0, 0.0, TOOL_LENGTH_M)
 
 
-def make_runner(backend: str, plate: PlateDescription, seed: int, registration: str
+def make_runner(backend: str, plate: PlateDescription, seed: int, registration: str,
+                level_sigma_rad: float | None = math.radians(0.1)
                 ) -> tuple[TrialRunner, PlateTruth]:
     """The runner named ``backend`` (``twin``, ``direct``) on a twin plate drawn from ``seed``.
 
@@ -311,4 +319,5 @@ def make_runner(backend: str, plate: PlateDescription, seed: int, registration: 
         return DirectTrialRunner(plate, twin_plate, seed=seed), truth
     if backend != "twin":
         raise InputError(f"unknown backend {backend!r}: use twin, direct or rt")
-    return TwinTrialRunner(plate, twin_plate, registration=registration, seed=seed), truth
+    return TwinTrialRunner(plate, twin_plate, registration=registration, seed=seed,
+                           level_sigma_rad=level_sigma_rad), truth

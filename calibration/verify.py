@@ -53,7 +53,8 @@ def verify(record_path: Path, out: Path, backend: str, seed: int, load_n: float,
     plan = default_plan(registration=record["registration"]["method"])
     trials = [Trial(id=f"{name}-hold", site=name, site_xy_m=(x, y), profile=ProfileKind.TILTED,
                     held_out=True, load_n=load_n) for name, x, y in check_sites(plate.size_m)]
-    runner, _ = make_runner(backend, plate, seed, plan.registration)
+    runner, _ = make_runner(backend, plate, seed, plan.registration,
+                               plan.level_sigma_rad())
     run_campaign(plan, plate_file, runner, out, None, progress, trials=trials)
     index = read_campaign(out)
     data = [TrialData.load(out / TRIALS_DIR / f"{e['id']}.npz") for e in index["trials"]]
