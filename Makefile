@@ -44,6 +44,10 @@ demo: setup
 	    --db out/demo.db --user demo-clinician --patient DEMO-001 || exit 1; echo; \
 	done; \
 	$(BIN)/talus sessions list --patient DEMO-001 --db out/demo.db --user demo-clinician
+	@echo
+	@# out/calibration is this target's own output (a campaign folder must be new).
+	rm -rf out/calibration
+	$(BIN)/talus calibrate demo --out out/calibration
 
 test: setup
 	$(BIN)/pytest -q

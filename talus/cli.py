@@ -34,6 +34,8 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
                  "patients: add, list, show, limits, forget, export"),
     "sessions": (("patients.sessions_cli",), "stored therapy sessions: list, show"),
     "audit": (("patients.audit_cli",), "audit log: verify, export"),
+    "calibrate": (("calibration.cli",),
+                  "force-plate calibration: plan, run, fit, verify, export, demo"),
     "identify": (("rt.identification.cli",),
                  "dynamic identification: excite, estimate, write a description file"),
 }

@@ -28,7 +28,9 @@ BACKENDS: dict[str, dict[str, str]] = {
         "sim": "rt.twin.backends:TwinForceTorque",
         "twin_shm": "rt.twin.shm_backends:ShmForceTorque",
     },
-    "force_plate": {},
+    "force_plate": {
+        "comedi": "rt.drivers.comedi_plate:ComediForcePlate",
+    },
     "camera": {
         "opencv": "rt.drivers.camera_cv:OpenCvCamera",
         "synthetic": "rt.drivers.synthetic_frames:SyntheticMarkerCamera",

@@ -1,0 +1,323 @@
+"""Trial runners on the digital twin.
+
+* :class:`TwinTrialRunner` — the robot twin presses the twin plate through its ATI sensor under
+  the product's force control (the protocol loop of ``rt.position_loop``: hybrid explicit
+  force in z, angles held), at simulated time. The plate is the twin's ``plate`` environment
+  (a stiff one-sided contact at the plate's height); the plate's channels are computed from
+  the true contact wrench by :class:`calibration.twin_plate.TwinPlate` on the plate's own
+  clock. The plate is moved between sites (the operator's move, simulated with a random
+  placement error) and registered by the chosen method.
+* :class:`DirectTrialRunner` — no robot: the commanded load at the site feeds the twin plate
+  and an ideal ATI (plus its noise). Fast; for the fit's unit tests.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from calibration import registration as reg
+from calibration.plate import PlateDescription
+from calibration.trial import TrialData, TrialRunner
+from calibration.twin_plate import PlateTruth, TwinPlate, draw_truth
+from protocols.base import ForceGenerator
+from protocols.output import ValidationReport
+from protocols.schema import Pose
+from rt.components.blocks import SignalTap
+from rt.engine import Array, Component
+from rt.errors import BackendUnavailableError, HardwareError, InputError, SafetyTrip
+from rt.model import RobotModel
+from rt.position_loop import build_protocol_loop, sim_devices
+from rt.safety.events import Reaction
+from rt.safety.limits import PatientLimits, RobotLimits
+from rt.twin.environment import ForcePlateContact
+from rt.twin.twin import SimClock, Twin
+
+RATE_HZ = 1000.0
+#: Tool (load applicator) length above the ATI's origin along its z axis (m).
+TOOL_LENGTH_M = 0.02
+#: Gap between the tool tip and the plate at the held pose before loading (m).
+START_GAP_M = 0.5e-3
+#: Forward kinematics is evaluated every this many cycles and interpolated in between.
+FK_DECIMATION = 20
+#: The operator's placement scatter when moving the plate between sites (1 σ).
+PLACEMENT_SIGMA_M = 2.0e-3
+PLACEMENT_SIGMA_YAW_RAD = math.radians(0.3)
+#: Camera frames averaged per registration.
+CAMERA_FRAMES = 4
+
+
+@dataclass(frozen=True)
+class _Push:
+    """The protocol-like description a force generator reads (pose held, no own limits)."""
+
+    name: str
+    pose: Pose
+    kind: str = "calibration_push"
+    limits: None = None
+
+
+class ForceTableGenerator(ForceGenerator):
+    """A force-mode generator playing a precomputed force (N) with the pose held."""
+
+    def __init__(self, name: str, force_n: np.ndarray, pose: tuple[float, float, float],
+                 dt: float, kinematics) -> None:
+        z, roll, pitch = pose
+        push = _Push(name, Pose(z_m=z, roll_deg=math.degrees(roll), pitch_deg=math.degrees(pitch)))
+        super().__init__(push, dt, kinematics, name)  # type: ignore[arg-type]
+        self._force = np.asarray(force_n, dtype=float)
+        self._set_length(len(self._force))
+
+    def _build(self, report: ValidationReport) -> np.ndarray | None:
+        if not self._hold_pose(report):
+            return None
+        table = np.zeros((self.n_samples, 4))
+        table[:, 0] = self._force
+        table[:, 1] = np.gradient(self._force, self.dt)
+        return table
+
+
+class ContactTruthTap(Component):
+    """Ports: in ``q``: float64[3] (only to run after the encoders, i.e. after the physics).
+
+    Records the twin's true contact wrench (sensor frame) and slider positions each cycle into
+    a preallocated ring: the plate's side of the experiment, which the loop never sees.
+    """
+
+    def __init__(self, name: str, twin: Twin, capacity: int) -> None:
+        super().__init__(name)
+        self.twin = twin
+        self.q = self.declare_input("q", Array(3))
+        self.ring = np.zeros((capacity, 10))
+        self.written = 0
+
+    def update(self, t: float, dt: float) -> int:
+        if self.written < self.ring.shape[0]:
+            row = self.ring[self.written]
+            row[0] = t
+            row[1:7] = self.twin.plant.wrench_s
+            row[7:10] = self.twin.plant.q
+            self.written += 1
+        return 0
+
+
+def sensor_poses(model: RobotModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(p_BS (n,3), R_BS (n,9)) from slider positions (n,3), FK every ``FK_DECIMATION``."""
+    n = len(q)
+    idx = np.unique(np.r_[np.arange(0, n, FK_DECIMATION), n - 1])
+    s = np.array(model.description.sensor.offset_m)
+    ps, rs = [], []
+    for k in idx:
+        c = model.kin.fk(q[k], check=False)
+        R = np.array(c.rotation).reshape(3, 3)
+        ps.append(np.array([c.x, c.y, c.z]) + R @ s)
+        rs.append(R.ravel())
+    ps_a, rs_a = np.array(ps), np.array(rs)
+    p = np.column_stack([np.interp(np.arange(n), idx, ps_a[:, k]) for k in range(3)])
+    R_all = np.column_stack([np.interp(np.arange(n), idx, rs_a[:, k]) for k in range(9)])
+    return p, R_all
+
+
+def tip_points_B(p_BS: np.ndarray, R_BS: np.ndarray, tool_length_m: float) -> np.ndarray:
+    """The tool tip in B: S's origin plus ``tool_length`` along S's z (3rd column of R_BS)."""
+    return p_BS + tool_length_m * R_BS[:, [2, 5, 8]]
+
+
+class _SiteMoves:
+    """The operator moving the plate between sites: the true pose, then its registration."""
+
+    def __init__(self, method: str, seed: int, level_sigma_rad: float | None) -> None:
+        self.method = method
+        self.level_sigma_rad = level_sigma_rad
+        self.rng = np.random.default_rng(seed)
+        self.rig = reg.MarkerRig()
+        self.T_BF_centre: np.ndarray | None = None
+        self.current: tuple[tuple[float, float], np.ndarray, reg.Registration] | None = None
+
+    def place(self, tip_B: np.ndarray, site: tuple[float, float]
+              ) -> tuple[np.ndarray, reg.Registration]:
+        if self.current is not None and self.current[0] == site:
+            return self.current[1], self.current[2]
+        if self.T_BF_centre is None:
+            self.T_BF_centre = reg.nominal_T_BF(tip_B, (0.0, 0.0))
+        planned = reg.nominal_T_BF(tip_B, site)
+        error = reg.transform(reg.rot_z(self.rng.normal(0.0, PLACEMENT_SIGMA_YAW_RAD)),
+                              np.r_[self.rng.normal(0.0, PLACEMENT_SIGMA_M, 2), 0.0])
+        true = planned @ error
+        if self.method == "camera":
+            registered = reg.average_registrations([
+                reg.camera_registration(reg.render_rig(self.rig, true, self.T_BF_centre,
+                                                       self.rng),
+                                        self.rig, self.rig.T_B_R(self.T_BF_centre))
+                for _ in range(CAMERA_FRAMES)])
+            registered = reg.with_level_prior(registered, self.level_sigma_rad)
+        else:
+            registered = reg.nominal(tip_B, site)
+        self.current = (site, true, registered)
+        return true, registered
+
+
+class TwinTrialRunner(TrialRunner):
+    """The robot twin pressing the twin plate (module docstring)."""
+
+    def __init__(self, plate: PlateDescription, twin_plate: TwinPlate,
+                 registration: str = "camera", seed: int = 0,
+                 model: RobotModel | None = None,
+                 level_sigma_rad: float | None = math.radians(0.1)) -> None:
+        self.plate = plate
+        self.twin_plate = twin_plate
+        self.model = model or RobotModel.load()
+        self.seed = seed
+        self.moves = _SiteMoves(registration, seed, level_sigma_rad)
+        self.robot_time_s = 0.0
+        self._t_offset = 0.0      # robot clock across trials (s)
+
+    def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],
+            profile_n: np.ndarray, dt: float) -> TrialData:
+        model = self.model
+        z0, roll, pitch = pose
+        q0 = np.array(model.kin.ik(z0, roll, pitch).q)
+        # The plate's height is the same for every pose: set by the level pose's tool tip.
+        p_lvl, R_lvl = sensor_poses(model, np.array([model.kin.ik(z0, 0.0, 0.0).q]))
+        tip_lvl = tip_points_B(p_lvl, R_lvl, TOOL_LENGTH_M)[0]
+        T_true, registered = self.moves.place(tip_lvl, site_xy_m)
+        height = float(tip_lvl[2]) + START_GAP_M
+        env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M)
+        clock = SimClock()
+        twin = Twin(model.description, env, seed=self.seed + len(trial_id), clock=clock)
+        twin.place(q0)
+        gen = ForceTableGenerator(trial_id, profile_n, pose, dt, model.kin)
+        report = gen.validate()
+        if not report.ok:
+            raise SafetyTrip(f"trial {trial_id}: " + "; ".join(report.violations))
+        n = int((report.duration_s + 8.0) / dt)
+        tap = SignalTap("cal", [("wrench", 6), ("q", 3), ("force", 3), ("phase", 1)],
+                        capacity=n)
+        truth = ContactTruthTap("truth", twin, n)
+        # No patient on the platform: the "patient" limits are the calibration's, up to what
+        # the robot tolerates.
+        limits = PatientLimits(max_force_n=RobotLimits().max_platform_force_n,
+                               roll_min_deg=-10.0, roll_max_deg=10.0, pitch_min_deg=-10.0,
+                               pitch_max_deg=10.0)
+        pl = build_protocol_loop(sim_devices(twin, clock), gen, model, 1.0 / dt, "fast",
+                                 patient_limits=limits,
+                                 extra_blocks=[tap, truth],
+                                 extra_connections=[("force.wrench", "cal.wrench"),
+                                                    ("encoders.q", "cal.q"),
+                                                    ("reference.force", "cal.force"),
+                                                    ("reference.phase", "cal.phase"),
+                                                    ("encoders.q", "truth.q")])
+        try:
+            t = 0.0
+            while t < report.duration_s + 8.0:
+                pl.loop.run(seconds=0.5)
+                t += 0.5
+                if pl.supervisor.reaction >= Reaction.SOFT_STOP:
+                    ev = [e for e in pl.events.snapshot() if e.reaction >= Reaction.SOFT_STOP]
+                    cause = f"{ev[0].cause}: {ev[0].message} at t = {ev[0].t:.3f} s {getattr(ev[0], 'data', '')}" if ev else "stopped"
+                    raise SafetyTrip(f"trial {trial_id}: the supervisor stopped the robot "
+                                     f"({cause})")
+                if tap.written and tap.ring[tap.written - 1, -1] >= 4:
+                    break
+        finally:
+            pl.graph.stop()
+        rows = tap.ring[:tap.written]
+        true_rows = truth.ring[:truth.written]
+        m = min(len(rows), len(true_rows))
+        rows, true_rows = rows[:m], true_rows[:m]
+        # The ATI reads NaN until its first sample arrives: start the recording there.
+        finite = np.isfinite(rows[:, 1:7]).all(axis=1)
+        if not finite.any():
+            raise HardwareError(f"trial {trial_id}: the ATI sensor gave no reading")
+        first = int(np.argmax(finite))
+        rows, true_rows = rows[first:], true_rows[first:]
+        if not np.isfinite(rows[:, 1:7]).all():
+            raise HardwareError(f"trial {trial_id}: the ATI sensor's readings stopped during "
+                                "the trial (NaN); repeat it")
+        t_robot = rows[:, 0] - rows[0, 0] + self._t_offset
+        p_BS, R_BS = sensor_poses(model, rows[:, 7:10])
+        # The plate's side: true load (on the plate = minus the environment's on the platform).
+        p_true, R_true = sensor_poses(model, true_rows[:, 7:10])
+        tip_B = tip_points_B(p_true, R_true, TOOL_LENGTH_M)
+        R_FB = T_true[:3, :3].T
+        force_B = -np.einsum("nij,nj->ni", R_true.reshape(-1, 3, 3), true_rows[:, 1:4])
+        force_F = force_B @ R_FB.T
+        point_F = (tip_B - T_true[:3, 3]) @ R_FB.T
+        point_F[:, 2] = 0.0          # the tip stays on the surface while it presses
+        t_plate, channels = self.twin_plate.sample(t_robot, force_F, point_F)
+        self.robot_time_s += float(t_robot[-1] - t_robot[0])
+        self._t_offset = float(t_robot[-1]) + 2.0     # the operator's pause between trials
+        return TrialData(trial_id, t_robot, rows[:, 1:7].copy(), p_BS, R_BS, rows[:, 10].copy(),
+                         t_plate, channels, registered.T_BF, registered.sigma_translation_m,
+                         registered.sigma_rotation_rad, TOOL_LENGTH_M)
+
+
+class DirectTrialRunner(TrialRunner):
+    """The commanded load, exactly at the site, with no robot (module docstring).
+
+    ``misalignment_rad`` tilts the true load's direction per site (a rotation vector per site
+    name in a dict, or one for every site), as a real load cell mounted out of square would.
+    """
+
+    def __init__(self, plate: PlateDescription, twin_plate: TwinPlate,
+                 ati_noise: tuple[float, ...] = (0.125, 0.125, 0.25, 0.0075, 0.0075, 0.0075),
+                 misalignment_rad: dict[tuple[float, float], np.ndarray] | None = None,
+                 tilted_shear: bool = True, seed: int = 0) -> None:
+        self.plate = plate
+        self.twin_plate = twin_plate
+        self.ati_noise = np.array(ati_noise)
+        self.misalignment = misalignment_rad or {}
+        self.rng = np.random.default_rng(seed)
+        self.tilted_shear = tilted_shear
+        self.robot_time_s = 0.0
+        self._t_offset = 0.0
+
+    def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],
+            profile_n: np.ndarray, dt: float) -> TrialData:
+        n = len(profile_n)
+        t_robot = np.arange(n) * dt + self._t_offset
+        # S placed so its tool tip is at the site, S axes tilted by the pose's roll/pitch; the
+        # load along S's z (a push along the tool's axis: shear in F when tilted).
+        _, roll, pitch = pose
+        R_BS = reg.small_rotation(np.array([roll, pitch, 0.0]))
+        T_BF = reg.transform(np.eye(3), np.array([0.1 - site_xy_m[0], -site_xy_m[1], 0.7]))
+        tip_B = T_BF[:3, :3] @ np.array([site_xy_m[0], site_xy_m[1], 0.0]) + T_BF[:3, 3]
+        p_BS = tip_B - TOOL_LENGTH_M * R_BS[:, 2]
+        axis = R_BS[:, 2] if self.tilted_shear else np.array([0.0, 0.0, 1.0])
+        force_B = np.outer(profile_n, axis)
+        tilt = self.misalignment.get(tuple(site_xy_m), np.zeros(3))  # type: ignore[arg-type]
+        force_true_B = force_B @ reg.small_rotation(tilt).T
+        # ATI: environment on the platform = minus the load, in S axes, about S's origin.
+        lever = tip_B - p_BS
+        f_S = -force_B @ R_BS
+        m_S = np.cross(lever @ R_BS, f_S)
+        ati = np.hstack([f_S, m_S]) + self.rng.normal(0.0, 1.0, (n, 6)) * self.ati_noise
+        point_F = np.tile([site_xy_m[0], site_xy_m[1], 0.0], (n, 1))
+        t_plate, channels = self.twin_plate.sample(t_robot, force_true_B, point_F)
+        self.robot_time_s += n * dt
+        self._t_offset = float(t_robot[-1]) + 2.0
+        return TrialData(trial_id, t_robot, ati, np.tile(p_BS, (n, 1)),
+                         np.tile(R_BS.ravel(), (n, 1)), np.asarray(profile_n, float), t_plate,
+                         channels, T_BF, 0.0, 0.0, TOOL_LENGTH_M)
+
+
+def make_runner(backend: str, plate: PlateDescription, seed: int, registration: str,
+                level_sigma_rad: float | None = math.radians(0.1)
+                ) -> tuple[TrialRunner, PlateTruth]:
+    """The runner named ``backend`` (``twin``, ``direct``) on a twin plate drawn from ``seed``.
+
+    ``rt`` (trials as force-control sessions in the RT process) is refused until the RT
+    process can start sessions (issue 9)."""
+    if backend == "rt":
+        raise BackendUnavailableError(
+            "the RT-process trial runner (campaign trials as force-control sessions over "
+            "ZeroMQ) comes with the RT process's session_start (issue 9); use --backend twin")
+    truth = draw_truth(plate, seed=seed)
+    twin_plate = TwinPlate(plate, truth, seed=seed + 1)
+    if backend == "direct":
+        return DirectTrialRunner(plate, twin_plate, seed=seed), truth
+    if backend != "twin":
+        raise InputError(f"unknown backend {backend!r}: use twin, direct or rt")
+    return TwinTrialRunner(plate, twin_plate, registration=registration, seed=seed,
+                           level_sigma_rad=level_sigma_rad), truth
