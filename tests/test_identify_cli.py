@@ -25,5 +25,5 @@ def test_identify_writes_a_loadable_description_and_refuses_to_overwrite(tmp_pat
     # The file exists now: a second run without --force is refused and changes nothing.
     before = out.read_bytes()
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 2 and "exists" in proc.stderr
+    assert proc.returncode == 2 and "exists" in proc.stdout   # one {"error"} line
     assert out.read_bytes() == before
