@@ -24,8 +24,9 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -175,8 +176,8 @@ def _progress(k: int, n: int, trial_id: str) -> None:
 
 def _run(args: argparse.Namespace) -> dict:
     from calibration.campaign import run_campaign
-    from calibration.twin_runner import make_runner
     from calibration.plate import load_plate
+    from calibration.twin_runner import make_runner
 
     plan = _load_plan(args)
     plate_file = _plate_file(args)
@@ -194,8 +195,7 @@ def _run(args: argparse.Namespace) -> dict:
 def fit_campaign(folder: Path, record_path: Path, thresholds, operator: str,  # type: ignore[no-untyped-def]
                  degree: int = 3, angles: bool = True, allow_partial: bool = False,
                  force: bool = False) -> tuple[dict, Any]:
-    from calibration.campaign import build_record, process, record_json
-    from calibration.campaign import ReferenceSensor
+    from calibration.campaign import ReferenceSensor, build_record, process, record_json
     from calibration.trial import write_json_atomic
 
     if record_path.exists() and not force:

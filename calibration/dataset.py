@@ -44,7 +44,7 @@ class Samples:
     trial_ids: list[str] = field(default_factory=list)
     site_names: list[str] = field(default_factory=list)
 
-    def select(self, mask: np.ndarray) -> "Samples":
+    def select(self, mask: np.ndarray) -> Samples:
         return Samples(self.v[mask], self.w_ref[mask], self.p_ref[mask], self.f_cmd[mask],
                        self.trial[mask], self.site[mask], self.trial_ids, self.site_names)
 
@@ -113,7 +113,7 @@ def build_samples(plate: PlateDescription, trials: list[TrialData], sites: list[
         t = d.t_robot[inside]
         v = np.column_stack([np.interp(t, t_on_robot, v_plate[:, j])
                              for j in range(v_plate.shape[1])])
-        n_per = max(1, int(round(block_s / float(np.median(np.diff(t))))))
+        n_per = max(1, round(block_s / float(np.median(np.diff(t)))))
         m = len(t) // n_per
         if m == 0:
             continue

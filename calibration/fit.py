@@ -275,7 +275,7 @@ class NonlinearCorrection:
 
     @classmethod
     def from_record(cls, entry: dict, origin_m: tuple[float, float, float]
-                    ) -> "NonlinearCorrection":
+                    ) -> NonlinearCorrection:
         """Rebuild the correction from the record's ``nonlinear_correction`` block."""
         return cls(int(entry["degree"]), tuple(entry["half_size_m"]),  # type: ignore[arg-type]
                    origin_m, np.array(entry["cop_x_m"]), np.array(entry["cop_y_m"]),

@@ -11,20 +11,25 @@ take the real encoder, DAC and sensor backends on the rig.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
-from rt.components.blocks import (ControllerBlock, EncoderReader, ModelState, RecorderTap,
-                                  VelocityEstimation)
+from rt.components.blocks import (
+    ControllerBlock,
+    EncoderReader,
+    ModelState,
+    RecorderTap,
+    VelocityEstimation,
+)
 from rt.components.safety_blocks import ForceReader, RedundantDrive, StopInputs, SupervisorBlock
 from rt.components.twin_step import TwinStep
 from rt.control.base import create
 from rt.control.experiment import RefFn, benchmark_reference
 from rt.engine import Component, Graph, GraphBuilder, Loop
 from rt.model import RobotModel
+from rt.model.description import RobotDescription
 from rt.references.program import Program, TrajectoryProgram
 from rt.references.sequencer import ProgramReference
-from rt.model.description import RobotDescription
 from rt.safety.events import EventLog
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
 from rt.safety.supervisor import Supervisor, supervisor_physics
@@ -44,7 +49,7 @@ class PositionLoop:
     reference: ProgramReference
     supervisor: Supervisor
     events: EventLog
-    devices: "Devices | None" = None
+    devices: Devices | None = None
 
 
 @dataclass
@@ -76,8 +81,13 @@ def sim_devices(twin: Twin, clock: SimClock) -> Devices:
 def shm_devices(shm_name: str) -> Devices:
     """The rig process (``talus twin rig --shm NAME``) over shared memory; the loop feeds its
     amplifier watchdog every cycle, so a dead or stalled loop drops the drives."""
-    from rt.twin.shm_backends import (ShmActuators, ShmDigitalInputs, ShmEncoders,
-                                      ShmForceTorque, ShmRig)
+    from rt.twin.shm_backends import (
+        ShmActuators,
+        ShmDigitalInputs,
+        ShmEncoders,
+        ShmForceTorque,
+        ShmRig,
+    )
 
     rig = ShmRig(shm_name)
     cards = [ShmActuators(rig, 0), ShmActuators(rig, 1)]

@@ -10,8 +10,8 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import pytest
 from hypothesis import given, settings
@@ -19,8 +19,15 @@ from hypothesis import strategies as st
 
 from rt.ati import rdt
 from rt.ati.rdt import (
-    CMD_SET_SOFTWARE_BIAS, CMD_START_BUFFERED, CMD_START_REALTIME, CMD_STOP, RECORD_SIZE,
-    STATUS_ANY_ERROR, STATUS_FT_OUT_OF_RANGE, CountsPerUnit, RdtRecord,
+    CMD_SET_SOFTWARE_BIAS,
+    CMD_START_BUFFERED,
+    CMD_START_REALTIME,
+    CMD_STOP,
+    RECORD_SIZE,
+    STATUS_ANY_ERROR,
+    STATUS_FT_OUT_OF_RANGE,
+    CountsPerUnit,
+    RdtRecord,
 )
 from rt.ati.rdt_client import RdtForceTorqueSensor
 from rt.ati.rdt_server import RdtServer
@@ -196,7 +203,7 @@ def pair():
 
 
 def test_streaming_delivers_the_load_in_si(pair):
-    server, client = pair
+    _server, client = pair
     w = client.read(Wrench())
     assert w.stale and w.sequence == -1 and all(v != v for v in w.as_tuple())  # NaN until read
     t0 = time.monotonic()
@@ -237,7 +244,7 @@ def test_stop_ends_the_stream(pair):
 
 
 def test_bias_zeroes_the_reading(pair):
-    server, client = pair
+    _server, client = pair
     client.start()
     assert wait_until(lambda: client.counters.received >= 5)
     client.bias()

@@ -15,7 +15,7 @@ from rt.benchmarks.tracking import run_experiment
                    "Paden-Panja under the real 100 kg payload (saturation, frozen-encoder check): "
                    "open point of issue 15")
 def test_payload_step_experiment_shape_and_ordering(monkeypatch):
-    import rt.benchmarks.tracking as tracking
+    from rt.benchmarks import tracking
 
     # Same experiment with the step at 4 s of an 8 s run (suite time). On the ideal twin: on the
     # realistic one Paden-Panja under the real payload stalls an axis and the supervisor's

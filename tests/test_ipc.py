@@ -8,19 +8,20 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
 import zmq
 
-from talus.cli import main as talus_main
 from rt.errors import ConfigurationError, InputError, ProtocolError, SafetyTrip
 from rt.ipc import messages
 from rt.ipc.client import RtClient, RtUnavailableError, Subscriber
 from rt.ipc.messages import MAX_MESSAGE_BYTES, decode_reply, decode_request, encode_request
 from rt.ipc.server import RtServer
+from talus.cli import main as talus_main
 
 REPO = Path(__file__).resolve().parents[1]
 ANY_PORT = "tcp://127.0.0.1:*"
@@ -179,10 +180,10 @@ BAD_REQUESTS: list[tuple[str, bytes, str]] = [
     ("empty", b"", "malformed JSON"),
     ("array", b"[1, 2]", "expected a JSON object, got list"),
     ("string", b'"status"', "expected a JSON object, got str"),
-    ("NaN token", b'{"v": 1, "id": 1, "client": "c", "cmd": "set_gains", '
-                  b'"args": {"controller": "p", "gains": {"kp": NaN}}}', "NaN is not valid JSON"),
-    ("duplicate keys", b'{"v": 1, "id": 1, "client": "c", "cmd": "status", "cmd": "estop", '
-                       b'"args": {}}', "duplicate key 'cmd'"),
+    ("NaN token", (b'{"v": 1, "id": 1, "client": "c", "cmd": "set_gains", '
+                  b'"args": {"controller": "p", "gains": {"kp": NaN}}}'), "NaN is not valid JSON"),
+    ("duplicate keys", (b'{"v": 1, "id": 1, "client": "c", "cmd": "status", "cmd": "estop", '
+                       b'"args": {}}'), "duplicate key 'cmd'"),
     ("deeply nested", request_bytes(cmd="run", args={"program": "p", "params": {}})
      .replace(b'"params": {}', b'"params": {"a": ' + DEEP.encode() + b"}"), "nested too deeply"),
     ("missing version", json.dumps({"id": 1, "client": "c", "cmd": "status", "args": {}})
@@ -199,8 +200,8 @@ BAD_REQUESTS: list[tuple[str, bytes, str]] = [
      "missing 'args'"),
     ("args not object", request_bytes(args=[]), "'args'"),
     ("extra envelope key", request_bytes(extra=1), "unknown key 'extra'"),
-    ("extra arg", request_bytes(args={"verbose": True}), "bad args for 'status': unknown key "
-                                                         "'verbose'"),
+    ("extra arg", request_bytes(args={"verbose": True}), ("bad args for 'status': unknown key "
+                                                         "'verbose'")),
     ("bad estop source", request_bytes(cmd="estop", args={"source": "phone"}),
      "bad args for 'estop': 'source'"),
     ("missing estop source", request_bytes(cmd="estop", args={}), "missing 'source'"),
@@ -550,8 +551,8 @@ def test_codec_round_trip_and_reply_validation() -> None:
     with pytest.raises(ProtocolError, match="unknown topic"):
         messages.decode_publication([b"status", b"{}"])
     with pytest.raises(ProtocolError, match="missing 'kind'"):
-        messages.decode_publication([b"event", b'{"v": 1, "topic": "event", "t": 0, '
-                                               b'"cause": "x"}'])
+        messages.decode_publication([b"event", (b'{"v": 1, "topic": "event", "t": 0, '
+                                               b'"cause": "x"}')])
 
 
 # --------------------------------------------------------------------------- CLI

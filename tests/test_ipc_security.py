@@ -6,22 +6,22 @@ so its peak resident memory (``VmHWM``) is its own.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 import zmq
 
-from talus.cli import main as talus_main
 from rt.errors import ConfigurationError
 from rt.ipc.client import RtClient, RtUnavailableError
-from rt.ipc.security import (ClientCurveConfig, ServerCurveConfig, is_loopback, make_keys)
+from rt.ipc.security import ClientCurveConfig, ServerCurveConfig, is_loopback, make_keys
 from rt.ipc.server import RtServer
+from talus.cli import main as talus_main
 
 ANY_PORT = "tcp://127.0.0.1:*"
 

@@ -19,16 +19,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from talus.cli import main as talus_main
 from rt.components.blocks import RecorderTap
 from rt.errors import InputError
 from rt.recording import writer as writer_mod
-from rt.recording.channels import (CHANNELS, EVENTS, METADATA, REFERENCE, STATE, WRENCH,
-                                   log_time_ns)
-from rt.recording.reader import (RecordingFileError, RecordingScan, TruncatedRecordingError,
-                                 export_csv, read_recording, recover)
+from rt.recording.channels import CHANNELS, EVENTS, METADATA, REFERENCE, STATE, WRENCH, log_time_ns
+from rt.recording.reader import (
+    RecordingFileError,
+    RecordingScan,
+    TruncatedRecordingError,
+    export_csv,
+    read_recording,
+    recover,
+)
 from rt.recording.writer import SessionRecorder
 from rt.safety.events import EventLog, Reaction, SafetyEvent
+from talus.cli import main as talus_main
 
 RATE_HZ = 1000
 DURATION_S = 5.0

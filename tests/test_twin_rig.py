@@ -9,6 +9,7 @@ allow for host stalls of a few ms (PLATFORM.md); the measured figures are printe
 """
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -31,8 +32,7 @@ from rt.drivers.pci1720 import code_to_volts, volts_to_code
 from rt.drivers.pcl833 import MIDPOINT
 from rt.errors import HardwareError, InputError
 from rt.twin import shm as layout
-from rt.twin.shm_backends import (ShmActuators, ShmDigitalInputs, ShmEncoders, ShmForceTorque,
-                                  ShmRig)
+from rt.twin.shm_backends import ShmActuators, ShmEncoders, ShmRig
 
 REPO = Path(__file__).resolve().parents[1]
 WATCHDOG_S = 0.02
@@ -175,7 +175,7 @@ def rig_name():
     try:
         yield name
     finally:
-        code, out, err = _stop_rig(proc) if proc.poll() is None else (proc.returncode, "", "")
+        code, _out, err = _stop_rig(proc) if proc.poll() is None else (proc.returncode, "", "")
         leaked = os.path.exists(f"/dev/shm/{name}")
         _remove_segment(name)
         assert code == 0, err
@@ -198,7 +198,7 @@ def test_layout_fields_are_aligned_disjoint_and_inside_their_blocks():
             assert first <= off and off + nbytes <= size, name
             used.append((off, off + nbytes, name))
         used.sort()
-        for (a0, a1, a), (b0, b1, b) in zip(used, used[1:]):
+        for (a0, a1, a), (b0, b1, b) in itertools.pairwise(used):
             assert a1 <= b0, f"{a} overlaps {b}"
     assert end == layout.TOTAL_SIZE
     # The module docstring documents every field at its offset.

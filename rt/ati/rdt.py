@@ -28,8 +28,9 @@ buffered datagram) and restarts at 1 after each start command.
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
 
 from rt.errors import InputError, ProtocolError
 
@@ -127,7 +128,7 @@ def _clip_int32(x: float) -> int:
         return _INT32_MAX
     if x <= _INT32_MIN:
         return _INT32_MIN
-    return int(round(x))
+    return round(x)
 
 
 def encode_request(command: int, sample_count: int = 0) -> bytes:

@@ -16,10 +16,18 @@ import socket
 import threading
 import time
 from dataclasses import dataclass
+from typing import Self
 
 from rt.ati.rdt import (
-    CMD_SET_SOFTWARE_BIAS, CMD_START_BUFFERED, CMD_START_REALTIME, CMD_STOP, RDT_PORT,
-    RECORD_SIZE, CountsPerUnit, decode_request, pack_record_into,
+    CMD_SET_SOFTWARE_BIAS,
+    CMD_START_BUFFERED,
+    CMD_START_REALTIME,
+    CMD_STOP,
+    RDT_PORT,
+    RECORD_SIZE,
+    CountsPerUnit,
+    decode_request,
+    pack_record_into,
 )
 from rt.ati.twin_sensor import SourceReader, WrenchSource
 from rt.errors import InputError, ProtocolError
@@ -128,7 +136,7 @@ class RdtServer:
         for s in (self._sock, self._wake_r, self._wake_w):
             s.close()
 
-    def __enter__(self) -> "RdtServer":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

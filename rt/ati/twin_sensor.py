@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, NamedTuple, Sequence, Union
+from typing import NamedTuple, Union
 
 import numpy as np
 
@@ -224,7 +225,7 @@ class TwinAtiSensorModel:
             for i in range(6):
                 d = drift[i] + self._drift_rate[i] * root_dt * z[i]
                 lim = self._drift_limit[i]
-                drift[i] = lim if d > lim else (-lim if d < -lim else d)
+                drift[i] = lim if d > lim else (max(d, -lim))
         if st.t_last is None or t > st.t_last:
             st.t_last = t
 

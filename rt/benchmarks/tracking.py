@@ -141,8 +141,8 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
             raise StoppedBySupervisor(f"{controller} at {rate_hz:g} Hz did not reach the "
                                       f"trajectory: {_events(pl)}")
     _, start = pl.recorder.drain(0)
-    n = int(round(seconds * rate_hz))
-    n_step = min(n, int(round(STEP_S * rate_hz)))
+    n = round(seconds * rate_hz)
+    n_step = min(n, round(STEP_S * rate_hz))
     # The trajectory sample k is produced at cycle k after the approach: the step happens
     # between cycles n_step - 1 and n_step, i.e. at trajectory time 13 s.
     pl.loop.run(cycles=n_step)
@@ -187,8 +187,8 @@ def run_experiment(name: str, seconds: float = DURATION_S, rate_hz: float = 1000
 
 def table(results: list[dict]) -> str:
     """The fig. 48/50 table: twin beside thesis (mm)."""
-    lines = [f"{'experiment':15s} {'rate':>6s} {'controller':12s} {'metric':10s} "
-             f"{'twin mm':>9s} {'thesis mm':>10s} {'ratio':>6s}"]
+    lines = [(f"{'experiment':15s} {'rate':>6s} {'controller':12s} {'metric':10s} "
+             f"{'twin mm':>9s} {'thesis mm':>10s} {'ratio':>6s}")]
     for r in results:
         for ctrl, m in r["controllers"].items():
             if "stopped_by_supervisor" in m:

@@ -8,17 +8,17 @@ plots them.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
 from rt.control.base import Reference, create
 from rt.errors import ConfigurationError
-from rt.references.approach import Approach, ApproachStatus
 from rt.estimation.velocity import KalmanVelocityEstimator
 from rt.model import RobotModel
 from rt.model.dynamics import State
+from rt.references.approach import Approach, ApproachStatus
 from rt.twin.backends import TwinActuators, TwinEncoders
 from rt.twin.environment import FreeMotion, PayloadStep
 from rt.twin.twin import SimClock, Twin
@@ -103,8 +103,8 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
     est = KalmanVelocityEstimator()
     st = State()
     dt = 1.0 / rate_hz
-    n = int(round(seconds * rate_hz))
-    n_approach = int(round(t_offset * rate_hz))
+    n = round(seconds * rate_hz)
+    n_approach = round(t_offset * rate_hz)
     per_volt = model.description.drive.force_per_volt_n
     limit = model.description.drive.command_limit_v
     q = np.zeros(3)

@@ -210,8 +210,7 @@ class ExplicitForce:
             # preload the feedback may command less than it: that moves the platform down
             # against its friction while the foot still pushes on it.
             fz = floor
-            if integral > self.integral:
-                self.integral = integral
+            self.integral = max(self.integral, integral)
         else:
             self.integral = integral
         q_roll = (-g.angle_kp_n_m_per_rad * (cfg.roll - ref.roll)
@@ -270,7 +269,7 @@ class Admittance:
         g = self.gains
         if self.z is None:
             self.z = st.cfg.z
-        f_d = ref.f if ref.f > g.preload_n else g.preload_n    # never below the preload
+        f_d = max(g.preload_n, ref.f)    # never below the preload
         e = 0.0 if math.isnan(force_n) else force_n - f_d      # pushing too hard → yield
         zdd = (-e - g.virtual_damping_n_s_per_m * self.zd) / g.virtual_mass_kg
         self.zd = max(-g.max_speed_m_s, min(g.max_speed_m_s, self.zd + zdd * dt))

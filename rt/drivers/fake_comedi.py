@@ -5,7 +5,8 @@ their device files, as one comedilib sees a machine's cards."""
 from __future__ import annotations
 
 import ctypes
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 from rt.drivers.pci1720 import ComediRange, volts_to_code
 

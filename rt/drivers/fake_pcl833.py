@@ -35,19 +35,26 @@ from __future__ import annotations
 
 import math
 import numbers
-from typing import Sequence
+from collections.abc import Sequence
 
 from rt.drivers.pcl833 import (
-    COUNTER_MASK, DEFAULT_BASE, DEFAULT_M_PER_COUNT, LATCH_SOURCE_MASK,
-    LATCH_SOURCE_SOFTWARE_READ, PORT_SPAN, REG_COUNTER_RESET, REG_STATUS, InputMode,
+    COUNTER_MASK,
+    DEFAULT_BASE,
+    DEFAULT_M_PER_COUNT,
+    LATCH_SOURCE_MASK,
+    LATCH_SOURCE_SOFTWARE_READ,
+    PORT_SPAN,
+    REG_COUNTER_RESET,
+    REG_STATUS,
+    InputMode,
     reset_value,
 )
 from rt.drivers.port_io import PortIO
 from rt.errors import ConfigurationError, HardwareError
 
 #: Offsets that the card answers on when read / written (from the Advantech driver).
-_READABLE = frozenset(range(0, 12)) | {REG_STATUS}
-_WRITABLE = frozenset(range(0, 11))
+_READABLE = frozenset(range(12)) | {REG_STATUS}
+_WRITABLE = frozenset(range(11))
 
 
 def _per_axis(value: float | Sequence[float], name: str) -> list:

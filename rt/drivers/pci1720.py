@@ -43,8 +43,9 @@ import ctypes
 import ctypes.util
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 from rt.devices.interfaces import ActuatorOutputs
 from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError, InputError
@@ -136,7 +137,7 @@ def volts_to_code(volts: float, v_min: float = -10.0, v_max: float = 10.0,
         return 0
     if s >= maxdata:
         return maxdata
-    return int(math.floor(s + 0.5))
+    return math.floor(s + 0.5)
 
 
 def code_to_volts(code: int, v_min: float = -10.0, v_max: float = 10.0,

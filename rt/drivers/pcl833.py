@@ -43,7 +43,7 @@ from __future__ import annotations
 import enum
 import math
 import numbers
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -175,7 +175,7 @@ class CountUnwrapper:
     ``displacement`` is measured from ``reference`` (the reset value).
     """
 
-    __slots__ = ("reference", "_last", "_displacement")
+    __slots__ = ("_displacement", "_last", "reference")
 
     def __init__(self, reference: int = MIDPOINT, count: int | None = None) -> None:
         self.reference = reference

@@ -267,7 +267,7 @@ class Component:
     def on_params_changed(self, old: Any) -> None:
         """``self.params`` has just replaced ``old``: update derived quantities."""
 
-    def handover(self, old: "Component") -> None:
+    def handover(self, old: Component) -> None:
         """Initialise this component's state from ``old``, which it replaces in a graph slot.
 
         Called by a swap at a cycle boundary, after ``self.start()`` and before this

@@ -26,8 +26,15 @@ import numpy as np
 
 from rt.engine.component import STATUS_EXCEPTION, Component, Lifecycle, LifecycleError
 from rt.engine.ports import InputPort, OutputPort, PortType, StructType, check_name
-from rt.engine.stats import (DEFAULT_CAPACITY, Fault, GraphStats, SlotStats, check_capacity,
-                             new_ring, summarize)
+from rt.engine.stats import (
+    DEFAULT_CAPACITY,
+    Fault,
+    GraphStats,
+    SlotStats,
+    check_capacity,
+    new_ring,
+    summarize,
+)
 from rt.errors import ConfigurationError, InputError
 
 FAULT_HISTORY = 1024
@@ -199,7 +206,7 @@ class GraphBuilder:
         return (f"cycle without delay: {hops}; break it with connect(..., delay=1) on one of "
                 f"these connections")
 
-    def build(self) -> "Graph":
+    def build(self) -> Graph:
         """Check everything, wire the ports (zero-copy) and return the :class:`Graph`.
 
         Raises ConfigurationError listing every problem found: unknown slots or ports, an
@@ -451,8 +458,7 @@ class Graph:
             copy(latch, src)
         elapsed = pc() - t0
         self._cycle_ring[idx] = elapsed
-        if elapsed > self._cycle_max:
-            self._cycle_max = elapsed
+        self._cycle_max = max(self._cycle_max, elapsed)
         self._idx = (idx + 1) & self._mask
         self._cycles += 1
         return faults

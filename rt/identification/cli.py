@@ -47,8 +47,12 @@ def _write_description(desc, out: Path, force: bool) -> None:
 def _run(args) -> int:
     from rt.benchmarks.tracking import run_one
     from rt.errors import InputError
-    from rt.identification.estimate import (description_from_physical, estimate_base,
-                                            estimate_physical, force_prediction_error)
+    from rt.identification.estimate import (
+        description_from_physical,
+        estimate_base,
+        estimate_physical,
+        force_prediction_error,
+    )
     from rt.identification.excitation import optimize_excitation
     from rt.identification.workflow import record, record_benchmark, truth_base
     from rt.model import RobotModel
@@ -88,7 +92,7 @@ def _run(args) -> int:
         tracking = {}
         for ctrl in ("paden_panja", "computed_torque"):
             for label, robot in (("nominal", nominal), ("identified", ident)):
-                t, e, _ = run_one("pid-vs-paden", ctrl, 13.0, 1000.0, truth, robot,
+                _t, e, _ = run_one("pid-vs-paden", ctrl, 13.0, 1000.0, truth, robot,
                                   args.ideal_twin)
                 tracking[f"{ctrl}/{label}"] = {"mean_abs_m": float(np.abs(e).mean()),
                                                "rms_m": float(np.sqrt(np.mean(e ** 2)))}

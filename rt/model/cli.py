@@ -10,7 +10,8 @@ import argparse
 import json
 import math
 import sys
-from typing import Any, Callable, TextIO
+from collections.abc import Callable
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -25,8 +26,8 @@ def register(commands: argparse._SubParsersAction) -> None:
         ("describe", _describe, "geometry, limits, bodies, drive and base parameters as JSON"),
         ("ik", _ik, 'JSON lines {"z","roll","pitch"} -> {"q","x","y","yaw","phi"}'),
         ("fk", _fk, 'JSON lines {"q":[..]} -> pose and parasitic terms'),
-        ("dynamics", _dynamics, 'JSON lines {"q","qd","qdd"[,"payload"][,"wrench"]} -> '
-                                 'M, C, G, F, tau'),
+        ("dynamics", _dynamics, ('JSON lines {"q","qd","qdd"[,"payload"][,"wrench"]} -> '
+                                 'M, C, G, F, tau')),
         ("demo", _demo, "human-readable tour of the model on the twin's nominal description"),
     ):
         p = commands.add_parser(name, help=help_text)

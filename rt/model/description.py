@@ -48,7 +48,7 @@ class Geometry(_Strict):
         return angles
 
     @model_validator(mode="after")
-    def _reachable(self) -> "Geometry":
+    def _reachable(self) -> Geometry:
         if self.rod_length_m <= abs(self.base_radius_m - self.platform_radius_m):
             raise ValueError("rod_length_m must exceed |base_radius_m - platform_radius_m|")
         return self
@@ -177,7 +177,7 @@ class Encoder(_Strict):
     midpoint: Annotated[int, Field(ge=0)]
 
     @model_validator(mode="after")
-    def _midpoint_fits(self) -> "Encoder":
+    def _midpoint_fits(self) -> Encoder:
         if self.midpoint >= 2 ** self.counter_bits:
             raise ValueError(f"midpoint {self.midpoint} does not fit {self.counter_bits} bits")
         return self
@@ -212,7 +212,7 @@ class RobotDescription(_Strict):
         return version
 
     @model_validator(mode="after")
-    def _stroke_within_rod(self) -> "RobotDescription":
+    def _stroke_within_rod(self) -> RobotDescription:
         stroke = self.limits.stroke_m
         if stroke[0] < 0.0:
             raise ValueError("limits.stroke_m must start at or above 0 (bottom of the guide)")

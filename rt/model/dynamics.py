@@ -27,8 +27,8 @@ import pinocchio as pin
 
 from rt.errors import InputError
 from rt.model.description import Body, RobotDescription
-from rt.model.kinematics import Configuration, Kinematics
 from rt.model.kernels import TREE_DOF, tree_maps
+from rt.model.kinematics import Configuration, Kinematics
 
 #: Pinocchio joint ids (1-based; 0 is the universe) of the bodies that carry mass.
 SLIDER_JOINTS = (1, 3, 5)

@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rt.errors import ConvergenceError, WorkspaceError
-from rt.model.kernels import FK_SINGULAR, assemble, fk_solve, pack_geometry
 from rt.model.description import RobotDescription
+from rt.model.kernels import FK_SINGULAR, assemble, fk_solve, pack_geometry
 
 _FK_MAX_ITERATIONS = 25
 # Newton stops when the largest rod-angle update is below this (rad). 1e-12 rad on a 0.45 m rod

@@ -43,8 +43,17 @@ from collections.abc import Sequence
 from enum import IntEnum
 
 import numpy as np
-from ruckig import (ControlInterface, DurationDiscretization, InputParameter, OutputParameter,
-                    Result, Ruckig, RuckigError, Synchronization, Trajectory)
+from ruckig import (
+    ControlInterface,
+    DurationDiscretization,
+    InputParameter,
+    OutputParameter,
+    Result,
+    Ruckig,
+    RuckigError,
+    Synchronization,
+    Trajectory,
+)
 
 from rt.errors import ConfigurationError
 

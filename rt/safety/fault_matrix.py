@@ -11,13 +11,12 @@ Targets (issue 5): every fault detected; hard stop ≤ 20 ms to zero output; sof
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
 from rt.control.base import Reference
-from rt.control.experiment import benchmark_reference
 from rt.engine import Component
 from rt.errors import KinematicsError
 from rt.model import RobotModel

@@ -5,7 +5,7 @@ Each environment packs into the float64[16] array read by ``rt.twin.physics``.
 """
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -95,7 +95,7 @@ class PayloadStep(_Env):
         return np.zeros(16)
 
 
-Environment = Annotated[Union[FreeMotion, ForcePlateContact, CompliantAnkle, PayloadStep],
+Environment = Annotated[FreeMotion | ForcePlateContact | CompliantAnkle | PayloadStep,
                         Field(discriminator="kind")]
 
 

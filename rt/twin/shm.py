@@ -80,8 +80,8 @@ import os
 import re
 import threading
 import time
+from collections.abc import Iterable
 from multiprocessing import shared_memory
-from typing import Iterable
 
 import numpy as np
 
@@ -292,7 +292,7 @@ class RigSegment:
     Use :func:`create_segment` (rig side) or :func:`attach_segment` (RT side).
     """
 
-    def __init__(self, shm: "shared_memory.SharedMemory | _AttachedShm", name: str, owner: bool):
+    def __init__(self, shm: shared_memory.SharedMemory | _AttachedShm, name: str, owner: bool):
         self.name = name
         self.owner = owner
         self._shm: shared_memory.SharedMemory | _AttachedShm | None = shm

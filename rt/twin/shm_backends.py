@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Self
 
 import numpy as np
 
-from rt.devices.interfaces import (ActuatorOutputs, DigitalInputs, DigitalInputState,
-                                   EncoderBank)
+from rt.devices.interfaces import ActuatorOutputs, DigitalInputs, DigitalInputState, EncoderBank
 from rt.devices.sampled_ft import SampledForceTorque
 from rt.drivers.fake_comedi import FakeComedi
 from rt.drivers.fake_pcl833 import FakePcl833Port
@@ -212,7 +212,7 @@ class ShmRig:
         self._cmd_block = None  # type: ignore[assignment]
         seg.close()
 
-    def __enter__(self) -> "ShmRig":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
