@@ -381,7 +381,7 @@ KINDS: dict[str, type[_Base]] = {
     "position_playback": PositionPlayback,
 }
 #: Validates any kind; ``PROTOCOL_ADAPTER.json_schema()`` describes the files (e.g. for an editor).
-PROTOCOL_ADAPTER: TypeAdapter[Any] = TypeAdapter(Protocol)  # type: ignore[arg-type]
+PROTOCOL_ADAPTER: TypeAdapter[Any] = TypeAdapter(Protocol)
 
 
 # ------------------------------------------------------------------------------ validation

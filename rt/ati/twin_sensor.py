@@ -297,7 +297,7 @@ class SourceReader:
             raise InputError(f"source returned {len(wrench)} wrench values, expected 6")
         self.status = int(result[1]) & 0xFFFF_FFFF
         if len(result) > 2:
-            self.ft_sequence = int(result[2]) & 0xFFFF_FFFF  # type: ignore[misc]
+            self.ft_sequence = int(result[2]) & 0xFFFF_FFFF
         else:
             self._own_sequence = (self._own_sequence + 1) & 0xFFFF_FFFF
             self.ft_sequence = self._own_sequence

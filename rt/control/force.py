@@ -28,8 +28,9 @@ stays below 0 N anyway (``rt.safety.supervisor``).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Annotated
+from typing import Annotated, Any, TypeVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -103,7 +104,11 @@ ADMITTANCE_RANGES = {
 }
 
 
-def _validate(owner: str, model_type, ranges, gains) -> BaseModel:
+_GainsT = TypeVar("_GainsT", bound=BaseModel)
+
+
+def _validate(owner: str, model_type: type[_GainsT], ranges: Mapping[str, GainRange],
+              gains: Mapping[str, Any] | None) -> _GainsT:
     try:
         validated = model_type.model_validate(gains or {})
     except ValidationError as exc:

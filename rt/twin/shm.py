@@ -82,6 +82,7 @@ import threading
 import time
 from collections.abc import Iterable
 from multiprocessing import shared_memory
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -194,6 +195,10 @@ class FieldViews:
             view = data[start:start + itemsize * count].view(dtype)
             setattr(self, name, view)
             self._names.append(name)
+
+    if TYPE_CHECKING:
+        # The fields are set by name at run time; to the type checker each one is an array.
+        def __getattr__(self, name: str) -> np.ndarray: ...
 
     def release(self) -> None:
         """Drop every view (they pin the shared buffer, which cannot close while pinned)."""

@@ -206,7 +206,7 @@ class ShmRig:
         seg, self.seg = self.seg, None
         if seg is None:
             return
-        self._rig_state = None  # type: ignore[assignment]
+        self._rig_state = None
         self._cmd = None  # type: ignore[assignment]
         self._sensor_block = None  # type: ignore[assignment]
         self._cmd_block = None  # type: ignore[assignment]
