@@ -201,7 +201,7 @@ class TwinAtiSensorModel:
             raise InputError(f"unknown ATI sensor fault {name!r}; known: {', '.join(FAULTS)}")
 
     # ---------------------------------------------------------------- physics
-    def measure(self, true_wrench: Sequence[float], t: float) -> AtiSample | None:
+    def measure(self, true_wrench: Sequence[float] | np.ndarray, t: float) -> AtiSample | None:
         """The sample the sensor reports at time ``t`` (s) under ``true_wrench`` (N, N m)."""
         if len(true_wrench) != 6:
             raise InputError(f"true_wrench needs 6 values (N, N m), got {len(true_wrench)}")

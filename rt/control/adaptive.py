@@ -43,6 +43,7 @@ class AdaptiveGains(Gains):
 @register
 class Adaptive(Controller):
     name = "adaptive"
+    gains: AdaptiveGains
     gains_type = AdaptiveGains
     #: Λ sets the sliding surface's bandwidth (same 5-150 rad/s family as the PD laws, capped
     #: at 100 since K_D Λ acts as a stiffness); adaptation above 1 chases quantization noise

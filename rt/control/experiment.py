@@ -75,7 +75,8 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
     reference(0.0, ref)
     approach = None
     if approach_from is not None:
-        approach = Approach(dt=1.0 / rate_hz, stroke=tuple(model.description.limits.stroke_m))
+        lo, hi = model.description.limits.stroke_m
+        approach = Approach(dt=1.0 / rate_hz, stroke=(lo, hi))
         approach.reset(approach_from)
         status = approach.set_target(ref.q, ref.qd, ref.qdd)
         if status != ApproachStatus.WORKING:
@@ -120,7 +121,7 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
         clock.t = t + t_offset
         enc.read_positions_m(q)
         est.update(q, dt)
-        if k < 0:
+        if approach is not None and k < 0:
             approach.update(ref.q, ref.qd, ref.qdd)
         else:
             reference(t, ref)

@@ -176,7 +176,7 @@ class ExplicitForce:
         """τ (N) into ``out``. ``force_n`` is the measured F (NaN → the law holds its integral
         and runs on feedforward; the supervisor decides whether that is acceptable)."""
         g = self.gains
-        cfg = st.cfg
+        cfg = st.config
         S = st.S
         qd = st.qd
         zd = S[8, 0] * qd[0] + S[8, 1] * qd[1] + S[8, 2] * qd[2]
@@ -273,7 +273,7 @@ class Admittance:
                out: np.ndarray) -> int:
         g = self.gains
         if self.z is None:
-            self.z = st.cfg.z
+            self.z = st.config.z
         f_d = max(g.preload_n, ref.f)    # never below the preload
         e = 0.0 if math.isnan(force_n) else force_n - f_d      # pushing too hard → yield
         zdd = (-e - g.virtual_damping_n_s_per_m * self.zd) / g.virtual_mass_kg

@@ -136,7 +136,7 @@ class ActuatorOutputs(Device):
     def enabled(self) -> bool: ...
 
     @abc.abstractmethod
-    def write_volts(self, volts: Sequence[float]) -> None:
+    def write_volts(self, volts: Sequence[float] | np.ndarray) -> None:
         """Command one voltage (V) per channel."""
 
 

@@ -47,6 +47,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from rt.devices.interfaces import ActuatorOutputs
 from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError, InputError
 
@@ -317,7 +319,7 @@ class Pci1720Outputs(ActuatorOutputs):
         if error is not None:
             raise error
 
-    def write_volts(self, volts: Sequence[float]) -> None:
+    def write_volts(self, volts: Sequence[float] | np.ndarray) -> None:
         """Command ``volts`` (V), one per axis, clamped to ±``limit_v`` and quantized.
 
         Refused (``HardwareError``, nothing written) with a non-zero value while disabled;

@@ -42,8 +42,7 @@ from __future__ import annotations
 
 import enum
 import math
-import numbers
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -205,7 +204,7 @@ class CountUnwrapper:
 # --- the driver ----------------------------------------------------------------------------
 
 def _per_axis(value: float | Sequence[float], name: str, n: int) -> tuple:
-    if isinstance(value, numbers.Real):
+    if not isinstance(value, Iterable):                  # one value for every axis
         return (value,) * n
     values = tuple(value)
     if len(values) != n:

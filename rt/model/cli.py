@@ -101,7 +101,8 @@ def _payload(obj: dict) -> Payload | None:
             or not all(isinstance(r, list) and len(r) == 3 for r in inertia)):
         raise InputError('"payload.inertia_kg_m2" must be a 3x3 list of numbers')
     rows = [_vector({"row": r}, "row") for r in inertia]
-    return Payload(mass, tuple(com), tuple(tuple(r) for r in rows))
+    return Payload(mass, (com[0], com[1], com[2]),
+                   tuple((r[0], r[1], r[2]) for r in rows))
 
 
 def _parse_line(line: str, lineno: int) -> dict:

@@ -119,6 +119,13 @@ class State:
         self._phi = np.zeros(3)
         self.forward_det = 0.0
 
+    @property
+    def config(self) -> Configuration:
+        """The configuration of this cycle (set by ``Dynamics.state``)."""
+        if self.cfg is None:
+            raise InputError("this State has no configuration yet: fill it with Dynamics.state")
+        return self.cfg
+
     def forward_jacobian(self) -> np.ndarray:
         """∂(z, roll, pitch)/∂q (3×3; m/m and rad/m): pose rates from slider velocities."""
         return self.S[[8, 11, 10]]

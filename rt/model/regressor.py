@@ -71,7 +71,7 @@ class Regressor:
 
     def __init__(self, dynamics: Dynamics, samples: int = 40, seed: int = 20121):
         self.dyn = dynamics
-        cols = []
+        cols: list[int] = []
         for _, joint in BODIES:
             cols.extend(range(10 * (joint - 1), 10 * joint))
         self._tree_cols = np.array(cols)
@@ -179,7 +179,7 @@ class Regressor:
     def _find_base(self, samples: int, seed: int) -> BaseParameters:
         rng = np.random.default_rng(seed)
         kin = self.dyn.kin
-        rows = []
+        rows: list[np.ndarray] = []
         while len(rows) < samples:
             z = rng.uniform(kin.stroke[0] + 0.45, kin.stroke[1] + 0.40)
             roll = rng.uniform(-0.8, 0.8) * kin.roll_max

@@ -457,7 +457,7 @@ class SessionRecorder:
                     commit_output(self._partial, self.path, force=True)
                 except TalusError as exc:
                     self._error = str(exc)
-            elif self._partial is not None:
+            elif self._partial is not None and self._error is not None:
                 self._error += f"; the previous {self.path} is untouched, this recording " \
                                f"is in {self._partial}"
             complete = self._error is None

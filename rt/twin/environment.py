@@ -114,7 +114,8 @@ def parse_environment(text: str) -> FreeMotion | ForcePlateContact | CompliantAn
             return PayloadStep(mass_kg=float(mass) if mass else 100.0,
                                at_s=float(at) if at else 0.0)
         if name == "plate":
-            return ForcePlateContact(**({"plate_height_m": float(arg)} if arg else {}))
+            return (ForcePlateContact(plate_height_m=float(arg)) if arg
+                    else ForcePlateContact())
         if name == "ankle" and not arg:
             return CompliantAnkle()
     except ValidationError as exc:

@@ -192,7 +192,7 @@ class FieldViews:
         for name, offset, dtype, count in specs:
             start = offset - skip
             itemsize = np.dtype(dtype).itemsize
-            view = data[start:start + itemsize * count].view(dtype)
+            view: np.ndarray = data[start:start + itemsize * count].view(dtype)
             setattr(self, name, view)
             self._names.append(name)
 
@@ -302,6 +302,8 @@ class RigSegment:
         self.owner = owner
         self._shm: shared_memory.SharedMemory | _AttachedShm | None = shm
         buf = shm.buf
+        if buf is None:
+            raise HardwareError(f"shared-memory segment {name!r} is not mapped")
         self._header_bytes = np.frombuffer(buf, np.uint8, HEADER_SIZE, HEADER_OFFSET)
         self.header = FieldViews(self._header_bytes, HEADER_FIELDS, skip=0)
         self.sensors = SeqlockBlock(buf, SENSOR_OFFSET, SENSOR_SIZE, SENSOR_FIELDS)
@@ -330,7 +332,7 @@ class RigSegment:
         except BufferError:
             # Someone still holds a view of the buffer; the mapping goes when it is collected.
             pass
-        if self.owner:
+        if self.owner and isinstance(shm, shared_memory.SharedMemory):  # the creator's handle
             try:
                 shm.unlink()
             except FileNotFoundError:

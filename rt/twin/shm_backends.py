@@ -206,7 +206,7 @@ class ShmRig:
         seg, self.seg = self.seg, None
         if seg is None:
             return
-        self._rig_state = None
+        self._rig_state = None  # type: ignore[assignment]  # unpinned; closed: never read
         self._cmd = None  # type: ignore[assignment]
         self._sensor_block = None  # type: ignore[assignment]
         self._cmd_block = None  # type: ignore[assignment]
@@ -337,7 +337,7 @@ class ShmActuators(ActuatorOutputs):
     def enabled(self) -> bool:
         return self._driver.enabled
 
-    def write_volts(self, volts: Sequence[float]) -> None:
+    def write_volts(self, volts: Sequence[float] | np.ndarray) -> None:
         """Command ``volts`` (V) per axis: clamped, quantized (12 bit), published to the rig."""
         self._check_open()
         try:
