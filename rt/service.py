@@ -110,7 +110,7 @@ class RtConfig(BaseModel):
     truth: str | None = None
     #: Backend sim: an ideal twin (truth = the model, no unmodelled effect), for comparisons.
     ideal_twin: bool = False
-    rate_hz: float = Field(1000.0, ge=100.0, le=2000.0)
+    rate_hz: float = Field(default=1000.0, ge=100.0, le=2000.0)
     #: "realtime" paces the loop by the clock; "fast" (the twin only) runs it back to back in
     #: simulated time, for demos and tests.
     loop_mode: Literal["realtime", "fast"] = "realtime"
@@ -124,9 +124,9 @@ class RtConfig(BaseModel):
     endpoint: str = DEFAULT_ENDPOINT
     pub_endpoint: str = DEFAULT_PUB_ENDPOINT
     #: The owner's silence after which the supervisor soft-stops a motion (s).
-    heartbeat_timeout_s: float = Field(0.25, gt=0.0, le=5.0)
+    heartbeat_timeout_s: float = Field(default=0.25, gt=0.0, le=5.0)
     #: Telemetry publication rate for live GUIs (Hz).
-    telemetry_hz: float = Field(60.0, gt=0.0, le=500.0)
+    telemetry_hz: float = Field(default=60.0, gt=0.0, le=500.0)
     #: Limits in force outside sessions (a session brings its patient's).
     patient_limits: PatientLimits = Field(default_factory=PatientLimits)
     #: The machine's limits (stroke margin, speeds, forces, overruns ...); its heartbeat
@@ -286,7 +286,7 @@ class RtService:
             "causes": sorted(sup.causes), "latched": sup.latched(),
             "t": stats.t, "cycles": stats.cycles, "deadline_misses": stats.misses,
             "rate_hz": self.config.rate_hz,
-            "controller": g.component("controller").controller.name,
+            "controller": pl.controller.name,
             "phase": int(g.output("reference.phase")[0]),
             "phase_name": Phase(int(g.output("reference.phase")[0])).name.lower(),
             "q": g.output("encoders.q").tolist(),
@@ -357,7 +357,7 @@ class RtService:
 
     def set_gains(self, client: str, controller: str, gains: dict[str, float]) -> dict[str, Any]:
         self._require_owner(client, "set_gains")
-        law = self.pl.graph.component("controller").controller
+        law = self.pl.controller
         if controller != law.name:
             raise InputError(f"controller {controller!r} is not running (running: {law.name!r})")
         try:
@@ -432,14 +432,15 @@ class RtService:
 
         from rt.ipc.server import Deferred
 
-        if self.sessions is None:
+        sessions = self.sessions
+        if sessions is None:
             raise InputError("this RT process offers no protocol sessions")
         info = PatientInfo(patient.id, patient.weight_kg, self._patient_limits(patient))
         future: Future = Future()
 
         def work() -> None:
             try:
-                prep = self.sessions.prepare(protocol, info, self._context())  # type: ignore
+                prep = sessions.prepare(protocol, info, self._context())
                 future.set_result({"ok": True, "protocol": prep.name, "kind": prep.kind,
                                    "duration_s": prep.program.duration_s,
                                    "start_pose": list(prep.start_pose),
@@ -531,7 +532,7 @@ class RtService:
             raise InputError("session_start refused: the client that started it was lost "
                              "during pre-flight")
         d = pl.model.description
-        limits = effective(tuple(d.limits.stroke_m), self.config.limits_of_robot(),
+        limits = effective(d.limits.stroke, self.config.limits_of_robot(),
                            s.patient.limits,
             prep.protocol_limits)
         started = datetime.now(UTC)

@@ -21,6 +21,8 @@ imperfections) unless ``ideal``.
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rt.control.experiment import benchmark_reference
@@ -92,8 +94,8 @@ def gains_for_rate(controller: str, rate_hz: float, axis_mass_kg: float) -> dict
     return None
 
 
-def metrics(t: np.ndarray, error: np.ndarray) -> dict:
-    out = {}
+def metrics(t: np.ndarray, error: np.ndarray) -> dict[str, Any]:
+    out: dict[str, Any] = {}
     for name, window in (("period1", t < STEP_S), ("period2", t >= STEP_S)):
         e = error[window]
         out[name] = {"mean_abs_m": float(np.abs(e).mean()),
@@ -123,7 +125,7 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
     if gains is None:
         st = model.dyn.state((Q0_M, Q0_M, Q0_M))
         gains = gains_for_rate(controller, rate_hz, float(model.dyn.mass_matrix(st)[0, 0]))
-    env = FreeMotion()
+    env: FreeMotion | PayloadStep = FreeMotion()
     if experiment == "payload-step":
         env = PayloadStep(mass_kg=PAYLOAD_KG, at_s=1e9, com_m=PAYLOAD_COM_M)  # timed below
     twin = (Twin.ideal(truth or model.description, environment=env, seed=seed) if ideal
@@ -148,7 +150,7 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
     pl.loop.run(cycles=n_step)
     if n_step < n:
         if experiment == "parameter-step":
-            _change_controller_parameters(model, pl.graph.component("controller").controller)
+            _change_controller_parameters(model, pl.controller)
         elif experiment == "payload-step":
             twin.plant.set_payload(Payload(PAYLOAD_KG, PAYLOAD_COM_M))
         pl.loop.run(cycles=n - n_step)

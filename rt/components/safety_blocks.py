@@ -137,7 +137,7 @@ class RedundantDrive(Component):
     """
 
     def __init__(self, name: str, cards: Sequence[ActuatorOutputs], log: EventLog,
-                 monitor: Callable[[], Sequence[float]] | None = None,
+                 monitor: Callable[[], Sequence[float] | np.ndarray] | None = None,
                  tolerance_v: float = 0.1, confirm_cycles: int = 3):
         super().__init__(name)
         self.cards = list(cards)

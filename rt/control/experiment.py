@@ -75,8 +75,7 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
     reference(0.0, ref)
     approach = None
     if approach_from is not None:
-        lo, hi = model.description.limits.stroke_m
-        approach = Approach(dt=1.0 / rate_hz, stroke=(lo, hi))
+        approach = Approach(dt=1.0 / rate_hz, stroke=model.description.limits.stroke)
         approach.reset(approach_from)
         status = approach.set_target(ref.q, ref.qd, ref.qdd)
         if status != ApproachStatus.WORKING:

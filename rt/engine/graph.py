@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 from time import perf_counter_ns
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -36,6 +36,8 @@ from rt.engine.stats import (
     summarize,
 )
 from rt.errors import ConfigurationError, InputError
+
+_C = TypeVar("_C", bound=Component)
 
 FAULT_HISTORY = 1024
 """Faults kept by a graph (the total count is always kept)."""
@@ -76,7 +78,7 @@ class GraphBuilder:
         self._connections: list[Connection] = []
         self._built = False
 
-    def add(self, component: Component, slot: str | None = None) -> Component:
+    def add(self, component: _C, slot: str | None = None) -> _C:
         """Add ``component`` in ``slot`` (default: its name); returns the component."""
         self._check_open()
         if not isinstance(component, Component):

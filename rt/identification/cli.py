@@ -6,6 +6,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -78,7 +79,7 @@ def _run(args) -> int:
                                       f"{nominal.name}-identified")
     _write_description(ident, out, args.force)
     validation = record_benchmark(args.seconds, model, truth, imp)
-    result = {
+    result: dict[str, Any] = {
         "out": str(out), "excitation_peaks": excitation.peaks(),
         "base": [{"name": n, "estimate": float(e), "sigma": float(s), "truth": float(t),
                   "rel_error": float(abs(e - t) / max(abs(t), 1e-12)),

@@ -61,6 +61,11 @@ class Limits(_Strict):
     roll_max_deg: Annotated[float, Field(gt=0.0, lt=60.0)]
     pitch_max_deg: Annotated[float, Field(gt=0.0, lt=60.0)]
 
+    @property
+    def stroke(self) -> tuple[float, float]:
+        """``stroke_m`` as (lower, upper) slider position (m)."""
+        return self.stroke_m[0], self.stroke_m[1]
+
     @field_validator("stroke_m")
     @classmethod
     def _ordered(cls, stroke: list[float]) -> list[float]:

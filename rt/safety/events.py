@@ -64,7 +64,7 @@ class EventLog:
     """Bounded, thread-safe record of events; ``listener`` (e.g. the IPC publisher, which must
     not block) is called with each new event's dict."""
 
-    def __init__(self, capacity: int = 4096, listener: Callable[[dict], None] | None = None):
+    def __init__(self, capacity: int = 4096, listener: Callable[[dict], object] | None = None):
         self._events: deque[SafetyEvent] = deque(maxlen=capacity)
         self._lock = threading.Lock()
         self.listener = listener
