@@ -52,6 +52,12 @@ class Samples:
         return len(self.f_cmd)
 
 
+def _block_means(x: np.ndarray, m: int, n_per: int) -> np.ndarray:
+    """Means of ``m`` consecutive blocks of ``n_per`` samples along the first axis."""
+    x = x[:m * n_per]
+    return x.reshape(m, n_per, *x.shape[1:]).mean(axis=1)
+
+
 def _zeroed(t: np.ndarray, x: np.ndarray, span_s: float) -> np.ndarray:
     """x minus the offset line through its first and last ``span_s`` means."""
     head = t <= t[0] + span_s
@@ -117,15 +123,10 @@ def build_samples(plate: PlateDescription, trials: list[TrialData], sites: list[
         m = len(t) // n_per
         if m == 0:
             continue
-
-        def blocks(x: np.ndarray) -> np.ndarray:
-            x = x[:m * n_per]
-            return x.reshape(m, n_per, *x.shape[1:]).mean(axis=1)
-
-        rows["v"].append(blocks(v))
-        rows["w"].append(blocks(w[inside]))
-        rows["p"].append(blocks(p[inside]))
-        rows["f"].append(blocks(d.force_ref[inside]))
+        rows["v"].append(_block_means(v, m, n_per))
+        rows["w"].append(_block_means(w[inside], m, n_per))
+        rows["p"].append(_block_means(p[inside], m, n_per))
+        rows["f"].append(_block_means(d.force_ref[inside], m, n_per))
         rows["trial"].append(np.full(m, k))
         rows["site"].append(np.full(m, site_names.index(site)))
     if not rows["v"]:

@@ -74,7 +74,8 @@ class User(Base):
     created_by: Mapped[str | None] = mapped_column(sa.String(64))
     version: Mapped[int] = mapped_column(default=1)
 
-    __mapper_args__ = {"version_id_col": version}
+    # A declarative directive SQLAlchemy reads once, when it maps the class
+    __mapper_args__ = {"version_id_col": version}  # noqa: RUF012
 
 
 class Patient(Base):
@@ -98,7 +99,8 @@ class Patient(Base):
     limits: Mapped[list[PatientLimitsRow]] = relationship(
         back_populates="patient", order_by="PatientLimitsRow.id")
 
-    __mapper_args__ = {"version_id_col": version}
+    # A declarative directive SQLAlchemy reads once, when it maps the class
+    __mapper_args__ = {"version_id_col": version}  # noqa: RUF012
 
 
 class PatientIdentity(Base):

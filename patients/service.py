@@ -64,6 +64,8 @@ Clock = Callable[[], dt.datetime]
 LIMIT_FIELDS = tuple(PatientLimits.model_fields)
 CLINICAL_FIELDS = ("body_mass_kg", "height_m", "affected_side", "diagnosis", "notes")
 IDENTITY_FIELDS = ("full_name", "birth_date", "national_id", "contact")
+#: The lockout used unless a deployment sets its own (the policy is immutable).
+DEFAULT_LOCKOUT = passwords.LockoutPolicy()
 _CODE = re.compile(r"^[A-Z0-9][A-Z0-9-]{2,31}$")
 _USERNAME = re.compile(r"^[a-z][a-z0-9._-]{1,63}$")
 #: Crockford base32 without I, L, O, U: codes read aloud or copied by hand without mistakes.
@@ -102,7 +104,7 @@ class ClinicalRecord:
 
     def __init__(self, engine: Engine, clock: Clock = utc_now,
                  hasher: PasswordHasher | None = None,
-                 lockout: passwords.LockoutPolicy = passwords.LockoutPolicy()) -> None:
+                 lockout: passwords.LockoutPolicy = DEFAULT_LOCKOUT) -> None:
         self.engine = engine
         self.clock = clock
         self.hasher = hasher or passwords.default_hasher()

@@ -322,7 +322,8 @@ def read_grf_c3d(path: str | Path, plate_index: int) -> GroundReactionForce:
     try:
         # Parameters first: the plate's type decides whether ezc3d can extract its forces.
         params = ezc3d.c3d(src, extract_forceplat_data=False)["parameters"]
-    except Exception as exc:  # ezc3d raises OSError/RuntimeError/IndexError on bad files
+    # ezc3d raises OSError/RuntimeError/IndexError on bad files.
+    except Exception as exc:  # noqa: BLE001
         raise _refuse(src, f"ezc3d cannot read it as C3D: {exc}") from None
     if "FORCE_PLATFORM" not in params or "USED" not in params["FORCE_PLATFORM"]:
         raise _refuse(src, "the file has no FORCE_PLATFORM parameters: no force plate to read")
@@ -349,7 +350,8 @@ def read_grf_c3d(path: str | Path, plate_index: int) -> GroundReactionForce:
     try:
         c3d = ezc3d.c3d(src, extract_forceplat_data=True)
         force = np.asarray(c3d["data"]["platform"][plate_index]["force"], dtype=float)
-    except Exception as exc:  # ezc3d's extraction fails on the types it does not model
+    # ezc3d's extraction fails on the types it does not model.
+    except Exception as exc:  # noqa: BLE001
         why = f" (the file also has plates of type {others}, which ezc3d cannot model)" \
             if others else ""
         raise _refuse(src, f"ezc3d cannot extract force platform {plate_index}{why}: "

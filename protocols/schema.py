@@ -374,7 +374,7 @@ class PositionPlayback(_Base):
 
 
 Protocol = Annotated[SineFz | GaitReplay | AnkleRom | IsometricHold | ActiveAssist | PositionPlayback, Field(discriminator="kind")]
-ProtocolModel = Union[SineFz, GaitReplay, AnkleRom, IsometricHold, ActiveAssist, PositionPlayback]
+ProtocolModel = SineFz | GaitReplay | AnkleRom | IsometricHold | ActiveAssist | PositionPlayback
 KINDS: dict[str, type[_Base]] = {
     "sine_fz": SineFz, "gait_replay": GaitReplay, "ankle_rom": AnkleRom,
     "isometric_hold": IsometricHold, "active_assist": ActiveAssist,

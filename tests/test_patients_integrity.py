@@ -157,9 +157,11 @@ def test_the_database_refuses_changes_to_the_audit_log(record, people):
     _populated(record, people)
     for sql in ("UPDATE audit_log SET username = 'x' WHERE seq = 2",
                 "DELETE FROM audit_log WHERE seq = 2", "DELETE FROM audit_head"):
-        with pytest.raises(sa.exc.DatabaseError, match="append-only"):
-            with record.engine.begin() as conn:
-                conn.exec_driver_sql(sql)
+        with (
+            pytest.raises(sa.exc.DatabaseError, match="append-only"),
+            record.engine.begin() as conn,
+        ):
+            conn.exec_driver_sql(sql)
     assert record.verify_audit(people.admin).ok
 
 

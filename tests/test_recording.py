@@ -256,7 +256,7 @@ class _StallingFile:
     """A file whose writes block while ``gate`` is clear: a disk that stopped answering."""
 
     def __init__(self, path: Path):
-        self.raw = open(path, "wb")
+        self.raw = open(path, "wb")  # noqa: SIM115 - owned by this wrapper, closed by close()
         self.gate = threading.Event()
         self.gate.set()
         self.blocked = threading.Event()
@@ -532,9 +532,11 @@ def test_bad_metadata_and_unknown_channels_are_refused(tmp_path: Path) -> None:
                                               if k != "patient_id"})
     with pytest.raises(InputError, match="compression"):
         SessionRecorder(tmp_path / "m.mcap", METADATA_IN, compression="gzip")
-    with SessionRecorder(tmp_path / "m.mcap", METADATA_IN) as rec:
-        with pytest.raises(InputError, match="unknown channel"):
-            rec.publish("/nope", {"t": 0.0})
+    with (
+        SessionRecorder(tmp_path / "m.mcap", METADATA_IN) as rec,
+        pytest.raises(InputError, match="unknown channel"),
+    ):
+        rec.publish("/nope", {"t": 0.0})
     assert rec.closed and not rec.event({"t": 1.0}) and rec.close()["dropped"][EVENTS] == 0
     # (a drop after close is counted by dropped(), not in the frozen summary)
     assert rec.dropped()[EVENTS] == 1

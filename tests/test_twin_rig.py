@@ -634,9 +634,11 @@ def test_closing_twice_is_safe_and_closed_handles_refuse_work(rig_name):
 
 def test_the_cli_refuses_a_bad_or_taken_name(rig_name):
     bad = subprocess.run([sys.executable, "-m", "rt.twin.rig_cli", "rig", "--shm", "a/b"],
-                         cwd=REPO, env=_env(), capture_output=True, text=True, timeout=30)
+                         cwd=REPO, env=_env(),
+                         check=False, capture_output=True, text=True, timeout=30)
     assert bad.returncode == 2 and "malformed" in json.loads(bad.stdout)["error"]
     taken = subprocess.run([sys.executable, "-m", "rt.twin.rig_cli", "rig", "--shm", rig_name],
-                           cwd=REPO, env=_env(), capture_output=True, text=True, timeout=30)
+                           cwd=REPO, env=_env(),
+                           check=False, capture_output=True, text=True, timeout=30)
     assert taken.returncode == 2 and "already exists" in json.loads(taken.stdout)["error"]
     assert os.path.exists(f"/dev/shm/{rig_name}")    # the running rig's segment is untouched

@@ -312,7 +312,8 @@ class AtiCanResponder:
                     self._reader.set_bias()
                 elif opcode == OP_REQUEST_SHORT:
                     self._reply()
-            except Exception as exc:  # a faulty source must not kill the responder thread
+            # A faulty source must not kill the responder thread.
+            except Exception as exc:  # noqa: BLE001
                 self.counters.source_errors += 1
                 self.last_error = f"source failed: {exc!r}"
 

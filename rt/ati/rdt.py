@@ -27,6 +27,7 @@ buffered datagram) and restarts at 1 after each start command.
 """
 from __future__ import annotations
 
+import math
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -122,7 +123,7 @@ class CountsPerUnit:
 
 
 def _clip_int32(x: float) -> int:
-    if x != x:  # NaN has no count; the device never sends one, so neither do we
+    if math.isnan(x):  # NaN has no count; the device never sends one, so neither do we
         raise InputError("cannot encode NaN as RDT counts")
     if x >= _INT32_MAX:
         return _INT32_MAX

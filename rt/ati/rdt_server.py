@@ -202,7 +202,8 @@ class RdtServer:
                 # Averages BIAS_SAMPLES fresh samples, waiting one record period for each
                 # the source has not produced yet (≈ 16 ms at 1 kHz; requests wait meanwhile).
                 self._reader.set_bias(wait=lambda: time.sleep(self._period))
-            except Exception as exc:  # a faulty source must not kill the server thread
+            # A faulty source must not kill the server thread.
+            except Exception as exc:  # noqa: BLE001
                 self.counters.source_errors += 1
                 self.last_error = f"source failed during bias: {exc!r}"
 
@@ -210,7 +211,7 @@ class RdtServer:
         reader = self._reader
         try:
             fresh = reader.poll()
-        except Exception as exc:  # a faulty source must not kill the server thread
+        except Exception as exc:  # noqa: BLE001 - a faulty source must not kill the server thread
             self.counters.source_errors += 1
             self.last_error = f"source failed: {exc!r}"
             return

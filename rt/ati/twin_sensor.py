@@ -14,7 +14,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple, Union
+from typing import NamedTuple
 
 import numpy as np
 
@@ -52,9 +52,13 @@ class AtiSample(NamedTuple):
 #: What a ``WrenchSource`` may return: ``None`` when no new sample exists (dropout),
 #: ``(wrench6, status)`` (the server numbers the samples) or ``(wrench6, status, ft_sequence)``
 #: (the source numbers them; a repeated ft_sequence marks a stale sample).
-SourceResult = Union[None, tuple[Sequence[float], int], tuple[Sequence[float], int, int]]
+SourceResult = tuple[Sequence[float], int] | tuple[Sequence[float], int, int] | None
 #: Zero-argument callable giving the sensor's current sample; called from the server thread.
 WrenchSource = Callable[[], SourceResult]
+
+
+def _constantly(value: tuple[float, ...]) -> Callable[[], tuple[float, ...]]:
+    return lambda: value
 
 
 def _as6(name: str, values: Sequence[float]) -> Wrench6:
@@ -253,7 +257,8 @@ class TwinAtiSensorModel:
         ``true_wrench`` is a constant 6-vector or a zero-argument callable giving it (N, N m);
         time is ``clock()`` (s) relative to the first call, so schedule faults on that time base.
         """
-        get = true_wrench if callable(true_wrench) else (lambda w=_as6("true_wrench", true_wrench): w)
+        get = (true_wrench if callable(true_wrench)
+               else _constantly(_as6("true_wrench", true_wrench)))
         t0: list[float] = []
 
         def source() -> AtiSample | None:

@@ -114,7 +114,7 @@ class CommandQueue:
                 value = cmd.apply(loop)
             except TalusError as exc:
                 cmd.result._complete(False, str(exc), cycle)
-            except Exception as exc:  # a buggy hook must not kill the loop
+            except Exception as exc:  # noqa: BLE001 - a buggy hook must not kill the loop
                 cmd.result._complete(False, f"{type(exc).__name__}: {exc}", cycle)
             else:
                 cmd.result._complete(True, None, cycle, value)

@@ -439,7 +439,7 @@ class Graph:
             if comp._active:
                 try:
                     status = update(t, dt)
-                except Exception as exc:  # a component bug must not kill the loop
+                except Exception as exc:  # noqa: BLE001 - a component bug must not kill the loop
                     now = pc()
                     ring[idx] = now - prev
                     prev = now

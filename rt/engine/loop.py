@@ -300,7 +300,8 @@ class Loop:
             with self._running():
                 ready.set()
                 self._cycle_loop(None, None)
-        except BaseException as exc:  # reported by stop(); a thread cannot raise to anyone
+        # Reported by stop(); a thread cannot raise to anyone.
+        except BaseException as exc:  # noqa: BLE001
             self._thread_error = exc
         finally:
             ready.set()

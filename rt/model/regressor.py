@@ -22,6 +22,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from rt.errors import KinematicsError
 from rt.model.dynamics import PLATFORM_JOINT, ROD_JOINTS, SLIDER_JOINTS, Dynamics, State
 
 INERTIAL_NAMES = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
@@ -186,7 +187,7 @@ class Regressor:
             pitch = rng.uniform(-0.8, 0.8) * kin.pitch_max
             try:
                 cfg = kin.ik(z, roll, pitch)
-            except Exception:
+            except KinematicsError:                       # outside the workspace: draw again
                 continue
             st = self.dyn.state(cfg.q, rng.normal(0.0, 0.1, 3), out=self._state, cfg=cfg)
             rows.append(self.standard(st, rng.normal(0.0, 1.0, 3)).copy())

@@ -184,7 +184,7 @@ class RecordingScan:
     def _scan(self) -> Iterator[RecordedMessage]:
         info = self.info
         try:
-            f = open(self.path, "rb")
+            f = open(self.path, "rb")  # noqa: SIM115 - closed by the with below; open errors apart
         except OSError as exc:
             raise RecordingFileError(self.path, f"cannot open: {exc.strerror or exc}") from exc
         with f:
