@@ -49,7 +49,13 @@ demo: setup
 	rm -rf out/calibration
 	$(BIN)/talus calibrate demo --out out/calibration
 
+# Static checks first (each fails the target): ruff over the code and its tests, mypy over
+# the packages listed in pyproject.toml's [tool.mypy].
+LINT_PATHS := talus rt protocols patients calibration tests bench
+
 test: setup
+	$(BIN)/ruff check $(LINT_PATHS)
+	$(BIN)/mypy
 	$(BIN)/pytest -q
 
 bench: setup

@@ -12,6 +12,7 @@ within about one sample period. Wall-clock figures (±30 % on these VMs); not a 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import statistics
 import time
@@ -37,7 +38,7 @@ def main() -> None:
         records = client.read_samples(201, 10.0, start=True)
         t_first = records[0].t          # host monotonic receipt time of the first record
     times = [w.t for w in records]
-    gaps = [b - a for a, b in zip(times, times[1:])]
+    gaps = [b - a for a, b in itertools.pairwise(times)]
     print(json.dumps({
         "idle_s": args.idle, "env": args.env, "rate_hz": args.rate,
         "sample_period_ms": 1e3 / args.rate, "max_catch_up_s": MAX_CATCH_UP_S,

@@ -34,11 +34,11 @@ from pathlib import Path
 _HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path = [p for p in sys.path if os.path.abspath(p or os.curdir) != _HERE]
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from calibration import campaign, metrics  # noqa: E402
-from calibration.plan import default_plan  # noqa: E402
-from calibration.plate import TWIN_PLATE_FILE, cop_F, load_plate  # noqa: E402
+from calibration import campaign, metrics
+from calibration.plan import default_plan
+from calibration.plate import TWIN_PLATE_FILE, cop_F, load_plate
 
 
 def figures(folder: Path) -> dict:

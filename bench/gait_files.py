@@ -79,7 +79,7 @@ def replay(case: Case, data: Path, workdir: Path) -> dict:
     talus = Path(sys.executable).with_name("talus")       # the console script, as installed
     proc = subprocess.run([str(talus), "session", "run", "--protocol",
                            str(path), "--patient-weight", f"{PATIENT_KG:g}", "--fast", "--json"],
-                          capture_output=True, text=True, cwd=REPO, timeout=600)
+                          check=False, capture_output=True, text=True, cwd=REPO, timeout=600)
     out = json.loads(proc.stdout) if proc.stdout.strip() else {"error": proc.stderr.strip()}
     out["exit_code"] = proc.returncode
     return out

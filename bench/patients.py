@@ -31,9 +31,9 @@ from argon2 import PasswordHasher
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from patients import db as dbmod  # noqa: E402
-from patients.models import Outcome, TherapySession  # noqa: E402
-from patients.service import ClinicalRecord  # noqa: E402
+from patients import db as dbmod
+from patients.models import Outcome, TherapySession
+from patients.service import ClinicalRecord
 
 PROTOCOL = (ROOT / "protocols" / "library" / "ankle_rom.yaml").read_text()
 SUMMARY = {"protocol": "Ankle passive ROM ±10° / ±8°", "kind": "ankle_rom", "twin": True,
@@ -51,7 +51,7 @@ SIZE_SESSIONS = 1000
 
 class Clock:
     def __init__(self) -> None:
-        self.now = dt.datetime(2026, 1, 5, 8, tzinfo=dt.timezone.utc)
+        self.now = dt.datetime(2026, 1, 5, 8, tzinfo=dt.UTC)
 
     def __call__(self) -> dt.datetime:
         self.now += dt.timedelta(minutes=7)
@@ -94,7 +94,7 @@ def measure(url: str, n_sessions: int) -> dict:
         with record.engine.begin() as conn:
             ids = conn.execute(sa.text("SELECT id FROM patients")).scalars().all()
             template = conn.execute(sa.select(TherapySession.__table__).limit(1)).mappings().one()
-            start = dt.datetime(2026, 6, 1, tzinfo=dt.timezone.utc)
+            start = dt.datetime(2026, 6, 1, tzinfo=dt.UTC)
             rows = []
             for i in range(n_sessions - SIZE_SESSIONS):
                 row = {k: v for k, v in template.items() if k != "id"}

@@ -26,7 +26,7 @@ from rt.twin.twin import SimClock, Twin
 
 def run(seconds: float, env: str, integrator: str, ideal: bool, rate_hz: float = 1000.0) -> dict:
     clock = SimClock()
-    kwargs = dict(environment=parse_environment(env), clock=clock, integrator=integrator)
+    kwargs = {"environment": parse_environment(env), "clock": clock, "integrator": integrator}
     twin = Twin.ideal(**kwargs) if ideal else Twin(**kwargs)
     enc, card, ati = TwinEncoders(twin), TwinActuators(twin, 0), TwinForceTorque(twin)
     ati.start()

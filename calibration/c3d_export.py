@@ -122,7 +122,7 @@ def export(folder: Path, p: Processed, c3d_path: Path, csv_path: Path, force: bo
             {"kind": "reference_csv", "path": str(csv_path), "sha256": sha256_file(csv_path)}]
 
 
-def _int_parameter(c, group: str, name: str, values: list[int], dims: list[int]) -> None:  # type: ignore[no-untyped-def]
+def _int_parameter(c, group: str, name: str, values: list[int], dims: list[int]) -> None:
     """An INT parameter (ezc3d's ``add_parameter`` stores numbers as FLOAT, and readers
     require FORCE_PLATFORM:USED, TYPE and CHANNEL to be INT)."""
     from ezc3d import ezc3d as swig
@@ -132,7 +132,7 @@ def _int_parameter(c, group: str, name: str, values: list[int], dims: list[int])
     c.parameters.add_parameter(group, param)
 
 
-def _write_atomic(path: Path, write) -> None:  # type: ignore[no-untyped-def]
+def _write_atomic(path: Path, write) -> None:
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=path.suffix)
     os.close(fd)
     try:

@@ -9,19 +9,27 @@ import math
 import shutil
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from calibration import dataset, fit, metrics
 from calibration.plan import Plan, Trial, expand, force_profile, sites
 from calibration.plate import PlateDescription, cop_F, load_plate
-from calibration.trial import (CAMPAIGN_FILE, CAMPAIGN_KIND, TRIALS_DIR, TrialData,
-                               TrialRunner, read_campaign, read_json_of_kind, sha256_file,
-                               write_json_atomic)
+from calibration.trial import (
+    CAMPAIGN_FILE,
+    CAMPAIGN_KIND,
+    TRIALS_DIR,
+    TrialData,
+    TrialRunner,
+    read_campaign,
+    read_json_of_kind,
+    sha256_file,
+    write_json_atomic,
+)
 from calibration.twin_plate import PlateTruth, expected_matrix
 from rt.ati.twin_sensor import DELTA_SI_660_60_RANGES
 from rt.errors import ConfigurationError, InputError
@@ -220,7 +228,7 @@ def uncertainty(p: Processed, ref: ReferenceSensor, sig_t: float, sig_r: float) 
 
 def build_record(folder: Path, p: Processed, thresholds: metrics.Thresholds,
                  ref: ReferenceSensor, operator: str,
-                 now: Callable[[], datetime] = lambda: datetime.now(timezone.utc)) -> dict:
+                 now: Callable[[], datetime] = lambda: datetime.now(UTC)) -> dict:
     """The calibration record (``docs/calibration_record.md``)."""
     levels = list(p.plan.loads_n) + [t.load_n for t in p.plan.tilted]
     m = {stage: metrics.stage_metrics(p.plate, p.held, w, levels)
@@ -244,7 +252,7 @@ def build_record(folder: Path, p: Processed, thresholds: metrics.Thresholds,
     sig_t = float(np.sqrt(np.mean([r[1] ** 2 for r in regs.values()])))
     sig_r = float(np.sqrt(np.mean([r[2] ** 2 for r in regs.values()])))
     centre = min(regs, key=lambda k: math.hypot(*site_xy[k]))
-    created = now().astimezone(timezone.utc)
+    created = now().astimezone(UTC)
     record = {
         "schema_version": 1,
         "kind": RECORD_KIND,

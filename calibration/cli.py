@@ -24,8 +24,9 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -100,7 +101,7 @@ def _threshold_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--crosstalk-pct", type=float, default=d.crosstalk_pct)
 
 
-def _thresholds(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+def _thresholds(args: argparse.Namespace):
     from calibration.metrics import Thresholds
 
     values = (args.cop_rms_mm, args.cop_max_mm, args.force_pct_fs, args.crosstalk_pct)
@@ -127,7 +128,7 @@ def _plate_file(args: argparse.Namespace) -> Path:
     return Path(args.plate) if getattr(args, "plate", None) else TWIN_PLATE_FILE
 
 
-def _load_plan(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+def _load_plan(args: argparse.Namespace):
     from calibration.plan import default_plan, load_plan
 
     return load_plan(args.plan) if args.plan else default_plan()
@@ -175,8 +176,8 @@ def _progress(k: int, n: int, trial_id: str) -> None:
 
 def _run(args: argparse.Namespace) -> dict:
     from calibration.campaign import run_campaign
-    from calibration.twin_runner import make_runner
     from calibration.plate import load_plate
+    from calibration.twin_runner import make_runner
 
     plan = _load_plan(args)
     plate_file = _plate_file(args)
@@ -191,11 +192,10 @@ def _run(args: argparse.Namespace) -> dict:
             "wall_time_s": round(time.perf_counter() - t0, 1), "backend": args.backend}
 
 
-def fit_campaign(folder: Path, record_path: Path, thresholds, operator: str,  # type: ignore[no-untyped-def]
+def fit_campaign(folder: Path, record_path: Path, thresholds, operator: str,
                  degree: int = 3, angles: bool = True, allow_partial: bool = False,
                  force: bool = False) -> tuple[dict, Any]:
-    from calibration.campaign import build_record, process, record_json
-    from calibration.campaign import ReferenceSensor
+    from calibration.campaign import ReferenceSensor, build_record, process, record_json
     from calibration.trial import write_json_atomic
 
     if record_path.exists() and not force:

@@ -44,12 +44,18 @@ class Samples:
     trial_ids: list[str] = field(default_factory=list)
     site_names: list[str] = field(default_factory=list)
 
-    def select(self, mask: np.ndarray) -> "Samples":
+    def select(self, mask: np.ndarray) -> Samples:
         return Samples(self.v[mask], self.w_ref[mask], self.p_ref[mask], self.f_cmd[mask],
                        self.trial[mask], self.site[mask], self.trial_ids, self.site_names)
 
     def __len__(self) -> int:
         return len(self.f_cmd)
+
+
+def _block_means(x: np.ndarray, m: int, n_per: int) -> np.ndarray:
+    """Means of ``m`` consecutive blocks of ``n_per`` samples along the first axis."""
+    x = x[:m * n_per]
+    return x.reshape(m, n_per, *x.shape[1:]).mean(axis=1)
 
 
 def _zeroed(t: np.ndarray, x: np.ndarray, span_s: float) -> np.ndarray:
@@ -113,19 +119,14 @@ def build_samples(plate: PlateDescription, trials: list[TrialData], sites: list[
         t = d.t_robot[inside]
         v = np.column_stack([np.interp(t, t_on_robot, v_plate[:, j])
                              for j in range(v_plate.shape[1])])
-        n_per = max(1, int(round(block_s / float(np.median(np.diff(t))))))
+        n_per = max(1, round(block_s / float(np.median(np.diff(t)))))
         m = len(t) // n_per
         if m == 0:
             continue
-
-        def blocks(x: np.ndarray) -> np.ndarray:
-            x = x[:m * n_per]
-            return x.reshape(m, n_per, *x.shape[1:]).mean(axis=1)
-
-        rows["v"].append(blocks(v))
-        rows["w"].append(blocks(w[inside]))
-        rows["p"].append(blocks(p[inside]))
-        rows["f"].append(blocks(d.force_ref[inside]))
+        rows["v"].append(_block_means(v, m, n_per))
+        rows["w"].append(_block_means(w[inside], m, n_per))
+        rows["p"].append(_block_means(p[inside], m, n_per))
+        rows["f"].append(_block_means(d.force_ref[inside], m, n_per))
         rows["trial"].append(np.full(m, k))
         rows["site"].append(np.full(m, site_names.index(site)))
     if not rows["v"]:

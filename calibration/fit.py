@@ -275,9 +275,9 @@ class NonlinearCorrection:
 
     @classmethod
     def from_record(cls, entry: dict, origin_m: tuple[float, float, float]
-                    ) -> "NonlinearCorrection":
+                    ) -> NonlinearCorrection:
         """Rebuild the correction from the record's ``nonlinear_correction`` block."""
-        return cls(int(entry["degree"]), tuple(entry["half_size_m"]),  # type: ignore[arg-type]
+        return cls(int(entry["degree"]), tuple(entry["half_size_m"]),
                    origin_m, np.array(entry["cop_x_m"]), np.array(entry["cop_y_m"]),
                    np.array(entry["fz_gain"]), float(entry["fz_quadratic"]),
                    float(entry["full_scale_fz_n"]))

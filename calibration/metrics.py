@@ -74,7 +74,7 @@ def stage_metrics(plate: PlateDescription, s: Samples, w_plate: np.ndarray,
     e = w_plate - s.w_ref
     f_mag = np.linalg.norm(s.w_ref[:, :3], axis=1)
     big = s.w_ref[:, 2] >= COP_MIN_LOAD_N
-    out: dict = {"samples": int(len(s)), "cop_samples": int(big.sum())}
+    out: dict = {"samples": len(s), "cop_samples": int(big.sum())}
     out["force_pct_fs"] = (np.max(np.abs(e), axis=0) / fs * 100.0).tolist() if len(s) \
         else [None] * 6
     out["force_pct_applied"] = (np.max(np.abs(e[big]) / f_mag[big, None], axis=0) * 100.0

@@ -215,7 +215,7 @@ def force_profile(plan: Plan, trial: Trial, dt: float) -> np.ndarray:
         path = [*levels, *levels[-2::-1], 0.0]
         st = plan.steps
         duration = b + len(path) * (st.ramp_s + st.hold_s) + b
-        t = np.arange(int(round(duration / dt)) + 1) * dt
+        t = np.arange(round(duration / dt) + 1) * dt
         f = np.zeros_like(t)
         prev, t0 = 0.0, b
         for level in path:
@@ -227,7 +227,7 @@ def force_profile(plan: Plan, trial: Trial, dt: float) -> np.ndarray:
         ramp = 1.0
         play = s.cycles / s.frequency_hz
         duration = b + ramp + play + ramp + b
-        t = np.arange(int(round(duration / dt)) + 1) * dt
+        t = np.arange(round(duration / dt) + 1) * dt
         env = _smooth(t, b, ramp) * (1.0 - _smooth(t, b + ramp + play, ramp))
         phase = 2.0 * math.pi * s.frequency_hz * (t - b - ramp)
         inside = (t >= b + ramp) & (t <= b + ramp + play)
@@ -238,7 +238,7 @@ def force_profile(plan: Plan, trial: Trial, dt: float) -> np.ndarray:
     ramp = 0.5
     first = b + ramp
     duration = first + g.repetitions * period + ramp + b
-    t = np.arange(int(round(duration / dt)) + 1) * dt
+    t = np.arange(round(duration / dt) + 1) * dt
     f = np.zeros_like(t)
     for k in range(g.repetitions):
         u = (t - first - k * period) / g.stance_s

@@ -87,7 +87,7 @@ class PlateDescription(_Model):
     _sha256: str = PrivateAttr(default="")
 
     @model_validator(mode="after")
-    def _consistent(self) -> "PlateDescription":
+    def _consistent(self) -> PlateDescription:
         n = len(self.channels)
         if self.kind == PlateKind.SIX_CHANNEL and n != 6:
             raise ValueError(f"channels: a six_channel plate has 6 channels, got {n}")

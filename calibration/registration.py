@@ -16,7 +16,7 @@ frame); a real camera gives frames through ``rt.drivers.camera_cv`` and the same
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -93,11 +93,12 @@ class MarkerRig:
     along F's z; the robot's board beside it, fixed to the robot frame.
     """
 
-    camera: PinholeCamera = PinholeCamera(width=1600, height=1600, fx=1300.0, fy=1300.0)
-    plate_board: MarkerBoard = MarkerBoard(rows=3, cols=4, marker_length_m=0.06,
-                                           gap_m=0.02, margin_m=0.02, first_id=0)
-    robot_board: MarkerBoard = MarkerBoard(rows=3, cols=4, marker_length_m=0.06,
-                                           gap_m=0.02, margin_m=0.02, first_id=20)
+    camera: PinholeCamera = field(default_factory=lambda: PinholeCamera(
+        width=1600, height=1600, fx=1300.0, fy=1300.0))
+    plate_board: MarkerBoard = field(default_factory=lambda: MarkerBoard(
+        rows=3, cols=4, marker_length_m=0.06, gap_m=0.02, margin_m=0.02, first_id=0))
+    robot_board: MarkerBoard = field(default_factory=lambda: MarkerBoard(
+        rows=3, cols=4, marker_length_m=0.06, gap_m=0.02, margin_m=0.02, first_id=20))
     distance_m: float = 1.2
     robot_board_offset_m: tuple[float, float] = (0.0, 0.46)
     noise_grey: float = 2.0

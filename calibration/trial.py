@@ -66,7 +66,7 @@ class TrialData:
         return digest
 
     @classmethod
-    def load(cls, path: Path) -> "TrialData":
+    def load(cls, path: Path) -> TrialData:
         try:
             with np.load(path, allow_pickle=False) as z:
                 kw: dict[str, Any] = {}

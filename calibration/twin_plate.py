@@ -47,12 +47,12 @@ class TruthSettings:
     clock_drift_ppm: float = 80.0
 
     @classmethod
-    def ideal(cls, **overrides: float) -> "TruthSettings":
+    def ideal(cls, **overrides: float) -> TruthSettings:
         """A plate that is exactly linear (for exact-recovery tests): no bending, noise,
         nonlinearity, hysteresis, drift, quantization or clock error."""
-        base = dict(origin_offset_mm=(1.5, -2.0, 3.0), bending_corner_mm=0.0,
-                    nonlinearity=0.0, hysteresis=0.0, noise_v=0.0, zero_offset_v=0.0,
-                    drift_v_per_s=0.0, quantize=False, clock_offset_s=0.0, clock_drift_ppm=0.0)
+        base = {"origin_offset_mm": (1.5, -2.0, 3.0), "bending_corner_mm": 0.0,
+                    "nonlinearity": 0.0, "hysteresis": 0.0, "noise_v": 0.0, "zero_offset_v": 0.0,
+                    "drift_v_per_s": 0.0, "quantize": False, "clock_offset_s": 0.0, "clock_drift_ppm": 0.0}
         base.update(overrides)
         return cls(**base)  # type: ignore[arg-type]
 

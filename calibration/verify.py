@@ -10,8 +10,8 @@ description must be the one the record was fitted for (same sha256).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 

@@ -23,11 +23,11 @@ LineOf = Callable[[Sequence[str | int]], int | None]
 
 
 class _NoDuplicateKeys(yaml.SafeLoader):
-    def construct_mapping(self, node: yaml.MappingNode,  # type: ignore[override]
+    def construct_mapping(self, node: yaml.MappingNode,
                           deep: bool = False) -> dict:
         first_line: dict[object, int] = {}
         for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)  # type: ignore[no-untyped-call]
+            key = self.construct_object(key_node, deep=True)
             if isinstance(key, (list, dict)):
                 raise yaml.constructor.ConstructorError(None, None, f"unhashable key {key!r}",
                                                         key_node.start_mark)
@@ -36,7 +36,7 @@ class _NoDuplicateKeys(yaml.SafeLoader):
                     None, None, f"duplicate key {key!r} (first at line {first_line[key]})",
                     key_node.start_mark)
             first_line[key] = key_node.start_mark.line + 1
-        return super().construct_mapping(node, deep=deep)  # type: ignore[no-untyped-call]
+        return super().construct_mapping(node, deep=deep)
 
 
 def _line_finder(root: yaml.Node) -> LineOf:
@@ -82,7 +82,7 @@ def parse_yaml(text: str, source: str) -> tuple[Any, LineOf]:
     except yaml.YAMLError as exc:
         raise ConfigurationError(f"{source}: YAML error: {exc}") from None
     finally:
-        loader.dispose()  # type: ignore[no-untyped-call]
+        loader.dispose()
     if root is None or data is None:
         raise ConfigurationError(f"{source}: the file is empty")
     return data, _line_finder(root)

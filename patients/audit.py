@@ -16,8 +16,9 @@ from __future__ import annotations
 import datetime as dt
 import hashlib
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, Iterator
+from typing import Any
 
 import sqlalchemy as sa
 from sqlalchemy.orm import Session
@@ -55,7 +56,7 @@ def append(db: Session, at: dt.datetime, username: str | None, action: str, enti
         raise AuditChainBroken("the audit log's head record is missing: run `talus audit "
                                "verify` and restore the database from a backup")
     fields: dict[str, Any] = {
-        "seq": head.seq + 1, "at": at.astimezone(dt.timezone.utc).isoformat(),
+        "seq": head.seq + 1, "at": at.astimezone(dt.UTC).isoformat(),
         "username": username, "action": action, "entity": entity, "entity_key": entity_key,
         "before": None if before is None else canonical_json(before),
         "after": None if after is None else canonical_json(after)}

@@ -99,7 +99,7 @@ def _restore(args: argparse.Namespace) -> int:
     return 0
 
 
-def _open(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+def _open(args: argparse.Namespace):
     from patients.cli_common import open_record
     return open_record(args)
 

@@ -46,8 +46,9 @@ def _password(record: ClinicalRecord) -> tuple[str, Path | None]:
 
 def ensure_demo(record: ClinicalRecord) -> dict[str, Any]:
     """Create what is missing of the demo clinic; returns who/what and where the password is."""
-    from patients.models import User
     import sqlalchemy as sa
+
+    from patients.models import User
     with record._tx() as db:
         users = set(db.execute(sa.select(User.username)).scalars())
     if users - {ADMIN, CLINICIAN}:

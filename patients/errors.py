@@ -40,6 +40,15 @@ class DatabaseUnavailable(RecordError):
     """The database cannot be opened, or its schema is not at the version this talus needs."""
 
 
-__all__ = ["RecordError", "NotFound", "AlreadyExists", "AuthenticationFailed", "AccountLocked",
-           "PermissionDenied", "ConcurrentUpdate", "AuditChainBroken", "DatabaseUnavailable",
-           "InputError"]
+__all__ = [
+    "AccountLocked",
+    "AlreadyExists",
+    "AuditChainBroken",
+    "AuthenticationFailed",
+    "ConcurrentUpdate",
+    "DatabaseUnavailable",
+    "InputError",
+    "NotFound",
+    "PermissionDenied",
+    "RecordError",
+]

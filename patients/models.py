@@ -29,13 +29,13 @@ class UTCDateTime(sa.types.TypeDecorator[dt.datetime]):
             return None
         if value.tzinfo is None:
             raise ValueError("naive datetime given to the clinical record; use UTC-aware times")
-        return value.astimezone(dt.timezone.utc)
+        return value.astimezone(dt.UTC)
 
     def process_result_value(self, value: dt.datetime | None, dialect: Any) -> dt.datetime | None:
         if value is None:
             return None
-        return value.replace(tzinfo=dt.timezone.utc) if value.tzinfo is None \
-            else value.astimezone(dt.timezone.utc)
+        return value.replace(tzinfo=dt.UTC) if value.tzinfo is None \
+            else value.astimezone(dt.UTC)
 
 
 class Side(str, enum.Enum):
@@ -74,7 +74,8 @@ class User(Base):
     created_by: Mapped[str | None] = mapped_column(sa.String(64))
     version: Mapped[int] = mapped_column(default=1)
 
-    __mapper_args__ = {"version_id_col": version}
+    # A declarative directive SQLAlchemy reads once, when it maps the class
+    __mapper_args__ = {"version_id_col": version}  # noqa: RUF012
 
 
 class Patient(Base):
@@ -98,7 +99,8 @@ class Patient(Base):
     limits: Mapped[list[PatientLimitsRow]] = relationship(
         back_populates="patient", order_by="PatientLimitsRow.id")
 
-    __mapper_args__ = {"version_id_col": version}
+    # A declarative directive SQLAlchemy reads once, when it maps the class
+    __mapper_args__ = {"version_id_col": version}  # noqa: RUF012
 
 
 class PatientIdentity(Base):

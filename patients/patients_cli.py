@@ -7,8 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from patients.cli_common import add_common, command, emit, login, open_record, table, \
-    write_new_file
+from patients.cli_common import add_common, command, emit, login, open_record, table, write_new_file
 from patients.errors import InputError
 
 _CLINICAL_ARGS = (("--mass-kg", "body_mass_kg", float, "body mass (kg): doses gait loading"),

@@ -51,8 +51,8 @@ PERMISSIONS: dict[Action, tuple[frozenset[Role], str]] = {
     Action.PATIENT_READ: (frozenset({A, C, E, V}),
                           "pseudonymous record: code, clinical data, limits, plans"),
     Action.PATIENT_UPDATE: (frozenset({C}), "change clinical data (mass, height, side, ...)"),
-    Action.IDENTITY_READ: (frozenset({A, C}), "read name, birth date, national id, contact "
-                                              "(every read is audited)"),
+    Action.IDENTITY_READ: (frozenset({A, C}), ("read name, birth date, national id, contact "
+                                              "(every read is audited)")),
     Action.IDENTITY_WRITE: (frozenset({A, C}), "enter or correct identifying data"),
     Action.PATIENT_FORGET: (frozenset({A}), "erase identifying data (GDPR art. 17)"),
     Action.LIMITS_SET: (frozenset({C}), "prescribe ROM, force and speed limits"),

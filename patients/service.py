@@ -23,7 +23,7 @@ import uuid
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Self
 
 import sqlalchemy as sa
 from argon2 import PasswordHasher
@@ -32,12 +32,29 @@ from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 from sqlalchemy.orm.exc import StaleDataError
 
-from patients import audit, db as dbmod, passwords, transfer
+from patients import audit, passwords, transfer
+from patients import db as dbmod
 from patients.anatomy import ClinicalRom, to_clinical
-from patients.errors import (AccountLocked, AlreadyExists, AuthenticationFailed,
-                             ConcurrentUpdate, InputError, NotFound, RecordError)
-from patients.models import (Calibration, Outcome, Patient, PatientIdentity, PatientLimitsRow,
-                             Plan, Side, TherapySession, User)
+from patients.errors import (
+    AccountLocked,
+    AlreadyExists,
+    AuthenticationFailed,
+    ConcurrentUpdate,
+    InputError,
+    NotFound,
+    RecordError,
+)
+from patients.models import (
+    Calibration,
+    Outcome,
+    Patient,
+    PatientIdentity,
+    PatientLimitsRow,
+    Plan,
+    Side,
+    TherapySession,
+    User,
+)
 from patients.roles import Action, Role, require
 from rt.safety.limits import PatientLimits
 
@@ -47,6 +64,8 @@ Clock = Callable[[], dt.datetime]
 LIMIT_FIELDS = tuple(PatientLimits.model_fields)
 CLINICAL_FIELDS = ("body_mass_kg", "height_m", "affected_side", "diagnosis", "notes")
 IDENTITY_FIELDS = ("full_name", "birth_date", "national_id", "contact")
+#: The lockout used unless a deployment sets its own (the policy is immutable).
+DEFAULT_LOCKOUT = passwords.LockoutPolicy()
 _CODE = re.compile(r"^[A-Z0-9][A-Z0-9-]{2,31}$")
 _USERNAME = re.compile(r"^[a-z][a-z0-9._-]{1,63}$")
 #: Crockford base32 without I, L, O, U: codes read aloud or copied by hand without mistakes.
@@ -54,7 +73,7 @@ _CODE_ALPHABET = "0123456789ABCDEFGHJKMNPQRSTVWXYZ"
 
 
 def utc_now() -> dt.datetime:
-    return dt.datetime.now(dt.timezone.utc)
+    return dt.datetime.now(dt.UTC)
 
 
 def sha256_text(text: str) -> str:
@@ -85,7 +104,7 @@ class ClinicalRecord:
 
     def __init__(self, engine: Engine, clock: Clock = utc_now,
                  hasher: PasswordHasher | None = None,
-                 lockout: passwords.LockoutPolicy = passwords.LockoutPolicy()) -> None:
+                 lockout: passwords.LockoutPolicy = DEFAULT_LOCKOUT) -> None:
         self.engine = engine
         self.clock = clock
         self.hasher = hasher or passwords.default_hasher()
@@ -118,7 +137,7 @@ class ClinicalRecord:
     def close(self) -> None:
         self.engine.dispose()
 
-    def __enter__(self) -> ClinicalRecord:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -897,7 +916,7 @@ def _calibration_fields(record: dict[str, Any]) -> dict[str, Any]:
     if missing:
         raise InputError(f"calibration record lacks {missing}")
     try:
-        created = dt.datetime.fromisoformat(str(record["created_utc"]).replace("Z", "+00:00"))
+        created = dt.datetime.fromisoformat(str(record["created_utc"]))
     except ValueError:
         raise InputError(f"calibration created_utc {record['created_utc']!r} is not ISO 8601") \
             from None
@@ -926,5 +945,14 @@ def _calibration_dict(c: Calibration, full: bool) -> dict[str, Any]:
     return d
 
 
-__all__ = ["Actor", "ClinicalRecord", "ClinicalRom", "Identity", "LIMIT_FIELDS", "Outcome",
-           "Role", "Side", "utc_now"]
+__all__ = [
+    "LIMIT_FIELDS",
+    "Actor",
+    "ClinicalRecord",
+    "ClinicalRom",
+    "Identity",
+    "Outcome",
+    "Role",
+    "Side",
+    "utc_now",
+]

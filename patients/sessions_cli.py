@@ -29,10 +29,10 @@ def parse_time(text: str | None, flag: str) -> dt.datetime | None:
     if text is None:
         return None
     try:
-        t = dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+        t = dt.datetime.fromisoformat(text)
     except ValueError:
         raise InputError(f"{flag} {text!r}: use YYYY-MM-DD or an ISO 8601 time") from None
-    return t.replace(tzinfo=dt.timezone.utc) if t.tzinfo is None else t
+    return t.replace(tzinfo=dt.UTC) if t.tzinfo is None else t
 
 
 @command

@@ -3,8 +3,17 @@ from __future__ import annotations
 
 import argparse
 
-from patients.cli_common import (add_common, command, emit, login, need_user, new_password,
-                                 open_record, password, table)
+from patients.cli_common import (
+    add_common,
+    command,
+    emit,
+    login,
+    need_user,
+    new_password,
+    open_record,
+    password,
+    table,
+)
 from patients.roles import Role
 
 
@@ -41,6 +50,7 @@ def register(commands: argparse._SubParsersAction) -> None:
 @command
 def _init(args: argparse.Namespace) -> int:
     from os import environ
+
     from patients.cli_common import ENV_PASSWORD
     user = need_user(args)
     secret = environ.get(ENV_PASSWORD) or new_password(user, ENV_PASSWORD)

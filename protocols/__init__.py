@@ -9,10 +9,22 @@
 """
 from protocols.generators import Generator, make_generator
 from protocols.library import list_library, load_protocol
-from protocols.output import (GeneratorInput, GeneratorStatus, Mode, ReferenceOutput,
-                              ValidationReport)
-from protocols.schema import (ActiveAssist, AnkleRom, GaitReplay, IsometricHold,
-                              PositionPlayback, Protocol, SineFz)
+from protocols.output import (
+                              GeneratorInput,
+                              GeneratorStatus,
+                              Mode,
+                              ReferenceOutput,
+                              ValidationReport,
+)
+from protocols.schema import (
+                              ActiveAssist,
+                              AnkleRom,
+                              GaitReplay,
+                              IsometricHold,
+                              PositionPlayback,
+                              Protocol,
+                              SineFz,
+)
 
 __all__ = ["ActiveAssist", "AnkleRom", "GaitReplay", "Generator", "GeneratorInput",
            "GeneratorStatus", "IsometricHold", "Mode", "PositionPlayback", "Protocol",

@@ -12,9 +12,16 @@ import math
 
 import numpy as np
 
-from protocols.base import (DERIVATIVE_STEP_S, Generator, anatomical_to_platform, check_limits)
-from protocols.output import (FZ, FZ_DOT, GeneratorInput, GeneratorStatus, Mode, ReferenceOutput,
-                              ValidationReport)
+from protocols.base import DERIVATIVE_STEP_S, Generator, anatomical_to_platform, check_limits
+from protocols.output import (
+    FZ,
+    FZ_DOT,
+    GeneratorInput,
+    GeneratorStatus,
+    Mode,
+    ReferenceOutput,
+    ValidationReport,
+)
 from protocols.schema import ActiveAssist
 from rt.errors import KinematicsError
 from rt.model.kinematics import Kinematics
@@ -53,7 +60,7 @@ class ActiveAssistGenerator(Generator):
         super().__init__(protocol, dt, kinematics, source)
         p, rad = protocol, math.radians
         self.side = side
-        self._set_length(int(round(p.duration_s / dt)) + 1)
+        self._set_length(round(p.duration_s / dt) + 1)
         self._z = p.pose.z_m
         self._r0, self._p0 = rad(p.pose.roll_deg), rad(p.pose.pitch_deg)
         rom = p.rom_deg

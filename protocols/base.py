@@ -23,9 +23,24 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from protocols.output import (FORCE_BLOCK, FZ, FZ_DOT, N_FIELDS, POSE, POSE_DOT, POSITION_BLOCK,
-                              Q, QD, QDD, SHEAR, GeneratorInput, GeneratorStatus, Mode,
-                              ReferenceOutput, ValidationReport)
+from protocols.output import (
+    FORCE_BLOCK,
+    FZ,
+    FZ_DOT,
+    N_FIELDS,
+    POSE,
+    POSE_DOT,
+    POSITION_BLOCK,
+    QD,
+    QDD,
+    SHEAR,
+    GeneratorInput,
+    GeneratorStatus,
+    Mode,
+    Q,
+    ReferenceOutput,
+    ValidationReport,
+)
 from protocols.profiles import PITCH, PITCH_D, ROLL, ROLL_D, TARGET
 from protocols.schema import ProtocolModel
 from rt.errors import KinematicsError, ProtocolValidationError

@@ -30,8 +30,8 @@ def _sine_error(freq: float, model) -> float:
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "sine.yaml"
-        path.write_text(SINE.format(f=freq, cycles=max(4, int(round(10 * freq)))))
-        protocol, gen, report, pl, tap = _build(SessionSetup(path), model, "fast")
+        path.write_text(SINE.format(f=freq, cycles=max(4, round(10 * freq))))
+        _protocol, _gen, report, pl, tap = _build(SessionSetup(path), model, "fast")
         _run(pl, tap, report.duration_s, None)
     rows = tap.ring[:tap.written]
     play = rows[:, COL_PHASE] == 1

@@ -200,16 +200,13 @@ def write_grf_csv(path: str | Path, grf: GroundReactionForce, comments: tuple[st
                   ) -> None:
     """Write a record in the CSV format ``read_grf_csv`` reads (µs and 0.1 mN resolution)."""
     with open(path, "w", encoding="utf-8", newline="") as f:
-        for c in comments:
-            f.write(f"# {c}\n")
+        f.writelines(f"# {c}\n" for c in comments)
         if grf.fx is not None and grf.fy is not None:
             f.write("t,fz,fx,fy\n")
-            for t, fz, fx, fy in zip(grf.t, grf.fz, grf.fx, grf.fy):
-                f.write(f"{t:.6f},{fz:.4f},{fx:.4f},{fy:.4f}\n")
+            f.writelines(f"{t:.6f},{fz:.4f},{fx:.4f},{fy:.4f}\n" for t, fz, fx, fy in zip(grf.t, grf.fz, grf.fx, grf.fy))
         else:
             f.write("t,fz\n")
-            for t, fz in zip(grf.t, grf.fz):
-                f.write(f"{t:.6f},{fz:.4f}\n")
+            f.writelines(f"{t:.6f},{fz:.4f}\n" for t, fz in zip(grf.t, grf.fz))
 
 
 # ------------------------------------------------------------------------------ C3D
@@ -276,7 +273,7 @@ def quiet_baseline(fz: np.ndarray, rate_hz: float) -> tuple[np.ndarray, float]:
     loaded one and the record has no unloaded stretch. Returns a boolean mask of the quiet
     samples (all False when there is none) and their σ (NaN then).
     """
-    w = max(3, int(round(QUIET_WINDOW_S * rate_hz)))
+    w = max(3, round(QUIET_WINDOW_S * rate_hz))
     n_win = fz.size // w
     mask = np.zeros(fz.size, dtype=bool)
     if n_win == 0:
@@ -318,14 +315,15 @@ def read_grf_c3d(path: str | Path, plate_index: int) -> GroundReactionForce:
         raise _refuse(src, f"not a C3D file: byte 2 is 0x{head[1]:02X} where a C3D header "
                       f"has 0x{_C3D_MAGIC:02X}")
     try:
-        import ezc3d  # noqa: PLC0415 - optional dependency, imported only when a C3D is read
+        import ezc3d
     except ImportError as exc:
         raise BackendUnavailableError(f"{src}: reading C3D files needs ezc3d "
                                       f"(pip install 'ezc3d>=1.5,<2'): {exc}") from None
     try:
         # Parameters first: the plate's type decides whether ezc3d can extract its forces.
         params = ezc3d.c3d(src, extract_forceplat_data=False)["parameters"]
-    except Exception as exc:  # ezc3d raises OSError/RuntimeError/IndexError on bad files
+    # ezc3d raises OSError/RuntimeError/IndexError on bad files.
+    except Exception as exc:  # noqa: BLE001
         raise _refuse(src, f"ezc3d cannot read it as C3D: {exc}") from None
     if "FORCE_PLATFORM" not in params or "USED" not in params["FORCE_PLATFORM"]:
         raise _refuse(src, "the file has no FORCE_PLATFORM parameters: no force plate to read")
@@ -352,7 +350,8 @@ def read_grf_c3d(path: str | Path, plate_index: int) -> GroundReactionForce:
     try:
         c3d = ezc3d.c3d(src, extract_forceplat_data=True)
         force = np.asarray(c3d["data"]["platform"][plate_index]["force"], dtype=float)
-    except Exception as exc:  # ezc3d's extraction fails on the types it does not model
+    # ezc3d's extraction fails on the types it does not model.
+    except Exception as exc:  # noqa: BLE001
         why = f" (the file also has plates of type {others}, which ezc3d cannot model)" \
             if others else ""
         raise _refuse(src, f"ezc3d cannot extract force platform {plate_index}{why}: "
@@ -524,7 +523,7 @@ def walking_grf(body_weight_kg: float = 70.0, stance_s: float = WALKING_STANCE_S
                 rate_hz: float = 500.0, pad_s: float = 0.1) -> GroundReactionForce:
     """One published-shape stance (N) for a subject of ``body_weight_kg``, sampled at
     ``rate_hz``, with ``pad_s`` of unloaded samples before heel strike and after toe off."""
-    n = int(round((stance_s + 2.0 * pad_s) * rate_hz)) + 1
+    n = round((stance_s + 2.0 * pad_s) * rate_hz) + 1
     t = np.arange(n) / rate_hz
     fz, fx, fy = walking_grf_bw((t - pad_s) / stance_s)
     w = body_weight_kg * STANDARD_GRAVITY_M_S2

@@ -48,16 +48,39 @@ from scipy.interpolate import PchipInterpolator
 
 from protocols import gait
 from protocols.active_assist import ActiveAssistGenerator
-from protocols.base import (BLOCK_POSITION, FOOT_MOUNTING, MAX_PRECOMPUTED_S, ForceGenerator,
-                            Generator, PositionGenerator, TableGenerator,
-                            anatomical_to_platform)
-from protocols.output import FZ, FZ_DOT, POSE, POSE_DOT, POSITION_BLOCK, Q, QD, QDD, Mode
-from protocols.output import ValidationReport
+from protocols.base import (
+    BLOCK_POSITION,
+    FOOT_MOUNTING,
+    MAX_PRECOMPUTED_S,
+    ForceGenerator,
+    Generator,
+    PositionGenerator,
+    TableGenerator,
+    anatomical_to_platform,
+)
+from protocols.output import (
+    FZ,
+    FZ_DOT,
+    POSE,
+    POSE_DOT,
+    POSITION_BLOCK,
+    QD,
+    QDD,
+    Mode,
+    Q,
+    ValidationReport,
+)
 from protocols.profiles import AnglePath, cosine_ramp
-from protocols.schema import (ActiveAssist, AnkleRom, GaitReplay, IsometricHold,
-                              PositionPlayback, ProtocolModel, SineFz)
-from rt.errors import (ConfigurationError, ConvergenceError, ProtocolValidationError,
-                       WorkspaceError)
+from protocols.schema import (
+    ActiveAssist,
+    AnkleRom,
+    GaitReplay,
+    IsometricHold,
+    PositionPlayback,
+    ProtocolModel,
+    SineFz,
+)
+from rt.errors import ConfigurationError, ConvergenceError, ProtocolValidationError, WorkspaceError
 from rt.model.kinematics import Kinematics
 from rt.references.playback import TrajectoryPlayback
 
@@ -77,7 +100,7 @@ class SineFzGenerator(ForceGenerator):
         super().__init__(protocol, dt, kinematics, source)
         p = protocol
         self._t_out = p.ramp_in_s + p.cycles / p.frequency_hz
-        n_periods = int(math.ceil((self._t_out + p.ramp_out_s) / dt - 1e-9))
+        n_periods = math.ceil((self._t_out + p.ramp_out_s) / dt - 1e-9)
         self._ramp_out = n_periods * dt - self._t_out  # ≥ ramp_out_s, < ramp_out_s + dt
         self._set_length(n_periods + 1)
 
@@ -144,8 +167,8 @@ class GaitReplayGenerator(ForceGenerator):
             raise self._refuse("ramp_s", f"ramps of {p.ramp_s:g} s at both ends do not fit in "
                                f"the {played:.3f} s stance (time_scale {p.time_scale:g})")
         # Samples of one stance (the last at or before its end) and of one rest.
-        self._n_stance = int(math.floor(played / dt + 1e-9)) + 1
-        self._n_rest = int(round(p.rest_between_s / dt))
+        self._n_stance = math.floor(played / dt + 1e-9) + 1
+        self._n_rest = round(p.rest_between_s / dt)
         self._period = self._n_stance - 1 + self._n_rest
         self._set_length((p.repetitions - 1) * self._period + self._n_stance)
 

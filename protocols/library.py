@@ -25,7 +25,7 @@ LIBRARY_DIR = Path(__file__).resolve().parent / "library"
 MAX_FILE_BYTES = 1_000_000
 
 
-def _locator(root: yaml.Node | None):  # type: ignore[no-untyped-def]
+def _locator(root: yaml.Node | None):
     """A function mapping a field path to the 1-based line of its key (or deepest parent)."""
 
     def locate(path: Sequence[str | int]) -> int | None:

@@ -25,7 +25,7 @@ PLAYBACK_Z_M = 0.63
 def playback_demo_q(kinematics: Kinematics, rate_hz: float = 100.0, duration_s: float = 12.0
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Times (s) and slider positions (m, (n, 3)) of the demo playback trajectory."""
-    t = np.arange(int(round(duration_s * rate_hz)) + 1) / rate_hz
+    t = np.arange(round(duration_s * rate_hz) + 1) / rate_hz
     window = np.sin(math.pi * t / duration_s) ** 2
     z = PLAYBACK_Z_M + 0.0075 * window * np.sin(2.0 * math.pi * t / 6.0)
     roll = math.radians(6.0) * window * np.sin(2.0 * math.pi * t / 6.0)
@@ -45,15 +45,14 @@ def regenerate(library_dir: Path = LIBRARY_DIR, kinematics: Kinematics | None = 
         "fz vertical (loading positive), fx anterior-posterior, fy medial-lateral.",
     ))
     if kinematics is None:
-        from rt.model import RobotModel  # noqa: PLC0415 - only when regenerating
+        from rt.model import RobotModel
         kinematics = RobotModel.load().kin
     t, q = playback_demo_q(kinematics)
     with open(library_dir / PLAYBACK_CSV, "w", encoding="utf-8", newline="") as f:
         f.write("# Demo slider trajectory for the nominal twin (protocols.library_data):\n")
         f.write("# heave and 6 deg tilts at z = 0.63 m, 100 Hz, starting and ending at rest.\n")
         f.write("t,q0,q1,q2\n")
-        for tk, (a, b, c) in zip(t, q):
-            f.write(f"{tk:.2f},{a:.7f},{b:.7f},{c:.7f}\n")
+        f.writelines(f"{tk:.2f},{a:.7f},{b:.7f},{c:.7f}\n" for tk, (a, b, c) in zip(t, q))
 
 
 if __name__ == "__main__":

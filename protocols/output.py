@@ -10,18 +10,47 @@ import math
 from dataclasses import dataclass, field
 
 from rt.errors import ProtocolValidationError
-from rt.references.program import (FORCE_BLOCK, FZ, FZ_DOT, N_FIELDS, POSE, POSE_DOT,
-                                   POSITION_BLOCK, Q, QD, QDD, SHEAR, Mode, ProgramInput,
-                                   ProgramStatus, ReferenceOutput)
+from rt.references.program import (
+    FORCE_BLOCK,
+    FZ,
+    FZ_DOT,
+    N_FIELDS,
+    POSE,
+    POSE_DOT,
+    POSITION_BLOCK,
+    QD,
+    QDD,
+    SHEAR,
+    Mode,
+    ProgramInput,
+    ProgramStatus,
+    Q,
+    ReferenceOutput,
+)
 from rt.safety.limits import PatientLimits, RobotLimits
 
 #: The generators' names for the program interface's input and status.
 GeneratorInput = ProgramInput
 GeneratorStatus = ProgramStatus
 
-__all__ = ["FORCE_BLOCK", "FZ", "FZ_DOT", "N_FIELDS", "POSE", "POSE_DOT", "POSITION_BLOCK", "Q",
-           "QD", "QDD", "SHEAR", "GeneratorInput", "GeneratorStatus", "Mode", "ReferenceOutput",
-           "ValidationReport"]
+__all__ = [
+    "FORCE_BLOCK",
+    "FZ",
+    "FZ_DOT",
+    "N_FIELDS",
+    "POSE",
+    "POSE_DOT",
+    "POSITION_BLOCK",
+    "QD",
+    "QDD",
+    "SHEAR",
+    "GeneratorInput",
+    "GeneratorStatus",
+    "Mode",
+    "Q",
+    "ReferenceOutput",
+    "ValidationReport",
+]
 
 
 @dataclass
@@ -60,8 +89,8 @@ class ValidationReport:
     def summary(self) -> str:
         """A few human lines (angles in degrees for the clinician)."""
         deg = math.degrees
-        lines = [f"{self.name} ({self.kind}, {self.mode.name.lower()} mode): "
-                 f"{self.duration_s:.2f} s, {self.n_samples} samples at {1.0 / self.dt:.0f} Hz"]
+        lines = [(f"{self.name} ({self.kind}, {self.mode.name.lower()} mode): "
+                 f"{self.duration_s:.2f} s, {self.n_samples} samples at {1.0 / self.dt:.0f} Hz")]
         if not math.isnan(self.peak_fz_n):
             lines.append(f"  force {self.min_fz_n:.1f} .. {self.peak_fz_n:.1f} N, "
                          f"rate ≤ {self.peak_fz_rate_n_s:.1f} N/s")

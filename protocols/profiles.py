@@ -27,7 +27,7 @@ N_COLS = 7
 
 def _periods(duration: float, dt: float) -> int:
     """Whole periods covering ``duration`` (s); 1e-9 relative slack absorbs round-off."""
-    return max(1, int(math.ceil(duration / dt * (1.0 - 1e-12) - 1e-9)))
+    return max(1, math.ceil(duration / dt * (1.0 - 1e-12) - 1e-9))
 
 
 def rest_to_rest(distance: float, v_max: float, a_max: float, j_max: float, profile: str,
@@ -71,7 +71,7 @@ def rest_to_rest(distance: float, v_max: float, a_max: float, j_max: float, prof
     if result not in (Result.Working, Result.Finished):
         raise ProtocolValidationError(f"ruckig could not plan a {distance:g} move "
                                       f"(v {v_max:g}, a {a_max:g}, j {j_max:g}): {result}")
-    n = int(round(traj.duration / dt))
+    n = round(traj.duration / dt)
     s, sd, sdd = np.empty(n + 1), np.empty(n + 1), np.empty(n + 1)
     for k in range(n + 1):
         p, v, a = traj.at_time(min(k * dt, traj.duration))
@@ -106,7 +106,7 @@ class AnglePath:
 
     def hold(self, duration: float, target_n: float = math.nan) -> None:
         """Stay still ``duration`` s (rounded to whole periods); ``target_n`` shown meanwhile."""
-        n = int(round(duration / self.dt))
+        n = round(duration / self.dt)
         if n <= 0:
             return
         chunk = np.zeros((n, N_COLS))

@@ -24,7 +24,13 @@ from typing import Any
 from protocols.generators import make_generator
 from protocols.library import LIBRARY_DIR, load_protocol
 from protocols.schema import GaitReplay, PositionPlayback, ProtocolModel, validate_protocol_data
-from protocols.session import SessionFigures, SessionSetup, protocol_limits_of, preflight, start_pose
+from protocols.session import (
+    SessionFigures,
+    SessionSetup,
+    preflight,
+    protocol_limits_of,
+    start_pose,
+)
 from rt.errors import ProtocolValidationError
 from rt.model import RobotModel
 from rt.references.program import Program

@@ -36,8 +36,16 @@ from collections.abc import Callable, Sequence
 from pathlib import PurePath
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import (BaseModel, ConfigDict, Field, PrivateAttr, TypeAdapter, ValidationError,
-                      field_validator, model_validator)
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    TypeAdapter,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from rt.errors import ProtocolValidationError
 from rt.safety.limits import ProtocolLimits
@@ -112,7 +120,7 @@ class _Base(_Model):
         return self._source
 
     @model_validator(mode="after")
-    def _limits_ordered(self) -> "_Base":
+    def _limits_ordered(self) -> _Base:
         lim = self.limits
         if lim is not None:
             for axis in ("roll", "pitch"):
@@ -149,7 +157,7 @@ class SineFz(_Base):
     ramp_out_s: Annotated[float, Field(ge=0.1, le=60.0, allow_inf_nan=False)] = 2.0
 
     @model_validator(mode="after")
-    def _pushes(self) -> "SineFz":
+    def _pushes(self) -> SineFz:
         if self.amplitude_n > self.mean_n:
             raise FieldProblem("amplitude_n", f"{self.amplitude_n} N exceeds mean_n "
                                f"{self.mean_n} N: the reference would go below 0 N, pulling "
@@ -173,7 +181,7 @@ class StanceExplicit(_Model):
     end_s: Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
 
     @model_validator(mode="after")
-    def _ordered(self) -> "StanceExplicit":
+    def _ordered(self) -> StanceExplicit:
         if not self.end_s > self.start_s:
             raise FieldProblem("end_s", f"must be after start_s (got {self.start_s} s .. "
                                f"{self.end_s} s)")
@@ -198,7 +206,7 @@ class GaitReplay(_Base):
     pose: Pose
     source: Annotated[str, Field(min_length=1)]
     plate_index: Annotated[int, Field(ge=0, le=31)] | None = None
-    stance: Annotated[Union[StanceAuto, StanceExplicit], Field(discriminator="select")] = \
+    stance: Annotated[StanceAuto | StanceExplicit, Field(discriminator="select")] = \
         StanceAuto(select="auto")
     source_body_weight_kg: Annotated[float, Field(gt=0.0, le=300.0, allow_inf_nan=False)] | \
         None = None
@@ -222,7 +230,7 @@ class GaitReplay(_Base):
         return PurePath(self.source).suffix.lower() == ".c3d"
 
     @model_validator(mode="after")
-    def _plate_fits_source(self) -> "GaitReplay":
+    def _plate_fits_source(self) -> GaitReplay:
         if self.is_c3d and self.plate_index is None:
             raise FieldProblem("plate_index", "is required for a C3D source (0-based index of "
                                "the force platform, in FORCE_PLATFORM order)")
@@ -251,7 +259,7 @@ class AnkleRom(_Base, _Smooth):
     hold_s: Annotated[float, Field(ge=0.0, le=60.0, allow_inf_nan=False)] = 1.0
 
     @model_validator(mode="after")
-    def _amplitudes_set(self) -> "AnkleRom":
+    def _amplitudes_set(self) -> AnkleRom:
         _require_directions(self.amplitude_deg, "amplitude_deg", self.sequence)
         return self
 
@@ -322,7 +330,7 @@ class ActiveAssist(_Base):
     max_acceleration_deg_s2: AccelDeg = 100.0
 
     @model_validator(mode="after")
-    def _consistent(self) -> "ActiveAssist":
+    def _consistent(self) -> ActiveAssist:
         if len(set(self.axes)) != len(self.axes):
             raise FieldProblem("axes", f"lists an axis twice ({self.axes})")
         _require_directions(self.rom_deg, "rom_deg", self.axes)
@@ -365,16 +373,15 @@ class PositionPlayback(_Base):
         return v
 
 
-Protocol = Annotated[Union[SineFz, GaitReplay, AnkleRom, IsometricHold, ActiveAssist,
-                           PositionPlayback], Field(discriminator="kind")]
-ProtocolModel = Union[SineFz, GaitReplay, AnkleRom, IsometricHold, ActiveAssist, PositionPlayback]
+Protocol = Annotated[SineFz | GaitReplay | AnkleRom | IsometricHold | ActiveAssist | PositionPlayback, Field(discriminator="kind")]
+ProtocolModel = SineFz | GaitReplay | AnkleRom | IsometricHold | ActiveAssist | PositionPlayback
 KINDS: dict[str, type[_Base]] = {
     "sine_fz": SineFz, "gait_replay": GaitReplay, "ankle_rom": AnkleRom,
     "isometric_hold": IsometricHold, "active_assist": ActiveAssist,
     "position_playback": PositionPlayback,
 }
 #: Validates any kind; ``PROTOCOL_ADAPTER.json_schema()`` describes the files (e.g. for an editor).
-PROTOCOL_ADAPTER: TypeAdapter[Any] = TypeAdapter(Protocol)  # type: ignore[arg-type]
+PROTOCOL_ADAPTER: TypeAdapter[Any] = TypeAdapter(Protocol)
 
 
 # ------------------------------------------------------------------------------ validation
@@ -437,8 +444,7 @@ def _reason(err: Any, cls: type[_Base], loc: Sequence[str | int]) -> str:
     if kind == "missing":
         return "required field is missing"
     msg = str(err["msg"])
-    if msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
+    msg = msg.removeprefix("Value error, ")
     if kind not in ("value_error",) and "input" in err and not isinstance(err["input"],
                                                                           (dict, list)):
         msg += f" (got {err['input']!r})"

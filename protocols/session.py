@@ -16,9 +16,10 @@ from __future__ import annotations
 import math
 import sys
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -32,8 +33,17 @@ from rt.position_loop import PositionLoop, build_protocol_loop, sim_devices
 from rt.references.sequencer import Phase
 from rt.safety.events import Reaction, SafetyEvent
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits
-from rt.sessions import (COL_CTRL_MODE, COL_FREF, COL_FZ, COL_PHASE, COL_PROGRESS, COLUMNS,
-                         SESSION_SIGNALS, SESSION_SOURCES, record_rows)
+from rt.sessions import (
+    COL_CTRL_MODE,
+    COL_FREF,
+    COL_FZ,
+    COL_PHASE,
+    COL_PROGRESS,
+    COLUMNS,
+    SESSION_SIGNALS,
+    SESSION_SOURCES,
+    record_rows,
+)
 from rt.twin.environment import CompliantAnkle, parse_environment
 from rt.twin.twin import SimClock, Twin
 
@@ -268,9 +278,9 @@ class SessionFigures:
         """The force in contact below the preload (less the sensor's noise), if it happened."""
         f, t = self._min_contact
         if f < self.preload_n - PRELOAD_TOLERANCE_N:
-            return [f"the force falls to {f:.1f} N at t = {t:.3f} s, below the "
+            return [(f"the force falls to {f:.1f} N at t = {t:.3f} s, below the "
                     f"{self.preload_n:g} N preload (the platform would unload or pull on the "
-                    "foot)"]
+                    "foot)")]
         return []
 
     def result(self, events: list[SafetyEvent]) -> dict[str, Any]:
@@ -336,7 +346,7 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     time and value).
     """
     model = model or RobotModel.load()
-    protocol, gen, report, pl, tap = _build(setup, model, "fast")
+    protocol, _gen, report, pl, tap = _build(setup, model, "fast")
     problems = report.check_against(setup.patient_limits, setup.robot_limits)
     if problems:
         raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: "

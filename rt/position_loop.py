@@ -11,20 +11,29 @@ take the real encoder, DAC and sensor backends on the rig.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
-from rt.components.blocks import (ControllerBlock, EncoderReader, ModelState, RecorderTap,
-                                  VelocityEstimation)
+import numpy as np
+
+from rt.components.blocks import (
+    ControllerBlock,
+    EncoderReader,
+    ModelState,
+    RecorderTap,
+    VelocityEstimation,
+)
 from rt.components.safety_blocks import ForceReader, RedundantDrive, StopInputs, SupervisorBlock
 from rt.components.twin_step import TwinStep
-from rt.control.base import create
+from rt.control.base import Controller, create
 from rt.control.experiment import RefFn, benchmark_reference
+from rt.devices.interfaces import ActuatorOutputs, DigitalInputs, EncoderBank, ForceTorqueSensor
 from rt.engine import Component, Graph, GraphBuilder, Loop
+from rt.errors import ConfigurationError
 from rt.model import RobotModel
+from rt.model.description import RobotDescription
 from rt.references.program import Program, TrajectoryProgram
 from rt.references.sequencer import ProgramReference
-from rt.model.description import RobotDescription
 from rt.safety.events import EventLog
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
 from rt.safety.supervisor import Supervisor, supervisor_physics
@@ -44,7 +53,16 @@ class PositionLoop:
     reference: ProgramReference
     supervisor: Supervisor
     events: EventLog
-    devices: "Devices | None" = None
+    devices: Devices | None = None
+
+    @property
+    def controller(self) -> Controller:
+        """The position law in the ``controller`` slot (the one the RT process reports and
+        tunes), whichever block hosts it."""
+        law = getattr(self.graph.component("controller"), "controller", None)
+        if not isinstance(law, Controller):
+            raise ConfigurationError("the controller slot hosts no position control law")
+        return law
 
 
 @dataclass
@@ -54,11 +72,11 @@ class Devices:
     (the rig's current monitors); ``feed_watchdog`` is called at the end of every cycle;
     ``first`` is a block run before everything else (the in-process twin's physics)."""
 
-    encoders: object
-    cards: list
-    force: object
-    stops: object
-    monitor: Callable[[], Sequence[float]] | None = None
+    encoders: EncoderBank
+    cards: Sequence[ActuatorOutputs]
+    force: ForceTorqueSensor
+    stops: DigitalInputs
+    monitor: Callable[[], Sequence[float] | np.ndarray] | None = None
     feed_watchdog: Callable[[], None] | None = None
     first: Component | None = None
     twin: Twin | None = None
@@ -76,8 +94,13 @@ def sim_devices(twin: Twin, clock: SimClock) -> Devices:
 def shm_devices(shm_name: str) -> Devices:
     """The rig process (``talus twin rig --shm NAME``) over shared memory; the loop feeds its
     amplifier watchdog every cycle, so a dead or stalled loop drops the drives."""
-    from rt.twin.shm_backends import (ShmActuators, ShmDigitalInputs, ShmEncoders,
-                                      ShmForceTorque, ShmRig)
+    from rt.twin.shm_backends import (
+        ShmActuators,
+        ShmDigitalInputs,
+        ShmEncoders,
+        ShmForceTorque,
+        ShmRig,
+    )
 
     rig = ShmRig(shm_name)
     cards = [ShmActuators(rig, 0), ShmActuators(rig, 1)]
@@ -139,7 +162,7 @@ def build_position_loop(devices: Devices, controller: str = "paden_panja",
     model = model or RobotModel.load()
     program = TrajectoryProgram(trajectory or benchmark_reference(), duration_s,
                                 1.0 / rate_hz) if start_program else None
-    reference = ProgramReference("reference", tuple(model.description.limits.stroke_m),
+    reference = ProgramReference("reference", model.description.limits.stroke,
                                  1.0 / rate_hz, program)
     return _assemble(devices, model, reference,
                      lambda sup: ControllerBlock("controller", create(controller, model, gains)),
@@ -171,7 +194,7 @@ def build_protocol_loop(devices: Devices, program: Program | None = None,
     from rt.control.force import ExplicitForce
 
     model = model or RobotModel.load()
-    reference = ProgramReference("reference", tuple(model.description.limits.stroke_m),
+    reference = ProgramReference("reference", model.description.limits.stroke,
                                  1.0 / rate_hz, program)
     return _assemble(
         devices, model, reference,
@@ -183,7 +206,7 @@ def build_protocol_loop(devices: Devices, program: Program | None = None,
         extra_connections, loop_kwargs)
 
 
-def _assemble(devices: Devices, model: RobotModel, reference: Component,
+def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
               make_controller: Callable[[Supervisor], Component],
               own_connections: list[tuple[str, str]], rate_hz: float, mode: str,
               robot_limits: RobotLimits | None, patient_limits: PatientLimits | None,
@@ -194,7 +217,7 @@ def _assemble(devices: Devices, model: RobotModel, reference: Component,
     chosen reference and controller need beyond it."""
     d = model.description
     events = EventLog()
-    limits = effective(tuple(d.limits.stroke_m), robot_limits or RobotLimits(),
+    limits = effective(d.limits.stroke, robot_limits or RobotLimits(),
                        patient_limits or PatientLimits(), protocol_limits)
     supervisor = Supervisor(limits, 1.0 / rate_hz, events, **supervisor_physics(d))
     b = GraphBuilder()

@@ -92,23 +92,23 @@ class BoundedSafeLoader(yaml.SafeLoader):
         self._aliases = 0
 
     def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
-        if self.check_event(yaml.AliasEvent):  # type: ignore[no-untyped-call]
+        if self.check_event(yaml.AliasEvent):
             self._aliases += 1
             if self._aliases > MAX_ALIASES:
-                event = self.peek_event()  # type: ignore[no-untyped-call]
+                event = self.peek_event()
                 raise yaml.composer.ComposerError(
                     None, None, f"more than {MAX_ALIASES} aliases", event.start_mark)
         self._depth += 1
         try:
             if self._depth > MAX_DEPTH:
-                event = self.peek_event()  # type: ignore[no-untyped-call]
+                event = self.peek_event()
                 raise yaml.composer.ComposerError(
                     None, None, f"nested more than {MAX_DEPTH} levels deep", event.start_mark)
             return super().compose_node(parent, index)
         finally:
             self._depth -= 1
 
-    def construct_mapping(self, node: yaml.MappingNode,  # type: ignore[override]
+    def construct_mapping(self, node: yaml.MappingNode,
                           deep: bool = False) -> dict[Any, Any]:
         seen: dict[object, int] = {}
         for key_node, _ in node.value:
@@ -117,14 +117,14 @@ class BoundedSafeLoader(yaml.SafeLoader):
                 raise yaml.constructor.ConstructorError(
                     None, None, "a mapping key must be a plain value, not a list or mapping",
                     key_node.start_mark)
-            key = self.construct_object(key_node, deep=True)  # type: ignore[no-untyped-call]
+            key = self.construct_object(key_node, deep=True)
             if key in seen:
                 raise yaml.constructor.ConstructorError(
                     f"while reading the mapping from line {node.start_mark.line + 1}", None,
                     f"duplicate key {_brief(key)} (first at line {seen[key]})",
                     key_node.start_mark)
             seen[key] = key_node.start_mark.line + 1
-        return super().construct_mapping(node, deep=deep)  # type: ignore[no-untyped-call]
+        return super().construct_mapping(node, deep=deep)
 
 
 def _brief(value: object, limit: int = 40) -> str:
@@ -173,7 +173,7 @@ def parse_yaml(text: str, source: str, error: type[TalusError] = ConfigurationEr
     """
     loader = BoundedSafeLoader(text)
     try:
-        root = loader.get_single_node()  # type: ignore[no-untyped-call]
+        root = loader.get_single_node()
         if root is None:
             return None, None
         expanded = expanded_size(root)
@@ -182,7 +182,7 @@ def parse_yaml(text: str, source: str, error: type[TalusError] = ConfigurationEr
         if expanded > MAX_EXPANDED_NODES:
             raise error(f"{source}: the document expands to more than {MAX_EXPANDED_NODES} "
                         "values through its aliases; refused")
-        return loader.construct_document(root), root  # type: ignore[no-untyped-call]
+        return loader.construct_document(root), root
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f"{source}, line {mark.line + 1}, column {mark.column + 1}" if mark else source
@@ -192,7 +192,7 @@ def parse_yaml(text: str, source: str, error: type[TalusError] = ConfigurationEr
     except yaml.YAMLError:
         raise error(f"{source}: not valid YAML") from None
     finally:
-        loader.dispose()  # type: ignore[no-untyped-call]
+        loader.dispose()
 
 
 def load_yaml_file(path: str | Path, what: str, error: type[TalusError] = ConfigurationError,

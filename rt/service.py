@@ -24,13 +24,13 @@ import math
 import os
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from rt.components.blocks import SignalTap
@@ -38,18 +38,36 @@ from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
 from rt.devices.rig_config import RigConfig
 from rt.errors import ConfigurationError, InputError, TalusError, validation_summary
-from rt.ipc.messages import (DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT, PatientArgs, RecordArgs,
-                             describe_validation_error)
+from rt.ipc.messages import (
+    DEFAULT_ENDPOINT,
+    DEFAULT_PUB_ENDPOINT,
+    PatientArgs,
+    RecordArgs,
+    describe_validation_error,
+)
 from rt.ipc.security import ServerCurveConfig
-from rt.safe_yaml import load_yaml_file
 from rt.position_loop import PositionLoop, build_protocol_loop, shm_devices, sim_devices
 from rt.references.program import Program, TrajectoryProgram
 from rt.references.sequencer import Phase
+from rt.safe_yaml import load_yaml_file
 from rt.safety.events import Reaction, SafetyEvent, SupervisorMode
-from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
-from rt.sessions import (COL_FREF, COL_FZ, COL_PHASE, COL_PROGRESS, COLUMNS, SESSION_SIGNALS,
-                         SESSION_SOURCES, PatientInfo, PreparedSession, SessionContext,
-                         SessionFactory, record_rows, recording_name, unique_path)
+from rt.safety.limits import PatientLimits, RobotLimits, effective
+from rt.sessions import (
+    COL_FREF,
+    COL_FZ,
+    COL_PHASE,
+    COL_PROGRESS,
+    COLUMNS,
+    SESSION_SIGNALS,
+    SESSION_SOURCES,
+    PatientInfo,
+    PreparedSession,
+    SessionContext,
+    SessionFactory,
+    record_rows,
+    recording_name,
+    unique_path,
+)
 
 log = logging.getLogger(__name__)
 
@@ -92,7 +110,7 @@ class RtConfig(BaseModel):
     truth: str | None = None
     #: Backend sim: an ideal twin (truth = the model, no unmodelled effect), for comparisons.
     ideal_twin: bool = False
-    rate_hz: float = Field(1000.0, ge=100.0, le=2000.0)
+    rate_hz: float = Field(default=1000.0, ge=100.0, le=2000.0)
     #: "realtime" paces the loop by the clock; "fast" (the twin only) runs it back to back in
     #: simulated time, for demos and tests.
     loop_mode: Literal["realtime", "fast"] = "realtime"
@@ -106,9 +124,9 @@ class RtConfig(BaseModel):
     endpoint: str = DEFAULT_ENDPOINT
     pub_endpoint: str = DEFAULT_PUB_ENDPOINT
     #: The owner's silence after which the supervisor soft-stops a motion (s).
-    heartbeat_timeout_s: float = Field(0.25, gt=0.0, le=5.0)
+    heartbeat_timeout_s: float = Field(default=0.25, gt=0.0, le=5.0)
     #: Telemetry publication rate for live GUIs (Hz).
-    telemetry_hz: float = Field(60.0, gt=0.0, le=500.0)
+    telemetry_hz: float = Field(default=60.0, gt=0.0, le=500.0)
     #: Limits in force outside sessions (a session brings its patient's).
     patient_limits: PatientLimits = Field(default_factory=PatientLimits)
     #: The machine's limits (stroke margin, speeds, forces, overruns ...); its heartbeat
@@ -189,7 +207,7 @@ class RtService:
 
     def __init__(self, pl: PositionLoop, config: RtConfig, tap: SignalTap,
                  sessions: SessionFactory | None = None,
-                 programs: dict[str, Callable[[dict[str, Any], "RtService"], Program]]
+                 programs: dict[str, Callable[[dict[str, Any], RtService], Program]]
                  | None = None):
         self.pl = pl
         self.config = config
@@ -268,7 +286,7 @@ class RtService:
             "causes": sorted(sup.causes), "latched": sup.latched(),
             "t": stats.t, "cycles": stats.cycles, "deadline_misses": stats.misses,
             "rate_hz": self.config.rate_hz,
-            "controller": g.component("controller").controller.name,
+            "controller": pl.controller.name,
             "phase": int(g.output("reference.phase")[0]),
             "phase_name": Phase(int(g.output("reference.phase")[0])).name.lower(),
             "q": g.output("encoders.q").tolist(),
@@ -339,7 +357,7 @@ class RtService:
 
     def set_gains(self, client: str, controller: str, gains: dict[str, float]) -> dict[str, Any]:
         self._require_owner(client, "set_gains")
-        law = self.pl.graph.component("controller").controller
+        law = self.pl.controller
         if controller != law.name:
             raise InputError(f"controller {controller!r} is not running (running: {law.name!r})")
         try:
@@ -385,7 +403,7 @@ class RtService:
         with self._lock:
             self._check_can_move(client, "session_start")
             self._session_count += 1
-            stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+            stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
             session = _Session(id=f"S{stamp}-{os.getpid()}-{self._session_count}",
                                owner=client, record_dir=record_dir,
                                patient=PatientInfo(patient.id, patient.weight_kg, limits))
@@ -414,14 +432,15 @@ class RtService:
 
         from rt.ipc.server import Deferred
 
-        if self.sessions is None:
+        sessions = self.sessions
+        if sessions is None:
             raise InputError("this RT process offers no protocol sessions")
         info = PatientInfo(patient.id, patient.weight_kg, self._patient_limits(patient))
         future: Future = Future()
 
         def work() -> None:
             try:
-                prep = self.sessions.prepare(protocol, info, self._context())  # type: ignore
+                prep = sessions.prepare(protocol, info, self._context())
                 future.set_result({"ok": True, "protocol": prep.name, "kind": prep.kind,
                                    "duration_s": prep.program.duration_s,
                                    "start_pose": list(prep.start_pose),
@@ -513,10 +532,10 @@ class RtService:
             raise InputError("session_start refused: the client that started it was lost "
                              "during pre-flight")
         d = pl.model.description
-        limits = effective(tuple(d.limits.stroke_m), self.config.limits_of_robot(),
+        limits = effective(d.limits.stroke, self.config.limits_of_robot(),
                            s.patient.limits,
             prep.protocol_limits)
-        started = datetime.now(timezone.utc)
+        started = datetime.now(UTC)
         s.recording = unique_path(s.record_dir, recording_name(
             started.strftime("%Y%m%dT%H%M%SZ"), s.patient.id, prep.name))
         t_now = float(pl.loop.stats().t)
@@ -725,12 +744,12 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
 
     model = RobotModel.load(config.robot) if config.robot else RobotModel.load()
     tap = SignalTap("session", SESSION_SIGNALS, capacity=1 << 16)
-    common: dict[str, Any] = dict(
-        model=model, rate_hz=config.rate_hz, mode=config.loop_mode, controller=config.controller,
-        gains=config.gains or None, patient_limits=config.patient_limits,
-        robot_limits=config.limits_of_robot(),
-        extra_blocks=[tap],
-        extra_connections=[(src, f"session.{name}") for name, src in SESSION_SOURCES.items()])
+    common: dict[str, Any] = {
+        "model": model, "rate_hz": config.rate_hz, "mode": config.loop_mode, "controller": config.controller,
+        "gains": config.gains or None, "patient_limits": config.patient_limits,
+        "robot_limits": config.limits_of_robot(),
+        "extra_blocks": [tap],
+        "extra_connections": [(src, f"session.{name}") for name, src in SESSION_SOURCES.items()]}
     if config.loop_mode == "fast" and config.backend != "sim":
         raise ConfigurationError("loop_mode fast is for the in-process twin (backend sim) only")
     if config.backend == "twin_shm":

@@ -6,11 +6,11 @@ import json
 import signal
 import sys
 import threading
-from typing import Any, Callable
-
-from rt.model.robot_option import add_robot_option
+from collections.abc import Callable
+from typing import Any
 
 from rt.cli_args import seconds
+from rt.model.robot_option import add_robot_option
 
 
 def register_serve(commands: argparse._SubParsersAction,

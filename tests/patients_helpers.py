@@ -9,7 +9,7 @@ from argon2 import PasswordHasher
 
 from patients.service import Actor, ClinicalRecord
 
-T0 = dt.datetime(2026, 3, 2, 9, 0, tzinfo=dt.timezone.utc)
+T0 = dt.datetime(2026, 3, 2, 9, 0, tzinfo=dt.UTC)
 PASSWORD = "a long test password"
 PROTOCOL = "protocols/library/ankle_rom.yaml"
 

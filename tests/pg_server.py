@@ -46,7 +46,7 @@ class PostgresServer:
 
     def _run(self, *args: str) -> None:
         cmd = ["runuser", "-u", RUN_AS, "--", *args] if os.geteuid() == 0 else list(args)
-        done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        done = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=120)
         if done.returncode != 0:
             log = self.log.read_text() if self.log.exists() else ""
             raise RuntimeError(f"{' '.join(args)} failed: {done.stderr}{done.stdout}\n{log}")

@@ -15,8 +15,14 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from rt.ati.config_server import NetFtConfigServer
-from rt.ati.netft_config import (CAL_INFO_REQUEST, CMD_READ_CAL_INFO, ForceUnit,
-                                 NetFtConfiguration, TorqueUnit, decode_cal_info_response)
+from rt.ati.netft_config import (
+    CAL_INFO_REQUEST,
+    CMD_READ_CAL_INFO,
+    ForceUnit,
+    NetFtConfiguration,
+    TorqueUnit,
+    decode_cal_info_response,
+)
 from rt.ati.rdt import CountsPerUnit
 from rt.ati.rdt_server import RdtServer
 from rt.ati.twin_sensor import BIAS_SAMPLES, AtiSensorParams, SourceReader, TwinAtiSensorModel

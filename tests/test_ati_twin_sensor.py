@@ -7,10 +7,17 @@ import numpy as np
 import pytest
 
 from rt.ati.rdt import (
-    STATUS_ANY_ERROR, STATUS_FT_OUT_OF_RANGE, STATUS_GAGE_OUT_OF_RANGE, is_saturated,
+    STATUS_ANY_ERROR,
+    STATUS_FT_OUT_OF_RANGE,
+    STATUS_GAGE_OUT_OF_RANGE,
+    is_saturated,
 )
 from rt.ati.twin_sensor import (
-    DELTA_SI_660_60_RANGES, AtiSample, AtiSensorParams, SourceReader, TwinAtiSensorModel,
+    DELTA_SI_660_60_RANGES,
+    AtiSample,
+    AtiSensorParams,
+    SourceReader,
+    TwinAtiSensorModel,
 )
 from rt.errors import InputError
 
@@ -20,7 +27,7 @@ LOAD = (10.0, -20.0, -50.0, 1.0, -2.0, 3.0)
 
 def quiet_params(**overrides) -> AtiSensorParams:
     """No noise, no drift, no bias unless overridden: outputs are exactly predictable."""
-    base = dict(noise_sigma=ZERO6, bias=ZERO6, drift_rate=ZERO6, drift_limit=ZERO6)
+    base = {"noise_sigma": ZERO6, "bias": ZERO6, "drift_rate": ZERO6, "drift_limit": ZERO6}
     base.update(overrides)
     return AtiSensorParams(**base)
 

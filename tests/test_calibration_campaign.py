@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import ezc3d
@@ -16,8 +16,8 @@ from calibration import c3d_export, campaign
 from calibration.metrics import Thresholds
 from calibration.plate import PlateKind
 from calibration.trial import CAMPAIGN_FILE, TRIALS_DIR, TrialData
-from talus.cli import main
 from rt.errors import ConfigurationError, InputError
+from talus.cli import main
 
 SHORT_PLAN = """schema_version: 1
 name: short test plan
@@ -110,7 +110,7 @@ def test_fit_writes_a_record_following_the_contract(campaign_dir: Path, tmp_path
 
 def test_record_date_comes_from_the_injected_clock(campaign_dir: Path) -> None:
     p = campaign.process(campaign_dir)
-    fixed = datetime(2026, 11, 23, 17, 0, 0, tzinfo=timezone.utc)
+    fixed = datetime(2026, 11, 23, 17, 0, 0, tzinfo=UTC)
     record = campaign.build_record(campaign_dir, p, Thresholds(), campaign.ReferenceSensor(),
                                    "op", now=lambda: fixed)
     assert record["created_utc"] == "2026-11-23T17:00:00Z"

@@ -12,13 +12,13 @@ from calibration import campaign, dataset, fit
 from calibration.alignment import ClockAlignmentError, clock_model, trial_lag
 from calibration.plan import default_plan, expand
 from calibration.plate import TWIN_PLATE_FILE, load_plate
-from calibration.twin_plate import TruthSettings, TwinPlate, draw_truth, expected_matrix
 from calibration.registration import small_rotation
+from calibration.twin_plate import TruthSettings, TwinPlate, draw_truth, expected_matrix
 from calibration.twin_runner import DirectTrialRunner
 
 #: A short plan for the fit's tests: 2×2 grid + corners, three load levels.
-SHORT = dict(loads_n=[200.0, 800.0, 1500.0], grid={"nx": 2, "ny": 2, "margin_m": 0.08},
-             sine_sites="none", gait_sites="none", registration="nominal")
+SHORT = {"loads_n": [200.0, 800.0, 1500.0], "grid": {"nx": 2, "ny": 2, "margin_m": 0.08},
+             "sine_sites": "none", "gait_sites": "none", "registration": "nominal"}
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +70,7 @@ def test_noisy_full_excitation_recovers_the_matrix_within_its_standard_errors(pl
 def test_unexcited_axis_is_reported_unidentified_and_kept_nominal(tmp_path: Path, plate) -> None:
     """No load ever twists the plate about z: the Mz channel's column cannot be identified;
     it stays at its nominal value and is flagged, while the excited entries are recovered."""
-    p, truth = _campaign(tmp_path, plate, TruthSettings.ideal(), ati_noise=(0.0,) * 6)
+    p, _truth = _campaign(tmp_path, plate, TruthSettings.ideal(), ati_noise=(0.0,) * 6)
     lin = p.linear
     assert not lin.identified[2, 5] and not lin.identified[3, 5] and not lin.identified[4, 5]
     C0 = plate.nominal_C()

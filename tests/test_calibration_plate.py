@@ -8,8 +8,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from calibration.plate import (TWIN_PLATE_FILE, PlateKind, cop_F, kistler_matrix, load_plate,
-                               wrench_at_point)
+from calibration.plate import (
+    TWIN_PLATE_FILE,
+    PlateKind,
+    cop_F,
+    kistler_matrix,
+    load_plate,
+    wrench_at_point,
+)
 from calibration.twin_plate import TruthSettings, TwinPlate, draw_truth, expected_matrix, quantize
 from rt.drivers.comedi_plate import ComediForcePlate
 from rt.drivers.fake_comedi_ai import FakeComediAnalogInput

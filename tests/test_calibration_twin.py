@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from calibration import dataset, registration as reg
+from calibration import dataset
+from calibration import registration as reg
 from calibration.plan import ProfileKind, Trial, default_plan, force_profile
 from calibration.plate import TWIN_PLATE_FILE, cop_F, load_plate
 from calibration.twin_plate import TruthSettings, TwinPlate, draw_truth, expected_matrix

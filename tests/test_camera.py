@@ -11,8 +11,12 @@ import pytest
 from rt.devices import registry
 from rt.drivers.camera_cv import OpenCvCamera
 from rt.drivers.synthetic_frames import (
-    MarkerBoard, PinholeCamera, SyntheticMarkerCamera, pose_facing_camera,
-    project_board_corners, render_board,
+    MarkerBoard,
+    PinholeCamera,
+    SyntheticMarkerCamera,
+    pose_facing_camera,
+    project_board_corners,
+    render_board,
 )
 from rt.errors import ConfigurationError, HardwareError
 
@@ -128,8 +132,8 @@ def test_rendered_corners_lie_where_the_pinhole_model_puts_them():
     pose = pose_facing_camera(0.8)
     grey = render_board(BOARD, CAMERA, pose)[:, :, 0].astype(float)
     tl = project_board_corners(BOARD, CAMERA, pose)[0][0]     # marker 0, top-left (x, y)
-    row = int(round(tl[1])) + 5                               # inside the marker's border
-    col = int(round(tl[0])) + 5
+    row = round(tl[1]) + 5                               # inside the marker's border
+    col = round(tl[0]) + 5
     # Sub-pixel edge position where the intensity crosses half way between white and black.
     def crossing(profile: np.ndarray, start: int) -> float:
         half = (profile.max() + profile.min()) / 2

@@ -7,9 +7,9 @@ import math
 
 import pytest
 
-from talus import cli
 from rt.benchmarks.cli import CONTROLLER_NAMES
 from rt.cli_args import bounded_int, finite_float, name_choice, port_number, seconds, seed
+from talus import cli
 
 
 def _refused(argv: list[str], capsys) -> str:
@@ -77,9 +77,9 @@ def test_controller_names_accept_dash_or_underscore(capsys):
 
 
 def test_the_benchmark_lists_every_registered_position_controller():
-    from rt.control.base import CONTROLLERS, create  # noqa: F401  (registers on first use)
-    import rt.control.adaptive  # noqa: F401
+    import rt.control.adaptive
     import rt.control.laws  # noqa: F401
+    from rt.control.base import CONTROLLERS, create  # noqa: F401  (registers on first use)
 
     assert set(CONTROLLER_NAMES) <= set(CONTROLLERS)
 

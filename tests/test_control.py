@@ -2,8 +2,6 @@
 the adaptive law learns a payload; switches are bumpless; gains are validated."""
 from __future__ import annotations
 
-from rt.twin.realism import RigImperfections
-
 import math
 
 import numpy as np
@@ -13,6 +11,7 @@ from rt.control.base import CONTROLLERS, Reference, create
 from rt.control.experiment import benchmark_reference, run_tracking
 from rt.errors import ConfigurationError
 from rt.twin.environment import PayloadStep
+from rt.twin.realism import RigImperfections
 
 ALL = ["pid", "pd_g", "pd_g0", "paden_panja", "computed_torque_ptp", "computed_torque",
        "adaptive"]

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import copy
 import math
+from importlib import resources
 
 import pytest
 import yaml
-from importlib import resources
 
 from rt.errors import ConfigurationError
 from rt.model.description import description_from_dict, load_description

@@ -24,7 +24,7 @@ class Pid(Component):
             if not (self.kp >= 0.0 and self.ki >= 0.0):
                 raise ValueError(f"gains must be ≥ 0 (kp={self.kp}, ki={self.ki})")
 
-    def __init__(self, name: str, params: "Pid.Params | None" = None, fail_in: str = "") -> None:
+    def __init__(self, name: str, params: Pid.Params | None = None, fail_in: str = "") -> None:
         super().__init__(name, params)
         self.e = self.declare_input("e", Array(3), "tracking error (m)")
         self.u = self.declare_output("u", Array(3), "command (V)")
@@ -57,11 +57,11 @@ class Pid(Component):
     def make_state(self) -> np.ndarray:
         return np.zeros(3)  # the integral of e (m s)
 
-    def check_params(self, new: "Pid.Params") -> None:
+    def check_params(self, new: Pid.Params) -> None:
         if new.limit_v > 10.0:
             raise InputError(f"limit_v {new.limit_v} V exceeds the DAC's ±10 V")
 
-    def on_params_changed(self, old: "Pid.Params") -> None:
+    def on_params_changed(self, old: Pid.Params) -> None:
         if self.fail_in == "params_changed" and self.params.kp == 13.0:
             raise RuntimeError("unlucky gain")
         self.derived = 2.0 * self.params.kp

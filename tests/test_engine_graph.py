@@ -1,6 +1,7 @@
 """Graph builder checks, dependency order, delays, zero-copy ports, statistics, faults."""
 from __future__ import annotations
 
+import itertools
 import tracemalloc
 from dataclasses import dataclass
 
@@ -8,8 +9,18 @@ import numpy as np
 import pytest
 
 from rt.devices.interfaces import Wrench
-from rt.engine import (BOOL, FLOAT, INT, Array, Component, GraphBuilder, Lifecycle, Loop,
-                       STATUS_EXCEPTION, Struct)
+from rt.engine import (
+    BOOL,
+    FLOAT,
+    INT,
+    STATUS_EXCEPTION,
+    Array,
+    Component,
+    GraphBuilder,
+    Lifecycle,
+    Loop,
+    Struct,
+)
 from rt.errors import ConfigurationError
 
 
@@ -93,7 +104,7 @@ def chain_graph(n: int = 5, reverse: bool = True):
     b.add(Source("src", 10.0))
     b.add(Sink("sink"))
     b.connect("src.y", "a0.u")
-    for a, c in zip(names, names[1:]):
+    for a, c in itertools.pairwise(names):
         b.connect(f"{a}.y", f"{c}.u")
     b.connect(f"{names[-1]}.y", "sink.u")
     g = b.build()

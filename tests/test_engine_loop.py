@@ -64,7 +64,7 @@ def probe_graph(**probe_kw):
     return b.build(), p, f
 
 
-NO_RT = dict(rt_priority=None, lock_memory=False, switch_interval_s=None)
+NO_RT = {"rt_priority": None, "lock_memory": False, "switch_interval_s": None}
 
 
 @pytest.mark.parametrize("rate", [99.9, 2000.1, 0.0, -5.0, float("nan"), "fast"])
@@ -206,7 +206,7 @@ def test_thread_start_stop_and_exclusive_running():
 
 def test_a_stop_request_from_inside_a_cycle_ends_run():
     holder = {}
-    g, p, _ = probe_graph(at=9, action=lambda: holder["loop"].request_stop())
+    g, _p, _ = probe_graph(at=9, action=lambda: holder["loop"].request_stop())
     loop = holder["loop"] = Loop(g, mode="fast")
     assert loop.run(cycles=100) == 10
 

@@ -239,8 +239,8 @@ def test_incompatible_swaps_are_refused_at_once_and_change_nothing():
     loop.run(cycles=3)
     old = g.component("ctl")
     for comp, message in [
-        (Narrow(), r"output 'y' is float64\[2\], the slot's is float64\[1\]; "
-                   r"output 'n' \(float\) is missing"),
+        (Narrow(), (r"output 'y' is float64\[2\], the slot's is float64\[1\]; "
+                   r"output 'n' \(float\) is missing")),
         (Needy(), r"input 'extra' \(float\) has no source in slot 'ctl'"),
         (old, "already in that slot"),
     ]:

@@ -28,9 +28,13 @@ from hypothesis import strategies as st
 
 from rt.errors import ConfigurationError
 from rt.estimation.characterize import characterize, quantize
-from rt.estimation.velocity import (ENCODER_RESOLUTION_M, EstimatorStatus,
-                                    FirstDifferenceEstimator, KalmanConfig,
-                                    KalmanVelocityEstimator)
+from rt.estimation.velocity import (
+    ENCODER_RESOLUTION_M,
+    EstimatorStatus,
+    FirstDifferenceEstimator,
+    KalmanConfig,
+    KalmanVelocityEstimator,
+)
 
 DT = 1e-3
 DELTA = ENCODER_RESOLUTION_M

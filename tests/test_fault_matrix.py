@@ -23,7 +23,7 @@ def test_matrix_covers_every_twin_fault_kind():
     covered = {"encoder_freeze", "encoder_jump", "encoder_noise", "dac_dead", "dac_stuck",
                "ati_dropout", "ati_stale", "ati_saturation", "latency", "hardware_estop",
                "hand_stop"}
-    assert set(KINDS) <= covered and covered <= set(SCENARIOS)
+    assert set(KINDS) <= covered <= set(SCENARIOS)
     assert set(EXPECTED) == set(SCENARIOS)
 
 

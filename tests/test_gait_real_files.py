@@ -94,7 +94,7 @@ def test_heel_strike_transient_is_replayed(tmp_path, robot):
     assert gen.validate().ok
     st, fz = gen.stance, gen.samples()["fz"]
     contact = gen.info["contact_s"][0] - st.start_s       # s into the replay
-    k = int(round(contact * 1000.0))
+    k = round(contact * 1000.0)
     spike = fz[k:k + 10].max() / gen.scale               # N of the record
     assert spike > 0.45 * 60.0 * gait.STANDARD_GRAVITY_M_S2
     assert fz[:k].max() < 0.05 * fz.max()                 # the lead-in is unloaded

@@ -5,11 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rt.identification.estimate import (IdentificationData, IdentificationError,
-                                        description_from_physical, estimate_base,
-                                        estimate_physical, force_prediction_error,
-                                        nominal_physical, prepare)
-from rt.identification.excitation import FourierExcitation, N_HARMONICS
+from rt.identification.estimate import (
+    IdentificationData,
+    IdentificationError,
+    description_from_physical,
+    estimate_base,
+    estimate_physical,
+    force_prediction_error,
+    nominal_physical,
+    prepare,
+)
+from rt.identification.excitation import N_HARMONICS, FourierExcitation
 from rt.model import RobotModel
 from rt.model.description import load_description
 from rt.model.regressor import Regressor

@@ -13,7 +13,7 @@ def test_identify_writes_a_loadable_description_and_refuses_to_overwrite(tmp_pat
     out = tmp_path / "identified.yaml"
     cmd = [sys.executable, "-m", "talus", "identify", "run", "--out", str(out), "--seconds",
            "20", "--json"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
     desc = load_description(out)
@@ -24,6 +24,6 @@ def test_identify_writes_a_loadable_description_and_refuses_to_overwrite(tmp_pat
     assert v["identified"]["rms_pct_of_peak"] < v["nominal"]["rms_pct_of_peak"]
     # The file exists now: a second run without --force is refused and changes nothing.
     before = out.read_bytes()
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "exists" in proc.stdout   # one {"error"} line
     assert out.read_bytes() == before

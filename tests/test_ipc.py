@@ -8,19 +8,20 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
 import zmq
 
-from talus.cli import main as talus_main
 from rt.errors import ConfigurationError, InputError, ProtocolError, SafetyTrip
 from rt.ipc import messages
 from rt.ipc.client import RtClient, RtUnavailableError, Subscriber
 from rt.ipc.messages import MAX_MESSAGE_BYTES, decode_reply, decode_request, encode_request
 from rt.ipc.server import RtServer
+from talus.cli import main as talus_main
 
 REPO = Path(__file__).resolve().parents[1]
 ANY_PORT = "tcp://127.0.0.1:*"
@@ -179,10 +180,10 @@ BAD_REQUESTS: list[tuple[str, bytes, str]] = [
     ("empty", b"", "malformed JSON"),
     ("array", b"[1, 2]", "expected a JSON object, got list"),
     ("string", b'"status"', "expected a JSON object, got str"),
-    ("NaN token", b'{"v": 1, "id": 1, "client": "c", "cmd": "set_gains", '
-                  b'"args": {"controller": "p", "gains": {"kp": NaN}}}', "NaN is not valid JSON"),
-    ("duplicate keys", b'{"v": 1, "id": 1, "client": "c", "cmd": "status", "cmd": "estop", '
-                       b'"args": {}}', "duplicate key 'cmd'"),
+    ("NaN token", (b'{"v": 1, "id": 1, "client": "c", "cmd": "set_gains", '
+                  b'"args": {"controller": "p", "gains": {"kp": NaN}}}'), "NaN is not valid JSON"),
+    ("duplicate keys", (b'{"v": 1, "id": 1, "client": "c", "cmd": "status", "cmd": "estop", '
+                       b'"args": {}}'), "duplicate key 'cmd'"),
     ("deeply nested", request_bytes(cmd="run", args={"program": "p", "params": {}})
      .replace(b'"params": {}', b'"params": {"a": ' + DEEP.encode() + b"}"), "nested too deeply"),
     ("missing version", json.dumps({"id": 1, "client": "c", "cmd": "status", "args": {}})
@@ -199,8 +200,8 @@ BAD_REQUESTS: list[tuple[str, bytes, str]] = [
      "missing 'args'"),
     ("args not object", request_bytes(args=[]), "'args'"),
     ("extra envelope key", request_bytes(extra=1), "unknown key 'extra'"),
-    ("extra arg", request_bytes(args={"verbose": True}), "bad args for 'status': unknown key "
-                                                         "'verbose'"),
+    ("extra arg", request_bytes(args={"verbose": True}), ("bad args for 'status': unknown key "
+                                                         "'verbose'")),
     ("bad estop source", request_bytes(cmd="estop", args={"source": "phone"}),
      "bad args for 'estop': 'source'"),
     ("missing estop source", request_bytes(cmd="estop", args={}), "missing 'source'"),
@@ -291,9 +292,11 @@ def test_handler_bug_becomes_internal_error_and_is_logged(
         server: RtServer, client: RtClient, handler: FakeHandler,
         caplog: pytest.LogCaptureFixture) -> None:
     handler.fail["stop"] = ZeroDivisionError("division by zero")
-    with caplog.at_level(logging.ERROR, logger="rt.ipc.server"):
-        with pytest.raises(InputError, match="internal error: ZeroDivisionError"):
-            client.stop()
+    with (
+        caplog.at_level(logging.ERROR, logger="rt.ipc.server"),
+        pytest.raises(InputError, match="internal error: ZeroDivisionError"),
+    ):
+        client.stop()
     assert any("'stop'" in r.getMessage() for r in caplog.records)
     handler.results["status"] = [1, 2]  # not a dict
     with pytest.raises(InputError, match="internal error: .*returned list"):
@@ -349,7 +352,7 @@ def test_heartbeat_age_tracks_requests_and_the_heartbeat_thread(server: RtServer
     assert client.heartbeat_running
     for _ in range(5):  # heartbeats keep arriving: each wait sees one newer than its start
         mark = time.monotonic()
-        assert wait_until(lambda: server.heartbeat_age_s() < time.monotonic() - mark)
+        assert wait_until(lambda mark=mark: server.heartbeat_age_s() < time.monotonic() - mark)
     assert client.heartbeat_failures == 0 and client.last_heartbeat_error is None
     # Commands from the main thread go through while heartbeats run (separate sockets).
     assert client.status() == {"did": "status"}
@@ -550,14 +553,15 @@ def test_codec_round_trip_and_reply_validation() -> None:
     with pytest.raises(ProtocolError, match="unknown topic"):
         messages.decode_publication([b"status", b"{}"])
     with pytest.raises(ProtocolError, match="missing 'kind'"):
-        messages.decode_publication([b"event", b'{"v": 1, "topic": "event", "t": 0, '
-                                               b'"cause": "x"}'])
+        messages.decode_publication([b"event", (b'{"v": 1, "topic": "event", "t": 0, '
+                                               b'"cause": "x"}')])
 
 
 # --------------------------------------------------------------------------- CLI
 
 def run_cli(*args: str) -> tuple[int, list[dict[str, Any]]]:
-    proc = subprocess.run([sys.executable, "-m", "talus", "rt", *args], capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "talus", "rt", *args],
+                          check=False, capture_output=True,
                           text=True, timeout=60, cwd=REPO)
     return proc.returncode, [json.loads(line) for line in proc.stdout.splitlines() if line]
 

@@ -6,22 +6,22 @@ so its peak resident memory (``VmHWM``) is its own.
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import pytest
 import zmq
 
-from talus.cli import main as talus_main
 from rt.errors import ConfigurationError
 from rt.ipc.client import RtClient, RtUnavailableError
-from rt.ipc.security import (ClientCurveConfig, ServerCurveConfig, is_loopback, make_keys)
+from rt.ipc.security import ClientCurveConfig, ServerCurveConfig, is_loopback, make_keys
 from rt.ipc.server import RtServer
+from talus.cli import main as talus_main
 
 ANY_PORT = "tcp://127.0.0.1:*"
 
@@ -102,9 +102,11 @@ def test_a_key_not_allowed_or_no_key_is_refused(curve_server: RtServer, keys: di
                                                 who: str) -> None:
     cfg = None if who == "plain" else ClientCurveConfig(
         secret_key_file=keys["stranger_secret"], server_public_key_file=keys["server_pub"])
-    with RtClient(curve_server.endpoint, timeout_s=0.5, curve=cfg) as client:
-        with pytest.raises(RtUnavailableError):
-            client.status()
+    with (
+        RtClient(curve_server.endpoint, timeout_s=0.5, curve=cfg) as client,
+        pytest.raises(RtUnavailableError),
+    ):
+        client.status()
     assert curve_server.stats()["requests"] == 0
 
 
@@ -112,9 +114,11 @@ def test_a_client_with_the_wrong_server_key_gets_nothing(curve_server: RtServer,
                                                          keys: dict[str, Path]) -> None:
     cfg = ClientCurveConfig(secret_key_file=keys["client_secret"],
                             server_public_key_file=keys["stranger_secret"])
-    with RtClient(curve_server.endpoint, timeout_s=0.5, curve=cfg) as client:
-        with pytest.raises(RtUnavailableError):
-            client.status()
+    with (
+        RtClient(curve_server.endpoint, timeout_s=0.5, curve=cfg) as client,
+        pytest.raises(RtUnavailableError),
+    ):
+        client.status()
 
 
 def test_server_config_errors_are_clear(keys: dict[str, Path], tmp_path: Path) -> None:
@@ -236,9 +240,11 @@ def test_rt_serve_with_curve_keys_from_its_config(keys: dict[str, Path], tmp_pat
                                     server_public_key_file=keys["server_pub"])
         with RtClient(serving["endpoint"], timeout_s=5.0, curve=allowed) as client:
             assert client.status()["state"] == "run"
-        with RtClient(serving["endpoint"], timeout_s=0.5) as plain:
-            with pytest.raises(RtUnavailableError):
-                plain.status()
+        with (
+            RtClient(serving["endpoint"], timeout_s=0.5) as plain,
+            pytest.raises(RtUnavailableError),
+        ):
+            plain.status()
     finally:
         proc.terminate()
         proc.wait(timeout=20)

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import json
-import math
 import shutil
 import subprocess
 import sys
@@ -13,7 +12,8 @@ TALUS = [shutil.which("talus") or "", ] if shutil.which("talus") else [sys.execu
 
 
 def run(args: list[str], stdin: str = "") -> tuple[int, list[dict]]:
-    proc = subprocess.run(TALUS + args, input=stdin, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(TALUS + args, input=stdin,
+                          check=False, capture_output=True, text=True, timeout=120)
     lines = [json.loads(line) for line in proc.stdout.splitlines() if line.strip()]
     return proc.returncode, lines
 
@@ -66,7 +66,8 @@ def test_bad_lines_get_an_error_line_and_exit_code(command, line, message):
 
 
 def test_describe_documents_frames_bodies_and_base_parameters():
-    proc = subprocess.run(TALUS + ["model", "describe"], capture_output=True, text=True,
+    proc = subprocess.run(TALUS + ["model", "describe"],
+                          check=False, capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0
     d = json.loads(proc.stdout)
@@ -113,7 +114,7 @@ def test_hostile_lines_are_answered_one_by_one_with_valid_json(command):
             "dynamics": '{"q": [0.2, 0.2, 0.2]}'}[command]
     hostile = [(_with_number(command, n), m) for n, m in HOSTILE_NUMBERS] + HOSTILE_LINES
     stdin = "".join(f"{line}\n{good}\n" for line, _ in hostile)
-    proc = subprocess.run(TALUS + ["model", command], input=stdin, capture_output=True,
+    proc = subprocess.run(TALUS + ["model", command], input=stdin, check=False, capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 2 and proc.stderr == ""
     # Strict JSON: Python's parser would accept NaN/Infinity, so refuse them explicitly.

@@ -7,8 +7,13 @@ from pathlib import Path
 
 import pytest
 
-from rt.output_files import (OutputFileError, atomic_output, check_output, commit_output,
-                             partial_path)
+from rt.output_files import (
+    OutputFileError,
+    atomic_output,
+    check_output,
+    commit_output,
+    partial_path,
+)
 
 
 def _names(d: Path) -> list[str]:
@@ -41,10 +46,9 @@ def test_existing_outputs_directories_and_missing_directories(tmp_path: Path) ->
 def test_a_failed_write_leaves_the_old_file_and_no_partial(tmp_path: Path) -> None:
     out = tmp_path / "out.csv"
     out.write_text("previous")
-    with pytest.raises(RuntimeError):
-        with atomic_output(out, force=True) as f:
-            f.write("half")
-            raise RuntimeError("the channel does not exist")
+    with pytest.raises(RuntimeError), atomic_output(out, force=True) as f:
+        f.write("half")
+        raise RuntimeError("the channel does not exist")
     assert out.read_text() == "previous" and _names(tmp_path) == ["out.csv"]
     with atomic_output(out, force=True) as f:
         f.write("new")

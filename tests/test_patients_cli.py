@@ -9,10 +9,9 @@ from pathlib import Path
 
 import pytest
 import sqlalchemy as sa
+from patients_helpers import PROTOCOL, fast_hasher
 
 from talus.cli import main
-
-from patients_helpers import PROTOCOL, fast_hasher
 
 ADMIN_PW, CLIN_PW = "admin password 1", "clinician password 1"
 
@@ -209,7 +208,7 @@ def test_users_list_disable_and_the_audit_anchor(clinic, capsys):
                                                                     ("root", "admin")]
     assert "password" not in out  # no hash leaves the service
     assert run(capsys, "users", "disable", "ana", *admin, password=ADMIN_PW)[0] == 0
-    code, _, err = run(capsys, "patients", "list", "--db", clinic, "--user", "ana",
+    code, _, _err = run(capsys, "patients", "list", "--db", clinic, "--user", "ana",
                        password=CLIN_PW)
     assert code == 2
     code, out, _ = run(capsys, "users", "list", "--db", clinic, "--user", "ana", "--json",

@@ -12,15 +12,15 @@ import pytest
 import sqlalchemy as sa
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
+from patients_helpers import PASSWORD, PROTOCOL, open_record, staff
 from sqlalchemy.orm import Session
 
-from patients import backup, db as dbmod
+from patients import backup
+from patients import db as dbmod
 from patients.errors import AlreadyExists, ConcurrentUpdate, InputError, PermissionDenied
 from patients.models import Base, Patient
 from patients.roles import PERMISSIONS, Action, Role, allowed, roles_markdown
 from patients.service import Identity
-
-from patients_helpers import PASSWORD, PROTOCOL, Clock, open_record, staff
 
 ROOT = Path(__file__).resolve().parents[1]
 YAML = (ROOT / PROTOCOL).read_text()
@@ -157,9 +157,11 @@ def test_the_database_refuses_changes_to_the_audit_log(record, people):
     _populated(record, people)
     for sql in ("UPDATE audit_log SET username = 'x' WHERE seq = 2",
                 "DELETE FROM audit_log WHERE seq = 2", "DELETE FROM audit_head"):
-        with pytest.raises(sa.exc.DatabaseError, match="append-only"):
-            with record.engine.begin() as conn:
-                conn.exec_driver_sql(sql)
+        with (
+            pytest.raises(sa.exc.DatabaseError, match="append-only"),
+            record.engine.begin() as conn,
+        ):
+            conn.exec_driver_sql(sql)
     assert record.verify_audit(people.admin).ok
 
 

@@ -6,15 +6,20 @@ from pathlib import Path
 
 import pytest
 import sqlalchemy as sa
+from patients_helpers import PASSWORD, PROTOCOL, Clock, open_record, staff
 
 from patients import anatomy
-from patients.errors import (AccountLocked, AlreadyExists, AuthenticationFailed, InputError,
-                             NotFound, PermissionDenied)
+from patients.errors import (
+    AccountLocked,
+    AlreadyExists,
+    AuthenticationFailed,
+    InputError,
+    NotFound,
+    PermissionDenied,
+)
 from patients.models import Outcome
 from patients.service import LIMIT_FIELDS, Identity
 from rt.safety.limits import PatientLimits
-
-from patients_helpers import PASSWORD, PROTOCOL, Clock, open_record, staff
 
 PROTOCOL_YAML = Path(PROTOCOL).read_text()
 
@@ -126,9 +131,9 @@ def test_patient_code_is_the_only_thing_the_pseudonymous_views_show(record, peop
 
 
 def test_bad_patient_input_is_refused_and_changes_nothing(record, people):
-    for kw, message in ((dict(body_mass_kg=7000), "body mass"), (dict(height_m=175), "metres"),
-                        (dict(affected_side="up"), "unknown side"),
-                        (dict(code="juana perez"), "patient code")):
+    for kw, message in (({"body_mass_kg": 7000}, "body mass"), ({"height_m": 175}, "metres"),
+                        ({"affected_side": "up"}, "unknown side"),
+                        ({"code": "juana perez"}, "patient code")):
         with pytest.raises(InputError, match=message):
             record.add_patient(people.clinician, **kw)
     assert record.list_patients(people.clinician) == []
@@ -213,12 +218,12 @@ def test_sessions_over_a_date_range(record, people, clock):
     record.set_limits(people.clinician, other)
     uids = []
     for day in range(5):
-        clock.now = dt.datetime(2026, 4, 1 + day, 10, tzinfo=dt.timezone.utc)
+        clock.now = dt.datetime(2026, 4, 1 + day, 10, tzinfo=dt.UTC)
         uids.append(record.start_session(people.clinician, code, PROTOCOL_YAML)["uid"])
         record.start_session(people.clinician, other, PROTOCOL_YAML)
     got = record.list_sessions(people.viewer, code,
-                               since=dt.datetime(2026, 4, 2, tzinfo=dt.timezone.utc),
-                               until=dt.datetime(2026, 4, 4, tzinfo=dt.timezone.utc), full=True)
+                               since=dt.datetime(2026, 4, 2, tzinfo=dt.UTC),
+                               until=dt.datetime(2026, 4, 4, tzinfo=dt.UTC), full=True)
     assert [s["uid"] for s in got] == uids[1:3]
     assert all(s["limits"] and s["patient"] == code for s in got)
     assert len(record.list_sessions(people.viewer)) == 10

@@ -4,12 +4,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from patients_helpers import open_record, staff
 
 from patients.models import Outcome
 from patients.session_record import outcome_of, rt_patient, run_for_patient, twin_runner
 from rt.errors import ProtocolValidationError
-
-from patients_helpers import open_record, staff
 
 LIB = Path(__file__).resolve().parents[1] / "protocols" / "library"
 

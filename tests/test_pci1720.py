@@ -10,11 +10,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rt.devices import registry
-from rt.drivers.pci1720 import (
-    AREF_GROUND, COMEDI_OUTPUT, MISSING_LIBRARY_MESSAGE, ComediRange, EnableLine,
-    Pci1720Outputs, code_to_volts, load_comedilib, volts_to_code,
-)
 from rt.drivers.fake_comedi import FakeComedi
+from rt.drivers.pci1720 import (
+    AREF_GROUND,
+    COMEDI_OUTPUT,
+    MISSING_LIBRARY_MESSAGE,
+    EnableLine,
+    Pci1720Outputs,
+    code_to_volts,
+    load_comedilib,
+    volts_to_code,
+)
 from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError, InputError
 
 LSB_V = 20.0 / 4095          # one code on the ±10 V range

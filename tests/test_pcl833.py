@@ -12,8 +12,17 @@ from hypothesis import strategies as st
 from rt.devices import registry
 from rt.drivers.fake_pcl833 import FakePcl833Port
 from rt.drivers.pcl833 import (
-    COUNTER_MODULUS, MIDPOINT, REG_CLOCK_CASCADE, REG_COUNTER_RESET, CountUnwrapper, InputMode,
-    Pcl833Encoders, count_register, decode_counts, encode_position, latch_register,
+    COUNTER_MODULUS,
+    MIDPOINT,
+    REG_CLOCK_CASCADE,
+    REG_COUNTER_RESET,
+    CountUnwrapper,
+    InputMode,
+    Pcl833Encoders,
+    count_register,
+    decode_counts,
+    encode_position,
+    latch_register,
     mode_register,
 )
 from rt.drivers.port_io import DevPortIO, check_ioperm
@@ -206,7 +215,7 @@ def test_high_byte_read_latches_the_counter():
 
 
 def test_reset_bits_hold_the_counter_until_released():
-    port, enc = make()
+    port, _enc = make()
     port.outb(BASE + REG_COUNTER_RESET, 0x01)             # hold channel 1 only
     port.set_positions_m([0.1, 0.1, 0.1])
     assert (port.count(0), port.count(1)) == (MIDPOINT, MIDPOINT + 5000)

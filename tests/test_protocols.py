@@ -15,10 +15,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from protocols import (GeneratorInput, GeneratorStatus, Mode, ReferenceOutput, list_library,
-                       load_protocol, make_generator)
-from protocols.generators import (ActiveAssistGenerator, AnkleRomGenerator,
-                                  PositionPlaybackGenerator, SineFzGenerator)
+from protocols import (
+    GeneratorInput,
+    GeneratorStatus,
+    Mode,
+    ReferenceOutput,
+    list_library,
+    load_protocol,
+    make_generator,
+)
+from protocols.generators import (
+    ActiveAssistGenerator,
+    AnkleRomGenerator,
+    PositionPlaybackGenerator,
+    SineFzGenerator,
+)
 from protocols.library import LIBRARY_DIR, parse_protocol_text
 from protocols.library_data import GAIT_CSV, PLAYBACK_CSV, playback_demo_q
 from rt.errors import ConfigurationError, ProtocolValidationError
@@ -178,8 +189,8 @@ def test_a_protocol_beyond_its_own_limits_is_reported_and_not_run(robot):
     gen = gen_from(SINE.replace("max_force_n: 500.0", "max_force_n: 350.0"), robot)
     report = gen.validate()
     assert not report.ok
-    assert report.violations == ["limits.max_force_n: the force reaches 400.0 N, above the "
-                                 "protocol's 350.0 N"]
+    assert report.violations == [("limits.max_force_n: the force reaches 400.0 N, above the "
+                                 "protocol's 350.0 N")]
     assert gen.update(ReferenceOutput()) == GeneratorStatus.ERROR_NOT_VALIDATED
     with pytest.raises(ProtocolValidationError, match="protocol 'Sine Fz.*' refused: limits"):
         report.raise_if_failed()
@@ -277,7 +288,7 @@ def test_force_mode_holds_the_pose(robot):
 def test_run_to_the_end_finishes_and_holds(robot):
     gen = gen_from(sine_text(cycles=1, ramp_in=0.1, ramp_out=0.1), robot)
     gen.validate()
-    rows, statuses = run_all(gen)
+    _rows, statuses = run_all(gen)
     assert statuses[-1] == GeneratorStatus.FINISHED and len(statuses) == gen.n_samples
     assert all(s == GeneratorStatus.RUNNING for s in statuses[:-1])
     out = ReferenceOutput()
@@ -364,14 +375,14 @@ def test_ankle_rom_circuit_goes_through_the_four_ends(robot):
 
 def test_rom_beyond_the_protocol_limits_is_a_violation(robot):
     report = gen_from(ROM.replace("pitch_max_deg: 12.0", "pitch_max_deg: 9.0"), robot).validate()
-    assert report.violations == ["limits.pitch_max_deg: the reference reaches pitch 10.00 deg, "
-                                 "above the protocol's 9.0 deg"]
+    assert report.violations == [("limits.pitch_max_deg: the reference reaches pitch 10.00 deg, "
+                                 "above the protocol's 9.0 deg")]
     report = gen_from(ROM.replace("max_angular_speed_deg_s: 12.0", "max_angular_speed_deg_s: 8"),
                       robot).validate()
     assert report.violations == [
-        "limits.max_angular_speed_deg_s: the roll rate reaches 10.00 deg/s, above the protocol's "
-        "8.0 deg/s", "limits.max_angular_speed_deg_s: the pitch rate reaches 10.00 deg/s, above "
-        "the protocol's 8.0 deg/s"]
+        ("limits.max_angular_speed_deg_s: the roll rate reaches 10.00 deg/s, above the protocol's "
+        "8.0 deg/s"), ("limits.max_angular_speed_deg_s: the pitch rate reaches 10.00 deg/s, above "
+        "the protocol's 8.0 deg/s")]
 
 
 # ------------------------------------------------------------------------------ isometric
@@ -538,7 +549,7 @@ def test_active_assist_update_keeps_no_memory_over_10000_cycles(robot):
     retention (≥ 240 kB for one float a cycle)."""
     gen = load_and_make("active_assist.yaml", robot)
     assert gen.validate().ok
-    r2, p2 = measure(gen, 2_000)
+    r2, _p2 = measure(gen, 2_000)
     r1, p1 = measure(gen, 10_000)
     assert r1 < 8192 and p1 < 16384, (r1, p1)
     assert abs(r2 - r1) < 1024, f"retention grows with the cycles: {r1} B, then {r2} B"

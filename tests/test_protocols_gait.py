@@ -325,7 +325,7 @@ def test_library_gait_scales_to_body_weight_exactly(robot):
     # sample, which the interpolant reproduces exactly; compare away from the 20 ms tapers.
     rec = gait.read_grf_csv(LIBRARY_DIR / GAIT_CSV)
     st = gen.stance
-    i0 = int(round(st.start_s * 500.0))  # the stance's first record sample (lead-in included)
+    i0 = round(st.start_s * 500.0)  # the stance's first record sample (lead-in included)
     k = np.arange(40, gen._n_stance - 40, 2)  # played samples on record samples, no taper
     np.testing.assert_allclose(s["fz"][k], scale * rec.fz[i0 + k // 2], rtol=1e-12)
     np.testing.assert_allclose(s["fz"][k], scale * st.fz[k // 2], rtol=1e-12)

@@ -19,16 +19,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from talus.cli import main as talus_main
 from rt.components.blocks import RecorderTap
 from rt.errors import InputError
 from rt.recording import writer as writer_mod
-from rt.recording.channels import (CHANNELS, EVENTS, METADATA, REFERENCE, STATE, WRENCH,
-                                   log_time_ns)
-from rt.recording.reader import (RecordingFileError, RecordingScan, TruncatedRecordingError,
-                                 export_csv, read_recording, recover)
+from rt.recording.channels import CHANNELS, EVENTS, METADATA, REFERENCE, STATE, WRENCH, log_time_ns
+from rt.recording.reader import (
+    RecordingFileError,
+    RecordingScan,
+    TruncatedRecordingError,
+    export_csv,
+    read_recording,
+    recover,
+)
 from rt.recording.writer import SessionRecorder
 from rt.safety.events import EventLog, Reaction, SafetyEvent
+from talus.cli import main as talus_main
 
 RATE_HZ = 1000
 DURATION_S = 5.0
@@ -251,7 +256,7 @@ class _StallingFile:
     """A file whose writes block while ``gate`` is clear: a disk that stopped answering."""
 
     def __init__(self, path: Path):
-        self.raw = open(path, "wb")
+        self.raw = open(path, "wb")  # noqa: SIM115 - owned by this wrapper, closed by close()
         self.gate = threading.Event()
         self.gate.set()
         self.blocked = threading.Event()
@@ -527,9 +532,11 @@ def test_bad_metadata_and_unknown_channels_are_refused(tmp_path: Path) -> None:
                                               if k != "patient_id"})
     with pytest.raises(InputError, match="compression"):
         SessionRecorder(tmp_path / "m.mcap", METADATA_IN, compression="gzip")
-    with SessionRecorder(tmp_path / "m.mcap", METADATA_IN) as rec:
-        with pytest.raises(InputError, match="unknown channel"):
-            rec.publish("/nope", {"t": 0.0})
+    with (
+        SessionRecorder(tmp_path / "m.mcap", METADATA_IN) as rec,
+        pytest.raises(InputError, match="unknown channel"),
+    ):
+        rec.publish("/nope", {"t": 0.0})
     assert rec.closed and not rec.event({"t": 1.0}) and rec.close()["dropped"][EVENTS] == 0
     # (a drop after close is counted by dropped(), not in the frozen summary)
     assert rec.dropped()[EVENTS] == 1

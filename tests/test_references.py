@@ -15,17 +15,21 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from ruckig import (ControlInterface, InputParameter, OutputParameter, Result, Ruckig,
-                    Trajectory)
+from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig, Trajectory
 
 from rt.errors import ProtocolValidationError
-from rt.references.approach import (DEFAULT_MAX_ACCELERATION_M_S2 as AMAX,
-                                    DEFAULT_MAX_JERK_M_S3 as JMAX,
-                                    DEFAULT_MAX_VELOCITY_M_S as VMAX, STROKE_M, Approach,
-                                    ApproachStatus, Mode, trajectory_position_extrema)
+from rt.references.approach import DEFAULT_MAX_ACCELERATION_M_S2 as AMAX
+from rt.references.approach import DEFAULT_MAX_JERK_M_S3 as JMAX
+from rt.references.approach import DEFAULT_MAX_VELOCITY_M_S as VMAX
+from rt.references.approach import (
+    STROKE_M,
+    Approach,
+    ApproachStatus,
+    Mode,
+    trajectory_position_extrema,
+)
 from rt.references.benchmark_trajectory import BenchmarkTrajectory
-from rt.references.playback import (ReferenceStatus, SourceProgram, TrajectoryPlayback,
-                                    load_csv)
+from rt.references.playback import ReferenceStatus, SourceProgram, TrajectoryPlayback, load_csv
 from rt.references.program import Mode as ProgramMode
 from rt.references.program import ReferenceOutput
 from rt.references.sequencer import Phase, ProgramReference
@@ -237,7 +241,7 @@ def test_overshooting_soft_stop_is_clamped_and_flagged() -> None:
     ap = Approach()
     ap.reset([0.39, 0.2, 0.2], [0.1, 0.0, 0.0])
     assert ap.soft_stop() == ApproachStatus.ERROR_OVERSHOOT  # a stop is never refused
-    p, v, a, statuses = run(ap)
+    p, _v, _a, statuses = run(ap)
     assert np.max(p) <= HI
     assert ApproachStatus.ERROR_POSITION_LIMIT in statuses
     assert statuses[-1] == ApproachStatus.FINISHED
@@ -348,11 +352,11 @@ def test_playback_at_loop_rate_reproduces_samples(tmp_path: Path, bench) -> None
     q = bench.evaluate(t)[0]
     play = TrajectoryPlayback.from_csv(write_csv(tmp_path / "traj.csv", t, q))
     assert play.n_samples == t.size
-    p, v, a, statuses = run(play, stop_on=(ReferenceStatus.FINISHED,))
+    p, v, _a, statuses = run(play, stop_on=(ReferenceStatus.FINISHED,))
     np.testing.assert_allclose(p, q, atol=1e-15)  # an interpolating spline hits its samples
     assert statuses.count(ReferenceStatus.FINISHED) == 1
     assert statuses[-1] == ReferenceStatus.FINISHED
-    _, va, aa = bench.evaluate(t)
+    _, va, _aa = bench.evaluate(t)
     np.testing.assert_allclose(v, va, atol=1e-6)  # analytic derivative of the spline
 
 
@@ -430,10 +434,10 @@ def _edit(line: int, text: str | None) -> list[str]:
     (_edit(4, None), {}, 4, "not uniformly sampled"),  # line 4 is now t = 0.03 (0.02 dropped)
     (_edit(3, "0.01,0.45,0.2,0.2"), {}, 3, r"column 'q0': position 0.45 m is outside the stroke"),
     (_edit(3, "0.01,0.2,-0.01,0.2"), {}, 3, "column 'q1': position -0.01 m is outside the stroke"),
-    (_edit(4, "0.02,0.2,0.2,0.2025"), {}, 4, "column 'q2': velocity 0.25 m/s from line 3 to 4 "
-                                             "exceeds the limit 0.15 m/s"),
-    (_edit(4, "0.02,0.2,0.2001,0.2"), {}, 3, "column 'q1': acceleration 1 m/s² (second difference "
-                                             "over lines 2 to 4) exceeds the limit 0.5 m/s²"),
+    (_edit(4, "0.02,0.2,0.2,0.2025"), {}, 4, ("column 'q2': velocity 0.25 m/s from line 3 to 4 "
+                                             "exceeds the limit 0.15 m/s")),
+    (_edit(4, "0.02,0.2,0.2001,0.2"), {}, 3, ("column 'q1': acceleration 1 m/s² (second difference "
+                                             "over lines 2 to 4) exceeds the limit 0.5 m/s²")),
     (["q0,q1,q2", "0.2,0.2,0.2", "0.2,0.2,0.2"], {}, 1, "declare its sample_rate_hz"),
     (_GOOD, {"sample_rate_hz": 100.0}, 1, "do not also declare sample_rate_hz"),
     (["0.0,0.2,0.2,0.2", "0.01,0.2,0.2,0.2"], {"sample_rate_hz": 100.0}, 1,
@@ -556,7 +560,7 @@ def test_sequencer_benchmark_with_thesis_8s_approach(bench) -> None:
     # The request is taken on the first cycle, whose sample is the approach's first.
     assert [(s, n) for s, n in seams] == [(Phase.APPROACH, 8000), (Phase.PLAY, 26000),
                                           (Phase.RETURN, 7999), (Phase.REST, 1)]
-    qa, va, aa = bench.evaluate(np.arange(1, 26001) * DT)
+    qa, _va, _aa = bench.evaluate(np.arange(1, 26001) * DT)
     np.testing.assert_allclose(p[8000:34000], qa, atol=1e-12)
     assert_within_limits([0.2] * 3, [0] * 3, [0] * 3, p, v, a)
 
@@ -590,7 +594,7 @@ def test_sequencer_abort_returns_to_rest_without_fault(bench) -> None:
     h.ref.request(SourceProgram(bench))
     h.run(n_max=3000, until=())
     h.ref.request_abort()
-    p, v, a, phases = h.run(n_max=5000)
+    _p, v, _a, phases = h.run(n_max=5000)
     assert phases[0] == Phase.RETURN and phases[-1] == Phase.REST
     assert len(phases) * DT <= 0.5
     np.testing.assert_array_equal(v[-1], 0.0)
@@ -629,7 +633,7 @@ class _ForceHold:
     def __init__(self, q, duration_s: float = 2.0) -> None:
         self.q = np.array(q, float)
         self.duration_s = duration_s
-        self.n = int(round(duration_s / DT)) + 1
+        self.n = round(duration_s / DT) + 1
         self.k = 0
 
     @staticmethod

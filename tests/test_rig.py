@@ -12,8 +12,8 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 import pytest
@@ -279,7 +279,7 @@ def test_rig_devices_with_the_ati_on_can(robot) -> None:
 def test_the_amplifier_monitor_catches_a_dead_dac_channel(robot) -> None:
     """A channel that accepts writes but outputs nothing: only the read-back sees it, and the
     second card takes over within a few cycles, the sliders held."""
-    with running_rig(robot, monitor=True) as (pl, world, devices):
+    with running_rig(robot, monitor=True) as (pl, world, _devices):
         time.sleep(0.7)
         commanded = float(pl.graph.output("supervisor.volts")[1])
         assert abs(commanded) > 0.1          # holding against gravity: a dead 0 V is visible

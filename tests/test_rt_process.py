@@ -256,7 +256,7 @@ def latched_event(endpoint: str, cause: str, timeout_s: float = 10.0):
 
 
 def test_killed_owner_soft_stops_within_the_heartbeat_timeout(rt_process):
-    _, endpoint, pub = rt_process
+    _, endpoint, _pub = rt_process
     child = subprocess.Popen([sys.executable, "-c", _driver_script(
         endpoint, 'c.run("benchmark", {"duration_s": 60.0})')], stdout=subprocess.PIPE,
         text=True)

@@ -20,27 +20,27 @@ DT = 1e-3
 
 def _check(sup: Supervisor, t: float = 1.0, **over) -> Reaction:
     """One cycle at a healthy mid-stroke state, with ``over`` replacing some inputs."""
-    args = dict(q=[0.2, 0.2, 0.2], est_status=0, qd=[0.0] * 3, qdd=[0.0] * 3, fk_ok=True,
-                roll=0.0, pitch=0.0, roll_rate=0.0, pitch_rate=0.0, q_ref=[0.2, 0.2, 0.2],
-                qd_ref=[0.0] * 3, tau=[0.0] * 3, force_n=0.0, wrench_stale=False,
-                wrench_saturated=False, hw_estop=False, hand_stop=False, drive_failed=False)
+    args = {"q": [0.2, 0.2, 0.2], "est_status": 0, "qd": [0.0] * 3, "qdd": [0.0] * 3, "fk_ok": True,
+                "roll": 0.0, "pitch": 0.0, "roll_rate": 0.0, "pitch_rate": 0.0, "q_ref": [0.2, 0.2, 0.2],
+                "qd_ref": [0.0] * 3, "tau": [0.0] * 3, "force_n": 0.0, "wrench_stale": False,
+                "wrench_saturated": False, "hw_estop": False, "hand_stop": False, "drive_failed": False}
     args.update(over)
     return sup.check(t, DT, **args)
 
 
 CASES = [
-    ("stroke_margin_0", dict(q=[0.003, 0.2, 0.2], q_ref=[0.003, 0.2, 0.2]), Reaction.SOFT_STOP),
-    ("stroke_1", dict(q=[0.2, 0.401, 0.2], q_ref=[0.2, 0.401, 0.2]), Reaction.HARD_STOP),
-    ("fk_failed", dict(fk_ok=False), Reaction.HARD_STOP),
-    ("tracking_2", dict(q=[0.2, 0.2, 0.2 + 3.1 * LIM.max_tracking_error_m]), Reaction.HARD_STOP),
-    ("tracking_0", dict(q=[0.2 + 1.5 * LIM.max_tracking_error_m, 0.2, 0.2]), Reaction.SOFT_STOP),
-    ("rom_roll", dict(roll=LIM.roll_max + LIM.rom_tolerance + 0.01), Reaction.HARD_STOP),
-    ("rom_pitch", dict(pitch=LIM.pitch_min + 0.001, pitch_rate=-0.2), Reaction.SOFT_STOP),
-    ("speed_2", dict(qd=[0.0, 0.0, 0.25]), Reaction.SOFT_STOP),
-    ("angular_speed_pitch", dict(pitch_rate=math.radians(70.0)), Reaction.SOFT_STOP),
-    ("force_limit", dict(force_n=LIM.max_force_n * 1.01), Reaction.HARD_STOP),
-    ("force_limit", dict(force_n=LIM.max_force_n * 0.95), Reaction.SOFT_STOP),
-    ("drive_channel", dict(drive_failed=True), Reaction.HARD_STOP),
+    ("stroke_margin_0", {"q": [0.003, 0.2, 0.2], "q_ref": [0.003, 0.2, 0.2]}, Reaction.SOFT_STOP),
+    ("stroke_1", {"q": [0.2, 0.401, 0.2], "q_ref": [0.2, 0.401, 0.2]}, Reaction.HARD_STOP),
+    ("fk_failed", {"fk_ok": False}, Reaction.HARD_STOP),
+    ("tracking_2", {"q": [0.2, 0.2, 0.2 + 3.1 * LIM.max_tracking_error_m]}, Reaction.HARD_STOP),
+    ("tracking_0", {"q": [0.2 + 1.5 * LIM.max_tracking_error_m, 0.2, 0.2]}, Reaction.SOFT_STOP),
+    ("rom_roll", {"roll": LIM.roll_max + LIM.rom_tolerance + 0.01}, Reaction.HARD_STOP),
+    ("rom_pitch", {"pitch": LIM.pitch_min + 0.001, "pitch_rate": -0.2}, Reaction.SOFT_STOP),
+    ("speed_2", {"qd": [0.0, 0.0, 0.25]}, Reaction.SOFT_STOP),
+    ("angular_speed_pitch", {"pitch_rate": math.radians(70.0)}, Reaction.SOFT_STOP),
+    ("force_limit", {"force_n": LIM.max_force_n * 1.01}, Reaction.HARD_STOP),
+    ("force_limit", {"force_n": LIM.max_force_n * 0.95}, Reaction.SOFT_STOP),
+    ("drive_channel", {"drive_failed": True}, Reaction.HARD_STOP),
 ]
 
 
@@ -67,7 +67,7 @@ def test_pulling_on_the_foot_soft_stops_after_max_pull_s():
     a pull held for it is a soft stop; in position control it is not judged."""
     sup = Supervisor(LIM, DT)
     sup.force_control = True
-    n = int(round(LIM.max_pull_s / DT))
+    n = round(LIM.max_pull_s / DT)
     for k in range(n - 1):
         assert _check(sup, t=k * DT, fz_n=-5.0, force_n=5.0) == Reaction.NONE
     assert _check(sup, t=n * DT, fz_n=2.0, force_n=2.0) == Reaction.NONE   # crossed back

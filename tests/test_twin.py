@@ -40,7 +40,7 @@ def _rig(**kwargs):
 
 def _run(clock, twin, seconds, dt=0.001):
     """Advance the simulated clock in control periods, syncing the twin as a loop would."""
-    for _ in range(int(round(seconds / dt))):
+    for _ in range(round(seconds / dt)):
         clock.t += dt
         twin.sync()
 
@@ -94,7 +94,7 @@ def test_constant_volts_settle_where_statics_says(robot):
     # 2 mm gap above the tool tip at home (0.633 + 0.080 + 0.020 m); damping near critical so
     # the contact settles in a few seconds without friction.
     plate = ForcePlateContact(plate_height_m=0.735, tool_length_m=0.02, damping_n_s_per_m=5e4)
-    clock, twin, enc, card0, _, ati = _rig(environment=plate, frictionless=True)
+    clock, twin, _enc, card0, _, ati = _rig(environment=plate, frictionless=True)
     volts = holding_volts(twin) + 0.6                 # ~200 N per axis more than gravity
     card0.write_volts(volts)
     _run(clock, twin, 4.0)
@@ -117,7 +117,7 @@ def test_constant_volts_settle_where_statics_says(robot):
 
 
 def test_friction_holds_within_its_band():
-    clock, twin, enc, card0, _, _ = _rig()
+    clock, twin, _enc, card0, _, _ = _rig()
     hold = holding_volts(twin)
     # 40 N below gravity per axis: inside the 75 N static friction, the robot must not sink.
     card0.write_volts(hold - 40.0 / 339.29)
@@ -173,7 +173,7 @@ def test_second_card_takes_over():
 
 
 def test_payload_step_at_its_time(robot):
-    clock, twin, enc, card0, _, _ = _rig(environment=PayloadStep(mass_kg=100.0, at_s=0.3))
+    clock, twin, _enc, card0, _, _ = _rig(environment=PayloadStep(mass_kg=100.0, at_s=0.3))
     card0.write_volts(holding_volts(twin))
     _run(clock, twin, 0.29)
     assert twin.plant.payload is None and abs(twin.plant.qd).max() < 1e-3
@@ -186,7 +186,7 @@ def test_compliant_ankle_pushes_back():
     # The foot is unloaded when the sensor origin (80 mm above the platform origin) is at
     # neutral_z_m: here with the platform at 0.633 m.
     ankle = CompliantAnkle(neutral_z_m=0.633 + 0.080, limb_weight_n=0.0)
-    clock, twin, enc, card0, _, ati = _rig(environment=ankle)
+    clock, twin, _enc, _card0, _, ati = _rig(environment=ankle)
     twin.place(twin.plant.kin.ik(0.653, 0.0, 0.0).q)    # 20 mm above the foot's neutral height
     twin.home_encoders()
     clock.t += 0.001
@@ -253,7 +253,7 @@ def test_dead_and_stuck_dac_channels():
 
 
 def test_ati_faults_show_in_the_readings():
-    clock, twin, enc, card0, _, ati = _rig(environment=ForcePlateContact(plate_height_m=0.70))
+    clock, twin, _enc, card0, _, ati = _rig(environment=ForcePlateContact(plate_height_m=0.70))
     card0.write_volts(holding_volts(twin) + 0.5)
     twin.faults.schedule("ati_dropout", 1.0, 1.2)
     twin.faults.schedule("ati_stale", 1.5, 1.7)
@@ -304,12 +304,12 @@ def test_stop_inputs_follow_the_fault_plan():
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    (dict(kind="encoder_freeze", axis=3), "axis 0, 1 or 2"),
-    (dict(kind="encoder_jump", axis=0, counts=0), "non-zero integer"),
-    (dict(kind="dac_dead", card=2, channel=0), "card 0 or 1"),
-    (dict(kind="latency", seconds=2.0), "0 < seconds <= 0.5"),
-    (dict(kind="melt"), "unknown fault kind 'melt'"),
-    (dict(kind="ati_dropout", t_start=1.0, t_end=0.5), "must be after"),
+    ({"kind": "encoder_freeze", "axis": 3}, "axis 0, 1 or 2"),
+    ({"kind": "encoder_jump", "axis": 0, "counts": 0}, "non-zero integer"),
+    ({"kind": "dac_dead", "card": 2, "channel": 0}, "card 0 or 1"),
+    ({"kind": "latency", "seconds": 2.0}, "0 < seconds <= 0.5"),
+    ({"kind": "melt"}, "unknown fault kind 'melt'"),
+    ({"kind": "ati_dropout", "t_start": 1.0, "t_end": 0.5}, "must be after"),
 ])
 def test_bad_fault_requests_are_refused(kwargs, message):
     twin = Twin.ideal()

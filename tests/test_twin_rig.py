@@ -9,6 +9,7 @@ allow for host stalls of a few ms (PLATFORM.md); the measured figures are printe
 """
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -31,8 +32,7 @@ from rt.drivers.pci1720 import code_to_volts, volts_to_code
 from rt.drivers.pcl833 import MIDPOINT
 from rt.errors import HardwareError, InputError
 from rt.twin import shm as layout
-from rt.twin.shm_backends import (ShmActuators, ShmDigitalInputs, ShmEncoders, ShmForceTorque,
-                                  ShmRig)
+from rt.twin.shm_backends import ShmActuators, ShmEncoders, ShmRig
 
 REPO = Path(__file__).resolve().parents[1]
 WATCHDOG_S = 0.02
@@ -175,7 +175,7 @@ def rig_name():
     try:
         yield name
     finally:
-        code, out, err = _stop_rig(proc) if proc.poll() is None else (proc.returncode, "", "")
+        code, _out, err = _stop_rig(proc) if proc.poll() is None else (proc.returncode, "", "")
         leaked = os.path.exists(f"/dev/shm/{name}")
         _remove_segment(name)
         assert code == 0, err
@@ -198,7 +198,7 @@ def test_layout_fields_are_aligned_disjoint_and_inside_their_blocks():
             assert first <= off and off + nbytes <= size, name
             used.append((off, off + nbytes, name))
         used.sort()
-        for (a0, a1, a), (b0, b1, b) in zip(used, used[1:]):
+        for (a0, a1, a), (b0, b1, b) in itertools.pairwise(used):
             assert a1 <= b0, f"{a} overlaps {b}"
     assert end == layout.TOTAL_SIZE
     # The module docstring documents every field at its offset.
@@ -634,9 +634,11 @@ def test_closing_twice_is_safe_and_closed_handles_refuse_work(rig_name):
 
 def test_the_cli_refuses_a_bad_or_taken_name(rig_name):
     bad = subprocess.run([sys.executable, "-m", "rt.twin.rig_cli", "rig", "--shm", "a/b"],
-                         cwd=REPO, env=_env(), capture_output=True, text=True, timeout=30)
+                         cwd=REPO, env=_env(),
+                         check=False, capture_output=True, text=True, timeout=30)
     assert bad.returncode == 2 and "malformed" in json.loads(bad.stdout)["error"]
     taken = subprocess.run([sys.executable, "-m", "rt.twin.rig_cli", "rig", "--shm", rig_name],
-                           cwd=REPO, env=_env(), capture_output=True, text=True, timeout=30)
+                           cwd=REPO, env=_env(),
+                           check=False, capture_output=True, text=True, timeout=30)
     assert taken.returncode == 2 and "already exists" in json.loads(taken.stdout)["error"]
     assert os.path.exists(f"/dev/shm/{rig_name}")    # the running rig's segment is untouched

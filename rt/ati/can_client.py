@@ -14,15 +14,27 @@ import math
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Self
 
 import can
 
 from rt.ati.can_protocol import (
-    DEFAULT_CAN_COUNTS_PER_FORCE, DEFAULT_CAN_COUNTS_PER_TORQUE, OFFSET_SHORT_XY,
-    OFFSET_SHORT_Z, OP_BIAS, OP_REQUEST_SHORT, STATUS16_SATURATION_MASK, check_base_id,
-    decode_request, decode_short_xy, decode_short_z, encode_request, encode_short_response,
-    status16_from_status32, status32_from_status16, to_counts16,
+    DEFAULT_CAN_COUNTS_PER_FORCE,
+    DEFAULT_CAN_COUNTS_PER_TORQUE,
+    OFFSET_SHORT_XY,
+    OFFSET_SHORT_Z,
+    OP_BIAS,
+    OP_REQUEST_SHORT,
+    STATUS16_SATURATION_MASK,
+    check_base_id,
+    decode_request,
+    decode_short_xy,
+    decode_short_z,
+    encode_request,
+    encode_short_response,
+    status16_from_status32,
+    status32_from_status16,
+    to_counts16,
 )
 from rt.ati.rdt import CountsPerUnit
 from rt.ati.twin_sensor import SourceReader, WrenchSource
@@ -270,7 +282,7 @@ class AtiCanResponder:
         if self._owns_bus:
             self._bus.shutdown()
 
-    def __enter__(self) -> "AtiCanResponder":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -300,7 +312,8 @@ class AtiCanResponder:
                     self._reader.set_bias()
                 elif opcode == OP_REQUEST_SHORT:
                     self._reply()
-            except Exception as exc:  # a faulty source must not kill the responder thread
+            # A faulty source must not kill the responder thread.
+            except Exception as exc:  # noqa: BLE001
                 self.counters.source_errors += 1
                 self.last_error = f"source failed: {exc!r}"
 

@@ -27,8 +27,9 @@ Not from the manual (talus choices, marked where they matter):
 """
 from __future__ import annotations
 
+import math
 import struct
-from typing import Sequence
+from collections.abc import Sequence
 
 from rt.ati.rdt import CountsPerUnit
 from rt.errors import InputError, ProtocolError
@@ -95,10 +96,10 @@ def to_counts16(values: Sequence[float], scale: CountsPerUnit) -> tuple[int, ...
     out = []
     for i in range(6):
         x = values[i] * (scale.force if i < 3 else scale.torque)
-        if x != x:
+        if math.isnan(x):
             raise InputError("cannot encode NaN as ATI CAN counts")
         out.append(_INT16_MAX if x >= _INT16_MAX else _INT16_MIN if x <= _INT16_MIN
-                   else int(round(x)))
+                   else round(x))
     return tuple(out)
 
 

@@ -16,7 +16,6 @@ from typing import Any
 from rt.ati.rdt import DEFAULT_COUNTS_PER_FORCE, DEFAULT_COUNTS_PER_TORQUE, RDT_PORT
 from rt.cli_args import bounded_int, finite_float, port_number, rate_hz, seconds, seed
 from rt.errors import InputError, TalusError
-from rt.errors import TalusError
 from rt.model.robot_option import add_robot_option
 
 EXIT_ERROR = 2
@@ -143,9 +142,8 @@ def cmd_serve_ati(args: argparse.Namespace) -> int:
                          "(a constant --wrench has no amplifiers to command)")
     try:
         if args.env is not None:
-            from rt.twin.serve import twin_wrench_source
-
             from rt.model.description import load_description
+            from rt.twin.serve import twin_wrench_source
 
             source = twin_wrench_source(args.env, args.volts, args.seed,
                                         load_description(args.robot))

@@ -13,10 +13,15 @@ import socket
 import socketserver
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Any
+from typing import Any, Self
 
-from rt.ati.netft_config import (CAL_INFO_REQUEST, CMD_READ_CAL_INFO, NETFT_XML_PATH,
-                                 NetFtConfiguration, decode_cal_info_request)
+from rt.ati.netft_config import (
+    CAL_INFO_REQUEST,
+    CMD_READ_CAL_INFO,
+    NETFT_XML_PATH,
+    NetFtConfiguration,
+    decode_cal_info_request,
+)
 from rt.errors import ProtocolError
 
 #: A TCP client gets this long to send its 20-byte command (s).
@@ -24,10 +29,10 @@ TCP_COMMAND_TIMEOUT_S = 2.0
 
 
 class _XmlHandler(BaseHTTPRequestHandler):
-    server: "_HttpServer"
+    server: _HttpServer
     protocol_version = "HTTP/1.1"
 
-    def do_GET(self) -> None:  # noqa: N802 (http.server's naming)
+    def do_GET(self) -> None:
         path = self.path.split("?", 1)[0]
         body = self.server.config.to_xml() if path == NETFT_XML_PATH else b""
         self.server.requests += 1     # counted before answering: a client then sees it
@@ -38,7 +43,7 @@ class _XmlHandler(BaseHTTPRequestHandler):
         self.end_headers()
         self.wfile.write(body)
 
-    def log_message(self, format: str, *args: Any) -> None:  # noqa: A002
+    def log_message(self, format: str, *args: Any) -> None:
         pass   # no per-request lines on stderr: the CLI's stdout is JSON lines
 
 
@@ -52,7 +57,7 @@ class _HttpServer(ThreadingHTTPServer):
 
 
 class _TcpHandler(socketserver.BaseRequestHandler):
-    server: "_TcpServer"
+    server: _TcpServer
 
     def handle(self) -> None:
         sock: socket.socket = self.request
@@ -136,7 +141,7 @@ class NetFtConfigServer:
             thread.join(timeout=5.0)
         self._threads = []
 
-    def __enter__(self) -> "NetFtConfigServer":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -132,6 +132,6 @@ def decode_cal_info_response(data: bytes) -> NetFtConfiguration:
         raise ProtocolError(f"calibration answer has unknown unit codes {fu}, {tu}") from None
     try:
         return NetFtConfiguration(cpf, cpt, force_unit, torque_unit,
-                                  scale_factors=tuple(scale))  # type: ignore[arg-type]
+                                  scale_factors=tuple(scale))
     except InputError as exc:
         raise ProtocolError(f"calibration answer: {exc}") from None

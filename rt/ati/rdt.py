@@ -27,9 +27,11 @@ buffered datagram) and restarts at 1 after each start command.
 """
 from __future__ import annotations
 
+import math
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
 
 from rt.errors import InputError, ProtocolError
 
@@ -121,13 +123,13 @@ class CountsPerUnit:
 
 
 def _clip_int32(x: float) -> int:
-    if x != x:  # NaN has no count; the device never sends one, so neither do we
+    if math.isnan(x):  # NaN has no count; the device never sends one, so neither do we
         raise InputError("cannot encode NaN as RDT counts")
     if x >= _INT32_MAX:
         return _INT32_MAX
     if x <= _INT32_MIN:
         return _INT32_MIN
-    return int(round(x))
+    return round(x)
 
 
 def encode_request(command: int, sample_count: int = 0) -> bytes:

@@ -15,9 +15,18 @@ import time
 from dataclasses import dataclass
 
 from rt.ati.rdt import (
-    CMD_SET_SOFTWARE_BIAS, CMD_START_BUFFERED, CMD_START_REALTIME, CMD_STOP, RDT_PORT,
-    RECORD_SIZE, RECORD_STRUCT, STATUS_SATURATION_MASK, CountsPerUnit, check_datagram,
-    encode_request, sequence_gap,
+    CMD_SET_SOFTWARE_BIAS,
+    CMD_START_BUFFERED,
+    CMD_START_REALTIME,
+    CMD_STOP,
+    RDT_PORT,
+    RECORD_SIZE,
+    RECORD_STRUCT,
+    STATUS_SATURATION_MASK,
+    CountsPerUnit,
+    check_datagram,
+    encode_request,
+    sequence_gap,
 )
 from rt.devices.interfaces import ForceTorqueSensor, Wrench
 from rt.errors import HardwareError, InputError, ProtocolError

@@ -16,10 +16,18 @@ import socket
 import threading
 import time
 from dataclasses import dataclass
+from typing import Self
 
 from rt.ati.rdt import (
-    CMD_SET_SOFTWARE_BIAS, CMD_START_BUFFERED, CMD_START_REALTIME, CMD_STOP, RDT_PORT,
-    RECORD_SIZE, CountsPerUnit, decode_request, pack_record_into,
+    CMD_SET_SOFTWARE_BIAS,
+    CMD_START_BUFFERED,
+    CMD_START_REALTIME,
+    CMD_STOP,
+    RDT_PORT,
+    RECORD_SIZE,
+    CountsPerUnit,
+    decode_request,
+    pack_record_into,
 )
 from rt.ati.twin_sensor import SourceReader, WrenchSource
 from rt.errors import InputError, ProtocolError
@@ -128,7 +136,7 @@ class RdtServer:
         for s in (self._sock, self._wake_r, self._wake_w):
             s.close()
 
-    def __enter__(self) -> "RdtServer":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -194,7 +202,8 @@ class RdtServer:
                 # Averages BIAS_SAMPLES fresh samples, waiting one record period for each
                 # the source has not produced yet (≈ 16 ms at 1 kHz; requests wait meanwhile).
                 self._reader.set_bias(wait=lambda: time.sleep(self._period))
-            except Exception as exc:  # a faulty source must not kill the server thread
+            # A faulty source must not kill the server thread.
+            except Exception as exc:  # noqa: BLE001
                 self.counters.source_errors += 1
                 self.last_error = f"source failed during bias: {exc!r}"
 
@@ -202,7 +211,7 @@ class RdtServer:
         reader = self._reader
         try:
             fresh = reader.poll()
-        except Exception as exc:  # a faulty source must not kill the server thread
+        except Exception as exc:  # noqa: BLE001 - a faulty source must not kill the server thread
             self.counters.source_errors += 1
             self.last_error = f"source failed: {exc!r}"
             return

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, NamedTuple, Sequence, Union
+from typing import NamedTuple
 
 import numpy as np
 
@@ -51,9 +52,13 @@ class AtiSample(NamedTuple):
 #: What a ``WrenchSource`` may return: ``None`` when no new sample exists (dropout),
 #: ``(wrench6, status)`` (the server numbers the samples) or ``(wrench6, status, ft_sequence)``
 #: (the source numbers them; a repeated ft_sequence marks a stale sample).
-SourceResult = Union[None, tuple[Sequence[float], int], tuple[Sequence[float], int, int]]
+SourceResult = tuple[Sequence[float], int] | tuple[Sequence[float], int, int] | None
 #: Zero-argument callable giving the sensor's current sample; called from the server thread.
 WrenchSource = Callable[[], SourceResult]
+
+
+def _constantly(value: tuple[float, ...]) -> Callable[[], tuple[float, ...]]:
+    return lambda: value
 
 
 def _as6(name: str, values: Sequence[float]) -> Wrench6:
@@ -200,7 +205,7 @@ class TwinAtiSensorModel:
             raise InputError(f"unknown ATI sensor fault {name!r}; known: {', '.join(FAULTS)}")
 
     # ---------------------------------------------------------------- physics
-    def measure(self, true_wrench: Sequence[float], t: float) -> AtiSample | None:
+    def measure(self, true_wrench: Sequence[float] | np.ndarray, t: float) -> AtiSample | None:
         """The sample the sensor reports at time ``t`` (s) under ``true_wrench`` (N, N m)."""
         if len(true_wrench) != 6:
             raise InputError(f"true_wrench needs 6 values (N, N m), got {len(true_wrench)}")
@@ -224,7 +229,7 @@ class TwinAtiSensorModel:
             for i in range(6):
                 d = drift[i] + self._drift_rate[i] * root_dt * z[i]
                 lim = self._drift_limit[i]
-                drift[i] = lim if d > lim else (-lim if d < -lim else d)
+                drift[i] = lim if d > lim else (max(d, -lim))
         if st.t_last is None or t > st.t_last:
             st.t_last = t
 
@@ -252,7 +257,8 @@ class TwinAtiSensorModel:
         ``true_wrench`` is a constant 6-vector or a zero-argument callable giving it (N, N m);
         time is ``clock()`` (s) relative to the first call, so schedule faults on that time base.
         """
-        get = true_wrench if callable(true_wrench) else (lambda w=_as6("true_wrench", true_wrench): w)
+        get = (true_wrench if callable(true_wrench)
+               else _constantly(_as6("true_wrench", true_wrench)))
         t0: list[float] = []
 
         def source() -> AtiSample | None:
@@ -296,7 +302,7 @@ class SourceReader:
             raise InputError(f"source returned {len(wrench)} wrench values, expected 6")
         self.status = int(result[1]) & 0xFFFF_FFFF
         if len(result) > 2:
-            self.ft_sequence = int(result[2]) & 0xFFFF_FFFF  # type: ignore[misc]
+            self.ft_sequence = int(result[2]) & 0xFFFF_FFFF
         else:
             self._own_sequence = (self._own_sequence + 1) & 0xFFFF_FFFF
             self.ft_sequence = self._own_sequence

@@ -21,6 +21,8 @@ imperfections) unless ``ideal``.
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rt.control.experiment import benchmark_reference
@@ -92,8 +94,8 @@ def gains_for_rate(controller: str, rate_hz: float, axis_mass_kg: float) -> dict
     return None
 
 
-def metrics(t: np.ndarray, error: np.ndarray) -> dict:
-    out = {}
+def metrics(t: np.ndarray, error: np.ndarray) -> dict[str, Any]:
+    out: dict[str, Any] = {}
     for name, window in (("period1", t < STEP_S), ("period2", t >= STEP_S)):
         e = error[window]
         out[name] = {"mean_abs_m": float(np.abs(e).mean()),
@@ -123,7 +125,7 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
     if gains is None:
         st = model.dyn.state((Q0_M, Q0_M, Q0_M))
         gains = gains_for_rate(controller, rate_hz, float(model.dyn.mass_matrix(st)[0, 0]))
-    env = FreeMotion()
+    env: FreeMotion | PayloadStep = FreeMotion()
     if experiment == "payload-step":
         env = PayloadStep(mass_kg=PAYLOAD_KG, at_s=1e9, com_m=PAYLOAD_COM_M)  # timed below
     twin = (Twin.ideal(truth or model.description, environment=env, seed=seed) if ideal
@@ -141,14 +143,14 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
             raise StoppedBySupervisor(f"{controller} at {rate_hz:g} Hz did not reach the "
                                       f"trajectory: {_events(pl)}")
     _, start = pl.recorder.drain(0)
-    n = int(round(seconds * rate_hz))
-    n_step = min(n, int(round(STEP_S * rate_hz)))
+    n = round(seconds * rate_hz)
+    n_step = min(n, round(STEP_S * rate_hz))
     # The trajectory sample k is produced at cycle k after the approach: the step happens
     # between cycles n_step - 1 and n_step, i.e. at trajectory time 13 s.
     pl.loop.run(cycles=n_step)
     if n_step < n:
         if experiment == "parameter-step":
-            _change_controller_parameters(model, pl.graph.component("controller").controller)
+            _change_controller_parameters(model, pl.controller)
         elif experiment == "payload-step":
             twin.plant.set_payload(Payload(PAYLOAD_KG, PAYLOAD_COM_M))
         pl.loop.run(cycles=n - n_step)
@@ -187,8 +189,8 @@ def run_experiment(name: str, seconds: float = DURATION_S, rate_hz: float = 1000
 
 def table(results: list[dict]) -> str:
     """The fig. 48/50 table: twin beside thesis (mm)."""
-    lines = [f"{'experiment':15s} {'rate':>6s} {'controller':12s} {'metric':10s} "
-             f"{'twin mm':>9s} {'thesis mm':>10s} {'ratio':>6s}"]
+    lines = [(f"{'experiment':15s} {'rate':>6s} {'controller':12s} {'metric':10s} "
+             f"{'twin mm':>9s} {'thesis mm':>10s} {'ratio':>6s}")]
     for r in results:
         for ctrl, m in r["controllers"].items():
             if "stopped_by_supervisor" in m:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from rt.control.base import Controller, Reference
-from rt.devices.interfaces import ActuatorOutputs, EncoderBank
+from rt.devices.interfaces import EncoderBank
 from rt.engine import Array, Component, Struct
 from rt.errors import InputError, KinematicsError, TalusError
 from rt.estimation.velocity import KalmanVelocityEstimator
@@ -121,7 +121,7 @@ class ControllerBlock(Component):
         except TalusError as exc:
             raise InputError(f"component {self.name!r}: rejected {values!r}: {exc}") from exc
 
-    def handover(self, old: "ControllerBlock") -> None:
+    def handover(self, old: Component) -> None:
         # The outputs already hold the old law's last force (the engine adopts its buffers).
         self.controller.handover(self.tau.data.copy(), self.state_in.data,
                                  self._bind_reference(), self._dt)

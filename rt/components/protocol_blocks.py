@@ -65,7 +65,7 @@ class HybridController(Component):
         into pulling on the foot; the reference is slowed there instead (rising is followed
         as it is)."""
         floor = self.preload_n
-        target = fr.f if fr.f > floor else floor
+        target = max(floor, fr.f)
         g = self._f_gov
         if math.isnan(g) or target >= g:
             self._f_gov = target

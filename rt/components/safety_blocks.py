@@ -2,12 +2,17 @@
 from __future__ import annotations
 
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from rt.devices.interfaces import ActuatorOutputs, DigitalInputs, DigitalInputState, \
-    ForceTorqueSensor, Wrench
+from rt.devices.interfaces import (
+    ActuatorOutputs,
+    DigitalInputs,
+    DigitalInputState,
+    ForceTorqueSensor,
+    Wrench,
+)
 from rt.engine import Array, Component, Struct
 from rt.errors import HardwareError
 from rt.model.dynamics import State
@@ -115,7 +120,7 @@ class SupervisorBlock(Component):
         limit = self.sup.limits.max_command_v
         for i in range(3):
             x = self.tau.data[i] * self.k
-            v[i] = limit if x > limit else (-limit if x < -limit else x)
+            v[i] = limit if x > limit else (max(x, -limit))
         self.enable.data[0] = 1.0
         self.mode.data[0] = float(SupervisorMode.of(reaction))
         return 0
@@ -132,7 +137,7 @@ class RedundantDrive(Component):
     """
 
     def __init__(self, name: str, cards: Sequence[ActuatorOutputs], log: EventLog,
-                 monitor: Callable[[], Sequence[float]] | None = None,
+                 monitor: Callable[[], Sequence[float] | np.ndarray] | None = None,
                  tolerance_v: float = 0.1, confirm_cycles: int = 3):
         super().__init__(name)
         self.cards = list(cards)

@@ -14,7 +14,8 @@ its nominal value (Γ = 0). The initial estimate is the nominal model, as in the
 """
 from __future__ import annotations
 
-from typing import Annotated
+from collections.abc import Mapping
+from typing import Annotated, ClassVar
 
 import numpy as np
 from pydantic import Field
@@ -43,15 +44,17 @@ class AdaptiveGains(Gains):
 @register
 class Adaptive(Controller):
     name = "adaptive"
+    gains: AdaptiveGains
     gains_type = AdaptiveGains
     #: Λ sets the sliding surface's bandwidth (same 5-150 rad/s family as the PD laws, capped
     #: at 100 since K_D Λ acts as a stiffness); adaptation above 1 chases quantization noise
     #: (see ``AdaptiveGains``); payloads up to 250 kg (the thesis stepped 100 kg).
-    gain_ranges = {"lambda_per_s": GainRange(1.0, 100.0, "1/s"),
-                   "kd_n_s_per_m": PD_RANGES["kd_n_s_per_m"],
-                   "adaptation_rate": GainRange(0.0, 1.0, ""),
-                   "max_payload_kg": GainRange(1.0, 250.0, "kg"),
-                   "payload_com_box_m": GainRange(0.01, 0.5, "m")}
+    gain_ranges: ClassVar[Mapping[str, GainRange]] = {
+        "lambda_per_s": GainRange(1.0, 100.0, "1/s"),
+        "kd_n_s_per_m": PD_RANGES["kd_n_s_per_m"],
+        "adaptation_rate": GainRange(0.0, 1.0, ""),
+        "max_payload_kg": GainRange(1.0, 250.0, "kg"),
+        "payload_com_box_m": GainRange(0.01, 0.5, "m")}
 
     def __init__(self, model, gains=None):
         self.regressor = Regressor(model.dyn)

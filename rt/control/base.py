@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import abc
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
@@ -188,9 +189,8 @@ def register(cls: type[Controller]) -> type[Controller]:
 
 def create(name: str, model: RobotModel, gains: dict | None = None) -> Controller:
     """A controller by name, with gains from config (defaults when omitted)."""
+    import rt.control.adaptive
     import rt.control.laws  # noqa: F401  (registers the laws)
-    import rt.control.adaptive  # noqa: F401
-
     from rt.cli_args import canonical_name
 
     try:

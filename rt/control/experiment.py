@@ -8,17 +8,17 @@ plots them.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
 from rt.control.base import Reference, create
 from rt.errors import ConfigurationError
-from rt.references.approach import Approach, ApproachStatus
 from rt.estimation.velocity import KalmanVelocityEstimator
 from rt.model import RobotModel
 from rt.model.dynamics import State
+from rt.references.approach import Approach, ApproachStatus
 from rt.twin.backends import TwinActuators, TwinEncoders
 from rt.twin.environment import FreeMotion, PayloadStep
 from rt.twin.twin import SimClock, Twin
@@ -75,7 +75,7 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
     reference(0.0, ref)
     approach = None
     if approach_from is not None:
-        approach = Approach(dt=1.0 / rate_hz, stroke=tuple(model.description.limits.stroke_m))
+        approach = Approach(dt=1.0 / rate_hz, stroke=model.description.limits.stroke)
         approach.reset(approach_from)
         status = approach.set_target(ref.q, ref.qd, ref.qdd)
         if status != ApproachStatus.WORKING:
@@ -103,8 +103,8 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
     est = KalmanVelocityEstimator()
     st = State()
     dt = 1.0 / rate_hz
-    n = int(round(seconds * rate_hz))
-    n_approach = int(round(t_offset * rate_hz))
+    n = round(seconds * rate_hz)
+    n_approach = round(t_offset * rate_hz)
     per_volt = model.description.drive.force_per_volt_n
     limit = model.description.drive.command_limit_v
     q = np.zeros(3)
@@ -120,7 +120,7 @@ def run_tracking(controller: str, seconds: float, reference: RefFn, environment=
         clock.t = t + t_offset
         enc.read_positions_m(q)
         est.update(q, dt)
-        if k < 0:
+        if approach is not None and k < 0:
             approach.update(ref.q, ref.qd, ref.qdd)
         else:
             reference(t, ref)

@@ -28,8 +28,9 @@ stays below 0 N anyway (``rt.safety.supervisor``).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Annotated
+from typing import Annotated, Any, TypeVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -103,7 +104,11 @@ ADMITTANCE_RANGES = {
 }
 
 
-def _validate(owner: str, model_type, ranges, gains) -> BaseModel:
+_GainsT = TypeVar("_GainsT", bound=BaseModel)
+
+
+def _validate(owner: str, model_type: type[_GainsT], ranges: Mapping[str, GainRange],
+              gains: Mapping[str, Any] | None) -> _GainsT:
     try:
         validated = model_type.model_validate(gains or {})
     except ValidationError as exc:
@@ -171,7 +176,7 @@ class ExplicitForce:
         """τ (N) into ``out``. ``force_n`` is the measured F (NaN → the law holds its integral
         and runs on feedforward; the supervisor decides whether that is acceptable)."""
         g = self.gains
-        cfg = st.cfg
+        cfg = st.config
         S = st.S
         qd = st.qd
         zd = S[8, 0] * qd[0] + S[8, 1] * qd[1] + S[8, 2] * qd[2]
@@ -210,8 +215,7 @@ class ExplicitForce:
             # preload the feedback may command less than it: that moves the platform down
             # against its friction while the foot still pushes on it.
             fz = floor
-            if integral > self.integral:
-                self.integral = integral
+            self.integral = max(self.integral, integral)
         else:
             self.integral = integral
         q_roll = (-g.angle_kp_n_m_per_rad * (cfg.roll - ref.roll)
@@ -269,8 +273,8 @@ class Admittance:
                out: np.ndarray) -> int:
         g = self.gains
         if self.z is None:
-            self.z = st.cfg.z
-        f_d = ref.f if ref.f > g.preload_n else g.preload_n    # never below the preload
+            self.z = st.config.z
+        f_d = max(g.preload_n, ref.f)    # never below the preload
         e = 0.0 if math.isnan(force_n) else force_n - f_d      # pushing too hard → yield
         zdd = (-e - g.virtual_damping_n_s_per_m * self.zd) / g.virtual_mass_kg
         self.zd = max(-g.max_speed_m_s, min(g.max_speed_m_s, self.zd + zdd * dt))

@@ -53,7 +53,8 @@ CT_RANGES = {"kp_per_s2": GainRange(25.0, 22500.0, "1/s²"),
 
 
 def _pd(g: PdGains, st: State, ref: Reference, out: np.ndarray) -> None:
-    e = st.cfg.q[0] - ref.q[0], st.cfg.q[1] - ref.q[1], st.cfg.q[2] - ref.q[2]
+    q = st.config.q
+    e = q[0] - ref.q[0], q[1] - ref.q[1], q[2] - ref.q[2]
     for i in range(3):
         out[i] = -g.kp_n_per_m * e[i] - g.kd_n_s_per_m * (st.qd[i] - ref.qd[i])
 
@@ -63,6 +64,7 @@ class Pid(Controller):
     """τ = −Kp e − Kd ė − Ki ∫e (thesis table 5), integral clamped (anti-windup)."""
 
     name = "pid"
+    gains: PidGains
     gains_type = PidGains
     gain_ranges = PID_RANGES
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import abc
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -56,7 +56,7 @@ class Wrench:
         self.t, self.sequence, self.status = NAN, -1, 0
         self.stale, self.saturated = True, False
 
-    def copy_from(self, other: "Wrench") -> None:
+    def copy_from(self, other: Wrench) -> None:
         """Copy every field of ``other`` into this wrench, in place."""
         self.fx, self.fy, self.fz = other.fx, other.fy, other.fz
         self.tx, self.ty, self.tz = other.tx, other.ty, other.tz
@@ -136,7 +136,7 @@ class ActuatorOutputs(Device):
     def enabled(self) -> bool: ...
 
     @abc.abstractmethod
-    def write_volts(self, volts: Sequence[float]) -> None:
+    def write_volts(self, volts: Sequence[float] | np.ndarray) -> None:
         """Command one voltage (V) per channel."""
 
 

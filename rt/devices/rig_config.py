@@ -157,7 +157,7 @@ class RigConfig(_Strict):
     amplifier_monitor: AmplifierMonitor | None = None
 
     @model_validator(mode="after")
-    def _distinct_wiring(self) -> "RigConfig":
+    def _distinct_wiring(self) -> RigConfig:
         devices = [c.device for c in self.dac_cards]
         if len(set(devices)) != len(devices):
             raise ValueError(f"dac_cards must be distinct devices, got {devices}")

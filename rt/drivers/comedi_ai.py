@@ -18,11 +18,18 @@ from __future__ import annotations
 
 import ctypes
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from rt.devices.interfaces import Device
-from rt.drivers.pci1720 import (AREF_GROUND, UNIT_VOLT, code_to_volts, comedi_error_text,
-                                comedi_open_device, load_comedilib)
+from rt.drivers.pci1720 import (
+    AREF_GROUND,
+    UNIT_VOLT,
+    code_to_volts,
+    comedi_error_text,
+    comedi_open_device,
+    load_comedilib,
+)
 from rt.errors import ConfigurationError, HardwareError
 
 

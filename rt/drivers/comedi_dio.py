@@ -26,8 +26,7 @@ import ctypes
 from typing import Any
 
 from rt.devices.interfaces import DigitalInputs, DigitalInputState
-from rt.drivers.pci1720 import (COMEDI_INPUT, comedi_error_text, comedi_open_device,
-                                load_comedilib)
+from rt.drivers.pci1720 import COMEDI_INPUT, comedi_error_text, comedi_open_device, load_comedilib
 from rt.errors import ConfigurationError
 
 

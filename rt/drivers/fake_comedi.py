@@ -5,7 +5,8 @@ their device files, as one comedilib sees a machine's cards."""
 from __future__ import annotations
 
 import ctypes
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 from rt.drivers.pci1720 import ComediRange, volts_to_code
 
@@ -155,8 +156,8 @@ class FakeComedi:
     def comedi_strerror(self, errnum: int) -> bytes:
         return f"fake comedi error {errnum}".encode()
 
-    def codes(self, n: int = 3) -> list[int]:
-        """The last code written to each of channels 0..n-1."""
+    def codes(self, n: int = 3) -> list[int | None]:
+        """The last code written to each of channels 0..n-1 (None: never written)."""
         return [self.last_code.get(c) for c in range(n)]
 
 

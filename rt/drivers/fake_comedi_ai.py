@@ -54,7 +54,7 @@ class FakeComediAnalogInput:
             return -1
         lo, hi = self.RANGES[rng]
         v = self.volts.get(channel, 0.0)
-        code = int(math.floor((v - lo) / (hi - lo) * self.MAXDATA + 0.5))
+        code = math.floor((v - lo) / (hi - lo) * self.MAXDATA + 0.5)
         code = max(0, min(self.MAXDATA, code))
         ctypes.cast(data_ptr, ctypes.POINTER(ctypes.c_uint))[0] = code
         self.reads.append((subdevice, channel, rng, aref))

@@ -34,24 +34,32 @@ Not thread-safe: drive it from the loop's thread (the twin runs in lockstep).
 from __future__ import annotations
 
 import math
-import numbers
-from typing import Sequence
+from collections.abc import Iterable, Sequence
+
+import numpy as np
 
 from rt.drivers.pcl833 import (
-    COUNTER_MASK, DEFAULT_BASE, DEFAULT_M_PER_COUNT, LATCH_SOURCE_MASK,
-    LATCH_SOURCE_SOFTWARE_READ, PORT_SPAN, REG_COUNTER_RESET, REG_STATUS, InputMode,
+    COUNTER_MASK,
+    DEFAULT_BASE,
+    DEFAULT_M_PER_COUNT,
+    LATCH_SOURCE_MASK,
+    LATCH_SOURCE_SOFTWARE_READ,
+    PORT_SPAN,
+    REG_COUNTER_RESET,
+    REG_STATUS,
+    InputMode,
     reset_value,
 )
 from rt.drivers.port_io import PortIO
 from rt.errors import ConfigurationError, HardwareError
 
 #: Offsets that the card answers on when read / written (from the Advantech driver).
-_READABLE = frozenset(range(0, 12)) | {REG_STATUS}
-_WRITABLE = frozenset(range(0, 11))
+_READABLE = frozenset(range(12)) | {REG_STATUS}
+_WRITABLE = frozenset(range(11))
 
 
 def _per_axis(value: float | Sequence[float], name: str) -> list:
-    if isinstance(value, numbers.Real):
+    if not isinstance(value, Iterable):                  # one value for every axis
         return [value] * 3
     values = list(value)
     if len(values) != 3:
@@ -98,12 +106,12 @@ class FakePcl833Port(PortIO):
             if byte == 2 and (self._reg[3 + channel] & LATCH_SOURCE_MASK) == LATCH_SOURCE_SOFTWARE_READ:
                 self._latched[channel] = self._count[channel]
             return (self._latched[channel] >> (8 * byte)) & 0xFF
-        offset = self._offset(port, _READABLE)
-        if offset is None:
+        register = self._offset(port, _READABLE)
+        if register is None:
             return 0xFF
-        if offset == REG_STATUS or offset % 4 == 3:
+        if register == REG_STATUS or register % 4 == 3:
             return 0
-        channel, byte = divmod(offset, 4)
+        channel, byte = divmod(register, 4)
         if byte == 2 and (self._reg[3 + channel] & LATCH_SOURCE_MASK) == LATCH_SOURCE_SOFTWARE_READ:
             self._latched[channel] = self._count[channel]
         return (self._latched[channel] >> (8 * byte)) & 0xFF
@@ -179,7 +187,7 @@ class FakePcl833Port(PortIO):
         self._encoder_index[axis] = index
         self.move_counts(axis, delta)
 
-    def set_positions_m(self, positions_m: Sequence[float]) -> None:
+    def set_positions_m(self, positions_m: Sequence[float] | np.ndarray) -> None:
         """``set_position_m`` for the three axes."""
         for axis in range(3):
             self.set_position_m(axis, positions_m[axis])

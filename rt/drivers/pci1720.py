@@ -43,8 +43,11 @@ import ctypes
 import ctypes.util
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
+
+import numpy as np
 
 from rt.devices.interfaces import ActuatorOutputs
 from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError, InputError
@@ -136,7 +139,7 @@ def volts_to_code(volts: float, v_min: float = -10.0, v_max: float = 10.0,
         return 0
     if s >= maxdata:
         return maxdata
-    return int(math.floor(s + 0.5))
+    return math.floor(s + 0.5)
 
 
 def code_to_volts(code: int, v_min: float = -10.0, v_max: float = 10.0,
@@ -316,7 +319,7 @@ class Pci1720Outputs(ActuatorOutputs):
         if error is not None:
             raise error
 
-    def write_volts(self, volts: Sequence[float]) -> None:
+    def write_volts(self, volts: Sequence[float] | np.ndarray) -> None:
         """Command ``volts`` (V), one per axis, clamped to ±``limit_v`` and quantized.
 
         Refused (``HardwareError``, nothing written) with a non-zero value while disabled;

@@ -42,8 +42,7 @@ from __future__ import annotations
 
 import enum
 import math
-import numbers
-from typing import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -175,7 +174,7 @@ class CountUnwrapper:
     ``displacement`` is measured from ``reference`` (the reset value).
     """
 
-    __slots__ = ("reference", "_last", "_displacement")
+    __slots__ = ("_displacement", "_last", "reference")
 
     def __init__(self, reference: int = MIDPOINT, count: int | None = None) -> None:
         self.reference = reference
@@ -205,7 +204,7 @@ class CountUnwrapper:
 # --- the driver ----------------------------------------------------------------------------
 
 def _per_axis(value: float | Sequence[float], name: str, n: int) -> tuple:
-    if isinstance(value, numbers.Real):
+    if not isinstance(value, Iterable):                  # one value for every axis
         return (value,) * n
     values = tuple(value)
     if len(values) != n:

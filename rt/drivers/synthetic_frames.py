@@ -24,8 +24,8 @@ from __future__ import annotations
 import functools
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -68,7 +68,7 @@ def _pixels(length_m: float, px_per_m: float, name: str) -> int:
         raise ConfigurationError(
             f"{name} = {length_m} m is not a whole number of texture pixels at "
             f"{px_per_m} px/m; change one of them")
-    return int(round(px))
+    return round(px)
 
 
 @dataclass(frozen=True)

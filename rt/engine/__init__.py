@@ -10,18 +10,53 @@ Typical use::
     loop.stop(); loop.graph.stop()
 """
 from rt.engine.commands import CommandResult
-from rt.engine.component import (STATUS_EXCEPTION, STATUS_OK, Component, Lifecycle,
-                                 LifecycleError)
+from rt.engine.component import STATUS_EXCEPTION, STATUS_OK, Component, Lifecycle, LifecycleError
 from rt.engine.graph import Connection, Graph, GraphBuilder
 from rt.engine.loop import MAX_RATE_HZ, MIN_RATE_HZ, Loop, LoopStats
-from rt.engine.ports import (BOOL, FLOAT, INT, Array, ArrayType, Box, InputPort, OutputPort,
-                             PortType, ScalarType, Struct, StructType)
+from rt.engine.ports import (
+                                 BOOL,
+                                 FLOAT,
+                                 INT,
+                                 Array,
+                                 ArrayType,
+                                 Box,
+                                 InputPort,
+                                 OutputPort,
+                                 PortType,
+                                 ScalarType,
+                                 Struct,
+                                 StructType,
+)
 from rt.engine.stats import Fault, GraphStats, SlotStats, TimingStats
 
 __all__ = [
-    "Array", "ArrayType", "BOOL", "Box", "CommandResult", "Component", "Connection", "FLOAT",
-    "Fault", "Graph", "GraphBuilder", "GraphStats", "INT", "InputPort", "Lifecycle",
-    "LifecycleError", "Loop", "LoopStats", "MAX_RATE_HZ", "MIN_RATE_HZ", "OutputPort",
-    "PortType", "STATUS_EXCEPTION", "STATUS_OK", "ScalarType", "SlotStats", "Struct",
-    "StructType", "TimingStats",
+                                 "BOOL",
+                                 "FLOAT",
+                                 "INT",
+                                 "MAX_RATE_HZ",
+                                 "MIN_RATE_HZ",
+                                 "STATUS_EXCEPTION",
+                                 "STATUS_OK",
+                                 "Array",
+                                 "ArrayType",
+                                 "Box",
+                                 "CommandResult",
+                                 "Component",
+                                 "Connection",
+                                 "Fault",
+                                 "Graph",
+                                 "GraphBuilder",
+                                 "GraphStats",
+                                 "InputPort",
+                                 "Lifecycle",
+                                 "LifecycleError",
+                                 "Loop",
+                                 "LoopStats",
+                                 "OutputPort",
+                                 "PortType",
+                                 "ScalarType",
+                                 "SlotStats",
+                                 "Struct",
+                                 "StructType",
+                                 "TimingStats",
 ]

@@ -26,7 +26,7 @@ class CommandResult:
     component's ``update`` in that cycle; a new rate sets the period that follows it).
     """
 
-    __slots__ = ("description", "ok", "error", "cycle", "value", "_event")
+    __slots__ = ("_event", "cycle", "description", "error", "ok", "value")
 
     def __init__(self, description: str) -> None:
         self.description = description
@@ -37,7 +37,7 @@ class CommandResult:
         self._event = threading.Event()
 
     def _complete(self, ok: bool, error: str | None = None, cycle: int | None = None,
-                  value: Any = None) -> "CommandResult":
+                  value: Any = None) -> CommandResult:
         self.ok, self.error, self.cycle, self.value = ok, error, cycle, value
         self._event.set()
         return self
@@ -114,7 +114,7 @@ class CommandQueue:
                 value = cmd.apply(loop)
             except TalusError as exc:
                 cmd.result._complete(False, str(exc), cycle)
-            except Exception as exc:  # a buggy hook must not kill the loop
+            except Exception as exc:  # noqa: BLE001 - a buggy hook must not kill the loop
                 cmd.result._complete(False, f"{type(exc).__name__}: {exc}", cycle)
             else:
                 cmd.result._complete(True, None, cycle, value)

@@ -181,7 +181,7 @@ class Component:
         self._lifecycle = Lifecycle.ERROR
         try:
             self.on_error(reason)
-        except Exception as exc:  # the fault path must not fault
+        except Exception as exc:  # noqa: BLE001 - the fault path must not fault
             reason = f"{reason}; on_error also failed: {type(exc).__name__}: {exc}"
         self.fault_reason = reason
 
@@ -234,8 +234,8 @@ class Component:
             self.params = old
             try:  # let derived quantities follow the restored params
                 self.on_params_changed(new)
-            except Exception:
-                pass
+            except Exception as again:  # noqa: BLE001 - the first failure is the one raised
+                exc.add_note(f"re-applying the previous params failed too: {again!r}")
             raise InputError(
                 f"component {self.name!r}: rejected {values!r}: applying them failed: "
                 f"{type(exc).__name__}: {exc}") from exc
@@ -267,7 +267,7 @@ class Component:
     def on_params_changed(self, old: Any) -> None:
         """``self.params`` has just replaced ``old``: update derived quantities."""
 
-    def handover(self, old: "Component") -> None:
+    def handover(self, old: Component) -> None:
         """Initialise this component's state from ``old``, which it replaces in a graph slot.
 
         Called by a swap at a cycle boundary, after ``self.start()`` and before this

@@ -20,15 +20,24 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 from time import perf_counter_ns
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from rt.engine.component import STATUS_EXCEPTION, Component, Lifecycle, LifecycleError
 from rt.engine.ports import InputPort, OutputPort, PortType, StructType, check_name
-from rt.engine.stats import (DEFAULT_CAPACITY, Fault, GraphStats, SlotStats, check_capacity,
-                             new_ring, summarize)
+from rt.engine.stats import (
+    DEFAULT_CAPACITY,
+    Fault,
+    GraphStats,
+    SlotStats,
+    check_capacity,
+    new_ring,
+    summarize,
+)
 from rt.errors import ConfigurationError, InputError
+
+_C = TypeVar("_C", bound=Component)
 
 FAULT_HISTORY = 1024
 """Faults kept by a graph (the total count is always kept)."""
@@ -69,7 +78,7 @@ class GraphBuilder:
         self._connections: list[Connection] = []
         self._built = False
 
-    def add(self, component: Component, slot: str | None = None) -> Component:
+    def add(self, component: _C, slot: str | None = None) -> _C:
         """Add ``component`` in ``slot`` (default: its name); returns the component."""
         self._check_open()
         if not isinstance(component, Component):
@@ -199,7 +208,7 @@ class GraphBuilder:
         return (f"cycle without delay: {hops}; break it with connect(..., delay=1) on one of "
                 f"these connections")
 
-    def build(self) -> "Graph":
+    def build(self) -> Graph:
         """Check everything, wire the ports (zero-copy) and return the :class:`Graph`.
 
         Raises ConfigurationError listing every problem found: unknown slots or ports, an
@@ -430,7 +439,7 @@ class Graph:
             if comp._active:
                 try:
                     status = update(t, dt)
-                except Exception as exc:  # a component bug must not kill the loop
+                except Exception as exc:  # noqa: BLE001 - a component bug must not kill the loop
                     now = pc()
                     ring[idx] = now - prev
                     prev = now
@@ -451,8 +460,7 @@ class Graph:
             copy(latch, src)
         elapsed = pc() - t0
         self._cycle_ring[idx] = elapsed
-        if elapsed > self._cycle_max:
-            self._cycle_max = elapsed
+        self._cycle_max = max(self._cycle_max, elapsed)
         self._idx = (idx + 1) & self._mask
         self._cycles += 1
         return faults

@@ -26,15 +26,23 @@ import functools
 import math
 import threading
 import time
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any
 
 from rt.engine import rt_hygiene
 from rt.engine.commands import Call, CommandQueue, CommandResult, SetParams, SetRate, Swap
 from rt.engine.component import Component
 from rt.engine.graph import Graph
-from rt.engine.stats import (DEFAULT_CAPACITY, Fault, GraphStats, TimingStats, check_capacity,
-                             new_ring, summarize)
+from rt.engine.stats import (
+    DEFAULT_CAPACITY,
+    Fault,
+    GraphStats,
+    TimingStats,
+    check_capacity,
+    new_ring,
+    summarize,
+)
 from rt.errors import ConfigurationError, InputError, TalusError
 
 MIN_RATE_HZ = 100.0
@@ -292,7 +300,8 @@ class Loop:
             with self._running():
                 ready.set()
                 self._cycle_loop(None, None)
-        except BaseException as exc:  # reported by stop(); a thread cannot raise to anyone
+        # Reported by stop(); a thread cannot raise to anyone.
+        except BaseException as exc:  # noqa: BLE001
             self._thread_error = exc
         finally:
             ready.set()
@@ -377,8 +386,7 @@ class Loop:
             ring[li] = late
             self._lat_idx = (li + 1) & mask
             self._lat_count += 1
-            if late > self._lat_max:
-                self._lat_max = late
+            self._lat_max = max(self._lat_max, late)
             if late > tol_ns:
                 self._misses += 1
                 if late > behind_ns:
@@ -442,7 +450,7 @@ class Loop:
             component._graph = None
         return result
 
-    def call(self, fn: Callable[["Loop"], Any], description: str) -> CommandResult:
+    def call(self, fn: Callable[[Loop], Any], description: str) -> CommandResult:
         """Run ``fn(loop)`` in the loop's thread at the next boundary (or at once when the loop
         is not running); returns the command's result."""
         cmd = Call(fn, description)

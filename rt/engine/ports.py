@@ -24,8 +24,9 @@ from __future__ import annotations
 
 import abc
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -220,9 +221,9 @@ class Port:
     property ≈ 60 ns); never assign to it from a component.
     """
 
-    __slots__ = ("name", "type", "owner", "data", "doc")
+    __slots__ = ("data", "doc", "name", "owner", "type")
 
-    def __init__(self, owner: "Component", name: str, type: PortType, doc: str) -> None:
+    def __init__(self, owner: Component, name: str, type: PortType, doc: str) -> None:
         if not isinstance(type, PortType):
             raise ConfigurationError(
                 f"port {owner.name}.{name}: type must be a PortType (Array(n), FLOAT, INT, BOOL, "
@@ -244,7 +245,7 @@ class OutputPort(Port):
 
     __slots__ = ("initial",)
 
-    def __init__(self, owner: "Component", name: str, type: PortType, doc: str = "",
+    def __init__(self, owner: Component, name: str, type: PortType, doc: str = "",
                  initial: Any = None) -> None:
         super().__init__(owner, name, type, doc)
         self.initial = initial
@@ -267,7 +268,7 @@ class InputPort(Port):
 
     __slots__ = ("source",)
 
-    def __init__(self, owner: "Component", name: str, type: PortType, doc: str = "") -> None:
+    def __init__(self, owner: Component, name: str, type: PortType, doc: str = "") -> None:
         super().__init__(owner, name, type, doc)
         self.source: str | None = None
 

@@ -27,8 +27,8 @@ import os
 import platform
 import sys
 import threading
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import Iterable, Iterator
 
 # Linux values on x86, x86-64, ARM and RISC-V (alpha, powerpc and sparc differ).
 MCL_CURRENT = 1
@@ -76,10 +76,10 @@ class HygieneReport:
         return "\n".join([
             f"SCHED_FIFO: {fifo} ({self.fifo_detail})",
             f"mlockall:   {'yes' if self.mlockall else 'no'} ({self.mlock_detail})",
-            f"affinity:   {list(self.affinity) if self.affinity else 'unchanged'} "
-            f"({self.affinity_detail})",
-            f"timerslack: {self.timer_slack_ns if self.timer_slack_ns is not None else '-'} ns "
-            f"({self.timer_slack_detail})",
+            (f"affinity:   {list(self.affinity) if self.affinity else 'unchanged'} "
+            f"({self.affinity_detail})"),
+            (f"timerslack: {self.timer_slack_ns if self.timer_slack_ns is not None else '-'} ns "
+            f"({self.timer_slack_detail})"),
             f"GIL switch: {si} ({self.switch_interval_detail})",
         ] + self.notes)
 
@@ -145,7 +145,7 @@ def try_affinity(cpus: Iterable[int]) -> tuple[bool, str, set[int] | None]:
     """Pin the calling thread to ``cpus``; returns (achieved, detail, previous set)."""
     if not hasattr(os, "sched_setaffinity"):
         return False, "os.sched_setaffinity unavailable on this platform", None
-    wanted = set(int(c) for c in cpus)
+    wanted = {int(c) for c in cpus}
     try:
         prev = os.sched_getaffinity(0)
         os.sched_setaffinity(0, wanted)

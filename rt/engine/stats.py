@@ -130,8 +130,8 @@ class GraphStats:
 
     def table(self) -> str:
         """A fixed-width text table (for the CLI and benchmarks)."""
-        rows = [f"{'slot':<16}{'component':<16}{'state':<13}{'n':>9}{'mean':>9}{'p50':>9}"
-                f"{'p99':>9}{'max':>9}  (µs)"]
+        rows = [(f"{'slot':<16}{'component':<16}{'state':<13}{'n':>9}{'mean':>9}{'p50':>9}"
+                f"{'p99':>9}{'max':>9}  (µs)")]
         for slot, s in self.components.items():
             rows.append(f"{slot:<16}{s.component:<16}{s.lifecycle:<13}{s.count:>9}"
                         f"{s.mean_us:>9.2f}{s.p50_us:>9.2f}{s.p99_us:>9.2f}{s.max_us:>9.2f}")

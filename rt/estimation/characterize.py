@@ -30,8 +30,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from rt.estimation.velocity import (ENCODER_RESOLUTION_M, EstimatorStatus,
-                                    FirstDifferenceEstimator, KalmanVelocityEstimator)
+from rt.estimation.velocity import (
+    ENCODER_RESOLUTION_M,
+    EstimatorStatus,
+    FirstDifferenceEstimator,
+    KalmanVelocityEstimator,
+)
 
 BENCHMARK_PHASES_RAD = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)
 # Lag windows (s): whole periods of the periodic signals (0.25 Hz and 0.6 Hz repeat every 20 s).
@@ -71,20 +75,20 @@ def _signals(dt: float, seed: int) -> dict[str, tuple[np.ndarray, np.ndarray, np
     rng = np.random.default_rng(seed)
     out = {}
     # rest: at a count boundary (round-half point), 2 µm RMS vibration -> two-count toggling
-    t = np.arange(int(round(2.0 / dt))) * dt
+    t = np.arange(round(2.0 / dt)) * dt
     q = 0.2 + 0.5 * ENCODER_RESOLUTION_M + rng.normal(0.0, 2.0e-6, (t.size, 3))
     out["rest"] = (t, q, np.zeros_like(q), np.zeros_like(q), 0.5)
     # constant velocity, random sub-count offsets per axis
-    t = np.arange(int(round(2.0 / dt))) * dt
+    t = np.arange(round(2.0 / dt)) * dt
     off = rng.uniform(0.0, ENCODER_RESOLUTION_M, 3)[None, :]
     v = np.full((t.size, 3), 0.05)
     out["constant_velocity"] = (t, 0.1 + off + 0.05 * t[:, None], v, np.zeros_like(v), 0.5)
     # benchmark trajectory
-    t = np.arange(int(round(26.0 / dt))) * dt
+    t = np.arange(round(26.0 / dt)) * dt
     q, v, a = _benchmark(t)
     out["benchmark"] = (t, q, v, a, 1.0)
     # 1 Hz, 0.1 m/s peak
-    t = np.arange(int(round(5.0 / dt))) * dt
+    t = np.arange(round(5.0 / dt)) * dt
     w = 2.0 * math.pi
     ph = np.asarray(BENCHMARK_PHASES_RAD)[None, :]
     amp = 0.1 / w
@@ -92,13 +96,13 @@ def _signals(dt: float, seed: int) -> dict[str, tuple[np.ndarray, np.ndarray, np
     out["sine_1hz"] = (t, q, amp * w * np.cos(w * t[:, None] + ph),
                        -amp * w * w * np.sin(w * t[:, None] + ph), 1.0)
     # acceleration step: rest 0.2 s, 1 m/s² for 0.1 s, then 0.1 m/s
-    t = np.arange(int(round(0.6 / dt))) * dt
+    t = np.arange(round(0.6 / dt)) * dt
     t1, t2, acc = 0.2, 0.3, 1.0
     tau = np.clip(t - t1, 0.0, t2 - t1)
     v1 = acc * tau
     q1 = 0.5 * acc * tau ** 2 + acc * (t2 - t1) * np.clip(t - t2, 0.0, None)
     a1 = np.where((t >= t1) & (t < t2), acc, 0.0)
-    rep = lambda x: np.repeat(x[:, None], 3, axis=1)  # noqa: E731 - local helper
+    rep = lambda x: np.repeat(x[:, None], 3, axis=1)
     out["acceleration_step"] = (t, 0.2 + rep(q1), rep(v1), rep(a1), 0.1)
     return out
 
@@ -190,8 +194,8 @@ def characterize(estimators: Mapping[str, Callable[[], Estimator]] | None = None
                 "a_rms_m_s2": float(np.sqrt(np.mean((acc[m] - a[m]) ** 2))),
             }
             if sig in _PERIOD_S:  # lag over a whole number of periods after settling
-                lo = int(round(settle / dt))
-                hi = lo + int(round(_PERIOD_S[sig] / dt))
+                lo = round(settle / dt)
+                hi = lo + round(_PERIOD_S[sig] / dt)
                 metrics["lag_xcorr_s"] = _xcorr_lag(vel, v, lo, hi, dt)
             if sig == "benchmark":
                 metrics["lag_phase_0p6hz_s"] = _phase_lag(vel[m], v[m], t[m], 0.6)
@@ -202,8 +206,8 @@ def characterize(estimators: Mapping[str, Callable[[], Estimator]] | None = None
 
 def format_table(result: Mapping[str, Any]) -> str:
     """The ``characterize`` result as a plain-text table (one row per estimator and signal)."""
-    lines = [f"{'estimator':<18}{'signal':<20}{'v_rms m/s':>12}{'v_peak m/s':>12}"
-             f"{'a_rms m/s2':>12}{'lag ms':>9}"]
+    lines = [(f"{'estimator':<18}{'signal':<20}{'v_rms m/s':>12}{'v_peak m/s':>12}"
+             f"{'a_rms m/s2':>12}{'lag ms':>9}")]
     for name, per_signal in result.items():
         if name == "settings":
             continue

@@ -164,6 +164,7 @@ class KalmanVelocityEstimator:
         self._dt_gain = -1.0  # dt of the current gain; -1 forces a recursion step
         self._steady = False
         self._k = (0.0, 0.0, 0.0)
+        self._s = 0.0  # innovation variance of the current gain (m²)
         self._p = (0.0,) * 6
         self._jump_latched = False
         self._latched_gate = 0.0

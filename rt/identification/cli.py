@@ -6,6 +6,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -47,8 +48,12 @@ def _write_description(desc, out: Path, force: bool) -> None:
 def _run(args) -> int:
     from rt.benchmarks.tracking import run_one
     from rt.errors import InputError
-    from rt.identification.estimate import (description_from_physical, estimate_base,
-                                            estimate_physical, force_prediction_error)
+    from rt.identification.estimate import (
+        description_from_physical,
+        estimate_base,
+        estimate_physical,
+        force_prediction_error,
+    )
     from rt.identification.excitation import optimize_excitation
     from rt.identification.workflow import record, record_benchmark, truth_base
     from rt.model import RobotModel
@@ -74,7 +79,7 @@ def _run(args) -> int:
                                       f"{nominal.name}-identified")
     _write_description(ident, out, args.force)
     validation = record_benchmark(args.seconds, model, truth, imp)
-    result = {
+    result: dict[str, Any] = {
         "out": str(out), "excitation_peaks": excitation.peaks(),
         "base": [{"name": n, "estimate": float(e), "sigma": float(s), "truth": float(t),
                   "rel_error": float(abs(e - t) / max(abs(t), 1e-12)),
@@ -88,7 +93,7 @@ def _run(args) -> int:
         tracking = {}
         for ctrl in ("paden_panja", "computed_torque"):
             for label, robot in (("nominal", nominal), ("identified", ident)):
-                t, e, _ = run_one("pid-vs-paden", ctrl, 13.0, 1000.0, truth, robot,
+                _t, e, _ = run_one("pid-vs-paden", ctrl, 13.0, 1000.0, truth, robot,
                                   args.ideal_twin)
                 tracking[f"{ctrl}/{label}"] = {"mean_abs_m": float(np.abs(e).mean()),
                                                "rms_m": float(np.sqrt(np.mean(e ** 2)))}

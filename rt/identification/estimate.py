@@ -77,7 +77,7 @@ def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float) -> IdentificationDat
     dt = 1.0 / rate_hz
     qd = np.gradient(qf, dt, axis=0)
     qdd = np.gradient(qd, dt, axis=0)
-    step = max(1, int(round(rate_hz / DECIMATE_TO_HZ)))
+    step = max(1, round(rate_hz / DECIMATE_TO_HZ))
     sl = slice(edge, len(q) - edge, step)
     return IdentificationData(qf[sl], qd[sl], qdd[sl], tf[sl])
 

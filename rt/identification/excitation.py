@@ -17,7 +17,7 @@ import numpy as np
 import scipy.optimize
 
 from rt.control.base import Reference
-from rt.errors import ConfigurationError
+from rt.errors import ConfigurationError, KinematicsError
 from rt.model import RobotModel
 from rt.model.regressor import Regressor
 
@@ -107,7 +107,7 @@ def optimize_excitation(model: RobotModel | None = None, seed: int = 0,
             return 1e6 * (1.0 + over)
         try:
             w = stacked_regressor(reg, *exc.evaluate(t))
-        except Exception:                 # a pose outside the assembly range: not admissible
+        except KinematicsError:           # a pose outside the assembly range: not admissible
             return 1e7
         w = w / np.maximum(np.linalg.norm(w, axis=0), 1e-12)
         return float(np.linalg.cond(w))

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rt.identification.estimate import (IdentificationData, IdentificationError, prepare)
+from rt.identification.estimate import IdentificationData, IdentificationError, prepare
 from rt.identification.excitation import FourierExcitation
 from rt.model import RobotModel
 from rt.model.description import RobotDescription
@@ -36,7 +36,7 @@ def record(excitation: FourierExcitation, seconds: float, model: RobotModel,
             raise IdentificationError("the excitation did not start (supervisor stop or "
                                       "approach refused)")
     _, start = pl.recorder.drain(0)
-    n = int(round(seconds * RATE_HZ))
+    n = round(seconds * RATE_HZ)
     pl.loop.run(cycles=n)
     if pl.reference.phase.data[0] == 3.0:
         events = "; ".join(e.message for e in pl.events.snapshot()[:3])

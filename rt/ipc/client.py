@@ -12,13 +12,18 @@ import os
 import threading
 import time
 import uuid
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any, Self
 
 import zmq
 
 from rt.errors import HardwareError, InputError, ProtocolError, TalusError
 from rt.ipc.messages import (
-    DEFAULT_ENDPOINT, TOPICS, decode_publication, decode_reply, encode_request,
+    DEFAULT_ENDPOINT,
+    TOPICS,
+    decode_publication,
+    decode_reply,
+    encode_request,
 )
 from rt.ipc.security import ClientCurveConfig, ClientSecurity, check_client_endpoint
 
@@ -296,7 +301,7 @@ class RtClient:
         if self._own_context:
             self._ctx.term()
 
-    def __enter__(self) -> RtClient:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -373,7 +378,7 @@ class Subscriber:
         if self._own_context:
             self._ctx.term()
 
-    def __enter__(self) -> Subscriber:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -7,7 +7,7 @@ import json
 import signal
 import subprocess
 import sys
-from typing import Iterator
+from collections.abc import Iterator
 
 from rt.errors import HardwareError, TalusError
 

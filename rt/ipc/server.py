@@ -17,15 +17,25 @@ import socket
 import threading
 import time
 from collections import deque
-from typing import Any, Callable, Protocol
+from collections.abc import Callable
+from typing import Any, Protocol, Self
 
 import zmq
 
 from rt.errors import ConfigurationError, InputError, TalusError
 from rt.ipc.messages import (
-    COMMANDS, DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT, MAX_MESSAGE_BYTES, TOPICS, Request,
+    COMMANDS,
+    DEFAULT_ENDPOINT,
+    DEFAULT_PUB_ENDPOINT,
+    MAX_MESSAGE_BYTES,
+    TOPICS,
+    Request,
     RequestRejected,
-    check_publication, decode_request, encode_publication, error_reply, ok_reply,
+    check_publication,
+    decode_request,
+    encode_publication,
+    error_reply,
+    ok_reply,
 )
 from rt.ipc.security import ServerCurveConfig, ServerSecurity, check_server_endpoint
 
@@ -197,7 +207,7 @@ class RtServer:
             return
         self._release()
 
-    def __enter__(self) -> RtServer:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

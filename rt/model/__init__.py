@@ -18,11 +18,11 @@ class RobotModel:
     dyn: Dynamics
 
     @classmethod
-    def load(cls, path: str | Path | None = None) -> "RobotModel":
+    def load(cls, path: str | Path | None = None) -> RobotModel:
         return cls.from_description(load_description(path))
 
     @classmethod
-    def from_description(cls, desc: RobotDescription) -> "RobotModel":
+    def from_description(cls, desc: RobotDescription) -> RobotModel:
         kin = Kinematics(desc)
         return cls(desc, kin, Dynamics(desc, kin))
 

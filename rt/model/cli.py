@@ -10,7 +10,8 @@ import argparse
 import json
 import math
 import sys
-from typing import Any, Callable, TextIO
+from collections.abc import Callable
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -25,8 +26,8 @@ def register(commands: argparse._SubParsersAction) -> None:
         ("describe", _describe, "geometry, limits, bodies, drive and base parameters as JSON"),
         ("ik", _ik, 'JSON lines {"z","roll","pitch"} -> {"q","x","y","yaw","phi"}'),
         ("fk", _fk, 'JSON lines {"q":[..]} -> pose and parasitic terms'),
-        ("dynamics", _dynamics, 'JSON lines {"q","qd","qdd"[,"payload"][,"wrench"]} -> '
-                                 'M, C, G, F, tau'),
+        ("dynamics", _dynamics, ('JSON lines {"q","qd","qdd"[,"payload"][,"wrench"]} -> '
+                                 'M, C, G, F, tau')),
         ("demo", _demo, "human-readable tour of the model on the twin's nominal description"),
     ):
         p = commands.add_parser(name, help=help_text)
@@ -100,7 +101,8 @@ def _payload(obj: dict) -> Payload | None:
             or not all(isinstance(r, list) and len(r) == 3 for r in inertia)):
         raise InputError('"payload.inertia_kg_m2" must be a 3x3 list of numbers')
     rows = [_vector({"row": r}, "row") for r in inertia]
-    return Payload(mass, tuple(com), tuple(tuple(r) for r in rows))
+    return Payload(mass, (com[0], com[1], com[2]),
+                   tuple((r[0], r[1], r[2]) for r in rows))
 
 
 def _parse_line(line: str, lineno: int) -> dict:

@@ -40,7 +40,7 @@ def run_demo(model: RobotModel, out: TextIO) -> None:
     w("\nDynamics in actuator space at home (Pinocchio tree projected on the sliders)\n")
     home = kin.ik(mid, 0.0, 0.0)
     st = dyn.state(home.q, (0.05, -0.02, 0.03))
-    m, c, g = dyn.mcg(st)
+    m, _c, g = dyn.mcg(st)
     w(f"  M (kg):\n{_indent(m)}\n  G (N): {np.array2string(g, precision=2)}\n")
     w(f"  reflected motor inertia {d.drive.reflected_inertia_kg:.1f} kg per axis; "
       f"{d.drive.force_per_volt_n:.0f} N per command volt, ±{d.drive.command_limit_v} V "

@@ -48,7 +48,7 @@ class Geometry(_Strict):
         return angles
 
     @model_validator(mode="after")
-    def _reachable(self) -> "Geometry":
+    def _reachable(self) -> Geometry:
         if self.rod_length_m <= abs(self.base_radius_m - self.platform_radius_m):
             raise ValueError("rod_length_m must exceed |base_radius_m - platform_radius_m|")
         return self
@@ -60,6 +60,11 @@ class Limits(_Strict):
     spherical_cone_half_angle_deg: Annotated[float, Field(gt=0.0, lt=90.0)]
     roll_max_deg: Annotated[float, Field(gt=0.0, lt=60.0)]
     pitch_max_deg: Annotated[float, Field(gt=0.0, lt=60.0)]
+
+    @property
+    def stroke(self) -> tuple[float, float]:
+        """``stroke_m`` as (lower, upper) slider position (m)."""
+        return self.stroke_m[0], self.stroke_m[1]
 
     @field_validator("stroke_m")
     @classmethod
@@ -177,7 +182,7 @@ class Encoder(_Strict):
     midpoint: Annotated[int, Field(ge=0)]
 
     @model_validator(mode="after")
-    def _midpoint_fits(self) -> "Encoder":
+    def _midpoint_fits(self) -> Encoder:
         if self.midpoint >= 2 ** self.counter_bits:
             raise ValueError(f"midpoint {self.midpoint} does not fit {self.counter_bits} bits")
         return self
@@ -212,7 +217,7 @@ class RobotDescription(_Strict):
         return version
 
     @model_validator(mode="after")
-    def _stroke_within_rod(self) -> "RobotDescription":
+    def _stroke_within_rod(self) -> RobotDescription:
         stroke = self.limits.stroke_m
         if stroke[0] < 0.0:
             raise ValueError("limits.stroke_m must start at or above 0 (bottom of the guide)")

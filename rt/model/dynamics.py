@@ -27,8 +27,8 @@ import pinocchio as pin
 
 from rt.errors import InputError
 from rt.model.description import Body, RobotDescription
-from rt.model.kinematics import Configuration, Kinematics
 from rt.model.kernels import TREE_DOF, tree_maps
+from rt.model.kinematics import Configuration, Kinematics
 
 #: Pinocchio joint ids (1-based; 0 is the universe) of the bodies that carry mass.
 SLIDER_JOINTS = (1, 3, 5)
@@ -118,6 +118,13 @@ class State:
         self._q = np.zeros(3)
         self._phi = np.zeros(3)
         self.forward_det = 0.0
+
+    @property
+    def config(self) -> Configuration:
+        """The configuration of this cycle (set by ``Dynamics.state``)."""
+        if self.cfg is None:
+            raise InputError("this State has no configuration yet: fill it with Dynamics.state")
+        return self.cfg
 
     def forward_jacobian(self) -> np.ndarray:
         """∂(z, roll, pitch)/∂q (3×3; m/m and rad/m): pose rates from slider velocities."""

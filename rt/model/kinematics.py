@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rt.errors import ConvergenceError, WorkspaceError
-from rt.model.kernels import FK_SINGULAR, assemble, fk_solve, pack_geometry
 from rt.model.description import RobotDescription
+from rt.model.kernels import FK_SINGULAR, assemble, fk_solve, pack_geometry
 
 _FK_MAX_ITERATIONS = 25
 # Newton stops when the largest rod-angle update is below this (rad). 1e-12 rad on a 0.45 m rod
@@ -208,12 +208,12 @@ class Kinematics:
         assemble(self.geom, self._q_buf, phi_arr, self._rot, self._pos, self._spheres)
         rot = tuple(self._rot.ravel().tolist())
         px, py, pz = self._pos.tolist()
-        pts = tuple(tuple(row) for row in self._spheres.tolist())
+        pts = tuple((float(x), float(y), float(z)) for x, y, z in self._spheres.tolist())
         roll = math.atan2(rot[7], rot[8])
         pitch = math.atan2(-rot[6], math.hypot(rot[7], rot[8]))
         yaw = math.atan2(rot[3], rot[0])
         return Configuration((q[0], q[1], q[2]), (phi[0], phi[1], phi[2]), pz, roll, pitch, px,
-                             py, yaw, rot, tuple(pts), iterations)
+                             py, yaw, rot, pts, iterations)
 
     # ------------------------------------------------------------------ workspace
     def workspace_violations(self, cfg: Configuration) -> list[str]:

@@ -22,6 +22,7 @@ import numpy as np
 import pinocchio as pin
 import scipy.linalg
 
+from rt.errors import KinematicsError
 from rt.model.dynamics import PLATFORM_JOINT, ROD_JOINTS, SLIDER_JOINTS, Dynamics, State
 
 INERTIAL_NAMES = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
@@ -71,7 +72,7 @@ class Regressor:
 
     def __init__(self, dynamics: Dynamics, samples: int = 40, seed: int = 20121):
         self.dyn = dynamics
-        cols = []
+        cols: list[int] = []
         for _, joint in BODIES:
             cols.extend(range(10 * (joint - 1), 10 * joint))
         self._tree_cols = np.array(cols)
@@ -179,14 +180,14 @@ class Regressor:
     def _find_base(self, samples: int, seed: int) -> BaseParameters:
         rng = np.random.default_rng(seed)
         kin = self.dyn.kin
-        rows = []
+        rows: list[np.ndarray] = []
         while len(rows) < samples:
             z = rng.uniform(kin.stroke[0] + 0.45, kin.stroke[1] + 0.40)
             roll = rng.uniform(-0.8, 0.8) * kin.roll_max
             pitch = rng.uniform(-0.8, 0.8) * kin.pitch_max
             try:
                 cfg = kin.ik(z, roll, pitch)
-            except Exception:
+            except KinematicsError:                       # outside the workspace: draw again
                 continue
             st = self.dyn.state(cfg.q, rng.normal(0.0, 0.1, 3), out=self._state, cfg=cfg)
             rows.append(self.standard(st, rng.normal(0.0, 1.0, 3)).copy())

@@ -17,9 +17,10 @@ import math
 import os
 import struct
 import zlib
+from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator, NamedTuple
+from typing import Any, NamedTuple
 
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
@@ -183,7 +184,7 @@ class RecordingScan:
     def _scan(self) -> Iterator[RecordedMessage]:
         info = self.info
         try:
-            f = open(self.path, "rb")
+            f = open(self.path, "rb")  # noqa: SIM115 - closed by the with below; open errors apart
         except OSError as exc:
             raise RecordingFileError(self.path, f"cannot open: {exc.strerror or exc}") from exc
         with f:
@@ -231,7 +232,7 @@ class RecordingScan:
                     summary_crc = zlib.crc32(body, zlib.crc32(head, summary_crc))
                 try:
                     out = self._record(opcode, length, body)
-                except Exception as exc:   # noqa: BLE001 - any corrupt record is reported
+                except Exception as exc:
                     if first:
                         raise RecordingFileError(
                             self.path, f"corrupt MCAP header record: {exc}") from exc
@@ -246,8 +247,7 @@ class RecordingScan:
                 first = False
                 offset += _RECORD_HEAD.size + length
                 info.recovered_bytes = offset
-                for rec in out:
-                    yield rec
+                yield from out
                 if opcode == Opcode.FOOTER:
                     self._check_summary_crc(head, body, summary_crc or 0, offset - length - 9)
                     closing = f.read(len(MAGIC))

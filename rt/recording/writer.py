@@ -33,19 +33,30 @@ import math
 import os
 import threading
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import IO, Any, Iterable, Protocol
+from typing import IO, Any, Protocol, Self
 
 import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from rt.errors import InputError, TalusError
 from rt.output_files import PARTIAL_SUFFIX, check_output, commit_output, partial_path
-from rt.recording.channels import (CHANNELS, EVENTS, MESSAGE_ENCODING, METADATA,
-                                   METADATA_REQUIRED_FROM_CALLER, REFERENCE, SCHEMA_ENCODING,
-                                   STATE, STATE_ROW_LAYOUT, WRENCH, ChannelSpec)
+from rt.recording.channels import (
+    CHANNELS,
+    EVENTS,
+    MESSAGE_ENCODING,
+    METADATA,
+    METADATA_REQUIRED_FROM_CALLER,
+    REFERENCE,
+    SCHEMA_ENCODING,
+    STATE,
+    STATE_ROW_LAYOUT,
+    WRENCH,
+    ChannelSpec,
+)
 
 #: Chunk size, bytes of uncompressed records: ≈ 1 s of 1 kHz state. The flush timer, not the
 #: size, usually closes chunks, so this only caps a chunk when many channels are busy.
@@ -446,7 +457,7 @@ class SessionRecorder:
                     commit_output(self._partial, self.path, force=True)
                 except TalusError as exc:
                     self._error = str(exc)
-            elif self._partial is not None:
+            elif self._partial is not None and self._error is not None:
                 self._error += f"; the previous {self.path} is untouched, this recording " \
                                f"is in {self._partial}"
             complete = self._error is None
@@ -467,7 +478,7 @@ class SessionRecorder:
             }
             return self._summary
 
-    def __enter__(self) -> "SessionRecorder":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -476,7 +487,7 @@ class SessionRecorder:
     # ------------------------------------------------------------------ writer thread
 
     def _complete_metadata(self, metadata: dict[str, Any]) -> dict[str, Any]:
-        start = datetime.fromtimestamp(self.start_wall_ns / 1e9, tz=timezone.utc)
+        start = datetime.fromtimestamp(self.start_wall_ns / 1e9, tz=UTC)
         out = {"t": self.loop_t0, **metadata}
         out.setdefault("software_version", software_version())
         out["start_wall_time"] = start.astimezone().isoformat(timespec="microseconds")

@@ -39,12 +39,21 @@ cycle.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from enum import IntEnum
 
 import numpy as np
-from ruckig import (ControlInterface, DurationDiscretization, InputParameter, OutputParameter,
-                    Result, Ruckig, RuckigError, Synchronization, Trajectory)
+from ruckig import (
+    ControlInterface,
+    DurationDiscretization,
+    InputParameter,
+    OutputParameter,
+    Result,
+    Ruckig,
+    RuckigError,
+    Synchronization,
+    Trajectory,
+)
 
 from rt.errors import ConfigurationError
 
@@ -86,7 +95,8 @@ class Mode(IntEnum):
 
 
 def _per_axis(value: float | Sequence[float], name: str) -> list[float]:
-    values = [float(value)] * N_AXES if np.isscalar(value) else [float(v) for v in value]
+    values = ([float(v) for v in value] if isinstance(value, Iterable)
+              else [float(value)] * N_AXES)
     if len(values) != N_AXES or not all(math.isfinite(v) and v > 0.0 for v in values):
         raise ConfigurationError(f"{name} must be a positive finite number or {N_AXES} of them "
                                  f"(got {value!r})")
@@ -98,8 +108,8 @@ def _three(value: float | Sequence[float] | np.ndarray | None) -> list[float] | 
     if value is None:
         return [0.0] * N_AXES
     try:
-        values = ([float(value)] * N_AXES if np.isscalar(value)
-                  else [float(v) for v in value])  # type: ignore[union-attr]
+        values = ([float(v) for v in value] if isinstance(value, Iterable)
+                  else [float(value)] * N_AXES)
     except (TypeError, ValueError):
         return None
     if len(values) != N_AXES or not all(math.isfinite(v) for v in values):

@@ -21,8 +21,12 @@ from collections.abc import Sequence
 import numpy as np
 
 from rt.errors import ConfigurationError, ProtocolValidationError
-from rt.references.approach import (DEFAULT_MAX_ACCELERATION_M_S2, DEFAULT_MAX_VELOCITY_M_S,
-                                    N_AXES, STROKE_M)
+from rt.references.approach import (
+    DEFAULT_MAX_ACCELERATION_M_S2,
+    DEFAULT_MAX_VELOCITY_M_S,
+    N_AXES,
+    STROKE_M,
+)
 from rt.references.playback import LIMIT_SLACK, ReferenceStatus
 
 PHASES_RAD = (0.0, 2.0 * math.pi / 3.0, 4.0 * math.pi / 3.0)
@@ -68,7 +72,7 @@ class BenchmarkTrajectory:
         self.stroke = (float(stroke[0]), float(stroke[1]))
         self.max_velocity = float(max_velocity)
         self.max_acceleration = float(max_acceleration)
-        self.n_samples = int(round(steps)) + 1
+        self.n_samples = round(steps) + 1
         self.index = 0
         self._validated = False
         self._w = (2.0 * math.pi * self.frequencies[0], 2.0 * math.pi * self.frequencies[1])

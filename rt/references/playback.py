@@ -48,8 +48,13 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from rt.errors import ConfigurationError, ProtocolValidationError
-from rt.references.approach import (DEFAULT_MAX_ACCELERATION_M_S2, DEFAULT_MAX_VELOCITY_M_S,
-                                    N_AXES, POSITION_SLACK_M, STROKE_M)
+from rt.references.approach import (
+    DEFAULT_MAX_ACCELERATION_M_S2,
+    DEFAULT_MAX_VELOCITY_M_S,
+    N_AXES,
+    POSITION_SLACK_M,
+    STROKE_M,
+)
 from rt.references.program import Mode, ProgramInput, ProgramStatus, ReferenceOutput
 
 _AXES = ("q0", "q1", "q2")
@@ -239,7 +244,7 @@ class TrajectoryPlayback:
 
     @classmethod
     def from_csv(cls, path: str | Path, dt: float = 1.0e-3, sample_rate_hz: float | None = None,
-                 **kwargs: object) -> "TrajectoryPlayback":
+                 **kwargs: object) -> TrajectoryPlayback:
         """Load a CSV (module docstring) and validate it; raises ProtocolValidationError."""
         t, q, lines = load_csv(path, sample_rate_hz)
         playback = cls(t, q, dt=dt, source=str(path), lines=lines,
@@ -321,7 +326,7 @@ class TrajectoryPlayback:
 
     def _resample(self) -> None:
         t = self._t - self._t[0]
-        n = int(math.floor(t[-1] / self.dt + 1e-9)) + 1
+        n = math.floor(t[-1] / self.dt + 1e-9) + 1
         tk = np.arange(n) * self.dt
         tk[-1] = min(tk[-1], t[-1])  # round-off must not evaluate past the last sample
         if self.interpolation == "cubic":

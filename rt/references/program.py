@@ -35,8 +35,9 @@ cycle that emits the last sample on.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from enum import IntEnum
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -74,8 +75,19 @@ class ProgramStatus(IntEnum):
 class ReferenceOutput:
     """Preallocated per-cycle references (module docstring for the fields and units)."""
 
-    __slots__ = ("buf", "q_ref", "qd_ref", "qdd_ref", "pose_ref", "pose_dot_ref", "shear_ref",
-                 "blocks", "mode", "done", "index")
+    __slots__ = (
+        "blocks",
+        "buf",
+        "done",
+        "index",
+        "mode",
+        "pose_dot_ref",
+        "pose_ref",
+        "q_ref",
+        "qd_ref",
+        "qdd_ref",
+        "shear_ref",
+    )
 
     def __init__(self) -> None:
         self.buf = np.zeros(N_FIELDS)
@@ -111,7 +123,7 @@ class ProgramInput:
     platform's own weight removed).
     """
 
-    __slots__ = ("tau_roll_nm", "tau_pitch_nm")
+    __slots__ = ("tau_pitch_nm", "tau_roll_nm")
 
     def __init__(self) -> None:
         self.tau_roll_nm = 0.0
@@ -145,7 +157,7 @@ class TrajectoryProgram:
         self.trajectory = trajectory
         self.duration_s = float(duration_s)
         self.dt = float(dt)
-        self.n_samples = int(round(duration_s / dt)) + 1
+        self.n_samples = round(duration_s / dt) + 1
         self.index = 0
         self._ref = Reference()
 

@@ -155,7 +155,7 @@ class ProgramReference(Component):
         self._pending = self._initial
 
     # ------------------------------------------------------------------ the cycle
-    def _begin(self, req: "_Request") -> None:
+    def _begin(self, req: _Request) -> None:
         st = self.state
         program = req.program
         out = req.out
@@ -176,7 +176,7 @@ class ProgramReference(Component):
             st.phase = Phase.REST
             return
         self.program, self._out, self._req = program, out, req
-        self._n = max(1, int(round(program.duration_s / self.approach.dt)))
+        self._n = max(1, round(program.duration_s / self.approach.dt))
         st.k = 0
         st.phase = Phase.APPROACH
         self.epoch += 1

@@ -5,8 +5,8 @@ import enum
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Callable
 
 
 class Reaction(enum.IntEnum):
@@ -28,14 +28,14 @@ class SupervisorMode(enum.IntEnum):
     HARD_STOP = 3     # outputs zero, drives disabled
 
     @classmethod
-    def of(cls, reaction: Reaction) -> "SupervisorMode":
+    def of(cls, reaction: Reaction) -> SupervisorMode:
         """The mode a latched reaction puts the loop in."""
         if reaction >= Reaction.HARD_STOP and reaction != Reaction.FAILOVER:
             return cls.HARD_STOP
         return cls.SOFT_STOP if reaction == Reaction.SOFT_STOP else cls.RUN
 
     @classmethod
-    def from_port(cls, value: float) -> "SupervisorMode":
+    def from_port(cls, value: float) -> SupervisorMode:
         """The mode a ``mode`` port carries."""
         return cls(int(value))
 
@@ -64,7 +64,7 @@ class EventLog:
     """Bounded, thread-safe record of events; ``listener`` (e.g. the IPC publisher, which must
     not block) is called with each new event's dict."""
 
-    def __init__(self, capacity: int = 4096, listener: Callable[[dict], None] | None = None):
+    def __init__(self, capacity: int = 4096, listener: Callable[[dict], object] | None = None):
         self._events: deque[SafetyEvent] = deque(maxlen=capacity)
         self._lock = threading.Lock()
         self.listener = listener

@@ -11,20 +11,21 @@ Targets (issue 5): every fault detected; hard stop ≤ 20 ms to zero output; sof
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any
 
 import numpy as np
 
 from rt.control.base import Reference
-from rt.control.experiment import benchmark_reference
 from rt.engine import Component
-from rt.errors import KinematicsError
+from rt.errors import ConfigurationError, KinematicsError
 from rt.model import RobotModel
 from rt.position_loop import PositionLoop, build_sim_position_loop
 from rt.safety.events import Reaction, SupervisorMode
 from rt.safety.limits import PatientLimits
 from rt.twin.environment import CompliantAnkle, FreeMotion
+from rt.twin.twin import Twin
 
 FAULT_AT_S = 3.0
 RUN_S = 5.0
@@ -32,6 +33,18 @@ REST_SPEED_M_S = 1e-3
 REST_HOLD_S = 0.05
 #: The matrix entry run as two real processes (``run_rt_process_loss``), not a Scenario.
 RT_PROCESS_LOSS = "rt_process_loss"
+
+
+#: An action the scenario wants run at a time of the run (s): the loop stops there, runs it,
+#: and goes on (what a GUI's e-stop press does between two cycles).
+Later = tuple[float, Callable[[], None]]
+
+
+def _sim_twin(pl: PositionLoop) -> Twin:
+    """The in-process twin the matrix runs on (every Scenario is a sim run)."""
+    if pl.twin is None:
+        raise ConfigurationError("the fault matrix runs on the in-process twin only")
+    return pl.twin
 
 
 class TruthProbe(Component):
@@ -45,12 +58,13 @@ class TruthProbe(Component):
 
     def update(self, t: float, dt: float) -> int:
         pl: PositionLoop = self._pl[0]
-        plant = pl.twin.plant
+        twin = _sim_twin(pl)
+        plant = twin.plant
         r = self.rows[self.n % len(self.rows)]
         r[0] = t
         r[1:4] = plant.q
         r[4:7] = plant.qd
-        r[7:10] = pl.twin.amp_volts
+        r[7:10] = twin.amp_volts
         w = plant.wrench_s
         r[10] = math.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
         r[11] = pl.graph.output("supervisor.mode")[0]
@@ -61,16 +75,17 @@ class TruthProbe(Component):
 @dataclass
 class Scenario:
     name: str
-    inject: Callable[[PositionLoop, float], None]
+    #: Injects the fault at the given time (s); returns the actions to run between cycles.
+    inject: Callable[[PositionLoop, float], list[Later] | None]
     environment: object = field(default_factory=FreeMotion)
     trajectory: Callable | None = None
     patient: PatientLimits = field(default_factory=PatientLimits)
     mode: str = "fast"
 
 
-def _fault(kind: str, **kw) -> Callable[[PositionLoop, float], None]:
+def _fault(kind: str, **kw: Any) -> Callable[[PositionLoop, float], None]:
     def inject(pl: PositionLoop, t: float) -> None:
-        pl.twin.faults.schedule(kind, t, **kw)
+        _sim_twin(pl).faults.schedule(kind, t, **kw)
     return inject
 
 
@@ -119,11 +134,13 @@ def _rise(speed_m_s: float, model: RobotModel):
 def scenarios(model: RobotModel) -> list[Scenario]:
     def heartbeat_lost(pl: PositionLoop, t_f: float) -> None:
         pl.supervisor.heartbeat_required = True
-        clock = pl.twin.clock
-        pl.supervisor.heartbeat_age = lambda: max(0.0, clock.t - t_f)
+        clock = _sim_twin(pl).clock
+        if clock is None:
+            raise ConfigurationError("client_loss needs the twin's clock")
+        pl.supervisor.heartbeat_age = lambda: max(0.0, clock() - t_f)
 
-    def gui_estop(pl: PositionLoop, t_f: float) -> None:
-        pl._pending.append((t_f, lambda: pl.supervisor.request_estop("gui")))
+    def gui_estop(pl: PositionLoop, t_f: float) -> list[Later]:
+        return [(t_f, lambda: pl.supervisor.request_estop("gui"))]
 
     return [
         Scenario("encoder_freeze", _fault("encoder_freeze", axis=0)),
@@ -157,10 +174,8 @@ def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
                                  environment=sc.environment, patient_limits=sc.patient,
                                  model=model, extra_blocks=[probe])
     holder.append(pl)
-    pl._pending = []
     synthetic = sc.name in ("rom_limit_at_speed", "force_overload")
-    sc.inject(pl, t_fault)
-    pending = pl._pending
+    pending = sc.inject(pl, t_fault) or []
     if pending:
         pl.loop.run(seconds=pending[0][0])
         pending[0][1]()
@@ -299,11 +314,13 @@ def run_rt_process_loss(timeout_s: float = 10.0) -> dict:
               "excursion": {"rom_deg": 0.0, "force_pct": 0.0, "stroke_mm": 0.0},
               "final_state": "unknown"}
     try:
+        assert rig.stdout is not None                 # stdout=PIPE
         json.loads(rig.stdout.readline())
         rt = subprocess.Popen(py + ["rt", "serve", "--backend", "twin_shm", "--shm", shm,
                                     "--endpoint", "tcp://127.0.0.1:*",
                                     "--pub-endpoint", "tcp://127.0.0.1:*"],
                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        assert rt.stdout is not None                  # stdout=PIPE
         endpoint = json.loads(rt.stdout.readline())["serving"]["endpoint"]
         with RtClient(endpoint, timeout_s=2.0) as client, ShmRig(shm) as handle:
             client.control_acquire("fault matrix")

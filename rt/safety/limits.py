@@ -55,7 +55,7 @@ class PatientLimits(_Limits):
     rom_tolerance_deg: Annotated[float, Field(gt=0.0, le=5.0)] = 0.5
 
     @model_validator(mode="after")
-    def _ordered(self) -> "PatientLimits":
+    def _ordered(self) -> PatientLimits:
         if not self.roll_min_deg < self.roll_max_deg:
             raise ValueError("roll_min_deg must be below roll_max_deg")
         if not self.pitch_min_deg < self.pitch_max_deg:

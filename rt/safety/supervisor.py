@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
 
 from rt.model.description import RobotDescription
 from rt.safety.events import EventLog, Reaction, SafetyEvent

@@ -6,8 +6,8 @@ import json
 import math
 import sys
 
-from rt.model.robot_option import add_robot_option
 from rt.cli_args import finite_float, rate_hz, seconds, seed
+from rt.model.robot_option import add_robot_option
 
 #: The amplifier commands a user may hold (V); the drive clamps at ±6 V, the DAC spans ±10 V.
 VOLTS = finite_float(-10.0, 10.0, unit="V")
@@ -61,7 +61,7 @@ def _step(args) -> int:
     card.write_volts(args.volts)
     q = np.zeros(3)
     w = Wrench()
-    n = int(round(args.seconds * args.rate))
+    n = round(args.seconds * args.rate)
     for k in range(n + 1):
         clock.t = k / args.rate
         encoders.read_positions_m(q)

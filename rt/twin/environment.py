@@ -5,7 +5,7 @@ Each environment packs into the float64[16] array read by ``rt.twin.physics``.
 """
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -95,7 +95,7 @@ class PayloadStep(_Env):
         return np.zeros(16)
 
 
-Environment = Annotated[Union[FreeMotion, ForcePlateContact, CompliantAnkle, PayloadStep],
+Environment = Annotated[FreeMotion | ForcePlateContact | CompliantAnkle | PayloadStep,
                         Field(discriminator="kind")]
 
 
@@ -114,7 +114,8 @@ def parse_environment(text: str) -> FreeMotion | ForcePlateContact | CompliantAn
             return PayloadStep(mass_kg=float(mass) if mass else 100.0,
                                at_s=float(at) if at else 0.0)
         if name == "plate":
-            return ForcePlateContact(**({"plate_height_m": float(arg)} if arg else {}))
+            return (ForcePlateContact(plate_height_m=float(arg)) if arg
+                    else ForcePlateContact())
         if name == "ankle" and not arg:
             return CompliantAnkle()
     except ValidationError as exc:

@@ -131,12 +131,10 @@ def end_stop_force(q, qd, bodies):
     f = 0.0
     if q > hi:
         f = -bodies[B_STOP_K] * (q - hi) - bodies[B_STOP_C] * qd
-        if f > 0.0:
-            f = 0.0
+        f = min(f, 0.0)
     elif q < lo:
         f = -bodies[B_STOP_K] * (q - lo) - bodies[B_STOP_C] * qd
-        if f < 0.0:
-            f = 0.0
+        f = max(f, 0.0)
     return f
 
 
@@ -411,8 +409,7 @@ def environment_wrench(env, bodies, rot, pos, twist, qd, env_state, wrench_s, ta
             tvx, tvy, tvz = _cross(wx, wy, wz, tipx, tipy, tipz)
             vtz = voz + tvz
             fn = env[2] * depth + env[3] * vtz
-            if fn < 0.0:
-                fn = 0.0                       # the contact pushes, never pulls
+            fn = max(fn, 0.0)                       # the contact pushes, never pulls
             fx = -env[4] * (vox + tvx)
             fy = -env[4] * (voy + tvy)
             fz = -fn
@@ -557,7 +554,7 @@ def drive_current(volts, bodies, out):
     limit = bodies[B_I_LIMIT]
     for i in range(3):
         c = gain * volts[i]
-        out[i] = limit if c > limit else (-limit if c < -limit else c)
+        out[i] = limit if c > limit else (max(c, -limit))
 
 
 @njit(cache=True)

@@ -230,7 +230,7 @@ class TwinPlant:
 
     def advance(self, dt: float, volts) -> None:
         """Hold amplifier commands ``volts`` (V, after the DAC) for ``dt`` s and integrate."""
-        n = max(1, int(round(dt * self.physics_rate_hz)))
+        n = max(1, round(dt * self.physics_rate_hz))
         if not self.realistic:
             self._volts[:] = volts
             status = physics.integrate(self.geom, self.bodies, self.friction, self.env, self.q,

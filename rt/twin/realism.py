@@ -97,7 +97,7 @@ class RigImperfections(BaseModel):
     cable_stiffness_n_per_m: NonNeg = 30.0
 
     @classmethod
-    def none(cls) -> "RigImperfections":
+    def none(cls) -> RigImperfections:
         """Every effect off: the ideal twin (rigid, instantaneous, no brake, no cable)."""
         return cls(current_loop_bandwidth_hz=0.0, amplifier_delay_s=0.0, motor_side_friction=0.0,
                    screw_stiffness_n_per_m=0.0, backlash_m=0.0, friction_ripple=0.0,

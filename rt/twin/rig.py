@@ -32,12 +32,12 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from typing import Any, Callable
+from typing import Any, Self
 
 from rt.engine import rt_hygiene
 from rt.errors import ConfigurationError, TalusError
-from rt.model.description import RobotDescription
 from rt.twin import shm as layout
 from rt.twin.environment import parse_environment
 from rt.twin.twin import Twin, port_counts
@@ -252,7 +252,7 @@ class RigProcess:
 
     def run(self, seconds: float | None = None, stop: Any = None,
             spin_s: float = DEFAULT_SPIN_S, fifo_priority: int | None = None,
-            on_ready: Callable[["RigProcess"], None] | None = None) -> RigSummary:
+            on_ready: Callable[[RigProcess], None] | None = None) -> RigSummary:
         """Run periods in real time until ``seconds`` elapse, ``stop.is_set()``, or
         :meth:`request_stop`. ``fifo_priority`` asks for SCHED_FIFO (tried, not required).
         ``on_ready(self)`` is called once the loop is set up (gc collected, ≈ 70 ms) and
@@ -294,8 +294,7 @@ class RigProcess:
                     while now < deadline:
                         now = clock_ns()
                     late = now - deadline
-                    if late > late_max:
-                        late_max = late
+                    late_max = max(late_max, late)
                     if late > tol_ns:
                         summary.misses += 1
                         if late > behind_ns:
@@ -321,7 +320,7 @@ class RigProcess:
             seg.header.rig_state[0] = layout.RIG_STOPPED
         seg.close()
 
-    def __enter__(self) -> "RigProcess":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

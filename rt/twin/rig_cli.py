@@ -70,7 +70,7 @@ def cmd_rig(args: argparse.Namespace) -> int:
             rig.request_stop()
 
     # Handlers first: a SIGTERM during the ≈ 1 s start-up must still unlink the segment.
-    previous: dict[int, Any] = {}
+    previous: dict[signal.Signals, Any] = {}
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, signal.SIGINT):
             previous[sig] = signal.signal(sig, _stop)
@@ -99,8 +99,8 @@ def cmd_rig(args: argparse.Namespace) -> int:
         finally:
             rig.close()
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     _emit({"stopped": summary.as_dict()})
     return EXIT_ERROR if summary.error else 0
 

@@ -80,8 +80,9 @@ import os
 import re
 import threading
 import time
+from collections.abc import Iterable
 from multiprocessing import shared_memory
-from typing import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -191,9 +192,13 @@ class FieldViews:
         for name, offset, dtype, count in specs:
             start = offset - skip
             itemsize = np.dtype(dtype).itemsize
-            view = data[start:start + itemsize * count].view(dtype)
+            view: np.ndarray = data[start:start + itemsize * count].view(dtype)
             setattr(self, name, view)
             self._names.append(name)
+
+    if TYPE_CHECKING:
+        # The fields are set by name at run time; to the type checker each one is an array.
+        def __getattr__(self, name: str) -> np.ndarray: ...
 
     def release(self) -> None:
         """Drop every view (they pin the shared buffer, which cannot close while pinned)."""
@@ -292,11 +297,13 @@ class RigSegment:
     Use :func:`create_segment` (rig side) or :func:`attach_segment` (RT side).
     """
 
-    def __init__(self, shm: "shared_memory.SharedMemory | _AttachedShm", name: str, owner: bool):
+    def __init__(self, shm: shared_memory.SharedMemory | _AttachedShm, name: str, owner: bool):
         self.name = name
         self.owner = owner
         self._shm: shared_memory.SharedMemory | _AttachedShm | None = shm
         buf = shm.buf
+        if buf is None:
+            raise HardwareError(f"shared-memory segment {name!r} is not mapped")
         self._header_bytes = np.frombuffer(buf, np.uint8, HEADER_SIZE, HEADER_OFFSET)
         self.header = FieldViews(self._header_bytes, HEADER_FIELDS, skip=0)
         self.sensors = SeqlockBlock(buf, SENSOR_OFFSET, SENSOR_SIZE, SENSOR_FIELDS)
@@ -325,7 +332,7 @@ class RigSegment:
         except BufferError:
             # Someone still holds a view of the buffer; the mapping goes when it is collected.
             pass
-        if self.owner:
+        if self.owner and isinstance(shm, shared_memory.SharedMemory):  # the creator's handle
             try:
                 shm.unlink()
             except FileNotFoundError:

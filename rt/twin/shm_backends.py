@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Self
 
 import numpy as np
 
-from rt.devices.interfaces import (ActuatorOutputs, DigitalInputs, DigitalInputState,
-                                   EncoderBank)
+from rt.devices.interfaces import ActuatorOutputs, DigitalInputs, DigitalInputState, EncoderBank
 from rt.devices.sampled_ft import SampledForceTorque
 from rt.drivers.fake_comedi import FakeComedi
 from rt.drivers.fake_pcl833 import FakePcl833Port
@@ -206,13 +206,13 @@ class ShmRig:
         seg, self.seg = self.seg, None
         if seg is None:
             return
-        self._rig_state = None  # type: ignore[assignment]
+        self._rig_state = None  # type: ignore[assignment]  # unpinned; closed: never read
         self._cmd = None  # type: ignore[assignment]
         self._sensor_block = None  # type: ignore[assignment]
         self._cmd_block = None  # type: ignore[assignment]
         seg.close()
 
-    def __enter__(self) -> "ShmRig":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -337,7 +337,7 @@ class ShmActuators(ActuatorOutputs):
     def enabled(self) -> bool:
         return self._driver.enabled
 
-    def write_volts(self, volts: Sequence[float]) -> None:
+    def write_volts(self, volts: Sequence[float] | np.ndarray) -> None:
         """Command ``volts`` (V) per axis: clamped, quantized (12 bit), published to the rig."""
         self._check_open()
         try:

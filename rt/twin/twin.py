@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -121,7 +121,7 @@ class Twin:
 
     # ------------------------------------------------------------------ setup
     @classmethod
-    def ideal(cls, description: RobotDescription | None = None, **kwargs) -> "Twin":
+    def ideal(cls, description: RobotDescription | None = None, **kwargs) -> Twin:
         """A twin whose physics is the model's: truth = ``description`` (default the nominal
         one) and no unmodelled effect. For tests of the ideal physics, not of the product."""
         return cls(description or load_description(), imperfections=RigImperfections.none(),
@@ -241,7 +241,7 @@ class Twin:
                     port.move_counts(f.axis, f.counts)
                     self._jumps_done.add(i)
             for f in self.faults.active("encoder_noise", t):
-                port.move_counts(f.axis, int(round(self.rng.normal(0.0, f.sigma_counts))))
+                port.move_counts(f.axis, round(self.rng.normal(0.0, f.sigma_counts)))
             for kind, name in (("ati_dropout", "dropout"), ("ati_stale", "stale"),
                                ("ati_saturation", "saturate")):
                 self.ati.set_fault(name, bool(self.faults.active(kind, t)))
