@@ -18,8 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rt.safety.limits import RobotLimits
-
 from rt.ati.rdt_server import RdtServer
 from rt.devices.interfaces import DigitalInputState
 from rt.devices.rig_config import AmplifierMonitor, AtiRdt, RigConfig
@@ -29,6 +27,7 @@ from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError
 from rt.model import RobotModel
 from rt.position_loop import build_position_loop
 from rt.rig_devices import rig_devices
+from rt.safety.limits import RobotLimits
 from rt.service import RtConfig, load_config
 from rt.twin.twin import Twin
 
