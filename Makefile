@@ -6,9 +6,9 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-# Debian packages the project needs at run or test time (none beyond the image's Python yet;
-# later parts add Xvfb and poppler-utils here).
-APT_PACKAGES :=
+# Debian packages the project needs at run or test time: poppler-utils (pdftoppm, pdftotext,
+# pdffonts) checks the PDF reports in the tests.
+APT_PACKAGES := poppler-utils
 
 .PHONY: demo test setup system-deps bench clean
 

@@ -284,7 +284,8 @@ def _pump(tap: SignalTap, recorder, stop: threading.Event) -> None:
                             bool(r[FLAGS + 1] > 0.5))
             recorder.publish("/protocol/reference", {
                 "t": t, "force": [0.0, 0.0, float(r[FREF])],
-                "phase": ("approach", "play", "return", "stopped", "done")[int(r[PHASE])]})
+                "phase": ("approach", "play", "return", "stopped", "done")[int(r[PHASE])],
+                "mode": "force" if r[CMODE] > 0.5 else "position"})
         if final:
             return
 

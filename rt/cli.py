@@ -23,6 +23,7 @@ GROUPS: dict[str, tuple[str, str]] = {
     "session": ("protocols.session_cli", "run a protocol: pre-flight, run, record, summary"),
     "rt": ("rt.ipc.cli", "RT process: status, stop, estop, reset (JSON)"),
     "record": ("rt.recording.cli", "recordings: info, CSV export"),
+    "report": ("reports.cli", "PDF reports: session, progress, calibration certificate"),
 }
 
 
