@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
+#: Below this range (°) on both axes the platform is said to have stayed level.
+LEVEL_DEG = 0.5
 #: Directions in the order clinicians read them (GUI.md: the patient's card).
 DIRECTIONS = ("dorsiflexion", "plantarflexion", "inversion", "eversion")
 

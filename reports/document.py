@@ -291,7 +291,9 @@ def table(spec: TableSpec, styles: Styles, width: float) -> Table:
              ("LINEBELOW", (0, 1), (-1, -1), 0.25, colors.HexColor("#d0d4d8")),
              ("VALIGN", (0, 0), (-1, -1), "TOP"),
              ("TOPPADDING", (0, 0), (-1, -1), 1.5),
-             ("BOTTOMPADDING", (0, 0), (-1, -1), 1.5)]
+             ("BOTTOMPADDING", (0, 0), (-1, -1), 1.5),
+             ("LEFTPADDING", (0, 0), (-1, -1), 2.5),
+             ("RIGHTPADDING", (0, 0), (-1, -1), 2.5)]
     t.setStyle(TableStyle(style))
     return t
 

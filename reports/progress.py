@@ -17,7 +17,7 @@ import json
 import math
 import os
 from datetime import date, timedelta
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -26,7 +26,8 @@ from pydantic.dataclasses import dataclass
 from reportlab.lib.units import mm
 from reportlab.platypus import Flowable, PageBreak, Spacer
 
-from reports.clinical import DIRECTIONS, KIND_WORDS, reached_by_direction
+from protocols.session_figures import FORCE_KINDS
+from reports.clinical import DIRECTIONS, LEVEL_DEG, reached_by_direction
 from reports.document import (AMBER, GREEN, RED, Clock, ReportContext, Styles, TableSpec,
                               banner, figure_image, fmt, frame_width, key_values, p, table,
                               utc_now, write_pdf)
@@ -58,7 +59,7 @@ class ProgressSession:
 class ProgressPlan:
     """The prescription's schedule: sessions per week from ``start`` to ``end`` (inclusive)."""
 
-    sessions_per_week: float = Field(gt=0, le=21)
+    sessions_per_week: Annotated[float, Field(gt=0, le=21)]
     start: date
     end: date | None = None
 
@@ -67,7 +68,7 @@ class ProgressPlan:
 class ProgressInput:
     """A patient's progress as plain data (module docstring)."""
 
-    patient_code: str = Field(min_length=1)
+    patient_code: Annotated[str, Field(min_length=1)]
     prescribed_rom_deg: dict[Literal["dorsiflexion", "plantarflexion", "inversion",
                                      "eversion"], float]
     sessions: list[ProgressSession]
@@ -144,14 +145,27 @@ def adherence(inp: ProgressInput, first: date, last: date) -> dict[str, Any]:
     return out
 
 
+def _moves_the_ankle(s: ProgressSession) -> bool:
+    """Whether a session's ROM counts: position kinds move the ankle, force kinds hold the
+    platform level (their ROM reads 0 and would drag the trend down)."""
+    if s.kind is not None:
+        return s.kind not in FORCE_KINDS
+    rom = (s.summary or {}).get("rom_deg") or {}
+    return any(r and (r[1] - r[0]) > LEVEL_DEG for r in rom.values())
+
+
 def _rows(inp: ProgressInput, sessions: list[ProgressSession]) -> list[dict[str, Any]]:
     out = []
     for s in sessions:
         summ = s.summary or {}
-        reached = reached_by_direction(summ.get("rom_deg"), inp.side) if s.outcome in \
-            ATTENDED else {d: None for d in DIRECTIONS}
+        came = s.outcome in ATTENDED
+        reached = reached_by_direction(summ.get("rom_deg"), inp.side) \
+            if came and _moves_the_ankle(s) else {d: None for d in DIRECTIONS}
+        force = came and (s.kind in FORCE_KINDS if s.kind is not None
+                          else summ.get("rms_error_pct") is not None)
         out.append({"session": s, "reached": reached,
-                    "rms": summ.get("rms_error_pct"), "peak": summ.get("peak_force_n"),
+                    "rms": summ.get("rms_error_pct") if force else None,
+                    "peak": summ.get("peak_force_n") if force else None,
                     "stops": len(summ.get("stops") or [])})
     return out
 
@@ -177,8 +191,12 @@ def render_progress_report(inp: ProgressInput, out: str | os.PathLike[str],
     ctx = ReportContext(TITLE, settings, clock(), software_version or installed_version(),
                         subject=f"Patient {inp.patient_code}")
     width = frame_width(ctx)
-    first = d0 or (sessions[0].date if sessions else None)
-    last = d1 or (sessions[-1].date if sessions else None)
+    today = ctx.generated_at.date()
+    plan = inp.plan
+    first = d0 or (min(sessions[0].date, plan.start) if sessions and plan else
+                   sessions[0].date if sessions else None)
+    last = d1 or (max(sessions[-1].date, min(plan.end or today, today)) if sessions and plan
+                  else sessions[-1].date if sessions else None)
     period = f"{first} to {last}" if first and last else "no sessions"
     story: list[Flowable] = [p(TITLE, st.title)]
     rows = _rows(inp, sessions)
@@ -202,7 +220,6 @@ def render_progress_report(inp: ProgressInput, out: str | os.PathLike[str],
                 f"({adh['pct']:.0f} %)")
     story.append(banner(text, colour, st, width))
     story.append(Spacer(1, 3 * mm))
-    plan = inp.plan
     story.append(key_values([
         ("Patient", inp.patient_code), ("Foot", inp.side), ("Period", period),
         ("Sessions", f"{len(sessions)} in the period: "
@@ -212,10 +229,11 @@ def render_progress_report(inp: ProgressInput, out: str | os.PathLike[str],
                  "adherence cannot be computed"),
     ], st, width))
     story.append(p("Range of motion", st.h1))
-    days = [r["session"].date for r in attended]
+    rom_sessions = [r for r in attended if _moves_the_ankle(r["session"])]
+    days = [r["session"].date for r in rom_sessions]
     rom_rows = []
     for d in DIRECTIONS:
-        vals = [r["reached"][d] for r in attended]
+        vals = [r["reached"][d] for r in rom_sessions]
         known = [v for v in vals if v is not None]
         trend = trend_per_week(days, vals)
         rom_rows.append([d.capitalize(), fmt(inp.prescribed_rom_deg.get(d), 1, "°"),
@@ -229,17 +247,22 @@ def render_progress_report(inp: ProgressInput, out: str | os.PathLike[str],
     story.append(p("First/latest/best: ROM reached in the first, the latest and the best "
                    "attended session of the period. Trend: least-squares slope over the "
                    "period.", st.small))
-    story.append(figure_image(_rom_figure(inp, attended), width))
+    if rom_sessions:
+        story.append(figure_image(_rom_figure(inp, rom_sessions), width))
+    else:
+        story.append(p("No range-of-motion session in the period.", st.body))
     story.append(PageBreak())
     story.append(p("Force", st.h1))
     force_fig = _force_figure(attended)
     if force_fig is not None:
         story.append(figure_image(force_fig, width))
-        rms = [r["rms"] for r in attended]
-        peak = [r["peak"] for r in attended]
+        forced = [r for r in attended if r["rms"] is not None]
+        f_days = [r["session"].date for r in forced]
+        rms = [r["rms"] for r in forced]
+        peak = [r["peak"] for r in forced]
         story.append(p(f"Trend of the force-tracking error: "
-                       f"{fmt(trend_per_week(days, rms), 3, '%/week')}; of the peak force: "
-                       f"{fmt(trend_per_week(days, peak), 1, 'N/week')}.", st.body))
+                       f"{fmt(trend_per_week(f_days, rms), 3, '%/week')}; of the peak force: "
+                       f"{fmt(trend_per_week(f_days, peak), 1, 'N/week')}.", st.body))
     else:
         story.append(p("No force protocol in the period.", st.body))
     story.append(p("Sessions", st.h1))
@@ -247,14 +270,13 @@ def render_progress_report(inp: ProgressInput, out: str | os.PathLike[str],
     for r in rows:
         s: ProgressSession = r["session"]
         rd = r["reached"]
-        t_rows.append([str(s.date), s.id, s.protocol + (f" ({KIND_WORDS.get(s.kind, s.kind)})"
-                                                       if s.kind else ""), s.outcome]
+        t_rows.append([str(s.date), s.id, s.protocol, s.outcome]
                       + [fmt(rd[d], 1) for d in DIRECTIONS]
                       + [fmt(r["rms"], 2), fmt(r["peak"], 0), str(r["stops"])])
     story.append(table(TableSpec(["date", "id", "protocol", "outcome", "dorsi °", "plantar °",
                                   "inv °", "ev °", "RMS err %", "peak N", "stops"], t_rows,
-                                 [0.1, 0.08, 0.22, 0.09, 0.07, 0.08, 0.06, 0.06, 0.08, 0.08,
-                                  0.08]), st, width))
+                                 [0.115, 0.06, 0.245, 0.1, 0.065, 0.07, 0.06, 0.06, 0.08,
+                                  0.07, 0.055]), st, width))
     missing = [r["session"].id for r in attended if not r["session"].summary]
     if missing:
         story.append(p(f"Sessions without a summary (figures missing): {', '.join(missing)}.",
@@ -307,8 +329,8 @@ def _rom_figure(inp: ProgressInput, attended: list[dict[str, Any]]) -> Figure:
 
 
 def _force_figure(attended: list[dict[str, Any]]) -> Figure | None:
-    forced = [r for r in attended if r["rms"] is not None or r["peak"] is not None]
-    if not any(r["rms"] is not None for r in forced):
+    forced = [r for r in attended if r["rms"] is not None]
+    if not forced:
         return None
     fig = Figure(figsize=(7.2, 3.6))
     ax_e, ax_p = fig.subplots(1, 2, sharex=True)

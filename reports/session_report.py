@@ -18,7 +18,8 @@ from matplotlib.figure import Figure
 from reportlab.platypus import CondPageBreak, Flowable, KeepTogether, PageBreak, Spacer
 from reportlab.lib.units import mm
 
-from reports.clinical import (DIRECTIONS, KIND_WORDS, limits_by_direction, narrowed_limits,
+from reports.clinical import (DIRECTIONS, KIND_WORDS, LEVEL_DEG, limits_by_direction,
+                              narrowed_limits,
                               reached_by_direction, reaction_words, stop_trigger)
 from reports.decimate import Envelope
 from reports.document import (AMBER, GREEN, RED, Clock, ReportContext, Styles, TableSpec,
@@ -230,10 +231,6 @@ def _angle_figure(inp: SessionReportInput, f: dict[str, Any]) -> Figure | None:
     fig.suptitle("Ankle angles reached, against the patient's range of motion", fontsize=9)
     fig.tight_layout()
     return fig
-
-
-#: Below this range (°) on both axes the platform is said to have stayed level.
-LEVEL_DEG = 0.5
 
 
 def _platform_moved(f: dict[str, Any]) -> bool:
