@@ -36,8 +36,9 @@ SUMMARY_TOPIC = "/session/summary"
 #: Samples per block handed to the figures (≈ 4 s at 1 kHz).
 BLOCK_SAMPLES = 4096
 #: A channel with no message for this many cycles while the others go on is treated as having
-#: a gap there (its values NaN) instead of being waited for: bounds memory on damaged files.
-MAX_SKEW_CYCLES = 30_000
+#: a gap there (its values NaN) instead of being waited for: bounds memory on damaged files
+#: (≈ 3 × 120 000 buffered rows, ≈ 60 MB, at worst).
+MAX_SKEW_CYCLES = 120_000
 #: Plot budget: buckets per decimated signal.
 PLOT_BUCKETS = 1500
 
@@ -118,10 +119,6 @@ class _Column:
         self.seen = False
 
 
-def _cycle(t: float, rate_hz: float) -> int:
-    return int(round(t * rate_hz))
-
-
 def _f(x: Any) -> float:
     return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else math.nan
 
@@ -143,15 +140,25 @@ class _Joiner:
         self.prev_phase = PHASE_UNKNOWN
 
     def add(self, topic: str, m: dict[str, Any]) -> None:
-        t = _f(m.get("t"))
-        if math.isnan(t):
+        t = m.get("t")
+        if not isinstance(t, (int, float)) or t != t:
             return
-        k = _cycle(t, self.rate_hz)
+        k = int(round(t * self.rate_hz))
         col = self.cols[topic]
+        row: tuple[Any, ...]
         if topic == STATE:
-            row: tuple[float, ...] = (t,) + sum((_vec(m.get(f)) for f in _STATE_FIELDS), ())
+            # The fast path keeps the lists as decoded (None, a non-finite value, becomes NaN
+            # when the block is built with dtype float); anything malformed goes the slow way.
+            try:
+                q, qd, q_ref, tau = m["q"], m["qd"], m["q_ref"], m["tau"]
+                if len(q) != 3 or len(qd) != 3 or len(q_ref) != 3 or len(tau) != 3:
+                    raise TypeError
+                row = (t, *q, *qd, *q_ref, *tau)
+            except (KeyError, TypeError):
+                row = (t,) + sum((_vec(m.get(f)) for f in _STATE_FIELDS), ())
         elif topic == WRENCH:
-            row = (-_f(m.get("fz")),)
+            fz = m.get("fz")
+            row = (-fz if isinstance(fz, (int, float)) else math.nan,)
         else:
             force = m.get("force")
             fz = _f(force[2]) if isinstance(force, list) and len(force) == 3 else math.nan
@@ -186,7 +193,10 @@ class _Joiner:
     def _block(self, keys: list[int]) -> SampleBlock:
         n = len(keys)
         srows = self.cols[STATE].rows
-        st = np.array([srows[k] for k in keys])
+        try:
+            st = np.array([srows[k] for k in keys], dtype=float)
+        except (TypeError, ValueError):       # a value that is not a number: NaN it
+            st = np.array([[_f(v) for v in srows[k]] for k in keys], dtype=float)
         wr, rf = self.cols[WRENCH].rows, self.cols[REFERENCE].rows
         nan1, nan3 = (math.nan,), (math.nan, float(PHASE_UNKNOWN), 0.0)
         w = np.array([wr.get(k, nan1) for k in keys]).reshape(n)
@@ -304,10 +314,14 @@ def session_input_from_recording(path: str | os.PathLike[str], robot: Any = None
     try:
         for topic, payload in buffered:
             handle(topic, payload)
+        # Join every BLOCK_SAMPLES new rows: the cost of a join is the rows pending, so this
+        # keeps reading linear even when a channel lags far behind the others in the file.
+        next_join = BLOCK_SAMPLES
         for rec in it:
             handle(rec.topic, rec.payload)
-            if joiner.pending >= 3 * BLOCK_SAMPLES * 2:
+            if joiner.pending >= next_join:
                 flush()
+                next_join = joiner.pending + BLOCK_SAMPLES
     except RecordingFileError as exc:
         raise ReportInputError(str(exc)) from exc
     flush(final=True)

@@ -178,6 +178,20 @@ def _force_figure(inp: SessionReportInput, f: dict[str, Any]) -> Figure | None:
     s = inp.series
     if not len(s.get("force_n", Envelope(*[np.empty(0)] * 4))):
         return None
+    tracked = len(s.get("force_ref_n", Envelope(*[np.empty(0)] * 4))) > 0
+    if not tracked:
+        # A position protocol: the force the foot felt, no prescription to compare with.
+        fig = Figure(figsize=(7.2, 2.4))
+        ax = fig.subplots()
+        _env_plot(ax, s["force_n"], 1.0, "#1a73e8", "measured")
+        ax.set_ylabel("force on the foot (N)")
+        ax.set_xlabel("time (s)")
+        ax.grid(alpha=0.3)
+        _stop_marks(ax, f)
+        fig.suptitle("Force on the foot (measured; this protocol prescribes positions)",
+                     fontsize=9)
+        fig.tight_layout()
+        return fig
     fig = Figure(figsize=(7.2, 3.8))
     ax, ax_e = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2.2, 1]})
     _env_plot(ax, s["force_n"], 1.0, "#1a73e8", "measured")
@@ -211,24 +225,24 @@ def _angle_figure(inp: SessionReportInput, f: dict[str, Any]) -> Figure | None:
     ax_p, ax_r = fig.subplots(2, 1, sharex=True)
     deg = 180.0 / math.pi
     inv = 1.0 if side == "right" else -1.0
-    for ax, key, scale, pos, neg in (
-            (ax_p, "pitch", deg, "plantarflexion", "dorsiflexion"),
-            (ax_r, "roll", deg * inv, "inversion", "eversion")):
+    for ax, key, scale, pos, neg, label in (
+            (ax_p, "pitch", deg, "plantarflexion", "dorsiflexion", "plantar + / dorsi − (°)"),
+            (ax_r, "roll", deg * inv, "inversion", "eversion", "inv. + / ev. − (°)")):
         _env_plot(ax, s[key], scale, "#1a73e8", "reached")
         hi, lo = lim[pos], lim[neg]
         if hi is not None and lo is not None:
-            ax.axhspan(-lo, hi, color="#1b7f3b", alpha=0.08, label="patient's range")
+            ax.axhspan(-lo, hi, color="#1b7f3b", alpha=0.08, label="range in force")
             ax.axhline(hi, color="#1b7f3b", lw=0.8)
             ax.axhline(-lo, color="#1b7f3b", lw=0.8)
             ax.set_ylim(min(ax.get_ylim()[0], -lo - 2.0), max(ax.get_ylim()[1], hi + 2.0))
         else:
             ax.set_ylim(min(ax.get_ylim()[0], -2.0), max(ax.get_ylim()[1], 2.0))
-        ax.set_ylabel(f"{pos} + / {neg} − (°)", fontsize=7.5)
+        ax.set_ylabel(label, fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=7)
         _stop_marks(ax, f)
     ax_r.set_xlabel("time (s)")
-    fig.suptitle("Ankle angles reached, against the patient's range of motion", fontsize=9)
+    fig.suptitle("Ankle angles reached, against the range of motion in force", fontsize=9)
     fig.tight_layout()
     return fig
 
