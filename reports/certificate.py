@@ -254,7 +254,7 @@ def _first_page(rec: CalibrationRecord, st: Styles, width: float) -> list[Flowab
     story.append(p("Results against the acceptance thresholds", st.h1))
     stages = [s for s in ("before", "linear", "nonlinear") if s in rec.metrics]
     rows: list[list[Any]] = []
-    failed = set(v.failed)
+    failed_keys = set(v.failed)
     for key, label, digits, unit, tkey in _METRIC_ROWS:
         thr = rec.thresholds.get(tkey)
         row: list[Any] = [f"{label} ({unit})"]
@@ -265,7 +265,7 @@ def _first_page(rec: CalibrationRecord, st: Styles, width: float) -> list[Flowab
         if thr is None or final is None:
             row.append("—")
         else:
-            ok = _metric(final, key) <= thr and tkey not in failed
+            ok = _metric(final, key) <= thr and tkey not in failed_keys
             row.append("pass" if ok else "FAIL")
         rows.append(row)
     story.append(table(TableSpec(["metric"] + [_STAGE_WORDS[s] for s in stages]

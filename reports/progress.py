@@ -21,7 +21,7 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from matplotlib.figure import Figure
-from pydantic import ConfigDict, Field, TypeAdapter, ValidationError
+from pydantic import ConfigDict, Field, TypeAdapter, ValidationError, field_validator
 from pydantic.dataclasses import dataclass
 from reportlab.lib.units import mm
 from reportlab.platypus import Flowable, PageBreak, Spacer
@@ -69,12 +69,20 @@ class ProgressInput:
     """A patient's progress as plain data (module docstring)."""
 
     patient_code: Annotated[str, Field(min_length=1)]
-    prescribed_rom_deg: dict[Literal["dorsiflexion", "plantarflexion", "inversion",
-                                     "eversion"], float]
+    #: direction (dorsiflexion, plantarflexion, inversion, eversion) → degrees.
+    prescribed_rom_deg: dict[str, Annotated[float, Field(ge=0, le=60)]]
     sessions: list[ProgressSession]
     side: Literal["right", "left"] = "right"
     plan: ProgressPlan | None = None
     schema_version: int = 1
+
+    @field_validator("prescribed_rom_deg")
+    @classmethod
+    def _directions(cls, v: dict[str, float]) -> dict[str, float]:
+        unknown = sorted(set(v) - set(DIRECTIONS))
+        if unknown:
+            raise ValueError(f"unknown direction(s) {unknown}; use {list(DIRECTIONS)}")
+        return v
 
 
 _ADAPTER = TypeAdapter(ProgressInput)

@@ -264,7 +264,8 @@ def session_input_from_recording(path: str | os.PathLike[str], robot: Any = None
     if not metadata:
         notes.append("The recording holds no session metadata (protocol, parameters, patient): "
                      "those fields are shown as unknown.")
-    params = metadata.get("parameters") if isinstance(metadata.get("parameters"), dict) else {}
+    raw_params = metadata.get("parameters")
+    params: dict[str, Any] = raw_params if isinstance(raw_params, dict) else {}
     kind = str(params.get("kind", "unknown"))
     amplitude = params.get("amplitude_n")
     rate_hz = 1000.0

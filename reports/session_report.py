@@ -73,7 +73,8 @@ def _first_page(inp: SessionReportInput, st: Styles, width: float) -> list[Flowa
     text, colour = _outcome(inp, f)
     story: list[Flowable] = [p(TITLE, st.title), banner(text, colour, st, width),
                              Spacer(1, 3 * mm)]
-    params = md.get("parameters") if isinstance(md.get("parameters"), dict) else {}
+    raw_params = md.get("parameters")
+    params: dict[str, Any] = raw_params if isinstance(raw_params, dict) else {}
     kind = str(params.get("kind", f.get("kind", "unknown")))
     ident = inp.identity or {}
     patient = str(md.get("patient_id", "not recorded"))
@@ -277,7 +278,9 @@ def _details(inp: SessionReportInput, st: Styles, width: float) -> list[Flowable
     f = _figures(inp)
     md = inp.metadata
     story: list[Flowable] = [p("Protocol and parameters", st.h1)]
-    params = md.get("parameters") if isinstance(md.get("parameters"), dict) else {}
+    raw_params = md.get("parameters")
+    params: dict[str, Any] = raw_params if isinstance(raw_params, dict) else {}
+    rows: list[list[Any]]
     if params:
         rows = [[k, _value(v)] for k, v in params.items() if k not in ("limits",)]
         story.append(table(TableSpec(["parameter", "value"], rows, [0.35, 0.65]), st, width))
@@ -305,10 +308,7 @@ def _details(inp: SessionReportInput, st: Styles, width: float) -> list[Flowable
     story.append(p("Time in each phase", st.h1))
     phases = f.get("phase_time_s") or {}
     if phases:
-        words = {"approach": "approach to the start pose", "play": "exercise",
-                 "return": "return to rest", "stopped": "stopped (braking, held)",
-                 "done": "at rest after the end", "unknown": "phase not recorded"}
-        rows = [[words.get(k, k), fmt(v, 2, "s")] for k, v in phases.items() if v > 0]
+        rows = [[_PHASE_WORDS.get(k, k), fmt(v, 2, "s")] for k, v in phases.items() if v > 0]
         story.append(table(TableSpec(["phase", "time"], rows, [0.5, 0.5]), st, width))
     else:
         story.append(p("Not available without the recording.", st.note))
@@ -317,6 +317,7 @@ def _details(inp: SessionReportInput, st: Styles, width: float) -> list[Flowable
     stops = f.get("stops") or []
     if stops:
         rows = []
+        s: dict[str, Any]
         for s in stops:
             who, words = stop_trigger(str(s.get("cause", "")))
             rows.append([fmt(s.get("t"), 3, "s"), words, who,
@@ -358,11 +359,11 @@ def _details(inp: SessionReportInput, st: Styles, width: float) -> list[Flowable
         block.append(p("No recording: the figures above are the session summary's as stored "
                        "with the session.", st.note))
     else:
-        rows = [("File", rec.file_name), ("sha256", rec.sha256),
+        pairs = [("File", rec.file_name), ("sha256", rec.sha256),
                 ("Size", f"{rec.bytes} bytes"),
                 ("Complete", "yes" if rec.complete else f"no — {rec.tail}"),
                 ("Messages", ", ".join(f"{k} {v}" for k, v in sorted(rec.messages.items())))]
-        block.append(key_values(rows, st, width, 0.18))
+        block.append(key_values(pairs, st, width, 0.18))
         block.append(p("Every figure in this report is computed from this file's samples "
                        f"({f.get('samples', '—')} loop cycles); plots are decimated "
                        "(min–max envelopes).", st.small))
@@ -372,6 +373,9 @@ def _details(inp: SessionReportInput, st: Styles, width: float) -> list[Flowable
     return story
 
 
+_PHASE_WORDS = {"approach": "approach to the start pose", "play": "exercise",
+                "return": "return to rest", "stopped": "stopped (braking, held)",
+                "done": "at rest after the end", "unknown": "phase not recorded"}
 _PREFLIGHT_ROWS = (("peak_platform_force_n", "peak_force_n", "peak force on the foot", 1, "N"),
                    ("rms_error_pct", "rms_error_pct", "force tracking error (RMS)", 2, "%"),
                    ("peak_actuator_force_n", "peak_actuator_force_n", "peak actuator force",

@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
@@ -34,9 +34,9 @@ class ReportSettings(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     schema_version: int = SCHEMA_VERSION
-    clinic_name: str = Field("talus", min_length=1, max_length=120)
+    clinic_name: Annotated[str, Field(min_length=1, max_length=120)] = "talus"
     #: Lines under the name (address, department), printed small.
-    clinic_address: str = Field("", max_length=300)
+    clinic_address: Annotated[str, Field(max_length=300)] = ""
     #: PNG or JPEG file drawn at the top left (relative paths: to the settings file).
     logo_path: Path | None = None
     page_size: PageSize = PageSize.A4

@@ -36,8 +36,9 @@ from rt.recording.writer import SessionRecorder
 from rt.safety.limits import PatientLimits
 
 LIB = {p.name: p for p in list_library()}
-DATA = Path(__file__).parent / "data"
-DEMO_PROGRESS = Path(__file__).parents[1] / "reports" / "data" / "demo_progress.json"
+DATA = Path(__file__).parents[1] / "reports" / "data"
+DEMO_PROGRESS = DATA / "demo_progress.json"
+CAL_RECORD = DATA / "example_calibration_record.json"
 T0 = datetime(2026, 11, 23, 17, 0, tzinfo=timezone.utc)
 REL = 1e-9
 
@@ -350,7 +351,7 @@ def test_progress_report_numbers(tmp_path):
     days = [s.date for s in rom]
     plantar = [s.summary["rom_deg"]["pitch"][1] for s in rom]
     assert fmt(trend_per_week(days, plantar), 2, "°/week") in text
-    assert fmt(max(plantar), 1, "°") in text and "DEMO-0001" in text
+    assert fmt(max(plantar), 1, "°") in text and "twin-demo" in text
 
 
 def test_trend_is_the_least_squares_slope():
@@ -390,7 +391,7 @@ def test_progress_input_errors_name_the_field(tmp_path):
 # ------------------------------------------------------------------------------ certificate
 
 def test_certificate_renders_the_record(tmp_path):
-    rec = load_calibration_record(DATA / "calibration_record.json")
+    rec = load_calibration_record(CAL_RECORD)
     pdf = tmp_path / "cert.pdf"
     pages = render_certificate(rec, pdf, clock=clock)
     pages_to_png(pdf, tmp_path, pages)
@@ -407,21 +408,21 @@ def test_certificate_renders_the_record(tmp_path):
 
 
 def test_certificate_fail_verdict_and_bad_records(tmp_path):
-    data = json.loads((DATA / "calibration_record.json").read_text())
+    data = json.loads((CAL_RECORD).read_text())
     data["verdict"] = {"pass": False, "stage": "linear", "failed": ["cop_rms_mm"]}
     pdf = tmp_path / "fail.pdf"
     render_certificate(calibration_record_from_dict(data), pdf, clock=clock)
     text = pdftext(pdf)
     assert "FAIL" in text and "cop_rms_mm" in text and "PASS" not in text
-    broken = json.loads((DATA / "calibration_record.json").read_text())
+    broken = json.loads((CAL_RECORD).read_text())
     del broken["plate"]["serial"]
     with pytest.raises(ReportInputError, match=r"plate\.serial"):
         calibration_record_from_dict(broken)
-    broken = json.loads((DATA / "calibration_record.json").read_text())
+    broken = json.loads((CAL_RECORD).read_text())
     broken["cop_error_map"]["after_mm"] = broken["cop_error_map"]["after_mm"][:1]
     with pytest.raises(ReportInputError, match="cop_error_map.after_mm"):
         calibration_record_from_dict(broken)
-    broken = json.loads((DATA / "calibration_record.json").read_text())
+    broken = json.loads((CAL_RECORD).read_text())
     broken["schema_version"] = 2
     with pytest.raises(ReportInputError, match="version 1"):
         calibration_record_from_dict(broken)
@@ -484,13 +485,13 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
 
 def test_cli_calibration_and_refusals(tmp_path):
     out = tmp_path / "c.pdf"
-    proc = _cli("calibration", "--record", str(DATA / "calibration_record.json"), "--out",
+    proc = _cli("calibration", "--record", str(CAL_RECORD), "--out",
                 str(out), "--generated-at", "2026-11-23T17:00:00Z")
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
     assert res["pass"] is True and res["pages"] >= 2 and out.exists()
     before = out.read_bytes()
-    proc = _cli("calibration", "--record", str(DATA / "calibration_record.json"), "--out",
+    proc = _cli("calibration", "--record", str(CAL_RECORD), "--out",
                 str(out))
     assert proc.returncode == 2 and "already exists" in json.loads(proc.stdout)["error"]
     assert out.read_bytes() == before
