@@ -14,7 +14,6 @@ the registration and plan, and the exports with their sha256.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from datetime import datetime
@@ -29,7 +28,7 @@ from reportlab.platypus import CondPageBreak, Flowable, KeepTogether, PageBreak,
 from reports.document import (GREEN, RED, Clock, ReportContext, Styles, TableSpec, banner,
                               figure_image, fmt, format_time, frame_width, key_values, p,
                               table, utc_now, write_pdf)
-from reports.session_data import ReportInputError
+from reports.inputs import ReportInputError, first_problem, read_json
 from reports.settings import ReportSettings
 
 TITLE = "Force-plate calibration certificate"
@@ -177,14 +176,7 @@ class CalibrationRecord(_Open):
 
 def load_calibration_record(path: str | os.PathLike[str]) -> CalibrationRecord:
     """Read and validate a calibration record; errors name the file and the key."""
-    try:
-        with open(path, encoding="utf-8") as f:
-            data = json.load(f)
-    except FileNotFoundError as exc:
-        raise ReportInputError(f"{path}: no such file") from exc
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ReportInputError(f"{path}: not valid JSON: {exc}") from exc
-    return calibration_record_from_dict(data, str(path))
+    return calibration_record_from_dict(read_json(path), str(path))
 
 
 def calibration_record_from_dict(data: Any, source: str = "<record>") -> CalibrationRecord:
@@ -192,9 +184,7 @@ def calibration_record_from_dict(data: Any, source: str = "<record>") -> Calibra
     try:
         rec = CalibrationRecord.model_validate(data)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        where = ".".join(str(x) for x in err["loc"]) or "(top)"
-        raise ReportInputError(f"{source}: calibration record: {where}: {err['msg']}") from exc
+        raise ReportInputError(f"{source}: calibration record: {first_problem(exc)}") from exc
     m = rec.cop_error_map
     for name, grid in (("before_mm", m.before_mm), ("after_mm", m.after_mm)):
         if len(grid) != len(m.y_m) or any(len(row) != len(m.x_m) for row in grid):

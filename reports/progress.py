@@ -13,7 +13,6 @@ count, adherence = sessions attended / sessions planned in the period; the sessi
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from datetime import date, timedelta
@@ -31,7 +30,7 @@ from reports.clinical import DIRECTIONS, LEVEL_DEG, reached_by_direction
 from reports.document import (AMBER, GREEN, RED, Clock, ReportContext, Styles, TableSpec,
                               banner, figure_image, fmt, frame_width, key_values, p, table,
                               utc_now, write_pdf)
-from reports.session_data import ReportInputError
+from reports.inputs import ReportInputError, first_problem, read_json
 from reports.settings import ReportSettings
 
 TITLE = "Progress report"
@@ -90,14 +89,7 @@ _ADAPTER = TypeAdapter(ProgressInput)
 
 def load_progress_input(path: str | os.PathLike[str]) -> ProgressInput:
     """Read and validate a progress input JSON; errors name the file and the field."""
-    try:
-        with open(path, encoding="utf-8") as f:
-            data = json.load(f)
-    except FileNotFoundError as exc:
-        raise ReportInputError(f"{path}: no such file") from exc
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ReportInputError(f"{path}: not valid JSON: {exc}") from exc
-    return progress_input_from_dict(data, str(path))
+    return progress_input_from_dict(read_json(path), str(path))
 
 
 def progress_input_from_dict(data: Any, source: str = "<progress input>") -> ProgressInput:
@@ -105,9 +97,7 @@ def progress_input_from_dict(data: Any, source: str = "<progress input>") -> Pro
     try:
         return _ADAPTER.validate_python(data)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        where = ".".join(str(x) for x in err["loc"]) or "(top)"
-        raise ReportInputError(f"{source}: {where}: {err['msg']}") from exc
+        raise ReportInputError(f"{source}: {first_problem(exc)}") from exc
 
 
 # ------------------------------------------------------------------------------ figures

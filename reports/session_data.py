@@ -27,7 +27,7 @@ import numpy as np
 from protocols.session_figures import (FORCE_KINDS, PHASE_BY_NAME, PHASE_UNKNOWN, Phase,
                                        SampleBlock, SessionFigures)
 from reports.decimate import Envelope, EnvelopeDecimator
-from rt.errors import InputError
+from reports.inputs import ReportInputError
 from rt.recording.channels import EVENTS, METADATA, REFERENCE, STATE, WRENCH
 from rt.recording.reader import RecordingScan
 
@@ -43,10 +43,6 @@ MAX_SKEW_CYCLES = 120_000
 PLOT_BUCKETS = 1500
 
 _STATE_FIELDS = ("q", "qd", "q_ref", "tau")
-
-
-class ReportInputError(InputError):
-    """The input of a report is unusable (the message names the file and what is wrong)."""
 
 
 @dataclass

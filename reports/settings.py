@@ -15,6 +15,7 @@ from typing import Annotated, Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from reports.inputs import first_problem
 from rt.errors import ConfigurationError
 
 SCHEMA_VERSION = 1
@@ -96,9 +97,7 @@ def load_settings(path: str | os.PathLike[str] | None = None) -> ReportSettings:
     try:
         settings = ReportSettings.model_validate(data)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        where = ".".join(str(x) for x in err["loc"]) or "(top)"
-        raise ConfigurationError(f"report settings {p}: {where}: {err['msg']}") from exc
+        raise ConfigurationError(f"report settings {p}: {first_problem(exc)}") from exc
     settings.check_logo()
     return settings
 
