@@ -199,7 +199,7 @@ def _force_figure(inp: SessionReportInput, f: dict[str, Any]) -> Figure | None:
     _env_plot(ax, s["force_ref_n"], 1.0, "#202124", "reference", dashed=True)
     lim = (narrowed_limits(inp.limits, _protocol_limits(inp)) or {}).get("max_force_n")
     if lim is not None:
-        ax.axhline(lim, color="#b3261e", lw=1.0, label="patient's force limit")
+        ax.axhline(lim, color="#b3261e", lw=1.0, label="force limit in force")
     ax.set_ylabel("force on the foot (N)")
     ax.legend(loc="upper right", fontsize=7, ncol=3)
     ax.grid(alpha=0.3)

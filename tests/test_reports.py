@@ -352,6 +352,12 @@ def test_progress_report_numbers(tmp_path):
     plantar = [s.summary["rom_deg"]["pitch"][1] for s in rom]
     assert fmt(trend_per_week(days, plantar), 2, "°/week") in text
     assert fmt(max(plantar), 1, "°") in text and "twin-demo" in text
+    letter = tmp_path / "letter.pdf"
+    render_progress_report(inp, letter, ReportSettings(page_size=PageSize.LETTER), clock=clock)
+    render_progress_report(inp, tmp_path / "again.pdf",
+                           ReportSettings(page_size=PageSize.LETTER), clock=clock)
+    assert letter.read_bytes() == (tmp_path / "again.pdf").read_bytes()
+    assert "612 x 792" in page_size(letter)
 
 
 def test_trend_is_the_least_squares_slope():
@@ -405,6 +411,9 @@ def test_certificate_renders_the_record(tmp_path):
     assert fmt(rec.uncertainty.cop_mm, 2, "mm") in text
     assert "34 of 36 entries are identifiable" in text
     assert rec.model_extra == {"lab_notes": "added by the calibration engineer: room 21.5 °C"}
+    again = tmp_path / "again.pdf"
+    render_certificate(load_calibration_record(CAL_RECORD), again, clock=clock)
+    assert again.read_bytes() == pdf.read_bytes()         # reproducible
 
 
 def test_certificate_fail_verdict_and_bad_records(tmp_path):
