@@ -40,8 +40,8 @@ demo: setup
 	$(BIN)/talus session run --protocol protocols/library/gait_replay.yaml --patient-weight 75 \
 	  --record out/gait_replay.mcap
 	@echo
-	# PDF reports: one per demo session, the demo patient's progress (an example history),
-	# and a certificate from an example calibration record.
+# PDF reports: one per demo session, the demo patient's progress (an example history),
+# and a certificate from an example calibration record.
 	$(BIN)/talus report session --recording out/sine_fz.mcap --out out/sine_fz.pdf --force
 	$(BIN)/talus report session --recording out/gait_replay.mcap --out out/gait_replay.pdf --force
 	$(BIN)/talus report progress --input reports/data/demo_progress.json \
