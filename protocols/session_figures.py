@@ -90,6 +90,12 @@ class AngleSamples:
     pitch: np.ndarray
 
 
+def _t(event: dict[str, Any]) -> float:
+    """An event's loop time (s), to the millisecond as the summary has it; NaN if absent."""
+    t = event.get("t")
+    return round(float(t), 3) if isinstance(t, (int, float)) else math.nan
+
+
 def _nanmax(x: np.ndarray) -> float:
     x = x[~np.isnan(x)]
     return float(x.max()) if len(x) else -math.inf
@@ -214,10 +220,10 @@ class SessionFigures:
         out["rom_deg"] = {axis: (list(r) if r[0] <= r[1] else None)
                           for axis, r in self._rom.items()}
         ev = list(events)
-        out["stops"] = [{"t": round(float(e["t"]), 3), "cause": e.get("cause", ""),
+        out["stops"] = [{"t": _t(e), "cause": e.get("cause", ""),
                          "reaction": e.get("reaction", ""), "message": e.get("message", "")}
                         for e in ev if e.get("reaction") in STOP_REACTIONS]
-        out["failovers"] = [{"t": round(float(e["t"]), 3), "cause": e.get("cause", ""),
+        out["failovers"] = [{"t": _t(e), "cause": e.get("cause", ""),
                              "message": e.get("message", "")}
                             for e in ev if e.get("reaction") == "failover"]
         out["completed"] = self._last_phase == Phase.DONE and not out["stops"]

@@ -375,9 +375,9 @@ def session_input_from_record(session: dict[str, Any], recording: str | os.PathL
             inp.summary = session["summary"]
             inp.notes = [n for n in inp.notes if "/session/summary" not in n]
         if stored_hash and inp.recording is not None and inp.recording.sha256 != stored_hash:
-            inp.notes.insert(0, f"The recording's sha256 ({inp.recording.sha256[:16]}…) differs "
-                                f"from the one stored with the session ({str(stored_hash)[:16]}…):"
-                                " the file is not the one recorded.")
+            got, want = inp.recording.sha256[:16], str(stored_hash)[:16]
+            inp.notes.insert(0, f"The recording's sha256 ({got}…) differs from the one stored "
+                                f"with the session ({want}…): the file is not the one recorded.")
         return inp
     summary = session.get("summary") if isinstance(session.get("summary"), dict) else None
     if summary is None:
