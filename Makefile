@@ -7,8 +7,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 # Debian packages the project needs at run or test time. postgresql: the clinical record's
-# tests start a throw-away server (tests/pg_server.py); later parts add Xvfb and poppler-utils.
-APT_PACKAGES := postgresql
+# tests start a throw-away server (tests/pg_server.py); poppler-utils (pdftoppm, pdftotext,
+# pdffonts) checks the PDF reports in the tests.
+APT_PACKAGES := postgresql poppler-utils
 
 .PHONY: demo test setup system-deps bench clean
 
@@ -44,6 +45,16 @@ demo: setup
 	    --db out/demo.db --user demo-clinician --patient DEMO-001 || exit 1; echo; \
 	done; \
 	$(BIN)/talus sessions list --patient DEMO-001 --db out/demo.db --user demo-clinician
+	@echo
+# PDF reports: one per demo session (the two newest recordings of DEMO-001), the demo
+# patient's progress (an example history), a certificate from an example calibration record.
+	for f in $$(ls -t out/*_DEMO-001_*.mcap | head -2); do \
+	  $(BIN)/talus report session --recording $$f --out $${f%.mcap}.pdf --force || exit 1; \
+	done
+	$(BIN)/talus report progress --input reports/data/demo_progress.json \
+	  --out out/progress_twin-demo.pdf --force
+	$(BIN)/talus report calibration --record reports/data/example_calibration_record.json \
+	  --out out/calibration_example.pdf --force
 	@echo
 	@# out/calibration is this target's own output (a campaign folder must be new).
 	rm -rf out/calibration

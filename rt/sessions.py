@@ -148,4 +148,5 @@ def record_rows(recorder: Any, rows: np.ndarray) -> None:
                         bool(r[flags + 1] > 0.5))
         recorder.publish("/protocol/reference", {
             "t": t, "force": [0.0, 0.0, float(r[COL_FREF])],
-            "phase": Phase(int(r[COL_PHASE])).name.lower()})
+            "phase": Phase(int(r[COL_PHASE])).name.lower(),
+            "mode": "force" if r[COL_CTRL_MODE] > 0.5 else "position"})

@@ -34,6 +34,7 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
                  "patients: add, list, show, limits, forget, export"),
     "sessions": (("patients.sessions_cli",), "stored therapy sessions: list, show"),
     "audit": (("patients.audit_cli",), "audit log: verify, export"),
+    "report": (("reports.cli",), "PDF reports: session, progress, calibration certificate"),
     "calibrate": (("calibration.cli",),
                   "force-plate calibration: plan, run, fit, verify, export, demo"),
     "identify": (("rt.identification.cli",),

@@ -143,6 +143,8 @@ _REFERENCE = _object(
         "position": {"type": "array", "items": {"type": "number"},
                      "description": "position reference (joint space), m (optional)"},
         "phase": {"type": "string", "description": "protocol phase name (optional)"},
+        "mode": {"type": "string",
+                 "description": "what the loop tracks: force or position (optional)"},
     },
     ["t"])
 
