@@ -127,7 +127,7 @@ def main() -> int:
               f"dropped {w['dropped']}")
     out = args.out or tmp / "report.pdf"
     proc = subprocess.run([sys.executable, __file__, "--child", "--recording", str(rec),
-                           "--out", str(out)], capture_output=True, text=True)
+                           "--out", str(out)], check=False, capture_output=True, text=True)
     if proc.returncode:
         sys.stderr.write(proc.stderr)
         return proc.returncode

@@ -192,6 +192,7 @@ class SessionFigures:
         self._phase_time = {p.name.lower(): 0.0 for p in Phase}
         self._last_phase = Phase.APPROACH
         self._k = 0
+        self._play_seen = 0
         self._t_last = math.nan
         self._dt = 1.0 / RATE_HZ
 
@@ -224,10 +225,12 @@ class SessionFigures:
         self._peak_qd = max(self._peak_qd, float(np.abs(rows[:, COLUMNS["qd"]]).max()))
         for p in Phase:
             self._phase_time[p.name.lower()] += float(np.count_nonzero(phase == p)) * self._dt
-        # Every ROM_DECIMATION-th sample of the whole stream (continuing across calls).
-        idx = np.arange(self._k, self._k + len(rows))
-        pick = play & (idx % ROM_DECIMATION == 0)
-        for q in rows[pick][:, COLUMNS["q"]]:
+        # Every ROM_DECIMATION-th play sample, counted from the session's first play sample
+        # (continuing across calls; the same samples as protocols.session_figures).
+        idx = np.flatnonzero(play)
+        counter = self._play_seen + np.arange(len(idx))
+        self._play_seen += len(idx)
+        for q in rows[idx[counter % ROM_DECIMATION == 0]][:, COLUMNS["q"]]:
             cfg = self.kin.fk(q, check=False)
             for axis, angle in (("roll", cfg.roll), ("pitch", cfg.pitch)):
                 lo_hi = self._rom[axis]
@@ -411,6 +414,7 @@ def run_session(setup: SessionSetup, record: Path | None = None,
                 "patient_id": "twin-demo", "robot_description": model.description.name}
         if getattr(gen, "info", None):
             meta["source"] = gen.info          # traceability of the replayed record
+        meta["preload_n"] = preload_of(pl)     # the force law's floor (the error's reference)
         recorder = SessionRecorder(record, meta, force=force, inputs=inputs)
         recorder.attach_state_ring(pl.recorder, start=0)
         pl.events.listener = recorder.event

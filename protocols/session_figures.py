@@ -22,27 +22,19 @@ Definitions (the same as ``protocols.session.summarize``; units SI unless the ke
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
-from enum import IntEnum
-from typing import Any, Iterable, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from rt.errors import KinematicsError
+from rt.references.sequencer import Phase
 
 
-class Phase(IntEnum):
-    """The protocol reference's phase (``rt.components.protocol_blocks``), recorded by name."""
-
-    APPROACH = 0
-    PLAY = 1
-    RETURN = 2
-    STOPPED = 3
-    DONE = 4
-
-
-#: Recorded phase name → :class:`Phase` (``/protocol/reference`` ``phase`` strings).
-PHASE_BY_NAME = {p.name.lower(): p for p in Phase}
+#: Recorded phase name → :class:`Phase` (``/protocol/reference`` ``phase`` strings; "done" is
+#: what recordings made before the one sequencer called the rest after the end).
+PHASE_BY_NAME = {**{p.name.lower(): p for p in Phase}, "done": Phase.REST}
 #: Code for a sample whose phase was not recorded.
 PHASE_UNKNOWN = -1
 #: Protocol kinds played in force control (the others are position kinds); a recording whose
@@ -110,11 +102,14 @@ class SessionFigures:
         amplitude_n: a sine protocol's amplitude (N), the basis of its RMS error in %.
         rate_hz: the loop rate (Hz): the duration of a sample.
         rom_stride: forward kinematics on every this-many play samples.
+        preload_n: the force law's floor (N): the error is taken against the reference the
+            law tracked, max(F_d, preload) (the recording's metadata ``preload_n``; 0 for
+            recordings made before the floor existed).
     """
 
     def __init__(self, kinematics: ForwardKinematics, kind: str,
                  amplitude_n: float | None = None, rate_hz: float = 1000.0,
-                 rom_stride: int = 10):
+                 rom_stride: int = 10, preload_n: float = 0.0):
         if rate_hz <= 0 or rom_stride < 1:
             raise ValueError("rate_hz must be > 0 and rom_stride >= 1")
         self.kin = kinematics
@@ -122,6 +117,7 @@ class SessionFigures:
         self.amplitude_n = amplitude_n
         self.dt = 1.0 / rate_hz
         self.rom_stride = rom_stride
+        self.preload_n = preload_n
         self.samples = 0
         self._play_seen = 0
         self._sq_err = 0.0
@@ -150,13 +146,14 @@ class SessionFigures:
         play = b.phase == Phase.PLAY
         tracked = play & b.force_mode
         if tracked.any():
-            e = (b.force_ref_n - b.force_n)[tracked]
+            e = (np.maximum(b.force_ref_n, self.preload_n) - b.force_n)[tracked]
             e = e[~np.isnan(e)]
             self._sq_err += float(np.dot(e, e))
             self._n_err += len(e)
             if len(e):
                 self._max_abs_err = max(self._max_abs_err, float(np.abs(e).max()))
-            self._peak_ref = max(self._peak_ref, _nanmax(b.force_ref_n[tracked]))
+            self._peak_ref = max(self._peak_ref,
+                                 _nanmax(np.maximum(b.force_ref_n, self.preload_n)[tracked]))
             self._force_samples += int(tracked.sum())
         self._peak_force = max(self._peak_force, _nanmax(b.force_n))
         self._peak_tau = max(self._peak_tau, _nanmax(np.abs(b.tau).ravel()))
@@ -226,7 +223,7 @@ class SessionFigures:
         out["failovers"] = [{"t": _t(e), "cause": e.get("cause", ""),
                              "message": e.get("message", "")}
                             for e in ev if e.get("reaction") == "failover"]
-        out["completed"] = self._last_phase == Phase.DONE and not out["stops"]
+        out["completed"] = self._last_phase == Phase.REST and not out["stops"]
         out["phase_time_s"] = {p.name.lower(): float(self._phase_counts[p]) * self.dt
                                for p in Phase}
         unknown = int(self._phase_counts[len(Phase)])

@@ -180,9 +180,14 @@ class _Joiner:
         keys = sorted(k for k in state.rows if k <= upto)
         for i in range(0, len(keys), BLOCK_SAMPLES):
             yield self._block(keys[i:i + BLOCK_SAMPLES])
-        # Wrench/reference rows without a state row at or before the horizon are dropped.
-        for col in self.cols.values():
-            for k in [k for k in col.rows if k <= upto]:
+        # State rows up to the horizon are done; a wrench/reference row is done once the state
+        # has passed its cycle (the writer may put the state ring's rows far behind the other
+        # channels in the file: their rows wait for it, they are not dropped).
+        done_state = upto
+        done_others = keys[-1] if keys else -1
+        for topic, col in self.cols.items():
+            limit = done_state if topic == STATE else done_others
+            for k in [k for k in col.rows if k <= limit]:
                 del col.rows[k]
         self.pending = sum(len(c.rows) for c in self.cols.values())
 
@@ -272,8 +277,10 @@ def session_input_from_recording(path: str | os.PathLike[str], robot: Any = None
             except ValueError:
                 notes.append(f"/robot/state declares rate_hz {ch.metadata['rate_hz']!r}; "
                              "1000 Hz assumed.")
+    preload = metadata.get("preload_n", 0.0)
     figures = SessionFigures(model.kin, kind, float(amplitude) if isinstance(
-        amplitude, (int, float)) else None, rate_hz=rate_hz)
+        amplitude, (int, float)) else None, rate_hz=rate_hz,
+        preload_n=float(preload) if isinstance(preload, (int, float)) else 0.0)
     joiner = _Joiner(rate_hz, kind in FORCE_KINDS)
     width = 1.0 / rate_hz
     dec = {name: EnvelopeDecimator(PLOT_BUCKETS, width) for name in (

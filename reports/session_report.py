@@ -375,7 +375,7 @@ def _details(inp: SessionReportInput, st: Styles, width: float) -> list[Flowable
 
 _PHASE_WORDS = {"approach": "approach to the start pose", "play": "exercise",
                 "return": "return to rest", "stopped": "stopped (braking, held)",
-                "done": "at rest after the end", "unknown": "phase not recorded"}
+                "rest": "at rest", "unknown": "phase not recorded"}
 _PREFLIGHT_ROWS = (("peak_platform_force_n", "peak_force_n", "peak force on the foot", 1, "N"),
                    ("rms_error_pct", "rms_error_pct", "force tracking error (RMS)", 2, "%"),
                    ("peak_actuator_force_n", "peak_actuator_force_n", "peak actuator force",

@@ -543,7 +543,10 @@ class RtService:
                 "limits": s.patient.limits.model_dump(), "session_id": s.id,
                 "rt": {"pid": os.getpid(), "endpoint": self.endpoint,
                        "backend": self.config.backend},
-                "robot_description": d.name, "preflight": prep.preflight}
+                "robot_description": d.name, "preflight": prep.preflight,
+                # The force law's floor: the reference the session's force error is taken to.
+                "preload_n": float(getattr(pl.graph.component("controller"), "preload_n",
+                                           0.0))}
         recorder = SessionRecorder(s.recording, meta, loop_t0=t_now,
                                    extra_channels={SUMMARY_CHANNEL.topic: SUMMARY_CHANNEL})
         s.prepared = prep

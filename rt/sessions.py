@@ -142,7 +142,10 @@ def record_rows(recorder: Any, rows: np.ndarray) -> None:
 
     w = COLUMNS["wrench"]
     flags = COLUMNS["flags"].start
-    for r in rows:
+    wait = getattr(recorder, "wait_for_room", None)
+    for k, r in enumerate(rows):
+        if wait is not None and k % 1024 == 0:
+            wait()    # a fast twin run outpaces the writer: wait rather than drop
         t = float(r[0])
         recorder.wrench(t, *(float(x) for x in r[w]), bool(r[flags] > 0.5),
                         bool(r[flags + 1] > 0.5))

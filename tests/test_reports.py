@@ -12,7 +12,7 @@ import json
 import shutil
 import subprocess
 import sys
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -21,14 +21,25 @@ import pytest
 import protocols.session as session_mod
 from protocols.library import list_library
 from protocols.session import SessionSetup, run_session
-from reports.certificate import (calibration_record_from_dict, load_calibration_record,
-                                 render_certificate)
+from reports.certificate import (
+    calibration_record_from_dict,
+    load_calibration_record,
+    render_certificate,
+)
 from reports.decimate import EnvelopeDecimator
 from reports.document import ReportError, fmt
-from reports.progress import (adherence, load_progress_input, progress_input_from_dict,
-                              render_progress_report, trend_per_week)
-from reports.session_data import (ReportInputError, session_input_from_record,
-                                  session_input_from_recording)
+from reports.progress import (
+    adherence,
+    load_progress_input,
+    progress_input_from_dict,
+    render_progress_report,
+    trend_per_week,
+)
+from reports.session_data import (
+    ReportInputError,
+    session_input_from_record,
+    session_input_from_recording,
+)
 from reports.session_report import render_session_report
 from reports.settings import PageSize, ReportSettings, load_settings
 from rt.errors import ConfigurationError
@@ -39,7 +50,7 @@ LIB = {p.name: p for p in list_library()}
 DATA = Path(__file__).parents[1] / "reports" / "data"
 DEMO_PROGRESS = DATA / "demo_progress.json"
 CAL_RECORD = DATA / "example_calibration_record.json"
-T0 = datetime(2026, 11, 23, 17, 0, tzinfo=timezone.utc)
+T0 = datetime(2026, 11, 23, 17, 0, tzinfo=UTC)
 REL = 1e-9
 
 pytestmark = pytest.mark.skipif(shutil.which("pdftotext") is None,
@@ -106,11 +117,11 @@ def sessions(tmp_path_factory):
     """Recorded sessions on the twin (fast): sine Fz, a short ankle ROM, a stopped sine."""
     d = tmp_path_factory.mktemp("sessions")
     out = {}
-    out["sine"] = (run_session(SessionSetup(LIB["sine_fz.yaml"]), d / "sine.mcap",
-                               realtime=False), d / "sine.mcap")
+    out["sine"] = (run_session(SessionSetup(LIB["sine_fz.yaml"]), d / "sine.mcap"),
+                   d / "sine.mcap")
     rom = d / "short_rom.yaml"
     rom.write_text(SHORT_ROM)
-    out["rom"] = (run_session(SessionSetup(rom), d / "rom.mcap", realtime=False),
+    out["rom"] = (run_session(SessionSetup(rom), d / "rom.mcap"),
                   d / "rom.mcap")
     return out
 
@@ -129,7 +140,7 @@ def stopped_session(tmp_path_factory):
     try:
         s = run_session(SessionSetup(LIB["sine_fz.yaml"],
                                      patient_limits=PatientLimits(max_force_n=350.0)),
-                        d / "stopped.mcap", realtime=False)
+                        d / "stopped.mcap")
     finally:
         mp.undo()
     return s, d / "stopped.mcap"
@@ -488,8 +499,8 @@ def test_report_with_logo_and_accents(sessions, tmp_path):
 # ------------------------------------------------------------------------------ CLI
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rt.cli", "report", *args],
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-m", "talus", "report", *args],
+                          check=False, capture_output=True, text=True, timeout=300)
 
 
 def test_cli_calibration_and_refusals(tmp_path):

@@ -418,6 +418,17 @@ class SessionRecorder:
     def closed(self) -> bool:
         return self._closed
 
+    def wait_for_room(self, fraction: float = 0.5, timeout_s: float = 10.0) -> bool:
+        """For non-real-time producers that can wait (a pump feeding a fast twin run): block
+        until the queue is below ``fraction`` of its capacity, so nothing is dropped; False on
+        timeout or when the recorder closed. Never call it from the loop."""
+        deadline = time.monotonic() + timeout_s
+        while len(self._queue) >= fraction * self.queue_capacity:
+            if self._closed or time.monotonic() > deadline:
+                return False
+            time.sleep(0.002)
+        return True
+
     def dropped(self) -> dict[str, int]:
         """Messages lost so far per topic (queue full, ring overrun), a snapshot."""
         out = dict(self._dropped)
@@ -546,7 +557,9 @@ class SessionRecorder:
                 if written % _YIELD_EVERY == 0:
                     time.sleep(0)   # let the loop thread have the GIL
         q = self._queue
-        while q:
+        # Only what was queued when this turn began: a producer that keeps the queue busy
+        # must not starve the rings (the state would fall far behind in the file).
+        for _ in range(len(q)):
             topic, t, payload = q.popleft()
             if topic == WRENCH:
                 fx, fy, fz, tx, ty, tz, stale, saturated = payload
@@ -577,6 +590,8 @@ class SessionRecorder:
                 if stopping:
                     break
             t0 = time.thread_time()
+            while self._queue:     # what producers queued while the last turn ran
+                self._pump()
             self._mcap.finish()
             self._stream.flush()
             if self._fsync:
