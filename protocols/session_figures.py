@@ -31,7 +31,6 @@ import numpy as np
 from rt.errors import KinematicsError
 from rt.references.sequencer import Phase
 
-
 #: Recorded phase name → :class:`Phase` (``/protocol/reference`` ``phase`` strings; "done" is
 #: what recordings made before the one sequencer called the rest after the end).
 PHASE_BY_NAME = {**{p.name.lower(): p for p in Phase}, "done": Phase.REST}
