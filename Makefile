@@ -6,9 +6,11 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-# Debian packages the project needs at run or test time (none beyond the image's Python yet;
-# later parts add Xvfb and poppler-utils here).
-APT_PACKAGES :=
+# Debian packages the project needs at run or test time: Xvfb and the xcb libraries for a real
+# Qt window (the GUI smoke test; PLATFORM.md); later parts add poppler-utils here.
+APT_PACKAGES := xvfb xauth libxcb-icccm4 libxcb-keysyms1 libxcb-xinerama0 libegl1 libgl1 \
+  libxkbcommon-x11-0 libxcb-cursor0 libxcb-shape0 libxcb-randr0 libxcb-render-util0 \
+  libxcb-image0 libfontconfig1 libdbus-1-3
 
 .PHONY: demo test setup system-deps bench clean
 

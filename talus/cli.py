@@ -27,7 +27,10 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
     "rt": (("rt.ipc.cli", "talus.rt_serve"),
            "RT process: serve, status, control, stop, estop, reset (JSON)"),
     "record": (("rt.recording.cli",), "recordings: info, CSV export"),
+    "gui": (("app.cli",), "the clinician GUI (talus gui [--screenshot DIR])"),
 }
+#: group -> the command run when the group is given only options (``talus gui --lang es``)
+DEFAULT_COMMANDS: dict[str, str] = {"gui": "start"}
 
 
 def build_parser(group: str | None = None) -> argparse.ArgumentParser:
@@ -47,6 +50,9 @@ def build_parser(group: str | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     group = argv[0] if argv and argv[0] in GROUPS else None
+    if group in DEFAULT_COMMANDS and (len(argv) == 1 or argv[1].startswith("-")
+                                      and argv[1] not in ("-h", "--help")):
+        argv = [group, DEFAULT_COMMANDS[group], *argv[1:]]
     args = build_parser(group).parse_args(argv)
     try:
         return int(args.func(args) or 0)
