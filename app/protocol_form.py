@@ -251,7 +251,8 @@ class ProtocolForm(QWidget):
                 value = w.isChecked()
             else:
                 assert isinstance(w, QLineEdit)
-                text = w.text().strip()
+                raw = w.text()
+                text = raw.strip()
                 if not text:
                     value = None
                     if not ed.optional and (not ed.block or ed.block in used_blocks):
@@ -268,7 +269,7 @@ class ProtocolForm(QWidget):
                 elif ed.json_type == "choices":
                     value = [p.strip() for p in text.split(",") if p.strip()]
                 else:
-                    value = text
+                    value = raw            # free text is kept as typed
             _set(doc, path, value)
         _prune_empty(doc)
         return doc, problems

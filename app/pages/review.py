@@ -21,6 +21,22 @@ from rt.errors import TalusError
 TARGET_PX = 40
 
 
+def recording_title(path: Path) -> str:
+    """``<date time> — <patient>`` over ``<protocol>`` from the RT process's file name
+    (``20261123T181621Z_<patient>_<protocol>.mcap``), in local time; the stem otherwise."""
+    import datetime as dt
+
+    parts = path.stem.split("_", 2)
+    try:
+        when = dt.datetime.strptime(parts[0], "%Y%m%dT%H%M%SZ").replace(tzinfo=dt.timezone.utc)
+    except (ValueError, IndexError):
+        return path.stem
+    local = when.astimezone()
+    patient = parts[1] if len(parts) > 1 else "?"
+    protocol = parts[2].replace("-", " ") if len(parts) > 2 else ""
+    return f"{local:%Y-%m-%d %H:%M} — {patient}\n{protocol}"
+
+
 class ReviewPage(QWidget):
     """Lists the recordings in a folder (newest first) and plots the one opened."""
 
@@ -33,7 +49,9 @@ class ReviewPage(QWidget):
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-review")
         self.sessions = QListWidget()
         self.sessions.setMinimumWidth(260)
-        self.sessions.setStyleSheet("QListWidget::item { min-height: 40px; }")
+        self.sessions.setStyleSheet("QListWidget::item { min-height: 48px; }")
+        self.sessions.setWordWrap(True)
+        self.sessions.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.sessions.itemActivated.connect(lambda item: self.open(Path(item.data(
             Qt.ItemDataRole.UserRole))))
         self.refresh_button = QPushButton(tr("Refresh"))
@@ -51,6 +69,8 @@ class ReviewPage(QWidget):
             p.showGrid(x=True, y=True, alpha=0.3)
             p.addLegend(offset=(10, 10))
             p.setLabel("bottom", tr("time (s)"))
+        # Angles that stay at 0 (force protocols) must not magnify numerical noise.
+        self.angle_plot.getViewBox().setLimits(minYRange=10.0)
         self.angle_plot.setXLink(self.force_plot)
         left = QVBoxLayout()
         left.addWidget(QLabel(tr("Recorded sessions")))
@@ -77,7 +97,7 @@ class ReviewPage(QWidget):
         files = sorted(self.recordings_dir.glob("*.mcap"), key=lambda p: p.stat().st_mtime,
                        reverse=True)
         for path in files:
-            item = QListWidgetItem(path.stem)
+            item = QListWidgetItem(recording_title(path))
             item.setData(Qt.ItemDataRole.UserRole, str(path))
             self.sessions.addItem(item)
         if files:

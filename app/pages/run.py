@@ -94,6 +94,7 @@ class RunPage(QWidget):
             "roll": self.angle_plot.plot(pen=pg.mkPen("#bf5f1f", width=2),
                                          name=tr("inversion(+)/eversion(−)")),
         }
+        self.angle_plot.getViewBox().setLimits(minYRange=10.0)
         self.rom_bands = {
             axis: pg.LinearRegionItem(orientation="horizontal", movable=False,
                                       brush=pg.mkBrush(colour))
