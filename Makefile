@@ -12,7 +12,7 @@ APT_PACKAGES := xvfb xauth libxcb-icccm4 libxcb-keysyms1 libxcb-xinerama0 libegl
   libxkbcommon-x11-0 libxcb-cursor0 libxcb-shape0 libxcb-randr0 libxcb-render-util0 \
   libxcb-image0 libfontconfig1 libdbus-1-3
 
-.PHONY: demo test setup system-deps bench clean
+.PHONY: demo test setup system-deps bench clean translations
 
 setup: system-deps $(STAMP)
 
@@ -44,6 +44,12 @@ demo: setup
 
 test: setup
 	$(BIN)/pytest -q
+
+# The GUI's Spanish: extract new strings into the .ts (translated with pyside6-linguist or by
+# hand), then compile the .qm the app loads (both are committed).
+translations: setup
+	$(BIN)/pyside6-lupdate app/*.py app/pages/*.py -ts app/i18n/talus_es.ts -no-obsolete
+	$(BIN)/pyside6-lrelease app/i18n/talus_es.ts -qm app/i18n/talus_es.qm
 
 bench: setup
 	$(BIN)/python bench/model.py

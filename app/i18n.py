@@ -12,15 +12,15 @@ from PySide6.QtCore import QCoreApplication, QLocale, QTranslator
 I18N_DIR = Path(__file__).resolve().parent / "i18n"
 #: Language code → name shown in Settings (each in its own language).
 LANGUAGES = {"en": "English", "es": "Español"}
-#: The one translation context of the app.
-CONTEXT = "talus"
+#: The translation context: lupdate files free `tr("...")` calls under the empty context.
+CONTEXT = ""
 
 _installed: QTranslator | None = None
 
 
 def tr(text: str) -> str:
     """``text`` in the installed language (English when none is installed)."""
-    return QCoreApplication.translate("talus", text)
+    return QCoreApplication.translate(CONTEXT, text)
 
 
 def install_language(code: str) -> None:

@@ -35,7 +35,7 @@ class StopPanel(QWidget):
             b.setMinimumHeight(120)
             b.setFocusPolicy(Qt.FocusPolicy.TabFocus)
             b.setStyleSheet(f"QPushButton {{ background: {colour}; color: white; "
-                            f"font-size: 22pt; font-weight: bold; border-radius: 8px; }}")
+                            f"font-size: 18pt; font-weight: bold; border-radius: 8px; }}")
         self.stop_button.clicked.connect(self.stop_pressed.emit)
         self.estop_button.clicked.connect(lambda: self.estop_pressed.emit("gui"))
         layout = QVBoxLayout(self)

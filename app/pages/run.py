@@ -29,8 +29,6 @@ FRAME_HZ = 30
 #: Seconds of history on the live plots.
 WINDOW_S = 20.0
 TARGET_PX = 40
-_PHASES = {"approach": "moving to the start position", "play": "exercise",
-           "return": "returning to rest", "stopped": "stopped", "rest": "at rest"}
 
 
 def phase_words(phase: str) -> str:
