@@ -26,6 +26,8 @@ from app.stop_panel import StopPanel
 #: The clinic touchscreen (issue 14): everything fits without horizontal scrolling.
 SCREEN_SIZE = (1366, 768)
 RAIL_WIDTH_PX = 150
+#: The pages in rail order (screenshots are named after them).
+PAGE_KEYS = ("prescribe", "run", "review", "settings")
 
 
 class MainWindow(QMainWindow):

@@ -21,6 +21,8 @@ DEMO_PATIENT = PatientContext(
     {"roll_min_deg": -12.0, "roll_max_deg": 12.0, "pitch_min_deg": -15.0,
      "pitch_max_deg": 15.0, "max_force_n": 600.0, "max_angular_speed_deg_s": 30.0},
     limits_set_by="demo")
+#: Shots besides one per page: the Run page live, and stopped with Reset asking.
+EXTRA_SHOTS = ("run_live", "stopped")
 #: Heartbeat timeout of the demo's embedded RT process, s.
 DEMO_HEARTBEAT_TIMEOUT_S = 1.0
 #: The demo session: sine Fz shortened to a few cycles.
@@ -89,9 +91,13 @@ def render_all(directory: Path, settings: GuiSettings, force: bool = False) -> l
     """
     from app.i18n import install_language
     from app.launch import application, recordings_dir, robot
-    from app.main_window import MainWindow
+    from app.main_window import PAGE_KEYS, MainWindow
     from app.rt_link import RtLink
 
+    targets = {k: directory / f"{k}.png" for k in [*PAGE_KEYS, *EXTRA_SHOTS]}
+    existing = [str(p) for p in targets.values() if p.exists()]
+    if existing and not force:
+        raise InputError(f"{', '.join(existing)} exist; use --force to overwrite")
     app = application()
     install_language(settings.language)
     directory.mkdir(parents=True, exist_ok=True)
@@ -106,10 +112,7 @@ def render_all(directory: Path, settings: GuiSettings, force: bool = False) -> l
             link.start()
             window.show()
             pages = list(window.pages)
-            targets = {k: directory / f"{k}.png" for k in [*pages, "run_live", "stopped"]}
-            existing = [str(p) for p in targets.values() if p.exists()]
-            if existing and not force:
-                raise InputError(f"{', '.join(existing)} exist; use --force to overwrite")
+            assert set(pages) <= set(PAGE_KEYS), pages
 
             def shot(key: str) -> None:
                 settle(0.3)
