@@ -1,908 +1,932 @@
-<?xml version="1.0" encoding="utf-8"?>
-<!DOCTYPE TS>
+<?xml version='1.0' encoding='utf-8'?>
 <TS version="2.1" language="es_ES">
 <context>
-    <name></name>
+    <name />
     <message>
-        <location filename="../field_labels.py" line="19"/>
+        <location filename="../field_labels.py" line="19" />
         <source>Name</source>
         <extracomment>Unit suffixes of field names → the unit shown.</extracomment>
         <translation>Nombre</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="19"/>
+        <location filename="../field_labels.py" line="19" />
         <source>Description</source>
         <translation>Descripción</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="20"/>
+        <location filename="../field_labels.py" line="20" />
         <source>Platform position</source>
         <translation>Posición de la plataforma</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="20"/>
+        <location filename="../field_labels.py" line="20" />
         <source>Height (m)</source>
         <translation>Altura (m)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="21"/>
+        <location filename="../field_labels.py" line="21" />
         <source>Inversion(+)/eversion(−) tilt (°)</source>
         <translation>Inclinación inversión(+)/eversión(−) (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="22"/>
+        <location filename="../field_labels.py" line="22" />
         <source>Dorsi(+)/plantarflexion(−) tilt (°)</source>
         <translation>Inclinación dorsi(+)/plantarflexión(−) (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="23"/>
+        <location filename="../field_labels.py" line="23" />
         <source>Mean force (N)</source>
         <translation>Fuerza media (N)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="23"/>
+        <location filename="../field_labels.py" line="23" />
         <source>Force amplitude (N)</source>
         <translation>Amplitud de fuerza (N)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="24"/>
+        <location filename="../field_labels.py" line="24" />
         <source>Frequency (Hz)</source>
         <translation>Frecuencia (Hz)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="24"/>
+        <location filename="../field_labels.py" line="24" />
         <source>Cycles</source>
         <translation>Ciclos</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="25"/>
+        <location filename="../field_labels.py" line="25" />
         <source>Ramp in (s)</source>
         <translation>Rampa de entrada (s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="25"/>
+        <location filename="../field_labels.py" line="25" />
         <source>Ramp out (s)</source>
         <translation>Rampa de salida (s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="26"/>
+        <location filename="../field_labels.py" line="26" />
         <source>Ramp (s)</source>
         <translation>Rampa (s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="27"/>
+        <location filename="../field_labels.py" line="27" />
         <source>Limits of this protocol</source>
         <translation>Límites de este protocolo</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="28"/>
+        <location filename="../field_labels.py" line="28" />
         <source>Eversion limit (°, negative)</source>
         <translation>Límite de eversión (°, negativo)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="29"/>
+        <location filename="../field_labels.py" line="29" />
         <source>Inversion limit (°)</source>
         <translation>Límite de inversión (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="30"/>
+        <location filename="../field_labels.py" line="30" />
         <source>Plantarflexion limit (°, negative)</source>
         <translation>Límite de plantarflexión (°, negativo)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="31"/>
+        <location filename="../field_labels.py" line="31" />
         <source>Dorsiflexion limit (°)</source>
         <translation>Límite de dorsiflexión (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="32"/>
+        <location filename="../field_labels.py" line="32" />
         <source>Maximum force (N)</source>
         <translation>Fuerza máxima (N)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="33"/>
+        <location filename="../field_labels.py" line="33" />
         <source>Maximum angular speed (°/s)</source>
         <translation>Velocidad angular máxima (°/s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="34"/>
+        <location filename="../field_labels.py" line="34" />
         <source>Movements</source>
         <translation>Movimientos</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="34"/>
+        <location filename="../field_labels.py" line="34" />
         <source>Range per direction (°)</source>
         <translation>Rango por dirección (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="35"/>
+        <location filename="../field_labels.py" line="35" />
         <source>Dorsiflexion (°)</source>
         <translation>Dorsiflexión (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="35"/>
+        <location filename="../field_labels.py" line="35" />
         <source>Plantarflexion (°)</source>
         <translation>Plantarflexión (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="36"/>
+        <location filename="../field_labels.py" line="36" />
         <source>Inversion (°)</source>
         <translation>Inversión (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="36"/>
+        <location filename="../field_labels.py" line="36" />
         <source>Eversion (°)</source>
         <translation>Eversión (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="37"/>
+        <location filename="../field_labels.py" line="37" />
         <source>Speed (°/s)</source>
         <translation>Velocidad (°/s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="37"/>
+        <location filename="../field_labels.py" line="37" />
         <source>Repetitions</source>
         <translation>Repeticiones</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="38"/>
+        <location filename="../field_labels.py" line="38" />
         <source>Hold at each end (s)</source>
         <translation>Pausa en cada extremo (s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="38"/>
+        <location filename="../field_labels.py" line="38" />
         <source>Motion profile</source>
         <translation>Perfil de movimiento</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="39"/>
+        <location filename="../field_labels.py" line="39" />
         <source>Maximum acceleration (°/s²)</source>
         <translation>Aceleración máxima (°/s²)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="40"/>
+        <location filename="../field_labels.py" line="40" />
         <source>Maximum jerk (°/s³)</source>
         <translation>Sobreaceleración máxima (°/s³)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="41"/>
+        <location filename="../field_labels.py" line="41" />
         <source>Gait record file</source>
         <translation>Archivo de registro de marcha</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="41"/>
+        <location filename="../field_labels.py" line="41" />
         <source>Trajectory file</source>
         <translation>Archivo de trayectoria</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="42"/>
+        <location filename="../field_labels.py" line="42" />
         <source>Load (% body weight)</source>
         <translation>Carga (% del peso corporal)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="42"/>
+        <location filename="../field_labels.py" line="42" />
         <source>Time scale</source>
         <translation>Escala de tiempo</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="43"/>
+        <location filename="../field_labels.py" line="43" />
         <source>Force plate</source>
         <translation>Plataforma de fuerzas</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="43"/>
+        <location filename="../field_labels.py" line="43" />
         <source>Include shear forces</source>
         <translation>Incluir fuerzas tangenciales</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="44"/>
+        <location filename="../field_labels.py" line="44" />
         <source>Body mass in the record (kg)</source>
         <translation>Masa corporal en el registro (kg)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="45"/>
+        <location filename="../field_labels.py" line="45" />
         <source>Holds</source>
         <translation>Mantenimientos</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="45"/>
+        <location filename="../field_labels.py" line="45" />
         <source>Rest (s)</source>
         <translation>Descanso (s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="45"/>
+        <location filename="../field_labels.py" line="45" />
         <source>Rest between (s)</source>
         <translation>Descanso entre (s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="46"/>
+        <location filename="../field_labels.py" line="46" />
         <source>Target force (N)</source>
         <translation>Fuerza objetivo (N)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="46"/>
+        <location filename="../field_labels.py" line="46" />
         <source>Duration (s)</source>
         <translation>Duración (s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="47"/>
+        <location filename="../field_labels.py" line="47" />
         <source>Assistance gain</source>
         <translation>Ganancia de asistencia</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="47"/>
+        <location filename="../field_labels.py" line="47" />
         <source>Threshold (N)</source>
         <translation>Umbral (N)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="48"/>
+        <location filename="../field_labels.py" line="48" />
         <source>Guide period (s)</source>
         <translation>Periodo de guía (s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="48"/>
+        <location filename="../field_labels.py" line="48" />
         <source>Admittance</source>
         <translation>Admitancia</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="49"/>
+        <location filename="../field_labels.py" line="49" />
         <source>Stiffness (N·m/rad)</source>
         <translation>Rigidez (N·m/rad)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="50"/>
+        <location filename="../field_labels.py" line="50" />
         <source>Damping (N·m·s/rad)</source>
         <translation>Amortiguamiento (N·m·s/rad)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="51"/>
+        <location filename="../field_labels.py" line="51" />
         <source>Interpolation</source>
         <translation>Interpolación</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="51"/>
+        <location filename="../field_labels.py" line="51" />
         <source>Sample rate (Hz)</source>
         <translation>Frecuencia de muestreo (Hz)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="52"/>
+        <location filename="../field_labels.py" line="52" />
         <source>Stance</source>
         <translation>Apoyo</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="52"/>
+        <location filename="../field_labels.py" line="52" />
         <source>Transition speed (°/s)</source>
         <translation>Velocidad de transición (°/s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="53"/>
+        <location filename="../field_labels.py" line="53" />
         <source>Maximum speed (°/s)</source>
         <translation>Velocidad máxima (°/s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="53"/>
+        <location filename="../field_labels.py" line="53" />
         <source>Axes</source>
         <translation>Ejes</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="54"/>
+        <location filename="../field_labels.py" line="54" />
         <source>Range (°)</source>
         <translation>Rango (°)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="54"/>
+        <location filename="../field_labels.py" line="54" />
         <source>Start (s)</source>
         <translation>Inicio (s)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="54"/>
+        <location filename="../field_labels.py" line="54" />
         <source>End (s)</source>
         <translation>Fin (s)</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="38"/>
+        <location filename="../main_window.py" line="40" />
         <source>talus — rehabilitation robot</source>
-        <extracomment>The clinic touchscreen (issue 14): everything fits without horizontal scrolling.</extracomment>
+        <extracomment>The clinic touchscreen (issue 14): everything fits without horizontal scrolling. The pages in rail order (screenshots are named after them).</extracomment>
         <translation>talus — robot de rehabilitación</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="55"/>
+        <location filename="../main_window.py" line="57" />
         <source>Prescribe</source>
         <translation>Prescribir</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="56"/>
+        <location filename="../main_window.py" line="58" />
         <source>Run</source>
         <translation>Ejecutar</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="57"/>
+        <location filename="../main_window.py" line="59" />
         <source>Review</source>
         <translation>Revisar</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="58"/>
+        <location filename="../main_window.py" line="60" />
         <source>Settings</source>
         <translation>Ajustes</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="142"/>
+        <location filename="../main_window.py" line="144" />
         <source>Reset refused: %1</source>
         <translation>Rearme rechazado: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="66"/>
+        <location filename="../pages/prescribe.py" line="66" />
         <source>Protocols</source>
         <translation>Protocolos</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="91"/>
-        <location filename="../pages/review.py" line="71"/>
-        <location filename="../pages/run.py" line="83"/>
+        <location filename="../pages/prescribe.py" line="91" />
+        <location filename="../pages/review.py" line="71" />
+        <location filename="../pages/run.py" line="82" />
         <source>time (s)</source>
         <translation>tiempo (s)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="95"/>
-        <location filename="../pages/prescribe.py" line="149"/>
+        <location filename="../pages/prescribe.py" line="95" />
+        <location filename="../pages/prescribe.py" line="149" />
         <source>Pre-flight not run yet.</source>
         <translation>Comprobación previa aún no realizada.</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="99"/>
+        <location filename="../pages/prescribe.py" line="99" />
         <source>Check on the robot model (pre-flight)</source>
         <translation>Comprobar en el modelo del robot (comprobación previa)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="100"/>
+        <location filename="../pages/prescribe.py" line="100" />
         <source>Start on the Run page</source>
         <translation>Iniciar en la página Ejecutar</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="150"/>
+        <location filename="../pages/prescribe.py" line="150" />
         <source>Correct the fields marked in red first.</source>
         <translation>Corrija primero los campos marcados en rojo.</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="159"/>
+        <location filename="../pages/prescribe.py" line="159" />
         <source>Computing the preview…</source>
         <translation>Calculando la vista previa…</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="176"/>
+        <location filename="../pages/prescribe.py" line="176" />
         <source>No preview: %1</source>
         <translation>Sin vista previa: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="179"/>
+        <location filename="../pages/prescribe.py" line="179" />
         <source>This protocol cannot be played: %1</source>
         <translation>Este protocolo no se puede ejecutar: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="183"/>
+        <location filename="../pages/prescribe.py" line="183" />
         <source>force (N)</source>
         <translation>fuerza (N)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="185"/>
+        <location filename="../pages/prescribe.py" line="185" />
         <source>force reference</source>
         <translation>referencia de fuerza</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="187"/>
+        <location filename="../pages/prescribe.py" line="187" />
         <source>angle (°)</source>
         <translation>ángulo (°)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="189"/>
-        <location filename="../pages/review.py" line="135"/>
-        <location filename="../pages/run.py" line="92"/>
+        <location filename="../pages/prescribe.py" line="189" />
+        <location filename="../pages/review.py" line="135" />
+        <location filename="../pages/run.py" line="91" />
         <source>dorsi(+)/plantar(−) flexion</source>
         <translation>flexión dorsal(+)/plantar(−)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="191"/>
-        <location filename="../pages/review.py" line="137"/>
-        <location filename="../pages/run.py" line="95"/>
+        <location filename="../pages/prescribe.py" line="191" />
+        <location filename="../pages/review.py" line="137" />
+        <location filename="../pages/run.py" line="94" />
         <source>inversion(+)/eversion(−)</source>
         <translation>inversión(+)/eversión(−)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="192"/>
+        <location filename="../pages/prescribe.py" line="192" />
         <source>Duration: %1 s</source>
         <translation>Duración: %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="203"/>
+        <location filename="../pages/prescribe.py" line="203" />
         <source>Pre-flight running on the robot model…</source>
         <translation>Comprobación previa en curso en el modelo del robot…</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="216"/>
+        <location filename="../pages/prescribe.py" line="216" />
         <source>REFUSED: %1</source>
         <translation>RECHAZADO: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="222"/>
+        <location filename="../pages/prescribe.py" line="222" />
         <source>Pre-flight passed. Predicted peaks: %1</source>
         <translation>Comprobación previa superada. Picos previstos: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="233"/>
+        <location filename="../pages/prescribe.py" line="233" />
         <source>Choose a patient first</source>
         <translation>Elija primero un paciente</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="57"/>
+        <location filename="../pages/prescribe.py" line="246" />
+        <source>platform force %1 N</source>
+        <translation>fuerza en la plataforma %1 N</translation>
+    </message>
+    <message>
+        <location filename="../pages/prescribe.py" line="248" />
+        <source>dorsi/plantarflexion</source>
+        <translation>dorsi/plantarflexión</translation>
+    </message>
+    <message>
+        <location filename="../pages/prescribe.py" line="248" />
+        <source>inversion/eversion</source>
+        <translation>inversión/eversión</translation>
+    </message>
+    <message>
+        <location filename="../pages/prescribe.py" line="254" />
+        <source>force tracking error %1 %</source>
+        <translation>error de seguimiento de fuerza %1 %</translation>
+    </message>
+    <message>
+        <location filename="../pages/prescribe.py" line="257" />
+        <source>duration %1 s</source>
+        <translation>duración %1 s</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="57" />
         <source>Refresh</source>
         <translation>Actualizar</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="58"/>
+        <location filename="../pages/review.py" line="58" />
         <source>Open</source>
         <translation>Abrir</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="63"/>
+        <location filename="../pages/review.py" line="63" />
         <source>Choose a session on the left.</source>
         <translation>Elija una sesión a la izquierda.</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="65"/>
-        <location filename="../pages/run.py" line="77"/>
+        <location filename="../pages/review.py" line="65" />
+        <location filename="../pages/run.py" line="76" />
         <source>Force (N)</source>
         <translation>Fuerza (N)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="66"/>
-        <location filename="../pages/run.py" line="78"/>
+        <location filename="../pages/review.py" line="66" />
+        <location filename="../pages/run.py" line="77" />
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="76"/>
+        <location filename="../pages/review.py" line="76" />
         <source>Recorded sessions</source>
         <translation>Sesiones grabadas</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="113"/>
+        <location filename="../pages/review.py" line="113" />
         <source>Reading %1…</source>
         <translation>Leyendo %1…</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="127"/>
+        <location filename="../pages/review.py" line="127" />
         <source>Cannot open: %1</source>
         <translation>No se puede abrir: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="131"/>
-        <location filename="../pages/run.py" line="87"/>
+        <location filename="../pages/review.py" line="131" />
+        <location filename="../pages/run.py" line="86" />
         <source>reference</source>
         <translation>referencia</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="133"/>
-        <location filename="../pages/run.py" line="89"/>
+        <location filename="../pages/review.py" line="133" />
+        <location filename="../pages/run.py" line="88" />
         <source>measured</source>
         <translation>medida</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="146"/>
+        <location filename="../pages/review.py" line="146" />
         <source>%1 — patient %2 — %3 s</source>
         <translation>%1 — paciente %2 — %3 s</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="149"/>
+        <location filename="../pages/review.py" line="149" />
         <source>stops: %1</source>
         <translation>paradas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="152"/>
+        <location filename="../pages/review.py" line="152" />
         <source>recording cut short (recovered up to its last whole block)</source>
         <translation>grabación interrumpida (recuperada hasta su último bloque completo)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="37"/>
+        <location filename="../pages/run.py" line="35" />
         <source>moving to the start position</source>
         <extracomment>Redraw rate of the live plots, Hz (the issue asks ≥ 30 fps). Seconds of history on the live plots.</extracomment>
         <translation>yendo a la posición inicial</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="37"/>
+        <location filename="../pages/run.py" line="35" />
         <source>exercise</source>
         <translation>ejercicio</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="38"/>
+        <location filename="../pages/run.py" line="36" />
         <source>returning to rest</source>
         <translation>volviendo al reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="38"/>
+        <location filename="../pages/run.py" line="36" />
         <source>stopped</source>
         <translation>detenido</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="39"/>
+        <location filename="../pages/run.py" line="37" />
         <source>at rest</source>
         <translation>en reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="64"/>
+        <location filename="../pages/run.py" line="63" />
         <source>No protocol prescribed: choose one in Prescribe.</source>
         <translation>Ningún protocolo prescrito: elija uno en Prescribir.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="66"/>
+        <location filename="../pages/run.py" line="65" />
         <source>Take control of the robot</source>
         <translation>Tomar el control del robot</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="67"/>
+        <location filename="../pages/run.py" line="66" />
         <source>Start session</source>
         <translation>Iniciar sesión</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="159"/>
+        <location filename="../pages/run.py" line="158" />
         <source>Protocol: %1</source>
         <translation>Protocolo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="174"/>
+        <location filename="../pages/run.py" line="173" />
         <source>Checking the protocol on the robot model, then starting…</source>
         <translation>Comprobando el protocolo en el modelo del robot; después se inicia…</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="180"/>
+        <location filename="../pages/run.py" line="179" />
         <source>Could not take control: %1</source>
         <translation>No se pudo tomar el control: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="181"/>
+        <location filename="../pages/run.py" line="180" />
         <source>You control the robot.</source>
         <translation>Usted controla el robot.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="185"/>
+        <location filename="../pages/run.py" line="184" />
         <source>The session did not start: %1</source>
         <translation>La sesión no se inició: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="193"/>
+        <location filename="../pages/run.py" line="193" />
         <source>Session running.</source>
         <translation>Sesión en curso.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="203"/>
+        <location filename="../pages/run.py" line="203" />
         <source>Session ended: %1</source>
         <translation>Sesión terminada: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="207"/>
+        <location filename="../pages/run.py" line="207" />
         <source>Stopped: %1</source>
         <translation>Detenido: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="251"/>
+        <location filename="../pages/run.py" line="251" />
         <source>%1 s left</source>
         <translation>quedan %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="33"/>
+        <location filename="../pages/settings_page.py" line="33" />
         <source>default: the local SQLite clinical record</source>
         <translation>por defecto: la historia clínica local SQLite</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="44"/>
+        <location filename="../pages/settings_page.py" line="44" />
         <source>RT process endpoint</source>
         <translation>Dirección del proceso de tiempo real</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="45"/>
+        <location filename="../pages/settings_page.py" line="45" />
         <source>Clinical record database URL</source>
         <translation>URL de la base de datos clínica</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="46"/>
+        <location filename="../pages/settings_page.py" line="46" />
         <source>Recordings folder</source>
         <translation>Carpeta de grabaciones</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="47"/>
+        <location filename="../pages/settings_page.py" line="47" />
         <source>Clinic name (reports)</source>
         <translation>Nombre de la clínica (informes)</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="48"/>
+        <location filename="../pages/settings_page.py" line="48" />
         <source>Clinic logo file (reports)</source>
         <translation>Archivo del logotipo de la clínica (informes)</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="49"/>
+        <location filename="../pages/settings_page.py" line="49" />
         <source>Language</source>
         <translation>Idioma</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="50"/>
+        <location filename="../pages/settings_page.py" line="50" />
         <source>Lock the screen after idle (minutes)</source>
         <translation>Bloquear la pantalla tras inactividad (minutos)</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="51"/>
+        <location filename="../pages/settings_page.py" line="51" />
         <source>RT reply timeout (s)</source>
         <translation>Tiempo de espera de respuesta TR (s)</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="55"/>
+        <location filename="../pages/settings_page.py" line="55" />
         <source>Save</source>
         <translation>Guardar</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="72"/>
+        <location filename="../pages/settings_page.py" line="72" />
         <source>Idle lock and timeout must be numbers.</source>
         <translation>El bloqueo por inactividad y el tiempo de espera deben ser números.</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="84"/>
+        <location filename="../pages/settings_page.py" line="84" />
         <source>Not saved: %1</source>
         <translation>No guardado: %1</translation>
     </message>
     <message>
-        <location filename="../pages/settings_page.py" line="90"/>
+        <location filename="../pages/settings_page.py" line="90" />
         <source>Saved. A new endpoint or language applies when the GUI is started again.</source>
         <translation>Guardado. Una nueva dirección o idioma se aplica al volver a iniciar la interfaz.</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="149"/>
+        <location filename="../protocol_form.py" line="149" />
         <source>Parameters</source>
-        <extracomment>Keys never edited in the form (they say what the document is). Source name in validation messages (stripped before display). the nearest optional block holding this field (&quot;&quot; when none): a block left wholly empty is omitted, so its required fields are only required once one of them is set</extracomment>
+        <extracomment>Keys never edited in the form (they say what the document is). Source name in validation messages (stripped before display). the nearest optional block holding this field ("" when none): a block left wholly empty is omitted, so its required fields are only required once one of them is set</extracomment>
         <translation>Parámetros</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="179"/>
+        <location filename="../protocol_form.py" line="179" />
         <source>Edited in the protocol file</source>
         <translation>Se edita en el archivo del protocolo</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="259"/>
+        <location filename="../protocol_form.py" line="259" />
         <source>required</source>
         <translation>obligatorio</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="266"/>
+        <location filename="../protocol_form.py" line="266" />
         <source>a number is needed</source>
         <translation>se necesita un número</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="267"/>
+        <location filename="../protocol_form.py" line="267" />
         <source>a whole number is needed</source>
         <translation>se necesita un número entero</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="45"/>
+        <location filename="../status_band.py" line="45" />
         <source>Reset…</source>
         <extracomment>Smallest touch target, px (GUI.md).</extracomment>
         <translation>Rearmar…</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="50"/>
+        <location filename="../status_band.py" line="50" />
         <source>Patient checked: clear</source>
         <translation>Paciente revisado: borrar</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="51"/>
+        <location filename="../status_band.py" line="51" />
         <source>Cancel</source>
         <translation>Cancelar</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="76"/>
+        <location filename="../status_band.py" line="76" />
         <source>not connected yet</source>
         <translation>aún sin conexión</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="81"/>
+        <location filename="../status_band.py" line="81" />
         <source>Patient: %1</source>
         <translation>Paciente: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="82"/>
+        <location filename="../status_band.py" line="82" />
         <source>No patient selected</source>
         <translation>Ningún paciente seleccionado</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="97"/>
+        <location filename="../status_band.py" line="97" />
         <source>Robot connected</source>
         <translation>Robot conectado</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="99"/>
+        <location filename="../status_band.py" line="99" />
         <source>Robot NOT connected: %1</source>
         <translation>Robot NO conectado: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="101"/>
+        <location filename="../status_band.py" line="101" />
         <source>Controlled by: %1</source>
         <translation>Controlado por: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="102"/>
+        <location filename="../status_band.py" line="102" />
         <source>Nobody controls the robot</source>
         <translation>Nadie controla el robot</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="105"/>
+        <location filename="../status_band.py" line="105" />
         <source>Why: %1</source>
         <translation>Motivo: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="126"/>
+        <location filename="../status_band.py" line="126" />
         <source>Reset will clear:</source>
         <translation>El rearme borrará:</translation>
     </message>
     <message>
-        <location filename="../stop_panel.py" line="29"/>
+        <location filename="../stop_panel.py" line="29" />
         <source>STOP</source>
         <extracomment>Keys: Esc for STOP (the key a hand finds without looking), F12 for E-STOP. GUI.md: STOP at least 120 px wide.</extracomment>
         <translation>PARAR</translation>
     </message>
     <message>
-        <location filename="../stop_panel.py" line="31"/>
+        <location filename="../stop_panel.py" line="31" />
         <source>E-STOP</source>
         <translation>EMERGENCIA</translation>
     </message>
     <message>
-        <location filename="../words.py" line="23"/>
+        <location filename="../words.py" line="23" />
         <source>Idle — robot at rest</source>
         <extracomment>Colours of the robot states (GUI.md: grey idle, green running, amber soft stop, red hard).</extracomment>
         <translation>Inactivo — robot en reposo</translation>
     </message>
     <message>
-        <location filename="../words.py" line="24"/>
+        <location filename="../words.py" line="24" />
         <source>Running</source>
         <translation>En marcha</translation>
     </message>
     <message>
-        <location filename="../words.py" line="25"/>
+        <location filename="../words.py" line="25" />
         <source>Stopped (soft stop) — reset to continue</source>
         <translation>Detenido (parada suave) — rearme para continuar</translation>
     </message>
     <message>
-        <location filename="../words.py" line="26"/>
+        <location filename="../words.py" line="26" />
         <source>EMERGENCY STOP — drives off</source>
         <translation>PARADA DE EMERGENCIA — motores desactivados</translation>
     </message>
     <message>
-        <location filename="../words.py" line="27"/>
+        <location filename="../words.py" line="27" />
         <source>Connection to the robot lost — motion disabled</source>
         <translation>Conexión con el robot perdida — movimiento desactivado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="46"/>
+        <location filename="../words.py" line="46" />
         <source>E-STOP pressed on this screen</source>
         <translation>PARADA DE EMERGENCIA pulsada en esta pantalla</translation>
     </message>
     <message>
-        <location filename="../words.py" line="47"/>
+        <location filename="../words.py" line="47" />
         <source>E-STOP pressed on the keyboard</source>
         <translation>PARADA DE EMERGENCIA pulsada en el teclado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="48"/>
+        <location filename="../words.py" line="48" />
         <source>E-STOP sent from a terminal</source>
         <translation>PARADA DE EMERGENCIA enviada desde un terminal</translation>
     </message>
     <message>
-        <location filename="../words.py" line="49"/>
+        <location filename="../words.py" line="49" />
         <source>the emergency-stop button was pressed</source>
         <translation>se pulsó la seta de emergencia</translation>
     </message>
     <message>
-        <location filename="../words.py" line="50"/>
+        <location filename="../words.py" line="50" />
         <source>the patient pressed the hand switch</source>
         <translation>el paciente pulsó el pulsador de mano</translation>
     </message>
     <message>
-        <location filename="../words.py" line="51"/>
+        <location filename="../words.py" line="51" />
         <source>STOP pressed</source>
         <translation>PARAR pulsado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="52"/>
+        <location filename="../words.py" line="52" />
         <source>a motor drive failed</source>
         <translation>falló un accionamiento de motor</translation>
     </message>
     <message>
-        <location filename="../words.py" line="53"/>
+        <location filename="../words.py" line="53" />
         <source>the platform position is unknown</source>
         <translation>la posición de la plataforma es desconocida</translation>
     </message>
     <message>
-        <location filename="../words.py" line="54"/>
+        <location filename="../words.py" line="54" />
         <source>a position sensor gave an impossible reading</source>
         <translation>un sensor de posición dio una lectura imposible</translation>
     </message>
     <message>
-        <location filename="../words.py" line="55"/>
+        <location filename="../words.py" line="55" />
         <source>force sensor overloaded</source>
         <translation>sensor de fuerza sobrecargado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="56"/>
+        <location filename="../words.py" line="56" />
         <source>the force sensor stopped answering</source>
         <translation>el sensor de fuerza dejó de responder</translation>
     </message>
     <message>
-        <location filename="../words.py" line="57"/>
+        <location filename="../words.py" line="57" />
         <source>the force sensor reading is invalid</source>
         <translation>la lectura del sensor de fuerza no es válida</translation>
     </message>
     <message>
-        <location filename="../words.py" line="58"/>
-        <source>force above the patient&apos;s limit</source>
+        <location filename="../words.py" line="58" />
+        <source>force above the patient's limit</source>
         <translation>fuerza por encima del límite del paciente</translation>
     </message>
     <message>
-        <location filename="../words.py" line="59"/>
+        <location filename="../words.py" line="59" />
         <source>the control computer fell behind</source>
         <translation>el ordenador de control se retrasó</translation>
     </message>
     <message>
-        <location filename="../words.py" line="60"/>
+        <location filename="../words.py" line="60" />
         <source>lost contact with the controlling screen</source>
         <translation>se perdió el contacto con la pantalla que controla</translation>
     </message>
     <message>
-        <location filename="../words.py" line="61"/>
-        <source>inversion/eversion at the end of the patient&apos;s range</source>
+        <location filename="../words.py" line="61" />
+        <source>inversion/eversion at the end of the patient's range</source>
         <translation>inversión/eversión al final del rango del paciente</translation>
     </message>
     <message>
-        <location filename="../words.py" line="62"/>
-        <source>dorsi/plantarflexion at the end of the patient&apos;s range</source>
+        <location filename="../words.py" line="62" />
+        <source>dorsi/plantarflexion at the end of the patient's range</source>
         <translation>dorsi/plantarflexión al final del rango del paciente</translation>
     </message>
     <message>
-        <location filename="../words.py" line="63"/>
-        <source>inversion/eversion faster than the patient&apos;s limit</source>
+        <location filename="../words.py" line="63" />
+        <source>inversion/eversion faster than the patient's limit</source>
         <translation>inversión/eversión más rápida que el límite del paciente</translation>
     </message>
     <message>
-        <location filename="../words.py" line="64"/>
-        <source>dorsi/plantarflexion faster than the patient&apos;s limit</source>
+        <location filename="../words.py" line="64" />
+        <source>dorsi/plantarflexion faster than the patient's limit</source>
         <translation>dorsi/plantarflexión más rápida que el límite del paciente</translation>
     </message>
     <message>
-        <location filename="../words.py" line="78"/>
+        <location filename="../words.py" line="78" />
         <source>actuator %1 at the end of its travel</source>
         <translation>actuador %1 al final de su recorrido</translation>
     </message>
     <message>
-        <location filename="../words.py" line="79"/>
+        <location filename="../words.py" line="79" />
         <source>actuator %1 near the end of its travel</source>
         <translation>actuador %1 cerca del final de su recorrido</translation>
     </message>
     <message>
-        <location filename="../words.py" line="80"/>
+        <location filename="../words.py" line="80" />
         <source>actuator %1 moving too fast</source>
         <translation>actuador %1 demasiado rápido</translation>
     </message>
     <message>
-        <location filename="../words.py" line="81"/>
+        <location filename="../words.py" line="81" />
         <source>actuator %1 accelerating too hard</source>
         <translation>actuador %1 acelera demasiado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="82"/>
+        <location filename="../words.py" line="82" />
         <source>actuator %1 could not follow its path</source>
         <translation>actuador %1 no pudo seguir su trayectoria</translation>
     </message>
     <message>
-        <location filename="../words.py" line="83"/>
+        <location filename="../words.py" line="83" />
         <source>actuator %1 pushing too hard</source>
         <translation>actuador %1 empuja demasiado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="84"/>
+        <location filename="../words.py" line="84" />
         <source>position sensor %1 stopped changing</source>
         <translation>el sensor de posición %1 dejó de cambiar</translation>
     </message>

@@ -238,17 +238,21 @@ class PrescribePage(QWidget):
 
 
 def _peaks(predicted: dict[str, Any]) -> str:
-    """Predicted peaks in clinical units (the RT process sends SI: rad, N, m)."""
-    import math
-
+    """The pre-flight's predicted peaks in clinical words and units (against the limits the
+    verdict already applied)."""
     parts = []
-    for key, value in predicted.items():
-        if not isinstance(value, (int, float)) or isinstance(value, bool):
-            continue
-        if key.endswith("_rad") or key in ("roll", "pitch"):
-            parts.append(f"{key.removesuffix('_rad')} {math.degrees(value):.1f}°")
-        elif key.endswith("_n"):
-            parts.append(f"{key.removesuffix('_n')} {value:.0f} N")
-        else:
-            parts.append(f"{key} {value:.3g}")
-    return ", ".join(parts) or "—"
+    force = predicted.get("peak_platform_force_n")
+    if isinstance(force, (int, float)):
+        parts.append(tr("platform force %1 N").replace("%1", f"{force:.0f}"))
+    angles = predicted.get("platform_angles_deg") or {}
+    words = {"pitch": tr("dorsi/plantarflexion"), "roll": tr("inversion/eversion")}
+    for axis, span in angles.items():
+        if isinstance(span, list) and len(span) == 2 and axis in words:
+            parts.append(f"{words[axis]} {span[0]:+.1f}° … {span[1]:+.1f}°")
+    err = predicted.get("rms_error_pct")
+    if isinstance(err, (int, float)):
+        parts.append(tr("force tracking error %1 %").replace("%1", f"{err:.1f}"))
+    duration = predicted.get("duration_s")
+    if isinstance(duration, (int, float)):
+        parts.append(tr("duration %1 s").replace("%1", f"{duration:.0f}"))
+    return "; ".join(parts) or "—"

@@ -51,6 +51,7 @@ class RunPage(QWidget):
         self.duration_s: float | None = None
         self.last_summary: dict[str, Any] | None = None
         self.last_error = ""
+        self.recording: str | None = None
         self.start_clicked_at: float | None = None
         self.frames = 0
         n = int(WINDOW_S * 70)
@@ -183,9 +184,10 @@ class RunPage(QWidget):
                 self.message.setText(tr("The session did not start: %1").replace("%1", error))
             else:
                 assert isinstance(result, dict)
-                self.session_id = str(result.get("session"))
-                pre = result.get("predicted") or {}
-                self.duration_s = pre.get("duration_s") if isinstance(pre, dict) else None
+                self.session_id = str(result["session_id"])
+                duration = result.get("duration_s")
+                self.duration_s = float(duration) if isinstance(duration, (int, float)) else None
+                self.recording = result.get("recording")
                 for buf in self._buf.values():
                     buf.clear()
                 self.message.setText(tr("Session running."))
