@@ -78,7 +78,11 @@ def _with_gui(endpoint: str, doc: dict[str, Any], pub: Subscriber) -> dict[str, 
     window.run.prescribe(doc)
     window.show_page("run")
     window.run.control_button.click()
-    wait_until(window.run.start_button.isEnabled, 30.0, "taking control")
+    try:
+        wait_until(window.run.start_button.isEnabled, 30.0, "taking control")
+    except Exception:
+        print(window.run.message.text(), link.last_status, window.run.document is not None)
+        raise
     settle(1.0)
 
     gaps: list[float] = []

@@ -76,6 +76,10 @@ class RunPage(QWidget):
         self.force_plot = pg.PlotWidget(title=tr("Force (N)"))
         self.angle_plot = pg.PlotWidget(title=tr("Ankle angles (°)"))
         for p in (self.force_plot, self.angle_plot):
+            # Draw only what is visible, at most about a point per pixel (CPU: the RT loop
+            # shares the machine).
+            p.setClipToView(True)
+            p.setDownsampling(auto=True, mode="peak")
             p.setBackground("w")
             p.showGrid(x=True, y=True, alpha=0.3)
             p.addLegend(offset=(10, 10))
