@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import sys
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 from app.settings import GuiSettings
 
@@ -32,12 +32,13 @@ def robot(settings: GuiSettings, fast: bool = False,
         yield endpoint
 
 
-def application() -> object:
+def application() -> Any:
     """The QApplication (created once), with a base font a clinician reads from a metre."""
     from PySide6.QtGui import QFont
     from PySide6.QtWidgets import QApplication
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
+    assert isinstance(app, QApplication)
     font = QFont(app.font())
     font.setPointSize(max(11, font.pointSize()))
     app.setFont(font)
@@ -58,6 +59,6 @@ def run_gui(settings: GuiSettings, settings_path: Path | None) -> int:
         window = MainWindow(link, settings, settings_path)
         link.start()
         window.show()
-        code = int(app.exec())  # type: ignore[attr-defined]
+        code = int(app.exec())
         link.close()
     return code

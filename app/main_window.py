@@ -6,7 +6,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from PySide6.QtCore import Qt
 from PySide6.QtGui import QKeySequence, QShortcut
 from PySide6.QtWidgets import (
     QButtonGroup, QHBoxLayout, QMainWindow, QPushButton, QStackedWidget, QVBoxLayout, QWidget,
@@ -22,6 +21,7 @@ from app.rt_link import RtLink
 from app.settings import GuiSettings
 from app.status_band import StatusBand
 from app.stop_panel import StopPanel
+from app.style import LARGE_PX
 
 #: The clinic touchscreen (issue 14): everything fits without horizontal scrolling.
 SCREEN_SIZE = (1366, 768)
@@ -100,7 +100,7 @@ class MainWindow(QMainWindow):
         button = QPushButton(label)
         button.setObjectName(f"rail:{key}")
         button.setCheckable(True)
-        button.setMinimumHeight(56)
+        button.setMinimumHeight(LARGE_PX)
         self.rail_group.addButton(button, index)
         button.clicked.connect(lambda _c=False, k=key: self.show_page(k))
         self.rail.insertWidget(index, button)

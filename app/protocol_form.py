@@ -21,6 +21,7 @@ from PySide6.QtWidgets import (
 
 from app.field_labels import field_label
 from app.i18n import tr
+from app.style import TARGET_PX
 from protocols.schema import KINDS, validate_protocol_data
 from rt.errors import ProtocolValidationError
 
@@ -28,7 +29,6 @@ from rt.errors import ProtocolValidationError
 FIXED_KEYS = ("schema_version", "kind")
 #: Source name in validation messages (stripped before display).
 FORM_SOURCE = "form"
-TARGET_PX = 40
 
 
 @dataclass
@@ -138,7 +138,7 @@ class ProtocolForm(QWidget):
         """Show ``document`` (a validated protocol as JSON, ``protocol_document``)."""
         while self._layout.count():
             item = self._layout.takeAt(0)
-            w = item.widget()
+            w = None if item is None else item.widget()
             if w is not None and w is not self.general_error:
                 w.deleteLater()
         self.editors.clear()

@@ -10,9 +10,8 @@ from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWi
 
 from app.i18n import tr
 from app.words import STATE_COLOURS, cause_words, display_state, state_words
+from app.style import TARGET_PX
 
-#: Smallest touch target, px (GUI.md).
-TARGET_PX = 40
 
 
 class StatusBand(QWidget):

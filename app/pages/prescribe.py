@@ -20,11 +20,11 @@ from app.patient_context import PatientContext
 from app.preview import Preview, compute_preview
 from app.protocol_form import ProtocolForm
 from app.rt_link import RtLink
+from app.style import LARGE_PX, TARGET_PX
 from protocols.library import LIBRARY_DIR
 from protocols.rt_session import protocol_document
 from rt.errors import TalusError
 
-TARGET_PX = 40
 
 
 def library_documents(directory: Path = LIBRARY_DIR) -> list[tuple[str, dict[str, Any]]]:
@@ -70,7 +70,7 @@ class PrescribePage(QWidget):
             card = QPushButton(doc["name"])
             card.setObjectName(f"card:{stem}")
             card.setCheckable(True)
-            card.setMinimumHeight(56)
+            card.setMinimumHeight(LARGE_PX)
             card.setToolTip(doc.get("description", ""))
             card.setStyleSheet("text-align: left; padding: 6px;")
             self.card_group.addButton(card, i)

@@ -16,9 +16,9 @@ from PySide6.QtWidgets import (
 from app.i18n import tr
 from app.review_data import ReviewData, load_review
 from app.words import cause_words
+from app.style import TARGET_PX
 from rt.errors import TalusError
 
-TARGET_PX = 40
 
 
 def recording_title(path: Path) -> str:

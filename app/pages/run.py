@@ -23,12 +23,12 @@ from app.i18n import tr
 from app.patient_context import PatientContext
 from app.rt_link import RtLink
 from app.words import event_words
+from app.style import LARGE_PX, TARGET_PX
 
 #: Redraw rate of the live plots, Hz (the issue asks ≥ 30 fps).
 FRAME_HZ = 30
 #: Seconds of history on the live plots.
 WINDOW_S = 20.0
-TARGET_PX = 40
 
 
 def phase_words(phase: str) -> str:
@@ -66,7 +66,7 @@ class RunPage(QWidget):
         self.start_button = QPushButton(tr("Start session"))
         self.start_button.setObjectName("startSession")
         for b in (self.control_button, self.start_button):
-            b.setMinimumHeight(56)
+            b.setMinimumHeight(LARGE_PX)
         self.control_button.clicked.connect(self.take_control)
         self.start_button.clicked.connect(self.start_session)
         self.message = QLabel()

@@ -14,8 +14,8 @@ from PySide6.QtWidgets import (
 from app import settings as settings_io
 from app.i18n import LANGUAGES, tr
 from app.settings import GuiSettings
+from app.style import TARGET_PX
 
-TARGET_PX = 40
 
 
 class SettingsPage(QWidget):
