@@ -116,3 +116,35 @@ def test_settings_page_refuses_bad_values_and_saves_good_ones(window, tmp_path):
     page.idle.setText("5")
     assert page.save()
     assert '"rt_endpoint": "tcp://127.0.0.1:6000"' in (tmp_path / "gui.json").read_text()
+
+
+def test_idle_lock_waits_for_the_session_and_counts_input(qtbot):
+    from PySide6.QtWidgets import QApplication, QPushButton
+
+    from app.idle_lock import IdleWatcher
+
+    now = [0.0]
+    running = [True]
+    watcher = IdleWatcher(600.0, busy=lambda: running[0], clock=lambda: now[0])
+    watcher.start(QApplication.instance())
+    locks = []
+    watcher.lock_requested.connect(lambda: locks.append(now[0]))
+    now[0] = 3600.0
+    watcher.check()
+    assert locks == []                       # a session runs: never lock
+    running[0] = False
+    now[0] = 3600.0 + 599.0
+    watcher.check()
+    assert locks == []                       # idle counts from the session's end
+    button = QPushButton("x")
+    qtbot.addWidget(button)
+    qtbot.mouseClick(button, Qt.MouseButton.LeftButton)   # the user touches the screen
+    now[0] += 599.0
+    watcher.check()
+    assert locks == []
+    now[0] += 1.0
+    watcher.check()
+    watcher.check()
+    assert locks == [now[0]]                 # once
+    watcher.reset()
+    assert not watcher.locked
