@@ -186,9 +186,9 @@ class PrescribePage(QWidget):
         else:
             self.plot.setLabel("left", tr("angle (°)"))
             self.plot.plot(preview.t, preview.pitch_deg, pen=pg.mkPen("#1f5fbf", width=2),
-                           name=tr("dorsi(+)/plantar(−) flexion"))
+                           name=tr("plantar(+)/dorsi(−) flexion"))
             self.plot.plot(preview.t, preview.roll_deg, pen=pg.mkPen("#bf5f1f", width=2),
-                           name=tr("inversion(+)/eversion(−)"))
+                           name=tr("roll (+ is inversion of a right foot)"))
         self.preview_label.setText(tr("Duration: %1 s").replace("%1",
                                                                  f"{preview.duration_s:.1f}"))
 

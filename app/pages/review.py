@@ -132,9 +132,9 @@ class ReviewPage(QWidget):
                                  pen=pg.mkPen("#555555", width=2, style=dash))
         self.force_plot.plot(data.t_force, data.force_n, name=tr("measured"),
                              pen=pg.mkPen("#1f5fbf", width=2), connect="finite")
-        self.angle_plot.plot(data.t, data.pitch_deg, name=tr("dorsi(+)/plantar(−) flexion"),
+        self.angle_plot.plot(data.t, data.pitch_deg, name=tr("plantar(+)/dorsi(−) flexion"),
                              pen=pg.mkPen("#1f5fbf", width=2), connect="finite")
-        self.angle_plot.plot(data.t, data.roll_deg, name=tr("inversion(+)/eversion(−)"),
+        self.angle_plot.plot(data.t, data.roll_deg, name=tr("roll (+ is inversion of a right foot)"),
                              pen=pg.mkPen("#bf5f1f", width=2), connect="finite")
         for t, cause, _event in data.stops:
             for plot in (self.force_plot, self.angle_plot):

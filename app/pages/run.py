@@ -92,7 +92,7 @@ class RunPage(QWidget):
                                           name=tr("measured")),
             "pitch_ref": self.angle_plot.plot(pen=pg.mkPen("#1f5fbf", width=1, style=dash)),
             "pitch": self.angle_plot.plot(pen=pg.mkPen("#1f5fbf", width=2),
-                                          name=tr("dorsi(+)/plantar(−) flexion")),
+                                          name=tr("plantar(+)/dorsi(−) flexion")),
             "roll_ref": self.angle_plot.plot(pen=pg.mkPen("#bf5f1f", width=1, style=dash)),
             "roll": self.angle_plot.plot(pen=pg.mkPen("#bf5f1f", width=2),
                                          name=tr("inversion(+)/eversion(−)")),
@@ -145,14 +145,24 @@ class RunPage(QWidget):
 
     # ------------------------------------------------------------------ inputs
 
+    def _inversion_sign(self) -> float:
+        """+1 when the platform's positive roll is the patient's inversion (right foot)."""
+        return -1.0 if self.patient is not None and self.patient.side == "left" else 1.0
+
     def set_patient(self, patient: PatientContext | None) -> None:
+        """Draw this patient's ROM: plantar(+)/dorsi(−) flexion is the platform's pitch;
+        inversion(+)/eversion(−) is its roll, mirrored for a left foot."""
         self.patient = patient
         lim = None if patient is None else patient.patient_limits()
+        inv = self._inversion_sign()
         for axis, band in self.rom_bands.items():
             if lim is None:
                 band.hide()
                 continue
-            band.setRegion((getattr(lim, f"{axis}_min_deg"), getattr(lim, f"{axis}_max_deg")))
+            lo, hi = getattr(lim, f"{axis}_min_deg"), getattr(lim, f"{axis}_max_deg")
+            if axis == "roll":
+                lo, hi = sorted((inv * lo, inv * hi))
+            band.setRegion((lo, hi))
             band.show()
         self.update_buttons()
 
@@ -232,6 +242,7 @@ class RunPage(QWidget):
         if not samples:
             return
         b = self._buf
+        inv = self._inversion_sign()
         for s in samples:
             b["t"].append(float(s["t"]))
             b["force_ref"].append(float(s.get("force_ref_n") or 0.0))
@@ -239,9 +250,9 @@ class RunPage(QWidget):
             b["force"].append(math.nan if f is None else float(f))
             pose = s.get("pose") or [math.nan] * 3
             ref = s.get("pose_ref") or [math.nan] * 3
-            b["roll"].append(math.degrees(pose[1]))
+            b["roll"].append(inv * math.degrees(pose[1]))
             b["pitch"].append(math.degrees(pose[2]))
-            b["roll_ref"].append(math.degrees(ref[1]))
+            b["roll_ref"].append(inv * math.degrees(ref[1]))
             b["pitch_ref"].append(math.degrees(ref[2]))
         t = np.fromiter(b["t"], float)
         for key, curve in self.curves.items():
