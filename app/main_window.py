@@ -8,10 +8,12 @@ from typing import Any
 
 from PySide6.QtGui import QKeySequence, QShortcut
 from PySide6.QtWidgets import (
-    QButtonGroup, QHBoxLayout, QMainWindow, QPushButton, QStackedWidget, QVBoxLayout, QWidget,
+    QButtonGroup, QHBoxLayout, QLabel, QMainWindow, QPushButton, QStackedWidget, QVBoxLayout,
+    QWidget,
 )
 
 from app.i18n import tr
+from app.idle_lock import IdleWatcher
 from app.pages.prescribe import PrescribePage
 from app.pages.review import ReviewPage
 from app.pages.run import RunPage
@@ -26,16 +28,17 @@ from app.style import LARGE_PX
 #: The clinic touchscreen (issue 14): everything fits without horizontal scrolling.
 SCREEN_SIZE = (1366, 768)
 RAIL_WIDTH_PX = 150
-#: The pages in rail order (screenshots are named after them).
-PAGE_KEYS = ("prescribe", "run", "review", "settings")
+#: The pages in rail order (screenshots are named after them); login and patients come with a
+#: clinical record.
+PAGE_KEYS = ("login", "patients", "prescribe", "run", "review", "settings")
 
 
 class MainWindow(QMainWindow):
     """Composes the pages around one :class:`RtLink` (None: no robot, e.g. docs screenshots)."""
 
     def __init__(self, link: RtLink | None, settings: GuiSettings,
-                 settings_path: Path | None = None,
-                 extra_pages: list[tuple[str, str, QWidget]] | None = None) -> None:
+                 settings_path: Path | None = None, record: Any = None,
+                 idle_clock: Any = None) -> None:
         super().__init__()
         self.setWindowTitle(tr("talus — rehabilitation robot"))
         self.link = link
@@ -53,14 +56,43 @@ class MainWindow(QMainWindow):
         self.rail = QVBoxLayout()
         self.rail_group = QButtonGroup(self)
         self.rail_buttons: dict[str, QPushButton] = {}
-        entries = [*(extra_pages or []),
-                   ("prescribe", tr("Prescribe"), self.prescribe),
+        self.record = record
+        self.actor: Any = None
+        entries: list[tuple[str, str, QWidget]] = []
+        if record is not None:
+            from app.pages.login import LoginPage
+            from app.pages.patients import PatientsPage
+            self.login = LoginPage(record)
+            self.patients = PatientsPage(record)
+            entries += [("login", tr("Log in"), self.login),
+                        ("patients", tr("Patients"), self.patients)]
+        entries += [("prescribe", tr("Prescribe"), self.prescribe),
                    ("run", tr("Run"), self.run),
                    ("review", tr("Review"), self.review),
                    ("settings", tr("Settings"), self.settings_page)]
         for key, label, page in entries:
             self.add_page(key, label, page)
         self.rail.addStretch(1)
+        self.who = QLabel()
+        self.who.setWordWrap(True)
+        self.logout_button = QPushButton(tr("Log out"))
+        self.logout_button.setMinimumHeight(LARGE_PX)
+        self.logout_button.clicked.connect(lambda: self.lock(tr("Logged out.")))
+        self.rail.addWidget(self.who)
+        self.rail.addWidget(self.logout_button)
+        self.logout_button.setVisible(record is not None)
+        self.idle: IdleWatcher | None = None
+        if record is not None:
+            self.login.logged_in.connect(self._logged_in)
+            self.patients.patient_chosen.connect(self._patient_chosen)
+            kwargs = {} if idle_clock is None else {"clock": idle_clock}
+            self.idle = IdleWatcher(settings.idle_lock_s, self.session_running, **kwargs,
+                                    parent=self)
+            from PySide6.QtWidgets import QApplication
+            self.idle.start(QApplication.instance())  # type: ignore[arg-type]
+            self.idle.lock_requested.connect(lambda: self.lock(
+                tr("Locked after %1 min without use.").replace(
+                    "%1", f"{settings.idle_lock_s / 60:g}")))
 
         rail_widget = QWidget()
         rail_widget.setFixedWidth(RAIL_WIDTH_PX)
@@ -90,6 +122,54 @@ class MainWindow(QMainWindow):
             link.event_received.connect(self.band.remember_event)
             link.replied.connect(self._replied)
         self.show_page(next(iter(self.pages)))
+        if record is not None:
+            self._apply_role()
+
+    # ------------------------------------------------------------------ users
+
+    def _logged_in(self, actor: Any) -> None:
+        self.actor = actor
+        self.who.setText(f"{actor.username}\n({actor.role.value})")
+        self.patients.set_actor(actor)
+        if self.idle is not None:
+            self.idle.reset()
+        self._apply_role()
+        self.show_page("patients")
+
+    def lock(self, why: str) -> None:
+        """Back to the login page (logout or idle lock); STOP and E-STOP stay."""
+        if self.record is None:
+            return
+        if self.actor is not None:
+            self.record.logout(self.actor)
+        self.actor = None
+        self.who.setText("")
+        self.patients.set_actor(None)
+        self._apply_role()
+        self.login.ask(why)
+        self.show_page("login")
+
+    def may(self, action: str) -> bool:
+        """Whether the logged-in role may ``action`` (``patients.roles``); no record: yes."""
+        if self.record is None:
+            return True
+        if self.actor is None:
+            return False
+        from patients.roles import Action, allowed
+        return allowed(self.actor.role, Action(action))
+
+    def _apply_role(self) -> None:
+        logged_in = self.actor is not None
+        for key, button in self.rail_buttons.items():
+            button.setEnabled(key == "login" or logged_in)
+        self.rail_buttons["login"].setVisible(not logged_in)
+        self.logout_button.setVisible(logged_in)
+        self.run.may_run = self.may("session.run")
+        self.run.update_buttons()
+
+    def _patient_chosen(self, patient: PatientContext) -> None:
+        self.set_patient(patient)
+        self.show_page("prescribe")
 
     # ------------------------------------------------------------------ pages
 

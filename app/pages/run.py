@@ -53,6 +53,8 @@ class RunPage(QWidget):
         self.last_error = ""
         self.recording: str | None = None
         self.start_clicked_at: float | None = None
+        #: False for roles that may not move the robot (viewer, engineer, admin)
+        self.may_run = True
         self.frames = 0
         n = int(WINDOW_S * 70)
         self._buf: dict[str, collections.deque[float]] = {
@@ -229,8 +231,9 @@ class RunPage(QWidget):
                      and link is not None and status["owner"].get("client") == link.client_id)
         stopped = bool(status and status.get("state") != "run")
         running = bool(status and status.get("session"))
-        self.control_button.setEnabled(connected and not owned)
-        self.start_button.setEnabled(connected and owned and not stopped and not running
+        self.control_button.setEnabled(self.may_run and connected and not owned)
+        self.start_button.setEnabled(self.may_run and connected and owned and not stopped
+                                     and not running
                                      and self.document is not None and self.patient is not None)
 
     # ------------------------------------------------------------------ drawing
