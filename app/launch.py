@@ -32,6 +32,16 @@ def robot(settings: GuiSettings, fast: bool = False,
         yield endpoint
 
 
+def clinical_record(settings: GuiSettings) -> Any:
+    """The clinical record at the settings' database URL (None when this installation has no
+    ``patients`` package: the GUI then runs without log in, e.g. a calibration bench)."""
+    try:
+        from patients.service import ClinicalRecord
+    except ImportError:
+        return None
+    return ClinicalRecord.open(settings.database_url or None)
+
+
 def application() -> Any:
     """The QApplication (created once), with a base font a clinician reads from a metre."""
     from PySide6.QtGui import QFont
@@ -54,11 +64,14 @@ def run_gui(settings: GuiSettings, settings_path: Path | None) -> int:
     app = application()
     install_language(settings.language)
     settings = settings.model_copy(update={"recordings_dir": str(recordings_dir(settings))})
+    record = clinical_record(settings)
     with robot(settings) as endpoint:
         link = RtLink(endpoint, name="GUI")
-        window = MainWindow(link, settings, settings_path)
+        window = MainWindow(link, settings, settings_path, record=record)
         link.start()
         window.show()
         code = int(app.exec())
         link.close()
+    if record is not None:
+        record.close()
     return code

@@ -7,9 +7,13 @@ happen.
 """
 from __future__ import annotations
 
+import json
+import os
+import shutil
+import tempfile
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from app.patient_context import PatientContext
 from app.settings import GuiSettings
@@ -51,6 +55,38 @@ def settle(seconds: float) -> None:
     wait_until(lambda: time.monotonic() > end, seconds + 1.0, "settling")
 
 
+def demo_record(directory: Path) -> tuple[Any, str, str]:
+    """A demo clinical record in ``directory`` (``patients.demo``): (record, clinician user
+    name, password), or (None, "", "") when the patients package is not installed."""
+    try:
+        from patients import demo
+        from patients.service import ClinicalRecord
+    except ImportError:
+        return None, "", ""
+    record = ClinicalRecord.open(str(directory / "talus-demo.db"), create=True)
+    demo.ensure_demo(record)
+    password = os.environ.get("TALUS_PASSWORD") or json.loads(
+        demo.credentials_file(record).read_text())["password"]
+    return record, demo.CLINICIAN, password
+
+
+def log_in_and_choose(window: Any, user: str, password: str, timeout_s: float = 30.0) -> None:
+    """Log in on the login page and use the record's first patient for the session."""
+    window.show_page("login")
+    window.login.user.setText(user)
+    window.login.password.setText(password)
+    window.login.button.click()
+    wait_until(lambda: window.actor is not None or "…" not in window.login.message.text()
+               and bool(window.login.message.text()), timeout_s, "logging in")
+    if window.actor is None:
+        raise InputError(f"demo login refused: {window.login.message.text()}")
+    page = window.patients
+    wait_until(lambda: page.list.count() > 0, timeout_s, "the patient list")
+    page.list.setCurrentRow(0)
+    wait_until(lambda: page.use_button.isEnabled(), timeout_s, "the patient's card")
+    page.use_button.click()
+
+
 def start_demo_session(window: object, timeout_s: float = 180.0) -> None:
     """Prescribe, pre-flight, take control and start the demo session (returns once it runs)."""
     from app.main_window import MainWindow
@@ -59,7 +95,8 @@ def start_demo_session(window: object, timeout_s: float = 180.0) -> None:
     link = window.link
     assert link is not None
     wait_until(lambda: link.connected, 30.0, "connecting to the RT process")
-    window.set_patient(DEMO_PATIENT)
+    if window.patient is None:
+        window.set_patient(DEMO_PATIENT)
     stem, values = DEMO_PROTOCOL
     window.show_page("prescribe")
     window.prescribe.select_stem(stem)
@@ -105,9 +142,11 @@ def render_all(directory: Path, settings: GuiSettings, force: bool = False) -> l
     written: list[Path] = []
     # A demo on whatever machine runs it (CI shares its cores): the embedded twin's heartbeat
     # timeout is widened as the RT tests do; `talus gui` itself keeps the robot's 0.25 s.
+    work = Path(tempfile.mkdtemp(prefix="talus-screenshots-"))
+    record, user, password = demo_record(work)
     with robot(settings, heartbeat_timeout_s=DEMO_HEARTBEAT_TIMEOUT_S) as endpoint:
         link = RtLink(endpoint, name="GUI (screenshots)")
-        window = MainWindow(link, settings)
+        window = MainWindow(link, settings, record=record)
         try:
             link.start()
             window.show()
@@ -122,6 +161,9 @@ def render_all(directory: Path, settings: GuiSettings, force: bool = False) -> l
                 tmp.replace(targets[key])
                 written.append(targets[key])
 
+            if record is not None:
+                shot("login")
+                log_in_and_choose(window, user, password)
             # The Run page live, then stopped with the fault latched and Reset asking.
             start_demo_session(window)
             window.show_page("run")
@@ -139,10 +181,14 @@ def render_all(directory: Path, settings: GuiSettings, force: bool = False) -> l
             window.review.open_button.click()
             wait_until(lambda: window.review.data is not None, 60.0, "reading the recording")
             for key in pages:
-                window.show_page(key)
-                shot(key)
+                if key != "login":
+                    window.show_page(key)
+                    shot(key)
         finally:
             window.close()
             link.close()
+            if record is not None:
+                record.close()
+            shutil.rmtree(work, ignore_errors=True)
     del app
     return written
