@@ -66,7 +66,8 @@ class RtLink(QObject):
         self.stale_after_s = stale_after_s
         self.heartbeat_period_s = heartbeat_period_s
         self.client_id = default_client_id("gui")
-        self.client = RtClient(endpoint, client_id=self.client_id, timeout_s=2.0)
+        # Commands wait up to 5 s: a loaded machine answered control_acquire after 2 s.
+        self.client = RtClient(endpoint, client_id=self.client_id, timeout_s=5.0)
         self._stop_client = RtClient(endpoint, client_id=default_client_id("gui-stop"),
                                      timeout_s=1.0)
         self._pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="gui-rt")

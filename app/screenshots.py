@@ -161,6 +161,7 @@ def render_all(directory: Path, settings: GuiSettings, force: bool = False) -> l
                 tmp.replace(targets[key])
                 written.append(targets[key])
 
+            wait_until(lambda: link.connected, 60.0, "connecting to the RT process")
             if record is not None:
                 shot("login")
                 log_in_and_choose(window, user, password)

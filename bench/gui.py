@@ -130,7 +130,9 @@ def _with_gui(endpoint: str, doc: dict[str, Any], pub: Subscriber) -> dict[str, 
     # STOP: a second session, stopped by the button after 3 s.
     wait_until(window.run.start_button.isEnabled, 30.0, "ready for the stop measurement")
     window.run.start_button.click()
-    wait_until(lambda: window.run.session_id is not None, 300.0, "the second session")
+    wait_until(lambda: window.run.session_id is not None or bool(window.run.last_error), 300.0,
+               "the second session")
+    assert window.run.session_id, window.run.last_error
     settle(3.0)
     while pub.recv(0.0) is not None:
         pass
@@ -176,6 +178,7 @@ def main() -> None:
         with RtClient(endpoint, timeout_s=5.0) as c:
             pub = Subscriber(c.subscribe_info()["pub_endpoint"], ["event"])
         out = {"without_gui": _without_gui(endpoint, doc)}
+        print(json.dumps(out), flush=True)
         out["with_gui"] = _with_gui(endpoint, doc, pub)
         pub.close()
     if args.json:
