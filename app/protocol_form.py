@@ -140,6 +140,10 @@ class ProtocolForm(QWidget):
             item = self._layout.takeAt(0)
             w = None if item is None else item.widget()
             if w is not None and w is not self.general_error:
+                # Detach now: deferred deletion waits for the event loop, and the old form
+                # must not show under the new one meanwhile.
+                w.hide()
+                w.setParent(None)
                 w.deleteLater()
         self.editors.clear()
         self._base = copy.deepcopy(document)

@@ -5,7 +5,7 @@ sent anyway: it costs nothing, and the link may be back)."""
 from __future__ import annotations
 
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtGui import QKeySequence, QShortcut
+from PySide6.QtGui import QFont, QFontMetrics, QKeySequence, QShortcut
 from PySide6.QtWidgets import QPushButton, QSizePolicy, QVBoxLayout, QWidget
 
 from app.i18n import tr
@@ -15,6 +15,20 @@ STOP_KEY = "Esc"
 ESTOP_KEY = "F12"
 #: GUI.md: STOP at least 120 px wide.
 STOP_WIDTH_PX = 150
+
+
+def _fitting_points(text: str, largest: int = 22, smallest: int = 11) -> int:
+    """The largest bold point size at which every line of ``text`` fits the button (a
+    translation may be longer than "STOP")."""
+    for points in range(largest, smallest - 1, -1):
+        font = QFont()
+        font.setPointSize(points)
+        font.setBold(True)
+        metrics = QFontMetrics(font)
+        if all(metrics.horizontalAdvance(line) <= STOP_WIDTH_PX - 20
+               for line in text.splitlines()):
+            return points
+    return smallest
 
 
 class StopPanel(QWidget):
@@ -35,7 +49,8 @@ class StopPanel(QWidget):
             b.setMinimumHeight(120)
             b.setFocusPolicy(Qt.FocusPolicy.TabFocus)
             b.setStyleSheet(f"QPushButton {{ background: {colour}; color: white; "
-                            f"font-size: 18pt; font-weight: bold; border-radius: 8px; }}")
+                            f"font-size: {_fitting_points(b.text())}pt; font-weight: bold; "
+                            f"border-radius: 8px; }}")
         self.stop_button.clicked.connect(self.stop_pressed.emit)
         self.estop_button.clicked.connect(lambda: self.estop_pressed.emit("gui"))
         layout = QVBoxLayout(self)

@@ -24,16 +24,6 @@
         <translation>Altura (m)</translation>
     </message>
     <message>
-        <location filename="../field_labels.py" line="21" />
-        <source>Inversion(+)/eversion(−) tilt (°)</source>
-        <translation>Inclinación inversión(+)/eversión(−) (°)</translation>
-    </message>
-    <message>
-        <location filename="../field_labels.py" line="22" />
-        <source>Dorsi(+)/plantarflexion(−) tilt (°)</source>
-        <translation>Inclinación dorsi(+)/plantarflexión(−) (°)</translation>
-    </message>
-    <message>
         <location filename="../field_labels.py" line="23" />
         <source>Mean force (N)</source>
         <translation>Fuerza media (N)</translation>
@@ -74,32 +64,44 @@
         <translation>Límites de este protocolo</translation>
     </message>
     <message>
+        <location filename="../field_labels.py" line="21" />
+        <source>Roll tilt (°)</source>
+        <translation>Inclinación en balanceo (°)</translation>
+    </message>
+    <message>
+        <location filename="../field_labels.py" line="22" />
+        <source>Pitch tilt (°)</source>
+        <translation>Inclinación en cabeceo (°)</translation>
+    </message>
+    <message>
         <location filename="../field_labels.py" line="28" />
-        <source>Eversion limit (°, negative)</source>
-        <translation>Límite de eversión (°, negativo)</translation>
+        <source>Minimum roll (°)</source>
+        <translation>Balanceo mínimo (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="29" />
-        <source>Inversion limit (°)</source>
-        <translation>Límite de inversión (°)</translation>
+        <source>Maximum roll (°)</source>
+        <translation>Balanceo máximo (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="30" />
-        <source>Plantarflexion limit (°, negative)</source>
-        <translation>Límite de plantarflexión (°, negativo)</translation>
+        <source>Minimum pitch (°, dorsiflexion)</source>
+        <translation>Cabeceo mínimo (°, dorsiflexión)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="31" />
-        <source>Dorsiflexion limit (°)</source>
-        <translation>Límite de dorsiflexión (°)</translation>
+        <source>Maximum pitch (°, plantarflexion)</source>
+        <translation>Cabeceo máximo (°, plantarflexión)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="32" />
+        <location filename="../pages/patients.py" line="93" />
         <source>Maximum force (N)</source>
         <translation>Fuerza máxima (N)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="33" />
+        <location filename="../pages/patients.py" line="94" />
         <source>Maximum angular speed (°/s)</source>
         <translation>Velocidad angular máxima (°/s)</translation>
     </message>
@@ -115,21 +117,25 @@
     </message>
     <message>
         <location filename="../field_labels.py" line="35" />
+        <location filename="../pages/patients.py" line="90" />
         <source>Dorsiflexion (°)</source>
         <translation>Dorsiflexión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="35" />
+        <location filename="../pages/patients.py" line="91" />
         <source>Plantarflexion (°)</source>
         <translation>Plantarflexión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="36" />
+        <location filename="../pages/patients.py" line="92" />
         <source>Inversion (°)</source>
         <translation>Inversión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="36" />
+        <location filename="../pages/patients.py" line="92" />
         <source>Eversion (°)</source>
         <translation>Eversión (°)</translation>
     </message>
@@ -299,33 +305,59 @@
         <translation>Fin (s)</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="40" />
+        <location filename="../main_window.py" line="43" />
         <source>talus — rehabilitation robot</source>
-        <extracomment>The clinic touchscreen (issue 14): everything fits without horizontal scrolling. The pages in rail order (screenshots are named after them).</extracomment>
+        <extracomment>The clinic touchscreen (issue 14): everything fits without horizontal scrolling. The pages in rail order (screenshots are named after them); login and patients come with a clinical record.</extracomment>
         <translation>talus — robot de rehabilitación</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="57" />
+        <location filename="../main_window.py" line="67" />
+        <location filename="../pages/login.py" line="35" />
+        <source>Log in</source>
+        <translation>Iniciar sesión</translation>
+    </message>
+    <message>
+        <location filename="../main_window.py" line="68" />
+        <source>Patients</source>
+        <translation>Pacientes</translation>
+    </message>
+    <message>
+        <location filename="../main_window.py" line="69" />
         <source>Prescribe</source>
         <translation>Prescribir</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="58" />
+        <location filename="../main_window.py" line="70" />
         <source>Run</source>
         <translation>Ejecutar</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="59" />
+        <location filename="../main_window.py" line="71" />
         <source>Review</source>
         <translation>Revisar</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="60" />
+        <location filename="../main_window.py" line="72" />
         <source>Settings</source>
         <translation>Ajustes</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="144" />
+        <location filename="../main_window.py" line="78" />
+        <source>Log out</source>
+        <translation>Cerrar sesión</translation>
+    </message>
+    <message>
+        <location filename="../main_window.py" line="80" />
+        <source>Logged out.</source>
+        <translation>Sesión cerrada.</translation>
+    </message>
+    <message>
+        <location filename="../main_window.py" line="94" />
+        <source>Locked after %1 min without use.</source>
+        <translation>Bloqueado tras %1 min sin uso.</translation>
+    </message>
+    <message>
+        <location filename="../main_window.py" line="224" />
         <source>Reset refused: %1</source>
         <translation>Rearme rechazado: %1</translation>
     </message>
@@ -335,124 +367,128 @@
         <translation>Protocolos</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="91" />
+        <location filename="../pages/prescribe.py" line="92" />
         <location filename="../pages/review.py" line="71" />
-        <location filename="../pages/run.py" line="82" />
+        <location filename="../pages/run.py" line="88" />
         <source>time (s)</source>
         <translation>tiempo (s)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="95" />
-        <location filename="../pages/prescribe.py" line="149" />
+        <location filename="../pages/prescribe.py" line="96" />
+        <location filename="../pages/prescribe.py" line="153" />
         <source>Pre-flight not run yet.</source>
         <translation>Comprobación previa aún no realizada.</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="99" />
+        <location filename="../pages/prescribe.py" line="100" />
         <source>Check on the robot model (pre-flight)</source>
         <translation>Comprobar en el modelo del robot (comprobación previa)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="100" />
+        <location filename="../pages/prescribe.py" line="101" />
         <source>Start on the Run page</source>
         <translation>Iniciar en la página Ejecutar</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="150" />
+        <location filename="../pages/prescribe.py" line="154" />
         <source>Correct the fields marked in red first.</source>
         <translation>Corrija primero los campos marcados en rojo.</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="159" />
+        <location filename="../pages/prescribe.py" line="163" />
         <source>Computing the preview…</source>
         <translation>Calculando la vista previa…</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="176" />
+        <location filename="../pages/prescribe.py" line="180" />
         <source>No preview: %1</source>
         <translation>Sin vista previa: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="179" />
+        <location filename="../pages/prescribe.py" line="183" />
         <source>This protocol cannot be played: %1</source>
         <translation>Este protocolo no se puede ejecutar: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="183" />
+        <location filename="../pages/prescribe.py" line="187" />
         <source>force (N)</source>
         <translation>fuerza (N)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="185" />
+        <location filename="../pages/prescribe.py" line="189" />
         <source>force reference</source>
         <translation>referencia de fuerza</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="187" />
+        <location filename="../pages/prescribe.py" line="191" />
         <source>angle (°)</source>
         <translation>ángulo (°)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="189" />
+        <location filename="../pages/prescribe.py" line="193" />
         <location filename="../pages/review.py" line="135" />
-        <location filename="../pages/run.py" line="91" />
-        <source>dorsi(+)/plantar(−) flexion</source>
-        <translation>flexión dorsal(+)/plantar(−)</translation>
+        <location filename="../pages/run.py" line="97" />
+        <source>plantar(+)/dorsi(−) flexion</source>
+        <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="191" />
+        <location filename="../pages/prescribe.py" line="195" />
         <location filename="../pages/review.py" line="137" />
-        <location filename="../pages/run.py" line="94" />
+        <source>roll (+ is inversion of a right foot)</source>
+        <translation>balanceo (+ es inversión del pie derecho)</translation>
+    </message>
+    <message>
+        <location filename="../pages/run.py" line="100" />
         <source>inversion(+)/eversion(−)</source>
         <translation>inversión(+)/eversión(−)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="192" />
+        <location filename="../pages/prescribe.py" line="196" />
         <source>Duration: %1 s</source>
         <translation>Duración: %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="203" />
+        <location filename="../pages/prescribe.py" line="207" />
         <source>Pre-flight running on the robot model…</source>
         <translation>Comprobación previa en curso en el modelo del robot…</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="216" />
+        <location filename="../pages/prescribe.py" line="220" />
         <source>REFUSED: %1</source>
         <translation>RECHAZADO: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="222" />
+        <location filename="../pages/prescribe.py" line="226" />
         <source>Pre-flight passed. Predicted peaks: %1</source>
         <translation>Comprobación previa superada. Picos previstos: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="233" />
+        <location filename="../pages/prescribe.py" line="237" />
         <source>Choose a patient first</source>
         <translation>Elija primero un paciente</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="246" />
+        <location filename="../pages/prescribe.py" line="250" />
         <source>platform force %1 N</source>
         <translation>fuerza en la plataforma %1 N</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="248" />
+        <location filename="../pages/prescribe.py" line="252" />
         <source>dorsi/plantarflexion</source>
         <translation>dorsi/plantarflexión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="248" />
+        <location filename="../pages/prescribe.py" line="252" />
         <source>inversion/eversion</source>
         <translation>inversión/eversión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="254" />
+        <location filename="../pages/prescribe.py" line="258" />
         <source>force tracking error %1 %</source>
         <translation>error de seguimiento de fuerza %1 %</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="257" />
+        <location filename="../pages/prescribe.py" line="261" />
         <source>duration %1 s</source>
         <translation>duración %1 s</translation>
     </message>
@@ -473,13 +509,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="65" />
-        <location filename="../pages/run.py" line="76" />
+        <location filename="../pages/run.py" line="78" />
         <source>Force (N)</source>
         <translation>Fuerza (N)</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="66" />
-        <location filename="../pages/run.py" line="77" />
+        <location filename="../pages/run.py" line="79" />
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
@@ -500,13 +536,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="131" />
-        <location filename="../pages/run.py" line="86" />
+        <location filename="../pages/run.py" line="92" />
         <source>reference</source>
         <translation>referencia</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="133" />
-        <location filename="../pages/run.py" line="88" />
+        <location filename="../pages/run.py" line="94" />
         <source>measured</source>
         <translation>medida</translation>
     </message>
@@ -552,62 +588,63 @@
         <translation>en reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="63" />
+        <location filename="../pages/run.py" line="65" />
         <source>No protocol prescribed: choose one in Prescribe.</source>
+        <extracomment>False for roles that may not move the robot (viewer, engineer, admin)</extracomment>
         <translation>Ningún protocolo prescrito: elija uno en Prescribir.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="65" />
+        <location filename="../pages/run.py" line="67" />
         <source>Take control of the robot</source>
         <translation>Tomar el control del robot</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="66" />
+        <location filename="../pages/run.py" line="68" />
         <source>Start session</source>
         <translation>Iniciar sesión</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="158" />
+        <location filename="../pages/run.py" line="174" />
         <source>Protocol: %1</source>
         <translation>Protocolo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="173" />
+        <location filename="../pages/run.py" line="189" />
         <source>Checking the protocol on the robot model, then starting…</source>
         <translation>Comprobando el protocolo en el modelo del robot; después se inicia…</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="179" />
+        <location filename="../pages/run.py" line="195" />
         <source>Could not take control: %1</source>
         <translation>No se pudo tomar el control: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="180" />
+        <location filename="../pages/run.py" line="196" />
         <source>You control the robot.</source>
         <translation>Usted controla el robot.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="184" />
+        <location filename="../pages/run.py" line="200" />
         <source>The session did not start: %1</source>
         <translation>La sesión no se inició: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="193" />
+        <location filename="../pages/run.py" line="209" />
         <source>Session running.</source>
         <translation>Sesión en curso.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="203" />
+        <location filename="../pages/run.py" line="219" />
         <source>Session ended: %1</source>
         <translation>Sesión terminada: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="207" />
+        <location filename="../pages/run.py" line="223" />
         <source>Stopped: %1</source>
         <translation>Detenido: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="251" />
+        <location filename="../pages/run.py" line="269" />
         <source>%1 s left</source>
         <translation>quedan %1 s</translation>
     </message>
@@ -703,63 +740,62 @@
         <translation>se necesita un número entero</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="45" />
+        <location filename="../status_band.py" line="44" />
         <source>Reset…</source>
-        <extracomment>Smallest touch target, px (GUI.md).</extracomment>
         <translation>Rearmar…</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="50" />
+        <location filename="../status_band.py" line="49" />
         <source>Patient checked: clear</source>
         <translation>Paciente revisado: borrar</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="51" />
+        <location filename="../status_band.py" line="50" />
         <source>Cancel</source>
         <translation>Cancelar</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="76" />
+        <location filename="../status_band.py" line="75" />
         <source>not connected yet</source>
         <translation>aún sin conexión</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="81" />
+        <location filename="../status_band.py" line="80" />
         <source>Patient: %1</source>
         <translation>Paciente: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="82" />
+        <location filename="../status_band.py" line="81" />
         <source>No patient selected</source>
         <translation>Ningún paciente seleccionado</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="97" />
+        <location filename="../status_band.py" line="96" />
         <source>Robot connected</source>
         <translation>Robot conectado</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="99" />
+        <location filename="../status_band.py" line="98" />
         <source>Robot NOT connected: %1</source>
         <translation>Robot NO conectado: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="101" />
+        <location filename="../status_band.py" line="100" />
         <source>Controlled by: %1</source>
         <translation>Controlado por: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="102" />
+        <location filename="../status_band.py" line="101" />
         <source>Nobody controls the robot</source>
         <translation>Nadie controla el robot</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="105" />
+        <location filename="../status_band.py" line="104" />
         <source>Why: %1</source>
         <translation>Motivo: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="126" />
+        <location filename="../status_band.py" line="125" />
         <source>Reset will clear:</source>
         <translation>El rearme borrará:</translation>
     </message>
@@ -929,6 +965,204 @@
         <location filename="../words.py" line="84" />
         <source>position sensor %1 stopped changing</source>
         <translation>el sensor de posición %1 dejó de cambiar</translation>
+    </message>
+    <message>
+        <location filename="../pages/login.py" line="26" />
+        <source>Log in to use the robot</source>
+        <translation>Inicie sesión para usar el robot</translation>
+    </message>
+    <message>
+        <location filename="../pages/login.py" line="42" />
+        <source>User name</source>
+        <translation>Usuario</translation>
+    </message>
+    <message>
+        <location filename="../pages/login.py" line="43" />
+        <source>Password</source>
+        <translation>Contraseña</translation>
+    </message>
+    <message>
+        <location filename="../pages/login.py" line="68" />
+        <source>Enter your user name and password.</source>
+        <translation>Escriba su usuario y contraseña.</translation>
+    </message>
+    <message>
+        <location filename="../pages/login.py" line="71" />
+        <source>Checking…</source>
+        <translation>Comprobando…</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="35" />
+        <source>%1: a number is needed</source>
+        <extracomment>Clinical limit fields edited here: (key, label) — degrees from neutral, N, deg/s.</extracomment>
+        <translation>%1: se necesita un número</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="54" />
+        <source>Search by code</source>
+        <translation>Buscar por código</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="60" />
+        <source>automatic when empty</source>
+        <translation>automático si se deja vacío</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="63" />
+        <source>right</source>
+        <translation>derecho</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="64" />
+        <source>left</source>
+        <translation>izquierdo</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="65" />
+        <source>both</source>
+        <translation>ambos</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="67" />
+        <source>Register patient</source>
+        <translation>Registrar paciente</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="69" />
+        <source>New patient</source>
+        <translation>Nuevo paciente</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="71" />
+        <source>Code</source>
+        <translation>Código</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="72" />
+        <location filename="../pages/patients.py" line="197" />
+        <source>Body mass (kg)</source>
+        <translation>Masa corporal (kg)</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="73" />
+        <source>Affected side</source>
+        <translation>Lado afectado</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="74" />
+        <source>Diagnosis (no names)</source>
+        <translation>Diagnóstico (sin nombres)</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="82" />
+        <location filename="../pages/patients.py" line="150" />
+        <source>Choose a patient.</source>
+        <translation>Elija un paciente.</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="88" />
+        <source>Prescribe limits</source>
+        <translation>Prescribir límites</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="95" />
+        <source>Reason</source>
+        <translation>Motivo</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="101" />
+        <source>Save the new limits</source>
+        <translation>Guardar los nuevos límites</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="106" />
+        <source>Show identifying data (audited)</source>
+        <translation>Mostrar datos identificativos (queda registrado)</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="111" />
+        <source>Use for the session</source>
+        <translation>Usar para la sesión</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="126" />
+        <source>Sessions</source>
+        <translation>Sesiones</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="221" />
+        <source>Give the four ranges of motion.</source>
+        <translation>Indique los cuatro rangos de movimiento.</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="276" />
+        <source>Patient %1 registered.</source>
+        <translation>Paciente %1 registrado.</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="280" />
+        <source>Limits saved.</source>
+        <translation>Límites guardados.</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="284" />
+        <source>No identifying data recorded.</source>
+        <translation>No hay datos identificativos registrados.</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="302" />
+        <source>Patient %1</source>
+        <translation>Paciente %1</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="303" />
+        <source>Body mass: %1 kg</source>
+        <translation>Masa corporal: %1 kg</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="304" />
+        <source>Affected side: %1</source>
+        <translation>Lado afectado: %1</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="305" />
+        <source>Diagnosis: %1</source>
+        <translation>Diagnóstico: %1</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="308" />
+        <source>No limits prescribed yet: a session needs them.</source>
+        <translation>Aún no hay límites prescritos: una sesión los necesita.</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="312" />
+        <source>dorsiflexion</source>
+        <translation>dorsiflexión</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="313" />
+        <source>plantarflexion</source>
+        <translation>plantarflexión</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="314" />
+        <source>inversion</source>
+        <translation>inversión</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="314" />
+        <source>eversion</source>
+        <translation>eversión</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="317" />
+        <source>Limits in force: %1; force ≤ %2 N; speed ≤ %3 °/s — set by %4 on %5</source>
+        <translation>Límites vigentes: %1; fuerza ≤ %2 N; velocidad ≤ %3 °/s — fijados por %4 el %5</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="332" />
+        <source>No sessions yet.</source>
+        <translation>Aún no hay sesiones.</translation>
     </message>
 </context>
 </TS>

@@ -73,6 +73,7 @@ class PrescribePage(QWidget):
             card.setMinimumHeight(LARGE_PX)
             card.setToolTip(doc.get("description", ""))
             card.setStyleSheet("text-align: left; padding: 6px;")
+            card.setMinimumWidth(0)
             self.card_group.addButton(card, i)
             cards.addWidget(card)
         cards.addStretch(1)
@@ -109,9 +110,12 @@ class PrescribePage(QWidget):
         right.addWidget(self.check_button)
         right.addWidget(self.start_button)
 
+        card_column = QWidget()
+        card_column.setLayout(cards)
+        card_column.setFixedWidth(240)
         layout = QHBoxLayout(self)
-        layout.addLayout(cards, 2)
-        layout.addWidget(scroll, 3)
+        layout.addWidget(card_column)
+        layout.addWidget(scroll, 5)
         layout.addLayout(right, 4)
         self.preview_ready.connect(self._show_preview)
         if link is not None:
