@@ -83,6 +83,8 @@ class MainWindow(QMainWindow):
         self.logout_button.setVisible(record is not None)
         self.idle: IdleWatcher | None = None
         if record is not None:
+            from app.journal import SessionJournal
+            self.run.journal = SessionJournal(record, lambda: self.actor)
             self.login.logged_in.connect(self._logged_in)
             self.patients.patient_chosen.connect(self._patient_chosen)
             kwargs = {} if idle_clock is None else {"clock": idle_clock}

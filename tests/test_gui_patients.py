@@ -115,3 +115,28 @@ def test_viewer_reads_but_cannot_move_or_prescribe(window, qtbot, record):
     assert not window.run.may_run
     assert not window.run.control_button.isEnabled()
     assert not window.run.start_button.isEnabled()
+
+
+def test_journal_records_the_session_with_the_record_s_limits(record):
+    from app.journal import SessionJournal
+    from protocols.library import LIBRARY_DIR
+    from protocols.rt_session import protocol_document
+
+    ana = record.authenticate("ana", PASSWORD)
+    record.add_patient(ana, "P-0007", body_mass_kg=66, affected_side="right")
+    record.set_limits(ana, "P-0007", pitch_min_deg=-8, pitch_max_deg=9, max_force_n=450)
+    journal = SessionJournal(record, lambda: ana)
+    doc = protocol_document(LIBRARY_DIR / "sine_fz.yaml")
+    patient = journal.begin("P-0007", doc)
+    assert patient["id"] == "P-0007" and patient["weight_kg"] == 66.0
+    assert patient["limits"]["max_force_n"] == 450.0 and patient["limits"]["pitch_max_deg"] == 9
+    summary = {"completed": False, "stops": [{"cause": "stop_client", "message": "STOP"}],
+               "recording": {"path": "/rec/x.mcap", "sha256": "ab" * 32}}
+    journal.end(summary)
+    (row,) = record.list_sessions(ana, "P-0007")
+    assert row["outcome"] == "stopped_by_user" and row["stopped_by"] == "operator: stop_client"
+    assert row["recording_path"] == "/rec/x.mcap"
+    journal.begin("P-0007", doc)
+    journal.refused("refused by pre-flight: pitch beyond the ROM")
+    outcomes = sorted(r["outcome"] for r in record.list_sessions(ana, "P-0007"))
+    assert outcomes == ["refused", "stopped_by_user"]

@@ -352,12 +352,12 @@
         <translation>Sesión cerrada.</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="94" />
+        <location filename="../main_window.py" line="96" />
         <source>Locked after %1 min without use.</source>
         <translation>Bloqueado tras %1 min sin uso.</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="224" />
+        <location filename="../main_window.py" line="226" />
         <source>Reset refused: %1</source>
         <translation>Rearme rechazado: %1</translation>
     </message>
@@ -369,7 +369,7 @@
     <message>
         <location filename="../pages/prescribe.py" line="92" />
         <location filename="../pages/review.py" line="71" />
-        <location filename="../pages/run.py" line="88" />
+        <location filename="../pages/run.py" line="95" />
         <source>time (s)</source>
         <translation>tiempo (s)</translation>
     </message>
@@ -427,7 +427,7 @@
     <message>
         <location filename="../pages/prescribe.py" line="193" />
         <location filename="../pages/review.py" line="135" />
-        <location filename="../pages/run.py" line="97" />
+        <location filename="../pages/run.py" line="104" />
         <source>plantar(+)/dorsi(−) flexion</source>
         <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
@@ -438,7 +438,7 @@
         <translation>balanceo (+ es inversión del pie derecho)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="100" />
+        <location filename="../pages/run.py" line="107" />
         <source>inversion(+)/eversion(−)</source>
         <translation>inversión(+)/eversión(−)</translation>
     </message>
@@ -509,13 +509,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="65" />
-        <location filename="../pages/run.py" line="78" />
+        <location filename="../pages/run.py" line="85" />
         <source>Force (N)</source>
         <translation>Fuerza (N)</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="66" />
-        <location filename="../pages/run.py" line="79" />
+        <location filename="../pages/run.py" line="86" />
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
@@ -536,13 +536,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="131" />
-        <location filename="../pages/run.py" line="92" />
+        <location filename="../pages/run.py" line="99" />
         <source>reference</source>
         <translation>referencia</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="133" />
-        <location filename="../pages/run.py" line="94" />
+        <location filename="../pages/run.py" line="101" />
         <source>measured</source>
         <translation>medida</translation>
     </message>
@@ -562,89 +562,94 @@
         <translation>grabación interrumpida (recuperada hasta su último bloque completo)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="35" />
+        <location filename="../pages/run.py" line="38" />
         <source>moving to the start position</source>
         <extracomment>Redraw rate of the live plots, Hz (the issue asks ≥ 30 fps). Seconds of history on the live plots.</extracomment>
         <translation>yendo a la posición inicial</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="35" />
+        <location filename="../pages/run.py" line="38" />
         <source>exercise</source>
         <translation>ejercicio</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="36" />
+        <location filename="../pages/run.py" line="39" />
         <source>returning to rest</source>
         <translation>volviendo al reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="36" />
+        <location filename="../pages/run.py" line="39" />
         <source>stopped</source>
         <translation>detenido</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="37" />
+        <location filename="../pages/run.py" line="40" />
         <source>at rest</source>
         <translation>en reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="65" />
+        <location filename="../pages/run.py" line="72" />
         <source>No protocol prescribed: choose one in Prescribe.</source>
-        <extracomment>False for roles that may not move the robot (viewer, engineer, admin)</extracomment>
+        <extracomment>False for roles that may not move the robot (viewer, engineer, admin) the clinical record's journal of sessions (None: no record)</extracomment>
         <translation>Ningún protocolo prescrito: elija uno en Prescribir.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="67" />
+        <location filename="../pages/run.py" line="74" />
         <source>Take control of the robot</source>
         <translation>Tomar el control del robot</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="68" />
+        <location filename="../pages/run.py" line="75" />
         <source>Start session</source>
         <translation>Iniciar sesión</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="174" />
+        <location filename="../pages/run.py" line="181" />
         <source>Protocol: %1</source>
         <translation>Protocolo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="189" />
+        <location filename="../pages/run.py" line="196" />
         <source>Checking the protocol on the robot model, then starting…</source>
         <translation>Comprobando el protocolo en el modelo del robot; después se inicia…</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="195" />
+        <location filename="../pages/run.py" line="209" />
         <source>Could not take control: %1</source>
         <translation>No se pudo tomar el control: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="196" />
+        <location filename="../pages/run.py" line="210" />
         <source>You control the robot.</source>
         <translation>Usted controla el robot.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="200" />
+        <location filename="../pages/run.py" line="214" />
         <source>The session did not start: %1</source>
         <translation>La sesión no se inició: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="209" />
+        <location filename="../pages/run.py" line="226" />
         <source>Session running.</source>
         <translation>Sesión en curso.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="219" />
+        <location filename="../pages/run.py" line="240" />
         <source>Session ended: %1</source>
         <translation>Sesión terminada: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="223" />
+        <location filename="../pages/run.py" line="244" />
         <source>Stopped: %1</source>
         <translation>Detenido: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="269" />
+        <location filename="../pages/run.py" line="249" />
+        <source>The clinical record did not take the session: %1</source>
+        <translation>La historia clínica no registró la sesión: %1</translation>
+    </message>
+    <message>
+        <location filename="../pages/run.py" line="295" />
         <source>%1 s left</source>
         <translation>quedan %1 s</translation>
     </message>
@@ -714,28 +719,28 @@
         <translation>Guardado. Una nueva dirección o idioma se aplica al volver a iniciar la interfaz.</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="149" />
+        <location filename="../protocol_form.py" line="153" />
         <source>Parameters</source>
         <extracomment>Keys never edited in the form (they say what the document is). Source name in validation messages (stripped before display). the nearest optional block holding this field ("" when none): a block left wholly empty is omitted, so its required fields are only required once one of them is set</extracomment>
         <translation>Parámetros</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="179" />
+        <location filename="../protocol_form.py" line="183" />
         <source>Edited in the protocol file</source>
         <translation>Se edita en el archivo del protocolo</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="259" />
+        <location filename="../protocol_form.py" line="263" />
         <source>required</source>
         <translation>obligatorio</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="266" />
+        <location filename="../protocol_form.py" line="270" />
         <source>a number is needed</source>
         <translation>se necesita un número</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="267" />
+        <location filename="../protocol_form.py" line="271" />
         <source>a whole number is needed</source>
         <translation>se necesita un número entero</translation>
     </message>
@@ -800,13 +805,13 @@
         <translation>El rearme borrará:</translation>
     </message>
     <message>
-        <location filename="../stop_panel.py" line="29" />
+        <location filename="../stop_panel.py" line="43" />
         <source>STOP</source>
         <extracomment>Keys: Esc for STOP (the key a hand finds without looking), F12 for E-STOP. GUI.md: STOP at least 120 px wide.</extracomment>
         <translation>PARAR</translation>
     </message>
     <message>
-        <location filename="../stop_panel.py" line="31" />
+        <location filename="../stop_panel.py" line="45" />
         <source>E-STOP</source>
         <translation>EMERGENCIA</translation>
     </message>

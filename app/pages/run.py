@@ -19,11 +19,14 @@ from PySide6.QtWidgets import (
     QGridLayout, QHBoxLayout, QLabel, QProgressBar, QPushButton, QVBoxLayout, QWidget,
 )
 
+from app.background import Background
 from app.i18n import tr
+from app.journal import SessionJournal
 from app.patient_context import PatientContext
 from app.rt_link import RtLink
-from app.words import event_words
 from app.style import LARGE_PX, TARGET_PX
+from app.words import event_words
+from rt.ipc.client import RtClient
 
 #: Redraw rate of the live plots, Hz (the issue asks ≥ 30 fps).
 FRAME_HZ = 30
@@ -55,6 +58,10 @@ class RunPage(QWidget):
         self.start_clicked_at: float | None = None
         #: False for roles that may not move the robot (viewer, engineer, admin)
         self.may_run = True
+        #: the clinical record's journal of sessions (None: no record)
+        self.journal: SessionJournal | None = None
+        self._journal_pool = Background("gui-journal", self)
+        self._journal_pool.done.connect(self._journaled)
         self.frames = 0
         n = int(WINDOW_S * 70)
         self._buf: dict[str, collections.deque[float]] = {
@@ -188,7 +195,14 @@ class RunPage(QWidget):
         self.start_clicked_at = time.monotonic()
         self.message.setText(tr("Checking the protocol on the robot model, then starting…"))
         self.start_button.setEnabled(False)
-        link.call("session_start", lambda c: c.session_start(doc, patient.rt_patient()))
+        journal = self.journal
+
+        def start(c: RtClient) -> dict[str, Any]:
+            # With a clinical record the row is opened first: its snapshot of the limits is
+            # what the RT process enforces.
+            args = patient.rt_patient() if journal is None else journal.begin(patient.code, doc)
+            return c.session_start(doc, args)
+        link.call("session_start", start)
 
     def _replied(self, tag: str, result: object, error: str) -> None:
         if tag == "control":
@@ -198,6 +212,9 @@ class RunPage(QWidget):
             if error:
                 self.last_error = error
                 self.message.setText(tr("The session did not start: %1").replace("%1", error))
+                journal = self.journal
+                if journal is not None:
+                    self._journal_pool.call("refused", lambda: journal.refused(error))
             else:
                 assert isinstance(result, dict)
                 self.session_id = str(result["session_id"])
@@ -215,13 +232,22 @@ class RunPage(QWidget):
         if event.get("kind") == "session_end":
             summary = event.get("summary") or {}
             self.last_summary = summary if isinstance(summary, dict) else {}
+            ended_here = self.session_id is not None
             self.session_id = None
+            journal, done = self.journal, self.last_summary
+            if journal is not None and ended_here:
+                self._journal_pool.call("end", lambda: journal.end(done))
             self.message.setText(tr("Session ended: %1").replace(
                 "%1", str(self.last_summary.get("outcome", event.get("cause", "")))))
             self.session_ended.emit(self.last_summary)
         elif event.get("kind") == "fault":
             self.events_label.setText(tr("Stopped: %1").replace("%1", event_words(event)))
         self.update_buttons()
+
+    def _journaled(self, tag: str, _result: object, error: str) -> None:
+        if error:
+            self.message.setText(tr("The clinical record did not take the session: %1")
+                                 .replace("%1", error))
 
     def update_buttons(self) -> None:
         link = self.link
