@@ -199,8 +199,10 @@ class RtLink(QObject):
                 reason = ""
                 try:
                     st = watcher.status()
-                    st["you_own"] = bool(st.get("owner", {}).get("client") == self.client_id) \
-                        if isinstance(st.get("owner"), dict) else False
+                    # "you_own" in the reply is the watcher's; say whether this GUI owns.
+                    owner = st.get("owner")
+                    st["you_own"] = isinstance(owner, dict) and owner.get("client") == \
+                        self.client_id
                     self.last_status = st
                     if not self._quit.is_set():
                         self.status_changed.emit(st)
