@@ -6,10 +6,11 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-# Debian packages the project needs at run or test time: Xvfb and the xcb libraries for a real
-# Qt window (the GUI smoke test; PLATFORM.md); later parts add poppler-utils here.
-APT_PACKAGES := xvfb xauth libxcb-icccm4 libxcb-keysyms1 libxcb-xinerama0 libegl1 libgl1 \
-  libxkbcommon-x11-0 libxcb-cursor0 libxcb-shape0 libxcb-randr0 libxcb-render-util0 \
+# Debian packages the project needs at run or test time. postgresql: the clinical record's
+# tests start a throw-away server (tests/pg_server.py); Xvfb and the xcb libraries: a real Qt
+# window for the GUI smoke test (PLATFORM.md); later parts add poppler-utils.
+APT_PACKAGES := postgresql xvfb xauth libxcb-icccm4 libxcb-keysyms1 libxcb-xinerama0 libegl1 \
+  libgl1 libxkbcommon-x11-0 libxcb-cursor0 libxcb-shape0 libxcb-randr0 libxcb-render-util0 \
   libxcb-image0 libfontconfig1 libdbus-1-3
 
 .PHONY: demo test setup system-deps bench clean translations
@@ -37,10 +38,15 @@ demo: setup
 	$(BIN)/talus bench tracking --experiment payload-step
 	@echo
 	@mkdir -p out
-	$(BIN)/talus session run --protocol protocols/library/sine_fz.yaml --record-dir out
+	$(BIN)/talus db demo --db out/demo.db
 	@echo
-	$(BIN)/talus session run --protocol protocols/library/gait_replay.yaml --patient-weight 75 \
-	  --record-dir out
+	export TALUS_PASSWORD="$${TALUS_PASSWORD:-$$($(BIN)/python -c 'import json; \
+	  print(json.load(open("out/talus-demo-credentials.json"))["password"])')}"; \
+	for p in sine_fz gait_replay; do \
+	  $(BIN)/talus session run --protocol protocols/library/$$p.yaml --record-dir out \
+	    --db out/demo.db --user demo-clinician --patient DEMO-001 || exit 1; echo; \
+	done; \
+	$(BIN)/talus sessions list --patient DEMO-001 --db out/demo.db --user demo-clinician
 
 test: setup
 	$(BIN)/pytest -q

@@ -165,6 +165,12 @@ class Generator(ABC):
                                 source=self.source, mode=self.mode, dt=self.dt,
                                 duration_s=self.duration_s, n_samples=self.n_samples)
 
+    @property
+    def info(self) -> dict:
+        """Traceability of the reference's sources (JSON-ready: the session summary and the
+        recording's metadata carry it); empty for protocols that read no record."""
+        return {}
+
     def _refuse(self, field: str, reason: str) -> ProtocolValidationError:
         return ProtocolValidationError(f"{self.source}: {field}: {reason}")
 

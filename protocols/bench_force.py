@@ -24,12 +24,10 @@ ramp_out_s: 2.0
 """
 
 
-def _sine_error(freq: float) -> float:
+def _sine_error(freq: float, model) -> float:
     from protocols.session import SessionSetup, _build, _run
-    from rt.model import RobotModel
     from rt.sessions import COL_FREF, COL_FZ, COL_PHASE
 
-    model = RobotModel.load()
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "sine.yaml"
         path.write_text(SINE.format(f=freq, cycles=max(4, int(round(10 * freq)))))
@@ -44,35 +42,44 @@ def _sine_error(freq: float) -> float:
     return float(np.sqrt(np.mean(e ** 2)) / 100.0 * 100.0)
 
 
-def _gait_error() -> float:
+def _gait_error(model) -> float:
     from protocols.library import list_library
     from protocols.session import SessionSetup, run_session
 
     path = next(p for p in list_library() if p.name == "gait_replay.yaml")
-    summary = run_session(SessionSetup(path, patient_weight_kg=75.0), None)
+    summary = run_session(SessionSetup(path, patient_weight_kg=75.0), None, model=model)
     return float(summary["rms_error_pct"])
 
 
-def run_force_benchmark() -> dict:
+def run_force_benchmark(model=None) -> dict:
+    """Sine Fz and gait figures on ``model`` (default: the nominal robot)."""
+    from rt.model import RobotModel
+
+    model = model or RobotModel.load()
     return {"twin": True, "environment": "compliant foot (1e5 N/m)",
-            "sine_rms_pct": {"0.5": _sine_error(0.5), "1": _sine_error(1.0),
-                             "2": _sine_error(2.0)},
-            "gait_rms_pct_of_peak": _gait_error()}
+            "sine_rms_pct": {"0.5": _sine_error(0.5, model), "1": _sine_error(1.0, model),
+                             "2": _sine_error(2.0, model)},
+            "gait_rms_pct_of_peak": _gait_error(model)}
 
 
 
 
 def register(commands) -> None:
+    from rt.model.robot_option import add_robot_option
+
     """``talus bench force`` (composed into the bench group by the entry point)."""
     p = commands.add_parser("force", help="force tracking on the twin: sine Fz and gait replay")
     p.add_argument("--json", action="store_true")
+    add_robot_option(p)
     p.set_defaults(func=_force)
 
 
 def _force(args) -> int:
     import json
 
-    r = run_force_benchmark()
+    from rt.model import RobotModel
+
+    r = run_force_benchmark(model=RobotModel.load(args.robot))
     if args.json:
         print(json.dumps(r))
     else:

@@ -14,18 +14,39 @@ CSV (``read_grf_csv``)
 C3D (``read_grf_c3d``, needs ezc3d)
     The force platform ``plate_index`` (0-based, FORCE_PLATFORM order) as ezc3d extracts it:
     ezc3d maps FORCE_PLATFORM:CHANNEL to the analog channels, applies ANALOG:SCALE, GEN_SCALE,
-    OFFSET and, for type-4 plates, FORCE_PLATFORM:CAL_MATRIX, and expresses the force in the
-    lab frame, whose z is taken as vertical. Sampled at ANALOG:RATE. Plates report the force
-    *on the plate*, negative in z for most lab frames; the sign of all three components is
-    flipped when the record's largest |Fz| is negative, so the loading is positive. The force
-    channels' ANALOG:UNITS must be N (or unset, taken as N); other units are refused. A file
-    shorter than its header says is refused as truncated (ezc3d would silently read the frames
-    present).
+    OFFSET and, for type-4 plates, FORCE_PLATFORM:CAL_MATRIX to the pre-calibration channels,
+    and expresses the force in the lab frame, whose z is taken as vertical. Plate types 2, 3
+    (Kistler, 8 channels) and 4 are read; other types are refused by name. Sampled at
+    ANALOG:RATE.
+
+    Units are decided by physics, not by labels: real files label data in N as ``V``, ``nt`` or
+    ``Newtons`` and type-4 pre-calibration channels as ``N``, so ANALOG:UNITS is only quoted in
+    messages. The generator checks that the stance's vertical peak is plausible against the
+    subject's body mass (:func:`check_plausible_peak`): PROCESSING:Bodymass (kg) when the file
+    has it (``body_mass_kg``), else the protocol's ``source_body_weight_kg``.
+
+    The plate's unloaded offset is removed (:func:`quiet_baseline`): the median of each
+    component over the record's quiet stretches (windows of ``QUIET_WINDOW_S`` whose Fz is
+    steady, at the lowest steady level — a foot only adds load), reported as ``offset_n``.
+    Plates report the force *on the plate*, negative in z for most lab frames; the sign of all
+    three components is then flipped when the record's largest |Fz| is negative, so the loading
+    is positive. A file shorter than its header says is refused as truncated (ezc3d would
+    silently read the frames present).
+
+Traceability
+    Every record carries the sha256 of its source file, the plate index, the offset removed and
+    the body mass the file states (``GroundReactionForce`` fields); the stance keeps its window
+    in record time (``start_s``) and its contact instants (``contact_s``).
 
 Stance selection (``select_stance``)
     by threshold: the ``occurrence``-th run of consecutive samples with Fz > threshold (a run
-    touching the record's first or last sample is incomplete and refused); or an explicit
-    [start_s, end_s] window. The selected stance's time starts at 0.
+    touching the record's first or last sample is incomplete and refused), widened to the true
+    contact (back and forward while Fz stays above the contact level, ``CONTACT_LEVEL_N`` or 4σ
+    of the quiet noise) and then by ``lead_s`` of unloaded record on both sides, so the replay
+    starts before heel strike and ends after toe off: the heel-strike transient (a 0.5 BW spike
+    within 10 ms of contact in real records) is replayed whole, and the replay's tapers act on
+    the unloaded lead-in. Or an explicit [start_s, end_s] window, taken as given. The selected
+    stance's time starts at 0.
 
 Published shape (``walking_grf_bw``)
     The double-hump vertical force of walking at normal speed, in body weights (BW) against the
@@ -42,9 +63,11 @@ Published shape (``walking_grf_bw``)
 from __future__ import annotations
 
 import csv
+import hashlib
+import io
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,19 +81,56 @@ WALKING_FZ_LANDMARKS_BW = ((0.0, 0.0), (0.25, 1.15), (0.5, 0.75), (0.75, 1.15), 
 WALKING_AP_PEAK_BW = 0.20
 WALKING_ML_PEAK_BW = 0.05
 WALKING_STANCE_S = 0.64
+#: Plate types read (C3D: 2 = six channels in N/N·mm, 3 = Kistler 8 channels, 4 = type 2 with
+#: a CAL_MATRIX applied to pre-calibration channels). Others are refused by name.
+SUPPORTED_PLATE_TYPES = (2, 3, 4)
+#: Quiet-baseline windows (s) and the steadiness they need: Fz standard deviation within a
+#: window at most max(QUIET_STD_N, 3 × the steadiest window's).
+QUIET_WINDOW_S = 0.05
+QUIET_STD_N = 2.0
+#: ... and never above this (N): a record whose steadiest window moves more has no quiet one.
+QUIET_MAX_STD_N = 10.0
+#: A quiet level with samples this far below it (N, or 8σ) was a loaded stretch, not the
+#: unloaded plate (a plate reads no less than unloaded, but for noise and ringing).
+FLOOR_TOLERANCE_N = 10.0
+#: Contact: Fz above this (N, offset removed) or above 4σ of the quiet noise, whichever is larger.
+CONTACT_LEVEL_N = 5.0
+#: A stance's vertical peak in body weights: walking peaks at 1.0-1.3 BW, running at 2-3 BW; a
+#: careful or assisted step still loads ≥ 0.5 BW. Outside, the units are wrong (lbf reads
+#: 0.22×, kgf 0.10×, kN 0.001× the force in N) or the body mass is not the subject's.
+PLAUSIBLE_PEAK_BW = (0.5, 3.0)
+#: Unloaded record kept before contact beyond the replay's taper (s, record time).
+LEAD_MARGIN_S = 0.02
 # max of sin(2πs) sin(πs) = 2 sin²(πs) cos(πs) on [0, 1]: 4/(3√3) at cos(πs) = 1/√3.
 _AP_SHAPE_MAX = 4.0 / (3.0 * math.sqrt(3.0))
 
 
 @dataclass(frozen=True)
 class GroundReactionForce:
-    """A force record: ``t`` (s), ``fz`` (N, loading positive), ``fx``/``fy`` (N) or None."""
+    """A force record: ``t`` (s), ``fz`` (N, loading positive), ``fx``/``fy`` (N) or None.
+
+    Traceability (module docstring): ``sha256`` of the source file, ``plate_index`` (C3D),
+    ``offset_n`` removed (fx, fy, fz in N, as read: force on the plate; ``offset_measured``
+    False when the record has no unloaded stretch and nothing was removed), ``noise_n`` (σ of Fz
+    over the quiet stretches, N), ``body_mass_kg`` the file states (PROCESSING:Bodymass),
+    ``units`` the force channels' labels as found, ``start_s`` the record time of the first
+    sample, ``contact_s`` the contact instants in record time (stances selected by threshold).
+    """
 
     t: np.ndarray
     fz: np.ndarray
     fx: np.ndarray | None
     fy: np.ndarray | None
     source: str
+    sha256: str | None = None
+    plate_index: int | None = None
+    offset_n: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    offset_measured: bool = False
+    noise_n: float = 0.0
+    body_mass_kg: float | None = None
+    units: str = ""
+    start_s: float = 0.0
+    contact_s: tuple[float, float] | None = None
 
     @property
     def has_shear(self) -> bool:
@@ -94,8 +154,8 @@ def read_grf_csv(path: str | Path) -> GroundReactionForce:
     """Read a ``t,fz[,fx,fy]`` CSV strictly (module docstring); raises ProtocolValidationError."""
     src = str(path)
     try:
-        with open(path, newline="", encoding="utf-8") as f:
-            rows = list(csv.reader(f))
+        raw = Path(path).read_bytes()
+        rows = list(csv.reader(io.StringIO(raw.decode("utf-8"), newline="")))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise _refuse(src, f"cannot read the file ({exc})") from None
     numbered = [(i + 1, r) for i, r in enumerate(rows)
@@ -132,7 +192,8 @@ def read_grf_csv(path: str | Path) -> GroundReactionForce:
     t = values[:, 0] - values[0, 0]
     shear = len(header) == 4
     return GroundReactionForce(t, values[:, 1].copy(), values[:, 2].copy() if shear else None,
-                               values[:, 3].copy() if shear else None, src)
+                               values[:, 3].copy() if shear else None, src,
+                               sha256=hashlib.sha256(raw).hexdigest())
 
 
 def write_grf_csv(path: str | Path, grf: GroundReactionForce, comments: tuple[str, ...] = ()
@@ -169,42 +230,87 @@ def _header_frames(head: bytes) -> int | None:
     return last - first + 1
 
 
-def _force_unit(params: object, plate_index: int) -> str:
-    """ANALOG:UNITS of the plate's force channels ("" when the file does not say).
+def _force_units(params: dict, plate_index: int, plate_type: int) -> str:
+    """ANALOG:UNITS of the plate's force channels as found ("" when the file does not say),
+    quoted in messages only (module docstring: labels are unreliable).
 
-    ezc3d reports every plate's force unit as "N" whatever the channels hold, so the units are
-    read here: FORCE_PLATFORM:CHANNEL (1-based analog indices, one column per plate) lists the
-    force channels first — 8 of them for a type-3 plate, 3 for the other types.
+    FORCE_PLATFORM:CHANNEL (1-based analog indices, one column per plate) lists the force
+    channels first: 8 of them for a type-3 plate, 3 for the other types.
     """
-    fp = params["FORCE_PLATFORM"]  # type: ignore[index]
-    channels = np.asarray(fp["CHANNEL"]["value"])
-    types = np.asarray(fp["TYPE"]["value"]).ravel()
+    channels = np.asarray(params["FORCE_PLATFORM"]["CHANNEL"]["value"])
     if channels.ndim != 2 or plate_index >= channels.shape[1]:
         return ""
-    n_force = 8 if plate_index < types.size and int(types[plate_index]) == 3 else 3
-    analog = params["ANALOG"]  # type: ignore[index]
+    n_force = 8 if plate_type == 3 else 3
+    analog = params["ANALOG"]
     units = list(analog["UNITS"]["value"]) if "UNITS" in analog else []
-    found = {str(units[c - 1]).strip() for c in channels[:n_force, plate_index]
-             if 0 < c <= len(units)}
-    if len(found) > 1:
-        return "/".join(sorted(found))
-    return found.pop() if found else ""
+    found = sorted({str(units[c - 1]).strip() for c in channels[:n_force, plate_index]
+                    if 0 < c <= len(units)})
+    return "/".join(found)
+
+
+def _plate_types(params: dict) -> np.ndarray:
+    fp = params["FORCE_PLATFORM"]
+    return np.asarray(fp["TYPE"]["value"]).ravel().astype(int) if "TYPE" in fp \
+        else np.zeros(0, dtype=int)
+
+
+def _body_mass(params: dict) -> float | None:
+    """PROCESSING:Bodymass (kg) when the file states a finite positive one."""
+    proc = params.get("PROCESSING", {})
+    if "Bodymass" not in proc:
+        return None
+    values = np.asarray(proc["Bodymass"]["value"], dtype=float).ravel()
+    if values.size and math.isfinite(values[0]) and values[0] > 0.0:
+        return float(values[0])
+    return None
+
+
+def quiet_baseline(fz: np.ndarray, rate_hz: float) -> tuple[np.ndarray, float]:
+    """The quiet (unloaded) samples of a plate's record and the σ of their Fz (N).
+
+    Windows of ``QUIET_WINDOW_S``; a window is steady when its Fz standard deviation is at most
+    max(``QUIET_STD_N``, 3 × the steadiest window's), never above ``QUIET_MAX_STD_N``; the
+    quiet windows are the steady ones whose mean lies within max(5 N, 5σ) of the lowest steady
+    mean (an unloaded plate reads its lowest level: a foot only adds load). That level must be the record's floor: when samples
+    read more than max(``FLOOR_TOLERANCE_N``, 8σ) below it, the steadiest low stretch was a
+    loaded one and the record has no unloaded stretch. Returns a boolean mask of the quiet
+    samples (all False when there is none) and their σ (NaN then).
+    """
+    w = max(3, int(round(QUIET_WINDOW_S * rate_hz)))
+    n_win = fz.size // w
+    mask = np.zeros(fz.size, dtype=bool)
+    if n_win == 0:
+        return mask, math.nan
+    win = fz[:n_win * w].reshape(n_win, w)
+    means, stds = win.mean(axis=1), win.std(axis=1)
+    steady = stds <= min(QUIET_MAX_STD_N, max(QUIET_STD_N, 3.0 * float(stds.min())))
+    if not steady.any():
+        return mask, math.nan
+    sigma = float(np.median(stds[steady]))
+    level = float(means[steady].min())
+    if float(fz.min()) < level - max(FLOOR_TOLERANCE_N, 8.0 * sigma):
+        return mask, math.nan
+    quiet = steady & (means <= level + max(5.0, 5.0 * sigma))
+    mask[:n_win * w] = np.repeat(quiet, w)
+    return mask, float(np.std(fz[mask]))
 
 
 def read_grf_c3d(path: str | Path, plate_index: int) -> GroundReactionForce:
-    """Read force platform ``plate_index`` of a C3D file (module docstring).
+    """Read force platform ``plate_index`` of a C3D file, its unloaded offset removed (module
+    docstring).
 
     Raises:
-        ProtocolValidationError: not a C3D file, truncated, unreadable, no such plate, unit not
-            N, non-finite samples.
+        ProtocolValidationError: not a C3D file, truncated, unreadable, no such plate, a plate
+            type other than 2, 3, 4, non-finite samples, no unloaded stretch to take the offset
+            from.
         BackendUnavailableError: ezc3d is not installed.
     """
     src = str(path)
     try:
-        with open(path, "rb") as f:
-            head = f.read(1024)
+        data = Path(path).read_bytes()
     except OSError as exc:
         raise _refuse(src, f"cannot read the file ({exc.strerror})") from None
+    head = data[:1024]
     if len(head) < 512:
         raise _refuse(src, f"not a C3D file: {len(head)} bytes, shorter than the 512-byte C3D "
                       "header")
@@ -217,31 +323,40 @@ def read_grf_c3d(path: str | Path, plate_index: int) -> GroundReactionForce:
         raise BackendUnavailableError(f"{src}: reading C3D files needs ezc3d "
                                       f"(pip install 'ezc3d>=1.5,<2'): {exc}") from None
     try:
-        c3d = ezc3d.c3d(src, extract_forceplat_data=True)
+        # Parameters first: the plate's type decides whether ezc3d can extract its forces.
+        params = ezc3d.c3d(src, extract_forceplat_data=False)["parameters"]
     except Exception as exc:  # ezc3d raises OSError/RuntimeError/IndexError on bad files
         raise _refuse(src, f"ezc3d cannot read it as C3D: {exc}") from None
-    params = c3d["parameters"]
     if "FORCE_PLATFORM" not in params or "USED" not in params["FORCE_PLATFORM"]:
         raise _refuse(src, "the file has no FORCE_PLATFORM parameters: no force plate to read")
     used = np.asarray(params["FORCE_PLATFORM"]["USED"]["value"]).ravel()
     n_used = int(used[0]) if used.size else 0
-    platforms = c3d["data"]["platform"]
-    if n_used == 0 or not platforms:
+    types = _plate_types(params)
+    if n_used == 0 or types.size == 0:
         raise _refuse(src, "the file has no force platform (FORCE_PLATFORM:USED = 0)")
-    if not 0 <= plate_index < len(platforms):
-        raise _refuse(src, f"plate_index {plate_index}: the file has {len(platforms)} force "
+    n_plates = min(n_used, types.size)
+    if not 0 <= plate_index < n_plates:
+        raise _refuse(src, f"plate_index {plate_index}: the file has {n_plates} force "
                       f"platform(s) (FORCE_PLATFORM:USED = {n_used}); valid indices 0.."
-                      f"{len(platforms) - 1}")
+                      f"{n_plates - 1}")
+    plate_type = int(types[plate_index])
+    if plate_type not in SUPPORTED_PLATE_TYPES:
+        raise _refuse(src, f"force platform {plate_index} is of type {plate_type}: type "
+                      f"{plate_type} is not supported (types "
+                      f"{', '.join(map(str, SUPPORTED_PLATE_TYPES))} are)")
+    others = sorted({int(x) for x in types[:n_plates]} - set(SUPPORTED_PLATE_TYPES))
     rate_values = np.asarray(params["ANALOG"]["RATE"]["value"]).ravel()
     rate = float(rate_values[0]) if rate_values.size else 0.0
     if not (math.isfinite(rate) and rate > 0.0):
         raise _refuse(src, f"ANALOG:RATE must be > 0 Hz (got {rate})")
-    pf = platforms[plate_index]
-    unit = _force_unit(params, plate_index)
-    if unit not in ("N", ""):
-        raise _refuse(src, f"force platform {plate_index}: force unit {unit!r} is not supported "
-                      "(ANALOG:UNITS of its force channels must be 'N')")
-    force = np.asarray(pf["force"], dtype=float)
+    try:
+        c3d = ezc3d.c3d(src, extract_forceplat_data=True)
+        force = np.asarray(c3d["data"]["platform"][plate_index]["force"], dtype=float)
+    except Exception as exc:  # ezc3d's extraction fails on the types it does not model
+        why = f" (the file also has plates of type {others}, which ezc3d cannot model)" \
+            if others else ""
+        raise _refuse(src, f"ezc3d cannot extract force platform {plate_index}{why}: "
+                      f"{exc}") from None
     n = force.shape[1]
     declared = _header_frames(head)
     points = c3d["header"]["points"]
@@ -258,11 +373,23 @@ def read_grf_c3d(path: str | Path, plate_index: int) -> GroundReactionForce:
         raise _refuse(src, f"force platform {plate_index}: F{'xyz'[axis]} is not a finite number "
                       f"at analog sample {k} (t = {k / rate:.4f} s); gaps must be filled before "
                       "replay")
+    quiet, noise = quiet_baseline(force[2] if -force[2].min() <= force[2].max()
+                                  else -force[2], rate)
+    # No unloaded stretch (a record that starts loaded): the offset cannot be measured and is
+    # left in, said so in the record (``offset_measured``) and in the replay's traceability.
+    offset = np.median(force[:, quiet], axis=1) if quiet.any() else np.zeros(3)
+    force = force - offset[:, None]
     fx, fy, fz = force
     if -fz.min() > fz.max():  # force on the plate: flip so the loading is positive
         fx, fy, fz = -fx, -fy, -fz
     t = np.arange(n) / rate
-    return GroundReactionForce(t, fz.copy(), fx.copy(), fy.copy(), src)
+    return GroundReactionForce(t, fz.copy(), fx.copy(), fy.copy(), src,
+                               sha256=hashlib.sha256(data).hexdigest(), plate_index=plate_index,
+                               offset_n=(float(offset[0]), float(offset[1]), float(offset[2])),
+                               offset_measured=bool(quiet.any()),
+                               noise_n=0.0 if math.isnan(noise) else noise,
+                               body_mass_kg=_body_mass(params),
+                               units=_force_units(params, plate_index, plate_type))
 
 
 def read_grf(path: str | Path, plate_index: int | None = None) -> GroundReactionForce:
@@ -280,13 +407,15 @@ def read_grf(path: str | Path, plate_index: int | None = None) -> GroundReaction
 # ------------------------------------------------------------------------------ stance
 def select_stance(grf: GroundReactionForce, *, threshold_n: float | None = None,
                   occurrence: int = 0, start_s: float | None = None,
-                  end_s: float | None = None) -> GroundReactionForce:
+                  end_s: float | None = None, lead_s: float = 0.0) -> GroundReactionForce:
     """The stance to replay (module docstring), its time starting at 0.
 
-    Give either ``threshold_n`` (N; with ``occurrence``, 0 = first) or ``start_s`` and ``end_s``
-    (s from the record's first sample).
+    Give either ``threshold_n`` (N; with ``occurrence``, 0 = first; ``lead_s``: unloaded record
+    kept before contact and after toe off, s) or ``start_s`` and ``end_s`` (s from the record's
+    first sample).
     """
     src, t, fz = grf.source, grf.t, grf.fz
+    contact: tuple[float, float] | None = None
     if threshold_n is not None:
         above = fz > threshold_n
         edges = np.diff(np.concatenate(([0], above.astype(np.int8), [0])))
@@ -303,6 +432,30 @@ def select_stance(grf: GroundReactionForce, *, threshold_n: float | None = None,
             raise _refuse(src, f"the stance at t = {t[i0]:.3f} .. {t[i1]:.3f} s touches the "
                           f"{which} of the record: it is incomplete (select it explicitly with "
                           "stance.select: explicit if it is what you want)")
+        # The true contact: Fz above the noise, not only above the threshold.
+        level = max(CONTACT_LEVEL_N, 4.0 * grf.noise_n)
+        while i0 > 0 and fz[i0 - 1] > level:
+            i0 -= 1
+        while i1 < fz.size - 1 and fz[i1 + 1] > level:
+            i1 += 1
+        contact = (float(t[i0] + grf.start_s), float(t[i1] + grf.start_s))
+        j0 = int(np.searchsorted(t, t[i0] - lead_s - 1e-12))
+        j1 = int(np.searchsorted(t, t[i1] + lead_s + 1e-12, side="right")) - 1
+        if lead_s > 0.0 and (t[i0] - t[0] < lead_s or t[-1] - t[i1] < lead_s):
+            before, after = t[i0] - t[0], t[-1] - t[i1]
+            raise _refuse(src, f"the stance at t = {t[i0]:.3f} .. {t[i1]:.3f} s has "
+                          f"{min(before, after) * 1e3:.0f} ms of unloaded record "
+                          f"{'before contact' if before < after else 'after toe off'}; the "
+                          f"replay starts {lead_s * 1e3:.0f} ms before contact and ends as "
+                          "long after toe off (ramp_s): shorten ramp_s or select the stance "
+                          "explicitly")
+        busy = fz[j0:i0] > threshold_n
+        busy_after = fz[i1 + 1:j1 + 1] > threshold_n
+        if busy.any() or busy_after.any():
+            raise _refuse(src, f"the stance at t = {t[i0]:.3f} .. {t[i1]:.3f} s is within "
+                          f"{lead_s * 1e3:.0f} ms of another one: no unloaded lead-in for the "
+                          "replay (shorten ramp_s or select the stance explicitly)")
+        i0, i1 = j0, j1
     elif start_s is not None and end_s is not None:
         if start_s < t[0] or end_s > t[-1]:
             raise _refuse(src, f"the stance window {start_s:g} .. {end_s:g} s is outside the "
@@ -317,9 +470,28 @@ def select_stance(grf: GroundReactionForce, *, threshold_n: float | None = None,
         raise _refuse(src, f"the stance at t = {t[i0]:.3f} .. {t[i1]:.3f} s has "
                       f"{i1 - i0 + 1} samples; at least {MIN_SAMPLES} are needed")
     sl = slice(i0, i1 + 1)
-    return GroundReactionForce(t[sl] - t[i0], fz[sl].copy(),
-                               None if grf.fx is None else grf.fx[sl].copy(),
-                               None if grf.fy is None else grf.fy[sl].copy(), src)
+    return replace(grf, t=t[sl] - t[i0], fz=fz[sl].copy(),
+                   fx=None if grf.fx is None else grf.fx[sl].copy(),
+                   fy=None if grf.fy is None else grf.fy[sl].copy(),
+                   start_s=float(t[i0] + grf.start_s), contact_s=contact)
+
+
+def check_plausible_peak(stance: GroundReactionForce, body_mass_kg: float, mass_from: str,
+                         plate: str) -> float:
+    """The stance's vertical peak in body weights; refuses it outside ``PLAUSIBLE_PEAK_BW``
+    naming the measured peak, the expected range and the unit labels found (module docstring).
+    """
+    weight = body_mass_kg * STANDARD_GRAVITY_M_S2
+    peak = float(stance.fz.max())
+    ratio = peak / weight
+    lo, hi = PLAUSIBLE_PEAK_BW
+    if not lo <= ratio <= hi:
+        labels = f" (its force channels are labelled {stance.units!r})" if stance.units else ""
+        raise _refuse(stance.source, f"{plate}the stance peaks at {peak:.4g} N = {ratio:.3g} body "
+                      f"weights of the {body_mass_kg:g} kg subject ({mass_from}); a stance "
+                      f"peaks at {lo:g}-{hi:g} BW, {lo * weight:.0f}-{hi * weight:.0f} N: the "
+                      f"data are not in N{labels} or the body mass is not the subject's")
+    return ratio
 
 
 # ------------------------------------------------------------------------------ published shape

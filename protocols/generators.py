@@ -17,9 +17,13 @@ How each kind is produced (``dt`` = loop period):
 * gait_replay — force mode. The selected stance is resampled at the loop rate by a
   shape-preserving cubic (scipy ``PchipInterpolator``: no overshoot, so no force above the
   record's peak sample or below 0; C¹) or linearly; played ``time_scale`` times slower; scaled
-  by ``percent_body_weight/100 × patient_weight_kg / source_body_weight_kg``; tapered to 0 N
-  over ``ramp_s`` at both ends of every stance; ``repetitions`` stances separated by
-  ``rest_between_s`` at 0 N.
+  by ``percent_body_weight/100 × patient_weight_kg / source body mass`` (the file's
+  PROCESSING:Bodymass, else ``source_body_weight_kg``) after a plausibility check of the
+  stance's peak against that mass; the plate's unloaded offset removed (the noise left around
+  0 N before contact is clipped at 0: a plate cannot be pulled); tapered to 0 N over ``ramp_s``
+  at both ends of every stance, on the unloaded lead-in (``gait.select_stance``);
+  ``repetitions`` stances separated by ``rest_between_s`` at 0 N. Traceability (source sha256,
+  plate, stance window, offset removed, scale factor, source body mass) in ``info``.
 * ankle_rom, isometric_hold — position mode. An angular path (``protocols.profiles``) of
   rest-to-rest jerk-limited or raised-cosine moves and holds, converted to slider references.
 * position_playback — position mode. The CSV is read, checked and resampled by
@@ -110,18 +114,27 @@ class GaitReplayGenerator(ForceGenerator):
             raise self._refuse("percent_body_weight", "gait replay needs the patient's weight "
                                f"in (0, 400] kg at run time (got {patient_weight_kg!r})")
         self.patient_weight_kg = float(patient_weight_kg)
-        self.scale = p.percent_body_weight / 100.0 * self.patient_weight_kg \
-            / p.source_body_weight_kg
         st = p.stance
         try:
             record = gait.read_grf(base_dir / p.source, p.plate_index)
             if st.select == "auto":
+                # Start before contact: the tapers (ramp_s in played time) act on the unloaded
+                # lead-in, never on the heel-strike transient.
+                lead = p.ramp_s / p.time_scale + gait.LEAD_MARGIN_S
                 stance = gait.select_stance(record, threshold_n=st.threshold_n,
-                                            occurrence=st.occurrence)
+                                            occurrence=st.occurrence, lead_s=lead)
             else:
                 stance = gait.select_stance(record, start_s=st.start_s, end_s=st.end_s)
         except ProtocolValidationError as exc:
             raise self._refuse("source", str(exc)) from None
+        mass, mass_from = self._source_mass(record)
+        plate = f"force platform {p.plate_index}: " if p.plate_index is not None else ""
+        try:
+            self.peak_bw = gait.check_plausible_peak(stance, mass, mass_from, plate)
+        except ProtocolValidationError as exc:
+            raise self._refuse("source", str(exc)) from None
+        self.source_mass_kg, self.source_mass_from = mass, mass_from
+        self.scale = p.percent_body_weight / 100.0 * self.patient_weight_kg / mass
         if p.include_shear and not stance.has_shear:
             raise self._refuse("include_shear", f"the record {record.source} has no fx, fy "
                                "(a CSV needs the header t,fz,fx,fy)")
@@ -136,6 +149,37 @@ class GaitReplayGenerator(ForceGenerator):
         self._period = self._n_stance - 1 + self._n_rest
         self._set_length((p.repetitions - 1) * self._period + self._n_stance)
 
+    def _source_mass(self, record: gait.GroundReactionForce) -> tuple[float, str]:
+        """The source subject's body mass (kg) and where it comes from."""
+        given = self.protocol.source_body_weight_kg
+        stated = record.body_mass_kg
+        if stated is not None:
+            if given is not None and abs(given - stated) > 0.5:
+                raise self._refuse("source_body_weight_kg", f"{given:g} kg, but the record "
+                                   f"{record.source} states PROCESSING:Bodymass = {stated:g} "
+                                   "kg: remove source_body_weight_kg or make it agree")
+            return stated, "PROCESSING:Bodymass"
+        if given is None:
+            raise self._refuse("source_body_weight_kg", f"required: the record {record.source} "
+                               "does not state the subject's body mass (PROCESSING:Bodymass)")
+        return given, "source_body_weight_kg"
+
+    @property
+    def info(self) -> dict:
+        """Traceability of the replayed force (kg, N, s; JSON-ready)."""
+        st = self.stance
+        return {"source": st.source, "source_sha256": st.sha256, "plate_index": st.plate_index,
+                "stance_window_s": [round(st.start_s, 6), round(st.start_s + st.duration_s, 6)],
+                "contact_s": None if st.contact_s is None else [round(x, 6)
+                                                                for x in st.contact_s],
+                "offset_removed_n": {"fx": st.offset_n[0], "fy": st.offset_n[1],
+                                     "fz": st.offset_n[2]},
+                "offset_measured": st.offset_measured,
+                "scale_factor": self.scale, "source_body_mass_kg": self.source_mass_kg,
+                "source_body_mass_from": self.source_mass_from,
+                "source_peak_n": float(st.fz.max()), "source_peak_bw": self.peak_bw,
+                "patient_weight_kg": self.patient_weight_kg}
+
     def repetition_starts(self) -> np.ndarray:
         """Sample index where each stance starts (its force is 0 there)."""
         return np.arange(self.protocol.repetitions) * self._period
@@ -149,7 +193,9 @@ class GaitReplayGenerator(ForceGenerator):
         w_out, wd_out = cosine_ramp(tp[-1] - tp, p.ramp_s)
         w, wd = w_in * w_out, wd_in * w_out - w_in * wd_out
         block = np.zeros((n, 4))
-        channels: list[tuple[int, np.ndarray]] = [(0, st.fz)]
+        # Noise around 0 N before contact and after toe off (offset removed): a plate cannot be
+        # pulled, so the replayed vertical force is clipped at 0.
+        channels: list[tuple[int, np.ndarray]] = [(0, np.maximum(st.fz, 0.0))]
         if p.include_shear and st.fx is not None and st.fy is not None:
             channels += [(2, st.fx), (3, st.fy)]
         for col, y in channels:
@@ -174,10 +220,15 @@ class GaitReplayGenerator(ForceGenerator):
         table = np.zeros((self.n_samples, 4))
         for s0 in self.repetition_starts():
             table[s0:s0 + self._n_stance] = block
+        st = self.stance
         report.notes.append(f"scale {self.scale:.4f} = {self.protocol.percent_body_weight:g} % "
-                            f"x {self.patient_weight_kg:g} kg / "
-                            f"{self.protocol.source_body_weight_kg:g} kg; stance "
-                            f"{self.stance.duration_s:.3f} s from {self.stance.source}")
+                            f"x {self.patient_weight_kg:g} kg / {self.source_mass_kg:g} kg "
+                            f"({self.source_mass_from}); stance {st.start_s:.3f} .. "
+                            f"{st.start_s + st.duration_s:.3f} s of {st.source} (sha256 "
+                            f"{(st.sha256 or '?')[:12]}…), "
+                            + (f"offset removed {st.offset_n[2]:.2f} N" if st.offset_measured
+                               else "no unloaded stretch: offset not measured, not removed")
+                            + f", peak {self.peak_bw:.2f} BW")
         return table
 
 

@@ -91,9 +91,10 @@ class ProtocolSession:
     def protocol_limits(self) -> ProtocolLimits | None:
         return protocol_limits_of(self.protocol)
 
-    def figures(self) -> SessionFigures:
+    def figures(self, preload_n: float) -> SessionFigures:
         assert self.model is not None
-        return SessionFigures(self.protocol, self.model)
+        return SessionFigures(self.protocol, self.model, preload_n,
+                              info=self.metadata.get("source"))
 
 
 class ProtocolSessions:
@@ -174,4 +175,6 @@ def prepare_session(protocol: dict[str, Any], patient: PatientInfo, description:
         data = Path(parameters[name])
         data = data if data.is_absolute() else base_dir / data
         meta["data_file"] = {"path": str(data), "sha256": _sha256(data)}
+    if getattr(gen, "info", None):
+        meta["source"] = gen.info          # traceability of a replayed record
     return ProtocolSession(model_obj, gen, pre["predicted"], start_pose(gen), meta)

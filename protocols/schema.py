@@ -183,11 +183,15 @@ class StanceExplicit(_Model):
 class GaitReplay(_Base):
     """Vertical ground-reaction force of one stance, replayed in Z (``protocols.gait``).
 
-    The force is ``percent_body_weight/100 × patient_weight / source_body_weight_kg`` times the
-    record (the record is the subject's force; the patient's weight comes at run time), played
-    ``time_scale`` times slower than recorded (1.0 = real speed), ``repetitions`` times with
-    ``rest_between_s`` at 0 N between stances, each stance tapered to 0 N over ``ramp_s`` at both
-    ends. ``include_shear`` carries the record's fx, fy in the output (not actuated).
+    The force is ``percent_body_weight/100 × patient_weight / source body mass`` times the
+    record (the record is the subject's force; the patient's weight comes at run time). The
+    source body mass is the C3D file's PROCESSING:Bodymass when it has one, else
+    ``source_body_weight_kg`` (required then; both given and different is refused). The stance
+    is played ``time_scale`` times slower than recorded (1.0 = real speed), ``repetitions``
+    times with ``rest_between_s`` between stances; an automatically selected stance starts
+    ``ramp_s`` (played time) plus ``gait.LEAD_MARGIN_S`` before contact and ends as long after
+    toe off, so its ``ramp_s`` tapers act on the unloaded plate, never on the heel strike.
+    ``include_shear`` carries the record's fx, fy in the output (not actuated).
     """
 
     kind: Literal["gait_replay"]
@@ -196,7 +200,8 @@ class GaitReplay(_Base):
     plate_index: Annotated[int, Field(ge=0, le=31)] | None = None
     stance: Annotated[Union[StanceAuto, StanceExplicit], Field(discriminator="select")] = \
         StanceAuto(select="auto")
-    source_body_weight_kg: Annotated[float, Field(gt=0.0, le=300.0, allow_inf_nan=False)]
+    source_body_weight_kg: Annotated[float, Field(gt=0.0, le=300.0, allow_inf_nan=False)] | \
+        None = None
     percent_body_weight: Annotated[float, Field(gt=0.0, le=150.0, allow_inf_nan=False)]
     time_scale: Annotated[float, Field(ge=0.5, le=5.0, allow_inf_nan=False)] = 1.0
     repetitions: Annotated[int, Field(ge=1, le=1000)] = 1

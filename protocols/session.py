@@ -40,6 +40,8 @@ from rt.twin.twin import SimClock, Twin
 RATE_HZ = 1000.0
 #: ROM figures use every n-th sample's forward kinematics (at 1 kHz: 100 Hz, ample for angles).
 ROM_DECIMATION = 10
+#: Sensor noise allowed below the preload before pre-flight calls it unloading (N).
+PRELOAD_TOLERANCE_N = 2.0
 
 
 @dataclass
@@ -119,35 +121,6 @@ def start_pose(gen) -> tuple[float, float, float]:
     return z, roll, pitch
 
 
-def _check_static_limits(report, setup: SessionSetup) -> list[str]:
-    """The references themselves against the patient's and the robot's limits."""
-    p, r = setup.patient_limits, setup.robot_limits
-    out = []
-    rad = math.radians
-    lo, hi = report.roll_range_rad
-    if not math.isnan(lo) and (lo < rad(p.roll_min_deg) or hi > rad(p.roll_max_deg)):
-        out.append(f"roll range [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg exceeds the "
-                   f"patient's ROM [{p.roll_min_deg}, {p.roll_max_deg}] deg")
-    lo, hi = report.pitch_range_rad
-    if not math.isnan(lo) and (lo < rad(p.pitch_min_deg) or hi > rad(p.pitch_max_deg)):
-        out.append(f"pitch range [{math.degrees(lo):.1f}, {math.degrees(hi):.1f}] deg exceeds "
-                   f"the patient's ROM [{p.pitch_min_deg}, {p.pitch_max_deg}] deg")
-    if not math.isnan(report.peak_fz_n) and report.peak_fz_n > min(p.max_force_n,
-                                                                   r.max_platform_force_n):
-        out.append(f"peak force {report.peak_fz_n:.0f} N exceeds the limit "
-                   f"{min(p.max_force_n, r.max_platform_force_n):.0f} N")
-    for name, value in (("roll", report.peak_roll_rate_rad_s),
-                        ("pitch", report.peak_pitch_rate_rad_s)):
-        if not math.isnan(value) and value > rad(p.max_angular_speed_deg_s):
-            out.append(f"{name} rate {math.degrees(value):.0f} deg/s exceeds the patient's "
-                       f"{p.max_angular_speed_deg_s} deg/s")
-    if not math.isnan(report.peak_slider_speed_m_s) and \
-            report.peak_slider_speed_m_s > r.max_slider_speed_m_s:
-        out.append(f"slider speed {report.peak_slider_speed_m_s:.3f} m/s exceeds the robot's "
-                   f"{r.max_slider_speed_m_s} m/s")
-    return out
-
-
 def _run(pl: PositionLoop, tap: SignalTap, duration_s: float,
          progress: Callable[[float], None] | None) -> None:
     """Run the in-process twin as fast as possible until the protocol is done and back at
@@ -174,12 +147,30 @@ def _run(pl: PositionLoop, tap: SignalTap, duration_s: float,
 class SessionFigures:
     """A session's figures, accumulated from session-tap rows as they stream (twin figures on
     the twin): force RMS error (% of the sine's amplitude, else of the peak reference) over the
-    samples played in force mode, peak platform force, ROM reached per axis, predicted peaks
-    (actuator force, slider speed), phases' durations; stops come from the events."""
+    samples played in force mode, against the reference the force law tracked (floored at the
+    preload); peak platform force; the least force in contact (below 0 the platform would pull
+    on the foot); ROM reached per axis; peaks of actuator force and slider speed; the longest
+    stretch with the actuator force or the drive command at the robot's limit; phases'
+    durations; stops come from the events.
 
-    def __init__(self, protocol: ProtocolModel, model: RobotModel):
+    "In contact" (:meth:`add`): force-controlled play from the moment the contact first carries
+    the preload (each stretch of force control counts anew); before it the platform is still
+    bringing the unloaded foot up to the preload and the sensor reads its noise around 0 N.
+    """
+
+    def __init__(self, protocol: ProtocolModel, model: RobotModel, preload_n: float = 0.0,
+                 robot_limits: RobotLimits | None = None, info: dict[str, Any] | None = None):
         self.protocol = protocol
         self.kin = model.kin
+        self.preload_n = preload_n
+        self.robot = robot_limits or RobotLimits()
+        self.info = info or {}
+        self._on = False                  # in contact (see the class docstring)
+        self._min_contact = (math.inf, math.nan)             # (force N, t s)
+        # Longest run at the limit: [current start t, current length, longest length, its t,
+        # its peak] for the actuator force and the drive command.
+        self._runs = {"actuator force": [math.nan, 0, 0, math.nan, 0.0],
+                      "drive command": [math.nan, 0, 0, math.nan, 0.0]}
         self._se = 0.0                  # Σ e² over force-mode play samples, N²
         self._n_force = 0
         self._peak_ref = -math.inf
@@ -202,6 +193,9 @@ class SessionFigures:
         f_ref = rows[:, COL_FREF]
         force_mode = play & (rows[:, COL_CTRL_MODE] > 0.5)
         if force_mode.any():
+            # Against the reference the force law tracked: the protocol's, floored at the
+            # preload.
+            f_ref = np.maximum(f_ref, self.preload_n)
             e = (f_ref - force)[force_mode]
             e = e[~np.isnan(e)]
             self._se += float(np.sum(e ** 2))
@@ -210,7 +204,12 @@ class SessionFigures:
         valid = ~np.isnan(force)
         if valid.any():
             self._peak_force = max(self._peak_force, float(np.max(force[valid])))
-        self._peak_tau = max(self._peak_tau, float(np.abs(rows[:, COLUMNS["tau"]]).max()))
+        self._contact(rows[:, 0], force, force_mode)
+        tau = np.abs(rows[:, COLUMNS["tau"]]).max(axis=1)
+        volts = np.abs(rows[:, COLUMNS["volts"]]).max(axis=1)
+        self._at_limit("actuator force", rows[:, 0], tau, self.robot.max_actuator_force_n)
+        self._at_limit("drive command", rows[:, 0], volts, self.robot.max_command_v)
+        self._peak_tau = max(self._peak_tau, float(tau.max()))
         self._peak_qd = max(self._peak_qd, float(np.abs(rows[:, COLUMNS["qd"]]).max()))
         for p in Phase:
             self._phase_time[p.name.lower()] += float(np.count_nonzero(phase == p)) * self._dt
@@ -226,6 +225,54 @@ class SessionFigures:
         self._k += len(rows)
         self._last_phase = Phase(int(phase[-1]))
 
+    def _contact(self, t: np.ndarray, force: np.ndarray, force_mode: np.ndarray) -> None:
+        on = self._on
+        lo_f, lo_t = self._min_contact
+        for k in range(len(t)):          # a state machine over samples (non-real-time thread)
+            f = force[k]
+            on = bool(force_mode[k]) and (on or f >= self.preload_n)
+            if on and f < lo_f:
+                lo_f, lo_t = float(f), float(t[k])
+        self._on = on
+        self._min_contact = (lo_f, lo_t)
+
+    def _at_limit(self, what: str, t: np.ndarray, values: np.ndarray, limit: float) -> None:
+        run = self._runs[what]
+        over = values >= limit - 1e-9
+        for k in np.flatnonzero(over | (run[1] > 0)):   # only samples that start/continue/end
+            if over[k]:
+                if run[1] == 0:
+                    run[0] = float(t[k])
+                run[1] += 1
+                if run[1] > run[2]:
+                    run[2], run[3] = run[1], run[0]
+                run[4] = max(run[4], float(values[k]))
+            else:
+                run[1] = 0
+
+    def saturation(self, dt: float) -> list[str]:
+        """The stretches at the robot's limit longer than ``RobotLimits.max_saturation_s``."""
+        out = []
+        for what, (_, _, longest, t0, peak), limit, unit in (
+                ("actuator force", *self._runs["actuator force"],
+                 self.robot.max_actuator_force_n, "N"),
+                ("drive command", *self._runs["drive command"], self.robot.max_command_v, "V")):
+            if longest * dt > self.robot.max_saturation_s:
+                out.append(f"{what} {peak:.4g} {unit} at the robot's limit {limit:g} {unit} for "
+                           f"{longest * dt * 1e3:.0f} ms from t = {t0:.3f} s (the drives "
+                           f"saturate; at most {self.robot.max_saturation_s * 1e3:.0f} ms "
+                           "allowed)")
+        return out
+
+    def unloading(self) -> list[str]:
+        """The force in contact below the preload (less the sensor's noise), if it happened."""
+        f, t = self._min_contact
+        if f < self.preload_n - PRELOAD_TOLERANCE_N:
+            return [f"the force falls to {f:.1f} N at t = {t:.3f} s, below the "
+                    f"{self.preload_n:g} N preload (the platform would unload or pull on the "
+                    "foot)"]
+        return []
+
     def result(self, events: list[SafetyEvent]) -> dict[str, Any]:
         p = self.protocol
         out: dict[str, Any] = {"protocol": p.name, "kind": p.kind, "twin": True}
@@ -238,6 +285,10 @@ class SessionFigures:
         else:
             out["rms_error_pct"] = None
         out["peak_force_n"] = self._peak_force if math.isfinite(self._peak_force) else None
+        out["min_force_n"] = self._min_contact[0] if math.isfinite(self._min_contact[0]) \
+            else None
+        if self.info:
+            out["source"] = self.info
         deg = math.degrees
         out["rom_deg"] = {axis: [deg(lo), deg(hi)] if math.isfinite(lo) else None
                           for axis, (lo, hi) in self._rom.items()}
@@ -253,38 +304,65 @@ class SessionFigures:
         return out
 
 
-def summarize(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel) -> dict:
+def preload_of(pl: PositionLoop) -> float:
+    """The force law's preload (N) of a protocol loop's hybrid controller."""
+    controller = pl.graph.component("controller")
+    return float(getattr(controller, "preload_n", 0.0))
+
+
+def figures_of(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel,
+               robot_limits: RobotLimits | None = None) -> SessionFigures:
     """The figures of an in-process run whose tap holds the whole session."""
-    figures = SessionFigures(protocol, model)
+    program = pl.reference.program
+    figures = SessionFigures(protocol, model, preload_of(pl), robot_limits,
+                             getattr(program, "info", None))
     rows, _ = tap.drain(0)
     figures.add(rows)
-    return figures.result(pl.events.snapshot())
+    return figures
+
+
+def summarize(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel) -> dict:
+    """The summary of an in-process run whose tap holds the whole session."""
+    return figures_of(pl, tap, protocol, model).result(pl.events.snapshot())
 
 
 def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
-    """Check and simulate the protocol; raises ``ProtocolValidationError`` with the reason."""
+    """Check and simulate the protocol; raises ``ProtocolValidationError`` with the reason.
+
+    Refused: the references against the patient's and the robot's limits
+    (``ValidationReport.check_against``); on the twin, a supervisor stop, a protocol that does
+    not finish, drives saturated or actuator force beyond the limit for longer than
+    ``RobotLimits.max_saturation_s``, or a force below the preload (every reason named with its
+    time and value).
+    """
     model = model or RobotModel.load()
     protocol, gen, report, pl, tap = _build(setup, model, "fast")
-    problems = _check_static_limits(report, setup)
+    problems = report.check_against(setup.patient_limits, setup.robot_limits)
     if problems:
         raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: "
                                       + "; ".join(problems))
     _run(pl, tap, report.duration_s, None)
     rows = tap.ring[:tap.written]
     stops = [e for e in pl.events.snapshot() if e.reaction >= Reaction.SOFT_STOP]
-    summary = summarize(pl, tap, protocol, model)
+    figures = figures_of(pl, tap, protocol, model, setup.robot_limits)
+    summary = figures.result(pl.events.snapshot())
     predicted = {
         "duration_s": report.duration_s,
         "peak_actuator_force_n": summary["peak_actuator_force_n"],
         "peak_slider_speed_m_s": summary["peak_slider_speed_m_s"],
         "platform_angles_deg": summary["rom_deg"],
         "peak_platform_force_n": summary["peak_force_n"],
+        "min_platform_force_n": summary["min_force_n"],
         "rms_error_pct": summary["rms_error_pct"],
     }
     if stops:
         raise ProtocolValidationError(
             f"{setup.source}: refused by pre-flight: on the twin the supervisor stopped "
             f"the robot at t = {stops[0].t:.3f} s ({stops[0].cause}: {stops[0].message})")
+    problems = figures.saturation(1.0 / RATE_HZ) + figures.unloading()
+    if problems:
+        raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: on the twin "
+                                      + "; ".join(problems))
     if len(rows) and rows[-1, COL_PHASE] < Phase.REST:
         raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: the "
                                       "protocol did not finish on the twin")
@@ -311,6 +389,8 @@ def run_session(setup: SessionSetup, record: Path | None = None,
                 "parameters": protocol.model_dump(mode="json", exclude={"loaded_from"})
                 if hasattr(protocol, "model_dump") else {},
                 "patient_id": "twin-demo", "robot_description": model.description.name}
+        if getattr(gen, "info", None):
+            meta["source"] = gen.info          # traceability of the replayed record
         recorder = SessionRecorder(record, meta)
         recorder.attach_state_ring(pl.recorder, start=0)
         pl.events.listener = recorder.event

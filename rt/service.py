@@ -36,9 +36,11 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from rt.components.blocks import SignalTap
 from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
+from rt.devices.rig_config import RigConfig
 from rt.errors import ConfigurationError, InputError, TalusError
 from rt.ipc.messages import (DEFAULT_ENDPOINT, DEFAULT_PUB_ENDPOINT, PatientArgs, RecordArgs,
                              describe_validation_error)
+from rt.ipc.security import ServerCurveConfig
 from rt.position_loop import PositionLoop, build_protocol_loop, shm_devices, sim_devices
 from rt.references.program import Program, TrajectoryProgram
 from rt.references.sequencer import Phase
@@ -54,6 +56,8 @@ log = logging.getLogger(__name__)
 REST_SPEED_M_S = 1e-3
 #: Longest pre-flight the IPC client waits for before its session_start reply is an error (s).
 SESSION_START_TIMEOUT_S = 120.0
+#: How long a stopping RT process lets a running session abort and come to rest (s).
+SHUTDOWN_SESSION_WAIT_S = 10.0
 #: GIL switch interval of the RT process (s).
 SWITCH_INTERVAL_S = 0.0002
 #: A program request not taken by the loop within this time is reported lost (s).
@@ -72,9 +76,16 @@ class RtConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     schema_version: Literal[1] = 1
-    backend: Literal["sim", "twin_shm"] = "sim"
+    backend: Literal["sim", "twin_shm", "rig"] = "sim"
     #: With backend twin_shm: the rig process's shared-memory segment (talus twin rig --shm).
     shm: str | None = None
+    #: With backend rig: the rig's cards and wiring (rt.devices.rig_config; example:
+    #: rt/data/rig_example.yaml).
+    rig: RigConfig | None = None
+    #: Robot description YAML (None: the packaged nominal twin); a lab's identified robot.
+    robot: str | None = None
+    #: CurveZMQ keys; required when an endpoint is not loopback (rt.ipc.security).
+    curve: ServerCurveConfig | None = None
     rate_hz: float = Field(1000.0, ge=100.0, le=2000.0)
     #: "realtime" paces the loop by the clock; "fast" (the twin only) runs it back to back in
     #: simulated time, for demos and tests.
@@ -94,11 +105,16 @@ class RtConfig(BaseModel):
     telemetry_hz: float = Field(60.0, gt=0.0, le=500.0)
     #: Limits in force outside sessions (a session brings its patient's).
     patient_limits: PatientLimits = Field(default_factory=PatientLimits)
+    #: The machine's limits (stroke margin, speeds, forces, overruns ...); its heartbeat
+    #: timeout is ``heartbeat_timeout_s`` above.
+    robot_limits: RobotLimits = Field(default_factory=RobotLimits)
     #: Where sessions are recorded unless the client names a directory (default:
     #: :func:`default_recordings_dir`).
     recordings_dir: str | None = None
-    #: The robot description file (default: the nominal one shipped with talus).
-    robot: str | None = None
+
+    def limits_of_robot(self) -> RobotLimits:
+        return self.robot_limits.model_copy(
+            update={"heartbeat_timeout_s": self.heartbeat_timeout_s})
 
     def recordings_path(self) -> Path:
         return Path(self.recordings_dir) if self.recordings_dir else default_recordings_dir()
@@ -184,7 +200,10 @@ class RtService:
         self.session: _Session | None = None
         self.last_summary: dict[str, Any] | None = None
         self._session_count = 0
-        self._base_limits = (pl.supervisor.limits)
+        self._base_limits = pl.supervisor.limits
+        #: Set when the RT process is stopping: a running session's pump finishes its
+        #: recording at once.
+        self.shutting_down = threading.Event()
         pl.supervisor.heartbeat_required = True
         pl.supervisor.heartbeat_age = self._owner_heartbeat_age
 
@@ -316,9 +335,13 @@ class RtService:
 
     def set_gains(self, client: str, controller: str, gains: dict[str, float]) -> dict[str, Any]:
         self._require_owner(client, "set_gains")
-        current = self.pl.graph.component("controller").controller.name
-        if controller != current:
-            raise InputError(f"controller {controller!r} is not running (running: {current!r})")
+        law = self.pl.graph.component("controller").controller
+        if controller != law.name:
+            raise InputError(f"controller {controller!r} is not running (running: {law.name!r})")
+        try:
+            law.check_gains(**gains)      # refused at once, with the range, not a cycle later
+        except ConfigurationError as exc:
+            raise InputError(str(exc)) from None
         self.pl.loop.set_params("controller", **gains).result(timeout=1.0)
         return {"controller": controller, "gains": gains}
 
@@ -415,8 +438,7 @@ class RtService:
             raise InputError(f"bad patient limits: {describe_validation_error(exc)}") from None
 
     def _context(self) -> SessionContext:
-        return SessionContext(self.pl.model, RobotLimits(
-            heartbeat_timeout_s=self.config.heartbeat_timeout_s), self.config.rate_hz,
+        return SessionContext(self.pl.model, self.config.limits_of_robot(), self.config.rate_hz,
             twin=self.pl.twin is not None)
 
     def session_status(self, client: str) -> dict[str, Any]:
@@ -487,8 +509,8 @@ class RtService:
             raise InputError("session_start refused: the client that started it was lost "
                              "during pre-flight")
         d = pl.model.description
-        limits = effective(tuple(d.limits.stroke_m), RobotLimits(
-            heartbeat_timeout_s=self.config.heartbeat_timeout_s), s.patient.limits,
+        limits = effective(tuple(d.limits.stroke_m), self.config.limits_of_robot(),
+                           s.patient.limits,
             prep.protocol_limits)
         started = datetime.now(timezone.utc)
         s.recording = unique_path(s.record_dir, recording_name(
@@ -549,7 +571,8 @@ class RtService:
         channels and the figures; ends the session when the robot is back at rest."""
         assert s.prepared is not None
         recorder = self._recorder
-        figures = s.prepared.figures()
+        figures = s.prepared.figures(float(getattr(
+            self.pl.graph.component("controller"), "preload_n", 0.0)))
         start = self._tap_start
         seen_motion = False
         still_since: float | None = None
@@ -557,7 +580,11 @@ class RtService:
         qd = COLUMNS["qd"]
         try:
             while True:
-                time.sleep(0.05)
+                if self.shutting_down.wait(0.05):
+                    rows, start = self.tap.drain(start)
+                    figures.add(rows[rows[:, 0] >= s.t_start])
+                    record_rows(recorder, rows[rows[:, 0] >= s.t_start])
+                    break
                 rows, start = self.tap.drain(start)
                 rows = rows[rows[:, 0] >= s.t_start]
                 if len(rows):
@@ -697,7 +724,7 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
     common: dict[str, Any] = dict(
         model=model, rate_hz=config.rate_hz, mode=config.loop_mode, controller=config.controller,
         gains=config.gains or None, patient_limits=config.patient_limits,
-        robot_limits=RobotLimits(heartbeat_timeout_s=config.heartbeat_timeout_s),
+        robot_limits=config.limits_of_robot(),
         extra_blocks=[tap],
         extra_connections=[(src, f"session.{name}") for name, src in SESSION_SOURCES.items()])
     if config.loop_mode == "fast" and config.backend != "sim":
@@ -706,6 +733,13 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
         if not config.shm:
             raise ConfigurationError("backend twin_shm needs the rig's segment name (--shm)")
         devices = shm_devices(config.shm)
+    elif config.backend == "rig":
+        from rt.rig_devices import rig_devices
+
+        if config.rig is None:
+            raise ConfigurationError("backend rig needs the config's rig: section "
+                                     "(see rt/data/rig_example.yaml)")
+        devices = rig_devices(config.rig, model.description)
     else:
         clock = SimClock()
         twin = Twin(model.description, parse_environment(config.environment), clock=clock)
@@ -728,13 +762,18 @@ def serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None 
     # bounds how long a request waits for it (the default 5 ms per hand-over delays the owner's
     # heartbeats by hundreds of ms when the loop runs back to back in fast mode).
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+    if config.curve is None:
+        # Refused before any device is opened: off loopback, only with CurveZMQ.
+        from rt.ipc.security import check_server_endpoint
+        check_server_endpoint(config.endpoint, None)
+        check_server_endpoint(config.pub_endpoint, None)
     pl, tap = build_rt_loop(config)
     warm = getattr(sessions, "warm", None)
     if warm is not None:
         warm(pl.model.description)   # the pre-flight worker starts while the loop does
     service = RtService(pl, config, tap, sessions, programs)
     with RtServer(service, config.endpoint, config.pub_endpoint,
-                  heartbeat_timeout_s=config.heartbeat_timeout_s) as server:
+                  heartbeat_timeout_s=config.heartbeat_timeout_s, curve=config.curve) as server:
         service.server = server
         service.endpoint = server.endpoint
         pl.events.listener = lambda ev: server.publish("event", ev)
@@ -748,8 +787,18 @@ def serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None 
         finally:
             s = service.session
             if s is not None:
+                # Stopping mid-session: abort it (soft stop, return to rest) while the loop
+                # still runs, then let its recording close whatever happened.
+                s.aborted_by = s.aborted_by or "the RT process (shutting down)"
                 s.stop.set()
                 pl.reference.request_abort()
+                end = time.monotonic() + SHUTDOWN_SESSION_WAIT_S
+                while s.state in ("preflight", "running") and time.monotonic() < end:
+                    time.sleep(0.05)
+                service.shutting_down.set()
+                end = time.monotonic() + 5.0
+                while s.state == "running" and time.monotonic() < end:
+                    time.sleep(0.05)
             pl.loop.stop()
             pl.graph.stop()
             if pl.devices is not None and pl.devices.close is not None:

@@ -8,6 +8,8 @@ import sys
 import threading
 from typing import Any, Callable
 
+from rt.model.robot_option import add_robot_option
+
 
 def register_serve(commands: argparse._SubParsersAction,
                    extensions: Callable[[], dict[str, Any]] | None = None) -> None:
@@ -18,15 +20,17 @@ def register_serve(commands: argparse._SubParsersAction,
                             "sim) and the 1 kHz loop; serves commands and publishes telemetry "
                             "and events. Prints {\"serving\": ...} once ready, a summary at "
                             "exit.")
-    p.add_argument("--backend", choices=("sim", "twin_shm"), default="sim",
-                   help="sim: the twin in this process; twin_shm: the rig process started with "
-                        "'talus twin rig --shm NAME' (its amplifier watchdog guards this process)")
+    p.add_argument("--backend", choices=("sim", "twin_shm", "rig"), default=None,
+                   help="sim: the twin in this process (the default); twin_shm: the rig process "
+                        "started with 'talus twin rig --shm NAME' (its amplifier watchdog guards "
+                        "this process); rig: the real cards described in the config's rig: "
+                        "section (see rt/data/rig_example.yaml)")
+    add_robot_option(p)
     p.add_argument("--shm", default=None, help="with --backend twin_shm: the rig's segment")
     p.add_argument("--config", default=None, help="RT config YAML (see rt.service.RtConfig)")
     p.add_argument("--endpoint", default=None, help="override the request endpoint")
     p.add_argument("--pub-endpoint", default=None, help="override the publish endpoint")
     p.add_argument("--seconds", type=float, default=None, help="stop after this long")
-    p.add_argument("--robot", default=None, help="robot description YAML (default: nominal)")
     p.add_argument("--heartbeat-timeout", type=float, default=None,
                    help="the owner's silence after which a motion soft-stops, s (default: the "
                         "config's, 0.25)")
@@ -47,7 +51,9 @@ def _serve(args) -> int:
 
     try:
         config = load_config(args.config)
-        updates = {"backend": args.backend}
+        updates = {}
+        if args.backend:
+            updates["backend"] = args.backend
         if args.shm:
             updates["shm"] = args.shm
         if args.endpoint:

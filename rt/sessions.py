@@ -26,11 +26,12 @@ from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits
 
 #: The session tap's signals (after its time column), each (loop port name, width).
 SESSION_SIGNALS: list[tuple[str, int]] = [
-    ("q", 3), ("qd", 3), ("tau", 3), ("wrench", 6), ("flags", 2), ("force", 3),
+    ("q", 3), ("qd", 3), ("tau", 3), ("volts", 3), ("wrench", 6), ("flags", 2), ("force", 3),
     ("ctrl_mode", 1), ("phase", 1), ("progress", 1)]
 #: Where each signal comes from in the loop.
 SESSION_SOURCES: dict[str, str] = {
-    "q": "encoders.q", "qd": "estimator.qd", "tau": "controller.tau", "wrench": "force.wrench",
+    "q": "encoders.q", "qd": "estimator.qd", "tau": "controller.tau",
+    "volts": "supervisor.volts", "wrench": "force.wrench",
     "flags": "force.flags", "force": "reference.force", "ctrl_mode": "reference.ctrl_mode",
     "phase": "reference.phase", "progress": "reference.progress"}
 
@@ -99,7 +100,9 @@ class PreparedSession(Protocol):
     #: patient's foot is placed there, unloaded, before the approach.
     start_pose: tuple[float, float, float]
 
-    def figures(self) -> SessionFigures: ...
+    def figures(self, preload_n: float) -> SessionFigures:
+        """A fresh accumulator; ``preload_n`` is the force law's floor (N) in this loop."""
+        ...
 
 
 class SessionFactory(Protocol):

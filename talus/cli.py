@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import sys
 
 #: group name -> (modules, each with ``register(subparsers)``, help)
@@ -22,12 +23,18 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
     "bench": (("rt.benchmarks.cli", "protocols.bench_force"),
               "benchmarks: control loop timing, tracking and force experiments"),
     "faults": (("rt.safety.cli",), "safety: the fault matrix on the twin"),
-    "session": (("protocols.session_cli",),
+    "session": (("talus.session_cli",),
                 "run a protocol through the RT process: pre-flight, run, record, summary"),
     "rt": (("rt.ipc.cli", "talus.rt_serve"),
            "RT process: serve, status, control, stop, estop, reset (JSON)"),
     "record": (("rt.recording.cli",), "recordings: info, CSV export"),
     "gui": (("app.cli",), "the clinician GUI (talus gui [--screenshot DIR])"),
+    "db": (("patients.db_cli",), "clinical database: upgrade, backup, restore, demo"),
+    "users": (("patients.users_cli",), "users and roles: init, add, passwd, list"),
+    "patients": (("patients.patients_cli",),
+                 "patients: add, list, show, limits, forget, export"),
+    "sessions": (("patients.sessions_cli",), "stored therapy sessions: list, show"),
+    "audit": (("patients.audit_cli",), "audit log: verify, export"),
 }
 #: group -> the command run when the group is given only options (``talus gui --lang es``)
 DEFAULT_COMMANDS: dict[str, str] = {"gui": "start"}
@@ -54,8 +61,15 @@ def main(argv: list[str] | None = None) -> int:
                                       and argv[1] not in ("-h", "--help")):
         argv = [group, DEFAULT_COMMANDS[group], *argv[1:]]
     args = build_parser(group).parse_args(argv)
+    from rt.errors import TalusError
+
     try:
         return int(args.func(args) or 0)
+    except TalusError as exc:
+        # A command that did not report its own error: one line, exit code 2 (a bad --robot
+        # file, a missing card), never a traceback.
+        print(json.dumps({"error": str(exc)}), flush=True)
+        return 2
     except BrokenPipeError:
         # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
         sys.stderr.close()

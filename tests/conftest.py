@@ -6,6 +6,9 @@ from hypothesis import HealthCheck, settings
 
 from rt.model import RobotModel
 
+# A throw-away PostgreSQL server and the sqlite/postgresql ``database_url`` fixture.
+pytest_plugins = ("pg_server",)
+
 settings.register_profile("talus", derandomize=True, max_examples=60, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile("talus")

@@ -592,3 +592,25 @@ def test_cli_commands_and_error_replies(server: RtServer, handler: FakeHandler,
     assert cli("reset") == (2, {"error": "fault still present: encoder 2 frozen"})
     assert handler.calls[-1][0] == "control_release"  # control given back after a refusal
     assert cli("status", "--timeout", "0") == (2, {"error": "timeout_s must be > 0, got 0.0"})
+
+
+def test_a_deferred_reply_never_holds_up_other_clients(handler: FakeHandler) -> None:
+    """A reset whose outcome is not known yet (deferred) stays pending while another client's
+    e-stop is answered; it is answered itself once its outcome is there."""
+    from rt.ipc.server import Deferred
+
+    outcome: dict[str, Any] = {}
+    handler.results["reset"] = Deferred(lambda: outcome.get("reply"), timeout_s=30.0,
+                                        what="reset")
+    with RtServer(handler, ANY_PORT, ANY_PORT) as srv, \
+            RtClient(srv.endpoint, client_id="owner", timeout_s=10.0) as owner, \
+            RtClient(srv.endpoint, client_id="nurse", timeout_s=10.0) as nurse:
+        result: dict[str, Any] = {}
+        t = threading.Thread(target=lambda: result.update(owner.reset([1])))
+        t.start()
+        assert wait_until(lambda: any(c == "reset" for c, _ in handler.calls))
+        assert nurse.estop("gui") == {"did": "estop", "source": "gui"}
+        assert t.is_alive() and result == {}             # the reset is still pending
+        outcome["reply"] = {"reset": True}
+        t.join(timeout=10.0)
+        assert result == {"reset": True}

@@ -85,6 +85,10 @@ def gait_yaml(source: str, **fields: object) -> str:
     return "".join(f"{k}: {v}\n" for k, v in base.items())
 
 
+#: The published stance's samples with Fz > 0 (pad 0.1 s): the stance without its lead-in.
+EXPLICIT = "{select: explicit, start_s: 0.1, end_s: 0.74}"
+
+
 def make_gait(tmp_path: Path, robot, text: str, weight: float | None = 70.0):
     proto = parse_protocol_text(text, str(tmp_path / "gait.yaml"))
     return make_generator(proto, dt=DT, kinematics=robot.kin, patient_weight_kg=weight,
@@ -167,8 +171,15 @@ def test_missing_csv_is_refused_with_the_protocol_file_and_field(tmp_path, robot
 def test_stance_selection_by_threshold_and_window():
     rec = shape_record(1000.0)
     st = gait.select_stance(rec, threshold_n=20.0)
-    assert st.t[0] == 0.0 and st.fz.min() > 20.0
+    # Widened from the threshold to the true contact (Fz above CONTACT_LEVEL_N).
+    assert st.t[0] == 0.0 and st.fz.min() > gait.CONTACT_LEVEL_N
     assert 0.60 < st.duration_s < 0.64
+    assert st.fz[0] < 20.0 and st.contact_s == (st.start_s, st.start_s + st.duration_s)
+    # With a lead, the stance starts before contact and ends after toe off, on unloaded record.
+    lead = gait.select_stance(rec, threshold_n=20.0, lead_s=0.04)
+    assert lead.start_s == pytest.approx(st.start_s - 0.04, abs=1e-9)
+    assert lead.duration_s == pytest.approx(st.duration_s + 0.08, abs=1e-9)
+    assert lead.fz[:30].max() == 0.0 and lead.contact_s == st.contact_s
     win = gait.select_stance(rec, start_s=0.1, end_s=0.74)
     assert win.duration_s == pytest.approx(0.64, abs=1e-9)
     np.testing.assert_allclose(win.fz.max(), 1.15 * BW70, rtol=1e-12)
@@ -263,10 +274,20 @@ def test_c3d_with_nan_samples_is_refused(tmp_path):
         gait.read_grf_c3d(path, 0)
 
 
-def test_c3d_in_other_force_units_is_refused(tmp_path):
-    path = write_c3d(tmp_path / "kn.c3d", -np.full(100, 0.5), force_unit="kN")
-    with pytest.raises(ProtocolValidationError, match="force unit 'kN' is not supported"):
-        gait.read_grf_c3d(path, 0)
+def test_units_are_decided_by_physics_not_labels(tmp_path, robot):
+    """Data in N labelled 'V' load; data in kN labelled 'N' are refused by the body-mass check,
+    naming the measured peak and the expected range."""
+    rec = shape_record(1000.0)
+    write_c3d(tmp_path / "v.c3d", -rec.fz[:840], force_unit="V")
+    gen = make_gait(tmp_path, robot, gait_yaml("v.c3d"))
+    assert gen.validate().ok and gen.info["source_peak_bw"] == pytest.approx(1.15, rel=1e-6)
+    write_c3d(tmp_path / "kn.c3d", -rec.fz[:840] / 1000.0, force_unit="N")
+    with pytest.raises(ProtocolValidationError) as exc:
+        make_gait(tmp_path, robot, gait_yaml("kn.c3d", stance=EXPLICIT))
+    msg = str(exc.value)
+    assert "kn.c3d: force platform 0: the stance peaks at 0." in msg
+    assert "body weights of the 70 kg subject (source_body_weight_kg)" in msg
+    assert "a stance peaks at 0.5-3 BW, 343-2059 N" in msg and "labelled 'N'" in msg
 
 
 def test_truncated_c3d_is_refused(tmp_path):
@@ -304,7 +325,7 @@ def test_library_gait_scales_to_body_weight_exactly(robot):
     # sample, which the interpolant reproduces exactly; compare away from the 20 ms tapers.
     rec = gait.read_grf_csv(LIBRARY_DIR / GAIT_CSV)
     st = gen.stance
-    i0 = int(np.flatnonzero(rec.fz > 20.0)[0])
+    i0 = int(round(st.start_s * 500.0))  # the stance's first record sample (lead-in included)
     k = np.arange(40, gen._n_stance - 40, 2)  # played samples on record samples, no taper
     np.testing.assert_allclose(s["fz"][k], scale * rec.fz[i0 + k // 2], rtol=1e-12)
     np.testing.assert_allclose(s["fz"][k], scale * st.fz[k // 2], rtol=1e-12)
@@ -338,7 +359,7 @@ def test_resampling_preserves_the_peak(tmp_path, robot, rate_hz, interp, tol):
 def test_repetitions_and_rests_are_timed_right(tmp_path, robot):
     gait.write_grf_csv(tmp_path / "r.csv", shape_record(1000.0))
     gen = make_gait(tmp_path, robot, gait_yaml("r.csv", repetitions=4, rest_between_s=0.75,
-                                               time_scale=1.5))
+                                               time_scale=1.5, stance=EXPLICIT))
     assert gen.validate().ok
     fz = gen.samples()["fz"]
     loaded = np.concatenate(([0], (fz > 0.0).astype(np.int8), [0]))
@@ -358,8 +379,8 @@ def test_repetitions_and_rests_are_timed_right(tmp_path, robot):
 
 def test_time_scale_slows_the_replay_and_divides_the_rate(tmp_path, robot):
     gait.write_grf_csv(tmp_path / "r.csv", shape_record(1000.0))
-    real = make_gait(tmp_path, robot, gait_yaml("r.csv"))
-    slow = make_gait(tmp_path, robot, gait_yaml("r.csv", time_scale=2.0))
+    real = make_gait(tmp_path, robot, gait_yaml("r.csv", stance=EXPLICIT))
+    slow = make_gait(tmp_path, robot, gait_yaml("r.csv", time_scale=2.0, stance=EXPLICIT))
     r1, r2 = real.validate(), slow.validate()
     assert r2.peak_fz_n == pytest.approx(r1.peak_fz_n, rel=1e-9)
     assert slow._n_stance - 1 == pytest.approx(2 * (real._n_stance - 1), abs=1)
@@ -407,4 +428,8 @@ def test_ramps_longer_than_the_stance_are_refused(tmp_path, robot):
     gait.write_grf_csv(tmp_path / "r.csv", shape_record(1000.0))
     with pytest.raises(ProtocolValidationError) as exc:
         make_gait(tmp_path, robot, gait_yaml("r.csv", ramp_s=0.4))
+    # Automatic selection: the ramps need unloaded record before contact.
+    assert "gait.yaml: source:" in str(exc.value) and "shorten ramp_s" in str(exc.value)
+    with pytest.raises(ProtocolValidationError) as exc:
+        make_gait(tmp_path, robot, gait_yaml("r.csv", ramp_s=0.4, stance=EXPLICIT))
     assert "gait.yaml: ramp_s: ramps of 0.4 s at both ends do not fit" in str(exc.value)

@@ -44,13 +44,13 @@ def test_ankle_rom_reaches_its_range():
 
 def test_preflight_refuses_a_protocol_beyond_the_patients_rom():
     narrow = PatientLimits(roll_min_deg=-5, roll_max_deg=5, pitch_min_deg=-5, pitch_max_deg=5)
-    with pytest.raises(ProtocolValidationError, match="exceeds the patient's ROM"):
+    with pytest.raises(ProtocolValidationError, match="leaves the patient's ROM"):
         preflight(SessionSetup(LIB["ankle_rom.yaml"], patient_limits=narrow))
 
 
 def test_preflight_refuses_a_force_beyond_the_patients_limit():
     weak = PatientLimits(max_force_n=350.0)
-    with pytest.raises(ProtocolValidationError, match="peak force 400 N exceeds the limit 350 N"):
+    with pytest.raises(ProtocolValidationError, match="force 400.0 N exceeds the patient's 350.0 N"):
         preflight(SessionSetup(LIB["sine_fz.yaml"], patient_limits=weak))
 
 

@@ -15,6 +15,7 @@ from typing import Any
 
 from rt.ati.rdt import DEFAULT_COUNTS_PER_FORCE, DEFAULT_COUNTS_PER_TORQUE, RDT_PORT
 from rt.errors import TalusError
+from rt.model.robot_option import add_robot_option
 
 EXIT_ERROR = 2
 
@@ -76,6 +77,7 @@ def register_twin_commands(commands: argparse._SubParsersAction) -> None:
                    help="with --env: amplifier commands held on the twin (default: the "
                         "gravity-compensating voltages at home)")
     _add_counts_options(p)
+    add_robot_option(p)
     p.set_defaults(func=cmd_serve_ati)
 
 
@@ -122,7 +124,10 @@ def cmd_serve_ati(args: argparse.Namespace) -> int:
         if args.env is not None:
             from rt.twin.serve import twin_wrench_source
 
-            source = twin_wrench_source(args.env, args.volts, args.seed)
+            from rt.model.description import load_description
+
+            source = twin_wrench_source(args.env, args.volts, args.seed,
+                                        load_description(args.robot))
         else:
             model = TwinAtiSensorModel(seed=args.seed)
             source = model.make_source(args.wrench)

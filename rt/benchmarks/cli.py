@@ -4,20 +4,29 @@ from __future__ import annotations
 import argparse
 import json
 
+from rt.model.robot_option import add_robot_option
+
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("tracking", help="thesis fig. 48/50 tracking experiments on the twin")
     p.add_argument("--experiment", choices=("pid-vs-paden", "payload-step"), required=True)
     p.add_argument("--seconds", type=float, default=26.0)
     p.add_argument("--json", action="store_true")
+    add_robot_option(p)
     p.set_defaults(func=_tracking)
     register_loop(commands)
+
+
+def _model(args):
+    from rt.model import RobotModel
+
+    return RobotModel.load(args.robot)
 
 
 def _tracking(args) -> int:
     from rt.benchmarks.tracking import fig50_table, run_experiment
 
-    result = run_experiment(args.experiment, args.seconds)
+    result = run_experiment(args.experiment, args.seconds, model=_model(args))
     if args.json:
         print(json.dumps(result))
     elif args.experiment == "payload-step":
@@ -43,13 +52,15 @@ def register_loop(commands: argparse._SubParsersAction) -> None:
                    help="realtime: paced by the clock (deadline misses meaningful); fast: "
                         "back-to-back in simulated time")
     p.add_argument("--json", action="store_true")
+    add_robot_option(p)
     p.set_defaults(func=_loop)
 
 
 def _loop(args) -> int:
     from rt.benchmarks.loop import run_loop_benchmark
 
-    result = run_loop_benchmark(args.controller, args.seconds, args.rate, args.mode)
+    result = run_loop_benchmark(args.controller, args.seconds, args.rate, args.mode,
+                                model=_model(args))
     if args.json:
         print(json.dumps(result))
     else:

@@ -18,9 +18,9 @@ def _summary(samples_ns: np.ndarray) -> dict[str, float]:
 
 
 def run_loop_benchmark(controller: str, seconds: float, rate_hz: float = 1000.0,
-                       mode: str = "realtime") -> dict:
+                       mode: str = "realtime", model=None) -> dict:
     pl = build_sim_position_loop(controller, duration_s=max(1.0, seconds), rate_hz=rate_hz,
-                                 mode=mode)
+                                 mode=mode, model=model)
     cycles = pl.loop.run(seconds=seconds)
     stats = pl.loop.stats()
     graph = pl.graph

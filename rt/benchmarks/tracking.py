@@ -44,14 +44,15 @@ def metrics(t: np.ndarray, error: np.ndarray) -> dict:
     return out
 
 
-def run_experiment(name: str, seconds: float = DURATION_S) -> dict:
-    """Run one experiment; returns the issue's JSON shape plus the thesis's figures."""
+def run_experiment(name: str, seconds: float = DURATION_S, model=None) -> dict:
+    """Run one experiment (on ``model``, default the nominal robot); returns the issue's JSON
+    shape plus the thesis's figures."""
     controllers, env = EXPERIMENTS[name]
     results = {}
     approach = None
     for ctrl in controllers:
         log = run_tracking(ctrl, seconds, benchmark_reference(Q0_M), env,
-                           approach_from=(Q0_M, Q0_M, Q0_M))
+                           approach_from=(Q0_M, Q0_M, Q0_M), model=model)
         results[ctrl] = metrics(log.t, log.error)
         approach = log.approach_s
     return {"experiment": name, "twin": True, "rate_hz": 1000.0, "duration_s": seconds,

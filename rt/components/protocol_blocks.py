@@ -22,7 +22,9 @@ class HybridController(Component):
     Position mode: the position law tracks the slider references. Force mode: hybrid explicit
     force in z (F = −w_S.fz, the platform's push) with roll and pitch held. Switching between
     them resets the force law's integral so the force starts from its feedforward. The
-    supervisor is told when the loop depends on the force sensor.
+    supervisor is told when the loop depends on the force sensor. The force reference handed
+    to the law is never below the law's preload (``preload_n``, N): the platform only pushes
+    on a foot (``rt.control.force``).
     """
 
     def __init__(self, name: str, position: Controller, force: ExplicitForce,
@@ -50,6 +52,37 @@ class HybridController(Component):
         self._offset = 0.0
         self.entry_time_s = 0.3
         self._decay_per_s = math.exp(-1.0 / self.entry_time_s)
+        #: Deceleration the platform can give when the force falls to the preload (m/s²).
+        self.unload_decel_m_s2 = 0.5
+        self._f_gov = math.nan
+
+    def _govern(self, fr: ForceReference, dt: float) -> None:
+        """The force reference as the law gets it: never below the preload, and falling to it
+        no faster than the platform can brake. Unloading at rate Ḟ moves the platform down at
+        Ḟ/k through a contact of stiffness k; stopping that motion within the force left above
+        the preload, (F − F_min)/k of travel, needs Ḟ² ≤ 2 a k (F − F_min). A toe off that
+        unloads faster (≈ 8 kN/s in real records) would carry the platform past the preload
+        into pulling on the foot; the reference is slowed there instead (rising is followed
+        as it is)."""
+        floor = self.preload_n
+        target = fr.f if fr.f > floor else floor
+        g = self._f_gov
+        if math.isnan(g) or target >= g:
+            self._f_gov = target
+            if target == floor:
+                fr.f_dot = fr.f_ddot = 0.0
+            fr.f = target
+            return
+        k = self.force_law.k_est
+        max_rate = math.sqrt(2.0 * self.unload_decel_m_s2 * k * (g - floor))
+        step = min(g - target, max_rate * dt)
+        self._f_gov = g - step
+        fr.f, fr.f_dot, fr.f_ddot = self._f_gov, -step / dt, 0.0
+
+    @property
+    def preload_n(self) -> float:
+        """The force reference's floor (N): the force law's preload."""
+        return float(self.force_law.gains.preload_n)
 
     def set_params(self, **values) -> None:
         """Gains of the position law change at a cycle boundary; invalid ones are refused
@@ -76,6 +109,7 @@ class HybridController(Component):
             # Bumpless entry: the reference starts from the force the contact already carries
             # and converges to the protocol's with time constant ``entry_time_s``.
             self._offset = 0.0 if math.isnan(measured) else measured - self.force.data[0]
+            self._f_gov = math.nan
         st = self.state_in.data
         if force_mode:
             fr = self._fref
@@ -85,6 +119,7 @@ class HybridController(Component):
             fr.f = f[0] + off
             fr.f_dot = f[1] - off / self.entry_time_s
             fr.f_ddot = f[2] + off / self.entry_time_s ** 2
+            self._govern(fr, dt)
             fr.roll, fr.pitch = self.pose.data[1], self.pose.data[2]
             fr.roll_rate = fr.pitch_rate = 0.0
             return self.force_law.update(st, measured, fr, dt, self.tau.data)

@@ -105,7 +105,7 @@ class SupervisorBlock(Component):
             t, dt, self.q.data, int(self.est_status.data[0]), self.qd.data, self.qdd.data,
             fk_ok, roll, pitch, roll_rate, pitch_rate, self.q_ref.data, self.qd_ref.data,
             self.tau.data, force, flags[0] > 0.5, flags[1] > 0.5, ins[0] > 0.5, ins[1] > 0.5,
-            self.drive_failed.data[0] > 0.5)
+            self.drive_failed.data[0] > 0.5, -w[2])
         v = self.volts.data
         if reaction >= Reaction.HARD_STOP:
             v[:] = 0.0
@@ -146,6 +146,7 @@ class RedundantDrive(Component):
         self.active_card = self.declare_output("active_card", Array(1))
         self._card = 0
         self._last = np.zeros(3)
+        self._zero = np.zeros(3)
         self._mismatch = [0, 0, 0]
         self._enabled = False
 
@@ -176,8 +177,22 @@ class RedundantDrive(Component):
                                                                    "channel": channel}))
         return True
 
+    def _all_off(self) -> None:
+        """Both cards failed on a channel: every card's outputs to 0 V and disabled, best
+        effort (the failed channel may not obey; the others must not keep their last
+        command while the supervisor hard-stops)."""
+        for card in self.cards:
+            try:
+                card.write_volts(self._zero)
+                card.disable()
+            except HardwareError:
+                pass
+        self._enabled = False
+
     def update(self, t: float, dt: float) -> int:
         if self.failed.data[0] > 0.5:
+            if self._enabled:
+                self._all_off()
             return 0
         v = self.volts.data
         enabled = self.enable.data[0] > 0.5
@@ -190,6 +205,7 @@ class RedundantDrive(Component):
                     if self._mismatch[i] >= self.confirm_cycles:
                         if not self._fail_over(t, i, "amplifier input disagrees with the "
                                                      "command"):
+                            self._all_off()
                             return 0
                         card = self.cards[self._card]
                         break
@@ -208,6 +224,7 @@ class RedundantDrive(Component):
             card.write_volts(v)
         except HardwareError as exc:
             if not self._fail_over(t, -1, f"write failed: {exc}"):
+                self._all_off()
                 return 0
             self.cards[self._card].write_volts(v)
         self._last[:] = v

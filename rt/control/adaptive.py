@@ -19,7 +19,8 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field
 
-from rt.control.base import STATUS_OK, Controller, Gains, register
+from rt.control.base import STATUS_OK, Controller, GainRange, Gains, register
+from rt.control.laws import PD_RANGES
 from rt.model.dynamics import Payload
 from rt.model.regressor import Regressor
 
@@ -43,6 +44,14 @@ class AdaptiveGains(Gains):
 class Adaptive(Controller):
     name = "adaptive"
     gains_type = AdaptiveGains
+    #: Λ sets the sliding surface's bandwidth (same 5-150 rad/s family as the PD laws, capped
+    #: at 100 since K_D Λ acts as a stiffness); adaptation above 1 chases quantization noise
+    #: (see ``AdaptiveGains``); payloads up to 250 kg (the thesis stepped 100 kg).
+    gain_ranges = {"lambda_per_s": GainRange(1.0, 100.0, "1/s"),
+                   "kd_n_s_per_m": PD_RANGES["kd_n_s_per_m"],
+                   "adaptation_rate": GainRange(0.0, 1.0, ""),
+                   "max_payload_kg": GainRange(1.0, 250.0, "kg"),
+                   "payload_com_box_m": GainRange(0.01, 0.5, "m")}
 
     def __init__(self, model, gains=None):
         self.regressor = Regressor(model.dyn)

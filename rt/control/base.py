@@ -6,7 +6,10 @@ Output: actuator forces τ (N) along the ball screws, written into a preallocate
 Errors follow the thesis: e = q − q_d, ė = q̇ − q̇_d.
 
 Controllers keep parameters (gains, validated, changeable at run time through ``set_gains``)
-apart from their state (integrals, estimates), which ``reset`` restores.
+apart from their state (integrals, estimates), which ``reset`` restores. Every law declares the
+range of each of its gains with units (``gain_ranges``, a class-level table of ``GainRange``);
+a gain outside its range is refused naming the range, at construction and at run time, so a
+typo on a clinic's workstation (an extra zero on Kp) never reaches a patient's ankle.
 
 Bumpless transfer: when a controller takes over from another, ``handover`` records the
 difference between the force the old law gave and the new law's first output and fades it out
@@ -19,7 +22,7 @@ from __future__ import annotations
 import abc
 import math
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
@@ -46,11 +49,53 @@ class Gains(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
 
+@dataclass(frozen=True)
+class GainRange:
+    """The values a gain may take, ``lo`` to ``hi`` inclusive, in ``unit`` (SI)."""
+
+    lo: float
+    hi: float
+    unit: str
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.lo) and math.isfinite(self.hi) and self.lo <= self.hi):
+            raise ConfigurationError(f"gain range [{self.lo}, {self.hi}] is not an interval")
+
+    def __str__(self) -> str:
+        return f"[{self.lo:g}, {self.hi:g}] {self.unit}".rstrip()
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"min": self.lo, "max": self.hi, "unit": self.unit}
+
+
+def check_gain_ranges(owner: str, ranges: Mapping[str, GainRange], gains: BaseModel) -> None:
+    """Raise ``ConfigurationError`` naming the gain, its value and its range when any numeric
+    gain in ``gains`` (tuples: every element) lies outside ``ranges``."""
+    for name, rng in ranges.items():
+        value = getattr(gains, name)
+        for v in value if isinstance(value, tuple) else (value,):
+            if not rng.lo <= v <= rng.hi:
+                raise ConfigurationError(
+                    f"{owner} gain {name} = {v:g} {rng.unit} is outside its range {rng}".rstrip())
+
+
+def check_range_table(owner: str, ranges: Mapping[str, GainRange],
+                      gains_type: type[BaseModel]) -> None:
+    """The table must give a range to every numeric gain of ``gains_type`` and nothing else
+    (booleans are switches, not gains)."""
+    numeric = {n for n, f in gains_type.model_fields.items() if f.annotation is not bool}
+    if set(ranges) != numeric:
+        raise ConfigurationError(
+            f"{owner}: gain ranges {sorted(ranges)} do not match its gains {sorted(numeric)}")
+
+
 class Controller(abc.ABC):
     """One position-control law. Subclasses set ``name``, ``gains_type`` and ``_law``."""
 
     name: ClassVar[str]
     gains_type: ClassVar[type[Gains]]
+    #: gain name -> allowed range (with units); checked on every change of gains.
+    gain_ranges: ClassVar[Mapping[str, GainRange]]
     bumpless_time_s: float = 0.2
 
     def __init__(self, model: RobotModel, gains: Gains | dict | None = None):
@@ -69,15 +114,28 @@ class Controller(abc.ABC):
         if isinstance(gains, Gains):
             gains = gains.model_dump()
         try:
-            return self.gains_type.model_validate(gains)
+            validated = self.gains_type.model_validate(gains)
         except ValidationError as exc:
             msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
             raise ConfigurationError(f"{self.name} gains invalid: {msgs}") from None
+        check_gain_ranges(self.name, self.gain_ranges, validated)
+        return validated
+
+    @classmethod
+    def describe_gains(cls) -> dict[str, dict[str, Any]]:
+        """Each gain's default and range: ``{name: {"default", "min", "max", "unit"}}``."""
+        defaults = cls.gains_type()
+        return {name: {"default": getattr(defaults, name), **rng.as_dict()}
+                for name, rng in cls.gain_ranges.items()}
+
+    def check_gains(self, **changes: Any) -> Gains:
+        """The gains ``changes`` would give, validated (ranges included); changes nothing.
+        Raises ``ConfigurationError`` naming the gain and its range."""
+        return self._validate({**self.gains.model_dump(), **changes})
 
     def set_gains(self, **changes: Any) -> None:
         """Change gains at run time; invalid values raise and change nothing."""
-        merged = {**self.gains.model_dump(), **changes}
-        self.gains = self._validate(merged)
+        self.gains = self.check_gains(**changes)
         self._gains_changed()
 
     def _gains_changed(self) -> None:
@@ -120,6 +178,10 @@ CONTROLLERS: dict[str, type[Controller]] = {}
 
 
 def register(cls: type[Controller]) -> type[Controller]:
+    """Add a law to the registry; its range table must cover exactly its gains, and its
+    default gains must lie inside it."""
+    check_range_table(cls.name, cls.gain_ranges, cls.gains_type)
+    check_gain_ranges(cls.name, cls.gain_ranges, cls.gains_type())
     CONTROLLERS[cls.name] = cls
     return cls
 

@@ -6,11 +6,21 @@ Sign convention: ``F`` is the force the platform applies along its z axis to wha
 on the platform). Task coordinates x = (z, roll, pitch); task forces map to the sliders through
 the forward-kinematics Jacobian: τ = J_fkᵀ Q_x (power: τᵀ q̇ = Q_xᵀ ẋ).
 
+Unilateral contact: the platform only pushes on a foot, it never pulls. Both laws take the
+reference no lower than a preload F_min (``preload_n``, default 10 N): F_d = max(F_d, F_min),
+and the explicit law never commands a task force below F_min (its integral does not wind
+further down while the command is held there). The supervisor soft-stops if the measured F
+stays below 0 N anyway (``rt.safety.supervisor``).
+
 * ``ExplicitForce`` — Q_z = F_d + Kp (F_d − F) + Ki ∫(F_d − F) − D (ż − ż_ff), plus the
   feedforward of the motion the force profile implies through the contact stiffness k:
   ż_ff = Ḟ_d / k, z̈_ff = F̈_d / k, compensated with the model (friction F(q̇_ff), inertia).
   k is estimated online (recursive least squares on F against z, with forgetting) from an
-  initial guess. Roll/pitch: PD on the angles with gravity compensation G(q).
+  initial guess. ż_ff is bounded by ``max_feedforward_speed_m_s``: a heel strike rises by
+  0.5 BW in ~5 ms, which through a 1e5 N/m heel would ask 0.4 m/s of the platform, far beyond
+  what its actuators can reach in that time; the bounded feedforward (z̈_ff too, by
+  ``max_feedforward_accel_m_s2``) leaves the rest to the feedback instead of demanding
+  kilonewtons. Roll/pitch: PD on the angles with gravity compensation G(q).
 * ``Admittance`` — the contact is rendered as a virtual mass-damper-spring in z driven by the
   force error, M_a z̈_c + D_a ż_c = F − F_d, and the resulting pose (z_c, roll_d, pitch_d) is
   tracked by the inner Paden-Panja position law (IK to slider references each cycle).
@@ -24,7 +34,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from rt.control.base import Reference, create
+from rt.control.base import GainRange, Reference, check_gain_ranges, check_range_table, create
 from rt.errors import ConfigurationError
 from rt.model import RobotModel
 from rt.model.dynamics import State
@@ -58,14 +68,43 @@ class ExplicitForceGains(BaseModel):
     stiffness_guess_n_per_m: Annotated[float, Field(ge=1e3, le=1e8)] = 1.0e5
     estimate_stiffness: bool = True
     forgetting: Annotated[float, Field(gt=0.9, le=1.0)] = 0.999
+    preload_n: Annotated[float, Field(ge=0.0, le=200.0, allow_inf_nan=False)] = 10.0
+    max_feedforward_speed_m_s: Pos = 0.05
+    max_feedforward_accel_m_s2: Pos = 1.0
 
 
-def _validate(model_type, gains) -> BaseModel:
+#: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
+#: (1e5-1e7 N/m) ring at 1 kHz; damping and angle gains follow the PD laws' 5-150 rad/s family
+#: (platform ≈ 630 kg through the legs in z, ≈ 8 kg m² in roll/pitch); integral clamp below
+#: the drives' ≈ 2 kN per axis.
+EXPLICIT_FORCE_RANGES = {
+    "kp": GainRange(0.0, 50.0, "N/N"),
+    "ki_per_s": GainRange(0.0, 5000.0, "1/s"),
+    "damping_n_s_per_m": GainRange(0.0, 1.0e5, "N s/m"),
+    "integral_limit_n": GainRange(1.0, 2500.0, "N"),
+    "angle_kp_n_m_per_rad": GainRange(100.0, 5.0e4, "N m/rad"),
+    "angle_kd_n_m_s_per_rad": GainRange(1.0, 2000.0, "N m s/rad"),
+    "stiffness_guess_n_per_m": GainRange(1.0e3, 1.0e8, "N/m"),
+    "forgetting": GainRange(0.9, 1.0, ""),
+}
+#: Admittance: a virtual mass below 1 kg or a rate above 0.2 m/s would let the platform jump
+#: at a patient's push; above 500 kg / 1e5 N s/m it no longer yields to a person.
+ADMITTANCE_RANGES = {
+    "virtual_mass_kg": GainRange(1.0, 500.0, "kg"),
+    "virtual_damping_n_s_per_m": GainRange(100.0, 1.0e5, "N s/m"),
+    "virtual_stiffness_n_per_m": GainRange(0.0, 1.0e6, "N/m"),
+    "max_speed_m_s": GainRange(0.001, 0.2, "m/s"),
+}
+
+
+def _validate(owner: str, model_type, ranges, gains) -> BaseModel:
     try:
-        return model_type.model_validate(gains or {})
+        validated = model_type.model_validate(gains or {})
     except ValidationError as exc:
         msgs = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
         raise ConfigurationError(f"force controller gains invalid: {msgs}") from None
+    check_gain_ranges(owner, ranges, validated)
+    return validated
 
 
 @dataclass
@@ -95,11 +134,13 @@ class ExplicitForce:
     """Hybrid explicit force (z) / position (roll, pitch) law; see the module docstring."""
 
     name = "explicit_force"
+    gains_type = ExplicitForceGains
+    gain_ranges = EXPLICIT_FORCE_RANGES
 
     def __init__(self, model: RobotModel, gains: dict | None = None):
         self.model = model
         self.dyn = model.dyn
-        self.gains = _validate(ExplicitForceGains, gains)
+        self.gains = _validate(self.name, ExplicitForceGains, self.gain_ranges, gains)
         self.axis_inertia = model.description.drive.reflected_inertia_kg
         self.reset()
 
@@ -116,7 +157,8 @@ class ExplicitForce:
         self.tau = np.zeros(3)
 
     def set_gains(self, **changes) -> None:
-        self.gains = _validate(ExplicitForceGains, {**self.gains.model_dump(), **changes})
+        self.gains = _validate(self.name, ExplicitForceGains, self.gain_ranges,
+                               {**self.gains.model_dump(), **changes})
 
     def update(self, st: State, force_n: float, ref: ForceReference, dt: float,
                out: np.ndarray) -> int:
@@ -129,11 +171,20 @@ class ExplicitForce:
         zd = S[8, 0] * qd[0] + S[8, 1] * qd[1] + S[8, 2] * qd[2]
         rd = S[11, 0] * qd[0] + S[11, 1] * qd[1] + S[11, 2] * qd[2]
         pd = S[10, 0] * qd[0] + S[10, 1] * qd[1] + S[10, 2] * qd[2]
+        floor = g.preload_n
+        f_d, f_dot, f_ddot = ref.f, ref.f_dot, ref.f_ddot
+        if not f_d > floor:                     # NaN too: hold the preload
+            f_d, f_dot, f_ddot = floor, 0.0, 0.0
+        k = self.k_est
+        vmax = g.max_feedforward_speed_m_s
+        z_dot_ff = max(-vmax, min(vmax, f_dot / k))
+        amax = g.max_feedforward_accel_m_s2
+        z_ddot_ff = max(-amax, min(amax, f_ddot / k)) if abs(f_dot / k) < vmax else 0.0
+        integral = self.integral
         if not math.isnan(force_n):
-            e = ref.f - force_n
-            integ = self.integral + e * dt
+            e = f_d - force_n
             limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
-            self.integral = max(-limit, min(limit, integ))
+            integral = max(-limit, min(limit, integral + e * dt))
             if g.estimate_stiffness and force_n > 50.0:
                 # Learn the contact's stiffness only while clearly in contact and moving a
                 # little; the estimate stays within 1/5..20× the guess, so a poorly excited
@@ -145,11 +196,18 @@ class ExplicitForce:
                 self._last_z = cfg.z
         else:
             e = 0.0
-        k = self.k_est
-        z_dot_ff = ref.f_dot / k
-        z_ddot_ff = ref.f_ddot / k
-        fz = (ref.f + g.kp * e + g.ki_per_s * self.integral
-              - g.damping_n_s_per_m * (zd - z_dot_ff))
+        fz = f_d + g.kp * e + g.ki_per_s * integral - g.damping_n_s_per_m * (zd - z_dot_ff)
+        if fz < floor and not force_n > floor:
+            # Never pull: with the foot carrying no more than the preload (or no reading) the
+            # command is held at the preload, and the integral only moves up (conditional
+            # integration: it does not wind down while the command is held). Above the
+            # preload the feedback may command less than it: that moves the platform down
+            # against its friction while the foot still pushes on it.
+            fz = floor
+            if integral > self.integral:
+                self.integral = integral
+        else:
+            self.integral = integral
         q_roll = (-g.angle_kp_n_m_per_rad * (cfg.roll - ref.roll)
                   - g.angle_kd_n_m_s_per_rad * (rd - ref.roll_rate))
         q_pitch = (-g.angle_kp_n_m_per_rad * (cfg.pitch - ref.pitch)
@@ -173,20 +231,28 @@ class AdmittanceGains(BaseModel):
     virtual_damping_n_s_per_m: Pos = 4000.0
     virtual_stiffness_n_per_m: NonNeg = 0.0
     max_speed_m_s: Pos = 0.05
+    preload_n: Annotated[float, Field(ge=0.0, le=200.0, allow_inf_nan=False)] = 10.0
 
 
 class Admittance:
     """Force error → virtual mass-damper(-spring) in z → pose → inner Paden-Panja."""
 
     name = "admittance"
+    gains_type = AdmittanceGains
+    gain_ranges = ADMITTANCE_RANGES
 
     def __init__(self, model: RobotModel, gains: dict | None = None,
                  inner: str = "paden_panja", inner_gains: dict | None = None):
         self.model = model
-        self.gains = _validate(AdmittanceGains, gains)
+        self.gains = _validate(self.name, AdmittanceGains, self.gain_ranges, gains)
         self.inner = create(inner, model, inner_gains)
         self._ref = Reference()
         self.reset()
+
+    def set_gains(self, **changes) -> None:
+        """Change gains at run time; a value outside its range is refused, nothing changes."""
+        self.gains = _validate(self.name, AdmittanceGains, self.gain_ranges,
+                               {**self.gains.model_dump(), **changes})
 
     def reset(self, z0: float | None = None) -> None:
         self.z = z0
@@ -198,7 +264,8 @@ class Admittance:
         g = self.gains
         if self.z is None:
             self.z = st.cfg.z
-        e = 0.0 if math.isnan(force_n) else force_n - ref.f      # pushing too hard → yield
+        f_d = ref.f if ref.f > g.preload_n else g.preload_n    # never below the preload
+        e = 0.0 if math.isnan(force_n) else force_n - f_d      # pushing too hard → yield
         zdd = (-e - g.virtual_damping_n_s_per_m * self.zd) / g.virtual_mass_kg
         self.zd = max(-g.max_speed_m_s, min(g.max_speed_m_s, self.zd + zdd * dt))
         self.z += self.zd * dt
@@ -212,3 +279,7 @@ class Admittance:
             r.qd[i] = (ahead.q[i] - cfg.q[i]) / 1e-4
             r.qdd[i] = 0.0
         return self.inner.update(st, r, dt, out)
+
+
+for _law in (ExplicitForce, Admittance):
+    check_range_table(_law.name, _law.gain_ranges, _law.gains_type)

@@ -4,6 +4,12 @@ Default gains put the closed loop's error dynamics near ω = 40 rad/s, ζ ≈ 1 
 axis that the sliders weigh with their reflected rotor inertia: Kp = m ω², Kd = 2 ζ m ω. The
 model-based laws use the model's friction F(q̇_d) as feedforward (the thesis's C term of eq. 35
 holds the friction); PID and PD use none.
+
+Gain ranges (``gain_ranges``) keep the closed loop where it is known to behave on this robot:
+natural frequencies ω from 5 to 150 rad/s (below 5 the platform sags centimetres under its own
+weight; above 150 the 1 kHz sampling, the velocity estimator's lag and the 20 µm encoder
+quantization make it ring) and damping ratios up to 2, for the ~210 kg per axis. Integral
+clamps stay below what the drives can give (6 V × 339 N/V ≈ 2 kN per axis).
 """
 from __future__ import annotations
 
@@ -12,7 +18,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field
 
-from rt.control.base import STATUS_OK, Controller, Gains, Reference, register
+from rt.control.base import STATUS_OK, Controller, GainRange, Gains, Reference, register
 from rt.model.dynamics import State
 
 Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
@@ -36,6 +42,16 @@ class CtGains(Gains):
     kd_per_s: Positive = 80.0
 
 
+#: Kp = m ω², Kd = 2 ζ m ω with m ≈ 210 kg, ω ∈ [5, 150] rad/s, ζ ≤ 2 (module docstring).
+PD_RANGES = {"kp_n_per_m": GainRange(5.0e3, 5.0e6, "N/m"),
+             "kd_n_s_per_m": GainRange(1.0e3, 1.5e5, "N s/m")}
+PID_RANGES = {**PD_RANGES, "ki_n_per_m_s": GainRange(0.0, 2.0e7, "N/(m s)"),
+              "integral_limit_n": GainRange(1.0, 2500.0, "N")}
+#: Kp = ω², Kd = 2 ζ ω on the linearised error dynamics, same ω and ζ.
+CT_RANGES = {"kp_per_s2": GainRange(25.0, 22500.0, "1/s²"),
+             "kd_per_s": GainRange(5.0, 600.0, "1/s")}
+
+
 def _pd(g: PdGains, st: State, ref: Reference, out: np.ndarray) -> None:
     e = st.cfg.q[0] - ref.q[0], st.cfg.q[1] - ref.q[1], st.cfg.q[2] - ref.q[2]
     for i in range(3):
@@ -48,6 +64,7 @@ class Pid(Controller):
 
     name = "pid"
     gains_type = PidGains
+    gain_ranges = PID_RANGES
 
     def reset(self) -> None:
         super().reset()
@@ -80,6 +97,7 @@ class PdG(Controller):
 
     name = "pd_g"
     gains_type = PdGains
+    gain_ranges = PD_RANGES
 
     def _law(self, st, ref, dt, out, dry_run):
         _pd(self.gains, st, ref, out)
@@ -93,6 +111,7 @@ class PdG0(Controller):
 
     name = "pd_g0"
     gains_type = PdGains
+    gain_ranges = PD_RANGES
 
     def reset(self) -> None:
         super().reset()
@@ -118,6 +137,7 @@ class PadenPanja(Controller):
 
     name = "paden_panja"
     gains_type = PdGains
+    gain_ranges = PD_RANGES
 
     def _law(self, st, ref, dt, out, dry_run):
         m, c, g = self.dyn.mcg(st)
@@ -138,6 +158,7 @@ class ComputedTorquePtp(Controller):
 
     name = "computed_torque_ptp"
     gains_type = CtGains
+    gain_ranges = CT_RANGES
 
     def _law(self, st, ref, dt, out, dry_run):
         g_ = self.gains
@@ -152,6 +173,7 @@ class ComputedTorqueTrajectory(Controller):
 
     name = "computed_torque"
     gains_type = CtGains
+    gain_ranges = CT_RANGES
 
     def _law(self, st, ref, dt, out, dry_run):
         g_ = self.gains

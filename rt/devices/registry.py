@@ -33,7 +33,11 @@ BACKENDS: dict[str, dict[str, str]] = {
         "opencv": "rt.drivers.camera_cv:OpenCvCamera",
         "synthetic": "rt.drivers.synthetic_frames:SyntheticMarkerCamera",
     },
+    "amplifier_monitor": {
+        "comedi_ai": "rt.drivers.comedi_ai:ComediAmplifierMonitor",
+    },
     "digital_inputs": {
+        "comedi": "rt.drivers.comedi_dio:ComediDigitalInputs",
         "sim": "rt.twin.backends:TwinDigitalInputs",
         "twin_shm": "rt.twin.shm_backends:ShmDigitalInputs",
     },

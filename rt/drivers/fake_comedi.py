@@ -1,25 +1,39 @@
 """A comedilib double for the PCI-1720: the same function names, arguments and return
 conventions as the C library, so the real driver code path (volts -> 12-bit codes) runs in tests
-and in the digital twin without a card."""
+and in the digital twin without a card. ``FakeComediSystem`` puts several such cards behind
+their device files, as one comedilib sees a machine's cards."""
 from __future__ import annotations
 
 import ctypes
+from typing import Any, Callable, Mapping
 
-from rt.drivers.pci1720 import ComediRange
+from rt.drivers.pci1720 import ComediRange, volts_to_code
 
 
 class FakeComedi:
     """comedilib's functions with the same names, arguments and return conventions, for a
     PCI-1720 (adv_pci1720: subdevice 0 = AO, 4 channels, maxdata 4095, ranges 0-5, 0-10,
-    ±5, ±10 V) plus an optional digital-output subdevice 2 on the same "device".
+    ±5, ±10 V) plus digital-I/O subdevices (``dio_subdevices``, default 2; 8 lines each,
+    configured as input or output with ``comedi_dio_config``, like an 8255 port) on the same
+    "device". A digital I/O card alone is ``FakeComedi(dio_subdevices=(0, 1))``; an
+    analog-input card (PCI-1711-like: 16 inputs, 12 bit, ranges ±10, ±5, ±2.5, ±1.25,
+    ±0.625 V) is ``FakeComedi(ai_source=volts_of_channel)``, its inputs on subdevice 0.
 
     Records ``writes`` as (handle, subdevice, channel, range, aref, code) and ``dio`` as
     (handle, subdevice, channel, bit). ``fail_open`` / ``fail_writes`` inject errors.
+    ``level(subdevice, channel)`` is a line's level (what an output drives, what the outside
+    world puts on an input: ``set_input``); ``fail_dio_reads`` makes ``comedi_dio_read`` fail.
     """
 
-    RANGES = ((0.0, 5.0), (0.0, 10.0), (-5.0, 5.0), (-10.0, 10.0))
+    DIO_CHANNELS = 8
 
-    def __init__(self, keep_log: bool = True) -> None:
+    RANGES = ((0.0, 5.0), (0.0, 10.0), (-5.0, 5.0), (-10.0, 10.0))
+    AI_RANGES = ((-10.0, 10.0), (-5.0, 5.0), (-2.5, 2.5), (-1.25, 1.25), (-0.625, 0.625))
+    AI_SUBDEVICE = 0
+    AI_CHANNELS = 16
+
+    def __init__(self, keep_log: bool = True, dio_subdevices: tuple[int, ...] = (2,),
+                 ai_source: Callable[[int], float] | None = None) -> None:
         # The twin keeps no log (it runs for hours); tests keep every write.
         self.keep_log = keep_log
         self.last_code: dict[int, int] = {}
@@ -30,6 +44,12 @@ class FakeComedi:
         self.closed: list[object] = []
         self.fail_open = False
         self.fail_writes = False
+        self.fail_dio_reads = False
+        self.dio_subdevices = tuple(dio_subdevices)
+        self.ai_source = ai_source
+        self.fail_ai_reads = False
+        self._ai_ranges = [ComediRange(lo, hi, 0) for lo, hi in self.AI_RANGES]
+        self._levels = {sub: [0] * self.DIO_CHANNELS for sub in self.dio_subdevices}
         self._errno = 0
         # comedi_get_range returns a pointer valid until close; keep the structures alive.
         self._ranges = [ComediRange(lo, hi, 0) for lo, hi in self.RANGES]
@@ -47,14 +67,25 @@ class FakeComedi:
         self.closed.append(handle)
         return 0
 
+    def _is_ai(self, subdevice: int) -> bool:
+        return self.ai_source is not None and subdevice == self.AI_SUBDEVICE
+
     def comedi_get_n_channels(self, handle, subdevice: int) -> int:
-        return {0: 4, 2: 8}.get(subdevice, -1)
+        if self._is_ai(subdevice):
+            return self.AI_CHANNELS
+        if subdevice in self.dio_subdevices:
+            return self.DIO_CHANNELS
+        return 4 if subdevice == 0 else -1
 
     def comedi_get_maxdata(self, handle, subdevice: int, channel: int) -> int:
-        return 4095 if subdevice == 0 else 1
+        return 4095 if subdevice == 0 and subdevice not in self.dio_subdevices else 1
 
     def comedi_get_range(self, handle, subdevice: int, channel: int, rng: int):
-        if subdevice != 0 or not 0 <= rng < len(self._ranges):
+        if self._is_ai(subdevice):
+            if not 0 <= rng < len(self._ai_ranges):
+                return ctypes.POINTER(ComediRange)()
+            return ctypes.pointer(self._ai_ranges[rng])
+        if subdevice != 0 or subdevice in self.dio_subdevices or not 0 <= rng < len(self._ranges):
             return ctypes.POINTER(ComediRange)()       # NULL
         return ctypes.pointer(self._ranges[rng])
 
@@ -71,16 +102,52 @@ class FakeComedi:
             self.writes.append((handle, subdevice, channel, rng, aref, data))
         return 1
 
-    def comedi_dio_config(self, handle, subdevice, channel, direction) -> int:
-        if subdevice != 2:
+    def _dio_ok(self, subdevice: int, channel: int) -> bool:
+        if subdevice not in self.dio_subdevices or not 0 <= channel < self.DIO_CHANNELS:
             self._errno = 22
+            return False
+        return True
+
+    def comedi_data_read(self, handle, subdevice, channel, rng, aref, data) -> int:
+        """``data`` is a ``POINTER(c_uint)``: the code of ``ai_source(channel)`` volts."""
+        if not self._is_ai(subdevice) or self.fail_ai_reads or not 0 <= rng < len(self.AI_RANGES):
+            self._errno = 5 if self.fail_ai_reads else 22
+            return -1
+        assert self.ai_source is not None
+        lo, hi = self.AI_RANGES[rng]
+        data[0] = volts_to_code(self.ai_source(channel), lo, hi, 4095)
+        return 1
+
+    def comedi_dio_config(self, handle, subdevice, channel, direction) -> int:
+        if not self._dio_ok(subdevice, channel):
             return -1
         self.dio_config.append((handle, subdevice, channel, direction))
         return 1
 
     def comedi_dio_write(self, handle, subdevice, channel, bit) -> int:
+        if not self._dio_ok(subdevice, channel):
+            return -1
         self.dio.append((handle, subdevice, channel, bit))
+        self._levels[subdevice][channel] = 1 if bit else 0
         return 1
+
+    def comedi_dio_read(self, handle, subdevice, channel, bit) -> int:
+        """``bit`` is a ``POINTER(c_uint)``, as ctypes passes ``unsigned int *``."""
+        if self.fail_dio_reads:
+            self._errno = 5
+            return -1
+        if not self._dio_ok(subdevice, channel):
+            return -1
+        bit[0] = self._levels[subdevice][channel]
+        return 1
+
+    def set_input(self, subdevice: int, channel: int, level: int) -> None:
+        """The outside world drives digital line ``channel`` of ``subdevice`` (0/1)."""
+        self._levels[subdevice][channel] = 1 if level else 0
+
+    def level(self, subdevice: int, channel: int) -> int:
+        """The level of digital line ``channel`` of ``subdevice`` (0/1)."""
+        return self._levels[subdevice][channel]
 
     def comedi_errno(self) -> int:
         return self._errno
@@ -91,3 +158,44 @@ class FakeComedi:
     def codes(self, n: int = 3) -> list[int]:
         """The last code written to each of channels 0..n-1."""
         return [self.last_code.get(c) for c in range(n)]
+
+
+class FakeComediSystem:
+    """comedilib over several fake cards, each behind its device file (``{path: FakeComedi}``).
+
+    ``comedi_open(path)`` opens that card (NULL and errno 2 for an unknown path); every other
+    call goes to the card that owns its handle. The real drivers take it as their ``lib``.
+    """
+
+    def __init__(self, devices: Mapping[str, FakeComedi]) -> None:
+        self.devices = dict(devices)
+        self._owner: dict[Any, FakeComedi] = {}
+        self._errno = 0
+        self._last: FakeComedi | None = None
+
+    def comedi_open(self, path: bytes):
+        card = self.devices.get(path.decode())
+        if card is None:
+            self._errno, self._last = 2, None
+            return None
+        handle = card.comedi_open(path)
+        if handle is not None:
+            self._owner[handle] = card
+        self._last = card
+        return handle
+
+    def __getattr__(self, name: str):
+        if not name.startswith("comedi_"):
+            raise AttributeError(name)
+
+        def call(handle, *args):
+            card = self._owner[handle]
+            self._last = card
+            return getattr(card, name)(handle, *args)
+        return call
+
+    def comedi_errno(self) -> int:
+        return self._last.comedi_errno() if self._last is not None else self._errno
+
+    def comedi_strerror(self, errnum: int) -> bytes:
+        return f"fake comedi error {errnum}".encode()

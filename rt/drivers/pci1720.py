@@ -51,6 +51,7 @@ from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError
 
 AREF_GROUND = 0
 UNIT_VOLT = 0
+COMEDI_INPUT = 0
 COMEDI_OUTPUT = 1
 #: adv_pci1720 range index of ±10 V (thesis 3.1.2).
 RANGE_BIPOLAR_10V = 3
@@ -87,8 +88,10 @@ def load_comedilib() -> Any:
         "comedi_get_maxdata": (u, (p, u, u)),
         "comedi_get_range": (ctypes.POINTER(ComediRange), (p, u, u, u)),
         "comedi_data_write": (ctypes.c_int, (p, u, u, u, u, u)),
+        "comedi_data_read": (ctypes.c_int, (p, u, u, u, u, ctypes.POINTER(ctypes.c_uint))),
         "comedi_dio_config": (ctypes.c_int, (p, u, u, u)),
         "comedi_dio_write": (ctypes.c_int, (p, u, u, u)),
+        "comedi_dio_read": (ctypes.c_int, (p, u, u, ctypes.POINTER(ctypes.c_uint))),
         "comedi_errno": (ctypes.c_int, ()),
         "comedi_strerror": (ctypes.c_char_p, (ctypes.c_int,)),
     }
@@ -97,6 +100,26 @@ def load_comedilib() -> Any:
         fn.restype = restype
         fn.argtypes = argtypes
     return lib
+
+
+def comedi_error_text(lib: Any) -> str:
+    """comedilib's message for its last error (``comedi_strerror(comedi_errno())``)."""
+    msg = lib.comedi_strerror(lib.comedi_errno())
+    return msg.decode(errors="replace") if isinstance(msg, bytes) else str(msg)
+
+
+def comedi_open_device(lib: Any, path: str, card: str) -> Any:
+    """``comedi_open(path)``, or one clear error: ``BackendUnavailableError`` when the device
+    file does not exist (driver for ``card`` not loaded), ``HardwareError`` otherwise."""
+    handle = lib.comedi_open(path.encode())
+    if not handle:
+        reason = comedi_error_text(lib)
+        if not os.path.exists(path):
+            raise BackendUnavailableError(
+                f"{path} does not exist: load the comedi driver for the {card} or choose the "
+                f"'sim' backend ({reason})")
+        raise HardwareError(f"comedi_open({path}) failed: {reason}")
+    return handle
 
 
 def volts_to_code(volts: float, v_min: float = -10.0, v_max: float = 10.0,
@@ -207,19 +230,10 @@ class Pci1720Outputs(ActuatorOutputs):
     # --- setup -------------------------------------------------------------------------
 
     def _error_text(self) -> str:
-        msg = self._lib.comedi_strerror(self._lib.comedi_errno())
-        return msg.decode(errors="replace") if isinstance(msg, bytes) else str(msg)
+        return comedi_error_text(self._lib)
 
     def _open(self, path: str) -> Any:
-        handle = self._lib.comedi_open(path.encode())
-        if not handle:
-            reason = self._error_text()
-            if not os.path.exists(path):
-                raise BackendUnavailableError(
-                    f"{path} does not exist: load the comedi driver for the card "
-                    f"(adv_pci1720) or choose the 'sim' backend ({reason})")
-            raise HardwareError(f"comedi_open({path}) failed: {reason}")
-        return handle
+        return comedi_open_device(self._lib, path, "card (adv_pci1720)")
 
     def _probe_channel(self, number: int) -> _Channel:
         lib, dev, sub = self._lib, self._dev, self.subdevice

@@ -216,9 +216,9 @@ def _per_axis(value: float | Sequence[float], name: str, n: int) -> tuple:
 class Pcl833Encoders(EncoderBank):
     """The three slider encoders read through a PCL-833 card.
 
-    Outputs: ``read_positions_m(out)`` -> slider displacements q (m, len 3) from the position
-    at the last ``reset()`` (or at open, with ``reset_on_open``); ``read_counts()`` -> raw
-    24-bit counter values.
+    Outputs: ``read_positions_m(out)`` -> slider positions q (m, len 3): ``origin_m`` plus the
+    displacement since the last ``reset()`` (or open, with ``reset_on_open``);
+    ``read_counts()`` -> raw 24-bit counter values.
 
     Parameters (fixed after construction):
 
@@ -233,6 +233,8 @@ class Pcl833Encoders(EncoderBank):
     * ``reset_on_open``: configure and reset the counters to the midpoint at open, as the
       thesis does at start-up. ``False`` configures without resetting, so a process can
       reopen the card and keep the positions counted so far.
+    * ``origin_m``: slider positions (m) that the counters' reset value stands for, i.e. where
+      the sliders are when the counters are reset (the rig's homing position); default 0.
     """
 
     def __init__(self, port_io: PortIO | None = None, base: int = DEFAULT_BASE,
@@ -241,7 +243,8 @@ class Pcl833Encoders(EncoderBank):
                  channels: Sequence[int] = (1, 2, 3),
                  input_mode: InputMode | int = InputMode.X1,
                  reset_on_open: bool = True,
-                 port_path: str = "/dev/port") -> None:
+                 port_path: str = "/dev/port",
+                 origin_m: float | Sequence[float] = 0.0) -> None:
         if not 0 <= base <= ISA_MAX_PORT - PORT_SPAN + 1:
             raise ConfigurationError(
                 f"PCL-833 base 0x{base:X} is outside the ISA I/O range 0x000-0x3F0")
@@ -249,6 +252,9 @@ class Pcl833Encoders(EncoderBank):
         self.m_per_count = tuple(float(m) for m in _per_axis(m_per_count, "m_per_count", 3))
         if not all(m > 0 and math.isfinite(m) for m in self.m_per_count):
             raise ConfigurationError(f"m_per_count must be positive, got {self.m_per_count}")
+        self.origin_m = tuple(float(x) for x in _per_axis(origin_m, "origin_m", 3))
+        if not all(math.isfinite(x) for x in self.origin_m):
+            raise ConfigurationError(f"origin_m must be finite, got {self.origin_m}")
         self.sign = tuple(int(s) for s in _per_axis(sign, "sign", 3))
         if not all(s in (1, -1) for s in self.sign):
             raise ConfigurationError(f"sign must be +1 or -1 per axis, got {self.sign}")
@@ -327,7 +333,7 @@ class Pcl833Encoders(EncoderBank):
         self._check_open()
         for i in range(3):
             displacement = self._unwrap[i].update(self.read_channel(self.channels[i]))
-            out[i] = self.sign[i] * displacement * self.m_per_count[i]
+            out[i] = self.origin_m[i] + self.sign[i] * displacement * self.m_per_count[i]
         return out
 
     def _close(self) -> None:

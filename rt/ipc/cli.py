@@ -1,4 +1,4 @@
-"""``talus rt status|stop|estop|reset``: requests to a running RT server.
+"""``talus rt status|stop|estop|reset``: requests to a running RT server; ``talus rt keys``.
 
 Each prints the reply's ``result`` as one JSON line and exits 0; a refused request or an
 unreachable server prints ``{"error": "..."}`` and exits 2. ``status``, ``stop`` and ``estop``
@@ -29,6 +29,23 @@ def _add_connection_options(parser: argparse.ArgumentParser) -> None:
                         help="RT server request address (default %(default)s)")
     parser.add_argument("--timeout", type=float, default=1.0,
                         help="longest wait for the reply, s (default %(default)s)")
+    parser.add_argument("--curve-secret", default=None, metavar="FILE",
+                        help="this client's CurveZMQ NAME.key_secret (needed off loopback)")
+    parser.add_argument("--server-key", default=None, metavar="FILE",
+                        help="the server's CurveZMQ public NAME.key (needed off loopback)")
+
+
+def client_curve(args: argparse.Namespace):
+    """The client's CurveZMQ config from ``--curve-secret``/``--server-key`` (both or none)."""
+    from rt.errors import ConfigurationError
+    from rt.ipc.security import ClientCurveConfig
+
+    if args.curve_secret is None and args.server_key is None:
+        return None
+    if args.curve_secret is None or args.server_key is None:
+        raise ConfigurationError("CurveZMQ needs both --curve-secret and --server-key")
+    return ClientCurveConfig(secret_key_file=args.curve_secret,
+                             server_public_key_file=args.server_key)
 
 
 def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -54,6 +71,13 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
             p.set_defaults(func=cmd_reset)
             continue
         p.set_defaults(func=cmd_request, rt_command=name)
+    p = commands.add_parser(
+        "keys", help="make a CurveZMQ key pair (NAME.key, NAME.key_secret) in --dir",
+        description="Makes a CurveZMQ key pair for the RT server or a client; never overwrites. "
+                    "Prints the two paths as one JSON line.")
+    p.add_argument("--dir", required=True, help="directory for the key files (made if missing)")
+    p.add_argument("--name", default="server", help="file name stem (default %(default)s)")
+    p.set_defaults(func=cmd_keys)
 
 
 def cmd_request(args: argparse.Namespace) -> int:
@@ -64,7 +88,7 @@ def cmd_request(args: argparse.Namespace) -> int:
     cmd_args: dict[str, Any] = {"source": args.source} if args.rt_command == "estop" else {}
     try:
         with RtClient(args.endpoint, client_id=default_client_id("cli"),
-                      timeout_s=args.timeout) as client:
+                      timeout_s=args.timeout, curve=client_curve(args)) as client:
             result = client.request(args.rt_command, **cmd_args)
     except TalusError as exc:
         _emit({"error": str(exc)})
@@ -80,7 +104,7 @@ def cmd_reset(args: argparse.Namespace) -> int:
 
     try:
         with RtClient(args.endpoint, client_id=default_client_id("cli"),
-                      timeout_s=args.timeout) as client:
+                      timeout_s=args.timeout, curve=client_curve(args)) as client:
             ack = args.ack
             if ack is None:
                 ack = [e["id"] for e in client.status()["latched"]]
@@ -93,4 +117,18 @@ def cmd_reset(args: argparse.Namespace) -> int:
         _emit({"error": str(exc)})
         return EXIT_ERROR
     _emit(result)
+    return 0
+
+
+def cmd_keys(args: argparse.Namespace) -> int:
+    """Make a key pair; print ``{"public": ..., "secret": ...}`` (the paths, never the keys)."""
+    from rt.errors import TalusError
+    from rt.ipc.security import make_keys
+
+    try:
+        public, secret = make_keys(args.dir, args.name)
+    except TalusError as exc:
+        _emit({"error": str(exc)})
+        return EXIT_ERROR
+    _emit({"public": str(public), "secret": str(secret)})
     return 0

@@ -20,6 +20,7 @@ from rt.errors import HardwareError, InputError, ProtocolError, TalusError
 from rt.ipc.messages import (
     DEFAULT_ENDPOINT, TOPICS, decode_publication, decode_reply, encode_request,
 )
+from rt.ipc.security import ClientCurveConfig, ClientSecurity, check_client_endpoint
 
 _CANCEL_SLICE_S = 0.05  # how often a cancellable wait checks its stop flag, s
 
@@ -38,14 +39,18 @@ class _ReqChannel:
     stuck in its send/recv state machine, so after a timeout it is discarded and the next
     request opens a fresh one. Not thread-safe: one owner thread."""
 
-    def __init__(self, ctx: zmq.Context[Any], endpoint: str) -> None:
+    def __init__(self, ctx: zmq.Context[Any], endpoint: str,
+                 security: ClientSecurity | None = None) -> None:
         self._ctx = ctx
         self.endpoint = endpoint
+        self._security = security
         self._sock: zmq.Socket[bytes] | None = None
 
     def _open(self) -> zmq.Socket[bytes]:
         sock: zmq.Socket[bytes] = self._ctx.socket(zmq.REQ)
         sock.setsockopt(zmq.LINGER, 0)  # a request nobody answered must not hold up close()
+        if self._security is not None:
+            self._security.apply(sock)
         try:
             sock.connect(self.endpoint)
         except zmq.ZMQError as exc:
@@ -93,20 +98,29 @@ class RtClient:
         client_id: this client's name in the server's heartbeat table (default: unique).
         timeout_s: longest wait for a reply, s.
         context: a zmq context to share (default: a private one, terminated by ``close()``).
+        curve: this client's key pair and the server's public key (:mod:`rt.ipc.security`);
+            required when ``endpoint`` is not loopback.
+
+    Raises:
+        ConfigurationError: a non-loopback endpoint without ``curve``, or unreadable keys.
     """
 
     def __init__(self, endpoint: str = DEFAULT_ENDPOINT, client_id: str | None = None,
                  timeout_s: float = 1.0, *,
-                 context: zmq.Context[Any] | None = None) -> None:
+                 context: zmq.Context[Any] | None = None,
+                 curve: ClientCurveConfig | None = None) -> None:
         if not timeout_s > 0:
             raise InputError(f"timeout_s must be > 0, got {timeout_s}")
+        self.curve = curve
+        self._security = None if curve is None else ClientSecurity(curve)
+        check_client_endpoint(endpoint, self._security)
         self.endpoint = endpoint
         self.client_id = client_id or default_client_id()
         self.timeout_s = float(timeout_s)
         self._own_context = context is None
         self._ctx = zmq.Context() if context is None else context
         self._lock = threading.Lock()
-        self._channel = _ReqChannel(self._ctx, endpoint)
+        self._channel = _ReqChannel(self._ctx, endpoint, self._security)
         self._ids = itertools.count(1)  # next() on a C iterator is atomic under the GIL
         self._hb_thread: threading.Thread | None = None
         self._hb_stop = threading.Event()
@@ -218,7 +232,7 @@ class RtClient:
     def subscribe(self, topics: Iterable[str] = TOPICS) -> Subscriber:
         """A :class:`Subscriber` to the server's PUB endpoint (asked with ``subscribe_info``).
         It has its own context, so it may outlive this client and live in another thread."""
-        return Subscriber(self.subscribe_info()["pub_endpoint"], topics)
+        return Subscriber(self.subscribe_info()["pub_endpoint"], topics, curve=self.curve)
 
     # ------------------------------------------------------------------ heartbeat
 
@@ -251,7 +265,7 @@ class RtClient:
         self._hb_thread = None
 
     def _heartbeat_loop(self, period_s: float) -> None:
-        channel = _ReqChannel(self._ctx, self.endpoint)  # sockets belong to one thread
+        channel = _ReqChannel(self._ctx, self.endpoint, self._security)  # one thread's socket
         try:
             next_t = time.monotonic()
             while not self._hb_stop.is_set():
@@ -301,21 +315,27 @@ class Subscriber:
         topics: any of "telemetry", "event".
         context: a zmq context to share (default: a private one, terminated by ``close()``).
         rcvhwm: messages queued for this subscriber before newer ones are dropped.
+        curve: as for :class:`RtClient`; required when ``pub_endpoint`` is not loopback.
     """
 
     def __init__(self, pub_endpoint: str, topics: Iterable[str] = TOPICS, *,
-                 context: zmq.Context[Any] | None = None, rcvhwm: int = 10_000) -> None:
+                 context: zmq.Context[Any] | None = None, rcvhwm: int = 10_000,
+                 curve: ClientCurveConfig | None = None) -> None:
         self.topics = tuple(topics)
         unknown = [t for t in self.topics if t not in TOPICS]
         if unknown or not self.topics:
             raise InputError(f"unknown or no topics {unknown or list(self.topics)}; "
                              f"topics: {', '.join(TOPICS)}")
+        security = None if curve is None else ClientSecurity(curve)
+        check_client_endpoint(pub_endpoint, security)
         self.pub_endpoint = pub_endpoint
         self._own_context = context is None
         self._ctx = zmq.Context() if context is None else context
         self._sock = self._ctx.socket(zmq.SUB)
         self._sock.setsockopt(zmq.LINGER, 0)
         self._sock.setsockopt(zmq.RCVHWM, rcvhwm)
+        if security is not None:
+            security.apply(self._sock)
         try:
             self._sock.connect(pub_endpoint)
         except zmq.ZMQError as exc:

@@ -27,14 +27,17 @@ from rt.ipc.messages import (
     RequestRejected,
     check_publication, decode_request, encode_publication, error_reply, ok_reply,
 )
+from rt.ipc.security import ServerCurveConfig, ServerSecurity, check_server_endpoint
 
 log = logging.getLogger(__name__)
 
 #: Handler methods the server dispatches to: every command but ``subscribe_info``, which the
 #: server answers itself.
 HANDLER_METHODS: tuple[str, ...] = tuple(c for c in COMMANDS if c != "subscribe_info")
-# libzmq disconnects a peer whose frame exceeds this; between MAX_MESSAGE_BYTES and this the
-# peer gets an error reply instead. It only guards the process's memory against a runaway peer.
+# libzmq disconnects a peer whose frame exceeds this, reading only the frame's header (set
+# before bind: ZMQ_MAXMSGSIZE applies to connections made after it is set); between
+# MAX_MESSAGE_BYTES and this the peer gets an error reply instead. It guards the process's
+# memory against a runaway or hostile peer.
 _HARD_FRAME_LIMIT = 16 * 1024 * 1024
 _MAX_REQUESTS_PER_TURN = 64  # so a flood of requests cannot starve publishing
 _MAX_CLIENTS_TRACKED = 1000
@@ -79,16 +82,20 @@ class RtServer:
         publish_queue_len: hand-over queue length; when full the oldest message is dropped.
         context: a zmq context to share (default: a private one, terminated by ``close()``).
         poll_interval_s: longest wait of the server thread between checks of its stop flag, s.
+        curve: CurveZMQ keys (see :mod:`rt.ipc.security`); required for an endpoint that is
+            not loopback.
 
     Raises:
-        ConfigurationError: the handler lacks a command method, or an endpoint cannot be bound.
+        ConfigurationError: the handler lacks a command method, an endpoint cannot be bound,
+            or is not loopback and no CurveZMQ keys are configured.
     """
 
     def __init__(self, handler: Handler, endpoint: str = DEFAULT_ENDPOINT,
                  pub_endpoint: str = DEFAULT_PUB_ENDPOINT, heartbeat_timeout_s: float = 0.25,
                  *, publish_queue_len: int = 1024,
                  context: zmq.Context[Any] | None = None,
-                 poll_interval_s: float = 0.05) -> None:
+                 poll_interval_s: float = 0.05,
+                 curve: ServerCurveConfig | None = None) -> None:
         missing = [m for m in HANDLER_METHODS if not callable(getattr(handler, m, None))]
         if missing:
             raise ConfigurationError(
@@ -103,10 +110,14 @@ class RtServer:
         self._ctx = zmq.Context() if context is None else context
         self._router: zmq.Socket[bytes] | None = None
         self._pub: zmq.Socket[bytes] | None = None
+        self._security: ServerSecurity | None = None
         self._wake_r, self._wake_w = socket.socketpair()
         try:
+            if curve is not None:
+                self._security = ServerSecurity(self._ctx, curve)
+            for address in (endpoint, pub_endpoint):
+                check_server_endpoint(address, self._security)
             self._router = self._bind(zmq.ROUTER, endpoint)
-            self._router.setsockopt(zmq.MAXMSGSIZE, _HARD_FRAME_LIMIT)
             self._pub = self._bind(zmq.PUB, pub_endpoint)
         except BaseException:
             self._release()
@@ -148,6 +159,9 @@ class RtServer:
     def _bind(self, kind: int, endpoint: str) -> zmq.Socket[bytes]:
         sock: zmq.Socket[bytes] = self._ctx.socket(kind)
         sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.MAXMSGSIZE, _HARD_FRAME_LIMIT)   # before bind, or it is ignored
+        if self._security is not None:
+            self._security.apply(sock)
         try:
             sock.bind(endpoint)
         except zmq.ZMQError as exc:
@@ -163,6 +177,8 @@ class RtServer:
                 sock.close(linger=0)
         self._wake_r.close()
         self._wake_w.close()
+        if self._security is not None:
+            self._security.close()      # its ZAP socket lives on the context
         if self._own_context:
             self._ctx.term()
 

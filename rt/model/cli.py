@@ -17,6 +17,7 @@ import numpy as np
 from rt.errors import InputError, TalusError
 from rt.model import RobotModel
 from rt.model.dynamics import Payload
+from rt.model.robot_option import add_robot_option
 
 
 def register(commands: argparse._SubParsersAction) -> None:
@@ -29,7 +30,7 @@ def register(commands: argparse._SubParsersAction) -> None:
         ("demo", _demo, "human-readable tour of the model on the twin's nominal description"),
     ):
         p = commands.add_parser(name, help=help_text)
-        p.add_argument("--robot", help="robot description YAML (default: packaged nominal twin)")
+        add_robot_option(p)
         p.set_defaults(func=func)
 
 

@@ -4,12 +4,15 @@ from __future__ import annotations
 import argparse
 import json
 
+from rt.model.robot_option import add_robot_option
+
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("matrix", help="inject every fault on the twin and report the "
                                            "supervisor's reaction")
     p.add_argument("--json", action="store_true")
     p.add_argument("--only", nargs="*", default=None, help="run only these faults")
+    add_robot_option(p)
     p.set_defaults(func=_matrix)
 
 
@@ -18,9 +21,16 @@ def _fmt(v) -> str:
 
 
 def _matrix(args) -> int:
+    from rt.errors import TalusError
+    from rt.model import RobotModel
     from rt.safety.fault_matrix import run_matrix
 
-    result = run_matrix(args.only)
+    try:
+        model = RobotModel.load(args.robot)
+    except TalusError as exc:
+        print(json.dumps({"error": str(exc)}))
+        return 2
+    result = run_matrix(args.only, model=model)
     if args.json:
         print(json.dumps(result))
         return 0
@@ -33,6 +43,6 @@ def _matrix(args) -> int:
         print(f"{f['name']:20s} {'yes' if f['detected'] else 'NO':4s} {f['reaction']:10s} "
               f"{f.get('cause', '-'):18s} {_fmt(f['latency_ms']):>8s} "
               f"{_fmt(f['time_to_zero_output_ms']):>7s} {_fmt(f['time_to_rest_ms']):>8s} "
-              f"{e['rom_deg']:6.2f} {e['force_pct']:6.2f} {e['stroke_mm']:6.2f}  "
+              f"{_fmt(e['rom_deg']):>6s} {e['force_pct']:6.2f} {e['stroke_mm']:6.2f}  "
               f"{f['final_state']}")
     return 0

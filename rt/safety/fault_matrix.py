@@ -19,6 +19,7 @@ import numpy as np
 from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference
 from rt.engine import Component
+from rt.errors import KinematicsError
 from rt.model import RobotModel
 from rt.position_loop import PositionLoop, build_sim_position_loop
 from rt.safety.events import Reaction, SupervisorMode
@@ -227,30 +228,38 @@ def _limit_onset(sc: Scenario, rows: np.ndarray, model: RobotModel, sup) -> floa
 
 
 def _excursions(rows: np.ndarray, sc: Scenario, model: RobotModel, t_from: float) -> dict:
+    """Worst excursions of the truth from ``t_from``: beyond the patient's ROM (deg; None when
+    forward kinematics failed on a sample, the pose then being unknown, with the count in
+    ``fk_failed_samples``), beyond the force limit (%), beyond the stroke (mm)."""
     kin = model.kin
     t = rows[:, 0]
     sel = rows[t >= t_from]
-    rom = 0.0
+    rom: float | None = 0.0
+    fk_failed = 0
     for r in sel[::5]:
         try:
-            cfg = kin.fk(r[1:4], check=False)
-        except Exception:
+            cfg = kin.fk(r[1:4], check=True)
+        except KinematicsError:
+            # The true pose is unknown there: the excursion cannot be bounded (not 0.0°).
+            fk_failed += 1
             continue
         p = sc.patient
         over = max(math.degrees(cfg.roll) - p.roll_max_deg, p.roll_min_deg - math.degrees(cfg.roll),
                    math.degrees(cfg.pitch) - p.pitch_max_deg,
                    p.pitch_min_deg - math.degrees(cfg.pitch), 0.0)
-        rom = max(rom, over)
+        rom = max(rom or 0.0, over)
+    if fk_failed:
+        rom = None
     lo, hi = model.description.limits.stroke_m
     stroke = max(0.0, float(np.max(sel[:, 1:4]) - hi), float(lo - np.min(sel[:, 1:4]))) * 1e3
     force_limit = sc.patient.max_force_n
     force_pct = max(0.0, (float(np.nanmax(sel[:, 10])) - force_limit) / force_limit * 100.0)
-    return {"rom_deg": round(rom, 3), "force_pct": round(force_pct, 2),
-            "stroke_mm": round(stroke, 3)}
+    return {"rom_deg": None if rom is None else round(rom, 3), "fk_failed_samples": fk_failed,
+            "force_pct": round(force_pct, 2), "stroke_mm": round(stroke, 3)}
 
 
-def run_matrix(names: list[str] | None = None) -> dict:
-    model = RobotModel.load()
+def run_matrix(names: list[str] | None = None, model: RobotModel | None = None) -> dict:
+    model = model or RobotModel.load()
     out = []
     for sc in scenarios(model):
         if names and sc.name not in names:

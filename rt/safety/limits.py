@@ -34,6 +34,12 @@ class RobotLimits(_Limits):
     heartbeat_timeout_s: Pos = 0.25
     frozen_encoder_s: Pos = 0.05
     frozen_min_ref_speed_m_s: Pos = 0.004
+    #: In force control the platform only pushes on the foot: measured Fz below 0 N for this
+    #: long (s) means it is pulling → soft stop. Longer than the sensor's noise crossings.
+    max_pull_s: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] = 0.02
+    #: Pre-flight: the drives may saturate (command at max_command_v, or the actuator force
+    #: asked beyond max_actuator_force_n) for at most this long at a time (s).
+    max_saturation_s: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] = 0.02
 
 
 class PatientLimits(_Limits):
@@ -91,6 +97,7 @@ class EffectiveLimits:
     heartbeat_timeout_s: float
     frozen_encoder_s: float
     frozen_min_ref_speed_m_s: float
+    max_pull_s: float
 
 
 def effective(stroke_m: tuple[float, float], robot: RobotLimits, patient: PatientLimits,
@@ -126,4 +133,5 @@ def effective(stroke_m: tuple[float, float], robot: RobotLimits, patient: Patien
         heartbeat_timeout_s=robot.heartbeat_timeout_s,
         frozen_encoder_s=robot.frozen_encoder_s,
         frozen_min_ref_speed_m_s=robot.frozen_min_ref_speed_m_s,
+        max_pull_s=robot.max_pull_s,
     )

@@ -20,6 +20,9 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
   (from the measured angular rate) reaches the ROM end, so the stop ends inside the ROM; beyond
   the end by more than the tolerance → hard stop; angular speed beyond the patient's → soft stop;
 * tracking error beyond the robot limit → soft stop, beyond three times it → hard stop;
+* pulling on the foot: in force control, measured Fz (the platform's push, ``fz_n``) below
+  0 N for ``max_pull_s`` → soft stop (the contact is unilateral; the force law never commands
+  a pull, so this catches what it cannot prevent);
 * platform force (ATI) above 90 % of the patient/protocol limit → soft stop, beyond it → hard
   stop (only dropping the drive force is fast enough against a stiff contact); saturated or
   implausible → soft stop; stale → soft stop when force control depends on it, else warn;
@@ -127,6 +130,8 @@ class Supervisor:
         self._last_q = [math.nan, math.nan, math.nan]
         self._overruns = 0
         self.latched_ids: dict[str, int] = {}      # latched cause -> the event that latched it
+        self._latched_wall: dict[str, float] = {}  # ... and its wall-clock time (s)
+        self._pull_time = 0.0
         self._estop_request: str | None = None
         self._stop_request = False
         self._reset_tickets: deque[ResetTicket] = deque()
@@ -153,7 +158,7 @@ class Supervisor:
             try:
                 items = list(self.latched_ids.items())
                 return [{"id": i, "cause": c, "reaction": self.causes.get(c, Reaction.NONE)
-                         .name.lower()} for c, i in items]
+                         .name.lower(), "wall": self._latched_wall.get(c)} for c, i in items]
             except RuntimeError:
                 continue
         return []
@@ -171,8 +176,9 @@ class Supervisor:
     def check(self, t: float, dt: float, q, est_status: int, qd, qdd, fk_ok: bool, roll: float,
               pitch: float, roll_rate: float, pitch_rate: float, q_ref, qd_ref, tau,
               force_n: float, wrench_stale: bool, wrench_saturated: bool, hw_estop: bool,
-              hand_stop: bool, drive_failed: bool) -> Reaction:
-        """Run every check; returns the latched reaction for this cycle."""
+              hand_stop: bool, drive_failed: bool, fz_n: float = math.nan) -> Reaction:
+        """Run every check; returns the latched reaction for this cycle. ``force_n`` is the
+        magnitude of the sensor's force, ``fz_n`` the platform's push along its z (N)."""
         lim = self.limits
         active = self._active
         active.clear()
@@ -189,6 +195,7 @@ class Supervisor:
                 event = SafetyEvent(t, "fault", cause, reaction, message, values)
                 self.log.append(event)
                 self.latched_ids[cause] = event.id
+                self._latched_wall[cause] = event.wall
 
         # -- stop inputs
         if self._estop_request is not None:
@@ -299,6 +306,13 @@ class Supervisor:
             elif force_n > FORCE_CUSHION * lim.max_force_n:
                 trip("force_limit", Reaction.SOFT_STOP, "platform force reaching the limit",
                      force_n=force_n)
+        if self.force_control and fz_n < 0.0:
+            self._pull_time += dt
+            if self._pull_time >= lim.max_pull_s:
+                trip("pulling", Reaction.SOFT_STOP, "the platform is pulling on the foot "
+                     "(measured Fz below 0 N)", fz_n=fz_n, for_s=self._pull_time)
+        else:
+            self._pull_time = 0.0
         # -- timing and clients
         if dt > 1.5 * self.period_s:
             self._overruns += 1

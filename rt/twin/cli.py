@@ -6,6 +6,8 @@ import json
 import math
 import sys
 
+from rt.model.robot_option import add_robot_option
+
 
 def register(commands: argparse._SubParsersAction) -> None:
     from rt.ati.cli import register_twin_commands
@@ -22,6 +24,7 @@ def register(commands: argparse._SubParsersAction) -> None:
                    help="free | payload:KG[@S] | plate[:HEIGHT_M] | ankle (default free)")
     p.add_argument("--rate", type=float, default=100.0, help="output lines per second")
     p.add_argument("--seed", type=int, default=0)
+    add_robot_option(p)
     p.set_defaults(func=_step)
     register_twin_commands(commands)
     from rt.twin.rig_cli import register_rig_command
@@ -34,6 +37,7 @@ def _step(args) -> int:
 
     from rt.devices.interfaces import Wrench
     from rt.errors import TalusError
+    from rt.model.description import load_description
     from rt.twin.backends import TwinActuators, TwinEncoders, TwinForceTorque
     from rt.twin.environment import parse_environment
     from rt.twin.twin import SimClock, Twin
@@ -44,7 +48,8 @@ def _step(args) -> int:
         if not 1.0 <= args.rate <= 5000.0:
             raise_input(f"--rate must be in [1, 5000] Hz, got {args.rate}")
         clock = SimClock()
-        twin = Twin(environment=parse_environment(args.env), seed=args.seed, clock=clock)
+        twin = Twin(load_description(args.robot), environment=parse_environment(args.env),
+                    seed=args.seed, clock=clock)
         encoders = TwinEncoders(twin)
         card = TwinActuators(twin, 0)
         sensor = TwinForceTorque(twin)

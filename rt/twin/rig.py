@@ -37,6 +37,7 @@ from typing import Any, Callable
 
 from rt.engine import rt_hygiene
 from rt.errors import ConfigurationError, TalusError
+from rt.model.description import RobotDescription
 from rt.twin import shm as layout
 from rt.twin.environment import parse_environment
 from rt.twin.twin import Twin, port_counts
@@ -73,13 +74,15 @@ class RigProcess:
     Parameters: ``environment`` (``Environment`` or its CLI text: ``free``, ``payload:KG[@S]``,
     ``plate[:HEIGHT_M]``, ``ankle``), ``seed`` (sensor noise), ``rate_hz`` (rig periods per
     second, 100-5000), ``watchdog_timeout_s`` (longest gap between feeds, s, 1 ms-1 s),
-    ``twin`` (an existing twin instead of a new one), ``clock`` (monotonic seconds).
+    ``twin`` (an existing twin instead of a new one), ``clock`` (monotonic seconds),
+    ``description`` (the robot the new twin simulates; default the nominal one).
     """
 
     def __init__(self, shm_name: str, environment: Any = "free", seed: int = 0,
                  rate_hz: float = DEFAULT_RATE_HZ,
                  watchdog_timeout_s: float = DEFAULT_WATCHDOG_TIMEOUT_S,
-                 twin: Twin | None = None, clock: Callable[[], float] = time.monotonic):
+                 twin: Twin | None = None, clock: Callable[[], float] = time.monotonic,
+                 description: RobotDescription | None = None):
         layout.check_shm_name(shm_name)
         if not 100.0 <= rate_hz <= 5000.0:
             raise ConfigurationError(f"rig rate must be 100-5000 Hz, got {rate_hz}")
@@ -93,7 +96,8 @@ class RigProcess:
         self.watchdog_timeout_s = float(watchdog_timeout_s)
         self.clock = clock
         # The twin first (≈ 1 s): the segment appears only when the rig can serve it.
-        self.twin = twin if twin is not None else Twin(environment=environment, seed=seed)
+        self.twin = twin if twin is not None else Twin(description, environment=environment,
+                                                       seed=seed)
         self.twin.home_encoders()             # the rig's counters read absolute positions
         self.summary = RigSummary(shm=shm_name)
         self._stop = False

@@ -16,6 +16,8 @@ import sys
 import threading
 from typing import Any
 
+from rt.model.robot_option import add_robot_option
+
 EXIT_ERROR = 2
 
 
@@ -41,6 +43,7 @@ def register_rig_command(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--watchdog-ms", type=float, default=20.0,
                    help="amplifier watchdog timeout, ms (default 20)")
     p.add_argument("--rate", type=float, default=1000.0, help="rig rate, Hz (default 1000)")
+    add_robot_option(p)
     p.add_argument("--fifo", type=int, default=None, metavar="PRIORITY",
                    help="try SCHED_FIFO at this priority (default: normal scheduling)")
     p.set_defaults(func=cmd_rig)
@@ -49,6 +52,7 @@ def register_rig_command(commands: argparse._SubParsersAction) -> None:
 def cmd_rig(args: argparse.Namespace) -> int:
     """Run the rig until ``--seconds``, SIGTERM or SIGINT; print ready and summary lines."""
     from rt.errors import TalusError
+    from rt.model.description import load_description
     from rt.twin.rig import RigProcess
 
     if args.seconds is not None and not args.seconds > 0.0:
@@ -71,7 +75,8 @@ def cmd_rig(args: argparse.Namespace) -> int:
     try:
         try:
             rig = RigProcess(args.shm, args.env, args.seed, rate_hz=args.rate,
-                             watchdog_timeout_s=args.watchdog_ms * 1e-3)
+                             watchdog_timeout_s=args.watchdog_ms * 1e-3,
+                             description=load_description(args.robot))
         except TalusError as exc:
             _emit({"error": str(exc)})
             return EXIT_ERROR

@@ -7,6 +7,7 @@ from typing import Sequence
 import numpy as np
 
 from rt.ati.twin_sensor import AtiSample
+from rt.model.description import RobotDescription
 from rt.model.dynamics import Dynamics
 from rt.twin.backends import TwinActuators
 from rt.twin.environment import parse_environment
@@ -20,9 +21,11 @@ def holding_volts(twin: Twin) -> np.ndarray:
     return g / twin.description.drive.force_per_volt_n
 
 
-def twin_wrench_source(env: str, volts: Sequence[float] | None, seed: int):
-    """A ``WrenchSource`` running a twin in real time: each call advances the physics to now."""
-    twin = Twin(environment=parse_environment(env), seed=seed)
+def twin_wrench_source(env: str, volts: Sequence[float] | None, seed: int,
+                       description: RobotDescription | None = None):
+    """A ``WrenchSource`` running a twin (of ``description``, default the nominal robot) in
+    real time: each call advances the physics to now."""
+    twin = Twin(description, environment=parse_environment(env), seed=seed)
     card = TwinActuators(twin, 0)
     card.enable()
     card.write_volts(holding_volts(twin) if volts is None else volts)

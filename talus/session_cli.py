@@ -5,15 +5,19 @@ sends the protocol (validated here first, so errors name the file and the line),
 heartbeat going while the RT process pre-flights, runs and records the session, shows the
 progress, and prints the summary. When no RT process answers there, it starts one on the twin
 as a child process (stopped afterwards), so a fresh machine needs nothing else.
+
+With ``--user`` the session is the clinical record's (``patients``): the user logs in, the
+patient's limits in force and body mass come from the record, and the session is stored with
+its outcome, summary and recording. It lives here, at the entry point, because it composes
+the protocols and the clinical record.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import sys
-import time
 from typing import Any
 
+from rt.errors import InputError
 from rt.ipc.messages import DEFAULT_ENDPOINT
 
 #: How long the CLI waits for an RT process to answer before starting its own (s).
@@ -42,33 +46,73 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--fast", action="store_true",
                    help="an embedded RT process runs the twin as fast as possible instead of in "
                         "real time")
+    p.add_argument("--user", default=None,
+                   help="clinical record user (password: prompt or TALUS_PASSWORD): the "
+                        "patient's limits and body mass come from the record, and the session "
+                        "is stored there")
+    p.add_argument("--db", default=None,
+                   help="clinical record URL (default: TALUS_DATABASE_URL, else the user data "
+                        "directory's SQLite file)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
     from protocols.rt_session import protocol_document
+    from protocols.session_client import print_summary, progress_bar, run_remote
     from rt.errors import TalusError
     from rt.ipc.embedded import rt_process
 
     try:
         document = protocol_document(args.protocol)
-        patient: dict[str, Any] = {"id": args.patient}
-        if args.patient_weight is not None:
-            patient["weight_kg"] = args.patient_weight
         record = {"dir": str(_absolute(args.record_dir))} if args.record_dir else {}
+        progress = None if args.json else progress_bar()
         with rt_process(args.endpoint, probe_timeout_s=PROBE_TIMEOUT_S, robot=args.robot,
                         fast=args.fast) as endpoint:
-            summary = run_remote(endpoint, document, patient, record,
-                                 None if args.json else progress_bar())
+            if args.user is None:
+                patient: dict[str, Any] = {"id": args.patient}
+                if args.patient_weight is not None:
+                    patient["weight_kg"] = args.patient_weight
+                summary = run_remote(endpoint, document, patient, record, progress)
+            else:
+                summary = _run_for_patient(args, endpoint, document, record, progress)
     except TalusError as exc:
         print(json.dumps({"error": str(exc)}))
         return 2
     if args.json:
         print(json.dumps(summary))
         return 0
-    _print(summary)
+    print_summary(summary)
     return 0
+
+
+def _run_for_patient(args: argparse.Namespace, endpoint: str, document: dict[str, Any],
+                     record: dict[str, Any], progress) -> dict[str, Any]:
+    """The session of a patient of the clinical record, stored there (the summary gets the
+    stored session's id as ``stored_session``)."""
+    from pathlib import Path
+
+    from patients.cli_common import login
+    from patients.service import ClinicalRecord
+    from patients.session_record import rt_patient, run_for_patient
+    from protocols.session_client import run_remote
+
+    if args.patient_weight is not None:
+        raise InputError("--patient-weight comes from the clinical record with --user "
+                         "(the patient's body mass)")
+    with ClinicalRecord.open(args.db) as clinical:
+        actor = login(clinical, args)
+        box: dict[str, Any] = {}
+
+        def runner(started: dict[str, Any], _recording: Any) -> dict[str, Any]:
+            box["summary"] = run_remote(endpoint, document, rt_patient(started), record,
+                                        progress)
+            return box["summary"]
+        stored = run_for_patient(clinical, actor, args.patient, Path(args.protocol), None,
+                                 runner)
+    summary = box["summary"]
+    summary["stored_session"] = stored.get("uid")
+    return summary
 
 
 def _absolute(path: str) -> str:
@@ -77,66 +121,3 @@ def _absolute(path: str) -> str:
     return str(Path(path).resolve())
 
 
-def run_remote(endpoint: str, document: dict[str, Any], patient: dict[str, Any],
-               record: dict[str, Any], progress=None, poll_s: float = 0.2) -> dict[str, Any]:
-    """Run one session in the RT process at ``endpoint``; returns its summary."""
-    from rt.errors import InputError
-    from rt.ipc.client import RtClient, default_client_id
-
-    with RtClient(endpoint, client_id=default_client_id("session"), timeout_s=2.0) as client:
-        client.control_acquire(f"talus session run ({patient['id']})")
-        client.start_heartbeat(0.05)
-        try:
-            started = client.session_start(document, patient, record)
-            sid = started["session_id"]
-            while True:
-                st = client.session_status()
-                if st["session"] == sid:
-                    if progress is not None:
-                        progress(float(st["progress"]))
-                    time.sleep(poll_s)
-                    continue
-                last = st.get("last_summary")
-                if last is None or last.get("session_id") != sid:
-                    raise InputError(f"session {sid} ended without a summary")
-                if progress is not None:
-                    progress(1.0)
-                return last
-        finally:
-            client.stop_heartbeat()
-            try:
-                client.control_release()
-            except InputError:
-                pass       # the session is still stopping: control lapses with the heartbeat
-
-
-def progress_bar(stream=sys.stderr):
-    def show(fraction: float) -> None:
-        n = int(fraction * 40)
-        stream.write(f"\r[{'#' * n}{'.' * (40 - n)}] {fraction * 100:5.1f} %")
-        stream.flush()
-        if fraction >= 1.0:
-            stream.write("\n")
-    return show
-
-
-def _print(s: dict) -> None:
-    w = sys.stdout.write
-    where = f"RT process pid {s['rt']['pid']}" if s.get("rt") else "the twin"
-    w(f"session: {s['protocol']} ({s['kind']}) by {where} on the twin — {s['outcome']}\n")
-    if s["rms_error_pct"] is not None:
-        w(f"  force RMS error   {s['rms_error_pct']:.2f} % of {s['rms_error_basis']}\n")
-    if s["peak_force_n"] is not None:
-        w(f"  peak force        {s['peak_force_n']:.1f} N\n")
-    for axis, rng in s["rom_deg"].items():
-        if rng:
-            w(f"  {axis:5s} reached    {rng[0]:+.1f} .. {rng[1]:+.1f} deg\n")
-    w(f"  stops             {len(s['stops'])}"
-      + "".join(f"\n    t={x['t']} s {x['reaction']}: {x['cause']} ({x['message']})"
-                for x in s["stops"]) + "\n")
-    if s.get("recording"):
-        w(f"  recording         {s['recording']['path']} (sha256 "
-          f"{s['recording']['sha256'][:16]}…)\n")
-    pre = s["preflight"]
-    w(f"  pre-flight peaks  actuator {pre['peak_actuator_force_n']:.0f} N, slider "
-      f"{pre['peak_slider_speed_m_s'] * 1e3:.0f} mm/s\n")
