@@ -253,10 +253,9 @@ class SessionFigures:
     def saturation(self, dt: float) -> list[str]:
         """The stretches at the robot's limit longer than ``RobotLimits.max_saturation_s``."""
         out = []
-        for what, (_, _, longest, t0, peak), limit, unit in (
-                ("actuator force", *self._runs["actuator force"],
-                 self.robot.max_actuator_force_n, "N"),
-                ("drive command", *self._runs["drive command"], self.robot.max_command_v, "V")):
+        for what, limit, unit in (("actuator force", self.robot.max_actuator_force_n, "N"),
+                                  ("drive command", self.robot.max_command_v, "V")):
+            _, _, longest, t0, peak = self._runs[what]
             if longest * dt > self.robot.max_saturation_s:
                 out.append(f"{what} {peak:.4g} {unit} at the robot's limit {limit:g} {unit} for "
                            f"{longest * dt * 1e3:.0f} ms from t = {t0:.3f} s (the drives "

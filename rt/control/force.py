@@ -86,6 +86,11 @@ EXPLICIT_FORCE_RANGES = {
     "angle_kd_n_m_s_per_rad": GainRange(1.0, 2000.0, "N m s/rad"),
     "stiffness_guess_n_per_m": GainRange(1.0e3, 1.0e8, "N/m"),
     "forgetting": GainRange(0.9, 1.0, ""),
+    # The floor the reference never goes below: the platform only pushes on a foot.
+    "preload_n": GainRange(0.0, 200.0, "N"),
+    # Bounds on the motion feedforward (a heel strike once asked for 16 kN without them).
+    "max_feedforward_speed_m_s": GainRange(0.001, 0.2, "m/s"),
+    "max_feedforward_accel_m_s2": GainRange(0.01, 5.0, "m/s²"),
 }
 #: Admittance: a virtual mass below 1 kg or a rate above 0.2 m/s would let the platform jump
 #: at a patient's push; above 500 kg / 1e5 N s/m it no longer yields to a person.
@@ -94,6 +99,7 @@ ADMITTANCE_RANGES = {
     "virtual_damping_n_s_per_m": GainRange(100.0, 1.0e5, "N s/m"),
     "virtual_stiffness_n_per_m": GainRange(0.0, 1.0e6, "N/m"),
     "max_speed_m_s": GainRange(0.001, 0.2, "m/s"),
+    "preload_n": GainRange(0.0, 200.0, "N"),
 }
 
 
