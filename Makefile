@@ -8,10 +8,13 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 # Debian packages the project needs at run or test time. postgresql: the clinical record's
 # tests start a throw-away server (tests/pg_server.py); poppler-utils (pdftoppm, pdftotext,
-# pdffonts) checks the PDF reports in the tests.
-APT_PACKAGES := postgresql poppler-utils
+# pdffonts) checks the PDF reports in the tests; Xvfb and the xcb libraries: a real Qt window
+# for the GUI smoke test (PLATFORM.md).
+APT_PACKAGES := postgresql poppler-utils xvfb xauth libxcb-icccm4 libxcb-keysyms1 \
+  libxcb-xinerama0 libegl1 libgl1 libxkbcommon-x11-0 libxcb-cursor0 libxcb-shape0 \
+  libxcb-randr0 libxcb-render-util0 libxcb-image0 libfontconfig1 libdbus-1-3
 
-.PHONY: demo test setup system-deps bench clean
+.PHONY: demo test setup system-deps bench clean translations
 
 setup: system-deps $(STAMP)
 
@@ -68,6 +71,12 @@ test: setup
 	$(BIN)/ruff check $(LINT_PATHS)
 	$(BIN)/mypy
 	$(BIN)/pytest -q
+
+# The GUI's Spanish: extract new strings into the .ts (translated with pyside6-linguist or by
+# hand), then compile the .qm the app loads (both are committed).
+translations: setup
+	$(BIN)/pyside6-lupdate app/*.py app/pages/*.py -ts app/i18n/talus_es.ts -no-obsolete
+	$(BIN)/pyside6-lrelease app/i18n/talus_es.ts -qm app/i18n/talus_es.qm
 
 bench: setup
 	$(BIN)/python bench/model.py

@@ -28,6 +28,7 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
     "rt": (("rt.ipc.cli", "talus.rt_serve"),
            "RT process: serve, status, control, stop, estop, reset (JSON)"),
     "record": (("rt.recording.cli",), "recordings: info, CSV export"),
+    "gui": (("app.cli",), "the clinician GUI (talus gui [--screenshot DIR])"),
     "db": (("patients.db_cli",), "clinical database: upgrade, backup, restore, demo"),
     "users": (("patients.users_cli",), "users and roles: init, add, passwd, list"),
     "patients": (("patients.patients_cli",),
@@ -40,6 +41,8 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
     "identify": (("rt.identification.cli",),
                  "dynamic identification: excite, estimate, write a description file"),
 }
+#: group -> the command run when the group is given only options (``talus gui --lang es``)
+DEFAULT_COMMANDS: dict[str, str] = {"gui": "start"}
 
 
 def build_parser(group: str | None = None) -> argparse.ArgumentParser:
@@ -59,6 +62,9 @@ def build_parser(group: str | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     group = argv[0] if argv and argv[0] in GROUPS else None
+    if group in DEFAULT_COMMANDS and (len(argv) == 1 or argv[1].startswith("-")
+                                      and argv[1] not in ("-h", "--help")):
+        argv = [group, DEFAULT_COMMANDS[group], *argv[1:]]
     args = build_parser(group).parse_args(argv)
     from rt.errors import TalusError
 

@@ -35,9 +35,12 @@ def answers(endpoint: str, timeout_s: float) -> bool:
 
 @contextlib.contextmanager
 def rt_process(endpoint: str, probe_timeout_s: float = 0.5, robot: str | None = None,
-               fast: bool = False, recordings_dir: str | None = None) -> Iterator[str]:
+               fast: bool = False, recordings_dir: str | None = None,
+               heartbeat_timeout_s: float | None = None) -> Iterator[str]:
     """Yield the endpoint of an RT process: the one at ``endpoint`` if it answers, else an
-    embedded one on the twin (free loopback ports), stopped (SIGTERM) on exit."""
+    embedded one on the twin (free loopback ports), stopped (SIGTERM) on exit.
+    ``heartbeat_timeout_s`` widens the owner's heartbeat timeout of the embedded one (a demo
+    on a loaded machine); None keeps the robot's (or the fast mode's) default."""
     if answers(endpoint, probe_timeout_s):
         yield endpoint
         return
@@ -48,7 +51,10 @@ def rt_process(endpoint: str, probe_timeout_s: float = 0.5, robot: str | None = 
     if fast:
         # Back to back, the loop shares the GIL and the cores with everything else: the
         # owner's heartbeat (a test or demo client on the same machine) gets a wider timeout.
-        cmd += ["--fast", "--heartbeat-timeout", str(FAST_HEARTBEAT_TIMEOUT_S)]
+        cmd += ["--fast"]
+        heartbeat_timeout_s = heartbeat_timeout_s or FAST_HEARTBEAT_TIMEOUT_S
+    if heartbeat_timeout_s is not None:
+        cmd += ["--heartbeat-timeout", str(heartbeat_timeout_s)]
     if recordings_dir:
         cmd += ["--recordings-dir", recordings_dir]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

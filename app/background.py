@@ -1,0 +1,36 @@
+"""Work the GUI thread must not wait for (a database query, an Argon2 password check), run on a
+worker thread and answered as a Qt signal: ``done(tag, result, error)``. Only the product's
+errors (``TalusError``) become ``error``; anything else is a bug and propagates."""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable
+
+from PySide6.QtCore import QObject, Signal
+
+from rt.errors import TalusError
+
+
+class Background(QObject):
+    """A one-thread pool whose results come back on the GUI thread, in submission order."""
+
+    done = Signal(str, object, str)
+
+    def __init__(self, name: str, parent: QObject | None = None) -> None:
+        super().__init__(parent)
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=name)
+
+    def call(self, tag: str, fn: Callable[[], Any]) -> None:
+        """Run ``fn()``; ``done(tag, result, "")`` or ``done(tag, None, message)``."""
+        self._pool.submit(self._run, tag, fn)
+
+    def _run(self, tag: str, fn: Callable[[], Any]) -> None:
+        try:
+            result = fn()
+        except TalusError as exc:
+            self.done.emit(tag, None, str(exc))
+            return
+        self.done.emit(tag, result, "")
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)

@@ -1,0 +1,332 @@
+"""Patients: search by code, register, the patient's card (dosing data, the limits in force in
+clinical terms with who set them and when, the sessions with their outcome), prescribe new
+limits, and — only for roles allowed to, only on request, every read audited by the record —
+the identifying data. "Use for the session" hands the pseudonymous patient to Prescribe/Run.
+
+The role decides what is enabled (``patients.roles.allowed``); the record enforces it anyway.
+Every record call runs on a worker (:class:`app.background.Background`).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (
+    QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QListWidget,
+    QListWidgetItem, QPushButton, QScrollArea, QVBoxLayout, QWidget,
+)
+
+from app.background import Background
+from app.i18n import tr
+from app.patient_context import PatientContext
+from app.style import TARGET_PX
+
+#: Clinical limit fields edited here: (key, label) — degrees from neutral, N, deg/s.
+_ROM = ("dorsiflexion_deg", "plantarflexion_deg", "inversion_deg", "eversion_deg")
+
+
+def _number(text: str, what: str) -> float | None:
+    text = text.strip().replace(",", ".")
+    if not text:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(tr("%1: a number is needed").replace("%1", what)) from None
+
+
+class PatientsPage(QWidget):
+    """Emits ``patient_chosen(PatientContext)``."""
+
+    patient_chosen = Signal(object)
+
+    def __init__(self, record: Any, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.record = record
+        self.actor: Any = None
+        self.current: dict[str, Any] | None = None
+        self.worker = Background("gui-patients", self)
+        self.worker.done.connect(self._done)
+        self._all: list[dict[str, Any]] = []
+
+        # left: search, list, registration
+        self.search = QLineEdit()
+        self.search.setPlaceholderText(tr("Search by code"))
+        self.search.textChanged.connect(self._filter)
+        self.list = QListWidget()
+        self.list.setStyleSheet("QListWidget::item { min-height: 40px; }")
+        self.list.currentItemChanged.connect(self._selected)
+        self.new_code = QLineEdit()
+        self.new_code.setPlaceholderText(tr("automatic when empty"))
+        self.new_mass = QLineEdit()
+        self.new_side = QComboBox()
+        self.new_side.addItem(tr("right"), "right")
+        self.new_side.addItem(tr("left"), "left")
+        self.new_side.addItem(tr("both"), "both")
+        self.new_diagnosis = QLineEdit()
+        self.create_button = QPushButton(tr("Register patient"))
+        self.create_button.clicked.connect(self.create_patient)
+        new_box = QGroupBox(tr("New patient"))
+        new_form = QFormLayout(new_box)
+        new_form.addRow(tr("Code"), self.new_code)
+        new_form.addRow(tr("Body mass (kg)"), self.new_mass)
+        new_form.addRow(tr("Affected side"), self.new_side)
+        new_form.addRow(tr("Diagnosis (no names)"), self.new_diagnosis)
+        new_form.addRow(self.create_button)
+        left = QVBoxLayout()
+        left.addWidget(self.search)
+        left.addWidget(self.list, 1)
+        left.addWidget(new_box)
+
+        # right: the card
+        self.card = QLabel(tr("Choose a patient."))
+        self.card.setWordWrap(True)
+        self.card.setTextFormat(Qt.TextFormat.PlainText)
+        self.limits_label = QLabel()
+        self.limits_label.setWordWrap(True)
+        self.limit_edits: dict[str, QLineEdit] = {}
+        limits_box = QGroupBox(tr("Prescribe limits"))
+        limits_form = QFormLayout(limits_box)
+        labels = {"dorsiflexion_deg": tr("Dorsiflexion (°)"),
+                  "plantarflexion_deg": tr("Plantarflexion (°)"),
+                  "inversion_deg": tr("Inversion (°)"), "eversion_deg": tr("Eversion (°)"),
+                  "max_force_n": tr("Maximum force (N)"),
+                  "max_angular_speed_deg_s": tr("Maximum angular speed (°/s)"),
+                  "reason": tr("Reason")}
+        for key, label in labels.items():
+            edit = QLineEdit()
+            edit.setObjectName(f"limit:{key}")
+            self.limit_edits[key] = edit
+            limits_form.addRow(label, edit)
+        self.limits_button = QPushButton(tr("Save the new limits"))
+        self.limits_button.clicked.connect(self.save_limits)
+        limits_form.addRow(self.limits_button)
+        self.sessions = QListWidget()
+        self.sessions.setStyleSheet("QListWidget::item { min-height: 32px; }")
+        self.identity_button = QPushButton(tr("Show identifying data (audited)"))
+        self.identity_button.clicked.connect(self.show_identity)
+        self.identity = QLabel()
+        self.identity.setWordWrap(True)
+        self.identity.setTextFormat(Qt.TextFormat.PlainText)
+        self.use_button = QPushButton(tr("Use for the session"))
+        self.use_button.setObjectName("usePatient")
+        self.use_button.clicked.connect(self.use)
+        self.message = QLabel()
+        self.message.setWordWrap(True)
+        for w in (self.search, self.new_code, self.new_mass, self.new_side, self.new_diagnosis,
+                  self.create_button, self.limits_button, self.identity_button,
+                  self.use_button, *self.limit_edits.values()):
+            w.setMinimumHeight(TARGET_PX)
+        card_widget = QWidget()
+        right = QVBoxLayout(card_widget)
+        right.addWidget(self.card)
+        right.addWidget(self.limits_label)
+        right.addWidget(self.use_button)
+        right.addWidget(limits_box)
+        right.addWidget(QLabel(tr("Sessions")))
+        right.addWidget(self.sessions)
+        right.addWidget(self.identity_button)
+        right.addWidget(self.identity)
+        right.addStretch(1)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        scroll.setWidget(card_widget)
+        layout = QHBoxLayout(self)
+        col = QVBoxLayout()
+        col.addLayout(left)
+        col.addWidget(self.message)
+        layout.addLayout(col, 2)
+        layout.addWidget(scroll, 3)
+        self._enable()
+
+    # ------------------------------------------------------------------ role
+
+    def set_actor(self, actor: Any) -> None:
+        """Who is logged in (None: nobody); reloads the list."""
+        self.actor = actor
+        self.current = None
+        self.list.clear()
+        self.card.setText(tr("Choose a patient."))
+        self.limits_label.setText("")
+        self.identity.setText("")
+        self.sessions.clear()
+        self._enable()
+        if actor is not None:
+            self.reload()
+
+    def _may(self, action: str) -> bool:
+        if self.actor is None:
+            return False
+        from patients.roles import Action, allowed
+        return allowed(self.actor.role, Action(action))
+
+    def _enable(self) -> None:
+        chosen = self.current is not None
+        self.create_button.setEnabled(self._may("patient.create"))
+        self.limits_button.setEnabled(chosen and self._may("limits.set"))
+        for edit in self.limit_edits.values():
+            edit.setEnabled(self._may("limits.set"))
+        self.identity_button.setVisible(self._may("identity.read"))
+        self.identity_button.setEnabled(chosen)
+        self.use_button.setEnabled(chosen and bool(self.current and self.current.get("limits")))
+
+    # ------------------------------------------------------------------ record calls
+
+    def reload(self, select: str | None = None) -> None:
+        actor = self.actor
+        self.worker.call(f"list:{select or ''}", lambda: self.record.list_patients(actor))
+
+    def _selected(self, item: QListWidgetItem | None, _previous: object = None) -> None:
+        if item is None:
+            return
+        self.open(str(item.data(Qt.ItemDataRole.UserRole)))
+
+    def open(self, code: str) -> None:
+        """Load patient ``code``'s card and sessions."""
+        actor, record = self.actor, self.record
+        self.identity.setText("")
+
+        def load() -> dict[str, Any]:
+            return {"patient": record.get_patient(actor, code),
+                    "sessions": record.list_sessions(actor, code)}
+        self.worker.call("open", load)
+
+    def create_patient(self) -> None:
+        try:
+            mass = _number(self.new_mass.text(), tr("Body mass (kg)"))
+        except ValueError as exc:
+            self.message.setText(str(exc))
+            return
+        actor, record = self.actor, self.record
+        code = self.new_code.text().strip().upper() or None
+        values = {"body_mass_kg": mass, "affected_side": self.new_side.currentData(),
+                  "diagnosis": self.new_diagnosis.text().strip() or None}
+        self.worker.call("create", lambda: record.add_patient(actor, code, **values))
+
+    def save_limits(self) -> None:
+        if self.current is None:
+            return
+        from patients.anatomy import ClinicalRom, to_robot
+
+        try:
+            rom = {k: _number(self.limit_edits[k].text(), k) for k in _ROM}
+            extra = {k: _number(self.limit_edits[k].text(), k)
+                     for k in ("max_force_n", "max_angular_speed_deg_s")}
+        except ValueError as exc:
+            self.message.setText(str(exc))
+            return
+        missing = [k for k, v in rom.items() if v is None]
+        if missing:
+            self.message.setText(tr("Give the four ranges of motion."))
+            return
+        side = self.current.get("affected_side")
+        actor, record, code = self.actor, self.record, self.current["code"]
+        reason = self.limit_edits["reason"].text().strip() or None
+
+        def save() -> dict[str, Any]:
+            limits = to_robot(ClinicalRom(**{k: float(v) for k, v in rom.items()
+                                             if v is not None}), side)
+            limits.update({k: v for k, v in extra.items() if v is not None})
+            return record.set_limits(actor, code, reason=reason, **limits)
+        self.worker.call("limits", save)
+
+    def show_identity(self) -> None:
+        if self.current is None:
+            return
+        actor, record, code = self.actor, self.record, self.current["code"]
+        self.worker.call("identity",
+                         lambda: record.get_patient(actor, code, include_identity=True))
+
+    def use(self) -> None:
+        p = self.current
+        if p is None or not p.get("limits"):
+            return
+        lim = p["limits"]
+        from rt.safety.limits import PatientLimits
+        fields = {k: float(lim[k]) for k in PatientLimits.model_fields if k in lim}
+        side = p.get("affected_side") if p.get("affected_side") in ("left", "right") \
+            else "right"
+        self.patient_chosen.emit(PatientContext(
+            p["code"], p.get("body_mass_kg"), fields,
+            f"{lim.get('set_by')} {lim.get('set_at', '')[:16]}", side))
+
+    # ------------------------------------------------------------------ results
+
+    def _done(self, tag: str, result: Any, error: str) -> None:
+        if error:
+            self.message.setText(error)
+            return
+        self.message.setText("")
+        if tag.startswith("list:"):
+            self._all = list(result)
+            self._filter()
+            select = tag[len("list:"):]
+            if select:
+                for i in range(self.list.count()):
+                    if self.list.item(i).data(Qt.ItemDataRole.UserRole) == select:
+                        self.list.setCurrentRow(i)
+        elif tag == "open":
+            self.current = result["patient"]
+            self._show_card(result["patient"], result["sessions"])
+        elif tag == "create":
+            self.new_code.clear()
+            self.new_mass.clear()
+            self.new_diagnosis.clear()
+            self.message.setText(tr("Patient %1 registered.").replace("%1", result["code"]))
+            self.reload(select=result["code"])
+        elif tag == "limits":
+            assert self.current is not None
+            self.message.setText(tr("Limits saved."))
+            self.open(self.current["code"])
+        elif tag == "identity":
+            ident = result.get("identity")
+            self.identity.setText(tr("No identifying data recorded.") if not ident else "\n".join(
+                f"{k}: {v}" for k, v in ident.items() if v))
+        self._enable()
+
+    def _filter(self) -> None:
+        needle = self.search.text().strip().upper()
+        self.list.blockSignals(True)
+        self.list.clear()
+        for p in self._all:
+            if needle in p["code"].upper():
+                item = QListWidgetItem(p["code"])
+                item.setData(Qt.ItemDataRole.UserRole, p["code"])
+                self.list.addItem(item)
+        self.list.blockSignals(False)
+
+    def _show_card(self, p: dict[str, Any], sessions: list[dict[str, Any]]) -> None:
+        mass = p.get("body_mass_kg")
+        self.card.setText("\n".join([
+            tr("Patient %1").replace("%1", p["code"]),
+            tr("Body mass: %1 kg").replace("%1", "—" if mass is None else f"{mass:g}"),
+            tr("Affected side: %1").replace("%1", str(p.get("affected_side") or "—")),
+            tr("Diagnosis: %1").replace("%1", str(p.get("diagnosis") or "—"))]))
+        lim = p.get("limits")
+        if not lim:
+            self.limits_label.setText(tr("No limits prescribed yet: a session needs them."))
+        else:
+            c = lim.get("clinical") or {}
+            rom = ", ".join(f"{name} {c[key]:g}°" for key, name in (
+                ("dorsiflexion_deg", tr("dorsiflexion")), ("plantarflexion_deg",
+                                                           tr("plantarflexion")),
+                ("inversion_deg", tr("inversion")), ("eversion_deg", tr("eversion")))
+                if key in c)
+            self.limits_label.setText(
+                tr("Limits in force: %1; force ≤ %2 N; speed ≤ %3 °/s — set by %4 on %5")
+                .replace("%1", rom or "—").replace("%2", f"{lim['max_force_n']:g}")
+                .replace("%3", f"{lim['max_angular_speed_deg_s']:g}")
+                .replace("%4", str(lim.get("set_by"))).replace("%5", str(lim.get("set_at"))[:16]))
+            for key in _ROM:
+                if key in c:
+                    self.limit_edits[key].setText(f"{c[key]:g}")
+            self.limit_edits["max_force_n"].setText(f"{lim['max_force_n']:g}")
+            self.limit_edits["max_angular_speed_deg_s"].setText(
+                f"{lim['max_angular_speed_deg_s']:g}")
+        self.sessions.clear()
+        for s in sessions:
+            self.sessions.addItem(f"{str(s.get('started_at'))[:16]}  {s.get('protocol_name')}"
+                                  f" — {s.get('outcome')}")
+        if not sessions:
+            self.sessions.addItem(tr("No sessions yet."))

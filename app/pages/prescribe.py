@@ -1,0 +1,262 @@
+"""Prescribe: the protocol library as cards, the parameter form generated from the schema,
+a preview of the reference, and the pre-flight verdict from the RT process (predicted peaks,
+or the refusal and its reason). Start is enabled only when the pre-flight of exactly this
+document for exactly this patient passed."""
+from __future__ import annotations
+
+import json
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import pyqtgraph as pg
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (
+    QButtonGroup, QHBoxLayout, QLabel, QPushButton, QScrollArea, QVBoxLayout, QWidget,
+)
+
+from app.i18n import tr
+from app.patient_context import PatientContext
+from app.preview import Preview, compute_preview
+from app.protocol_form import ProtocolForm
+from app.rt_link import RtLink
+from app.style import LARGE_PX, TARGET_PX
+from protocols.library import LIBRARY_DIR
+from protocols.rt_session import protocol_document
+from rt.errors import TalusError
+
+
+
+def library_documents(directory: Path = LIBRARY_DIR) -> list[tuple[str, dict[str, Any]]]:
+    """The shipped protocols as (file stem, document), in name order; unreadable files are
+    left out (the CLI's ``talus session`` reports them)."""
+    out = []
+    for path in sorted(directory.glob("*.yaml")):
+        try:
+            out.append((path.stem, protocol_document(path)))
+        except TalusError:
+            continue
+    return out
+
+
+def _key(document: dict[str, Any], patient: PatientContext | None) -> str:
+    return json.dumps([document, None if patient is None else patient.rt_patient()],
+                      sort_keys=True)
+
+
+class PrescribePage(QWidget):
+    """Emits ``start_requested(document)`` when Start is pressed (after a passed pre-flight)."""
+
+    start_requested = Signal(dict)
+    preview_ready = Signal(object, str)
+
+    def __init__(self, link: RtLink | None, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.link = link
+        self.patient: PatientContext | None = None
+        self.preflight_ok_for: str | None = None
+        self.last_preflight: dict[str, Any] | None = None
+        self.last_refusal: str | None = None
+        self.preview: Preview | None = None
+        self._preview_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-preview")
+        self._preview_generation = 0
+        self.documents = library_documents()
+
+        cards = QVBoxLayout()
+        cards.addWidget(QLabel(tr("Protocols")))
+        self.card_group = QButtonGroup(self)
+        self.card_group.setExclusive(True)
+        for i, (stem, doc) in enumerate(self.documents):
+            card = QPushButton(doc["name"])
+            card.setObjectName(f"card:{stem}")
+            card.setCheckable(True)
+            card.setMinimumHeight(LARGE_PX)
+            card.setToolTip(doc.get("description", ""))
+            card.setStyleSheet("text-align: left; padding: 6px;")
+            card.setMinimumWidth(0)
+            self.card_group.addButton(card, i)
+            cards.addWidget(card)
+        cards.addStretch(1)
+        self.card_group.idClicked.connect(self.select)
+
+        self.form = ProtocolForm()
+        self.form.changed.connect(self._form_changed)
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        scroll.setWidget(self.form)
+
+        self.plot = pg.PlotWidget()
+        self.plot.setBackground("w")
+        self.plot.showGrid(x=True, y=True, alpha=0.3)
+        self.plot.setLabel("bottom", tr("time (s)"))
+        self.plot.addLegend()
+        self.preview_label = QLabel()
+        self.preview_label.setWordWrap(True)
+        self.verdict = QLabel(tr("Pre-flight not run yet."))
+        self.verdict.setObjectName("verdict")
+        self.verdict.setWordWrap(True)
+        self.verdict.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.check_button = QPushButton(tr("Check on the robot model (pre-flight)"))
+        self.start_button = QPushButton(tr("Start on the Run page"))
+        for b in (self.check_button, self.start_button):
+            b.setMinimumHeight(TARGET_PX)
+        self.check_button.clicked.connect(self.run_preflight)
+        self.start_button.clicked.connect(self._start)
+        right = QVBoxLayout()
+        right.addWidget(self.plot, 3)
+        right.addWidget(self.preview_label)
+        right.addWidget(self.verdict, 1)
+        right.addWidget(self.check_button)
+        right.addWidget(self.start_button)
+
+        card_column = QWidget()
+        card_column.setLayout(cards)
+        card_column.setFixedWidth(240)
+        layout = QHBoxLayout(self)
+        layout.addWidget(card_column)
+        layout.addWidget(scroll, 5)
+        layout.addLayout(right, 4)
+        self.preview_ready.connect(self._show_preview)
+        if link is not None:
+            link.replied.connect(self._replied)
+            link.connection_changed.connect(lambda *_: self._update_buttons())
+        if self.documents:
+            self.card_group.button(0).setChecked(True)
+            self.select(0)
+
+    # ------------------------------------------------------------------ selection
+
+    def select(self, index: int) -> None:
+        """Show protocol ``index`` of the library in the form."""
+        self.card_group.button(index).setChecked(True)
+        self.form.load(self.documents[index][1])
+
+    def select_stem(self, stem: str) -> None:
+        """Select the library protocol whose file is ``stem``.yaml."""
+        for i, (s, _) in enumerate(self.documents):
+            if s == stem:
+                self.select(i)
+                return
+        raise KeyError(stem)
+
+    def set_patient(self, patient: PatientContext | None) -> None:
+        self.patient = patient
+        self._form_changed(self.form.valid)
+
+    # ------------------------------------------------------------------ preview
+
+    def _form_changed(self, valid: bool) -> None:
+        self.preflight_ok_for = None
+        self.last_preflight = None
+        self.last_refusal = None
+        self.verdict.setText(tr("Pre-flight not run yet.") if valid
+                             else tr("Correct the fields marked in red first."))
+        self.verdict.setStyleSheet("")
+        self._update_buttons()
+        if valid:
+            self._preview_generation += 1
+            generation = self._preview_generation
+            doc = self.form.document
+            weight = None if self.patient is None else self.patient.weight_kg
+            side = "right" if self.patient is None else self.patient.side
+            self.preview_label.setText(tr("Computing the preview…"))
+            self._preview_pool.submit(self._compute, generation, doc, weight, side)
+
+    def _compute(self, generation: int, doc: dict[str, Any], weight: float | None,
+                 side: str) -> None:
+        try:
+            preview: Preview | None = compute_preview(doc, weight, side)
+            error = ""
+        except TalusError as exc:
+            preview, error = None, str(exc)
+        if generation == self._preview_generation:
+            self.preview_ready.emit(preview, error)
+
+    def _show_preview(self, preview: Preview | None, error: str) -> None:
+        self.preview = preview
+        self.plot.clear()
+        if preview is None:
+            self.preview_label.setText(tr("No preview: %1").replace("%1", error))
+            return
+        if preview.violations:
+            self.preview_label.setText(tr("This protocol cannot be played: %1").replace(
+                "%1", "; ".join(preview.violations)))
+            return
+        if preview.force_protocol:
+            self.plot.setLabel("left", tr("force (N)"))
+            self.plot.plot(preview.t, preview.fz_n, pen=pg.mkPen("#1f5fbf", width=2),
+                           name=tr("force reference"))
+        else:
+            self.plot.setLabel("left", tr("angle (°)"))
+            self.plot.plot(preview.t, preview.pitch_deg, pen=pg.mkPen("#1f5fbf", width=2),
+                           name=tr("plantar(+)/dorsi(−) flexion"))
+            self.plot.plot(preview.t, preview.roll_deg, pen=pg.mkPen("#bf5f1f", width=2),
+                           name=tr("roll (+ is inversion of a right foot)"))
+        self.preview_label.setText(tr("Duration: %1 s").replace("%1",
+                                                                 f"{preview.duration_s:.1f}"))
+
+    # ------------------------------------------------------------------ pre-flight
+
+    def run_preflight(self) -> None:
+        """Ask the RT process to pre-flight the form's document for the patient."""
+        if self.link is None or self.patient is None or not self.form.valid:
+            return
+        doc, patient = self.form.document, self.patient
+        key = _key(doc, patient)
+        self.verdict.setText(tr("Pre-flight running on the robot model…"))
+        self.verdict.setStyleSheet("")
+        self.link.call(f"preflight:{key}",
+                       lambda c: c.session_preflight(doc, patient.rt_patient()))
+
+    def _replied(self, tag: str, result: object, error: str) -> None:
+        if not tag.startswith("preflight:"):
+            return
+        key = tag[len("preflight:"):]
+        if key != _key(self.form.document, self.patient):
+            return  # the form changed meanwhile: that verdict is not for this document
+        if error:
+            self.last_refusal = error
+            self.verdict.setText(tr("REFUSED: %1").replace("%1", error))
+            self.verdict.setStyleSheet("color: #c0262d; font-weight: bold;")
+        else:
+            assert isinstance(result, dict)
+            self.last_preflight = result
+            self.preflight_ok_for = key
+            self.verdict.setText(tr("Pre-flight passed. Predicted peaks: %1").replace(
+                "%1", _peaks(result.get("predicted") or {})))
+            self.verdict.setStyleSheet("color: #1e8a3c; font-weight: bold;")
+        self._update_buttons()
+
+    def _update_buttons(self) -> None:
+        connected = self.link is not None and self.link.connected
+        self.check_button.setEnabled(connected and self.form.valid and self.patient is not None)
+        self.start_button.setEnabled(
+            connected and self.preflight_ok_for == _key(self.form.document, self.patient))
+        if self.patient is None:
+            self.check_button.setToolTip(tr("Choose a patient first"))
+
+    def _start(self) -> None:
+        if self.preflight_ok_for == _key(self.form.document, self.patient):
+            self.start_requested.emit(dict(self.form.document))
+
+
+def _peaks(predicted: dict[str, Any]) -> str:
+    """The pre-flight's predicted peaks in clinical words and units (against the limits the
+    verdict already applied)."""
+    parts = []
+    force = predicted.get("peak_platform_force_n")
+    if isinstance(force, (int, float)):
+        parts.append(tr("platform force %1 N").replace("%1", f"{force:.0f}"))
+    angles = predicted.get("platform_angles_deg") or {}
+    words = {"pitch": tr("dorsi/plantarflexion"), "roll": tr("inversion/eversion")}
+    for axis, span in angles.items():
+        if isinstance(span, list) and len(span) == 2 and axis in words:
+            parts.append(f"{words[axis]} {span[0]:+.1f}° … {span[1]:+.1f}°")
+    err = predicted.get("rms_error_pct")
+    if isinstance(err, (int, float)):
+        parts.append(tr("force tracking error %1 %").replace("%1", f"{err:.1f}"))
+    duration = predicted.get("duration_s")
+    if isinstance(duration, (int, float)):
+        parts.append(tr("duration %1 s").replace("%1", f"{duration:.0f}"))
+    return "; ".join(parts) or "—"

@@ -1,0 +1,153 @@
+"""Review: a past session from its recording — force (measured solid, reference dashed) and
+the ankle angles, stops marked on the time axis with their cause in words; the plots can be
+zoomed and panned (scrubbed) with the mouse, finger or keyboard. Reading runs on a worker.
+(The report button arrives with the reports issue.)"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pyqtgraph as pg
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (
+    QHBoxLayout, QLabel, QListWidget, QListWidgetItem, QPushButton, QVBoxLayout, QWidget,
+)
+
+from app.i18n import tr
+from app.review_data import ReviewData, load_review
+from app.words import cause_words
+from app.style import TARGET_PX
+from rt.errors import TalusError
+
+
+
+def recording_title(path: Path) -> str:
+    """``<date time> — <patient>`` over ``<protocol>`` from the RT process's file name
+    (``20261123T181621Z_<patient>_<protocol>.mcap``), in local time; the stem otherwise."""
+    import datetime as dt
+
+    parts = path.stem.split("_", 2)
+    try:
+        when = dt.datetime.strptime(parts[0], "%Y%m%dT%H%M%SZ").replace(tzinfo=dt.timezone.utc)
+    except (ValueError, IndexError):
+        return path.stem
+    local = when.astimezone()
+    patient = parts[1] if len(parts) > 1 else "?"
+    protocol = parts[2].replace("-", " ") if len(parts) > 2 else ""
+    return f"{local:%Y-%m-%d %H:%M} — {patient}\n{protocol}"
+
+
+class ReviewPage(QWidget):
+    """Lists the recordings in a folder (newest first) and plots the one opened."""
+
+    loaded = Signal(object, str)
+
+    def __init__(self, recordings_dir: Path | None, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.recordings_dir = recordings_dir
+        self.data: ReviewData | None = None
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-review")
+        self.sessions = QListWidget()
+        self.sessions.setMinimumWidth(260)
+        self.sessions.setStyleSheet("QListWidget::item { min-height: 48px; }")
+        self.sessions.setWordWrap(True)
+        self.sessions.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.sessions.itemActivated.connect(lambda item: self.open(Path(item.data(
+            Qt.ItemDataRole.UserRole))))
+        self.refresh_button = QPushButton(tr("Refresh"))
+        self.open_button = QPushButton(tr("Open"))
+        for b in (self.refresh_button, self.open_button):
+            b.setMinimumHeight(TARGET_PX)
+        self.refresh_button.clicked.connect(self.refresh)
+        self.open_button.clicked.connect(self._open_selected)
+        self.info = QLabel(tr("Choose a session on the left."))
+        self.info.setWordWrap(True)
+        self.force_plot = pg.PlotWidget(title=tr("Force (N)"))
+        self.angle_plot = pg.PlotWidget(title=tr("Ankle angles (°)"))
+        for p in (self.force_plot, self.angle_plot):
+            p.setBackground("w")
+            p.showGrid(x=True, y=True, alpha=0.3)
+            p.addLegend(offset=(10, 10))
+            p.setLabel("bottom", tr("time (s)"))
+        # Angles that stay at 0 (force protocols) must not magnify numerical noise.
+        self.angle_plot.getViewBox().setLimits(minYRange=10.0)
+        self.angle_plot.setXLink(self.force_plot)
+        left = QVBoxLayout()
+        left.addWidget(QLabel(tr("Recorded sessions")))
+        left.addWidget(self.sessions, 1)
+        buttons = QHBoxLayout()
+        buttons.addWidget(self.refresh_button)
+        buttons.addWidget(self.open_button)
+        left.addLayout(buttons)
+        right = QVBoxLayout()
+        right.addWidget(self.info)
+        right.addWidget(self.force_plot, 1)
+        right.addWidget(self.angle_plot, 1)
+        layout = QHBoxLayout(self)
+        layout.addLayout(left, 1)
+        layout.addLayout(right, 3)
+        self.loaded.connect(self._show)
+        self.refresh()
+
+    def refresh(self) -> None:
+        """List the folder's recordings, newest first."""
+        self.sessions.clear()
+        if self.recordings_dir is None or not self.recordings_dir.is_dir():
+            return
+        files = sorted(self.recordings_dir.glob("*.mcap"), key=lambda p: p.stat().st_mtime,
+                       reverse=True)
+        for path in files:
+            item = QListWidgetItem(recording_title(path))
+            item.setData(Qt.ItemDataRole.UserRole, str(path))
+            self.sessions.addItem(item)
+        if files:
+            self.sessions.setCurrentRow(0)
+
+    def _open_selected(self) -> None:
+        item = self.sessions.currentItem()
+        if item is not None:
+            self.open(Path(item.data(Qt.ItemDataRole.UserRole)))
+
+    def open(self, path: Path) -> None:
+        """Read ``path`` on the worker; the plots follow when it is done."""
+        self.info.setText(tr("Reading %1…").replace("%1", path.name))
+        self._pool.submit(self._load, path)
+
+    def _load(self, path: Path) -> None:
+        try:
+            self.loaded.emit(load_review(path), "")
+        except TalusError as exc:
+            self.loaded.emit(None, str(exc))
+
+    def _show(self, data: ReviewData | None, error: str) -> None:
+        self.data = data
+        self.force_plot.clear()
+        self.angle_plot.clear()
+        if data is None:
+            self.info.setText(tr("Cannot open: %1").replace("%1", error))
+            return
+        dash = Qt.PenStyle.DashLine
+        if len(data.t_ref):
+            self.force_plot.plot(data.t_ref, data.force_ref_n, name=tr("reference"),
+                                 pen=pg.mkPen("#555555", width=2, style=dash))
+        self.force_plot.plot(data.t_force, data.force_n, name=tr("measured"),
+                             pen=pg.mkPen("#1f5fbf", width=2), connect="finite")
+        self.angle_plot.plot(data.t, data.pitch_deg, name=tr("plantar(+)/dorsi(−) flexion"),
+                             pen=pg.mkPen("#1f5fbf", width=2), connect="finite")
+        self.angle_plot.plot(data.t, data.roll_deg, name=tr("roll (+ is inversion of a right foot)"),
+                             pen=pg.mkPen("#bf5f1f", width=2), connect="finite")
+        for t, cause, _event in data.stops:
+            for plot in (self.force_plot, self.angle_plot):
+                line = pg.InfiniteLine(pos=t, angle=90, pen=pg.mkPen("#c0262d", width=2),
+                                       label=cause_words(cause), labelOpts={"color": "#c0262d"})
+                plot.addItem(line)
+        meta = data.metadata
+        duration = float(data.t[-1]) if len(data.t) else 0.0
+        text = tr("%1 — patient %2 — %3 s").replace("%1", str(meta.get("protocol_name", "?"))) \
+            .replace("%2", str(meta.get("patient_id", "?"))).replace("%3", f"{duration:.1f}")
+        if data.stops:
+            text += " — " + tr("stops: %1").replace("%1", "; ".join(
+                f"{t:.1f} s {cause_words(c)}" for t, c, _ in data.stops))
+        if not data.complete:
+            text += " — " + tr("recording cut short (recovered up to its last whole block)")
+        self.info.setText(text)

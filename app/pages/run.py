@@ -1,0 +1,298 @@
+"""Run: take control, start the prescribed session, live plots (reference dashed, measured
+solid: force in N; the ankle angles in clinical terms with the patient's ROM drawn as a shaded
+band), progress with phase and time left. Nothing on this page needs typing.
+
+The plots are redrawn by a timer at :data:`FRAME_HZ` from the samples the link collected
+(the GUI thread never waits for telemetry); each redraw costs one ``setData`` per curve.
+"""
+from __future__ import annotations
+
+import collections
+import math
+import time
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt, QTimer, Signal
+from PySide6.QtWidgets import (
+    QGridLayout, QHBoxLayout, QLabel, QProgressBar, QPushButton, QVBoxLayout, QWidget,
+)
+
+from app.background import Background
+from app.i18n import tr
+from app.journal import SessionJournal
+from app.patient_context import PatientContext
+from app.rt_link import RtLink
+from app.style import LARGE_PX, TARGET_PX
+from app.words import event_words
+from rt.ipc.client import RtClient
+
+#: Redraw rate of the live plots, Hz (the issue asks ≥ 30 fps).
+FRAME_HZ = 30
+#: Seconds of history on the live plots.
+WINDOW_S = 20.0
+
+
+def phase_words(phase: str) -> str:
+    return {"approach": tr("moving to the start position"), "play": tr("exercise"),
+            "return": tr("returning to rest"), "stopped": tr("stopped"),
+            "rest": tr("at rest")}.get(phase, phase)
+
+
+class RunPage(QWidget):
+    """Emits ``session_ended(summary)`` when the RT process publishes ``session_end``."""
+
+    session_ended = Signal(dict)
+
+    def __init__(self, link: RtLink | None, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.link = link
+        self.patient: PatientContext | None = None
+        self.document: dict[str, Any] | None = None
+        self.session_id: str | None = None
+        self.duration_s: float | None = None
+        self.last_summary: dict[str, Any] | None = None
+        self.last_error = ""
+        self.recording: str | None = None
+        self.start_clicked_at: float | None = None
+        #: False for roles that may not move the robot (viewer, engineer, admin)
+        self.may_run = True
+        #: the clinical record's journal of sessions (None: no record)
+        self.journal: SessionJournal | None = None
+        self._journal_pool = Background("gui-journal", self)
+        self._journal_pool.done.connect(self._journaled)
+        self.frames = 0
+        n = int(WINDOW_S * 70)
+        self._buf: dict[str, collections.deque[float]] = {
+            k: collections.deque(maxlen=n) for k in
+            ("t", "force_ref", "force", "roll", "pitch", "roll_ref", "pitch_ref")}
+        self._latest: dict[str, Any] | None = None
+
+        self.protocol_label = QLabel(tr("No protocol prescribed: choose one in Prescribe."))
+        self.protocol_label.setWordWrap(True)
+        self.control_button = QPushButton(tr("Take control of the robot"))
+        self.start_button = QPushButton(tr("Start session"))
+        self.start_button.setObjectName("startSession")
+        for b in (self.control_button, self.start_button):
+            b.setMinimumHeight(LARGE_PX)
+        self.control_button.clicked.connect(self.take_control)
+        self.start_button.clicked.connect(self.start_session)
+        self.message = QLabel()
+        self.message.setWordWrap(True)
+
+        pg.setConfigOptions(antialias=False)
+        self.force_plot = pg.PlotWidget(title=tr("Force (N)"))
+        self.angle_plot = pg.PlotWidget(title=tr("Ankle angles (°)"))
+        for p in (self.force_plot, self.angle_plot):
+            # Draw only what is visible, at most about a point per pixel (CPU: the RT loop
+            # shares the machine).
+            p.setClipToView(True)
+            p.setDownsampling(auto=True, mode="peak")
+            p.setBackground("w")
+            p.showGrid(x=True, y=True, alpha=0.3)
+            p.addLegend(offset=(10, 10))
+            p.setLabel("bottom", tr("time (s)"))
+        dash = Qt.PenStyle.DashLine
+        self.curves = {
+            "force_ref": self.force_plot.plot(pen=pg.mkPen("#555555", width=2, style=dash),
+                                              name=tr("reference")),
+            "force": self.force_plot.plot(pen=pg.mkPen("#1f5fbf", width=2),
+                                          name=tr("measured")),
+            "pitch_ref": self.angle_plot.plot(pen=pg.mkPen("#1f5fbf", width=1, style=dash)),
+            "pitch": self.angle_plot.plot(pen=pg.mkPen("#1f5fbf", width=2),
+                                          name=tr("plantar(+)/dorsi(−) flexion")),
+            "roll_ref": self.angle_plot.plot(pen=pg.mkPen("#bf5f1f", width=1, style=dash)),
+            "roll": self.angle_plot.plot(pen=pg.mkPen("#bf5f1f", width=2),
+                                         name=tr("inversion(+)/eversion(−)")),
+        }
+        self.angle_plot.getViewBox().setLimits(minYRange=10.0)
+        self.rom_bands = {
+            axis: pg.LinearRegionItem(orientation="horizontal", movable=False,
+                                      brush=pg.mkBrush(colour))
+            for axis, colour in (("pitch", (31, 95, 191, 35)), ("roll", (191, 95, 31, 35)))}
+        for band in self.rom_bands.values():
+            self.angle_plot.addItem(band)
+            band.hide()
+
+        self.progress = QProgressBar()
+        self.progress.setMinimumHeight(TARGET_PX)
+        self.progress.setRange(0, 1000)
+        self.progress.setTextVisible(True)
+        self.phase_label = QLabel()
+        font = self.phase_label.font()
+        font.setPointSize(14)
+        self.phase_label.setFont(font)
+        self.events_label = QLabel()
+        self.events_label.setWordWrap(True)
+
+        top = QHBoxLayout()
+        top.addWidget(self.protocol_label, 3)
+        top.addWidget(self.control_button, 1)
+        top.addWidget(self.start_button, 1)
+        plots = QGridLayout()
+        plots.addWidget(self.force_plot, 0, 0)
+        plots.addWidget(self.angle_plot, 0, 1)
+        layout = QVBoxLayout(self)
+        layout.addLayout(top)
+        layout.addWidget(self.message)
+        layout.addLayout(plots, 1)
+        layout.addWidget(self.phase_label)
+        layout.addWidget(self.progress)
+        layout.addWidget(self.events_label)
+
+        self.timer = QTimer(self)
+        self.timer.setInterval(int(1000 / FRAME_HZ))
+        self.timer.timeout.connect(self.redraw)
+        if link is not None:
+            link.replied.connect(self._replied)
+            link.event_received.connect(self._event)
+            link.status_changed.connect(lambda _s: self.update_buttons())
+            link.connection_changed.connect(lambda *_: self.update_buttons())
+            self.timer.start()
+        self.update_buttons()
+
+    # ------------------------------------------------------------------ inputs
+
+    def _inversion_sign(self) -> float:
+        """+1 when the platform's positive roll is the patient's inversion (right foot)."""
+        return -1.0 if self.patient is not None and self.patient.side == "left" else 1.0
+
+    def set_patient(self, patient: PatientContext | None) -> None:
+        """Draw this patient's ROM: plantar(+)/dorsi(−) flexion is the platform's pitch;
+        inversion(+)/eversion(−) is its roll, mirrored for a left foot."""
+        self.patient = patient
+        lim = None if patient is None else patient.patient_limits()
+        inv = self._inversion_sign()
+        for axis, band in self.rom_bands.items():
+            if lim is None:
+                band.hide()
+                continue
+            lo, hi = getattr(lim, f"{axis}_min_deg"), getattr(lim, f"{axis}_max_deg")
+            if axis == "roll":
+                lo, hi = sorted((inv * lo, inv * hi))
+            band.setRegion((lo, hi))
+            band.show()
+        self.update_buttons()
+
+    def prescribe(self, document: dict[str, Any]) -> None:
+        """The protocol to run next (its pre-flight passed on Prescribe)."""
+        self.document = document
+        self.protocol_label.setText(tr("Protocol: %1").replace("%1", document["name"]))
+        self.message.setText("")
+        self.update_buttons()
+
+    # ------------------------------------------------------------------ commands
+
+    def take_control(self) -> None:
+        if self.link is not None:
+            self.link.take_control()
+
+    def start_session(self) -> None:
+        link, doc, patient = self.link, self.document, self.patient
+        if link is None or doc is None or patient is None:
+            return
+        self.start_clicked_at = time.monotonic()
+        self.message.setText(tr("Checking the protocol on the robot model, then starting…"))
+        self.start_button.setEnabled(False)
+        journal = self.journal
+
+        def start(c: RtClient) -> dict[str, Any]:
+            # With a clinical record the row is opened first: its snapshot of the limits is
+            # what the RT process enforces.
+            args = patient.rt_patient() if journal is None else journal.begin(patient.code, doc)
+            return c.session_start(doc, args)
+        link.call("session_start", start)
+
+    def _replied(self, tag: str, result: object, error: str) -> None:
+        if tag == "control":
+            self.message.setText(tr("Could not take control: %1").replace("%1", error)
+                                 if error else tr("You control the robot."))
+        elif tag == "session_start":
+            if error:
+                self.last_error = error
+                self.message.setText(tr("The session did not start: %1").replace("%1", error))
+                journal = self.journal
+                if journal is not None:
+                    self._journal_pool.call("refused", lambda: journal.refused(error))
+            else:
+                assert isinstance(result, dict)
+                self.session_id = str(result["session_id"])
+                duration = result.get("duration_s")
+                self.duration_s = float(duration) if isinstance(duration, (int, float)) else None
+                self.recording = result.get("recording")
+                for buf in self._buf.values():
+                    buf.clear()
+                self.message.setText(tr("Session running."))
+        elif tag in ("stop", "estop", "reset") and error:
+            self.message.setText(f"{tag}: {error}")
+        self.update_buttons()
+
+    def _event(self, event: dict[str, Any]) -> None:
+        if event.get("kind") == "session_end":
+            summary = event.get("summary") or {}
+            self.last_summary = summary if isinstance(summary, dict) else {}
+            ended_here = self.session_id is not None
+            self.session_id = None
+            journal, done = self.journal, self.last_summary
+            if journal is not None and ended_here:
+                self._journal_pool.call("end", lambda: journal.end(done))
+            self.message.setText(tr("Session ended: %1").replace(
+                "%1", str(self.last_summary.get("outcome", event.get("cause", "")))))
+            self.session_ended.emit(self.last_summary)
+        elif event.get("kind") == "fault":
+            self.events_label.setText(tr("Stopped: %1").replace("%1", event_words(event)))
+        self.update_buttons()
+
+    def _journaled(self, tag: str, _result: object, error: str) -> None:
+        if error:
+            self.message.setText(tr("The clinical record did not take the session: %1")
+                                 .replace("%1", error))
+
+    def update_buttons(self) -> None:
+        link = self.link
+        connected = link is not None and link.connected
+        status = None if link is None else link.last_status
+        owned = bool(status and isinstance(status.get("owner"), dict)
+                     and link is not None and status["owner"].get("client") == link.client_id)
+        stopped = bool(status and status.get("state") != "run")
+        running = bool(status and status.get("session"))
+        self.control_button.setEnabled(self.may_run and connected and not owned)
+        self.start_button.setEnabled(self.may_run and connected and owned and not stopped
+                                     and not running
+                                     and self.document is not None and self.patient is not None)
+
+    # ------------------------------------------------------------------ drawing
+
+    def redraw(self) -> None:
+        """Append the new telemetry and redraw (the frame timer's slot)."""
+        assert self.link is not None
+        samples = self.link.take_telemetry()
+        if not samples:
+            return
+        b = self._buf
+        inv = self._inversion_sign()
+        for s in samples:
+            b["t"].append(float(s["t"]))
+            b["force_ref"].append(float(s.get("force_ref_n") or 0.0))
+            f = s.get("force_n")
+            b["force"].append(math.nan if f is None else float(f))
+            pose = s.get("pose") or [math.nan] * 3
+            ref = s.get("pose_ref") or [math.nan] * 3
+            b["roll"].append(inv * math.degrees(pose[1]))
+            b["pitch"].append(math.degrees(pose[2]))
+            b["roll_ref"].append(inv * math.degrees(ref[1]))
+            b["pitch_ref"].append(math.degrees(ref[2]))
+        t = np.fromiter(b["t"], float)
+        for key, curve in self.curves.items():
+            curve.setData(t, np.fromiter(b[key], float), connect="finite")
+        last = samples[-1]
+        self._latest = last
+        progress = float(last.get("progress") or 0.0)
+        self.progress.setValue(int(round(1000 * min(max(progress, 0.0), 1.0))))
+        left = ""
+        if self.duration_s and last.get("session"):
+            left = " — " + tr("%1 s left").replace(
+                "%1", f"{max(0.0, (1.0 - progress) * float(self.duration_s)):.0f}")
+        self.phase_label.setText(phase_words(str(last.get("phase", ""))) + left)
+        self.frames += 1

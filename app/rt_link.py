@@ -1,0 +1,223 @@
+"""The GUI's connection to the RT process: commands, heartbeat, telemetry, connection state.
+
+The GUI thread never waits on the network (GUI.md). Everything that talks to the RT process
+runs on Python threads here and comes back to the GUI thread as Qt signals (queued across
+threads):
+
+* commands run on a small thread pool (:meth:`RtLink.call`), each reply delivered as
+  ``replied(tag, result, error)``;
+* STOP and E-STOP have a client and a thread of their own, so a long request (a pre-flight
+  takes seconds) never delays a stop;
+* a watcher thread asks ``status`` every :attr:`status_period_s` on its own client; a missed
+  reply or telemetry older than ``stale_after_s`` is ``connection_changed(False, reason)`` at
+  once, and the pages disable motion;
+* a subscriber thread keeps the telemetry; the Run page takes it at its own frame rate
+  (:meth:`take_telemetry`), so 60 Hz telemetry never floods the event loop.
+
+The owner's heartbeat comes from a child process (:mod:`app.heartbeat`) that the GUI thread
+ticks: GUI stalls do not starve it, a hung GUI stops it, and when this process dies (SIGKILL
+included) it sends a soft stop at once.
+"""
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable
+
+from PySide6.QtCore import QObject, QTimer, Signal
+
+from app.heartbeat import HeartbeatProcess
+
+from rt.errors import TalusError
+from rt.ipc.client import RtClient, Subscriber, default_client_id
+
+#: Telemetry samples kept for the plots (≈ 60 Hz × 30 s).
+TELEMETRY_BUFFER = 2000
+
+
+class RtLink(QObject):
+    """Qt face of the RT process for one GUI (one client id: the one that owns the robot).
+
+    Args:
+        endpoint: the RT process's request address.
+        name: shown to other clients as the owner ("GUI (username)").
+        status_period_s: how often the connection is checked, s.
+        stale_after_s: telemetry older than this while connected means the link is lost, s.
+        heartbeat_period_s: owner heartbeat period, s (the RT process's timeout is 0.25 s).
+    """
+
+    #: tag, result (dict or None), error message ("" when ok)
+    replied = Signal(str, object, str)
+    #: connected, reason when not
+    connection_changed = Signal(bool, str)
+    #: the latest ``status`` reply
+    status_changed = Signal(object)
+    #: a published event (safety events, ``session_end`` with its summary)
+    event_received = Signal(object)
+
+    def __init__(self, endpoint: str, name: str = "GUI", *, status_period_s: float = 0.25,
+                 stale_after_s: float = 1.0, heartbeat_period_s: float = 0.05) -> None:
+        super().__init__()
+        self.endpoint = endpoint
+        self.name = name
+        self.status_period_s = status_period_s
+        self.stale_after_s = stale_after_s
+        self.heartbeat_period_s = heartbeat_period_s
+        self.client_id = default_client_id("gui")
+        # Commands wait up to 5 s: a loaded machine answered control_acquire after 2 s.
+        self.client = RtClient(endpoint, client_id=self.client_id, timeout_s=5.0)
+        self._stop_client = RtClient(endpoint, client_id=default_client_id("gui-stop"),
+                                     timeout_s=1.0)
+        self._pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="gui-rt")
+        self._stop_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-stop")
+        self._telemetry: collections.deque[dict[str, Any]] = collections.deque(
+            maxlen=TELEMETRY_BUFFER)
+        self._tlock = threading.Lock()
+        self._last_telemetry_mono = 0.0
+        self._quit = threading.Event()
+        self.connected = False
+        self.last_status: dict[str, Any] | None = None
+        self.heartbeat: HeartbeatProcess | None = None
+        self._tick_timer = QTimer(self)
+        self._tick_timer.setInterval(200)
+        self._tick_timer.timeout.connect(self._tick)
+        self.replied.connect(self._on_control)
+        self._threads = [threading.Thread(target=self._watch, name="gui-rt-watch", daemon=True),
+                         threading.Thread(target=self._listen, name="gui-rt-sub", daemon=True)]
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def start(self) -> None:
+        """Start watching the connection and receiving telemetry."""
+        for t in self._threads:
+            t.start()
+
+    def close(self) -> None:
+        """Stop the threads and close the clients (the heartbeat stops: if this GUI owned a
+        moving robot, the RT process soft-stops it). Safe to call twice."""
+        if self._quit.is_set():
+            return
+        self._quit.set()
+        for t in self._threads:
+            if t.is_alive():
+                t.join(timeout=2.0)
+        self._tick_timer.stop()
+        if self.heartbeat is not None:
+            self.heartbeat.close()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._stop_pool.shutdown(wait=False, cancel_futures=True)
+        self.client.close()
+        self._stop_client.close()
+
+    # ------------------------------------------------------------------ commands
+
+    def call(self, tag: str, fn: Callable[[RtClient], dict[str, Any]]) -> None:
+        """Run ``fn(client)`` on a worker; its result or error comes back as ``replied``."""
+        self._pool.submit(self._run, tag, fn, self.client)
+
+    def _run(self, tag: str, fn: Callable[[RtClient], dict[str, Any]], client: RtClient) -> None:
+        try:
+            result = fn(client)
+        except TalusError as exc:
+            if not self._quit.is_set():
+                self.replied.emit(tag, None, str(exc))
+            return
+        if not self._quit.is_set():
+            self.replied.emit(tag, result, "")
+
+    def take_control(self) -> None:
+        """Become the owner (reply tag ``control``), then heartbeat from the child process."""
+        self.call("control", lambda c: c.control_acquire(self.name))
+
+    def _on_control(self, tag: str, result: object, error: str) -> None:
+        if tag != "control" or error or self._quit.is_set():
+            return
+        if self.heartbeat is None or not self.heartbeat.alive():
+            self.heartbeat = HeartbeatProcess(self.endpoint, self.client_id,
+                                              self.heartbeat_period_s)
+            self.heartbeat.start()
+            self._tick_timer.start()
+
+    def _tick(self) -> None:
+        if self.heartbeat is not None:
+            self.heartbeat.tick()
+
+    def stop(self) -> None:
+        """Soft stop, on the dedicated stop thread and client (reply tag ``stop``)."""
+        self._stop_pool.submit(self._run, "stop", lambda c: c.stop(), self._stop_client)
+
+    def estop(self, source: str = "gui") -> None:
+        """Hard stop, on the dedicated stop thread and client (reply tag ``estop``)."""
+        self._stop_pool.submit(self._run, "estop", lambda c: c.estop(source), self._stop_client)
+
+    # ------------------------------------------------------------------ telemetry
+
+    def take_telemetry(self) -> list[dict[str, Any]]:
+        """The samples received since the last call (GUI thread, at the frame rate)."""
+        with self._tlock:
+            out = list(self._telemetry)
+            self._telemetry.clear()
+        return out
+
+    def _listen(self) -> None:
+        sub: Subscriber | None = None
+        probe = RtClient(self.endpoint, client_id=default_client_id("gui-sub"), timeout_s=1.0)
+        try:
+            while not self._quit.is_set():
+                if sub is None:
+                    try:
+                        sub = Subscriber(probe.subscribe_info()["pub_endpoint"])
+                    except TalusError:
+                        self._quit.wait(0.5)
+                        continue
+                try:
+                    msg = sub.recv(0.1)
+                except TalusError:
+                    continue  # one bad publication: skip it, keep listening
+                if msg is None:
+                    continue
+                if msg["topic"] == "telemetry":
+                    with self._tlock:
+                        self._telemetry.append(msg)
+                        self._last_telemetry_mono = time.monotonic()
+                elif not self._quit.is_set():
+                    self.event_received.emit(msg)
+        finally:
+            if sub is not None:
+                sub.close()
+            probe.close()
+
+    # ------------------------------------------------------------------ connection
+
+    def _watch(self) -> None:
+        watcher = RtClient(self.endpoint, client_id=default_client_id("gui-watch"),
+                           timeout_s=max(0.5, self.status_period_s * 2))
+        try:
+            while not self._quit.is_set():
+                reason = ""
+                try:
+                    st = watcher.status()
+                    # "you_own" in the reply is the watcher's; say whether this GUI owns.
+                    owner = st.get("owner")
+                    st["you_own"] = isinstance(owner, dict) and owner.get("client") == \
+                        self.client_id
+                    self.last_status = st
+                    if not self._quit.is_set():
+                        self.status_changed.emit(st)
+                    with self._tlock:
+                        age = time.monotonic() - self._last_telemetry_mono
+                    if self._last_telemetry_mono and age > self.stale_after_s:
+                        reason = f"no telemetry from the robot for {age:.1f} s"
+                except TalusError as exc:
+                    reason = str(exc)
+                self._set_connected(not reason, reason)
+                self._quit.wait(self.status_period_s)
+        finally:
+            watcher.close()
+
+    def _set_connected(self, connected: bool, reason: str) -> None:
+        if connected != self.connected and not self._quit.is_set():
+            self.connected = connected
+            self.connection_changed.emit(connected, reason)

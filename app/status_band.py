@@ -1,0 +1,138 @@
+"""The band across the top of every page: robot state in words and colour, the connection,
+who owns the robot, the patient; a latched fault's cause with a Reset that says what it
+clears and asks for acknowledgement (inline, never a modal dialog that could hide STOP)."""
+from __future__ import annotations
+
+from typing import Any
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+
+from app.i18n import tr
+from app.words import STATE_COLOURS, cause_words, display_state, state_words
+from app.style import TARGET_PX
+
+
+
+class StatusBand(QWidget):
+    """Shows the latest ``status`` and connection; emits ``reset_confirmed(ids)`` once the
+    user acknowledged exactly the faults listed."""
+
+    reset_confirmed = Signal(list)
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setObjectName("statusBand")
+        self.setAttribute(Qt.WidgetAttribute.WA_StyledBackground, True)
+        self.state = "disconnected"
+        self.latched: list[dict[str, Any]] = []
+        self._events: dict[int, dict[str, Any]] = {}
+        self.state_label = QLabel()
+        self.state_label.setObjectName("stateLabel")
+        font = self.state_label.font()
+        font.setPointSize(16)
+        font.setBold(True)
+        self.state_label.setFont(font)
+        self.detail_label = QLabel()
+        self.detail_label.setWordWrap(True)
+        self.connection_label = QLabel()
+        self.owner_label = QLabel()
+        self.patient_label = QLabel()
+        for label in (self.state_label, self.connection_label, self.owner_label,
+                      self.patient_label):
+            label.setWordWrap(True)   # a long reason must never widen the window
+        self.reset_button = QPushButton(tr("Reset…"))
+        self.reset_button.setMinimumHeight(TARGET_PX)
+        self.reset_button.clicked.connect(self._ask_acknowledge)
+        self.ack_label = QLabel()
+        self.ack_label.setWordWrap(True)
+        self.ack_button = QPushButton(tr("Patient checked: clear"))
+        self.cancel_button = QPushButton(tr("Cancel"))
+        for b in (self.ack_button, self.cancel_button):
+            b.setMinimumHeight(TARGET_PX)
+        self.ack_button.clicked.connect(self._acknowledge)
+        self.cancel_button.clicked.connect(self._hide_acknowledge)
+
+        top = QHBoxLayout()
+        top.addWidget(self.state_label, 3)
+        info = QVBoxLayout()
+        info.addWidget(self.connection_label)
+        info.addWidget(self.owner_label)
+        info.addWidget(self.patient_label)
+        top.addLayout(info, 2)
+        top.addWidget(self.reset_button)
+        ack = QHBoxLayout()
+        ack.addWidget(self.ack_label, 1)
+        ack.addWidget(self.ack_button)
+        ack.addWidget(self.cancel_button)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(12, 6, 12, 6)
+        layout.addLayout(top)
+        layout.addWidget(self.detail_label)
+        layout.addLayout(ack)
+        self._hide_acknowledge()
+        self.set_patient(None)
+        self.update_status(None, False, tr("not connected yet"))
+
+    # ------------------------------------------------------------------ updates
+
+    def set_patient(self, code: str | None) -> None:
+        self.patient_label.setText(tr("Patient: %1").replace("%1", code) if code
+                                   else tr("No patient selected"))
+
+    def remember_event(self, event: dict[str, Any]) -> None:
+        """Keep a published fault event (its values say by how much a limit was passed)."""
+        if isinstance(event.get("id"), int):
+            self._events[event["id"]] = event
+
+    def update_status(self, status: dict[str, Any] | None, connected: bool,
+                      reason: str = "") -> None:
+        self.state = display_state(status, connected)
+        colour = STATE_COLOURS[self.state]
+        self.setStyleSheet(f"#statusBand {{ background: {colour}; }} "
+                           f"#statusBand QLabel {{ color: white; font-size: 12pt; }}")
+        self.state_label.setText(state_words(self.state))
+        if connected:
+            self.connection_label.setText(tr("Robot connected"))
+        else:
+            self.connection_label.setText(tr("Robot NOT connected: %1").replace("%1", reason))
+        owner = (status or {}).get("owner")
+        self.owner_label.setText(tr("Controlled by: %1").replace("%1", owner["name"])
+                                 if isinstance(owner, dict) else tr("Nobody controls the robot"))
+        self.latched = list((status or {}).get("latched") or [])
+        if self.latched:
+            self.detail_label.setText(tr("Why: %1").replace("%1", "; ".join(
+                self._fault_text(f) for f in self.latched)))
+        else:
+            self.detail_label.setText("")
+            self._hide_acknowledge()
+        self.detail_label.setVisible(bool(self.latched))
+        self.reset_button.setVisible(bool(self.latched) and connected)
+        if not self.ack_button.isHidden() and [int(f["id"]) for f in self.latched] != \
+                getattr(self, "_pending", []):
+            self._ask_acknowledge()   # what Reset clears changed: show the new list
+
+    def _fault_text(self, fault: dict[str, Any]) -> str:
+        from app.words import event_words
+        event = self._events.get(fault.get("id", -1))
+        return event_words(event) if event else cause_words(str(fault.get("cause", "")))
+
+    # ------------------------------------------------------------------ acknowledgement
+
+    def _ask_acknowledge(self) -> None:
+        self._pending = [int(f["id"]) for f in self.latched]
+        lines = [f"• {self._fault_text(f)}" for f in self.latched]
+        self.ack_label.setText(tr("Reset will clear:") + "\n" + "\n".join(lines))
+        for w in (self.ack_label, self.ack_button, self.cancel_button):
+            w.show()
+        self.ack_button.setFocus(Qt.FocusReason.OtherFocusReason)
+
+    def _acknowledge(self) -> None:
+        ids = getattr(self, "_pending", [])
+        self._hide_acknowledge()
+        if ids:
+            self.reset_confirmed.emit(ids)
+
+    def _hide_acknowledge(self) -> None:
+        for w in (self.ack_label, self.ack_button, self.cancel_button):
+            w.hide()

@@ -1,0 +1,21 @@
+"""Shared by the GUI tests: the offscreen platform (set before Qt is imported) and a real RT
+process on the twin with a heartbeat timeout widened for a loaded machine."""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+from test_rt_process import start_rt, stop_rt  # noqa: E402  (after the platform is chosen)
+
+#: The RT tests' owner heartbeat timeout on a loaded 2-core machine, s.
+LOADED_HEARTBEAT_TIMEOUT_S = 1.0
+
+
+def start_rt_for_gui(recordings_dir: str):
+    """(process, endpoint, pub endpoint) of an RT process recording into ``recordings_dir``."""
+    return start_rt("--heartbeat-timeout", str(LOADED_HEARTBEAT_TIMEOUT_S),
+                    "--recordings-dir", recordings_dir)
+
+
+__all__ = ["start_rt_for_gui", "stop_rt", "LOADED_HEARTBEAT_TIMEOUT_S"]
