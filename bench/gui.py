@@ -26,10 +26,10 @@ from typing import Any
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
-from protocols.library import LIBRARY_DIR  # noqa: E402
-from protocols.rt_session import protocol_document  # noqa: E402
-from rt.ipc.client import RtClient, Subscriber  # noqa: E402
-from rt.ipc.embedded import rt_process  # noqa: E402
+from protocols.library import LIBRARY_DIR
+from protocols.rt_session import protocol_document
+from rt.ipc.client import RtClient, Subscriber
+from rt.ipc.embedded import rt_process
 
 HEARTBEAT_TIMEOUT_S = 1.0
 PATIENT = {"id": "BENCH", "weight_kg": 70.0}

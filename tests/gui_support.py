@@ -6,7 +6,7 @@ import os
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
-from test_rt_process import start_rt, stop_rt  # noqa: E402  (after the platform is chosen)
+from test_rt_process import start_rt, stop_rt
 
 #: The RT tests' owner heartbeat timeout on a loaded 2-core machine, s.
 LOADED_HEARTBEAT_TIMEOUT_S = 1.0
@@ -18,4 +18,4 @@ def start_rt_for_gui(recordings_dir: str):
                     "--recordings-dir", recordings_dir)
 
 
-__all__ = ["start_rt_for_gui", "stop_rt", "LOADED_HEARTBEAT_TIMEOUT_S"]
+__all__ = ["LOADED_HEARTBEAT_TIMEOUT_S", "start_rt_for_gui", "stop_rt"]

@@ -11,8 +11,9 @@ import time
 from pathlib import Path
 
 import gui_support
-from rt.ipc.client import RtClient, Subscriber
 from test_rt_process import LOADED_MACHINE_SLACK_S
+
+from rt.ipc.client import RtClient, Subscriber
 
 DRIVER = Path(__file__).with_name("gui_kill_driver.py")
 

@@ -10,9 +10,9 @@ from PySide6.QtCore import Qt
 pytest.importorskip("patients.service", reason="the clinical record (issue: patients) is "
                     "not merged into this branch yet")
 
-from app.main_window import MainWindow  # noqa: E402
-from app.settings import GuiSettings  # noqa: E402
-from patients.service import ClinicalRecord  # noqa: E402
+from app.main_window import MainWindow
+from app.settings import GuiSettings
+from patients.service import ClinicalRecord
 
 PASSWORD = "correct horse battery"
 

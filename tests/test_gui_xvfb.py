@@ -43,7 +43,8 @@ def test_real_window_under_xvfb_renders_every_page(tmp_path):
     proc = subprocess.run(
         [xvfb_run, "-a", "-s", "-screen 0 1366x768x24", str(talus), "gui", "--screenshot",
          str(out), "--recordings-dir", str(tmp_path / "rec"), "--settings",
-         str(tmp_path / "gui.json")], env=env, capture_output=True, text=True, timeout=600)
+         str(tmp_path / "gui.json")], env=env, check=False, capture_output=True, text=True,
+        timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     files = [Path(f) for f in json.loads(proc.stdout.strip().splitlines()[-1])["screenshots"]]
     assert {f.stem for f in files} == _expected()
@@ -54,5 +55,5 @@ def test_real_window_under_xvfb_renders_every_page(tmp_path):
     # Refuses to overwrite what it did not create in this run, unless --force.
     again = subprocess.run([str(talus), "gui", "--screenshot", str(out)],
                            env={**env, "QT_QPA_PLATFORM": "offscreen"},
-                           capture_output=True, text=True, timeout=120)
+                           check=False, capture_output=True, text=True, timeout=120)
     assert again.returncode == 2 and "--force" in again.stderr
