@@ -47,13 +47,18 @@ demo: setup
 	  $(BIN)/talus session run --protocol protocols/library/$$p.yaml --record-dir out \
 	    --db out/demo.db --user demo-clinician --patient DEMO-001 || exit 1; echo; \
 	done; \
-	$(BIN)/talus sessions list --patient DEMO-001 --db out/demo.db --user demo-clinician
-	@echo
-# PDF reports: one per demo session (the two newest recordings of DEMO-001), the demo
-# patient's progress (an example history), a certificate from an example calibration record.
-	for f in $$(ls -t out/*_DEMO-001_*.mcap | head -2); do \
-	  $(BIN)/talus report session --recording $$f --out $${f%.mcap}.pdf --force || exit 1; \
-	done
+	$(BIN)/talus sessions list --patient DEMO-001 --db out/demo.db --user demo-clinician; \
+	echo; \
+	for uid in $$($(BIN)/talus sessions list --patient DEMO-001 --db out/demo.db \
+	    --user demo-clinician --json | $(BIN)/python -c 'import json, sys; \
+	    print(" ".join(s["uid"] for s in json.load(sys.stdin)[-2:]))'); do \
+	  $(BIN)/talus report session --session $$uid --db out/demo.db --user demo-clinician \
+	    --out out/session_$$uid.pdf --force || exit 1; \
+	done; \
+	$(BIN)/talus report progress --patient DEMO-001 --db out/demo.db --user demo-clinician \
+	  --out out/progress_DEMO-001.pdf --force
+# PDF reports above: the two demo sessions and DEMO-001's progress from the clinical record;
+# below, an example history's progress and a certificate from an example calibration record.
 	$(BIN)/talus report progress --input reports/data/demo_progress.json \
 	  --out out/progress_twin-demo.pdf --force
 	$(BIN)/talus report calibration --record reports/data/example_calibration_record.json \

@@ -159,7 +159,11 @@ class SessionFigures:
         self._peak_qd = max(self._peak_qd, _nanmax(np.abs(b.qd).ravel()))
         codes = np.where((b.phase >= 0) & (b.phase < len(Phase)), b.phase, len(Phase))
         self._phase_counts += np.bincount(codes.astype(np.int64), minlength=len(Phase) + 1)
-        self._last_phase = int(b.phase[-1])
+        known = b.phase[b.phase != PHASE_UNKNOWN]
+        if len(known):
+            # The state may run on a few cycles past the last recorded reference (the RT
+            # process stops recording when the session is at rest): those rows say nothing.
+            self._last_phase = int(known[-1])
         # Every rom_stride-th play sample, counted from the session's first play sample.
         idx = np.flatnonzero(play)
         if not len(idx):

@@ -49,6 +49,7 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
                         "whose role may read it)")
     p.add_argument("--robot", default=None,
                    help="robot description YAML the session ran with (default: nominal)")
+    _record_options(p)
     _common(p)
     p.set_defaults(func=cmd_session)
 
@@ -62,6 +63,7 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     src.add_argument("--patient", help="patient code in the clinical database")
     p.add_argument("--from", dest="date_from", default=None, help="first date (YYYY-MM-DD)")
     p.add_argument("--to", dest="date_to", default=None, help="last date (YYYY-MM-DD)")
+    _record_options(p)
     _common(p)
     p.set_defaults(func=cmd_progress)
 
@@ -119,10 +121,23 @@ def _guard(run: Callable[[argparse.Namespace], dict[str, Any]]
     return wrapped
 
 
-def _needs_database(what: str) -> None:
-    from rt.errors import InputError
-    raise InputError(f"{what} needs the clinical database, which this installation does not "
-                     "have yet: use --recording (session) or --input (progress)")
+def _record_options(p: argparse.ArgumentParser) -> None:
+    import os
+
+    p.add_argument("--db", default=None,
+                   help="clinical record URL (default: TALUS_DATABASE_URL, else the user data "
+                        "directory's SQLite file)")
+    p.add_argument("--user", default=os.environ.get("TALUS_USER"),
+                   help="clinical record user (password: prompt or TALUS_PASSWORD)")
+
+
+def _with_record(args: argparse.Namespace, use: Callable[[Any, Any], Any]) -> Any:
+    """Log in to the clinical record and call ``use(record, actor)``."""
+    from patients.cli_common import login
+    from patients.service import ClinicalRecord
+
+    with ClinicalRecord.open(args.db) as record:
+        return use(record, login(record, args))
 
 
 @_guard
@@ -132,9 +147,7 @@ def cmd_session(args: argparse.Namespace) -> dict[str, Any]:
     from reports.session_report import render_session_report
     from rt.errors import InputError
 
-    if args.session is not None:
-        _needs_database("--session")
-    if args.identify:
+    if args.identify and args.session is None:
         raise InputError("--identify needs --session and a user whose role may read the "
                          "patient's identifying data; a recording holds only the pseudonym")
     robot = None
@@ -142,10 +155,18 @@ def cmd_session(args: argparse.Namespace) -> dict[str, Any]:
         from rt.model import RobotModel
         robot = RobotModel.load(args.robot)
     settings = _settings(args)
-    out = _out(args, args.recording)
+    if args.session is not None and args.out is None:
+        raise InputError("--session needs --out (where to write the report)")
+    out = _out(args, args.recording or args.session)
     if out.exists() and not args.force:
         raise InputError(f"{out}: already exists (use --force to replace it)")
-    inp = session_input_from_recording(args.recording, robot)
+    if args.session is not None:
+        from reports.from_record import session_input
+
+        inp = _with_record(args, lambda record, actor: session_input(
+            record, actor, args.session, robot, identify=args.identify))
+    else:
+        inp = session_input_from_recording(args.recording, robot)
     pages = render_session_report(inp, out, settings, _clock(args), force=args.force)
     return {"out": str(out), "pages": pages, "notes": inp.notes}
 
@@ -156,9 +177,26 @@ def cmd_progress(args: argparse.Namespace) -> dict[str, Any]:
     from reports.progress import load_progress_input, render_progress_report
 
     if args.patient is not None:
-        _needs_database("--patient")
-    inp = load_progress_input(args.input)
-    out = _out(args, args.input)
+        import datetime as dt
+
+        from reports.from_record import progress_input
+        from rt.errors import InputError
+
+        if args.out is None:
+            raise InputError("--patient needs --out (where to write the report)")
+
+        def day(s: str | None) -> dt.date | None:
+            try:
+                return None if s is None else dt.date.fromisoformat(s)
+            except ValueError:
+                raise InputError(f"not a date (YYYY-MM-DD): {s!r}") from None
+        since, until = day(args.date_from), day(args.date_to)
+        inp = _with_record(args, lambda record, actor: progress_input(
+            record, actor, args.patient, since, until))
+        out = _out(args, args.patient)
+    else:
+        inp = load_progress_input(args.input)
+        out = _out(args, args.input)
     pages = render_progress_report(inp, out, _settings(args), _clock(args),
                                    date_from=args.date_from, date_to=args.date_to,
                                    force=args.force)
