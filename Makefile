@@ -70,7 +70,7 @@ demo: setup
 
 # Static checks first (each fails the target): ruff over the code and its tests, mypy over
 # the packages listed in pyproject.toml's [tool.mypy].
-LINT_PATHS := talus rt protocols patients calibration tests bench
+LINT_PATHS := talus rt protocols patients calibration reports app tests bench
 
 test: setup
 	$(BIN)/ruff check $(LINT_PATHS)

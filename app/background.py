@@ -3,8 +3,9 @@ worker thread and answered as a Qt signal: ``done(tag, result, error)``. Only th
 errors (``TalusError``) become ``error``; anything else is a bug and propagates."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable
+from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 

@@ -14,7 +14,7 @@ from pathlib import Path
 from rt.errors import TalusError
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("start", help="open the clinician GUI (the default command)")
     _options(p)
     p.set_defaults(func=run)

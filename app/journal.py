@@ -5,7 +5,8 @@ the summary and the recording's path and sha256 when the RT process publishes ``
 (a refusal closes it as refused). Called from worker threads (the record is thread-safe)."""
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import yaml
 

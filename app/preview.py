@@ -54,7 +54,13 @@ def compute_preview(document: dict[str, Any], weight_kg: float | None = None,
     if violations:
         return Preview(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), 0.0, violations,
                        False)
-    s = gen.samples()
+    samples = getattr(gen, "samples", None)
+    if samples is None:
+        # An interactive protocol (active assist) follows the patient: there is no reference
+        # to draw ahead of time, only its duration.
+        return Preview(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0),
+                       float(gen.duration_s), (), False)
+    s = samples()
     pose = np.asarray(s["pose"])
     fz = np.asarray(s["fz"], dtype=float)
     t = np.asarray(s["t"], dtype=float)

@@ -16,7 +16,14 @@ from typing import Any
 
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
-    QCheckBox, QComboBox, QFormLayout, QGroupBox, QLabel, QLineEdit, QVBoxLayout, QWidget,
+    QCheckBox,
+    QComboBox,
+    QFormLayout,
+    QGroupBox,
+    QLabel,
+    QLineEdit,
+    QVBoxLayout,
+    QWidget,
 )
 
 from app.field_labels import field_label
@@ -304,8 +311,7 @@ class ProtocolForm(QWidget):
     @staticmethod
     def _split(line: str) -> tuple[str, str]:
         prefix = f"{FORM_SOURCE}: "
-        if line.startswith(prefix):
-            line = line[len(prefix):]
+        line = line.removeprefix(prefix)
         path, sep, reason = line.partition(": ")
         return (path, reason) if sep else ("", line)
 

@@ -44,7 +44,7 @@ def _every(rows: list[dict[str, Any]], rate_hz: float) -> list[dict[str, Any]]:
         return rows
     span = float(rows[-1]["t"]) - float(rows[0]["t"])
     native = (len(rows) - 1) / span if span > 0 else rate_hz
-    step = max(1, int(round(native / rate_hz)))
+    step = max(1, round(native / rate_hz))
     return rows[::step]
 
 

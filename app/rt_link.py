@@ -23,13 +23,13 @@ from __future__ import annotations
 import collections
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable
+from typing import Any
 
 from PySide6.QtCore import QObject, QTimer, Signal
 
 from app.heartbeat import HeartbeatProcess
-
 from rt.errors import TalusError
 from rt.ipc.client import RtClient, Subscriber, default_client_id
 

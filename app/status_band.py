@@ -9,9 +9,8 @@ from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
 from app.i18n import tr
-from app.words import STATE_COLOURS, cause_words, display_state, state_words
 from app.style import TARGET_PX
-
+from app.words import STATE_COLOURS, cause_words, display_state, state_words
 
 
 class StatusBand(QWidget):

@@ -25,9 +25,24 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from reportlab.lib.units import mm
 from reportlab.platypus import CondPageBreak, Flowable, KeepTogether, PageBreak, Spacer
 
-from reports.document import (GREEN, RED, Clock, ReportContext, Styles, TableSpec, banner,
-                              figure_image, fmt, format_time, frame_width, key_values, p,
-                              table, utc_now, write_pdf)
+from reports.document import (
+    GREEN,
+    RED,
+    Clock,
+    ReportContext,
+    Styles,
+    TableSpec,
+    banner,
+    figure_image,
+    fmt,
+    format_time,
+    frame_width,
+    key_values,
+    p,
+    table,
+    utc_now,
+    write_pdf,
+)
 from reports.inputs import ReportInputError, first_problem, read_json
 from reports.settings import ReportSettings
 
@@ -168,7 +183,7 @@ class CalibrationRecord(_Open):
     @classmethod
     def _iso(cls, v: str) -> str:
         try:
-            datetime.fromisoformat(v.replace("Z", "+00:00"))
+            datetime.fromisoformat(v)
         except ValueError as exc:
             raise ValueError(f"not an ISO 8601 time: {v!r}") from exc
         return v
@@ -226,19 +241,19 @@ def _first_page(rec: CalibrationRecord, st: Styles, width: float) -> list[Flowab
                              Spacer(1, 3 * mm)]
     story.append(key_values([
         ("Certificate", rec.id),
-        ("Date", format_time(datetime.fromisoformat(rec.created_utc.replace("Z", "+00:00")))),
+        ("Date", format_time(datetime.fromisoformat(rec.created_utc))),
         ("Operator", rec.operator),
         ("Force plate", f"{pl.manufacturer} {pl.model}, serial {pl.serial} ({pl.name})"),
         ("Plate type", {"six_channel": "six-channel (F = C·V)",
                         "kistler8": "Kistler-type, eight channels",
                         "linear_n": "generic linear N-channel"}[pl.kind]),
-        ("Plate size", f"{fmt(pl.size_m[0] * 1e3, 0)} × {fmt(pl.size_m[1] * 1e3, 0)} mm; "
-                       f"range Fx, Fy, Fz {', '.join(fmt(x, 0) for x in pl.force_range_n)} N"),
+        ("Plate size", (f"{fmt(pl.size_m[0] * 1e3, 0)} × {fmt(pl.size_m[1] * 1e3, 0)} mm; "
+                       f"range Fx, Fy, Fz {', '.join(fmt(x, 0) for x in pl.force_range_n)} N")),
         ("Reference sensor", f"{ref.model}, serial {ref.serial}"),
-        ("Traceability", f"certificate {ref.calibration_certificate} of "
+        ("Traceability", (f"certificate {ref.calibration_certificate} of "
                          f"{ref.calibration_date}; accuracy "
                          f"{', '.join(fmt(x, 2) for x in ref.accuracy_pct_fs)} % FS "
-                         "(Fx Fy Fz Mx My Mz)"),
+                         "(Fx Fy Fz Mx My Mz)")),
         ("Software", f"talus {rec.software_version}"),
     ], st, width, 0.24))
     story.append(p("Results against the acceptance thresholds", st.h1))
@@ -361,8 +376,8 @@ def _details(rec: CalibrationRecord, st: Styles, width: float) -> list[Flowable]
     story.append(key_values([
         ("Method", "ArUco markers seen by the camera" if reg.method == "camera"
          else "nominal mounting"),
-        ("Translation", f"{fmt(t[0][3] * 1e3, 2)}, {fmt(t[1][3] * 1e3, 2)}, "
-                        f"{fmt(t[2][3] * 1e3, 2)} mm (robot frame)"),
+        ("Translation", (f"{fmt(t[0][3] * 1e3, 2)}, {fmt(t[1][3] * 1e3, 2)}, "
+                        f"{fmt(t[2][3] * 1e3, 2)} mm (robot frame)")),
         ("1-σ", f"{fmt(reg.sigma_translation_mm, 2)} mm, {fmt(reg.sigma_rotation_deg, 3)}°"),
     ], st, width, 0.24))
     story.append(p("Plan", st.h1))

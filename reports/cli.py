@@ -9,9 +9,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from datetime import datetime, timezone
+from collections.abc import Callable
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 EXIT_ERROR = 2
 
@@ -34,7 +35,7 @@ def _common(p: argparse.ArgumentParser) -> None:
                         "the same value gives the same PDF")
 
 
-def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(commands: argparse._SubParsersAction) -> None:
     """Add ``session``, ``progress`` and ``calibration`` to the ``report`` group."""
     p = commands.add_parser(
         "session", help="session report from a recording",
@@ -85,11 +86,11 @@ def _clock(args: argparse.Namespace) -> Callable[[], datetime]:
     if args.generated_at is None:
         return utc_now
     try:
-        t = datetime.fromisoformat(args.generated_at.replace("Z", "+00:00"))
+        t = datetime.fromisoformat(args.generated_at)
     except ValueError as exc:
         raise InputError(f"--generated-at {args.generated_at!r}: not an ISO 8601 time") from exc
     if t.tzinfo is None:
-        t = t.replace(tzinfo=timezone.utc)
+        t = t.replace(tzinfo=UTC)
     return lambda: t
 
 

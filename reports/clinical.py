@@ -8,7 +8,8 @@ foot (eversion the opposite).
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 #: Below this range (°) on both axes the platform is said to have stayed level.
 LEVEL_DEG = 0.5

@@ -14,12 +14,15 @@
 from __future__ import annotations
 
 import io
+import math
 import os
 import tempfile
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
+from xml.sax.saxutils import escape
 
 import matplotlib
 from reportlab.lib import colors
@@ -30,9 +33,16 @@ from reportlab.lib.units import mm
 from reportlab.pdfbase import pdfmetrics
 from reportlab.pdfbase.ttfonts import TTFont
 from reportlab.pdfgen import canvas as rl_canvas
-from reportlab.platypus import (BaseDocTemplate, Flowable, Frame, Image, PageTemplate,
-                                Paragraph, Table, TableStyle)
-from xml.sax.saxutils import escape
+from reportlab.platypus import (
+    BaseDocTemplate,
+    Flowable,
+    Frame,
+    Image,
+    PageTemplate,
+    Paragraph,
+    Table,
+    TableStyle,
+)
 
 from reports.settings import PageSize, ReportSettings
 from rt.errors import InputError
@@ -63,7 +73,7 @@ Clock = Callable[[], datetime]
 
 def utc_now() -> datetime:
     """The default clock: now, in UTC."""
-    return datetime.now(timezone.utc)
+    return datetime.now(UTC)
 
 
 class ReportError(InputError):
@@ -138,13 +148,13 @@ class ReportContext:
 def format_time(t: datetime) -> str:
     """``2026-11-23 17:00 UTC``: one unambiguous form in every report."""
     if t.tzinfo is None:
-        t = t.replace(tzinfo=timezone.utc)
-    return t.astimezone(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        t = t.replace(tzinfo=UTC)
+    return t.astimezone(UTC).strftime("%Y-%m-%d %H:%M UTC")
 
 
 def _numbered_canvas(ctx: ReportContext) -> type[rl_canvas.Canvas]:
     """A canvas class that draws header and footer once the page count is known."""
-    stamp = ctx.generated_at.astimezone(timezone.utc).strftime("D:%Y%m%d%H%M%S+00'00'")
+    stamp = ctx.generated_at.astimezone(UTC).strftime("D:%Y%m%d%H%M%S+00'00'")
 
     class NumberedCanvas(rl_canvas.Canvas):
         def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -158,7 +168,7 @@ def _numbered_canvas(ctx: ReportContext) -> type[rl_canvas.Canvas]:
             self.setCreator(f"talus {ctx.software_version}")
             self._saved: list[dict[str, Any]] = []
 
-        def showPage(self) -> None:   # noqa: N802 - reportlab's name
+        def showPage(self) -> None:
             self._saved.append(dict(self.__dict__))
             self._startPage()
 
@@ -331,7 +341,7 @@ def fmt(value: Any, digits: int = 1, unit: str = "", missing: str = "—") -> st
         x = float(value)
     except (TypeError, ValueError):
         return str(value)
-    if x != x:
+    if math.isnan(x):
         return missing
     s = f"{x:.{digits}f}"
     if s.startswith("-") and float(s) == 0.0:

@@ -55,9 +55,9 @@ def progress_input(record: ClinicalRecord, actor: Actor, code: str,
     rom = to_clinical(limits, side)
     if rom is None:
         raise ReportInputError(f"patient {code}: the affected foot is not recorded")
-    start = None if since is None else dt.datetime.combine(since, dt.time.min, dt.timezone.utc)
+    start = None if since is None else dt.datetime.combine(since, dt.time.min, dt.UTC)
     end = None if until is None else dt.datetime.combine(until + dt.timedelta(days=1),
-                                                         dt.time.min, dt.timezone.utc)
+                                                         dt.time.min, dt.UTC)
     sessions = []
     for s in record.list_sessions(actor, code, since=start, until=end, full=True):
         summary = s.get("summary") or {}

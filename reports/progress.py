@@ -27,9 +27,24 @@ from reportlab.platypus import Flowable, PageBreak, Spacer
 
 from protocols.session_figures import FORCE_KINDS
 from reports.clinical import DIRECTIONS, LEVEL_DEG, reached_by_direction
-from reports.document import (AMBER, GREEN, RED, Clock, ReportContext, Styles, TableSpec,
-                              banner, figure_image, fmt, frame_width, key_values, p, table,
-                              utc_now, write_pdf)
+from reports.document import (
+    AMBER,
+    GREEN,
+    RED,
+    Clock,
+    ReportContext,
+    Styles,
+    TableSpec,
+    banner,
+    figure_image,
+    fmt,
+    frame_width,
+    key_values,
+    p,
+    table,
+    utc_now,
+    write_pdf,
+)
 from reports.inputs import ReportInputError, first_problem, read_json
 from reports.settings import ReportSettings
 
@@ -137,7 +152,7 @@ def adherence(inp: ProgressInput, first: date, last: date) -> dict[str, Any]:
         out["planned"] = 0
         return out
     days = (end - start).days + 1
-    planned = int(round(plan.sessions_per_week * days / 7.0))
+    planned = round(plan.sessions_per_week * days / 7.0)
     out["planned"] = planned
     out["pct"] = attended / planned * 100.0 if planned else None
     return out

@@ -18,14 +18,21 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
-from protocols.session_figures import (FORCE_KINDS, PHASE_BY_NAME, PHASE_UNKNOWN, Phase,
-                                       SampleBlock, SessionFigures)
+from protocols.session_figures import (
+    FORCE_KINDS,
+    PHASE_BY_NAME,
+    PHASE_UNKNOWN,
+    Phase,
+    SampleBlock,
+    SessionFigures,
+)
 from reports.decimate import Envelope, EnvelopeDecimator
 from reports.inputs import ReportInputError
 from rt.recording.channels import EVENTS, METADATA, REFERENCE, STATE, WRENCH
@@ -137,9 +144,9 @@ class _Joiner:
 
     def add(self, topic: str, m: dict[str, Any]) -> None:
         t = m.get("t")
-        if not isinstance(t, (int, float)) or t != t:
+        if not isinstance(t, (int, float)) or math.isnan(t):
             return
-        k = int(round(t * self.rate_hz))
+        k = round(t * self.rate_hz)
         col = self.cols[topic]
         row: tuple[Any, ...]
         if topic == STATE:
@@ -391,8 +398,8 @@ def session_input_from_record(session: dict[str, Any], recording: str | os.PathL
         raise ReportInputError(f"session {sid}: neither a recording nor a stored summary: "
                                "nothing to report")
     where = f" ({recording})" if recording is not None else ""
-    notes = [f"The session's recording is missing{where}: plots are not available and the "
-             "figures are the session summary's as stored."]
+    notes = [(f"The session's recording is missing{where}: plots are not available and the "
+             "figures are the session summary's as stored.")]
     return SessionReportInput(metadata=dict(session.get("metadata") or {}), summary=summary,
                               figures=None, series={}, events=list(summary.get("stops", [])),
                               recording=None, notes=notes, session_id=sid)

@@ -15,16 +15,39 @@ from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
-from reportlab.platypus import CondPageBreak, Flowable, KeepTogether, PageBreak, Spacer
 from reportlab.lib.units import mm
+from reportlab.platypus import CondPageBreak, Flowable, KeepTogether, PageBreak, Spacer
 
-from reports.clinical import (DIRECTIONS, KIND_WORDS, LEVEL_DEG, limits_by_direction,
-                              narrowed_limits,
-                              reached_by_direction, reaction_words, stop_trigger)
+from reports.clinical import (
+    DIRECTIONS,
+    KIND_WORDS,
+    LEVEL_DEG,
+    limits_by_direction,
+    narrowed_limits,
+    reached_by_direction,
+    reaction_words,
+    stop_trigger,
+)
 from reports.decimate import Envelope
-from reports.document import (AMBER, GREEN, RED, Clock, ReportContext, Styles, TableSpec,
-                              banner, figure_image, fmt, format_time, frame_width, key_values,
-                              p, table, utc_now, write_pdf)
+from reports.document import (
+    AMBER,
+    GREEN,
+    RED,
+    Clock,
+    ReportContext,
+    Styles,
+    TableSpec,
+    banner,
+    figure_image,
+    fmt,
+    format_time,
+    frame_width,
+    key_values,
+    p,
+    table,
+    utc_now,
+    write_pdf,
+)
 from reports.session_data import SessionReportInput
 from reports.settings import ReportSettings
 
@@ -50,7 +73,7 @@ def _outcome(inp: SessionReportInput, f: dict[str, Any]) -> tuple[str, Any]:
     stops = f.get("stops") or []
     if stops:
         first = stops[0]
-        who, words = stop_trigger(str(first.get("cause", "")))
+        _who, words = stop_trigger(str(first.get("cause", "")))
         colour = RED if first.get("reaction") == "hard_stop" else AMBER
         return (f"STOPPED at {fmt(first.get('t'), 1, 's')}: {words}", colour)
     if inp.recording is not None and not inp.recording.complete:

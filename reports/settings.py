@@ -59,7 +59,7 @@ class ReportSettings(BaseModel):
             raise ConfigurationError(f"report settings: logo_path {p}: no such file")
         with open(p, "rb") as f:
             head = f.read(8)
-        if not (head.startswith(b"\x89PNG\r\n\x1a\n") or head.startswith(b"\xff\xd8")):
+        if not (head.startswith((b"\x89PNG\r\n\x1a\n", b"\xff\xd8"))):
             raise ConfigurationError(f"report settings: logo_path {p}: not a PNG or JPEG image")
 
 

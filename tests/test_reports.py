@@ -518,8 +518,11 @@ def test_cli_calibration_and_refusals(tmp_path):
     proc = _cli("session", "--recording", str(tmp_path / "none.mcap"), "--out",
                 str(tmp_path / "s.pdf"))
     assert proc.returncode == 2 and "no such recording" in json.loads(proc.stdout)["error"]
-    proc = _cli("progress", "--patient", "P-1", "--out", str(tmp_path / "p.pdf"))
-    assert proc.returncode == 2 and "clinical database" in json.loads(proc.stdout)["error"]
+    missing = tmp_path / "no-clinic.db"
+    proc = _cli("progress", "--patient", "P-1", "--out", str(tmp_path / "p.pdf"), "--db",
+                f"sqlite:///{missing}", "--user", "ana")
+    assert proc.returncode == 2 and "no database" in json.loads(proc.stdout)["error"]
+    assert not missing.exists()
 
 
 def test_cli_session_is_reproducible(sessions, tmp_path):

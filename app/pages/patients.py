@@ -12,8 +12,18 @@ from typing import Any
 
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
-    QComboBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QListWidget,
-    QListWidgetItem, QPushButton, QScrollArea, QVBoxLayout, QWidget,
+    QComboBox,
+    QFormLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QListWidget,
+    QListWidgetItem,
+    QPushButton,
+    QScrollArea,
+    QVBoxLayout,
+    QWidget,
 )
 
 from app.background import Background
@@ -245,7 +255,7 @@ class PatientsPage(QWidget):
         lim = p["limits"]
         from rt.safety.limits import PatientLimits
         fields = {k: float(lim[k]) for k in PatientLimits.model_fields if k in lim}
-        side = p.get("affected_side") if p.get("affected_side") in ("left", "right") \
+        side = str(p["affected_side"]) if p.get("affected_side") in ("left", "right") \
             else "right"
         self.patient_chosen.emit(PatientContext(
             p["code"], p.get("body_mass_kg"), fields,

@@ -12,7 +12,13 @@ from typing import Any
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
-    QButtonGroup, QHBoxLayout, QLabel, QPushButton, QScrollArea, QVBoxLayout, QWidget,
+    QButtonGroup,
+    QHBoxLayout,
+    QLabel,
+    QPushButton,
+    QScrollArea,
+    QVBoxLayout,
+    QWidget,
 )
 
 from app.i18n import tr
@@ -24,7 +30,6 @@ from app.style import LARGE_PX, TARGET_PX
 from protocols.library import LIBRARY_DIR
 from protocols.rt_session import protocol_document
 from rt.errors import TalusError
-
 
 
 def library_documents(directory: Path = LIBRARY_DIR) -> list[tuple[str, dict[str, Any]]]:

@@ -10,15 +10,20 @@ from pathlib import Path
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
-    QHBoxLayout, QLabel, QListWidget, QListWidgetItem, QPushButton, QVBoxLayout, QWidget,
+    QHBoxLayout,
+    QLabel,
+    QListWidget,
+    QListWidgetItem,
+    QPushButton,
+    QVBoxLayout,
+    QWidget,
 )
 
 from app.i18n import tr
 from app.review_data import ReviewData, load_review
-from app.words import cause_words
 from app.style import TARGET_PX
+from app.words import cause_words
 from rt.errors import TalusError
-
 
 
 def recording_title(path: Path) -> str:
@@ -28,7 +33,7 @@ def recording_title(path: Path) -> str:
 
     parts = path.stem.split("_", 2)
     try:
-        when = dt.datetime.strptime(parts[0], "%Y%m%dT%H%M%SZ").replace(tzinfo=dt.timezone.utc)
+        when = dt.datetime.strptime(parts[0], "%Y%m%dT%H%M%SZ").replace(tzinfo=dt.UTC)
     except (ValueError, IndexError):
         return path.stem
     local = when.astimezone()

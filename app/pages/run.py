@@ -16,7 +16,13 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtWidgets import (
-    QGridLayout, QHBoxLayout, QLabel, QProgressBar, QPushButton, QVBoxLayout, QWidget,
+    QGridLayout,
+    QHBoxLayout,
+    QLabel,
+    QProgressBar,
+    QPushButton,
+    QVBoxLayout,
+    QWidget,
 )
 
 from app.background import Background
@@ -289,7 +295,7 @@ class RunPage(QWidget):
         last = samples[-1]
         self._latest = last
         progress = float(last.get("progress") or 0.0)
-        self.progress.setValue(int(round(1000 * min(max(progress, 0.0), 1.0))))
+        self.progress.setValue(round(1000 * min(max(progress, 0.0), 1.0)))
         left = ""
         if self.duration_s and last.get("session"):
             left = " — " + tr("%1 s left").replace(

@@ -8,14 +8,19 @@ from pathlib import Path
 from pydantic import ValidationError
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
-    QComboBox, QFormLayout, QLabel, QLineEdit, QPushButton, QVBoxLayout, QWidget,
+    QComboBox,
+    QFormLayout,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QVBoxLayout,
+    QWidget,
 )
 
 from app import settings as settings_io
 from app.i18n import LANGUAGES, tr
 from app.settings import GuiSettings
 from app.style import TARGET_PX
-
 
 
 class SettingsPage(QWidget):
