@@ -197,7 +197,11 @@ def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> Non
         truth = twin.ati_sample.wrench
         assert pl.graph.output("drive.active_card")[0] == 0
         twin.dac_libs[0].fail_writes = True           # card 0 dies mid-run
-        time.sleep(1.0)
+        deadline = time.monotonic() + 5.0             # a bound: the next write fails over
+        while time.monotonic() < deadline and not any(
+                e.kind == "failover" for e in pl.events.snapshot()):
+            time.sleep(0.01)
+        time.sleep(0.5)                               # then runs on card 1 for a while
         q_meas = pl.graph.output("encoders.q").copy()
         q_true = twin.plant.q.copy()
         mode_before_estop = float(pl.graph.output("supervisor.mode")[0])
@@ -216,7 +220,8 @@ def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> Non
     # Failover: one event, card 1 drives, the relays followed (card 0 off, card 1 on, never
     # both at once); the e-stop then dropped both.
     failovers = [e for e in pl.events.snapshot() if e.kind == "failover"]
-    assert len(failovers) == 1 and failovers[0].cause == "dac_card_0"
+    assert len(failovers) == 1 and failovers[0].cause == "dac_card_0", \
+        [e.as_dict() for e in pl.events.snapshot()]
     states = [h[1] for h in world.enabled_history]
     assert states[0] == [True, False] and [False, True] in states
     assert [True, True] not in states and states[-1] == [False, False]
