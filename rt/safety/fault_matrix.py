@@ -19,7 +19,7 @@ import numpy as np
 
 from rt.control.base import Reference
 from rt.engine import Component
-from rt.errors import ConfigurationError, KinematicsError
+from rt.errors import ConfigurationError, InputError, KinematicsError
 from rt.model import RobotModel
 from rt.position_loop import PositionLoop, build_sim_position_loop
 from rt.safety.events import Reaction, SupervisorMode
@@ -326,13 +326,16 @@ def run_rt_process_loss(timeout_s: float = 10.0) -> dict:
             client.control_acquire("fault matrix")
             client.start_heartbeat(0.05)
             # A start-up stop (on a loaded machine: late cycles while the rig process and
-            # this one start) is not the fault under test: acknowledge it first.
-            for _ in range(3):
-                if not client.status()["latched"]:
+            # this one start) is not the fault under test: acknowledge it and start again.
+            for attempt in range(10):
+                try:
+                    client.run("move", {"z": 0.64, "roll": 0.05, "hold_s": 30.0})
                     break
-                client.reset()
-                time.sleep(0.1)
-            client.run("move", {"z": 0.64, "roll": 0.05, "hold_s": 30.0})
+                except InputError:
+                    if attempt == 9:
+                        raise
+                    time.sleep(0.2)
+                    client.reset()
             end = time.monotonic() + timeout_s
             while time.monotonic() < end and max(abs(v) for v in
                                                  handle.amplifier_state().volts) < 0.05:
