@@ -6,15 +6,20 @@ import os
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
-from test_rt_process import start_rt, stop_rt
+from pathlib import Path
+
+from test_rt_process import start_rt, stop_rt, tolerant_config
 
 #: The RT tests' owner heartbeat timeout on a loaded 2-core machine, s.
 LOADED_HEARTBEAT_TIMEOUT_S = 1.0
 
 
 def start_rt_for_gui(recordings_dir: str):
-    """(process, endpoint, pub endpoint) of an RT process recording into ``recordings_dir``."""
-    return start_rt("--heartbeat-timeout", str(LOADED_HEARTBEAT_TIMEOUT_S),
+    """(process, endpoint, pub endpoint) of an RT process recording into ``recordings_dir``,
+    its supervisor tolerant of a late loop (``tolerant_config``: the GUI tests are about the
+    GUI; a loaded machine's late cycles would stop the robot before the step under test)."""
+    return start_rt("--config", tolerant_config(Path(recordings_dir).parent),
+                    "--heartbeat-timeout", str(LOADED_HEARTBEAT_TIMEOUT_S),
                     "--recordings-dir", recordings_dir)
 
 

@@ -84,7 +84,7 @@ def test_clinician_flow_refusal_run_stop_acknowledge_review(gui, qtbot):
     frames = run.frames
     qtbot.waitUntil(lambda: run.frames > frames + 20 and len(run._buf["force"]) > 50,
                     timeout=30_000)
-    qtbot.waitUntil(lambda: window.band.state == "running", timeout=10_000)
+    qtbot.waitUntil(lambda: window.band.state == "running", timeout=30_000)
     qtbot.keyClick(window, Qt.Key.Key_Escape)          # STOP from the keyboard
     qtbot.waitUntil(lambda: window.band.state == "soft_stop" and bool(window.band.latched),
                     timeout=10_000)
