@@ -191,9 +191,7 @@ class SessionFigures:
         self._peak_qd = 0.0
         self._phase_time = {p.name.lower(): 0.0 for p in Phase}
         self._last_phase = Phase.APPROACH
-        self._k = 0
         self._play_seen = 0
-        self._t_last = math.nan
         self._dt = 1.0 / RATE_HZ
 
     def add(self, rows: np.ndarray) -> None:
@@ -236,7 +234,6 @@ class SessionFigures:
                 lo_hi = self._rom[axis]
                 lo_hi[0] = min(lo_hi[0], angle)
                 lo_hi[1] = max(lo_hi[1], angle)
-        self._k += len(rows)
         self._last_phase = Phase(int(phase[-1]))
 
     def _contact(self, t: np.ndarray, force: np.ndarray, force_mode: np.ndarray) -> None:

@@ -18,7 +18,6 @@ soft-stops.
 """
 from __future__ import annotations
 
-import hashlib
 import logging
 import math
 import os
@@ -872,11 +871,3 @@ def telemetry(service: RtService) -> dict[str, Any]:
         "session": None if s is None else s.id,
         "owner": service.owner.name,
     }
-
-
-def sha256_of(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
