@@ -188,10 +188,31 @@ def running_rig(robot, monitor: bool = False) -> Iterator[tuple]:
         world.close()
 
 
+START_ATTEMPTS = 3
+
+
+@contextlib.contextmanager
+def settled_rig(robot, settle_s: float, monitor: bool = False) -> Iterator[tuple]:
+    """``running_rig`` after ``settle_s`` of holding with nothing latched. The twin's physics
+    runs in a thread of this process: on a loaded machine it can stall and then catch up in
+    one step, which the loop rightly reads as an encoder jump and stops on. That start-up stop
+    is not what these tests are about (the jump check has its own tests), so a start that
+    latched a stop before the fault is injected is retried, at most ``START_ATTEMPTS`` times."""
+    causes: list[dict] = []
+    for _attempt in range(START_ATTEMPTS):
+        with contextlib.ExitStack() as stack:
+            pl, world, devices = stack.enter_context(running_rig(robot, monitor=monitor))
+            time.sleep(settle_s)
+            if not pl.supervisor.causes:
+                yield pl, world, devices
+                return
+            causes.append(dict(pl.supervisor.causes))
+    pytest.fail(f"every start latched a stop before the fault was injected: {causes}")
+
+
 def test_rig_assembly_runs_two_seconds_on_the_fakes_and_fails_over(robot) -> None:
-    with running_rig(robot) as (pl, world, devices):
+    with settled_rig(robot, settle_s=1.0) as (pl, world, devices):
         twin = world.twin
-        time.sleep(1.0)
         healthy_wrench = pl.graph.output("force.wrench").copy()
         healthy_flags = pl.graph.output("force.flags").copy()
         truth = twin.ati_sample.wrench
@@ -283,8 +304,7 @@ def test_rig_devices_with_the_ati_on_can(robot) -> None:
 def test_the_amplifier_monitor_catches_a_dead_dac_channel(robot) -> None:
     """A channel that accepts writes but outputs nothing: only the read-back sees it, and the
     second card takes over within a few cycles, the sliders held."""
-    with running_rig(robot, monitor=True) as (pl, world, _devices):
-        time.sleep(0.7)
+    with settled_rig(robot, settle_s=0.7, monitor=True) as (pl, world, _devices):
         commanded = float(pl.graph.output("supervisor.volts")[1])
         assert abs(commanded) > 0.1          # holding against gravity: a dead 0 V is visible
         world.twin.faults.schedule("dac_dead", world.twin.t, card=0, channel=1)
