@@ -214,7 +214,7 @@ def test_a_200_mb_frame_is_dropped_without_being_read() -> None:
     finally:
         if child.stdin is not None:
             child.stdin.close()
-        child.wait(timeout=10)
+        child.wait(timeout=30)
 
 
 def test_rt_serve_refuses_a_network_endpoint_without_keys_before_starting(
@@ -247,4 +247,4 @@ def test_rt_serve_with_curve_keys_from_its_config(keys: dict[str, Path], tmp_pat
             plain.status()
     finally:
         proc.terminate()
-        proc.wait(timeout=20)
+        proc.wait(timeout=60)

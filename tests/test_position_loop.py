@@ -37,9 +37,9 @@ def test_runtime_gain_change_and_refusal():
     pl = build_sim_position_loop("pd_g", duration_s=2.0)
     pl.loop.start()
     try:
-        ok = pl.loop.set_param("controller", "kp_n_per_m", 2.0e5).result(timeout=5.0)
+        ok = pl.loop.set_param("controller", "kp_n_per_m", 2.0e5).result(timeout=30.0)
         with pytest.raises(InputError, match="kp_n_per_m"):
-            pl.loop.set_param("controller", "kp_n_per_m", -5.0).result(timeout=5.0)
+            pl.loop.set_param("controller", "kp_n_per_m", -5.0).result(timeout=30.0)
     finally:
         pl.loop.stop()
     assert ok is None or ok is not False
@@ -52,7 +52,7 @@ def test_bumpless_swap_through_the_loop():
     pl.loop.start()
     try:
         result = swap_controller(pl, "paden_panja")
-        result.result(timeout=5.0)
+        result.result(timeout=30.0)
         switched_at = result.cycle
         import time
         time.sleep(0.3)

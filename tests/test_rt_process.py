@@ -66,7 +66,7 @@ def rt_process(tmp_path):
         stop_rt(proc)
 
 
-def _wait_for(pred, timeout=5.0):
+def _wait_for(pred, timeout=30.0):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         value = pred()

@@ -85,7 +85,7 @@ def _stop_rig(proc: subprocess.Popen) -> tuple[int, str, str]:
     """SIGTERM, wait; returns (exit code, stdout rest, stderr)."""
     proc.send_signal(signal.SIGTERM)
     try:
-        out, err = proc.communicate(timeout=10)
+        out, err = proc.communicate(timeout=30)
     except subprocess.TimeoutExpired:
         _kill(proc)
         raise AssertionError("the rig did not exit within 10 s of SIGTERM")
@@ -96,7 +96,7 @@ def _kill(proc: subprocess.Popen) -> None:
     if proc.poll() is None:
         proc.kill()
     try:
-        proc.communicate(timeout=10)
+        proc.communicate(timeout=30)
     except (subprocess.TimeoutExpired, ValueError):
         pass
 
@@ -243,7 +243,7 @@ def test_seqlock_snapshots_never_tear_across_processes():
         seg.header.magic[:] = tuple(layout.MAGIC)
         writer = subprocess.Popen([sys.executable, "-c", _TEAR_WRITER, name, "1.0"], cwd=REPO,
                                   env=_env(), stdout=subprocess.PIPE, text=True)
-        assert _read_line(writer, 20.0).strip() == "go"
+        assert _read_line(writer, 60.0).strip() == "go"
         block = seg.sensors
         s = block.local
         good = distinct = 0
@@ -535,7 +535,7 @@ def test_sigkill_of_the_rt_process_drops_the_drives(hold_volts):
         stand_in = subprocess.Popen(
             [sys.executable, "-c", _RT_STAND_IN, name, *(repr(float(v)) for v in hold_volts)],
             cwd=REPO, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        assert _read_line(stand_in, 20.0).strip() == "ready"
+        assert _read_line(stand_in, 60.0).strip() == "ready"
         expected = _quantized(hold_volts)
         _wait_for(lambda: (s := handle.amplifier_state()).volts == expected
                   and s.drives_enabled, 5.0, "the stand-in's volts on the amplifiers")
