@@ -31,7 +31,7 @@ import enum
 import math
 import operator
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -148,28 +148,19 @@ class ProtoMessage:
         self._by_number = {f.number: f for f in self.fields}
         self._by_name = {f.name: f for f in self.fields}
         fixed = [f for f in self.fields if f.fixed]
-        # The fixed part, in field order: one struct (pack/unpack one message) and one numpy
-        # record dtype (a block of messages) with the tags as constant columns.
-        fmt, np_fields, consts = ["<"], [], []
+        # The fixed part, in field order, as one struct: pack or unpack one message at once.
+        fmt = ["<"]
         for f in fixed:
             fmt.append("B")
-            np_fields.append((f"tag{f.number}", "u1"))
-            consts.append((f"tag{f.number}", f.tag))
             if f.width:
+                if f.width * _SIZE[f.kind] >= 128:
+                    raise ValueError(f"{name}.{f.name}: a fixed array stays under 128 bytes")
                 fmt.append("B")
-                np_fields.append((f"len{f.number}", "u1"))
-                consts.append((f"len{f.number}", f.width * _SIZE[f.kind]))
                 fmt.append(f"{f.width}{_STRUCT[f.kind]}")
-                np_fields.append((f.name, _NUMPY[f.kind], (f.width,)))
             else:
                 fmt.append(_STRUCT[f.kind])
-                np_fields.append((f.name, _NUMPY[f.kind]))
-            if f.width * _SIZE[f.kind] >= 128:
-                raise ValueError(f"{name}.{f.name}: a fixed array must stay under 128 bytes")
         self._fixed = tuple(fixed)
         self._struct = struct.Struct("".join(fmt))
-        self._dtype = np.dtype(np_fields)
-        self._consts = tuple(consts)
         # Where the struct's values hold tags and array lengths, and what they must be: a
         # message of another layout is recognised in one tuple comparison.
         positions, expected, k = [], [], 0
@@ -234,25 +225,74 @@ class ProtoMessage:
     # ------------------------------------------------------------------ encoding
 
     def encode_rows(self, rows: np.ndarray) -> list[bytes]:
-        """One message per row of ``rows`` (n × :attr:`row_width` float64, the fixed fields'
-        values in field order, optional fields absent): numpy fills a record array whose tag
-        columns are constants, so the cost per message is a slice of one buffer."""
-        n = len(rows)
-        if rows.ndim != 2 or rows.shape[1] != self.row_width:
-            raise ProtoCodecError(f"{self.name}: rows of {self.row_width} values expected, got "
-                                  f"shape {rows.shape}")
-        block = np.empty(n, self._dtype)
-        for key, value in self._consts:
-            block[key] = value
+        """One message per row of ``rows`` (n × :attr:`row_width` float64: the fixed fields'
+        values in field order, optional fields absent). See :meth:`row_encoder`."""
+        return self.row_encoder(self.fixed_layout)(rows)
+
+    def row_encoder(self, layout: Sequence[tuple[str, int]]
+                    ) -> Callable[[np.ndarray], list[bytes]]:
+        """An encoder of ring rows laid out as ``layout`` (``((name, width), ...)``, the
+        columns of a float64 row) into one message per row: numpy fills a record array whose
+        tag and length columns are constants, so a message costs a slice of one buffer.
+
+        The layout names every fixed field with its width and may add optional numeric
+        arrays (any width); strings cannot come from a ring. Raises ProtoCodecError naming
+        what does not fit."""
+        columns: dict[str, tuple[int, int]] = {}
         k = 0
-        for f in self._fixed:
-            w = max(f.width, 1)
-            cols = rows[:, k] if f.width == 0 else rows[:, k:k + w]
-            block[f.name] = (cols != 0) if f.kind is Kind.BOOL else cols
-            k += w
-        buf = block.tobytes()
-        size = self.fixed_size
-        return [buf[i:i + size] for i in range(0, n * size, size)]
+        for name, width in layout:
+            columns[name] = (k, int(width))
+            k += int(width)
+        total = k
+        unknown = [n for n in columns if n not in self._by_name]
+        if unknown:
+            raise ProtoCodecError(f"{self.name} has no field {unknown[0]!r}")
+        plan: list[tuple[ProtoField, int, int]] = []      # field, first column, width
+        np_fields: list[tuple[Any, ...]] = []
+        consts: list[tuple[str, int]] = []
+        for f in self.fields:          # field-number order: the fast decoder's order
+            if f.name not in columns:
+                if f.fixed:
+                    raise ProtoCodecError(f"{self.name}.{f.name} missing from the row layout")
+                continue
+            col, width = columns[f.name]
+            if f.kind is Kind.STRING:
+                raise ProtoCodecError(f"{self.name}.{f.name} is a string: not from a ring")
+            if f.fixed and width != max(f.width, 1):
+                raise ProtoCodecError(f"{self.name}.{f.name}: width {max(f.width, 1)} "
+                                      f"expected, got {width}")
+            if f.width == 0 and width != 1:
+                raise ProtoCodecError(f"{self.name}.{f.name} is a scalar, got width {width}")
+            np_fields.append((f"tag{f.number}", "u1"))
+            consts.append((f"tag{f.number}", f.tag))
+            if f.width:
+                nbytes = width * _SIZE[f.kind]
+                if nbytes >= 128:
+                    raise ProtoCodecError(f"{self.name}.{f.name}: arrays from a ring stay "
+                                          "under 128 bytes")
+                np_fields.append((f"len{f.number}", "u1"))
+                consts.append((f"len{f.number}", nbytes))
+                np_fields.append((f.name, _NUMPY[f.kind], (width,)))
+            else:
+                np_fields.append((f.name, _NUMPY[f.kind]))
+            plan.append((f, col, width))
+        dtype = np.dtype(np_fields)
+        size = dtype.itemsize
+
+        def encode(rows: np.ndarray) -> list[bytes]:
+            if rows.ndim != 2 or rows.shape[1] != total:
+                raise ProtoCodecError(f"{self.name}: rows of {total} values expected, got "
+                                      f"shape {rows.shape}")
+            block = np.empty(len(rows), dtype)
+            for key, value in consts:
+                block[key] = value
+            for f, col, width in plan:
+                cols = rows[:, col] if f.width == 0 else rows[:, col:col + width]
+                block[f.name] = (cols != 0) if f.kind is Kind.BOOL else cols
+            buf = block.tobytes()
+            return [buf[i:i + size] for i in range(0, len(buf), size)]
+
+        return encode
 
     def encode(self, message: dict[str, Any]) -> bytes:
         """One message from its dict (the JSON channel's shape). A missing fixed field, an

@@ -408,10 +408,11 @@ class SessionRecorder:
         encode: Callable[[np.ndarray], list[bytes]] = layout.encode
         proto = self._protos.get(topic)
         if proto is not None:
-            if layout.fields != proto.fixed_layout:
-                raise InputError(f"channel {topic!r} is protobuf {proto.name}: ring rows must be "
-                                 f"{list(proto.fixed_layout)}, got {list(layout.fields)}")
-            encode = proto.encode_rows
+            try:
+                encode = proto.row_encoder(layout.fields)
+            except ProtoCodecError as exc:
+                raise InputError(f"channel {topic!r}: ring rows {list(layout.fields)} do not "
+                                 f"fit: {exc}") from None
         tap = _RingTap(topic, self._channel_ids[topic], source, layout,
                        source.written if start is None else int(start), encode)
         # Copy-on-write: the thread iterates whatever tuple it read, never a list being changed.
