@@ -28,7 +28,7 @@ from rt.recording.channels import (
     WRENCH_PROTO,
 )
 from rt.recording.protobuf_codec import ProtoCodecError
-from rt.recording.reader import export_csv, read_recording, recording_info, recover
+from rt.recording.reader import export_csv, read_recording, recover
 from rt.recording.writer import SessionRecorder
 from rt.safety.events import Reaction, SafetyEvent
 from talus.cli import main as talus_main

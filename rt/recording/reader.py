@@ -156,15 +156,15 @@ def _generic_protobuf(schema: Schema) -> Decoder:
 
     def to_dict(msg: ProtoMessage) -> dict[str, Any]:
         out: dict[str, Any] = {}
-        for field, value in msg.ListFields():
-            if field.message_type is not None:
+        for fd, value in msg.ListFields():
+            if fd.message_type is not None:
                 value = ([to_dict(v) for v in value]
-                         if field.label == field.LABEL_REPEATED else to_dict(value))
-            elif field.label == field.LABEL_REPEATED:
+                         if fd.label == fd.LABEL_REPEATED else to_dict(value))
+            elif fd.label == fd.LABEL_REPEATED:
                 value = [_finite_or_none(v) for v in value]
             else:
                 value = _finite_or_none(value)
-            out[field.name] = value
+            out[fd.name] = value
         return out
 
     return lambda data: to_dict(decode(data))
