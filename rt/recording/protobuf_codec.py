@@ -28,10 +28,11 @@ an empty optional array or string is absent), so every reader of recordings is e
 from __future__ import annotations
 
 import enum
+import functools
 import math
 import operator
 import struct
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -115,6 +116,8 @@ def _varint(n: int) -> bytes:
 
 
 def _read_varint(data: bytes, i: int) -> tuple[int, int]:
+    if i < len(data) and data[i] < 0x80:
+        return data[i], i + 1          # every tag and length we write: one byte
     shift = result = 0
     while True:
         if i >= len(data):
@@ -127,6 +130,11 @@ def _read_varint(data: bytes, i: int) -> tuple[int, int]:
         shift += 7
         if shift > 63:
             raise ProtoCodecError("varint longer than 10 bytes")
+
+
+@functools.lru_cache(maxsize=256)
+def _packed(code: str, count: int) -> struct.Struct:
+    return struct.Struct(f"<{count}{code}")
 
 
 def _finite(v: float) -> float | None:
@@ -337,7 +345,7 @@ class ProtoMessage:
                     floats = [math.nan if x is None else float(x) for x in v]
                 except (TypeError, ValueError) as exc:
                     raise ProtoCodecError(f"{self.name}.{f.name}: {exc}") from None
-                data = struct.pack(f"<{len(floats)}{_STRUCT[f.kind]}", *floats)
+                data = _packed(_STRUCT[f.kind], len(floats)).pack(*floats)
             if data:
                 parts.append(bytes((f.tag,)) + _varint(len(data)) + data)
         return b"".join(parts)
@@ -448,7 +456,7 @@ def _merge(f: ProtoField, old: Any, wire: int, raw: Any, where: str) -> Any:
         if len(raw) % size:
             raise ProtoCodecError(f"{where}.{f.name}: packed length {len(raw)} not a multiple "
                                   f"of {size}")
-        got = list(struct.unpack(f"<{len(raw) // size}{code}", raw))
+        got = list(_packed(code, len(raw) // size).unpack(raw))
     elif wire == _WIRE_TYPE[f.kind]:
         if len(raw) != size:
             raise ProtoCodecError(f"{where}.{f.name}: message cut inside the field")
@@ -458,13 +466,3 @@ def _merge(f: ProtoField, old: Any, wire: int, raw: Any, where: str) -> Any:
     if f.width:
         return (old or []) + got
     return got[-1]
-
-
-def fields_of(widths: Iterable[tuple[str, int]], kinds: dict[str, Kind],
-              first_number: int = 1) -> list[ProtoField]:
-    """``ProtoField`` s for a ring's row layout ``((name, width), ...)``: scalars for width 1,
-    packed arrays otherwise, numbered in order; ``kinds`` gives each name's kind."""
-    out = []
-    for k, (name, width) in enumerate(widths):
-        out.append(ProtoField(name, first_number + k, kinds[name], 0 if width == 1 else width))
-    return out

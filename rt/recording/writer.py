@@ -310,6 +310,11 @@ class SessionRecorder:
         self._protos: dict[str, ProtoMessage] = {
             topic: spec.proto for topic, spec in self.channels.items()
             if spec.proto is not None and self.encoding is Encoding.PROTOBUF}
+        # The queued wrench samples (t, fx..tz, stale, saturated) as protobuf rows.
+        wrench_proto = self._protos.get(WRENCH)
+        self._wrench_rows = None if wrench_proto is None else wrench_proto.row_encoder(
+            [("t", 1), ("fx", 1), ("fy", 1), ("fz", 1), ("tx", 1), ("ty", 1), ("tz", 1),
+             ("stale", 1), ("saturated", 1)])
         self.loop_t0 = float(loop_t0)
         self.start_wall_ns = time.time_ns() if start_wall_ns is None else int(start_wall_ns)
         self.flush_interval_s = float(flush_interval_s)
@@ -624,37 +629,58 @@ class SessionRecorder:
                 if written % _YIELD_EVERY == 0:
                     time.sleep(0)   # let the loop thread have the GIL
         q = self._queue
-        wrench_proto = self._protos.get(WRENCH)
         # Only what was queued when this turn began: a producer that keeps the queue busy
         # must not starve the rings (the state would fall far behind in the file).
-        for _ in range(len(q)):
-            topic, t, payload = q.popleft()
-            if isinstance(payload, bytes):      # encoded by publish()
-                self._write(topic, t, payload)
+        items = [q.popleft() for _ in range(len(q))]
+        wrenches = self._encode_wrenches(items)
+        k = 0
+        try:
+            for k, (topic, t, payload) in enumerate(items):
+                if isinstance(payload, bytes):      # encoded by publish()
+                    data = payload
+                elif topic == WRENCH:
+                    if wrenches is not None:
+                        encoded = wrenches.get(k)
+                        if encoded is None:         # no sample: counted by the encoder
+                            continue
+                        data = encoded
+                    else:
+                        fx, fy, fz, tx, ty, tz, stale, saturated = payload
+                        if not all(math.isfinite(v) for v in (fx, fy, fz, tx, ty, tz)):
+                            # No sample yet (the sensor's NaN): not a measurement, and as
+                            # nulls it would break the channel's schema. Counted, not written.
+                            self._wrench_without_sample += 1
+                            continue
+                        data = encode_json({
+                            "t": t, "fx": float(fx), "fy": float(fy), "fz": float(fz),
+                            "tx": float(tx), "ty": float(ty), "tz": float(tz),
+                            "stale": bool(stale), "saturated": bool(saturated)})
+                else:
+                    data = encode_json(payload)
+                self._write(topic, t, data)
                 written += 1
                 if written % _YIELD_EVERY == 0:
                     time.sleep(0)
-                continue
-            if topic == WRENCH:
-                fx, fy, fz, tx, ty, tz, stale, saturated = payload
-                if not all(math.isfinite(v) for v in (fx, fy, fz, tx, ty, tz)):
-                    # No sample yet (the sensor's NaN): not a measurement, and as nulls it
-                    # would break the channel's schema (numbers). Counted, not written.
-                    self._wrench_without_sample += 1
-                    continue
-                payload = {"t": t, "fx": float(fx), "fy": float(fy), "fz": float(fz),
-                           "tx": float(tx), "ty": float(ty), "tz": float(tz),
-                           "stale": bool(stale), "saturated": bool(saturated)}
-                if wrench_proto is not None:
-                    self._write(topic, t, wrench_proto.encode(payload))
-                    written += 1
-                    if written % _YIELD_EVERY == 0:
-                        time.sleep(0)
-                    continue
-            self._write(topic, t, encode_json(payload))
-            written += 1
-            if written % _YIELD_EVERY == 0:
-                time.sleep(0)
+        except BaseException:
+            for topic, _, _ in items[k:]:       # taken from the queue, never written
+                self._dropped[topic] += 1
+            raise
+
+    def _encode_wrenches(self, items: list[tuple[str, float, Any]]) -> dict[int, bytes] | None:
+        """Protobuf bytes of the queued wrench samples of ``items`` (by index), encoded as one
+        numpy block; samples without a finite value (the sensor has not answered yet) are
+        counted and left out. None when the wrench channel is JSON."""
+        if self._wrench_rows is None:
+            return None
+        index = [i for i, (topic, _, payload) in enumerate(items)
+                 if topic == WRENCH and not isinstance(payload, bytes)]
+        if not index:
+            return {}
+        rows = np.array([(items[i][1], *items[i][2]) for i in index], dtype=float)
+        finite = np.isfinite(rows[:, 1:7]).all(axis=1)
+        self._wrench_without_sample += int(len(index) - finite.sum())
+        encoded = self._wrench_rows(rows[finite])
+        return dict(zip(np.asarray(index)[finite].tolist(), encoded))
 
     def _run(self) -> None:
         next_flush = time.monotonic() + self.flush_interval_s
