@@ -169,6 +169,13 @@ class ProtoMessage:
                 fmt.append(_STRUCT[f.kind])
         self._fixed = tuple(fixed)
         self._struct = struct.Struct("".join(fmt))
+        # What encode() walks per message, computed once: (name, tag, width, bytes, bool).
+        self._fixed_plan = tuple((f.name, f.tag, f.width, f.width * _SIZE[f.kind],
+                                  f.kind is Kind.BOOL) for f in fixed)
+        #: (name, tag byte, struct code or None for a string) of the optional fields.
+        self._optional_plan = tuple(
+            (f.name, bytes((f.tag,)), None if f.kind is Kind.STRING else _STRUCT[f.kind])
+            for f in self.fields if not f.fixed)
         # Where the struct's values hold tags and array lengths, and what they must be: a
         # message of another layout is recognised in one tuple comparison.
         positions, expected, k = [], [], 0
@@ -307,47 +314,49 @@ class ProtoMessage:
         array of the wrong length or a value of the wrong type raises ProtoCodecError naming
         the field; ``None`` in a number field is written as NaN (not finite)."""
         values: list[Any] = []
+        name = ""
         try:
-            for f in self._fixed:
-                v = message[f.name]
-                values.append(f.tag)
-                if f.width:
-                    if len(v) != f.width:
-                        raise ProtoCodecError(f"{self.name}.{f.name}: {f.width} values "
-                                              f"expected, got {len(v)}")
-                    values.append(f.width * _SIZE[f.kind])
-                    values.extend(math.nan if x is None else float(x) for x in v)
-                elif f.kind is Kind.BOOL:
+            for name, tag, width, nbytes, is_bool in self._fixed_plan:
+                v = message[name]
+                values.append(tag)
+                if width:
+                    if len(v) != width:
+                        raise ProtoCodecError(f"{self.name}.{name}: {width} values expected, "
+                                              f"got {len(v)}")
+                    values.append(nbytes)
+                    values.extend([math.nan if x is None else float(x) for x in v])
+                elif is_bool:
                     values.append(bool(v))
                 else:
                     values.append(math.nan if v is None else float(v))
             head = self._struct.pack(*values)
-        except KeyError as exc:
-            raise ProtoCodecError(f"{self.name}: field {exc.args[0]!r} missing") from None
-        except (TypeError, struct.error) as exc:
-            raise ProtoCodecError(f"{self.name}: {exc}") from None
+        except KeyError:
+            raise ProtoCodecError(f"{self.name}: field {name!r} missing") from None
+        except (TypeError, ValueError, struct.error) as exc:
+            if isinstance(exc, ProtoCodecError):
+                raise
+            raise ProtoCodecError(f"{self.name}.{name}: {exc}") from None
         if self.all_fixed:
             return head
         parts = [head]
-        for f in self.fields:
-            if f.fixed:
-                continue
-            v = message.get(f.name)
+        for name, tag_byte, code in self._optional_plan:
+            v = message.get(name)
             if v is None:
                 continue
-            if f.kind is Kind.STRING:
+            if code is None:               # a string
                 if not isinstance(v, str):
-                    raise ProtoCodecError(f"{self.name}.{f.name}: a string expected, got "
+                    raise ProtoCodecError(f"{self.name}.{name}: a string expected, got "
                                           f"{type(v).__name__}")
                 data = v.encode()
             else:
                 try:
                     floats = [math.nan if x is None else float(x) for x in v]
                 except (TypeError, ValueError) as exc:
-                    raise ProtoCodecError(f"{self.name}.{f.name}: {exc}") from None
-                data = _packed(_STRUCT[f.kind], len(floats)).pack(*floats)
+                    raise ProtoCodecError(f"{self.name}.{name}: {exc}") from None
+                data = _packed(code, len(floats)).pack(*floats)
             if data:
-                parts.append(bytes((f.tag,)) + _varint(len(data)) + data)
+                n = len(data)
+                parts.append(tag_byte + (bytes((n,)) if n < 0x80 else _varint(n)) + data)
         return b"".join(parts)
 
     # ------------------------------------------------------------------ decoding
