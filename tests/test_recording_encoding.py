@@ -141,7 +141,7 @@ def test_every_channel_round_trips_through_protobuf(pair: dict) -> None:
         assert data[REFERENCE][k] == {"t": w[0], "force": [0.0, 0.0, f32(sig["fz_ref"][k])],
                                       "phase": "play" if k > 100 else "approach"}
     # The rare channels stay JSON, exact.
-    assert len(data[EVENTS]) == 3 and data[EVENTS][0]["values"] == {
+    assert len(data[EVENTS]) == n // 1000 and data[EVENTS][0]["values"] == {
         "fz_n": float(sig["wrench"][999][3])}
     assert data[METADATA][0]["parameters"] == META["parameters"]
 
