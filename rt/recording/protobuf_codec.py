@@ -74,8 +74,7 @@ class ProtoField:
 
     ``width`` 0 is a scalar, ``n > 0`` a packed repeated field always holding ``n`` values
     (one per leg ...), :data:`VARIABLE` an optional repeated field (absent when empty).
-    ``description`` (with the unit) goes into the ``.proto`` text of the note, and the JSON
-    Schema of the channel carries it into the file.
+    Units and descriptions are the channel's JSON Schema's (``rt.recording.channels``).
     """
 
     name: str
@@ -227,15 +226,6 @@ class ProtoMessage:
                 json_name=f.name)
         fds = d.FileDescriptorSet(file=[fdp])
         return fds.SerializeToString(deterministic=True)
-
-    def proto_text(self) -> str:
-        """The ``.proto`` source equivalent to :attr:`file_descriptor_set` (documentation)."""
-        lines = ['syntax = "proto3";', f"package {PACKAGE};", "",
-                 f"message {self.name.split('.', 1)[1]} {{"]
-        for f in self.fields:
-            rep = "repeated " if f.width else ""
-            lines.append(f"  {rep}{f.kind.value} {f.name} = {f.number};")
-        return "\n".join(lines + ["}"])
 
     # ------------------------------------------------------------------ encoding
 
