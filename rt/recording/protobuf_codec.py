@@ -232,7 +232,11 @@ class ProtoMessage:
     def encode_rows(self, rows: np.ndarray) -> list[bytes]:
         """One message per row of ``rows`` (n × :attr:`row_width` float64: the fixed fields'
         values in field order, optional fields absent). See :meth:`row_encoder`."""
-        return self.row_encoder(self.fixed_layout)(rows)
+        return self._fixed_rows(rows)
+
+    @cached_property
+    def _fixed_rows(self) -> Callable[[np.ndarray], list[bytes]]:
+        return self.row_encoder(self.fixed_layout)
 
     def row_encoder(self, layout: Sequence[tuple[str, int]]
                     ) -> Callable[[np.ndarray], list[bytes]]:
