@@ -54,6 +54,11 @@ def synthetic_row(k: int) -> list[float]:
     return row
 
 
+def f32(values: list[float]) -> list[float]:
+    """What a float32 field reads back: the nearest float32 (exact, not a tolerance)."""
+    return [float(np.float32(v)) for v in values]
+
+
 def bound_tap(capacity: int = 65536) -> tuple[RecorderTap, list[np.ndarray]]:
     """A RecorderTap whose five inputs are bound to arrays the test fills (no graph needed)."""
     tap = RecorderTap("recorder", capacity=capacity)
@@ -72,12 +77,10 @@ def push(tap: RecorderTap, arrays: list[np.ndarray], k: int) -> None:
 
 # ------------------------------------------------------------------ a 5 s session, shared
 
-@pytest.fixture(scope="module")
-def session(tmp_path_factory: pytest.TempPathFactory) -> dict:
+def record_session(path: Path, encoding: str = "protobuf") -> dict:
     """5 s of 1 kHz state, 1 kHz wrench, safety events through EventLog, references."""
-    path = tmp_path_factory.mktemp("rec") / "session.mcap"
     tap, arrays = bound_tap()
-    rec = SessionRecorder(path, METADATA_IN, start_wall_ns=START_WALL_NS)
+    rec = SessionRecorder(path, METADATA_IN, start_wall_ns=START_WALL_NS, encoding=encoding)
     rec.attach_state_ring(tap)
     log = EventLog(listener=rec.event)
     events_in = []
@@ -98,6 +101,18 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return {"path": path, "summary": summary, "events": events_in, "recorder": rec}
 
 
+@pytest.fixture(scope="module")
+def session(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """The session in today's encoding (protobuf 1 kHz channels)."""
+    return record_session(tmp_path_factory.mktemp("rec") / "session.mcap")
+
+
+@pytest.fixture(scope="module")
+def json_session(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """The session as recordings were made before issue 16 (all JSON, every index)."""
+    return record_session(tmp_path_factory.mktemp("rec") / "session_json.mcap", "json")
+
+
 def test_round_trip_counts_and_exact_values(session: dict) -> None:
     s = session["summary"]
     assert s["complete"] and s["error"] is None and s["dropped_total"] == 0
@@ -107,16 +122,22 @@ def test_round_trip_counts_and_exact_values(session: dict) -> None:
     for k in (0, 1, 1234, N_ROWS - 1):
         row = synthetic_row(k)
         m = data[STATE][k]
-        assert m["t"] == row[0]
-        assert m["q"] == row[1:4] and m["qd"] == row[4:7] and m["q_ref"] == row[7:10]
-        assert m["tau"] == row[10:13] and m["volts"] == row[13:16]
+        assert m["t"] == row[0]                   # double: exact
+        # float32 fields: the nearest float32 of what the loop had (channels.py says why
+        # float32 resolves every field far below its sensor's or actuator's resolution).
+        assert m["q"] == f32(row[1:4]) and m["qd"] == f32(row[4:7])
+        assert m["q_ref"] == f32(row[7:10])
+        assert m["tau"] == f32(row[10:13]) and m["volts"] == f32(row[13:16])
+        assert "qd_ref" not in m                  # optional, not recorded
     assert [m["t"] for m in data[STATE]] == [k / RATE_HZ for k in range(N_ROWS)]
     assert len(data[WRENCH]) == N_ROWS
-    assert data[WRENCH][10] == {"t": 0.01, "fx": 1.01, "fy": -2.0, "fz": 6.0, "tx": 0.1,
-                                "ty": -0.2, "tz": 0.3, "stale": True, "saturated": False}
+    fx, tx, ty, tz = f32([1.01, 0.1, -0.2, 0.3])
+    assert data[WRENCH][10] == {"t": 0.01, "fx": fx, "fy": -2.0, "fz": 6.0, "tx": tx,
+                                "ty": ty, "tz": tz, "stale": True, "saturated": False}
     assert data[EVENTS] == [{**e, "values": e["values"]} for e in session["events"]]
     assert len(data[EVENTS]) == 5 and data[EVENTS][0]["reaction"] == "warn"
     assert len(data[REFERENCE]) == N_ROWS // 100
+    assert data[REFERENCE][3] == {"t": 0.3, "force": f32([0.0, 0.0, 30.0])}
     (meta,) = data[METADATA]
     for key, value in METADATA_IN.items():
         assert meta[key] == value
@@ -354,7 +375,7 @@ def test_generic_ring_rows_overwritten_during_the_copy_are_dropped(tmp_path: Pat
     got = read_recording(tmp_path / "ring.mcap")[REFERENCE]
     # Rows 0..2 shared their slots with rows 8..10 written during the copy.
     assert [m["t"] for m in got] == [k / RATE_HZ for k in range(3, 11)]
-    assert got[0]["position"] == [3.0, 3.0, 3.0]
+    assert got[0]["position"] == [3.0, 3.0, 3.0] and "force" not in got[0]
     assert s["dropped"][REFERENCE] == 3 and s["messages"][REFERENCE] == 8
 
 
@@ -416,8 +437,8 @@ def test_sigkilled_recording_is_recovered_up_to_the_last_chunk(tmp_path: Path,
     # An exact prefix of what the loop produced: every row, in order, no gap, exact values.
     assert [m["t"] for m in state] == [k / RATE_HZ for k in range(n)]
     for k in (0, n // 2, n - 1):
-        assert state[k]["q"] == synthetic_row(k)[1:4]
-        assert state[k]["volts"] == synthetic_row(k)[13:16]
+        assert state[k]["q"] == f32(synthetic_row(k)[1:4])
+        assert state[k]["volts"] == f32(synthetic_row(k)[13:16])
     assert messages[METADATA][0]["patient_id"] == METADATA_IN["patient_id"]
     loss_s = (produced - n) / RATE_HZ
     print(f"\nSIGKILL after {produced} rows: recovered {n} in {info['chunks']} chunks, "
@@ -480,8 +501,8 @@ def test_csv_export_of_state(session: dict, tmp_path: Path) -> None:
     for k in (0, 777, N_ROWS - 1):
         r, expected = rows[k + 1], synthetic_row(k)
         assert float(r[col["t"]]) == expected[0]
-        assert [float(r[col[f"q{i}"]]) for i in range(3)] == expected[1:4]
-        assert [float(r[col[f"tau{i}"]]) for i in range(3)] == expected[10:13]
+        assert [float(r[col[f"q{i}"]]) for i in range(3)] == f32(expected[1:4])
+        assert [float(r[col[f"tau{i}"]]) for i in range(3)] == f32(expected[10:13])
         assert r[col["qd_ref0"]] == ""           # optional field, not recorded
         assert int(r[col["log_time_ns"]]) == log_time_ns(expected[0], START_WALL_NS)
 
@@ -648,14 +669,18 @@ def test_flipped_bytes_in_a_chunk_are_reported_and_salvaged(session: dict, tmp_p
         assert len(list(csv.reader(f))) == result["rows"] + 1
 
 
-@pytest.mark.parametrize("opcode, which, message", [
-    (MESSAGE_INDEX, 3, "data section CRC mismatch"),       # outside any chunk
-    (STATISTICS, 0, "summary section CRC mismatch"),        # in the summary
+@pytest.mark.parametrize("encoding, opcode, which, message", [
+    # Message indexes (outside any chunk) are only in JSON recordings, made before issue 16.
+    ("json", MESSAGE_INDEX, 3, "data section CRC mismatch"),
+    ("protobuf", STATISTICS, 0, "summary section CRC mismatch"),        # in the summary
+    ("json", STATISTICS, 0, "summary section CRC mismatch"),
 ])
 def test_flipped_bytes_outside_chunks_are_caught_by_the_section_crcs(
-        session: dict, tmp_path: Path, opcode: int, which: int, message: str) -> None:
+        session: dict, json_session: dict, tmp_path: Path, encoding: str, opcode: int,
+        which: int, message: str) -> None:
     bad = tmp_path / "flipped.mcap"
-    _flip(session["path"], bad, opcode, which, at=0.7)
+    recorded = session if encoding == "protobuf" else json_session
+    _flip(recorded["path"], bad, opcode, which, at=0.7)
     assert talus_main(["record", "info", str(bad)]) == 2
     from rt.recording.reader import recording_info
 

@@ -38,18 +38,22 @@ def test_sine_fz_session_recorded_and_summarized(tmp_path):
 
 
 def _first_messages_validate(path: Path) -> None:
-    """The first message of every channel validates against the channel's own schema (the
-    first wrench once carried nulls from before the sensor's first sample)."""
+    """The first message of every channel, decoded (JSON or protobuf), validates against the
+    channel's JSON Schema (the first wrench once carried nulls from before the sensor's first
+    sample)."""
     import jsonschema
-    from mcap.reader import make_reader
+
+    from rt.recording.reader import RecordingScan
 
     seen: set[str] = set()
-    with open(path, "rb") as f:
-        for schema, channel, message in make_reader(f, validate_crcs=True).iter_messages():
-            if channel.topic not in seen:
-                seen.add(channel.topic)
-                jsonschema.validate(json.loads(message.data), json.loads(schema.data),
-                                    cls=jsonschema.Draft202012Validator)
+    scan = RecordingScan(path)
+    for rec in scan:
+        if rec.topic not in seen:
+            seen.add(rec.topic)
+            schema = scan.schema_for(rec.topic)
+            assert schema is not None, rec.topic
+            jsonschema.validate(rec.payload, schema, cls=jsonschema.Draft202012Validator)
+    assert scan.info.complete
     assert {"/robot/wrench", "/robot/state", "/protocol/metadata"} <= seen
 
 

@@ -1,7 +1,33 @@
-"""The channels of a session recording: topic → JSON Schema (DESIGN 9).
+"""The channels of a session recording: topic → JSON Schema and protobuf message (DESIGN 9).
 
-Every channel is written as MCAP ``message_encoding="json"`` with a ``jsonschema`` schema whose
-root is an object: the form Foxglove opens and plots without plugins (PLATFORM, MCAP).
+Two encodings, both MCAP well-known ones that Foxglove opens and plots without plugins:
+
+* **protobuf** (the default since issue 16): the 1 kHz channels (``/robot/state``,
+  ``/robot/wrench``, ``/protocol/reference``) as ``message_encoding="protobuf"`` with a
+  ``protobuf`` schema (a ``FileDescriptorSet``, :mod:`rt.recording.protobuf_codec`), numbers
+  as float32 where the resolution allows (below) and ``t`` as double. The JSON Schema of each
+  channel goes into the MCAP channel metadata (``talus.jsonschema``): units and descriptions
+  travel with the file, and the decoded dicts are the JSON channels' dicts. The rare channels
+  (``/safety/events``, ``/protocol/metadata``, added ones) stay JSON: a handful of messages per
+  session whose ``values``/``parameters`` are free-form objects a fixed schema would not hold.
+* **json** (every recording before issue 16, and ``SessionRecorder(encoding="json")``):
+  ``message_encoding="json"`` with a ``jsonschema`` schema whose root is an object.
+
+Float32 (24-bit mantissa, relative step 6e-8) against what each field can resolve:
+
+* ``q``, ``q_ref``, ``position`` (m, at most 0.5 m of stroke): step ≤ 3e-8 m, against the
+  encoder's 20 µm per count (robot description ``encoder.m_per_count``): 600x finer.
+* ``qd`` (m/s, < 1 m/s): step ≤ 6e-8 m/s; the estimate's own quantum is a count per cycle,
+  0.02 m/s at 1 kHz.
+* ``tau`` (N, < 10 kN): step ≤ 1e-3 N; what reaches the motors is resolved by the DAC's
+  4.88 mV LSB (``volts``), far coarser.
+* ``volts`` (V, ±10 V): step ≤ 1e-6 V, against the PCI-1720's 4.88 mV LSB.
+* wrench ``fx..fz`` (N, < 2.5 kN) step ≤ 2.4e-4 N and ``tx..tz`` (N·m, < 200) step ≤ 1.5e-5,
+  against the Delta SI-660-60's 1/8 N (1/4 N on z) and 7.5 mN·m.
+* reference ``force`` (N): as the wrench.
+
+``t`` (loop time, s) stays double: float32 would step by 0.24 ms after an hour, a quarter of a
+1 kHz period.
 
 Conventions, shared by all channels:
 
@@ -21,14 +47,27 @@ Adding a channel is one entry in :data:`CHANNELS`; the writer registers every en
 """
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 from typing import Any
+
+from rt.recording.protobuf_codec import VARIABLE, Kind, ProtoField, ProtoMessage
 
 #: JSON Schema dialect of every schema here.
 SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 #: MCAP schema encoding and message encoding for JSON channels (MCAP well-known values).
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
+#: MCAP channel metadata key holding a protobuf channel's JSON Schema (units, descriptions,
+#: the shape of the decoded dicts).
+JSONSCHEMA_METADATA_KEY = "talus.jsonschema"
+
+
+class Encoding(enum.Enum):
+    """How a recording encodes its channels that have a protobuf message."""
+
+    PROTOBUF = "protobuf"
+    JSON = "json"
 
 STATE = "/robot/state"
 WRENCH = "/robot/wrench"
@@ -46,6 +85,9 @@ class ChannelSpec:
     schema: dict[str, Any]
     #: MCAP channel metadata (string → string), e.g. the nominal rate.
     metadata: dict[str, str] = field(default_factory=dict)
+    #: The protobuf message of the channel (same fields as the JSON Schema), None for a
+    #: channel always written as JSON.
+    proto: ProtoMessage | None = None
 
     @property
     def required(self) -> tuple[str, ...]:
@@ -148,14 +190,36 @@ _REFERENCE = _object(
     },
     ["t"])
 
+_D, _F, _B, _S = Kind.DOUBLE, Kind.FLOAT, Kind.BOOL, Kind.STRING
+
+#: Protobuf messages of the 1 kHz channels: the JSON Schemas' fields, same names; numbers
+#: are never reused (a removed field keeps its number retired).
+STATE_PROTO = ProtoMessage("talus.RobotState", [
+    ProtoField("t", 1, _D), ProtoField("q", 2, _F, 3), ProtoField("qd", 3, _F, 3),
+    ProtoField("q_ref", 4, _F, 3), ProtoField("tau", 5, _F, 3), ProtoField("volts", 6, _F, 3),
+    ProtoField("qd_ref", 7, _F, VARIABLE)])
+WRENCH_PROTO = ProtoMessage("talus.Wrench", [
+    ProtoField("t", 1, _D), ProtoField("fx", 2, _F), ProtoField("fy", 3, _F),
+    ProtoField("fz", 4, _F), ProtoField("tx", 5, _F), ProtoField("ty", 6, _F),
+    ProtoField("tz", 7, _F), ProtoField("stale", 8, _B), ProtoField("saturated", 9, _B)])
+REFERENCE_PROTO = ProtoMessage("talus.ProtocolReference", [
+    ProtoField("t", 1, _D), ProtoField("force", 2, _F, VARIABLE),
+    ProtoField("position", 3, _F, VARIABLE), ProtoField("phase", 4, _S),
+    ProtoField("mode", 5, _S)])
+
 #: topic → spec; the writer registers all of them, in this order.
 CHANNELS: dict[str, ChannelSpec] = {
-    STATE: ChannelSpec(STATE, "talus.RobotState", _STATE, {"rate_hz": "1000"}),
-    WRENCH: ChannelSpec(WRENCH, "talus.Wrench", _WRENCH, {"rate_hz": "1000"}),
+    STATE: ChannelSpec(STATE, "talus.RobotState", _STATE, {"rate_hz": "1000"}, STATE_PROTO),
+    WRENCH: ChannelSpec(WRENCH, "talus.Wrench", _WRENCH, {"rate_hz": "1000"}, WRENCH_PROTO),
     EVENTS: ChannelSpec(EVENTS, "talus.SafetyEvent", _EVENTS),
     METADATA: ChannelSpec(METADATA, "talus.SessionMetadata", _METADATA),
-    REFERENCE: ChannelSpec(REFERENCE, "talus.ProtocolReference", _REFERENCE),
+    REFERENCE: ChannelSpec(REFERENCE, "talus.ProtocolReference", _REFERENCE,
+                           proto=REFERENCE_PROTO),
 }
+
+#: Protobuf messages talus writes, by full name: the reader's fast decoders.
+PROTO_MESSAGES: dict[str, ProtoMessage] = {
+    m.name: m for m in (STATE_PROTO, WRENCH_PROTO, REFERENCE_PROTO)}
 
 #: Column layout of a ``RecorderTap`` row (rt.components.blocks): field name → width.
 STATE_ROW_LAYOUT: tuple[tuple[str, int], ...] = (

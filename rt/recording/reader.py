@@ -1,5 +1,11 @@
 """Reading session recordings: complete files, crashed (truncated) files, CSV export.
 
+Both encodings are read (``rt.recording.channels``): JSON channels with ``json.loads``,
+protobuf channels of talus's own messages with their ``struct`` fast path
+(``rt.recording.protobuf_codec``), any other protobuf schema through
+``mcap_protobuf.decoder``; every payload comes out as the same dict, so callers never ask which
+encoding a file has.
+
 A complete file (footer, summary, closing magic) is read with mcap's own reader, so what we
 write is checked against the reference implementation. A file whose writer died has no
 footer: :func:`recover` walks its records from the start (MCAP framing: opcode u8, length u64
@@ -17,7 +23,7 @@ import math
 import os
 import struct
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -31,6 +37,8 @@ from mcap.stream_reader import breakup_chunk
 
 from rt.errors import InputError
 from rt.output_files import atomic_output
+from rt.recording import protobuf_codec
+from rt.recording.channels import JSONSCHEMA_METADATA_KEY, PROTO_MESSAGES
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
@@ -115,10 +123,55 @@ def _duration(start_ns: int | None, end_ns: int | None) -> float:
     return 0.0 if start_ns is None or end_ns is None else (end_ns - start_ns) / 1e9
 
 
-def _decode(channel: Channel, data: bytes) -> Any:
-    if channel.message_encoding == "json":
-        return json.loads(data)
+Decoder = Callable[[bytes], Any]
+
+
+def _bytes(data: bytes) -> Any:
     return bytes(data)
+
+
+def decoder_for(channel: Channel, schema: Schema | None) -> Decoder:
+    """bytes → payload for ``channel``'s messages: a dict for JSON and protobuf channels,
+    the raw bytes for an encoding we do not know."""
+    if channel.message_encoding == "json":
+        return json.loads
+    if (channel.message_encoding == protobuf_codec.MESSAGE_ENCODING and schema is not None
+            and schema.encoding == protobuf_codec.SCHEMA_ENCODING):
+        ours = PROTO_MESSAGES.get(schema.name)
+        if ours is not None and bytes(schema.data) == ours.file_descriptor_set:
+            return ours.decode
+        return _generic_protobuf(schema)
+    return _bytes
+
+
+def _generic_protobuf(schema: Schema) -> Decoder:
+    """A protobuf schema that is not one of ours (another writer, a later talus): the field
+    library decodes it, and the message becomes a dict of its fields."""
+    from google.protobuf.message import Message as ProtoMessage
+    from mcap_protobuf.decoder import DecoderFactory
+
+    decode = DecoderFactory().decoder_for(protobuf_codec.MESSAGE_ENCODING, schema)
+    if decode is None:
+        return _bytes
+
+    def to_dict(msg: ProtoMessage) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for fd, value in msg.ListFields():
+            if fd.message_type is not None:
+                value = ([to_dict(v) for v in value]
+                         if fd.label == fd.LABEL_REPEATED else to_dict(value))
+            elif fd.label == fd.LABEL_REPEATED:
+                value = [_finite_or_none(v) for v in value]
+            else:
+                value = _finite_or_none(value)
+            out[fd.name] = value
+        return out
+
+    return lambda data: to_dict(decode(data))
+
+
+def _finite_or_none(v: Any) -> Any:
+    return None if isinstance(v, float) and not math.isfinite(v) else v
 
 
 class RecordingScan:
@@ -138,15 +191,26 @@ class RecordingScan:
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self._sequence: dict[str, int] = {}     # last sequence number seen per topic
+        self._decoders: dict[int, Decoder] = {}  # per channel id
 
     def schema_for(self, topic: str) -> dict[str, Any] | None:
-        """The JSON Schema (a dict) of ``topic``'s channel, if the file declared one."""
+        """The JSON Schema (a dict) of ``topic``'s channel, if the file declared one: the
+        schema of a JSON channel, the one a protobuf channel carries in its metadata."""
         for ch in self.channels.values():
+            if ch.topic == topic and JSONSCHEMA_METADATA_KEY in ch.metadata:
+                return json.loads(ch.metadata[JSONSCHEMA_METADATA_KEY])
             if ch.topic == topic and ch.schema_id in self.schemas:
                 schema = self.schemas[ch.schema_id]
                 if schema.encoding == "jsonschema":
                     return json.loads(schema.data)
         return None
+
+    def _decode(self, channel: Channel, data: bytes) -> Any:
+        decode = self._decoders.get(channel.id)
+        if decode is None:
+            decode = decoder_for(channel, self.schemas.get(channel.schema_id))
+            self._decoders[channel.id] = decode
+        return decode(data)
 
     def topic_names(self) -> list[str]:
         return [c.topic for c in self.channels.values()]
@@ -169,7 +233,7 @@ class RecordingScan:
         if self.topics is not None and channel.topic not in self.topics:
             return None
         if payload is None:
-            payload = _decode(channel, msg.data)
+            payload = self._decode(channel, msg.data)
         return RecordedMessage(channel.topic, msg.log_time, payload)
 
     def __iter__(self) -> Iterator[RecordedMessage]:
@@ -316,6 +380,8 @@ class RecordingScan:
                     pending.append(r)
             self.schemas.update((x.id, x) for x in schemas)
             self.channels.update((x.id, x) for x in channels)
+            for x in channels:
+                self._decoders.pop(x.id, None)
             decoded = [self._decoded(m) for m in pending]
             out = [rec for rec in (self._message(m, payload) for m, payload in decoded)
                    if rec is not None]
@@ -326,7 +392,7 @@ class RecordingScan:
 
     def _decoded(self, msg: Message) -> tuple[Message, Any]:
         channel = self.channels.get(msg.channel_id)
-        return msg, None if channel is None else _decode(channel, msg.data)
+        return msg, None if channel is None else self._decode(channel, msg.data)
 
 
 def _reason(exc: BaseException) -> str:
@@ -384,8 +450,12 @@ def read_recording(path: str | os.PathLike[str],
                 for ch in summary.channels.values():
                     if topics is None or ch.topic in topics:
                         out.setdefault(ch.topic, [])
-            for _, channel, message in reader.iter_messages(topics=topics):
-                out.setdefault(channel.topic, []).append(_decode(channel, message.data))
+            decoders: dict[int, Decoder] = {}
+            for schema, channel, message in reader.iter_messages(topics=topics):
+                decode = decoders.get(channel.id)
+                if decode is None:
+                    decode = decoders[channel.id] = decoder_for(channel, schema)
+                out.setdefault(channel.topic, []).append(decode(message.data))
     except (McapError, struct.error, ValueError) as exc:
         _check_complete(path)
         raise RecordingFileError(path, f"unreadable MCAP file: {exc}") from exc

@@ -3,8 +3,15 @@
 Data flow (DESIGN 3): the 1 kHz loop never touches the file. State leaves the loop through
 ``RecorderTap``'s preallocated ring, which the recorder's thread drains every
 ``drain_period_s``; rare or optional messages (safety events, wrench, protocol reference) are
-handed over with a non-blocking append to a bounded queue. The thread encodes JSON, feeds the
+handed over with a non-blocking append to a bounded queue. The thread encodes, feeds the
 mcap ``Writer`` and owns the file.
+
+Encoding (``rt.recording.channels``): by default the 1 kHz channels are protobuf (float32
+where the resolution allows), a drained block of ring rows encoded at once with numpy, and
+the file carries no per-message index (MCAP MessageIndex records: 16 bytes per message that
+compression never touches, a quarter of the file at 1 kHz; readers, Foxglove and mcap's own,
+find messages through the chunk indexes and read the chunk). ``encoding="json"`` writes the
+recordings made before issue 16 (all JSON, every index).
 
 Never blocking the caller: every enqueue is a length check and a ``deque.append`` (no lock, no
 I/O); a full queue drops the message and counts it. A ring the thread has not drained in time
@@ -30,23 +37,26 @@ import hashlib
 import importlib.metadata
 import json
 import math
+import numbers
 import os
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import IO, Any, Protocol, Self
 
 import numpy as np
-from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
 from rt.errors import InputError, TalusError
 from rt.output_files import PARTIAL_SUFFIX, check_output, commit_output, partial_path
+from rt.recording import protobuf_codec
 from rt.recording.channels import (
     CHANNELS,
     EVENTS,
+    JSONSCHEMA_METADATA_KEY,
     MESSAGE_ENCODING,
     METADATA,
     METADATA_REQUIRED_FROM_CALLER,
@@ -56,7 +66,9 @@ from rt.recording.channels import (
     STATE_ROW_LAYOUT,
     WRENCH,
     ChannelSpec,
+    Encoding,
 )
+from rt.recording.protobuf_codec import ProtoCodecError, ProtoMessage
 
 #: Chunk size, bytes of uncompressed records: ≈ 1 s of 1 kHz state. The flush timer, not the
 #: size, usually closes chunks, so this only caps a chunk when many channels are busy.
@@ -225,6 +237,8 @@ class _RingTap:
     source: RingSource
     layout: RowLayout
     start: int
+    #: rows (n × width) → one message each: JSON or protobuf.
+    encode: Callable[[np.ndarray], list[bytes]]
     dropped: int = 0
 
 
@@ -244,6 +258,10 @@ class SessionRecorder:
     ``rt.recording.channels.CHANNELS``; write to them with :meth:`publish` or
     :meth:`attach_ring`.
 
+    ``encoding``: ``"protobuf"`` (default) writes the channels that have a protobuf message
+    (``ChannelSpec.proto``) as protobuf, the others as JSON; ``"json"`` writes every channel
+    as JSON, as recordings were before issue 16 (kept for comparison and compatibility tests).
+
     The file is opened, the channels registered and the metadata written to disk before the
     constructor returns, so a bad path fails here, not in the thread.
     """
@@ -255,7 +273,13 @@ class SessionRecorder:
                  queue_capacity: int = DEFAULT_QUEUE_CAPACITY, loop_t0: float = 0.0,
                  start_wall_ns: int | None = None,
                  extra_channels: dict[str, ChannelSpec] | None = None, fsync: bool = False,
-                 force: bool = False, inputs: Iterable[str | os.PathLike[str]] = ()):
+                 force: bool = False, inputs: Iterable[str | os.PathLike[str]] = (),
+                 encoding: Encoding | str = Encoding.PROTOBUF):
+        try:
+            self.encoding = Encoding(encoding)
+        except ValueError:
+            raise InputError(f"encoding must be one of {[e.value for e in Encoding]}, got "
+                             f"{encoding!r}") from None
         if compression not in _COMPRESSION:
             raise InputError(f"compression must be one of {sorted(_COMPRESSION)}, "
                              f"got {compression!r}")
@@ -282,6 +306,15 @@ class SessionRecorder:
             if topic != spec.topic or spec.schema.get("type") != "object":
                 raise InputError(f"channel {topic!r}: the key must be the spec's topic and "
                                  "the schema an object")
+        #: topic → protobuf message, for the channels written as protobuf.
+        self._protos: dict[str, ProtoMessage] = {
+            topic: spec.proto for topic, spec in self.channels.items()
+            if spec.proto is not None and self.encoding is Encoding.PROTOBUF}
+        # The queued wrench samples (t, fx..tz, stale, saturated) as protobuf rows.
+        wrench_proto = self._protos.get(WRENCH)
+        self._wrench_rows = None if wrench_proto is None else wrench_proto.row_encoder(
+            [("t", 1), ("fx", 1), ("fy", 1), ("fz", 1), ("tx", 1), ("ty", 1), ("tz", 1),
+             ("stale", 1), ("saturated", 1)])
         self.loop_t0 = float(loop_t0)
         self.start_wall_ns = time.time_ns() if start_wall_ns is None else int(start_wall_ns)
         self.flush_interval_s = float(flush_interval_s)
@@ -315,18 +348,35 @@ class SessionRecorder:
         try:
             # Data-section CRC in DataEnd (besides the chunk and summary CRCs): a flipped byte
             # outside any chunk (a message index) is detected too.
+            # No MessageIndex records with protobuf (see the module docstring); the JSON
+            # encoding keeps them, so it writes what recordings were before issue 16.
+            index_types = IndexType.ALL if self.encoding is Encoding.JSON \
+                else IndexType.ALL & ~IndexType.MESSAGE
             self._mcap = Writer(self._stream, chunk_size=int(chunk_size),  # type: ignore[arg-type]
-                                compression=_COMPRESSION[compression], enable_data_crcs=True)
+                                compression=_COMPRESSION[compression], index_types=index_types,
+                                enable_data_crcs=True)
             self._mcap.start(profile="", library=f"talus {software_version()}; "
                                                  f"{LIBRARY_IDENTIFIER}")
             self._channel_ids: dict[str, int] = {}
             for spec in self.channels.values():
+                proto = self._protos.get(spec.topic)
+                if proto is None:
+                    schema_id = self._mcap.register_schema(
+                        name=spec.schema_name, encoding=SCHEMA_ENCODING,
+                        data=json.dumps(spec.schema).encode())
+                    self._channel_ids[spec.topic] = self._mcap.register_channel(
+                        topic=spec.topic, message_encoding=MESSAGE_ENCODING,
+                        schema_id=schema_id, metadata=dict(spec.metadata))
+                    continue
                 schema_id = self._mcap.register_schema(
-                    name=spec.schema_name, encoding=SCHEMA_ENCODING,
-                    data=json.dumps(spec.schema).encode())
+                    name=proto.name, encoding=protobuf_codec.SCHEMA_ENCODING,
+                    data=proto.file_descriptor_set)
+                # The JSON Schema rides along: units and descriptions stay in the file.
                 self._channel_ids[spec.topic] = self._mcap.register_channel(
-                    topic=spec.topic, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
-                    metadata=dict(spec.metadata))
+                    topic=spec.topic, message_encoding=protobuf_codec.MESSAGE_ENCODING,
+                    schema_id=schema_id,
+                    metadata={**spec.metadata,
+                              JSONSCHEMA_METADATA_KEY: json.dumps(spec.schema)})
             self._write(METADATA, self.loop_t0, encode_json(self.metadata))
             # The first chunk (schemas, channels, metadata) goes to disk now: a recording
             # whose writer dies later still says what it was.
@@ -360,8 +410,16 @@ class SessionRecorder:
             raise InputError(f"unknown channel {topic!r}; channels: {sorted(self._channel_ids)}")
         if self._closed:
             raise InputError("the recorder is closed")
+        encode: Callable[[np.ndarray], list[bytes]] = layout.encode
+        proto = self._protos.get(topic)
+        if proto is not None:
+            try:
+                encode = proto.row_encoder(layout.fields)
+            except ProtoCodecError as exc:
+                raise InputError(f"channel {topic!r}: ring rows {list(layout.fields)} do not "
+                                 f"fit: {exc}") from None
         tap = _RingTap(topic, self._channel_ids[topic], source, layout,
-                       source.written if start is None else int(start))
+                       source.written if start is None else int(start), encode)
         # Copy-on-write: the thread iterates whatever tuple it read, never a list being changed.
         self._taps = self._taps + (tap,)
 
@@ -379,11 +437,24 @@ class SessionRecorder:
         return self._enqueue(WRENCH, t, (fx, fy, fz, tx, ty, tz, stale, saturated))
 
     def publish(self, topic: str, message: dict[str, Any]) -> bool:
-        """Enqueue a message (with ``t``, loop time in s) on any registered JSON channel, e.g.
-        ``/protocol/reference``. False when dropped."""
+        """Enqueue a message (with ``t``, loop time in s) on any registered channel, e.g.
+        ``/protocol/reference``. False when dropped.
+
+        A protobuf channel's message is encoded here, so a message that does not fit its
+        schema (a missing field, a wrong length) is refused with :class:`InputError` now,
+        not lost in the writer thread. Not for the loop: it costs a few µs."""
         if topic not in self._channel_ids:
             raise InputError(f"unknown channel {topic!r}; channels: {sorted(self._channel_ids)}")
-        return self._enqueue(topic, float(message["t"]), message)
+        t = message.get("t")
+        if not isinstance(t, numbers.Real) or isinstance(t, bool):
+            raise InputError(f"channel {topic!r}: a message needs 't', the loop time in s")
+        proto = self._protos.get(topic)
+        if proto is not None:
+            try:
+                return self._enqueue(topic, float(t), proto.encode(message))
+            except ProtoCodecError as exc:
+                raise InputError(f"channel {topic!r}: {exc}") from None
+        return self._enqueue(topic, float(t), message)
 
     def reference(self, t: float, force: Iterable[float] | None = None,
                   position: Iterable[float] | None = None, phase: str | None = None) -> bool:
@@ -485,6 +556,7 @@ class SessionRecorder:
                 "writer_busy_s": self._busy_s,
                 "writer_us_per_message": 1e6 * self._busy_s / n if n else 0.0,
                 "flushes": self._flushes,
+                "encoding": self.encoding.value,
                 "error": self._error,
             }
             return self._summary
@@ -551,7 +623,7 @@ class SessionRecorder:
             if not len(rows):
                 continue
             ts = rows[:, 0].tolist()
-            for t, data in zip(ts, tap.layout.encode(rows)):
+            for t, data in zip(ts, tap.encode(rows)):
                 self._write(tap.topic, t, data)
                 written += 1
                 if written % _YIELD_EVERY == 0:
@@ -559,22 +631,56 @@ class SessionRecorder:
         q = self._queue
         # Only what was queued when this turn began: a producer that keeps the queue busy
         # must not starve the rings (the state would fall far behind in the file).
-        for _ in range(len(q)):
-            topic, t, payload = q.popleft()
-            if topic == WRENCH:
-                fx, fy, fz, tx, ty, tz, stale, saturated = payload
-                if not all(math.isfinite(v) for v in (fx, fy, fz, tx, ty, tz)):
-                    # No sample yet (the sensor's NaN): not a measurement, and as nulls it
-                    # would break the channel's schema (numbers). Counted, not written.
-                    self._wrench_without_sample += 1
-                    continue
-                payload = {"t": t, "fx": float(fx), "fy": float(fy), "fz": float(fz),
-                           "tx": float(tx), "ty": float(ty), "tz": float(tz),
-                           "stale": bool(stale), "saturated": bool(saturated)}
-            self._write(topic, t, encode_json(payload))
-            written += 1
-            if written % _YIELD_EVERY == 0:
-                time.sleep(0)
+        items = [q.popleft() for _ in range(len(q))]
+        wrenches = self._encode_wrenches(items)
+        k = 0
+        try:
+            for k, (topic, t, payload) in enumerate(items):
+                if isinstance(payload, bytes):      # encoded by publish()
+                    data = payload
+                elif topic == WRENCH:
+                    if wrenches is not None:
+                        encoded = wrenches.get(k)
+                        if encoded is None:         # no sample: counted by the encoder
+                            continue
+                        data = encoded
+                    else:
+                        fx, fy, fz, tx, ty, tz, stale, saturated = payload
+                        if not all(math.isfinite(v) for v in (fx, fy, fz, tx, ty, tz)):
+                            # No sample yet (the sensor's NaN): not a measurement, and as
+                            # nulls it would break the channel's schema. Counted, not written.
+                            self._wrench_without_sample += 1
+                            continue
+                        data = encode_json({
+                            "t": t, "fx": float(fx), "fy": float(fy), "fz": float(fz),
+                            "tx": float(tx), "ty": float(ty), "tz": float(tz),
+                            "stale": bool(stale), "saturated": bool(saturated)})
+                else:
+                    data = encode_json(payload)
+                self._write(topic, t, data)
+                written += 1
+                if written % _YIELD_EVERY == 0:
+                    time.sleep(0)
+        except BaseException:
+            for topic, _, _ in items[k:]:       # taken from the queue, never written
+                self._dropped[topic] += 1
+            raise
+
+    def _encode_wrenches(self, items: list[tuple[str, float, Any]]) -> dict[int, bytes] | None:
+        """Protobuf bytes of the queued wrench samples of ``items`` (by index), encoded as one
+        numpy block; samples without a finite value (the sensor has not answered yet) are
+        counted and left out. None when the wrench channel is JSON."""
+        if self._wrench_rows is None:
+            return None
+        index = [i for i, (topic, _, payload) in enumerate(items)
+                 if topic == WRENCH and not isinstance(payload, bytes)]
+        if not index:
+            return {}
+        rows = np.array([(items[i][1], *items[i][2]) for i in index], dtype=float)
+        finite = np.isfinite(rows[:, 1:7]).all(axis=1)
+        self._wrench_without_sample += int(len(index) - finite.sum())
+        encoded = self._wrench_rows(rows[finite])
+        return dict(zip(np.asarray(index)[finite].tolist(), encoded))
 
     def _run(self) -> None:
         next_flush = time.monotonic() + self.flush_interval_s

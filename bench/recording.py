@@ -1,0 +1,138 @@
+"""The recorder's encodings side by side: encoding cost per message, bytes per message, MB/h.
+
+Run:  .venv/bin/python bench/recording.py [--seconds 10] [--from RECORDING.mcap]
+
+The stream is either a recording's own 1 kHz channels (``--from``: e.g. a twin session's file,
+read back and re-recorded) or the session-like generated stream of the tests
+(``tests/test_recording_encoding.session_signals``: encoder-quantized positions, noisy velocity,
+forces with noise). For each encoding (``json``: recordings before issue 16; ``protobuf``:
+today's) it prints one JSON line:
+
+* ``encode_us`` — the encoding cost per message, median and p99, as the recorder pays it:
+  state, one drained block of 20 ring rows (the 20 ms drain period at 1 kHz) divided by its
+  rows; wrench, the same for protobuf (the writer encodes a pump's queued samples as one
+  block) and one message at a time for JSON; reference, one message (protobuf: in
+  ``publish()``, the producer's thread; JSON: in the writer thread);
+* ``writer_cpu_us_per_message`` — the recorder thread's whole CPU per message (encoding,
+  mcap records, compression, writing) from ``SessionRecorder.close()``;
+* ``bytes_per_message`` and ``mb_per_hour`` of the finished file (1 kHz extrapolated from the
+  stream's duration).
+
+Wall-clock figures: ±30 % run to run on these shared VMs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+# This file is bench/recording.py: its folder must not shadow packages; tests/ holds the
+# generated stream shared with the tests.
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).parent.resolve()]
+sys.path.append(str(Path(__file__).resolve().parent.parent / "tests"))
+
+META = {"protocol_name": "bench", "protocol_version": "1", "parameters": {},
+        "patient_id": "bench", "robot_description": "talus_nominal"}
+
+
+def _stream_from(path: Path) -> dict[str, np.ndarray]:
+    """A recording's state, wrench and reference as the generated stream's arrays."""
+    from rt.recording.channels import REFERENCE, STATE, WRENCH
+    from rt.recording.reader import read_recording
+
+    data = read_recording(path, topics=[STATE, WRENCH, REFERENCE])
+    state = np.array([[m["t"], *m["q"], *m["qd"], *m["q_ref"], *m["tau"], *m["volts"]]
+                      for m in data[STATE]], dtype=float)
+    n = min(len(state), len(data[WRENCH]), len(data[REFERENCE]))
+    wrench = np.array([[m["t"], m["fx"], m["fy"], m["fz"], m["tx"], m["ty"], m["tz"]]
+                       for m in data[WRENCH][:n]], dtype=float)
+    fz_ref = np.array([(m.get("force") or [0.0, 0.0, 0.0])[2] for m in data[REFERENCE][:n]])
+    return {"state": state[:n], "wrench": wrench, "fz_ref": fz_ref}
+
+
+def _percentiles(us: list[float]) -> dict[str, float]:
+    a = np.array(us)
+    return {"median": round(float(np.median(a)), 3), "p99": round(float(np.percentile(a, 99)), 3)}
+
+
+def encode_costs(encoding: str, sig: dict[str, np.ndarray]) -> dict[str, dict[str, float]]:
+    """µs per message of the writer thread's encoding step, per channel."""
+    from rt.recording.channels import REFERENCE_PROTO, STATE_PROTO, WRENCH_PROTO
+    from rt.recording.writer import STATE_LAYOUT, encode_json
+
+    state, wrench, fz_ref = sig["state"], sig["wrench"], sig["fz_ref"]
+    encode_rows: Callable[[np.ndarray], list[bytes]] = (
+        STATE_LAYOUT.encode if encoding == "json" else STATE_PROTO.encode_rows)
+    block = 20
+    out: dict[str, list[float]] = {"state": [], "wrench": [], "reference": []}
+    for k in range(0, len(state) - block, block):
+        rows = state[k:k + block]
+        t0 = time.perf_counter_ns()
+        encode_rows(rows)
+        out["state"].append((time.perf_counter_ns() - t0) / 1e3 / block)
+    one = encode_json if encoding == "json" else None
+    if one is None:
+        wrench_rows = WRENCH_PROTO.row_encoder([(n, 1) for n in (
+            "t", "fx", "fy", "fz", "tx", "ty", "tz", "stale", "saturated")])
+        for k in range(0, len(wrench) - block, block):
+            queued = [(float(w[0]), *map(float, w[1:]), False, False)
+                      for w in wrench[k:k + block]]
+            t0 = time.perf_counter_ns()
+            rows = np.array(queued, dtype=float)       # what the writer does with the queue
+            wrench_rows(rows[np.isfinite(rows[:, 1:7]).all(axis=1)])
+            out["wrench"].append((time.perf_counter_ns() - t0) / 1e3 / block)
+    for k in range(len(wrench)):
+        w = wrench[k].tolist()
+        msg = {"t": w[0], "fx": w[1], "fy": w[2], "fz": w[3], "tx": w[4], "ty": w[5],
+               "tz": w[6], "stale": False, "saturated": False}
+        ref = {"t": w[0], "force": [0.0, 0.0, float(fz_ref[k])], "phase": "play",
+               "mode": "force"}
+        t0 = time.perf_counter_ns()
+        if one is not None:
+            one(msg)
+        t1 = time.perf_counter_ns()
+        (one or REFERENCE_PROTO.encode)(ref)
+        t2 = time.perf_counter_ns()
+        if one is not None:
+            out["wrench"].append((t1 - t0) / 1e3)
+        out["reference"].append((t2 - t1) / 1e3)
+    return {k: _percentiles(v) for k, v in out.items()}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seconds", type=float, default=10.0,
+                    help="length of the generated stream (s, default %(default)s)")
+    ap.add_argument("--from", dest="source", type=Path, default=None,
+                    help="take the stream from this recording instead of generating it")
+    args = ap.parse_args()
+    if args.seconds <= 0:
+        ap.error("--seconds must be positive")
+    from test_recording_encoding import record, session_signals
+
+    if args.source is not None:
+        sig, source = _stream_from(args.source), str(args.source)
+    else:
+        sig, source = session_signals(args.seconds), f"generated {args.seconds:g} s"
+    duration = float(sig["state"][-1, 0] - sig["state"][0, 0]) + 1e-3
+    tmp = Path(tempfile.mkdtemp(prefix="talus-bench-recording-"))
+    for encoding in ("json", "protobuf"):
+        summary = record(tmp / f"{encoding}.mcap", sig, encoding, events=False)
+        n = sum(summary["messages"].values())
+        print(json.dumps({
+            "encoding": encoding, "source": source, "seconds": round(duration, 3),
+            "messages": n, "encode_us": encode_costs(encoding, sig),
+            "writer_cpu_us_per_message": round(summary["writer_us_per_message"], 2),
+            "bytes_per_message": round(summary["bytes"] / n, 2),
+            "mb_per_hour": round(summary["bytes"] / duration * 3600 / 1e6, 1)}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
