@@ -95,8 +95,8 @@ def _replay(stream, make, switch=None) -> None:
 @pytest.mark.parametrize("env", ["free", "plate:0.7128", "ankle"])
 def test_realistic_twin_replay_equals_the_interpreted_reference(env):
     stream = _record(env, ideal=False, seconds=0.6)
-    ref, fast, contacts = _replay(stream, lambda c: Twin(environment=parse_environment(env),
-                                                         seed=3, compiled=c))
+    ref, _, contacts = _replay(stream, lambda c: Twin(environment=parse_environment(env),
+                                                      seed=3, compiled=c))
     # The stream exercised what it claims: brakes engaged while off, the heat model updated.
     assert ref.plant.temperature_rise_k.max() > 0.0
     assert np.ptp(ref.plant.q) > 1e-4
