@@ -28,25 +28,14 @@ import math
 import numpy as np
 from numba import njit
 
-from rt.model.kernels import TREE_MAPS_WORK, assemble, fk_solve, tree_maps_work
 from rt.twin import physics
 from rt.twin.physics import (
-    B_C_PLAT,
-    B_C_ROD,
     B_F_PER_A,
-    B_G,
-    B_I_PLAT,
-    B_I_ROD,
-    B_J_REFL_AXES,
-    B_M_PLAT,
-    B_M_ROD,
-    B_M_SLIDER,
     N_BODY_PARAMS,
     N_FRICTION,
     N_REAL,
     R_AMP_DELAY_STEPS,
     R_BRAKE_ON,
-    STATUS_FK_FAILED,
     STATUS_OK,
     WORK_SIZE,
 )
@@ -326,7 +315,7 @@ def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd
         else:
             for i in range(3):
                 force[i] = fpa * current[i] + cable_tau[i]
-        st = acceleration_fast(geom, bodies, viscous_only if k > 0.0 else friction, env, q,
+        st = physics.acceleration(geom, bodies, viscous_only if k > 0.0 else friction, env, q,
                                   qd, phi, force, env_state, qdd, wrench_s, rot, pos, S, Sd,
                                   twist, M, hb, tau_env, fr, work)
         if st != STATUS_OK:
@@ -359,243 +348,6 @@ def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd
     for a in range(3):
         for b in range(3):
             rot_out[a, b] = rot[a, b]
-    return STATUS_OK
-
-
-# ---- the substep with the mass matrix's products factored
-@njit(cache=True)
-def _congruence(r, bodies, offset, tmp, out):
-    """out = R I Rᵀ for the inertia I = bodies[offset:offset+9] (row-major), via tmp = R I."""
-    for a in range(3):
-        for l in range(3):
-            tmp[a, l] = (r[a, 0] * bodies[offset + l] + r[a, 1] * bodies[offset + 3 + l]
-                         + r[a, 2] * bodies[offset + 6 + l])
-    for a in range(3):
-        for b in range(3):
-            out[a, b] = tmp[a, 0] * r[b, 0] + tmp[a, 1] * r[b, 1] + tmp[a, 2] * r[b, 2]
-
-
-@njit(cache=True)
-def _add_mass(m, av, aw, iw, tmp, M):
-    """M += m AvᵀAv + Awᵀ Iw Aw for one body's velocity maps (3×3 each), via tmp = Iw Aw."""
-    for k in range(3):
-        for b in range(3):
-            tmp[k, b] = iw[k, 0] * aw[0, b] + iw[k, 1] * aw[1, b] + iw[k, 2] * aw[2, b]
-    for a in range(3):
-        for b in range(3):
-            M[a, b] += (m * (av[0, a] * av[0, b] + av[1, a] * av[1, b] + av[2, a] * av[2, b])
-                        + aw[0, a] * tmp[0, b] + aw[1, a] * tmp[1, b] + aw[2, a] * tmp[2, b])
-
-
-@njit(cache=True)
-def mass_and_bias_fast(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, work):
-    """``physics.mass_and_bias_work`` with the congruences factored: R I Rᵀ as (R I) Rᵀ and
-    Aᵀ I A as Aᵀ (I A), 54 multiplications per body instead of 162 and 729 (the same sums,
-    reassociated: equal to round-off, ``tests/test_twin_compiled.py``)."""
-    extra = work[TREE_MAPS_WORK:]
-    spheres = extra[0:9].reshape((3, 3))
-    iw = extra[9:18].reshape((3, 3))
-    rr = extra[18:27].reshape((3, 3))
-    av = extra[27:36].reshape((3, 3))
-    aw = extra[36:45].reshape((3, 3))
-    tmp = extra[45:54].reshape((3, 3))
-    assemble(geom, q, phi, rot, pos, spheres)
-    tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work)
-    g = bodies[B_G]
-    ms = bodies[B_M_SLIDER]
-    for a in range(3):
-        h[a] = ms * g
-        for b in range(3):
-            M[a, b] = 0.0
-        M[a, a] = bodies[B_J_REFL_AXES + a] + ms
-    # ---- rods: rotation about the leg tangent t_i, pivot moving with the slider.
-    mr = bodies[B_M_ROD]
-    for i in range(3):
-        ct = geom[3 + i]
-        st = geom[6 + i]
-        sp = math.sin(phi[i])
-        cp = math.cos(phi[i])
-        # R_rod = Rz(θ) Ry(φ); columns in the base frame.
-        r00 = ct * cp
-        r01 = -st
-        r02 = ct * sp
-        r10 = st * cp
-        r11 = ct
-        r12 = st * sp
-        r20 = -sp
-        r21 = 0.0
-        r22 = cp
-        cx = bodies[B_C_ROD]
-        cy = bodies[B_C_ROD + 1]
-        cz = bodies[B_C_ROD + 2]
-        rhox = r00 * cx + r01 * cy + r02 * cz
-        rhoy = r10 * cx + r11 * cy + r12 * cz
-        rhoz = r20 * cx + r21 * cy + r22 * cz
-        # World inertia I_w = R I Rᵀ.
-        rr[0, 0] = r00
-        rr[0, 1] = r01
-        rr[0, 2] = r02
-        rr[1, 0] = r10
-        rr[1, 1] = r11
-        rr[1, 2] = r12
-        rr[2, 0] = r20
-        rr[2, 1] = r21
-        rr[2, 2] = r22
-        _congruence(rr, bodies, B_I_ROD, tmp, iw)
-        tx = -st
-        ty = ct
-        # Columns: v_k = δ_ik ẑ + ω_k × ρ, ω_k = φ̇_ik t.
-        for k in range(3):
-            pd = S[2 * i + 1, k]
-            wx = pd * tx
-            wy = pd * ty
-            wz = 0.0
-            vx, vy, vz = physics._cross(wx, wy, wz, rhox, rhoy, rhoz)
-            if k == i:
-                vz += 1.0
-            av[0, k] = vx
-            av[1, k] = vy
-            av[2, k] = vz
-            aw[0, k] = wx
-            aw[1, k] = wy
-            aw[2, k] = wz
-        # Drift accelerations (q̈ = 0) for the actual q̇.
-        phid = 0.0
-        phidd = 0.0
-        for k in range(3):
-            phid += S[2 * i + 1, k] * qd[k]
-            phidd += Sd[2 * i + 1, k] * qd[k]
-        wx = phid * tx
-        wy = phid * ty
-        alx = phidd * tx
-        aly = phidd * ty
-        a1x, a1y, a1z = physics._cross(alx, aly, 0.0, rhox, rhoy, rhoz)
-        w1x, w1y, w1z = physics._cross(wx, wy, 0.0, rhox, rhoy, rhoz)
-        a2x, a2y, a2z = physics._cross(wx, wy, 0.0, w1x, w1y, w1z)
-        ax0 = a1x + a2x
-        ay0 = a1y + a2y
-        az0 = a1z + a2z + g            # a⁰ − g_vec with g_vec = (0, 0, −g)
-        iwx = iw[0, 0] * wx + iw[0, 1] * wy
-        iwy = iw[1, 0] * wx + iw[1, 1] * wy
-        iwz = iw[2, 0] * wx + iw[2, 1] * wy
-        gx, gy, gz = physics._cross(wx, wy, 0.0, iwx, iwy, iwz)
-        tqx = iw[0, 0] * alx + iw[0, 1] * aly + gx
-        tqy = iw[1, 0] * alx + iw[1, 1] * aly + gy
-        tqz = iw[2, 0] * alx + iw[2, 1] * aly + gz
-        for a in range(3):
-            h[a] += mr * (av[0, a] * ax0 + av[1, a] * ay0 + av[2, a] * az0) \
-                + aw[0, a] * tqx + aw[1, a] * tqy + aw[2, a] * tqz
-        _add_mass(mr, av, aw, iw, tmp, M)
-    # ---- platform (with sensor and payload).
-    mp = bodies[B_M_PLAT]
-    cx = bodies[B_C_PLAT]
-    cy = bodies[B_C_PLAT + 1]
-    cz = bodies[B_C_PLAT + 2]
-    rhox = rot[0, 0] * cx + rot[0, 1] * cy + rot[0, 2] * cz
-    rhoy = rot[1, 0] * cx + rot[1, 1] * cy + rot[1, 2] * cz
-    rhoz = rot[2, 0] * cx + rot[2, 1] * cy + rot[2, 2] * cz
-    _congruence(rot, bodies, B_I_PLAT, tmp, iw)
-    for k in range(3):
-        wx = twist[3, k]
-        wy = twist[4, k]
-        wz = twist[5, k]
-        vx, vy, vz = physics._cross(wx, wy, wz, rhox, rhoy, rhoz)
-        av[0, k] = twist[0, k] + vx
-        av[1, k] = twist[1, k] + vy
-        av[2, k] = twist[2, k] + vz
-        aw[0, k] = wx
-        aw[1, k] = wy
-        aw[2, k] = wz
-    # Drift: origin acceleration from Ṡ, angular acceleration from the Euler-rate kinematics.
-    pax = 0.0
-    pay = 0.0
-    paz = 0.0
-    yd = 0.0
-    pd = 0.0
-    rd = 0.0
-    ydd = 0.0
-    pdd = 0.0
-    rdd = 0.0
-    wx = 0.0
-    wy = 0.0
-    wz = 0.0
-    for k in range(3):
-        pax += Sd[6, k] * qd[k]
-        pay += Sd[7, k] * qd[k]
-        paz += Sd[8, k] * qd[k]
-        yd += S[9, k] * qd[k]
-        pd += S[10, k] * qd[k]
-        rd += S[11, k] * qd[k]
-        ydd += Sd[9, k] * qd[k]
-        pdd += Sd[10, k] * qd[k]
-        rdd += Sd[11, k] * qd[k]
-        wx += twist[3, k] * qd[k]
-        wy += twist[4, k] * qd[k]
-        wz += twist[5, k] * qd[k]
-    yaw = math.atan2(rot[1, 0], rot[0, 0])
-    sa = math.sin(yaw)
-    ca = math.cos(yaw)
-    sb = -rot[2, 0]
-    cb = math.sqrt(max(0.0, 1.0 - sb * sb))
-    ebx = -sa
-    eby = ca
-    egx = ca * cb
-    egy = sa * cb
-    egz = -sb
-    # ω̇ = α̈ ẑ + β̈ e_β + γ̈ e_γ + β̇ α̇ (ẑ × e_β) + γ̇ (α̇ ẑ + β̇ e_β) × e_γ
-    alx = pdd * ebx + rdd * egx + pd * yd * (-eby)
-    aly = pdd * eby + rdd * egy + pd * yd * ebx
-    alz = ydd + rdd * egz
-    ox = pd * ebx
-    oy = pd * eby
-    oz = yd
-    t1x, t1y, t1z = physics._cross(ox, oy, oz, egx, egy, egz)
-    alx += rd * t1x
-    aly += rd * t1y
-    alz += rd * t1z
-    a1x, a1y, a1z = physics._cross(alx, aly, alz, rhox, rhoy, rhoz)
-    w1x, w1y, w1z = physics._cross(wx, wy, wz, rhox, rhoy, rhoz)
-    a2x, a2y, a2z = physics._cross(wx, wy, wz, w1x, w1y, w1z)
-    ax0 = pax + a1x + a2x
-    ay0 = pay + a1y + a2y
-    az0 = paz + a1z + a2z + g
-    iwx = iw[0, 0] * wx + iw[0, 1] * wy + iw[0, 2] * wz
-    iwy = iw[1, 0] * wx + iw[1, 1] * wy + iw[1, 2] * wz
-    iwz = iw[2, 0] * wx + iw[2, 1] * wy + iw[2, 2] * wz
-    gx, gy, gz = physics._cross(wx, wy, wz, iwx, iwy, iwz)
-    tqx = iw[0, 0] * alx + iw[0, 1] * aly + iw[0, 2] * alz + gx
-    tqy = iw[1, 0] * alx + iw[1, 1] * aly + iw[1, 2] * alz + gy
-    tqz = iw[2, 0] * alx + iw[2, 1] * aly + iw[2, 2] * alz + gz
-    for a in range(3):
-        h[a] += mp * (av[0, a] * ax0 + av[1, a] * ay0 + av[2, a] * az0) \
-            + aw[0, a] * tqx + aw[1, a] * tqy + aw[2, a] * tqz
-    _add_mass(mp, av, aw, iw, tmp, M)
-
-
-@njit(cache=True)
-def acceleration_fast(geom, bodies, friction, env, q, qd, phi, force, env_state, qdd, wrench_s,
-                 work_rot, work_pos, S, Sd, twist, M, h, tau_env, fr, work):
-    """``physics.acceleration`` with ``mass_and_bias_fast``."""
-    it = fk_solve(geom, q, phi, physics._FK_TOL, physics._FK_MAX_IT)
-    if it < 0:
-        return STATUS_FK_FAILED
-    mass_and_bias_fast(geom, bodies, q, qd, phi, work_rot, work_pos, S, Sd, twist, M, h, work)
-    physics.environment_wrench(env, bodies, work_rot, work_pos, twist, qd, env_state, wrench_s, tau_env)
-    physics.friction_force(q, qd, friction, fr)
-    r0 = force[0] - h[0] - fr[0] + tau_env[0] + physics.end_stop_force(q[0], qd[0], bodies)
-    r1 = force[1] - h[1] - fr[1] + tau_env[1] + physics.end_stop_force(q[1], qd[1], bodies)
-    r2 = force[2] - h[2] - fr[2] + tau_env[2] + physics.end_stop_force(q[2], qd[2], bodies)
-    # M is symmetric positive definite and dominated by the reflected inertia: Cramer's rule.
-    c00 = M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1]
-    c01 = M[1, 2] * M[2, 0] - M[1, 0] * M[2, 2]
-    c02 = M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]
-    det = M[0, 0] * c00 + M[0, 1] * c01 + M[0, 2] * c02
-    qdd[0] = (r0 * c00 + r1 * (M[0, 2] * M[2, 1] - M[0, 1] * M[2, 2])
-              + r2 * (M[0, 1] * M[1, 2] - M[0, 2] * M[1, 1])) / det
-    qdd[1] = (r0 * c01 + r1 * (M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0])
-              + r2 * (M[0, 2] * M[1, 0] - M[0, 0] * M[1, 2])) / det
-    qdd[2] = (r0 * c02 + r1 * (M[0, 1] * M[2, 0] - M[0, 0] * M[2, 1])
-              + r2 * (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0])) / det
     return STATUS_OK
 
 

@@ -152,14 +152,42 @@ def mass_and_bias(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h):
 
 
 @njit(cache=True)
+def _congruence(r, bodies, offset, tmp, out):
+    """out = R I Rᵀ for the inertia I = bodies[offset:offset+9] (row-major), via tmp = R I."""
+    for a in range(3):
+        for l in range(3):
+            tmp[a, l] = (r[a, 0] * bodies[offset + l] + r[a, 1] * bodies[offset + 3 + l]
+                         + r[a, 2] * bodies[offset + 6 + l])
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = tmp[a, 0] * r[b, 0] + tmp[a, 1] * r[b, 1] + tmp[a, 2] * r[b, 2]
+
+
+@njit(cache=True)
+def _add_mass(m, av, aw, iw, tmp, M):
+    """M += m AvᵀAv + Awᵀ Iw Aw for one body's velocity maps (3×3 each), via tmp = Iw Aw."""
+    for k in range(3):
+        for b in range(3):
+            tmp[k, b] = iw[k, 0] * aw[0, b] + iw[k, 1] * aw[1, b] + iw[k, 2] * aw[2, b]
+    for a in range(3):
+        for b in range(3):
+            M[a, b] += (m * (av[0, a] * av[0, b] + av[1, a] * av[1, b] + av[2, a] * av[2, b])
+                        + aw[0, a] * tmp[0, b] + aw[1, a] * tmp[1, b] + aw[2, a] * tmp[2, b])
+
+
+@njit(cache=True)
 def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, work):
-    """``mass_and_bias`` with caller-provided scratch (float64[WORK_SIZE]): no allocation."""
+    """``mass_and_bias`` with caller-provided scratch (float64[WORK_SIZE]): no allocation.
+
+    The congruences are factored — R I Rᵀ as (R I) Rᵀ, Aᵀ I A as Aᵀ (I A): 54 multiplications
+    per body instead of ~900 (issue 16; the substep's largest cost before)."""
     extra = work[TREE_MAPS_WORK:]
     spheres = extra[0:9].reshape((3, 3))
     iw = extra[9:18].reshape((3, 3))
     rr = extra[18:27].reshape((3, 3))
     av = extra[27:36].reshape((3, 3))
     aw = extra[36:45].reshape((3, 3))
+    tmp = extra[45:54].reshape((3, 3))
     assemble(geom, q, phi, rot, pos, spheres)
     tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work)
     g = bodies[B_G]
@@ -202,13 +230,7 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
         rr[2, 0] = r20
         rr[2, 1] = r21
         rr[2, 2] = r22
-        for a in range(3):
-            for b in range(3):
-                acc = 0.0
-                for k in range(3):
-                    for l in range(3):
-                        acc += rr[a, k] * bodies[B_I_ROD + 3 * k + l] * rr[b, l]
-                iw[a, b] = acc
+        _congruence(rr, bodies, B_I_ROD, tmp, iw)
         tx = -st
         ty = ct
         # Columns: v_k = δ_ik ẑ + ω_k × ρ, ω_k = φ̇_ik t.
@@ -252,12 +274,7 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
         for a in range(3):
             h[a] += mr * (av[0, a] * ax0 + av[1, a] * ay0 + av[2, a] * az0) \
                 + aw[0, a] * tqx + aw[1, a] * tqy + aw[2, a] * tqz
-            for b in range(3):
-                acc = mr * (av[0, a] * av[0, b] + av[1, a] * av[1, b] + av[2, a] * av[2, b])
-                for k in range(3):
-                    for l in range(3):
-                        acc += aw[k, a] * iw[k, l] * aw[l, b]
-                M[a, b] += acc
+        _add_mass(mr, av, aw, iw, tmp, M)
     # ---- platform (with sensor and payload).
     mp = bodies[B_M_PLAT]
     cx = bodies[B_C_PLAT]
@@ -266,13 +283,7 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
     rhox = rot[0, 0] * cx + rot[0, 1] * cy + rot[0, 2] * cz
     rhoy = rot[1, 0] * cx + rot[1, 1] * cy + rot[1, 2] * cz
     rhoz = rot[2, 0] * cx + rot[2, 1] * cy + rot[2, 2] * cz
-    for a in range(3):
-        for b in range(3):
-            acc = 0.0
-            for k in range(3):
-                for l in range(3):
-                    acc += rot[a, k] * bodies[B_I_PLAT + 3 * k + l] * rot[b, l]
-            iw[a, b] = acc
+    _congruence(rot, bodies, B_I_PLAT, tmp, iw)
     for k in range(3):
         wx = twist[3, k]
         wy = twist[4, k]
@@ -347,12 +358,7 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
     for a in range(3):
         h[a] += mp * (av[0, a] * ax0 + av[1, a] * ay0 + av[2, a] * az0) \
             + aw[0, a] * tqx + aw[1, a] * tqy + aw[2, a] * tqz
-        for b in range(3):
-            acc = mp * (av[0, a] * av[0, b] + av[1, a] * av[1, b] + av[2, a] * av[2, b])
-            for k in range(3):
-                for l in range(3):
-                    acc += aw[k, a] * iw[k, l] * aw[l, b]
-            M[a, b] += acc
+    _add_mass(mp, av, aw, iw, tmp, M)
 
 
 @njit(cache=True)
