@@ -313,8 +313,8 @@ class TwinAtiSensorModel:
         if self._faults_possible and self.fault_active("saturate", t):
             status |= STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE
         st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
-        sample = AtiSample((float(m[0]), float(m[1]), float(m[2]), float(m[3]), float(m[4]),
-                            float(m[5])), status, st.ft_sequence)
+        v = m.tolist()
+        sample = AtiSample((v[0], v[1], v[2], v[3], v[4], v[5]), status, st.ft_sequence)
         st.last = sample
         return sample
 

@@ -118,6 +118,7 @@ class Twin:
         self._stuck_volts: dict[tuple[int, int], float] = {}
         self.command_limit_v = self.description.drive.command_limit_v
         self.amp_volts = np.zeros(3)
+        self._amp_key: tuple | None = None     # (card, codes) amp_volts was computed from
         self.ati = TwinAtiSensorModel(ati_params, seed=seed, compiled=compiled)
         self.ati_sample: AtiSample | None = None
         self.inputs = DigitalInputState()
@@ -184,6 +185,17 @@ class Twin:
     def _update_amplifier_input(self) -> None:
         t = self.plant.t
         card = 0 if self.card_enabled[0] else (1 if self.card_enabled[1] else -1)
+        if self.compiled and not self.faults.faults:
+            # Without DAC faults the input is a function of the card's codes: recompute it
+            # only when they changed (most chunks of a catch-up hold the same codes).
+            codes = self.dac_libs[card].last_code if card >= 0 else None
+            key = (card, codes.get(0), codes.get(1), codes.get(2)) if codes is not None \
+                else (card,)
+            if key == self._amp_key:
+                return
+            self._amp_key = key
+        else:
+            self._amp_key = None
         for ch in range(3):
             v = 0.0
             if card >= 0:
