@@ -12,7 +12,8 @@ import pytest
 
 from rt.ati.twin_sensor import AtiSensorParams, TwinAtiSensorModel
 from rt.drivers.pci1720 import volts_to_code
-from rt.twin import kernels
+from rt.model.kernels import tree_maps
+from rt.twin import kernels, physics
 from rt.twin.environment import CompliantAnkle, FreeMotion, PayloadStep, parse_environment
 from rt.twin.serve import holding_volts
 from rt.twin.twin import Twin
@@ -181,3 +182,23 @@ def test_compiled_ati_model_gives_the_interpreted_samples(faults):
     a, b = ref.measure((1.0,) * 6, 0.0), fast.measure((1.0,) * 6, 0.0)
     assert a is not None and b is not None
     assert a.wrench == b.wrench
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_drift_term_equals_the_model_kernels_s_dot_q_dot(seed):
+    """The twin's substep evaluates Ṡ q̇ once as H(q̇, q̇) (``physics.tree_maps_drift``); the
+    model's kernel gives the columns of Ṡ: Ṡ q̇ from both agree to round-off, and S and the
+    twist map are the model kernel's."""
+    rng = np.random.default_rng(seed)
+    plant = Twin.ideal().plant
+    cfg = plant.kin.ik(rng.uniform(0.55, 0.75), rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2))
+    q, qd, phi = np.array(cfg.q), rng.normal(0.0, 0.2, 3), np.array(cfg.phi)
+    rot = np.array(cfg.rotation, dtype=float).reshape(3, 3)
+    s_ref, sd_ref, tw_ref = np.zeros((12, 3)), np.zeros((12, 3)), np.zeros((6, 3))
+    tree_maps(plant.geom, q, phi, rot, qd, s_ref, sd_ref, tw_ref)
+    s, sdq, tw = np.zeros((12, 3)), np.zeros(12), np.zeros((6, 3))
+    physics.tree_maps_drift(plant.geom, q, phi, rot, qd, s, sdq, tw,
+                            np.zeros(physics.TREE_MAPS_WORK))
+    assert np.array_equal(s, s_ref) and np.array_equal(tw, tw_ref)
+    expected = sd_ref @ qd
+    assert np.allclose(sdq, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
