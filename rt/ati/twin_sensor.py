@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 from rt.ati.rdt import STATUS_ANY_ERROR, STATUS_FT_OUT_OF_RANGE, STATUS_GAGE_OUT_OF_RANGE
 from rt.errors import InputError
@@ -113,14 +114,41 @@ class _State:
     """Mutable state, kept apart from parameters so a run can be reset and replayed."""
 
     rng: np.random.Generator
-    drift: list = field(default_factory=lambda: [0.0] * 6)
+    drift: list | np.ndarray = field(default_factory=lambda: [0.0] * 6)
     # Standard normals drawn in blocks (one row of 12 per sample: 6 drift, 6 noise); per-sample
     # numpy calls on 6-vectors cost ~10 µs, a block draw amortises to well under 1 µs.
-    block: list = field(default_factory=list)
+    block: list | np.ndarray = field(default_factory=list)
     block_pos: int = 0
     t_last: float | None = None
     ft_sequence: int = 0
     last: AtiSample | None = None
+
+
+#: Offsets of the compiled model's parameter array (6 values each, Fx..Tz).
+_P_RATE, _P_LIMIT, _P_BIAS, _P_SIGMA, _P_RANGE = 0, 6, 12, 18, 24
+
+
+@njit(cache=True)
+def _measure_kernel(true_wrench, block, row, params, drift, out, dt, overload_bits):
+    """``TwinAtiSensorModel.measure``'s arithmetic, compiled: drift from ``block[row, :6]``,
+    noise from ``block[row, 6:]``, the same operations in the same order as the interpreted
+    loop. Writes the measured wrench to ``out``; returns the overload status bits."""
+    if dt > 0.0:
+        root_dt = math.sqrt(dt)
+        for i in range(6):
+            d = drift[i] + params[_P_RATE + i] * root_dt * block[row, i]
+            lim = params[_P_LIMIT + i]
+            drift[i] = lim if d > lim else (max(d, -lim))
+    status = 0
+    for i in range(6):
+        v = (true_wrench[i] + params[_P_BIAS + i] + drift[i]
+             + params[_P_SIGMA + i] * block[row, 6 + i])
+        r = params[_P_RANGE + i]
+        if v > r or v < -r:
+            v = r if v > r else -r
+            status |= overload_bits
+        out[i] = v
+    return status
 
 
 class TwinAtiSensorModel:
@@ -138,11 +166,17 @@ class TwinAtiSensorModel:
     ``STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE``. ``ft_sequence`` counts new samples.
     Everything random comes from one ``numpy.random.Generator`` seeded by ``seed``, so the same
     seed, inputs and fault schedule give the same samples.
+
+    ``compiled`` (default False) computes each sample with a numba kernel (the twin's
+    pre-flight speed, issue 16); the interpreted loop is the reference, and both give the same
+    samples from the same seed and inputs (``tests/test_twin_compiled.py``).
     """
 
-    def __init__(self, params: AtiSensorParams | None = None, seed: int = 0) -> None:
+    def __init__(self, params: AtiSensorParams | None = None, seed: int = 0,
+                 compiled: bool = False) -> None:
         self.params = params if params is not None else AtiSensorParams()
         self.seed = int(seed)
+        self.compiled = compiled
         self._manual: dict[str, bool] = {name: False for name in FAULTS}
         # Skips the fault lookups in the per-sample path while no fault was ever switched on.
         self._faults_possible = False
@@ -154,14 +188,24 @@ class TwinAtiSensorModel:
         self._drift_rate = tuple(p.drift_rate)
         self._drift_limit = tuple(p.drift_limit)
         self._ranges = tuple(p.ranges)
-        self._state = _State(rng=np.random.default_rng(self.seed))
+        self._kparams = np.array(p.drift_rate + p.drift_limit + p.bias + p.noise_sigma
+                                 + p.ranges, dtype=np.float64)
+        self._out = np.zeros(6)
+        self._state = self._new_state()
+
+    def _new_state(self) -> _State:
+        st = _State(rng=np.random.default_rng(self.seed))
+        if self.compiled:
+            st.drift = np.zeros(6)
+            st.block = np.empty((0, 12))
+        return st
 
     # ---------------------------------------------------------------- state
     def reset(self, seed: int | None = None) -> None:
         """Back to the initial state (drift 0, ft_sequence 0); faults and schedule are kept."""
         if seed is not None:
             self.seed = int(seed)
-        self._state = _State(rng=np.random.default_rng(self.seed))
+        self._state = self._new_state()
 
     @property
     def drift(self) -> Wrench6:
@@ -217,6 +261,8 @@ class TwinAtiSensorModel:
             return st.last
 
         dt = 0.0 if st.t_last is None else t - st.t_last
+        if self.compiled:
+            return self._measure_compiled(true_wrench, t, dt)
         if st.block_pos >= len(st.block):
             st.block = st.rng.standard_normal((_BLOCK, 12)).tolist()
             st.block_pos = 0
@@ -247,6 +293,28 @@ class TwinAtiSensorModel:
 
         st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
         sample = AtiSample((m[0], m[1], m[2], m[3], m[4], m[5]), status, st.ft_sequence)
+        st.last = sample
+        return sample
+
+    def _measure_compiled(self, true_wrench: Sequence[float] | np.ndarray, t: float,
+                          dt: float) -> AtiSample:
+        st = self._state
+        if st.block_pos >= len(st.block):
+            st.block = st.rng.standard_normal((_BLOCK, 12))
+            st.block_pos = 0
+        w = true_wrench if type(true_wrench) is np.ndarray else np.asarray(true_wrench,
+                                                                            dtype=np.float64)
+        m = self._out
+        status = int(_measure_kernel(w, st.block, st.block_pos, self._kparams, st.drift, m, dt,
+                                     STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE))
+        st.block_pos += 1
+        if st.t_last is None or t > st.t_last:
+            st.t_last = t
+        if self._faults_possible and self.fault_active("saturate", t):
+            status |= STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE
+        st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
+        v = m.tolist()
+        sample = AtiSample((v[0], v[1], v[2], v[3], v[4], v[5]), status, st.ft_sequence)
         st.last = sample
         return sample
 

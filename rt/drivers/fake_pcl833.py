@@ -188,9 +188,14 @@ class FakePcl833Port(PortIO):
         self.move_counts(axis, delta)
 
     def set_positions_m(self, positions_m: Sequence[float] | np.ndarray) -> None:
-        """``set_position_m`` for the three axes."""
+        """``set_position_m`` for the three axes (inlined: the twin calls it every period)."""
+        sign, mpc, index = self.sign, self.m_per_count, self._encoder_index
         for axis in range(3):
-            self.set_position_m(axis, positions_m[axis])
+            new = math.floor(sign[axis] * positions_m[axis] / mpc[axis] + 0.5)
+            delta = new - index[axis]
+            if delta:
+                index[axis] = new
+                self.move_counts(axis, delta)
 
     def set_frozen(self, axis: int, frozen: bool = True) -> None:
         """Fault injection: a frozen channel ignores all motion until unfrozen."""

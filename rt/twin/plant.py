@@ -7,6 +7,12 @@ imperfections (``rt.twin.realism.RigImperfections``; ``RigImperfections.none()``
 rigid plant) the motors are separate bodies behind a compliant, backlashed screw, the motor
 currents lag the commands, friction depends on temperature and position, the brakes hold when
 the drives are off and the ATI cable pulls on the platform.
+
+``compiled=True`` (the default) runs each held command as one call of
+``rt.twin.kernels.advance`` (the period's bookkeeping, brakes, thermal model and the sensor
+stage compiled too); ``compiled=False`` is the interpreted reference around the same substep
+kernels. Both read and write the same arrays: every state and parameter array here is a view
+into the packed ``P``/``S`` arrays of ``rt.twin.kernels``.
 """
 from __future__ import annotations
 
@@ -19,7 +25,7 @@ from rt.errors import ConfigurationError, KinematicsError
 from rt.model.description import RobotDescription
 from rt.model.dynamics import Payload
 from rt.model.kinematics import Kinematics
-from rt.twin import physics
+from rt.twin import kernels, physics
 from rt.twin.environment import FreeMotion
 from rt.twin.realism import RigImperfections, screw_damping_n_s_per_m
 
@@ -43,7 +49,8 @@ class TwinPlant:
 
     def __init__(self, description: RobotDescription, environment=None,
                  physics_rate_hz: float = 5000.0, integrator: str = "symplectic_euler",
-                 frictionless: bool = False, imperfections: RigImperfections | None = None):
+                 frictionless: bool = False, imperfections: RigImperfections | None = None,
+                 compiled: bool = True):
         if not 5000.0 <= physics_rate_hz <= 100_000.0:
             raise ConfigurationError(f"physics_rate_hz must be in [5000, 100000] Hz, got "
                                      f"{physics_rate_hz}")
@@ -60,8 +67,16 @@ class TwinPlant:
         self.geom = self.kin.geom
         self.physics_rate_hz = float(physics_rate_hz)
         self.integrator = INTEGRATORS[integrator]
-        self.bodies = np.zeros(physics.N_BODY_PARAMS)
-        self.friction = np.zeros(physics.N_FRICTION)
+        self.compiled = compiled
+        # Packed parameters, state and scratch of the compiled period (rt.twin.kernels); the
+        # named arrays below are views into them, so both paths share one state.
+        self.P, self.S, self.W = kernels.new_state()
+        P, S, K = self.P, self.S, kernels
+        self.bodies = P[K.P_BODIES:K.P_BODIES + physics.N_BODY_PARAMS]
+        self.friction = P[K.P_FRICTION:K.P_FRICTION + physics.N_FRICTION]
+        self.friction_slider = P[K.P_FRICTION_SLIDER:K.P_FRICTION_SLIDER + physics.N_FRICTION]
+        self.friction_motor = P[K.P_FRICTION_MOTOR:K.P_FRICTION_MOTOR + physics.N_FRICTION]
+        self.real = P[K.P_REAL:K.P_REAL + physics.N_REAL]
         fr = description.friction
         if not frictionless:
             self.friction[0:3] = fr.viscous_axes
@@ -71,36 +86,42 @@ class TwinPlant:
         self.friction[11:17] = 1.0
         imp = self.imperfections
         self.friction[17:19] = (imp.friction_ripple, imp.friction_ripple_period_m)
-        self.temperature_rise_k = np.full(3, imp.initial_temperature_rise_k)
-        self._heat_energy = [0.0, 0.0, 0.0]      # J since the last temperature update
-        self._heat_time = 0.0
+        self.temperature_rise_k = S[K.S_TEMP:K.S_TEMP + 3]
+        self.temperature_rise_k[:] = imp.initial_temperature_rise_k
+        self._heat_energy = S[K.S_HEAT_ENERGY:K.S_HEAT_ENERGY + 3]  # J since the last update
         # With a compliant screw the friction is split (RigImperfections.motor_side_friction):
         # ``friction`` stays the whole (for heat and reports), the kernels get the two shares.
         split = imp.motor_side_friction if imp.screw_stiffness_n_per_m > 0.0 else 0.0
         self._friction_split = split
-        self.friction_slider = self.friction.copy()
-        self.friction_motor = self.friction.copy()
         self._update_temperature_scales()
-        self.real = np.zeros(physics.N_REAL)
+        self._pack_extra()
         self.payload: Payload | None = None
         self._pack_bodies()
         self.environment = environment or FreeMotion()
         self.env = self.environment.pack()
-        self.env_state = np.zeros(4)
-        self.q = np.zeros(3)
-        self.qd = np.zeros(3)
-        self.qdd = np.zeros(3)
+        self.env_state = S[K.S_ENV_STATE:K.S_ENV_STATE + 4]
+        self.q = S[K.S_Q:K.S_Q + 3]
+        self.qd = S[K.S_QD:K.S_QD + 3]
+        self.qdd = S[K.S_QDD:K.S_QDD + 3]
         # Motor side (at the slider, m and m/s), motor currents (A), cable forces (N).
-        self.xm = np.zeros(3)
-        self.vm = np.zeros(3)
-        self.current = np.zeros(3)
-        self.cable_tau = np.zeros(3)
-        self.phi = np.full(3, self.kin.phi_nominal)
-        self.wrench_s = np.zeros(6)
-        self.rot = np.eye(3)            # R_BP after the last advance (realistic path)
+        self.xm = S[K.S_XM:K.S_XM + 3]
+        self.vm = S[K.S_VM:K.S_VM + 3]
+        self.current = S[K.S_CURRENT:K.S_CURRENT + 3]
+        self.cable_tau = S[K.S_CABLE_TAU:K.S_CABLE_TAU + 3]
+        self.phi = S[K.S_PHI:K.S_PHI + 3]
+        self.phi[:] = self.kin.phi_nominal
+        self.wrench_s = S[K.S_WRENCH:K.S_WRENCH + 6]
+        self.rot = S[K.S_ROT:K.S_ROT + 9].reshape(3, 3)  # R_BP after the last advance
+        self.rot[:] = np.eye(3)
+        # The sensor stage (rt.twin.twin.Twin reads them): encoder reading, ATI filter state,
+        # its input with the tool's weight, and the filtered wrench the gauges feel.
+        self.encoder_q = S[K.S_ENC:K.S_ENC + 3]
+        self.wrench_filtered = S[K.S_W_FILTERED:K.S_W_FILTERED + 6]
+        self.wrench_sensed = S[K.S_W_SENSED:K.S_W_SENSED + 6]
+        self.wrench_measured = S[K.S_W_MEAS:K.S_W_MEAS + 6]
         self.t = 0.0
-        self._volts = np.zeros(3)
-        self._volts_prev = np.zeros(3)
+        self._volts = S[K.S_VOLTS:K.S_VOLTS + 3]
+        self._volts_prev = S[K.S_VOLTS_PREV:K.S_VOLTS_PREV + 3]
         self._delay_left = 0
         self._drives_on = False
         self._drives_changed_t = -1.0e9     # powered off since forever: brakes on
@@ -133,12 +154,63 @@ class TwinPlant:
             dt_k = self.temperature_rise_k[i]
             self.friction[11 + i] = max(0.2, 1.0 + imp.viscous_per_k * dt_k)
             self.friction[14 + i] = max(0.2, 1.0 + imp.coulomb_per_k * dt_k)
-        if hasattr(self, "friction_slider"):
-            split = self._friction_split
-            self.friction_slider[:] = self.friction
-            self.friction_slider[11:17] *= 1.0 - split
-            self.friction_motor[:] = self.friction
-            self.friction_motor[11:17] *= split
+        split = self._friction_split
+        self.friction_slider[:] = self.friction
+        self.friction_slider[11:17] *= 1.0 - split
+        self.friction_motor[:] = self.friction
+        self.friction_motor[11:17] *= split
+
+    def _pack_extra(self) -> None:
+        """The compiled period's scalar parameters (``rt.twin.kernels.P_*``)."""
+        imp = self.imperfections
+        P, K = self.P, kernels
+        P[K.P_VISCOUS_PER_K] = imp.viscous_per_k
+        P[K.P_COULOMB_PER_K] = imp.coulomb_per_k
+        P[K.P_HEAT_CAPACITY] = imp.heat_capacity_j_per_k
+        P[K.P_THERMAL_RES] = imp.thermal_resistance_k_per_w
+        P[K.P_SPLIT] = self._friction_split
+        P[K.P_HEAT_PERIOD] = _HEAT_PERIOD_S
+        P[K.P_BRAKE_HOLD_N] = imp.brake_holding_force_n
+        P[K.P_BRAKE_RELEASE] = imp.brake_release_s
+        P[K.P_BRAKE_ENGAGE] = imp.brake_engage_s
+        P[K.P_ENC_LATENCY] = imp.encoder_latency_s
+        P[K.P_ATI_TAU] = (0.0 if imp.ati_filter_hz <= 0.0
+                          else 1.0 / (2.0 * math.pi * imp.ati_filter_hz))
+        P[K.P_TOOL_MG] = imp.ati_tool_mass_kg * self.description.gravity_m_s2
+        P[K.P_TOOL_COM] = imp.ati_tool_com_m
+
+    # Scalar state kept in ``S`` so the compiled period and the interpreted path share it.
+    @property
+    def _delay_left(self) -> int:
+        return int(self.S[kernels.S_DELAY_LEFT])
+
+    @_delay_left.setter
+    def _delay_left(self, value: int) -> None:
+        self.S[kernels.S_DELAY_LEFT] = value
+
+    @property
+    def _heat_time(self) -> float:
+        return float(self.S[kernels.S_HEAT_TIME])
+
+    @_heat_time.setter
+    def _heat_time(self, value: float) -> None:
+        self.S[kernels.S_HEAT_TIME] = value
+
+    @property
+    def _drives_on(self) -> bool:
+        return bool(self.S[kernels.S_DRIVES_ON] > 0.5)
+
+    @_drives_on.setter
+    def _drives_on(self, value: bool) -> None:
+        self.S[kernels.S_DRIVES_ON] = 1.0 if value else 0.0
+
+    @property
+    def _drives_changed_t(self) -> float:
+        return float(self.S[kernels.S_DRIVES_CHANGED_T])
+
+    @_drives_changed_t.setter
+    def _drives_changed_t(self, value: float) -> None:
+        self.S[kernels.S_DRIVES_CHANGED_T] = value
 
     def _rise(self) -> float:
         g = self.description.geometry
@@ -231,7 +303,12 @@ class TwinPlant:
     def advance(self, dt: float, volts) -> None:
         """Hold amplifier commands ``volts`` (V, after the DAC) for ``dt`` s and integrate."""
         n = max(1, round(dt * self.physics_rate_hz))
-        if not self.realistic:
+        if self.compiled:
+            if type(volts) is not np.ndarray:
+                volts = np.asarray(volts, dtype=np.float64)
+            status = kernels.advance(self.geom, self.P, self.env, self.S, self.W, volts, dt, n,
+                                     self.t, self.realistic, self.integrator)
+        elif not self.realistic:
             self._volts[:] = volts
             status = physics.integrate(self.geom, self.bodies, self.friction, self.env, self.q,
                                        self.qd, self.phi, self._volts, n, dt / n,

@@ -1,0 +1,356 @@
+"""The twin's whole control period compiled: one numba call per held command.
+
+``rt.twin.physics`` compiles the substep (dynamics, friction, contact, integrators), but until
+issue 16 everything around it ran in interpreted Python once per 1 ms chunk: the amplifier
+delay bookkeeping, the brakes' timing, the thermal model and its friction scales, the encoders'
+latency and the ATI's tool weight and low-pass filter, and the ATI's noise/drift/clip model.
+Those cost more than the physics (``bench/twin.py``), so they are compiled here on
+preallocated state, with the same arithmetic in the same order as the interpreted reference
+(``TwinPlant(compiled=False)``: ``tests/test_twin_compiled.py`` replays a recorded input
+stream through both and requires 1e-12 agreement).
+
+State and parameters are packed in two float64 arrays owned by ``rt.twin.plant.TwinPlant``
+(the plant's arrays — ``q``, ``bodies``, ``friction`` … — are views into them), so a chunk is
+one dispatch with five array arguments instead of ~25 (numba unboxes every array argument:
+≈ 0.2 µs each):
+
+* ``P`` (parameters): ``P_BODIES`` (``physics.N_BODY_PARAMS``), ``P_FRICTION``,
+  ``P_FRICTION_SLIDER``, ``P_FRICTION_MOTOR`` (``physics.N_FRICTION`` each), ``P_REAL``
+  (``physics.N_REAL``), then the scalars ``P_*`` below (thermal model, brakes, sensors).
+* ``S`` (state): ``S_*`` below; the scalars (delay left, heat time, drives on, time of the last
+  drive change) are floats.
+* ``W`` (scratch): ``W_SIZE`` floats the substeps use, so the period allocates nothing.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from rt.twin import physics
+from rt.twin.physics import (
+    B_F_PER_A,
+    N_BODY_PARAMS,
+    N_FRICTION,
+    N_REAL,
+    R_AMP_DELAY_STEPS,
+    R_BRAKE_ON,
+    STATUS_OK,
+    WORK_SIZE,
+)
+
+# ---- parameter array P
+P_BODIES = 0
+P_FRICTION = P_BODIES + N_BODY_PARAMS
+P_FRICTION_SLIDER = P_FRICTION + N_FRICTION
+P_FRICTION_MOTOR = P_FRICTION_SLIDER + N_FRICTION
+P_REAL = P_FRICTION_MOTOR + N_FRICTION
+_PX = P_REAL + N_REAL
+P_VISCOUS_PER_K = _PX + 0         # friction scale per kelvin (1/K)
+P_COULOMB_PER_K = _PX + 1
+P_HEAT_CAPACITY = _PX + 2         # J/K
+P_THERMAL_RES = _PX + 3           # K/W
+P_SPLIT = _PX + 4                 # motor-side share of the friction (compliant screw)
+P_HEAT_PERIOD = _PX + 5           # s between temperature updates
+P_BRAKE_HOLD_N = _PX + 6          # the imperfection's holding force (0: no brakes)
+P_BRAKE_RELEASE = _PX + 7         # s
+P_BRAKE_ENGAGE = _PX + 8          # s
+P_ENC_LATENCY = _PX + 9           # s
+P_ATI_TAU = _PX + 10              # s (0: no filter)
+P_TOOL_MG = _PX + 11              # N
+P_TOOL_COM = _PX + 12             # m
+P_SIZE = _PX + 13
+
+# ---- state array S
+S_Q = 0
+S_QD = 3
+S_QDD = 6
+S_PHI = 9
+S_XM = 12
+S_VM = 15
+S_CURRENT = 18
+S_CABLE_TAU = 21
+S_VOLTS = 24
+S_VOLTS_PREV = 27
+S_ENV_STATE = 30          # 4
+S_WRENCH = 34             # 6, the environment's wrench at the sensor (sensor frame)
+S_ROT = 40                # 9, R_BP row-major
+S_TEMP = 49               # 3, temperature rise (K)
+S_HEAT_ENERGY = 52        # 3, friction energy since the last temperature update (J)
+S_ENC = 55                # 3, what the motor encoders hold (m)
+S_W_FILTERED = 58         # 6, the ATI filter's state
+S_W_SENSED = 64           # 6, wrench + tool weight (filter input)
+S_W_MEAS = 70             # 6, what the gauges feel after the filter (the ATI model's input)
+S_DELAY_LEFT = 76         # substeps the amplifiers still act on the previous command
+S_HEAT_TIME = 77          # s since the last temperature update
+S_DRIVES_ON = 78          # 1.0 while the amplifiers are enabled
+S_DRIVES_CHANGED_T = 79   # s, when they were last switched
+S_SIZE = 80
+
+# ---- scratch array W
+_W_FORCE = 0
+_W_SPRING = 3
+_W_ROT = 6
+_W_POS = 15
+_W_S = 18
+_W_SD = 54
+_W_TWIST = 90
+_W_M = 108
+_W_HB = 117
+_W_TAU_ENV = 120
+_W_FR = 123
+_W_FRM = 126
+_W_CMD_NEW = 129
+_W_CMD_OLD = 132
+_W_VISCOUS = 135
+_W_WORK = _W_VISCOUS + N_FRICTION
+W_SIZE = _W_WORK + WORK_SIZE
+
+
+@njit(cache=True)
+def _temperature_scales(P, S):
+    """``TwinPlant._update_temperature_scales``: friction scales from the temperatures, split
+    between the slider's and the motor's share."""
+    split = P[P_SPLIT]
+    f = P_FRICTION
+    for i in range(3):
+        dt_k = S[S_TEMP + i]
+        P[f + 11 + i] = max(0.2, 1.0 + P[P_VISCOUS_PER_K] * dt_k)
+        P[f + 14 + i] = max(0.2, 1.0 + P[P_COULOMB_PER_K] * dt_k)
+    keep = 1.0 - split
+    for k in range(N_FRICTION):
+        v = P[f + k]
+        if 11 <= k < 17:
+            P[P_FRICTION_SLIDER + k] = v * keep
+            P[P_FRICTION_MOTOR + k] = v * split
+        else:
+            P[P_FRICTION_SLIDER + k] = v
+            P[P_FRICTION_MOTOR + k] = v
+
+
+@njit(cache=True)
+def _heat(P, S, dt):
+    """``TwinPlant._heat``: friction power in, convection out, scales every heat period."""
+    if P[P_VISCOUS_PER_K] == 0.0 and P[P_COULOMB_PER_K] == 0.0:
+        return
+    f = P_FRICTION
+    for i in range(3):
+        v = S[S_QD + i]
+        S[S_HEAT_ENERGY + i] += dt * (P[f + 11 + i] * P[f + i] * v * v
+                                      + P[f + 14 + i] * P[f + 3 + i] * abs(v))
+    S[S_HEAT_TIME] += dt
+    if S[S_HEAT_TIME] < P[P_HEAT_PERIOD]:
+        return
+    cap = P[P_HEAT_CAPACITY]
+    res = P[P_THERMAL_RES]
+    span = S[S_HEAT_TIME]
+    for i in range(3):
+        S[S_TEMP + i] += (S[S_HEAT_ENERGY + i] - span * S[S_TEMP + i] / res) / cap
+        S[S_HEAT_ENERGY + i] = 0.0
+    S[S_HEAT_TIME] = 0.0
+    _temperature_scales(P, S)
+
+
+@njit(cache=True)
+def _update_brakes(P, S, t):
+    """``TwinPlant._update_brakes``: engaged ``brake_engage_s`` after the drives went off,
+    released ``brake_release_s`` after they came back on."""
+    if P[P_BRAKE_HOLD_N] <= 0.0:
+        return
+    since = t - S[S_DRIVES_CHANGED_T]
+    on = P[P_REAL + R_BRAKE_ON] > 0.5
+    drives_on = S[S_DRIVES_ON] > 0.5
+    if drives_on and on and since >= P[P_BRAKE_RELEASE]:
+        on = False
+    elif not drives_on and not on and since >= P[P_BRAKE_ENGAGE]:
+        on = True
+    P[P_REAL + R_BRAKE_ON] = 1.0 if on else 0.0
+
+
+@njit(cache=True)
+def _sensors(P, S, dt):
+    """The encoders' reading (motor position a latency ago) and the ATI's filtered input
+    (``Twin._encoder_positions`` and ``Twin._filtered_wrench``)."""
+    lat = P[P_ENC_LATENCY]
+    for i in range(3):
+        if lat == 0.0:
+            S[S_ENC + i] = S[S_XM + i]
+        else:
+            S[S_ENC + i] = S[S_XM + i] - S[S_VM + i] * lat
+    src = S_WRENCH
+    mg = P[P_TOOL_MG]
+    if mg != 0.0:
+        for k in range(6):
+            S[S_W_SENSED + k] = S[S_WRENCH + k]
+        fx = -mg * S[S_ROT + 6]
+        fy = -mg * S[S_ROT + 7]
+        fz = -mg * S[S_ROT + 8]
+        h = P[P_TOOL_COM]
+        S[S_W_SENSED + 0] += fx
+        S[S_W_SENSED + 1] += fy
+        S[S_W_SENSED + 2] += fz
+        S[S_W_SENSED + 3] += -h * fy
+        S[S_W_SENSED + 4] += h * fx
+        src = S_W_SENSED
+    tau = P[P_ATI_TAU]
+    if tau == 0.0:
+        for k in range(6):
+            S[S_W_MEAS + k] = S[src + k]
+        return
+    a = 1.0 - math.exp(-dt / tau)
+    for k in range(6):
+        w = S[S_W_FILTERED + k]
+        w += a * (S[src + k] - w)
+        S[S_W_FILTERED + k] = w
+        S[S_W_MEAS + k] = w
+
+
+@njit(cache=True)
+def advance(geom, P, env, S, W, volts, dt, n, t, realistic, integrator):
+    """One held command: ``TwinPlant.advance(dt, volts)`` at time ``t`` (s) with ``n``
+    substeps, then the sensor stage. Returns the physics' status (0 ok)."""
+    bodies = P[P_BODIES:P_BODIES + N_BODY_PARAMS]
+    env_state = S[S_ENV_STATE:S_ENV_STATE + 4]
+    qdd = S[S_QDD:S_QDD + 3]
+    wrench = S[S_WRENCH:S_WRENCH + 6]
+    q = S[S_Q:S_Q + 3]
+    qd = S[S_QD:S_QD + 3]
+    phi = S[S_PHI:S_PHI + 3]
+    h = dt / n
+    if not realistic:
+        v = S[S_VOLTS:S_VOLTS + 3]
+        for i in range(3):
+            v[i] = volts[i]
+        status = physics.integrate(geom, bodies, P[P_FRICTION:P_FRICTION + N_FRICTION], env,
+                                   q, qd, phi, v, n, h, integrator, env_state, qdd, wrench)
+        for i in range(3):
+            S[S_XM + i] = S[S_Q + i]
+            S[S_VM + i] = S[S_QD + i]
+    else:
+        if (S[S_VOLTS] != volts[0] or S[S_VOLTS + 1] != volts[1]
+                or S[S_VOLTS + 2] != volts[2]):
+            # A new command: the amplifiers keep acting on the old one for the delay.
+            for i in range(3):
+                S[S_VOLTS_PREV + i] = S[S_VOLTS + i]
+                S[S_VOLTS + i] = volts[i]
+            S[S_DELAY_LEFT] = float(int(P[P_REAL + R_AMP_DELAY_STEPS]))
+        _update_brakes(P, S, t)
+        delay = int(S[S_DELAY_LEFT])
+        status = integrate_real_work(
+            geom, bodies, P[P_FRICTION_SLIDER:P_FRICTION_SLIDER + N_FRICTION],
+            P[P_FRICTION_MOTOR:P_FRICTION_MOTOR + N_FRICTION], env, P[P_REAL:P_REAL + N_REAL],
+            q, qd, phi, S[S_XM:S_XM + 3], S[S_VM:S_VM + 3], S[S_CURRENT:S_CURRENT + 3],
+            S[S_CABLE_TAU:S_CABLE_TAU + 3], S[S_VOLTS:S_VOLTS + 3],
+            S[S_VOLTS_PREV:S_VOLTS_PREV + 3], delay, n, h, env_state, qdd, wrench,
+            S[S_ROT:S_ROT + 9].reshape((3, 3)), W)
+        S[S_DELAY_LEFT] = float(max(0, delay - n))
+        _heat(P, S, dt)
+    if status == STATUS_OK:
+        _sensors(P, S, dt)
+    return status
+
+
+@njit(cache=True)
+def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd, phi, xm, vm,
+                        current, cable_tau, volts, volts_prev, delay_steps, n_steps, h_step,
+                        env_state, qdd, wrench_s, rot_out, W):
+    """``physics.integrate_real`` on the scratch ``W`` (float64[W_SIZE]): no allocation.
+
+    The same statements in the same order (the twin's results must not depend on which path
+    ran); ``physics.integrate_real`` stays the interpreted path's kernel.
+    """
+    cmd_new = W[_W_CMD_NEW:_W_CMD_NEW + 3]
+    cmd_old = W[_W_CMD_OLD:_W_CMD_OLD + 3]
+    physics.drive_current(volts, bodies, cmd_new)
+    physics.drive_current(volts_prev, bodies, cmd_old)
+    force = W[_W_FORCE:_W_FORCE + 3]
+    spring = W[_W_SPRING:_W_SPRING + 3]
+    for i in range(3):
+        spring[i] = 0.0
+    rot = W[_W_ROT:_W_ROT + 9].reshape((3, 3))
+    pos = W[_W_POS:_W_POS + 3]
+    S = W[_W_S:_W_S + 36].reshape((12, 3))
+    Sd = W[_W_SD:_W_SD + 36].reshape((12, 3))
+    twist = W[_W_TWIST:_W_TWIST + 18].reshape((6, 3))
+    M = W[_W_M:_W_M + 9].reshape((3, 3))
+    hb = W[_W_HB:_W_HB + 3]
+    tau_env = W[_W_TAU_ENV:_W_TAU_ENV + 3]
+    fr = W[_W_FR:_W_FR + 3]
+    frm = W[_W_FRM:_W_FRM + 3]
+    for i in range(3):
+        frm[i] = 0.0
+    work = W[_W_WORK:_W_WORK + WORK_SIZE]
+    viscous_only = W[_W_VISCOUS:_W_VISCOUS + N_FRICTION]
+    for k in range(N_FRICTION):
+        viscous_only[k] = friction[k]
+    viscous_only[14:17] = 0.0
+    fpa = bodies[B_F_PER_A]
+    alpha = real[physics.R_AMP_ALPHA]
+    k = real[physics.R_SCREW_K]
+    c = real[physics.R_SCREW_C]
+    half_b = 0.5 * real[physics.R_BACKLASH]
+    brake = real[R_BRAKE_ON] > 0.5
+    hold = real[physics.R_BRAKE_HOLD]
+    cable_w = real[physics.R_CABLE_W]
+    cable_k = real[physics.R_CABLE_K]
+    cable = cable_w != 0.0 or cable_k != 0.0
+    for s in range(n_steps):
+        for i in range(3):
+            target = cmd_old[i] if s < delay_steps else cmd_new[i]
+            current[i] += alpha * (target - current[i])
+        if k > 0.0:
+            for i in range(3):
+                d = xm[i] - q[i]
+                e = 0.0
+                if d > half_b:
+                    e = d - half_b
+                elif d < -half_b:
+                    e = d + half_b
+                fs = 0.0
+                if e != 0.0:
+                    fs = k * e + c * (vm[i] - qd[i])
+                spring[i] = fs
+                force[i] = fs + cable_tau[i]
+        else:
+            for i in range(3):
+                force[i] = fpa * current[i] + cable_tau[i]
+        st = physics.acceleration(geom, bodies, viscous_only if k > 0.0 else friction, env, q,
+                                  qd, phi, force, env_state, qdd, wrench_s, rot, pos, S, Sd,
+                                  twist, M, hb, tau_env, fr, work)
+        if st != STATUS_OK:
+            return st
+        if k > 0.0:
+            physics.friction_force(xm, vm, friction_motor, frm)
+        for i in range(3):
+            if k > 0.0:
+                level = physics.coulomb_level(q[i], qd[i], friction, i)
+                qd[i] = physics._toward_zero(qd[i] + h_step * qdd[i], h_step * level / M[i, i])
+                q[i] += h_step * qd[i]
+                jr = real[physics.R_JR + i]
+                v = vm[i] + h_step * (fpa * current[i] - spring[i] - frm[i]) / jr
+                if brake:
+                    v = physics._toward_zero(v, h_step * hold / jr)
+                vm[i] = v
+                xm[i] += h_step * v
+            else:
+                v = qd[i] + h_step * qdd[i]
+                if brake:
+                    v = physics._toward_zero(v, h_step * hold / M[i, i])
+                qd[i] = v
+                q[i] += h_step * v
+                xm[i] = q[i]
+                vm[i] = v
+        if cable:
+            fz = -(cable_w + cable_k * (pos[2] - real[physics.R_CABLE_Z]))
+            for j in range(3):
+                cable_tau[j] = twist[2, j] * fz
+    for a in range(3):
+        for b in range(3):
+            rot_out[a, b] = rot[a, b]
+    return STATUS_OK
+
+
+def new_state() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Zeroed (P, S, W) arrays of the right sizes."""
+    return np.zeros(P_SIZE), np.zeros(S_SIZE), np.zeros(W_SIZE)

@@ -1,0 +1,204 @@
+"""The compiled twin (issue 16) equals the interpreted reference: a recorded input stream —
+DAC codes every 1 ms period from a closed-loop run, drive switching, environment changes and
+payload steps — replayed through ``Twin(compiled=True)`` and ``Twin(compiled=False)`` gives the
+same state, sensor readings and ATI samples within 1e-12 (relative to the quantity's size, at
+least 1: metres, newtons and kelvins alike), period by period."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rt.ati.twin_sensor import AtiSensorParams, TwinAtiSensorModel
+from rt.drivers.pci1720 import volts_to_code
+from rt.model.kernels import tree_maps
+from rt.twin import kernels, physics
+from rt.twin.environment import CompliantAnkle, FreeMotion, PayloadStep, parse_environment
+from rt.twin.serve import holding_volts
+from rt.twin.twin import Twin
+
+TOL = 1e-12
+DT = 0.001
+
+#: Plant quantities compared every period (encoder_q and the filtered/measured wrench are
+#: sensor-stage quantities: compared through what the encoders count and the ATI reports).
+_PLANT = ("q", "qd", "qdd", "phi", "xm", "vm", "current", "cable_tau", "wrench_s", "rot",
+          "env_state", "temperature_rise_k", "friction", "friction_slider", "friction_motor",
+          "real", "bodies")
+
+
+def _record(env: str, ideal: bool, seconds: float, integrator: str = "symplectic_euler",
+            seed: int = 3) -> list[tuple[float, tuple[int, int, int], bool]]:
+    """A closed-loop run on the interpreted twin (PD on the true slider positions towards
+    sines, a drive switch-off and back): its DAC codes per period are the recorded stream."""
+    kwargs = {"environment": parse_environment(env), "seed": seed, "integrator": integrator,
+              "compiled": False}
+    twin = Twin.ideal(**kwargs) if ideal else Twin(**kwargs)
+    twin.set_card_enabled(0, True)
+    hold = holding_volts(twin)
+    q0 = twin.plant.q.copy()
+    stream = []
+    for k in range(round(seconds / DT)):
+        t = (k + 1) * DT
+        enabled = not 0.30 <= t < 0.36       # off long enough for the brakes to engage
+        codes = []
+        for i in range(3):
+            ref = q0[i] + 0.004 * math.sin(2.0 * math.pi * 2.0 * t + 2.0944 * i)
+            v = hold[i] + 300.0 * (ref - twin.plant.q[i]) - 3.0 * twin.plant.qd[i]
+            codes.append(volts_to_code(max(-6.0, min(6.0, v)) if enabled else 0.0))
+        stream.append((t, (codes[0], codes[1], codes[2]), enabled))
+        _apply(twin, codes, enabled)
+        twin.sync(t)
+    return stream
+
+
+def _apply(twin: Twin, codes, enabled: bool) -> None:
+    if twin.card_enabled[0] != enabled:
+        twin.set_card_enabled(0, enabled)
+    for ch in range(3):
+        twin.dac_libs[0].last_code[ch] = codes[ch]
+
+
+def _close(a, b, what: str, k: int) -> None:
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    scale = np.maximum(1.0, np.abs(a))
+    err = np.abs(a - b) / scale
+    assert np.all(err <= TOL), f"period {k}: {what} differs by {err.max():.3g} (relative)"
+
+
+def _replay(stream, make, switch=None) -> None:
+    """Feed the stream to an interpreted and a compiled twin and compare every period."""
+    ref, fast = make(False), make(True)
+    assert fast.plant.compiled and not ref.plant.compiled
+    contacts = 0
+    for k, (t, codes, enabled) in enumerate(stream):
+        for twin in (ref, fast):
+            if switch is not None:
+                switch(twin, t)
+            _apply(twin, codes, enabled)
+            twin.sync(t)
+        for name in _PLANT:
+            _close(getattr(ref.plant, name), getattr(fast.plant, name), name, k)
+        assert ref.plant.t == fast.plant.t
+        assert ref.plant.brakes_engaged == fast.plant.brakes_engaged
+        counts = [ref.encoder_port.count(i) for i in range(3)]
+        assert counts == [fast.encoder_port.count(i) for i in range(3)], f"period {k}"
+        a, b = ref.ati_sample, fast.ati_sample
+        assert a is not None and b is not None
+        _close(a.wrench, b.wrench, "ATI wrench", k)
+        assert (a.status, a.ft_sequence) == (b.status, b.ft_sequence)
+        contacts += ref.plant.in_contact
+    return ref, fast, contacts
+
+
+@pytest.mark.parametrize("env", ["free", "plate:0.7128", "ankle"])
+def test_realistic_twin_replay_equals_the_interpreted_reference(env):
+    stream = _record(env, ideal=False, seconds=0.6)
+    ref, _, contacts = _replay(stream, lambda c: Twin(environment=parse_environment(env),
+                                                      seed=3, compiled=c))
+    # The stream exercised what it claims: brakes engaged while off, the heat model updated.
+    assert ref.plant.temperature_rise_k.max() > 0.0
+    assert np.ptp(ref.plant.q) > 1e-4
+    if env.startswith("plate"):
+        assert 0 < contacts < len(stream)          # the contact opened and closed
+
+
+def test_brakes_engage_in_the_replay_on_both_paths():
+    stream = _record("free", ideal=False, seconds=0.4)
+    seen = []
+
+    def watch(twin, t):
+        if not twin.compiled and abs(t - 0.35) < 1e-9:
+            seen.append(twin.plant.brakes_engaged)
+    _replay(stream, lambda c: Twin(seed=3, compiled=c), switch=watch)
+    assert seen == [True]
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "rk4"])
+def test_ideal_twin_replay_equals_the_interpreted_reference(integrator):
+    stream = _record("ankle", ideal=True, seconds=0.3, integrator=integrator)
+    _replay(stream, lambda c: Twin.ideal(environment=CompliantAnkle(), seed=3,
+                                         integrator=integrator, compiled=c))
+
+
+def test_environment_changes_and_payload_step_replay_equal():
+    stream = _record("free", ideal=False, seconds=0.4)
+
+    def switch(twin, t):
+        if abs(t - 0.101) < 1e-9:
+            twin.set_environment(PayloadStep(mass_kg=20.0, at_s=0.15))
+        elif abs(t - 0.251) < 1e-9:
+            twin.set_environment(CompliantAnkle(neutral_z_m=0.72))
+        elif abs(t - 0.351) < 1e-9:
+            twin.set_environment(FreeMotion())
+    _replay(stream, lambda c: Twin(seed=3, compiled=c), switch=switch)
+
+
+def test_plant_advance_accepts_a_list_and_equals_the_reference():
+    ref, fast = Twin(compiled=False).plant, Twin(compiled=True).plant
+    for plant in (ref, fast):
+        plant.set_drives_enabled(True)
+    for k in range(50):
+        volts = [0.5 * math.sin(0.1 * k), -0.2, 0.1 * k / 50]
+        ref.advance(DT, volts)
+        fast.advance(DT, volts)
+        for name in _PLANT:
+            _close(getattr(ref, name), getattr(fast, name), name, k)
+
+
+def test_packed_state_is_shared_with_the_named_arrays():
+    plant = Twin().plant
+    plant.set_state([0.30, 0.31, 0.32])
+    assert plant.S[kernels.S_Q:kernels.S_Q + 3].tolist() == [0.30, 0.31, 0.32]
+    plant.set_drives_enabled(True)
+    assert plant.S[kernels.S_DRIVES_ON] == 1.0
+    plant.friction[0] = 123.0
+    assert plant.P[kernels.P_FRICTION] == 123.0
+
+
+@pytest.mark.parametrize("faults", [(), ("stale",), ("saturate",), ("dropout",)])
+def test_compiled_ati_model_gives_the_interpreted_samples(faults):
+    params = AtiSensorParams(ranges=(50.0, 50.0, 150.0, 5.0, 5.0, 5.0))
+    ref, fast = TwinAtiSensorModel(params, seed=7), TwinAtiSensorModel(params, seed=7,
+                                                                       compiled=True)
+    for name in faults:
+        for model in (ref, fast):
+            model.schedule_fault(name, 0.5, 0.8)
+    for k in range(2100):            # more than two blocks of random numbers
+        t = k * DT
+        wrench = (60.0 * math.sin(t), 5.0, 100.0 + 80.0 * math.cos(3 * t), 0.1, -6.0 * t, 0.0)
+        a = ref.measure(wrench, t)
+        b = fast.measure(np.array(wrench), t)
+        if a is None or b is None:
+            assert a is b is None
+            continue
+        assert (a.status, a.ft_sequence) == (b.status, b.ft_sequence)
+        _close(a.wrench, b.wrench, "wrench", k)
+    _close(ref.drift, fast.drift, "drift", -1)
+    ref.reset()
+    fast.reset()
+    a, b = ref.measure((1.0,) * 6, 0.0), fast.measure((1.0,) * 6, 0.0)
+    assert a is not None and b is not None
+    assert a.wrench == b.wrench
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_drift_term_equals_the_model_kernels_s_dot_q_dot(seed):
+    """The twin's substep evaluates Ṡ q̇ once as H(q̇, q̇) (``physics.tree_maps_drift``); the
+    model's kernel gives the columns of Ṡ: Ṡ q̇ from both agree to round-off, and S and the
+    twist map are the model kernel's."""
+    rng = np.random.default_rng(seed)
+    plant = Twin.ideal().plant
+    cfg = plant.kin.ik(rng.uniform(0.55, 0.75), rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2))
+    q, qd, phi = np.array(cfg.q), rng.normal(0.0, 0.2, 3), np.array(cfg.phi)
+    rot = np.array(cfg.rotation, dtype=float).reshape(3, 3)
+    s_ref, sd_ref, tw_ref = np.zeros((12, 3)), np.zeros((12, 3)), np.zeros((6, 3))
+    tree_maps(plant.geom, q, phi, rot, qd, s_ref, sd_ref, tw_ref)
+    s, sdq, tw = np.zeros((12, 3)), np.zeros(12), np.zeros((6, 3))
+    physics.tree_maps_drift(plant.geom, q, phi, rot, qd, s, sdq, tw,
+                            np.zeros(physics.TREE_MAPS_WORK))
+    assert np.array_equal(s, s_ref) and np.array_equal(tw, tw_ref)
+    expected = sd_ref @ qd
+    assert np.allclose(sdq, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
