@@ -144,7 +144,8 @@ class RtTrialRunner(TrialRunner):
             st = self.client.status()
             if st["state"] != "run":
                 raise SafetyTrip(f"trial {trial_id}: the robot stopped moving to the trial's "
-                                 f"pose ({', '.join(st['causes']) or st['state']})")
+                                 f"pose ({', '.join(st['causes']) or st['state']}: "
+                                 f"{json.dumps(st.get('latched'))})")
             if st["phase_name"] != "rest":
                 seen = True
             elif seen or time.monotonic() - t0 > float(started["duration_s"]) + 2.0:

@@ -221,11 +221,13 @@ def test_verify_checks_a_record_without_fitting(campaign_dir: Path, tmp_path: Pa
     assert code == 2 and "at least 200 N" in err["error"]
 
 
-def test_run_refuses_a_used_folder_and_the_rt_backend(campaign_dir: Path, capsys) -> None:
+def test_run_refuses_a_used_folder_and_an_absent_rt_process(campaign_dir: Path, capsys) -> None:
     code, err = _cli(capsys, "run", "--out", str(campaign_dir), "--backend", "direct")
     assert code == 2 and "not empty" in err["error"]
-    code, err = _cli(capsys, "run", "--out", str(campaign_dir.parent / "x"), "--backend", "rt")
-    assert code == 2 and "issue 9" in err["error"]
+    code, err = _cli(capsys, "run", "--out", str(campaign_dir.parent / "x"), "--backend", "rt",
+                     "--endpoint", "tcp://127.0.0.1:9")
+    assert code == 2 and "no RT process answers at tcp://127.0.0.1:9" in err["error"]
+    assert not (campaign_dir.parent / "x").exists()
 
 
 def test_export_refuses_an_eight_channel_plate(campaign_dir: Path, tmp_path: Path) -> None:

