@@ -97,7 +97,7 @@ class ContactRecordingProgram:
         self.armed = False
 
     def new_output(self) -> ReferenceOutput:
-        return self.inner.new_output()  # type: ignore[no-any-return]
+        return self.inner.new_output()
 
     def reset(self) -> None:
         self.inner.reset()

@@ -950,9 +950,10 @@ def calibration_figures(record: dict[str, Any]) -> dict[str, Any]:
         return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else None
 
     ref = record.get("reference_sensor")
-    metrics = record.get("metrics") if isinstance(record.get("metrics"), dict) else {}
+    raw = record.get("metrics")
+    metrics: dict[str, Any] = raw if isinstance(raw, dict) else {}
     stage = next((s for s in ("nonlinear", "linear") if isinstance(metrics.get(s), dict)), None)
-    m = metrics.get(stage, {}) if stage else {}
+    m: dict[str, Any] = metrics[stage] if stage else {}
     axes = m.get("force_pct_fs")
     forces = [number(x) for x in axes[:3]] if isinstance(axes, list) else []
     forces_ok = [x for x in forces if x is not None]
