@@ -40,8 +40,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from pydantic import ValidationError
 
-from calibration.plan import Plan, Trial, force_profile
-from calibration.push import TOOL_LENGTH_M, ForceTableGenerator
+from calibration.plan import Plan, Trial, force_profile, tilt_profile, trial_pose
+from calibration.push import (
+    TIP_FRICTION_COEFFICIENT,
+    TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+    TOOL_LENGTH_M,
+    ForceTableGenerator,
+)
 from rt.errors import InputError, validation_summary
 from rt.references.program import ProgramInput, ReferenceOutput
 from rt.references.sequencer import Phase
@@ -148,20 +153,29 @@ def calibration_push(params: dict[str, Any], service: RtService) -> ContactRecor
         raise InputError("calibration_push: this RT process drives the rig, whose plate DAQ it "
                          "does not acquire yet; calibrate on the twin (backend sim)")
     dt = 1.0 / service.config.rate_hz
-    profile = force_profile(plan, trial, dt)
+    try:
+        profile = force_profile(plan, trial, dt)
+    except ValueError as exc:
+        raise InputError(f"calibration_push: {exc}") from None
     limit = pl.supervisor.limits.max_force_n
     if float(profile.max()) > limit:
         raise InputError(f"calibration_push: trial {trial.id} peaks at {profile.max():.0f} N, "
                          f"above the RT process's force limit {limit:.0f} N (raise "
                          "patient_limits.max_force_n in its config for a calibration)")
-    pose = (plan.pose_z_m, math.radians(trial.roll_deg), math.radians(trial.pitch_deg))
-    gen = ForceTableGenerator(trial.id, profile, pose, dt, pl.model.kin)
+    pose = trial_pose(plan, trial)
+    try:
+        tilt = tilt_profile(plan, trial, dt)
+    except ValueError as exc:
+        raise InputError(f"calibration_push: {exc}") from None
+    gen = ForceTableGenerator(trial.id, profile, pose, dt, pl.model.kin, tilt)
     report = gen.validate()
     if not report.ok:
         raise InputError(f"calibration_push: trial {trial.id}: " + "; ".join(report.violations))
     height = plate_height_m(pl.model, plan.pose_z_m, TOOL_LENGTH_M, START_GAP_M)
     _check_at_pose(pl, trial.id, pose, height)
-    env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M)
+    env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
+                            tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+                            friction_coefficient=TIP_FRICTION_COEFFICIENT)
     twin = pl.twin
 
     def place_plate(loop: Any) -> None:

@@ -81,7 +81,9 @@ class RtTrialRunner(TrialRunner):
         self.client.start_heartbeat(HEARTBEAT_S)
 
     def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],
-            profile_n: np.ndarray, dt: float) -> TrialData:
+            profile_n: np.ndarray, dt: float, tilt_rad: np.ndarray | None = None) -> TrialData:
+        # The RT process recomputes the force and the tilt from the plan (IPC messages are
+        # bounded); the force's digest is checked, the tilt is the same function's.
         trial = self.trials.get(trial_id)
         if trial is None:
             raise InputError(f"trial {trial_id!r} is not in the plan {self.plan.name!r}")

@@ -19,7 +19,12 @@ import numpy as np
 from calibration import registration as reg
 from calibration.plan import Plan
 from calibration.plate import PlateDescription
-from calibration.push import TOOL_LENGTH_M, ForceTableGenerator
+from calibration.push import (
+    TIP_FRICTION_COEFFICIENT,
+    TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+    TOOL_LENGTH_M,
+    ForceTableGenerator,
+)
 from calibration.trial import TrialData, TrialRunner
 from calibration.twin_plate import PlateTruth, TwinPlate, draw_truth
 from rt.components.blocks import SignalTap
@@ -140,7 +145,7 @@ class TwinTrialRunner(TrialRunner):
         self._t_offset = 0.0      # robot clock across trials (s)
 
     def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],
-            profile_n: np.ndarray, dt: float) -> TrialData:
+            profile_n: np.ndarray, dt: float, tilt_rad: np.ndarray | None = None) -> TrialData:
         model = self.model
         z0, roll, pitch = pose
         q0 = np.array(model.kin.ik(z0, roll, pitch).q)
@@ -149,11 +154,13 @@ class TwinTrialRunner(TrialRunner):
         tip_lvl = tip_points_B(p_lvl, R_lvl, TOOL_LENGTH_M)[0]
         T_true, registered = self.moves.place(tip_lvl, site_xy_m)
         height = float(tip_lvl[2]) + START_GAP_M
-        env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M)
+        env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
+                                tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+                                friction_coefficient=TIP_FRICTION_COEFFICIENT)
         clock = SimClock()
         twin = Twin(model.description, env, seed=self.seed + len(trial_id), clock=clock)
         twin.place(q0)
-        gen = ForceTableGenerator(trial_id, profile_n, pose, dt, model.kin)
+        gen = ForceTableGenerator(trial_id, profile_n, pose, dt, model.kin, tilt_rad)
         report = gen.validate()
         if not report.ok:
             raise SafetyTrip(f"trial {trial_id}: " + "; ".join(report.violations))
@@ -251,7 +258,10 @@ class DirectTrialRunner(TrialRunner):
         self._t_offset = 0.0
 
     def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],
-            profile_n: np.ndarray, dt: float) -> TrialData:
+            profile_n: np.ndarray, dt: float, tilt_rad: np.ndarray | None = None) -> TrialData:
+        if tilt_rad is not None:
+            raise InputError(f"trial {trial_id}: the direct runner has no robot to tilt under "
+                             "load (shear pushes need the twin or the RT process)")
         n = len(profile_n)
         t_robot = np.arange(n) * dt + self._t_offset
         # S placed so its tool tip is at the site, S axes tilted by the pose's roll/pitch; the
