@@ -12,7 +12,8 @@
 * ``verify --record CAL.json --out DIR`` runs a short CalTester-like check (≥ 200 N at the
   centre and four points near the corners) and applies the record's calibration, without
   fitting.
-* ``export --campaign DIR --c3d OUT.c3d --reference-csv REF.csv`` writes the C3D (TYPE 4,
+* ``export --campaign DIR --c3d OUT.c3d --reference-csv REF.csv`` writes the C3D (TYPE 4 or, for
+  a Kistler plate, TYPE 3 with calibrated channels;
   fitted CAL_MATRIX, validation trials' raw channels) and the ATI reference in its frame.
 * ``demo --out DIR`` runs plan, run, fit and export on the twin.
 
