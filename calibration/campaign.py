@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration import dataset, fit, metrics
-from calibration.plan import Plan, Trial, expand, force_profile, sites
+from calibration.plan import Plan, Trial, expand, force_profile, sites, tilt_profile, trial_pose
 from calibration.plate import PlateDescription, cop_F, load_plate
 from calibration.trial import (
     CAMPAIGN_FILE,
@@ -94,9 +94,10 @@ def run_campaign(plan: Plan, plate_file: Path, runner: TrialRunner, out: Path,
         if progress is not None:
             progress(k, len(trials), trial.id)
         profile = force_profile(plan, trial, DT)
-        data = runner.run(trial.id, trial.site_xy_m,
-                          (plan.pose_z_m, math.radians(trial.roll_deg),
-                           math.radians(trial.pitch_deg)), profile, DT)
+        tilt = tilt_profile(plan, trial, DT)
+        pose = trial_pose(plan, trial)
+        data = (runner.run(trial.id, trial.site_xy_m, pose, profile, DT) if tilt is None
+                else runner.run(trial.id, trial.site_xy_m, pose, profile, DT, tilt_rad=tilt))
         digest = data.save(out / TRIALS_DIR / f"{trial.id}.npz")
         entries.append({**trial.model_dump(mode="json"), "sha256": digest})
     index = {"schema_version": 1, "kind": CAMPAIGN_KIND, "plan": plan.model_dump(mode="json"),

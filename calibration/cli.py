@@ -5,13 +5,15 @@
 * ``run --plan PLAN.yaml --out DIR`` runs the campaign into a new folder. Backends: ``twin``
   (the robot twin pressing the twin plate under force control, the default) and ``direct``
   (the twin plate fed the commanded load, no robot: seconds instead of minutes). The real rig
-  runs through the RT process (issue 9) and is not available yet.
+  (and the twin through the RT process: ``rt``, at ``--endpoint``) plays each trial as the RT
+  process's ``calibration_push`` program (``calibration.rt_program``).
 * ``fit --campaign DIR`` aligns, fits and judges; writes the calibration record
   (``DIR/calibration_record.json`` unless ``--record``) and prints the figures.
 * ``verify --record CAL.json --out DIR`` runs a short CalTester-like check (≥ 200 N at the
   centre and four points near the corners) and applies the record's calibration, without
   fitting.
-* ``export --campaign DIR --c3d OUT.c3d --reference-csv REF.csv`` writes the C3D (TYPE 4,
+* ``export --campaign DIR --c3d OUT.c3d --reference-csv REF.csv`` writes the C3D (TYPE 4 or, for
+  a Kistler plate, TYPE 3 with calibrated channels;
   fitted CAL_MATRIX, validation trials' raw channels) and the ATI reference in its frame.
 * ``demo --out DIR`` runs plan, run, fit and export on the twin.
 
@@ -51,6 +53,9 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=DEFAULT_SEED,
                    help="twin plate's truth and noise seed")
     p.add_argument("--trials", help="comma-separated trial ids (default: all)")
+    p.add_argument("--endpoint", help="backend rt: the RT process's endpoint (default: "
+                   "its default); it must be configured for the plan's loads "
+                   "(patient_limits.max_force_n)")
     p.set_defaults(func=_guard(_run))
 
     p = commands.add_parser("fit", help="fit a campaign and write its calibration record")
@@ -183,10 +188,13 @@ def _run(args: argparse.Namespace) -> dict:
     plate_file = _plate_file(args)
     plate = load_plate(plate_file)
     runner, truth = make_runner(args.backend, plate, args.seed, plan.registration,
-                                    plan.level_sigma_rad())
+                                plan.level_sigma_rad(), plan=plan, endpoint=args.endpoint)
     only = [t.strip() for t in args.trials.split(",")] if args.trials else None
     t0 = time.perf_counter()
-    index = run_campaign(plan, plate_file, runner, Path(args.out), truth, _progress, only)
+    try:
+        index = run_campaign(plan, plate_file, runner, Path(args.out), truth, _progress, only)
+    finally:
+        runner.close()       # the RT runner's heartbeat and control of the robot
     return {"campaign": args.out, "trials": len(index["trials"]),
             "robot_time_s": round(index["robot_time_s"], 1),
             "wall_time_s": round(time.perf_counter() - t0, 1), "backend": args.backend}

@@ -14,6 +14,10 @@ Profiles (all start and end with ``baseline_s`` unloaded, used to zero both sens
   of ``peak_n`` over ``stance_s``, repeated on a small preload (the tool keeps contact).
 * ``tilted`` — static steps with the platform tilted (roll, pitch): the load's line of action
   and its point move, exciting the moments (and shear where the contact's friction allows).
+* ``shear`` — a push at the level pose, then, under load, the platform tilts by (roll, pitch)
+  and back (:func:`tilt_profile`): the tool tip, stuck to the plate by static friction, is
+  dragged sideways and loads the plate in shear up to the friction cone, the excitation the
+  Fx/Fy columns need (a 3-PRS cannot push sideways). Off unless the plan lists ``shear``.
 
 Held-out sites and trials are never used by the fit; the metrics are computed on them.
 """
@@ -39,6 +43,7 @@ class ProfileKind(StrEnum):
     SINE = "sine"
     GAIT = "gait"
     TILTED = "tilted"
+    SHEAR = "shear"
 
 
 class _Model(BaseModel):
@@ -88,6 +93,19 @@ class TiltedPush(_Model):
     load_n: Load = 600.0
 
 
+class ShearPush(_Model):
+    """Load ``load_n`` at the level pose, then tilt by (roll, pitch) under load and back."""
+
+    roll_deg: Tilt = 1.5
+    pitch_deg: Tilt = 0.0
+    load_n: Load = 600.0
+    #: Slow on purpose: the sliders' reference speed stays below the supervisor's frozen-encoder
+    #: threshold (4 mm/s), because an axis stalled by the contact under load reads as a frozen
+    #: encoder there (the closing note of issue 12 describes the case; issue 15).
+    tilt_ramp_s: Pos = 5.0
+    hold_s: Pos = 1.0
+
+
 class Plan(_Model):
     """A campaign's plan (module docstring). Lengths in m, forces in N, angles in degrees."""
 
@@ -104,6 +122,7 @@ class Plan(_Model):
     tilted: list[TiltedPush] = Field(default_factory=lambda: [
         TiltedPush(roll_deg=2.0), TiltedPush(roll_deg=-2.0), TiltedPush(pitch_deg=2.0),
         TiltedPush(pitch_deg=-2.0)])
+    shear: list[ShearPush] = Field(default_factory=list, max_length=8)
     sine_sites: Literal["centre_and_corners", "centre", "none"] = "centre_and_corners"
     gait_sites: Literal["centre", "none"] = "centre"
     repeat_centre_steps: bool = True
@@ -189,6 +208,9 @@ def expand(plan: Plan, size_m: tuple[float, float]) -> list[Trial]:
             for k, tp in enumerate(plan.tilted):
                 add(site, ProfileKind.TILTED, f"-{k}", roll_deg=tp.roll_deg,
                     pitch_deg=tp.pitch_deg, load_n=tp.load_n)
+            for k, sp in enumerate(plan.shear):
+                add(site, ProfileKind.SHEAR, f"-{k}", roll_deg=sp.roll_deg,
+                    pitch_deg=sp.pitch_deg, load_n=sp.load_n)
             if plan.gait_sites == "centre":
                 add(site, ProfileKind.GAIT)
         if plan.sine_sites != "none" and (site is centre or (
@@ -207,9 +229,54 @@ def _smooth(t: np.ndarray, t0: float, duration: float) -> np.ndarray:
     return 0.5 - 0.5 * np.cos(math.pi * u)
 
 
+def _shear_push(plan: Plan, trial: Trial) -> ShearPush:
+    k = int(trial.id.rsplit("-", 1)[1])
+    if not 0 <= k < len(plan.shear):
+        raise ValueError(f"trial {trial.id}: the plan has no shear push {k}")
+    return plan.shear[k]
+
+
+def _shear_times(plan: Plan, sp: ShearPush) -> tuple[float, float, float, float]:
+    """(loaded at, tilt starts, tilt back at, unloading starts) in s from the trial's start."""
+    b, ramp = plan.baseline_s, plan.steps.ramp_s
+    loaded = b + ramp + plan.steps.hold_s
+    back = loaded + sp.tilt_ramp_s + sp.hold_s
+    return loaded, loaded, back, back + sp.tilt_ramp_s + plan.steps.hold_s
+
+
+def trial_pose(plan: Plan, trial: Trial) -> tuple[float, float, float]:
+    """The pose (z m, roll, pitch rad) the robot holds when the push starts (level for a shear
+    push: it tilts under load)."""
+    if trial.profile == ProfileKind.SHEAR:
+        return plan.pose_z_m, 0.0, 0.0
+    return plan.pose_z_m, math.radians(trial.roll_deg), math.radians(trial.pitch_deg)
+
+
+def tilt_profile(plan: Plan, trial: Trial, dt: float) -> np.ndarray | None:
+    """A shear push's tilt under load, (n, 2) roll, pitch in rad on the samples of
+    :func:`force_profile` (raised-cosine ramps); None for the other profiles (pose held)."""
+    if trial.profile != ProfileKind.SHEAR:
+        return None
+    sp = _shear_push(plan, trial)
+    n = len(force_profile(plan, trial, dt))
+    t = np.arange(n) * dt
+    _, start, back, _ = _shear_times(plan, sp)
+    shape = _smooth(t, start, sp.tilt_ramp_s) * (1.0 - _smooth(t, back, sp.tilt_ramp_s))
+    return np.column_stack([shape * math.radians(trial.roll_deg),
+                            shape * math.radians(trial.pitch_deg)])
+
+
 def force_profile(plan: Plan, trial: Trial, dt: float) -> np.ndarray:
     """The trial's force reference (N) sampled every ``dt`` s from t = 0."""
     b = plan.baseline_s
+    if trial.profile == ProfileKind.SHEAR:
+        sp = _shear_push(plan, trial)
+        ramp = plan.steps.ramp_s
+        _, _, _, unload = _shear_times(plan, sp)
+        duration = unload + ramp + b
+        t = np.arange(round(duration / dt) + 1) * dt
+        return np.maximum(trial.load_n * _smooth(t, b, ramp) * (1.0 - _smooth(t, unload, ramp)),
+                          0.0)
     if trial.profile in (ProfileKind.STEPS, ProfileKind.TILTED):
         levels = list(plan.loads_n) if trial.profile == ProfileKind.STEPS else [trial.load_n]
         path = [*levels, *levels[-2::-1], 0.0]

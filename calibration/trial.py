@@ -115,8 +115,10 @@ class TrialRunner(abc.ABC):
 
     @abc.abstractmethod
     def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],
-            profile_n: np.ndarray, dt: float) -> TrialData:
-        """Run one trial; raises a TalusError when the robot could not complete it."""
+            profile_n: np.ndarray, dt: float, tilt_rad: np.ndarray | None = None) -> TrialData:
+        """Run one trial; raises a TalusError when the robot could not complete it.
+        ``tilt_rad`` ((n, 2) roll, pitch in rad on the profile's samples) tilts the platform
+        under load about ``pose`` (shear pushes); None holds the pose."""
 
     def close(self) -> None:
         """Release what the runner holds."""

@@ -13,20 +13,23 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from calibration import registration as reg
+from calibration.plan import Plan
 from calibration.plate import PlateDescription
+from calibration.push import (
+    TIP_FRICTION_COEFFICIENT,
+    TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+    TOOL_LENGTH_M,
+    ForceTableGenerator,
+)
 from calibration.trial import TrialData, TrialRunner
 from calibration.twin_plate import PlateTruth, TwinPlate, draw_truth
-from protocols.base import ForceGenerator
-from protocols.output import ValidationReport
-from protocols.schema import Pose
 from rt.components.blocks import SignalTap
 from rt.engine import Array, Component
-from rt.errors import BackendUnavailableError, HardwareError, InputError, SafetyTrip
+from rt.errors import HardwareError, InputError, SafetyTrip
 from rt.model import RobotModel
 from rt.position_loop import build_protocol_loop, sim_devices
 from rt.safety.events import Reaction
@@ -35,8 +38,6 @@ from rt.twin.environment import ForcePlateContact
 from rt.twin.twin import SimClock, Twin
 
 RATE_HZ = 1000.0
-#: Tool (load applicator) length above the ATI's origin along its z axis (m).
-TOOL_LENGTH_M = 0.02
 #: Gap between the tool tip and the plate at the held pose before loading (m).
 START_GAP_M = 0.5e-3
 #: Forward kinematics is evaluated every this many cycles and interpolated in between.
@@ -46,36 +47,6 @@ PLACEMENT_SIGMA_M = 2.0e-3
 PLACEMENT_SIGMA_YAW_RAD = math.radians(0.3)
 #: Camera frames averaged per registration.
 CAMERA_FRAMES = 4
-
-
-@dataclass(frozen=True)
-class _Push:
-    """The protocol-like description a force generator reads (pose held, no own limits)."""
-
-    name: str
-    pose: Pose
-    kind: str = "calibration_push"
-    limits: None = None
-
-
-class ForceTableGenerator(ForceGenerator):
-    """A force-mode generator playing a precomputed force (N) with the pose held."""
-
-    def __init__(self, name: str, force_n: np.ndarray, pose: tuple[float, float, float],
-                 dt: float, kinematics) -> None:
-        z, roll, pitch = pose
-        push = _Push(name, Pose(z_m=z, roll_deg=math.degrees(roll), pitch_deg=math.degrees(pitch)))
-        super().__init__(push, dt, kinematics, name)  # type: ignore[arg-type]
-        self._force = np.asarray(force_n, dtype=float)
-        self._set_length(len(self._force))
-
-    def _build(self, report: ValidationReport) -> np.ndarray | None:
-        if not self._hold_pose(report):
-            return None
-        table = np.zeros((self.n_samples, 4))
-        table[:, 0] = self._force
-        table[:, 1] = np.gradient(self._force, self.dt)
-        return table
 
 
 class ContactTruthTap(Component):
@@ -174,7 +145,7 @@ class TwinTrialRunner(TrialRunner):
         self._t_offset = 0.0      # robot clock across trials (s)
 
     def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],
-            profile_n: np.ndarray, dt: float) -> TrialData:
+            profile_n: np.ndarray, dt: float, tilt_rad: np.ndarray | None = None) -> TrialData:
         model = self.model
         z0, roll, pitch = pose
         q0 = np.array(model.kin.ik(z0, roll, pitch).q)
@@ -183,11 +154,13 @@ class TwinTrialRunner(TrialRunner):
         tip_lvl = tip_points_B(p_lvl, R_lvl, TOOL_LENGTH_M)[0]
         T_true, registered = self.moves.place(tip_lvl, site_xy_m)
         height = float(tip_lvl[2]) + START_GAP_M
-        env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M)
+        env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
+                                tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+                                friction_coefficient=TIP_FRICTION_COEFFICIENT)
         clock = SimClock()
         twin = Twin(model.description, env, seed=self.seed + len(trial_id), clock=clock)
         twin.place(q0)
-        gen = ForceTableGenerator(trial_id, profile_n, pose, dt, model.kin)
+        gen = ForceTableGenerator(trial_id, profile_n, pose, dt, model.kin, tilt_rad)
         report = gen.validate()
         if not report.ok:
             raise SafetyTrip(f"trial {trial_id}: " + "; ".join(report.violations))
@@ -225,32 +198,43 @@ class TwinTrialRunner(TrialRunner):
         rows = tap.ring[:tap.written]
         true_rows = truth.ring[:truth.written]
         m = min(len(rows), len(true_rows))
-        rows, true_rows = rows[:m], true_rows[:m]
-        # The ATI reads NaN until its first sample arrives: start the recording there.
-        finite = np.isfinite(rows[:, 1:7]).all(axis=1)
-        if not finite.any():
-            raise HardwareError(f"trial {trial_id}: the ATI sensor gave no reading")
-        first = int(np.argmax(finite))
-        rows, true_rows = rows[first:], true_rows[first:]
-        if not np.isfinite(rows[:, 1:7]).all():
-            raise HardwareError(f"trial {trial_id}: the ATI sensor's readings stopped during "
-                                "the trial (NaN); repeat it")
-        t_robot = rows[:, 0] - rows[0, 0] + self._t_offset
-        p_BS, R_BS = sensor_poses(model, rows[:, 7:10])
-        # The plate's side: true load (on the plate = minus the environment's on the platform).
-        p_true, R_true = sensor_poses(model, true_rows[:, 7:10])
-        tip_B = tip_points_B(p_true, R_true, TOOL_LENGTH_M)
-        R_FB = T_true[:3, :3].T
-        force_B = -np.einsum("nij,nj->ni", R_true.reshape(-1, 3, 3), true_rows[:, 1:4])
-        force_F = force_B @ R_FB.T
-        point_F = (tip_B - T_true[:3, 3]) @ R_FB.T
-        point_F[:, 2] = 0.0          # the tip stays on the surface while it presses
-        t_plate, channels = self.twin_plate.sample(t_robot, force_F, point_F)
-        self.robot_time_s += float(t_robot[-1] - t_robot[0])
-        self._t_offset = float(t_robot[-1]) + 2.0     # the operator's pause between trials
-        return TrialData(trial_id, t_robot, rows[:, 1:7].copy(), p_BS, R_BS, rows[:, 10].copy(),
-                         t_plate, channels, registered.T_BF, registered.sigma_translation_m,
-                         registered.sigma_rotation_rad, TOOL_LENGTH_M)
+        data = trial_from_rows(trial_id, model, rows[:m], true_rows[:m], T_true, registered,
+                               self.twin_plate, self._t_offset)
+        self.robot_time_s += float(data.t_robot[-1] - data.t_robot[0])
+        self._t_offset = float(data.t_robot[-1]) + 2.0     # the operator's pause between trials
+        return data
+
+
+def trial_from_rows(trial_id: str, model: RobotModel, rows: np.ndarray, true_rows: np.ndarray,
+                    T_true: np.ndarray, registered: reg.Registration, twin_plate: TwinPlate,
+                    t_offset: float) -> TrialData:
+    """A trial's recording from the loop's rows (t, ATI wrench 6, q 3, force reference 3,
+    phase) and the twin's true contact at the same instants (t, wrench 6, q 3): the robot side
+    as recorded, the plate side through the twin plate on its own clock; the robot clock starts
+    at ``t_offset``."""
+    # The ATI reads NaN until its first sample arrives: start the recording there.
+    finite = np.isfinite(rows[:, 1:7]).all(axis=1)
+    if not finite.any():
+        raise HardwareError(f"trial {trial_id}: the ATI sensor gave no reading")
+    first = int(np.argmax(finite))
+    rows, true_rows = rows[first:], true_rows[first:]
+    if not np.isfinite(rows[:, 1:7]).all():
+        raise HardwareError(f"trial {trial_id}: the ATI sensor's readings stopped during "
+                            "the trial (NaN); repeat it")
+    t_robot = rows[:, 0] - rows[0, 0] + t_offset
+    p_BS, R_BS = sensor_poses(model, rows[:, 7:10])
+    # The plate's side: true load (on the plate = minus the environment's on the platform).
+    p_true, R_true = sensor_poses(model, true_rows[:, 7:10])
+    tip_B = tip_points_B(p_true, R_true, TOOL_LENGTH_M)
+    R_FB = T_true[:3, :3].T
+    force_B = -np.einsum("nij,nj->ni", R_true.reshape(-1, 3, 3), true_rows[:, 1:4])
+    force_F = force_B @ R_FB.T
+    point_F = (tip_B - T_true[:3, 3]) @ R_FB.T
+    point_F[:, 2] = 0.0          # the tip stays on the surface while it presses
+    t_plate, channels = twin_plate.sample(t_robot, force_F, point_F)
+    return TrialData(trial_id, t_robot, rows[:, 1:7].copy(), p_BS, R_BS, rows[:, 10].copy(),
+                     t_plate, channels, registered.T_BF, registered.sigma_translation_m,
+                     registered.sigma_rotation_rad, TOOL_LENGTH_M)
 
 
 class DirectTrialRunner(TrialRunner):
@@ -274,7 +258,10 @@ class DirectTrialRunner(TrialRunner):
         self._t_offset = 0.0
 
     def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],
-            profile_n: np.ndarray, dt: float) -> TrialData:
+            profile_n: np.ndarray, dt: float, tilt_rad: np.ndarray | None = None) -> TrialData:
+        if tilt_rad is not None:
+            raise InputError(f"trial {trial_id}: the direct runner has no robot to tilt under "
+                             "load (shear pushes need the twin or the RT process)")
         n = len(profile_n)
         t_robot = np.arange(n) * dt + self._t_offset
         # S placed so its tool tip is at the site, S axes tilted by the pose's roll/pitch; the
@@ -303,21 +290,24 @@ class DirectTrialRunner(TrialRunner):
 
 
 def make_runner(backend: str, plate: PlateDescription, seed: int, registration: str,
-                level_sigma_rad: float | None = math.radians(0.1)
-                ) -> tuple[TrialRunner, PlateTruth]:
-    """The runner named ``backend`` (``twin``, ``direct``) on a twin plate drawn from ``seed``.
-
-    ``rt`` (trials as force-control sessions in the RT process) is refused until the RT
-    process can start sessions (issue 9)."""
-    if backend == "rt":
-        raise BackendUnavailableError(
-            "the RT-process trial runner (campaign trials as force-control sessions over "
-            "ZeroMQ) comes with the RT process's session_start (issue 9); use --backend twin")
+                level_sigma_rad: float | None = math.radians(0.1), plan: Plan | None = None,
+                endpoint: str | None = None) -> tuple[TrialRunner, PlateTruth]:
+    """The runner named ``backend`` on a twin plate drawn from ``seed``: ``twin`` (the robot
+    twin in this process), ``direct`` (no robot) or ``rt`` (the RT process at ``endpoint``
+    plays each trial; ``plan`` is the campaign's plan, sent with each trial)."""
+    if backend not in ("twin", "direct", "rt"):
+        raise InputError(f"unknown backend {backend!r}: use twin, direct or rt")
     truth = draw_truth(plate, seed=seed)
     twin_plate = TwinPlate(plate, truth, seed=seed + 1)
     if backend == "direct":
         return DirectTrialRunner(plate, twin_plate, seed=seed), truth
-    if backend != "twin":
-        raise InputError(f"unknown backend {backend!r}: use twin, direct or rt")
+    if backend == "rt":
+        from calibration.rt_runner import RtTrialRunner
+        from rt.ipc.messages import DEFAULT_ENDPOINT
+
+        if plan is None:
+            raise InputError("the rt backend needs the campaign's plan")
+        return RtTrialRunner(plate, twin_plate, plan, endpoint or DEFAULT_ENDPOINT,
+                             registration, seed, level_sigma_rad=level_sigma_rad), truth
     return TwinTrialRunner(plate, twin_plate, registration=registration, seed=seed,
                            level_sigma_rad=level_sigma_rad), truth

@@ -205,6 +205,17 @@ class Calibration(Base):
     matrix: Mapped[Any] = mapped_column(sa.JSON)
     metrics: Mapped[Any] = mapped_column(sa.JSON)
     certificate_path: Mapped[str | None] = mapped_column(sa.Text)
+    #: The certificate's sha256 (attached with the record or later, once).
+    certificate_sha256: Mapped[str | None] = mapped_column(sa.String(64))
+    #: The reference sensor's serial (traceability: which ATI loaded the plate).
+    reference_serial: Mapped[str | None] = mapped_column(sa.String(100))
+    #: Headline figures on held-out points after the fit (``figures_stage``: ``nonlinear`` when
+    #: the record has it, else ``linear``): COP error RMS and max (mm), the worst force axis
+    #: (% of full scale, Fx/Fy/Fz).
+    cop_rms_mm: Mapped[float | None] = mapped_column()
+    cop_max_mm: Mapped[float | None] = mapped_column()
+    force_pct_fs: Mapped[float | None] = mapped_column()
+    figures_stage: Mapped[str | None] = mapped_column(sa.String(20))
     record: Mapped[dict[str, Any]] = mapped_column(sa.JSON)
     record_sha256: Mapped[str] = mapped_column(sa.String(64))
     added_by: Mapped[str] = mapped_column(sa.String(64))

@@ -711,19 +711,47 @@ class ClinicalRecord:
 
     # ------------------------------------------------------------ calibrations
     def add_calibration(self, actor: Actor, record: dict[str, Any],
-                        certificate_path: str | None = None) -> dict[str, Any]:
-        """Store a calibration record (/work/briefs/calibration_record.md, schema 1) whole."""
+                        certificate_path: str | None = None,
+                        certificate_sha256: str | None = None) -> dict[str, Any]:
+        """Store a calibration record (docs/calibration_record.md, schema 1) whole, with its
+        headline figures as columns (:func:`calibration_figures`); audited."""
         fields = _calibration_fields(record)
+        _check_certificate(certificate_path, certificate_sha256)
         with self._tx() as db:
             self._require(db, actor, Action.CALIBRATION_WRITE)
             if db.execute(sa.select(Calibration.id)
                           .where(Calibration.record_id == fields["record_id"])).first():
                 raise AlreadyExists(f"calibration {fields['record_id']} is already stored")
             cal = Calibration(**fields, certificate_path=certificate_path,
+                              certificate_sha256=certificate_sha256,
                               added_by=actor.username, added_at=self.clock())
             db.add(cal)
             self._audit(db, actor, "calibration.add", "calibration", cal.record_id,
-                        after={"plate": cal.plate_name, "sha256": cal.record_sha256})
+                        after={"plate": cal.plate_name, "serial": cal.plate_serial,
+                               "sha256": cal.record_sha256, "passed": cal.passed,
+                               "cop_rms_mm": cal.cop_rms_mm, "force_pct_fs": cal.force_pct_fs,
+                               "certificate": certificate_path,
+                               "certificate_sha256": certificate_sha256})
+            return _calibration_dict(cal, full=False)
+
+    def attach_calibration_certificate(self, actor: Actor, record_id: str, path: str,
+                                       sha256: str) -> dict[str, Any]:
+        """Name the certificate (PDF) of a stored calibration, once: a certificate already
+        attached is never replaced (a new calibration gets a new record). Audited."""
+        _check_certificate(path, sha256)
+        with self._tx() as db:
+            self._require(db, actor, Action.CALIBRATION_WRITE)
+            cal = db.execute(sa.select(Calibration).where(Calibration.record_id == record_id)) \
+                .scalar_one_or_none()
+            if cal is None:
+                raise NotFound(f"no calibration {record_id!r}")
+            if cal.certificate_path is not None:
+                raise AlreadyExists(f"calibration {record_id} already has its certificate "
+                                    f"({cal.certificate_path}); it is never replaced")
+            cal.certificate_path, cal.certificate_sha256 = path, sha256
+            self._audit(db, actor, "calibration.certify", "calibration", record_id,
+                        before={"certificate": None},
+                        after={"certificate": path, "certificate_sha256": sha256})
             return _calibration_dict(cal, full=False)
 
     def list_calibrations(self, actor: Actor, plate_serial: str | None = None) -> list[dict[str, Any]]:
@@ -905,6 +933,36 @@ def _pydantic_reason(exc: ValidationError) -> str:
                      for e in exc.errors())
 
 
+def _check_certificate(path: str | None, sha256: str | None) -> None:
+    if path is None and sha256 is not None:
+        raise InputError("a certificate sha256 without the certificate's path")
+    if path is not None and not path.strip():
+        raise InputError("the calibration certificate's path is empty")
+    if sha256 is not None and not re.fullmatch(r"[0-9a-f]{64}", sha256):
+        raise InputError(f"certificate sha256 {sha256!r} is not 64 lowercase hex digits")
+
+
+def calibration_figures(record: dict[str, Any]) -> dict[str, Any]:
+    """The record's headline columns: the reference sensor's serial, and on held-out points
+    after the fit (``nonlinear`` when present, else ``linear``) the COP error RMS and max (mm)
+    and the worst of Fx, Fy, Fz (% FS). Absent or malformed entries give None."""
+    def number(x: Any) -> float | None:
+        return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else None
+
+    ref = record.get("reference_sensor")
+    raw = record.get("metrics")
+    metrics: dict[str, Any] = raw if isinstance(raw, dict) else {}
+    stage = next((s for s in ("nonlinear", "linear") if isinstance(metrics.get(s), dict)), None)
+    m: dict[str, Any] = metrics[stage] if stage else {}
+    axes = m.get("force_pct_fs")
+    forces = [number(x) for x in axes[:3]] if isinstance(axes, list) else []
+    forces_ok = [x for x in forces if x is not None]
+    serial = ref.get("serial") if isinstance(ref, dict) else None
+    return {"reference_serial": None if serial is None else str(serial)[:100],
+            "cop_rms_mm": number(m.get("cop_rms_mm")), "cop_max_mm": number(m.get("cop_max_mm")),
+            "force_pct_fs": max(forces_ok) if forces_ok else None, "figures_stage": stage}
+
+
 def _calibration_fields(record: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(record, dict) or record.get("kind") != "talus.calibration_record":
         raise InputError("not a calibration record (kind must be 'talus.calibration_record')")
@@ -930,7 +988,8 @@ def _calibration_fields(record: dict[str, Any]) -> dict[str, Any]:
             "plate_serial": plate.get("serial"), "created_at": created,
             "operator": str(record["operator"]), "passed": verdict.get("pass"),
             "matrix": record["matrix"], "metrics": record["metrics"], "record": record,
-            "record_sha256": sha256_text(audit.canonical_json(record))}
+            "record_sha256": sha256_text(audit.canonical_json(record)),
+            **calibration_figures(record)}
 
 
 def _calibration_dict(c: Calibration, full: bool) -> dict[str, Any]:
@@ -938,6 +997,10 @@ def _calibration_dict(c: Calibration, full: bool) -> dict[str, Any]:
                          "plate_serial": c.plate_serial, "created_at": _iso(c.created_at),
                          "operator": c.operator, "passed": c.passed,
                          "certificate_path": c.certificate_path,
+                         "certificate_sha256": c.certificate_sha256,
+                         "reference_serial": c.reference_serial, "cop_rms_mm": c.cop_rms_mm,
+                         "cop_max_mm": c.cop_max_mm, "force_pct_fs": c.force_pct_fs,
+                         "figures_stage": c.figures_stage,
                          "record_sha256": c.record_sha256, "added_by": c.added_by,
                          "added_at": _iso(c.added_at)}
     if full:

@@ -35,6 +35,8 @@ GROUPS: dict[str, tuple[tuple[str, ...], str]] = {
                  "patients: add, list, show, limits, forget, export"),
     "sessions": (("patients.sessions_cli",), "stored therapy sessions: list, show"),
     "audit": (("patients.audit_cli",), "audit log: verify, export"),
+    "calibrations": (("patients.calibrations_cli",),
+                     "stored force-plate calibrations: add, certify, list, show"),
     "report": (("reports.cli",), "PDF reports: session, progress, calibration certificate"),
     "calibrate": (("calibration.cli",),
                   "force-plate calibration: plan, run, fit, verify, export, demo"),

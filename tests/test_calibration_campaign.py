@@ -14,7 +14,7 @@ import pytest
 
 from calibration import c3d_export, campaign
 from calibration.metrics import Thresholds
-from calibration.plate import PlateKind
+from calibration.plate import KISTLER_CHANNELS, PlateKind
 from calibration.trial import CAMPAIGN_FILE, TRIALS_DIR, TrialData
 from rt.errors import ConfigurationError, InputError
 from talus.cli import main
@@ -221,17 +221,74 @@ def test_verify_checks_a_record_without_fitting(campaign_dir: Path, tmp_path: Pa
     assert code == 2 and "at least 200 N" in err["error"]
 
 
-def test_run_refuses_a_used_folder_and_the_rt_backend(campaign_dir: Path, capsys) -> None:
+def test_run_refuses_a_used_folder_and_an_absent_rt_process(campaign_dir: Path, capsys) -> None:
     code, err = _cli(capsys, "run", "--out", str(campaign_dir), "--backend", "direct")
     assert code == 2 and "not empty" in err["error"]
-    code, err = _cli(capsys, "run", "--out", str(campaign_dir.parent / "x"), "--backend", "rt")
-    assert code == 2 and "issue 9" in err["error"]
+    code, err = _cli(capsys, "run", "--out", str(campaign_dir.parent / "x"), "--backend", "rt",
+                     "--endpoint", "tcp://127.0.0.1:9")
+    assert code == 2 and "no RT process answers at tcp://127.0.0.1:9" in err["error"]
+    assert not (campaign_dir.parent / "x").exists()
 
 
-def test_export_refuses_an_eight_channel_plate(campaign_dir: Path, tmp_path: Path) -> None:
+def test_export_refuses_a_kistler_plate_without_its_sensor_offsets(campaign_dir: Path,
+                                                                  tmp_path: Path) -> None:
     p = campaign.process(campaign_dir)
     kistler = p.plate.model_copy(update={"kind": PlateKind.KISTLER8})
     object.__setattr__(kistler, "channels", list(p.plate.channels) * 2)
     p.plate = kistler
-    with pytest.raises(InputError, match="TYPE-4 carries a 6×6 matrix"):
+    with pytest.raises(InputError, match="TYPE 3 needs the Kistler sensor offsets"):
         c3d_export.export(campaign_dir, p, tmp_path / "x.c3d", tmp_path / "x.csv")
+    assert not (tmp_path / "x.c3d").exists()
+
+
+KISTLER_PLATE = """schema_version: 1
+name: Kistler 9260AA
+kind: kistler8
+channels: [{label: fx12}, {label: fx34}, {label: fy14}, {label: fy23},
+           {label: fz1}, {label: fz2}, {label: fz3}, {label: fz4}]
+size_m: [0.6, 0.5]
+origin_m: [0.004, -0.003, 0.041]
+force_range_n: [5000, 5000, 10000]
+moment_range_nm: [2000, 2000, 1000]
+kistler: {a_m: 0.21, b_m: 0.16, az0_m: 0.041}
+"""
+
+
+def test_kistler_type3_export_reproduces_the_fitted_forces(tmp_path: Path) -> None:
+    """An eight-channel Kistler calibration (a 6×8 matrix with sensitivity and crosstalk errors
+    the Kistler formulas cannot express) exported as TYPE 3: ezc3d and the project's own C3D
+    reader (protocols.gait, which the gait replay uses) give back C v, the fitted forces."""
+    from calibration.plate import load_plate
+    from protocols.gait import read_grf_c3d
+
+    (tmp_path / "k.yaml").write_text(KISTLER_PLATE)
+    plate = load_plate(tmp_path / "k.yaml")
+    rng = np.random.default_rng(7)
+    C = plate.nominal_C() @ (np.eye(8) + rng.normal(0.0, 0.02, (8, 8)))
+    n = 2000                                            # 2 s at 1 kHz: quiet, then a push
+    t = np.arange(n) / plate.sample_rate_hz
+    load = 800.0 * np.clip((t - 0.6) / 0.3, 0.0, 1.0)
+    v = np.column_stack([0.02 * load, 0.01 * load, -0.03 * load, 0.0 * load,
+                         0.2 * load, 0.3 * load, 0.25 * load, 0.25 * load]) \
+        * np.array([ch.scale for ch in plate.channels]) ** -1     # the raw channels
+    w = v @ C.T                                         # the fitted wrench about O
+    corners = plate.corners_F() @ c3d_export.R_GF.T
+    path = tmp_path / "kistler.c3d"
+    c3d_export.write_c3d(path, plate, C, v, corners)
+    c = ezc3d.c3d(str(path), extract_forceplat_data=True)
+    fp = c["parameters"]["FORCE_PLATFORM"]
+    assert int(fp["TYPE"]["value"][0]) == 3
+    assert list(c["parameters"]["ANALOG"]["LABELS"]["value"]) == list(KISTLER_CHANNELS)
+    platform = c["data"]["platform"][0]
+    expected_f = c3d_export.R_GF @ w[:, :3].T
+    # float32 channels: 1e-5 of the peak.
+    assert np.allclose(platform["force"], expected_f, atol=1e-5 * np.abs(expected_f).max())
+    origin = np.array(plate.origin_m)
+    m_c = (w[:, 3:] + np.cross(origin, w[:, :3])).T     # about the surface centre, as TYPE 4
+    assert np.allclose(platform["moment"], c3d_export.R_GF @ m_c,
+                       atol=1e-5 * np.abs(m_c).max())
+    grf = read_grf_c3d(path, 0)
+    assert grf.fz.max() == pytest.approx(w[:, 2].max(), rel=1e-5)
+    # The reader flips so that loading is positive: Fz up to 800 N, shear in the same frame.
+    assert np.allclose(np.abs(grf.fx), np.abs(expected_f[0]), atol=1e-4 * 800.0)
+    assert np.allclose(np.abs(grf.fy), np.abs(expected_f[1]), atol=1e-4 * 800.0)

@@ -34,7 +34,10 @@ class ForcePlateContact(_Env):
 
     The tool tip (``tool_length_m`` above the sensor origin along its z axis) meets the plate's
     horizontal lower face at ``plate_height_m`` (base frame). Normal spring-damper, one-sided
-    (the contact can open); tangential viscous drag models the tip's grip.
+    (the contact can open); tangential viscous drag models the tip's grip. With
+    ``tangential_stiffness_n_per_m`` > 0 the tip also sticks by static friction (Coulomb,
+    ``friction_coefficient``): a tilted push then loads the plate in shear, as a calibration
+    needs to identify the Fx/Fy columns; 0 (the default) keeps the drag alone.
     """
 
     kind: Literal["plate"] = "plate"
@@ -43,11 +46,14 @@ class ForcePlateContact(_Env):
     damping_n_s_per_m: NonNeg = 2.0e3
     tangential_damping_n_s_per_m: NonNeg = 5.0e3
     tool_length_m: NonNeg = 0.02
+    tangential_stiffness_n_per_m: NonNeg = 0.0
+    friction_coefficient: NonNeg = 0.5
 
     def pack(self) -> np.ndarray:
         env = np.zeros(16)
-        env[:6] = (physics.ENV_PLATE, self.plate_height_m, self.stiffness_n_per_m,
-                   self.damping_n_s_per_m, self.tangential_damping_n_s_per_m, self.tool_length_m)
+        env[:8] = (physics.ENV_PLATE, self.plate_height_m, self.stiffness_n_per_m,
+                   self.damping_n_s_per_m, self.tangential_damping_n_s_per_m, self.tool_length_m,
+                   self.tangential_stiffness_n_per_m, self.friction_coefficient)
         return env
 
 

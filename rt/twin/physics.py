@@ -644,8 +644,11 @@ def environment_wrench(env, bodies, rot, pos, twist, qd, env_state, wrench_s, ta
     my = 0.0
     mz = 0.0
     if kind == ENV_PLATE:
-        # env: [1, z_plate, k_n, c_n, c_t, tool_length]: the tool tip, ``tool_length`` along the
-        # sensor z axis above its origin, presses a horizontal rigidly-mounted plate from below.
+        # env: [1, z_plate, k_n, c_n, c_t, tool_length, k_t, mu]: the tool tip, ``tool_length``
+        # along the sensor z axis above its origin, presses a horizontal rigidly-mounted plate
+        # from below. Tangentially: viscous drag c_t, and with k_t > 0 static friction — a
+        # spring k_t to where the tip stuck (env_state[1:3], base x, y), slipping when its force
+        # exceeds mu times the normal force (the anchor is dragged to the friction cone's edge).
         tool = env[5]
         tipx = rot[0, 2] * tool
         tipy = rot[1, 2] * tool
@@ -658,6 +661,25 @@ def environment_wrench(env, bodies, rot, pos, twist, qd, env_state, wrench_s, ta
             fn = max(fn, 0.0)                       # the contact pushes, never pulls
             fx = -env[4] * (vox + tvx)
             fy = -env[4] * (voy + tvy)
+            k_t = env[6]
+            if k_t > 0.0:
+                px = pos[0] + obx + tipx
+                py = pos[1] + oby + tipy
+                if env_state[0] == 0.0:             # contact begins: the tip sticks here
+                    env_state[1] = px
+                    env_state[2] = py
+                sx_ = -k_t * (px - env_state[1])
+                sy_ = -k_t * (py - env_state[2])
+                cone = env[7] * fn
+                mag = math.sqrt(sx_ * sx_ + sy_ * sy_)
+                if mag > cone:                      # slip: the anchor follows the tip
+                    scale = cone / mag
+                    sx_ *= scale
+                    sy_ *= scale
+                    env_state[1] = px + sx_ / k_t
+                    env_state[2] = py + sy_ / k_t
+                fx += sx_
+                fy += sy_
             fz = -fn
             mx, my, mz = _cross(tipx, tipy, tipz, fx, fy, fz)
             env_state[0] = 1.0

@@ -255,6 +255,7 @@ class TwinPlant:
     def set_environment(self, environment) -> None:
         self.environment = environment
         self.env = environment.pack()
+        self.env_state[:] = 0.0       # a new environment: no contact, no stuck point yet
 
     # ------------------------------------------------------------------ state
     def set_state(self, q, qd=(0.0, 0.0, 0.0)) -> None:

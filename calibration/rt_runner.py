@@ -1,0 +1,186 @@
+"""Campaign trials run by the RT process (``talus calibrate run --backend rt``).
+
+The client's side of :mod:`calibration.rt_program`: it takes control of the robot, heartbeats,
+and for each trial sends ``run calibration_push {plan, trial, out}``; the RT process plays the
+force-controlled push under its supervisor and writes the trial's rows to ``out`` (a temporary
+folder of this runner, on the file system both share, as session recordings are). The runner
+turns them into a :class:`~calibration.trial.TrialData` exactly as the in-process twin runner
+does (:func:`calibration.twin_runner.trial_from_rows`): the ATI and encoders as the loop saw
+them; the plate's channels from the plate's sensing element through the twin plate, on the
+plate's own clock. The operator's move of the plate between sites and its registration are
+simulated here, as on the in-process twin.
+"""
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from calibration.plan import Plan, Trial, expand, force_profile
+from calibration.plate import PlateDescription
+from calibration.rt_program import PROGRAM_NAME, profile_digest
+from calibration.trial import TrialData, TrialRunner
+from calibration.twin_plate import TwinPlate
+from calibration.twin_runner import (
+    TOOL_LENGTH_M,
+    _SiteMoves,
+    sensor_poses,
+    tip_points_B,
+    trial_from_rows,
+)
+from rt.errors import HardwareError, InputError, SafetyTrip
+from rt.ipc.client import RtUnavailableError
+from rt.model import RobotModel
+
+#: Heartbeat period of the runner's client (s): well inside the RT process's timeout.
+HEARTBEAT_S = 0.05
+#: How long the move to a trial's pose holds it before the push (s): the robot settles.
+MOVE_HOLD_S = 0.3
+#: How often the runner looks for the trial file (s).
+POLL_S = 0.1
+#: Beyond the program's duration, how long the runner waits for the trial file (s): the
+#: approach and the return at the sequencer's limits, plus the RT process's own margin.
+WAIT_MARGIN_S = 45.0
+
+
+class RtTrialRunner(TrialRunner):
+    """Trials as ``calibration_push`` programs of the RT process at ``endpoint``."""
+
+    def __init__(self, plate: PlateDescription, twin_plate: TwinPlate, plan: Plan,
+                 endpoint: str, registration: str = "camera", seed: int = 0,
+                 model: RobotModel | None = None,
+                 level_sigma_rad: float | None = math.radians(0.1),
+                 timeout_s: float = 5.0) -> None:
+        from rt.ipc.client import RtClient, default_client_id
+
+        self.plate = plate
+        self.twin_plate = twin_plate
+        self.plan = plan
+        self.trials: dict[str, Trial] = {t.id: t for t in expand(plan, plate.size_m)}
+        self.model = model or RobotModel.load()
+        self.moves = _SiteMoves(registration, seed, level_sigma_rad)
+        self.robot_time_s = 0.0
+        self._t_offset = 0.0
+        self.folder = Path(tempfile.mkdtemp(prefix="talus-calibration-"))
+        self.client = RtClient(endpoint, client_id=default_client_id("calibrate"),
+                               timeout_s=timeout_s)
+        try:
+            self.client.control_acquire("talus calibrate run")
+        except RtUnavailableError:
+            self.close(release=False)
+            raise RtUnavailableError(f"no RT process answers at {endpoint}; start one with "
+                                     "`talus rt serve` (on the twin) first") from None
+        except BaseException:
+            self.close(release=False)
+            raise
+        self.client.start_heartbeat(HEARTBEAT_S)
+
+    def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],
+            profile_n: np.ndarray, dt: float, tilt_rad: np.ndarray | None = None) -> TrialData:
+        # The RT process recomputes the force and the tilt from the plan (IPC messages are
+        # bounded); the force's digest is checked, the tilt is the same function's.
+        trial = self.trials.get(trial_id)
+        if trial is None:
+            raise InputError(f"trial {trial_id!r} is not in the plan {self.plan.name!r}")
+        out = self.folder / f"{trial_id}.npz"
+        out.unlink(missing_ok=True)
+        expected = profile_digest(force_profile(self.plan, trial, dt))
+        if profile_digest(profile_n) != expected:
+            raise InputError(f"trial {trial_id}: its profile is not the plan's")
+        self._move_to(trial_id, pose)
+        started = self.client.run(PROGRAM_NAME, {
+            "plan": self.plan.model_dump(mode="json"), "trial": trial.model_dump(mode="json"),
+            "out": str(out)})
+        deadline = time.monotonic() + float(started["duration_s"]) + WAIT_MARGIN_S
+        while not out.exists():
+            if time.monotonic() > deadline:
+                raise HardwareError(f"trial {trial_id}: the RT process wrote no recording "
+                                    f"within {started['duration_s'] + WAIT_MARGIN_S:.0f} s")
+            time.sleep(POLL_S)
+        with np.load(out, allow_pickle=False) as z:
+            robot, contact = z["robot"], z["contact"]
+            meta = json.loads(str(z["meta"]))
+        out.unlink()
+        if meta["outcome"] != "completed":
+            causes = ", ".join(meta.get("causes", [])) or "no cause recorded"
+            events = "; ".join(f"{e.get('cause')}: {e.get('message')}"
+                               for e in meta.get("events", [])
+                               if e.get("reaction") in ("soft_stop", "hard_stop"))
+            raise SafetyTrip(f"trial {trial_id}: {meta['outcome']} in the RT process "
+                             f"({causes}{'; ' + events if events else ''}); reset the faults "
+                             "(talus rt reset) and run the remaining trials into a new folder")
+        if abs(float(meta["dt"]) - dt) > 1e-12:
+            raise HardwareError(f"trial {trial_id}: the RT process's loop runs at "
+                                f"{1.0 / float(meta['dt']):g} Hz; campaigns are recorded at "
+                                f"{1.0 / dt:g} Hz (rate_hz in its config)")
+        if meta["profile_sha256"] != expected:
+            raise HardwareError(f"trial {trial_id}: the RT process played another profile")
+        rows, true_rows = _common_instants(trial_id, robot, contact)
+        model = self.model
+        z0 = pose[0]
+        p_lvl, R_lvl = sensor_poses(model, np.array([model.kin.ik(z0, 0.0, 0.0).q]))
+        tip_lvl = tip_points_B(p_lvl, R_lvl, TOOL_LENGTH_M)[0]
+        T_true, registered = self.moves.place(tip_lvl, site_xy_m)
+        data = trial_from_rows(trial_id, model, rows, true_rows, T_true, registered,
+                               self.twin_plate, self._t_offset)
+        self.robot_time_s += float(data.t_robot[-1] - data.t_robot[0])
+        self._t_offset = float(data.t_robot[-1]) + 2.0
+        return data
+
+    def _move_to(self, trial_id: str, pose: tuple[float, float, float]) -> None:
+        """Bring the robot to the trial's pose (position control) and wait until it rests
+        there: the push starts from rest at its pose, the plate above the tool."""
+        z, roll, pitch = pose
+        started = self.client.run("move", {"z": z, "roll": roll, "pitch": pitch,
+                                           "hold_s": MOVE_HOLD_S})
+        t0 = time.monotonic()
+        deadline = t0 + float(started["duration_s"]) + WAIT_MARGIN_S
+        seen = False      # the loop takes the request at its next cycle boundary
+        while True:
+            time.sleep(POLL_S)
+            st = self.client.status()
+            if st["state"] != "run":
+                raise SafetyTrip(f"trial {trial_id}: the robot stopped moving to the trial's "
+                                 f"pose ({', '.join(st['causes']) or st['state']}: "
+                                 f"{json.dumps(st.get('latched'))})")
+            if st["phase_name"] != "rest":
+                seen = True
+            elif seen or time.monotonic() - t0 > float(started["duration_s"]) + 2.0:
+                return
+            if time.monotonic() > deadline:
+                raise HardwareError(f"trial {trial_id}: the robot did not reach the trial's "
+                                    "pose in time")
+
+    def close(self, release: bool = True) -> None:
+        try:
+            if release:
+                self.client.stop_heartbeat()
+                try:
+                    self.client.control_release()
+                except (InputError, RtUnavailableError):
+                    pass        # still moving or gone: control lapses with the heartbeat
+        finally:
+            self.client.close()
+            shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def _common_instants(trial_id: str, robot: np.ndarray, contact: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The robot's rows while the program played, and the contact at those instants (both are
+    sampled by the same loop; interpolation only bridges a row the tap's ring skipped)."""
+    if len(contact) < 10 or len(robot) < 10:
+        raise HardwareError(f"trial {trial_id}: the RT process recorded too little "
+                            f"({len(robot)} loop rows, {len(contact)} contact rows)")
+    inside = (robot[:, 0] >= contact[0, 0] - 1e-9) & (robot[:, 0] <= contact[-1, 0] + 1e-9)
+    rows = robot[inside]
+    if len(rows) < 0.9 * len(contact):
+        raise HardwareError(f"trial {trial_id}: the loop's rows cover {len(rows)} of the "
+                            f"{len(contact)} cycles played (the session tap overflowed?)")
+    true_rows = np.column_stack([rows[:, 0]] + [np.interp(rows[:, 0], contact[:, 0],
+                                                          contact[:, k]) for k in range(1, 10)])
+    return rows, true_rows

@@ -1,0 +1,142 @@
+"""Calibration trials through a real RT process (``talus calibrate run --backend rt``): the
+``calibration_push`` program plays each trial under the RT process's supervisor on its twin and
+writes the trial's rows; the campaign folder is then the same as the in-process runners'."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_rt_process import TEST_HEARTBEAT_TIMEOUT_S, start_rt, stop_rt
+
+from calibration import cli as cal_cli
+from calibration.plan import default_plan, expand
+from calibration.plate import TWIN_PLATE_FILE, load_plate
+from calibration.rt_program import PROGRAM_NAME
+from calibration.trial import TrialData, read_campaign
+from rt.errors import InputError
+from rt.ipc.client import RtClient
+
+#: A short plan: two load levels up and down at the centre and one tilted push, so a trial
+#: lasts a few seconds of real time.
+PLAN = default_plan(loads_n=[200.0, 600.0], baseline_s=0.5, steps={"ramp_s": 0.3, "hold_s": 0.6},
+                    tilted=[{"roll_deg": 3.0, "pitch_deg": 0.0, "load_n": 400.0}],
+                    registration="nominal")
+
+
+def _config(tmp_path: Path, max_force_n: float) -> str:
+    """The tests' tolerant RT config (see tests/test_rt_process.tolerant_config) with the
+    calibration's force limit."""
+    path = tmp_path / f"rt-{max_force_n:g}.yaml"
+    path.write_text(f"schema_version: 1\nheartbeat_timeout_s: {TEST_HEARTBEAT_TIMEOUT_S}\n"
+                    "robot_limits:\n  deadline_overruns: 1000\n  max_tracking_error_m: 0.05\n"
+                    f"patient_limits:\n  max_force_n: {max_force_n}\n")
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def rt_calibration(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("rtcal")
+    proc, endpoint, _ = start_rt("--config", _config(tmp, 1000.0))
+    try:
+        yield endpoint, tmp
+    finally:
+        stop_rt(proc)
+
+
+def _trial_ids() -> tuple[str, str]:
+    trials = expand(PLAN, load_plate(TWIN_PLATE_FILE).size_m)
+    centre = next(t for t in trials if t.profile.value == "steps" and t.site_xy_m == (0.0, 0.0))
+    tilted = next(t for t in trials if t.profile.value == "tilted")
+    return centre.id, tilted.id
+
+
+def test_campaign_trials_run_through_the_rt_process(rt_calibration, capsys) -> None:
+    endpoint, tmp = rt_calibration
+    plan_file = tmp / "plan.json"
+    plan_file.write_text(json.dumps(PLAN.model_dump(mode="json")))
+    centre, tilted = _trial_ids()
+    for attempt in range(2):
+        out = tmp / f"campaign-{attempt}"
+        code = cal_cli._guard(cal_cli._run)(cal_cli_args(
+            plan=str(plan_file), out=str(out), backend="rt", endpoint=endpoint,
+            trials=f"{centre},{tilted}"))
+        printed = json.loads(capsys.readouterr().out)
+        # On a loaded machine the frozen-encoder check can trip as a move starts (the case is
+        # described in the closing note; issue 15 makes that check load-aware): acknowledge it
+        # and run the campaign again into a new folder, as the operator would.
+        if code == 0 or "encoder_frozen" not in printed.get("error", "") or attempt:
+            break
+        _acknowledge(endpoint)
+    assert code == 0, printed
+    assert printed["trials"] == 2 and printed["backend"] == "rt"
+    index = read_campaign(out)
+    assert index["runner"] == "RtTrialRunner"
+    plate = load_plate(TWIN_PLATE_FILE)
+    for trial_id, load_levels, roll in ((centre, (200.0, 600.0), 0.0), (tilted, (400.0,), 3.0)):
+        d = TrialData.load(out / "trials" / f"{trial_id}.npz")
+        # The robot's side: the ATI's load along the tool (−Fz in S) tracks the reference on
+        # the holds within 5 % + 10 N (force control on the twin, noise, the hold's start).
+        held = np.abs(np.gradient(d.force_ref, d.t_robot)) < 1.0
+        for level in load_levels:
+            at = held & (np.abs(d.force_ref - level) < 1.0)
+            assert at.sum() > 200, (trial_id, level)
+            measured = float(np.median(-d.ati[at, 2]))
+            assert abs(measured - level) < 0.05 * level + 10.0, (trial_id, level, measured)
+        # The pose held: the sensor's z axis tilted by the trial's roll (within 0.3°).
+        R = d.R_BS[len(d.R_BS) // 2].reshape(3, 3)
+        assert math.degrees(math.atan2(-R[1, 2], R[2, 2])) == pytest.approx(roll, abs=0.3)
+        # The plate's side: its channels through the nominal matrix give the load the robot
+        # applied (the twin plate's sensitivity and crosstalk errors are within ±5 %).
+        # The plate's side: its channels through the nominal matrix give the load the robot
+        # applied (the twin plate's sensitivity and crosstalk errors are within ±5 %; its
+        # zero offset is the first half-second's mean: the baseline).
+        v = d.channels - d.channels[: int(0.4 * plate.sample_rate_hz)].mean(axis=0)
+        fz_plate = np.abs((v @ plate.nominal_C().T)[:, 2])
+        peak = max(load_levels)
+        assert float(np.percentile(fz_plate, 99)) == pytest.approx(peak, rel=0.06, abs=15.0)
+        # Both clocks cover the trial (the plate's own clock is offset and drifts).
+        assert d.t_plate[-1] - d.t_plate[0] == pytest.approx(d.t_robot[-1] - d.t_robot[0],
+                                                             abs=0.05)
+
+
+def _acknowledge(endpoint: str) -> None:
+    with RtClient(endpoint, timeout_s=5.0) as client:
+        client.control_acquire("test: acknowledge")
+        latched = [f["id"] for f in client.status()["latched"]]
+        client.reset(latched)
+        client.control_release()
+
+
+def cal_cli_args(**kw):
+    import argparse
+
+    defaults = {"plate": None, "seed": cal_cli.DEFAULT_SEED, "trials": None, "endpoint": None}
+    return argparse.Namespace(**{**defaults, **kw})
+
+
+def test_the_program_refuses_what_it_cannot_play_and_changes_nothing(rt_calibration) -> None:
+    endpoint, tmp = rt_calibration
+    centre, _ = _trial_ids()
+    trial = next(t for t in expand(PLAN, load_plate(TWIN_PLATE_FILE).size_m) if t.id == centre)
+    heavy = PLAN.model_copy(update={"loads_n": [200.0, 1500.0]})
+    args = {"plan": heavy.model_dump(mode="json"), "trial": trial.model_dump(mode="json"),
+            "out": str(tmp / "heavy.npz")}
+    with RtClient(endpoint, timeout_s=5.0) as client:
+        client.control_acquire("test")
+        with pytest.raises(InputError, match="1500 N, above the RT process's force limit 1000"):
+            client.run(PROGRAM_NAME, args)
+        with pytest.raises(InputError, match="unknown parameter"):
+            client.run(PROGRAM_NAME, {**args, "speed": 2})
+        (tmp / "exists.npz").write_bytes(b"theirs")
+        with pytest.raises(InputError, match="never overwrites"):
+            client.run(PROGRAM_NAME, {**args, "plan": PLAN.model_dump(mode="json"),
+                                      "out": str(tmp / "exists.npz")})
+        with pytest.raises(InputError, match="loads_n"):
+            client.run(PROGRAM_NAME, {**args, "plan": {**args["plan"], "loads_n": [-5.0]}})
+        assert client.status()["phase_name"] == "rest"
+        client.control_release()
+    assert (tmp / "exists.npz").read_bytes() == b"theirs"
+    assert not (tmp / "heavy.npz").exists()
