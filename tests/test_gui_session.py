@@ -82,7 +82,7 @@ def test_clinician_flow_refusal_run_stop_acknowledge_review(gui, qtbot):
     qtbot.waitUntil(lambda: run.session_id is not None or bool(run.last_error), timeout=WAIT_MS)
     assert run.session_id is not None, run.last_error
     frames = run.frames
-    qtbot.waitUntil(lambda: run.frames > frames + 20 and len(run._buf["force"]) > 50,
+    qtbot.waitUntil(lambda: run.frames > frames + 20 and run.samples_shown > 50,
                     timeout=30_000)
     qtbot.waitUntil(lambda: window.band.state == "running", timeout=30_000)
     qtbot.keyClick(window, Qt.Key.Key_Escape)          # STOP from the keyboard
