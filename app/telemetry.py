@@ -44,27 +44,28 @@ def _band(extent_neg: float, extent_pos: float) -> tuple[float, float]:
 
 @dataclass
 class _Axis:
-    """One axis' repetition state: a repetition is one visit to each end."""
+    """One axis' repetition state. The angle's zones are "low" (≤ lo) and "high" (≥ hi); a
+    repetition is two zone entries (one visit to each end: neutral → end → other end →
+    neutral, or one period of a back-and-forth guide). Re-entering the zone last visited, e.g.
+    wobbling at an end, is not an entry."""
 
     column: str
     lo_deg: float
     hi_deg: float
-    low_seen: bool = False
-    high_seen: bool = False
-    count: int = 0
+    last_zone: int = 0          # -1 low, +1 high, 0 none yet
+    entries: int = 0
+
+    @property
+    def count(self) -> int:
+        return self.entries // 2
 
     def feed(self, angle_deg: float) -> None:
         if math.isnan(angle_deg):
             return
-        if angle_deg <= self.lo_deg:
-            self.low_seen = True
-        elif angle_deg >= self.hi_deg:
-            self.high_seen = True
-        if self.low_seen and self.high_seen:
-            self.count += 1
-            # The end reached last starts the next repetition's pair (back-and-forth motion).
-            self.low_seen = angle_deg <= self.lo_deg
-            self.high_seen = angle_deg >= self.hi_deg
+        zone = -1 if angle_deg <= self.lo_deg else 1 if angle_deg >= self.hi_deg else 0
+        if zone and zone != self.last_zone:
+            self.last_zone = zone
+            self.entries += 1
 
 
 @dataclass

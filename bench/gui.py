@@ -62,108 +62,8 @@ def _without_gui(endpoint: str, doc: dict[str, Any]) -> dict[str, Any]:
 
 
 def _with_gui(endpoint: str, doc: dict[str, Any], pub: Subscriber) -> dict[str, Any]:
-    from PySide6.QtCore import QTimer
-
-    from app.launch import application
-    from app.main_window import MainWindow
-    from app.patient_context import PatientContext
-    from app.rt_link import RtLink
-    from app.screenshots import settle, wait_until
-    from app.settings import GuiSettings
-
-    application()
-    link = RtLink(endpoint, name="GUI (bench)")
-    window = MainWindow(link, GuiSettings(recordings_dir=tempfile.mkdtemp()))
-    link.start()
-    window.show()
-    wait_until(lambda: link.connected, 30.0, "connecting")
-    window.set_patient(PatientContext("BENCH", 70.0))
-    window.run.prescribe(doc)
-    window.show_page("run")
-    window.run.control_button.click()
-    try:
-        wait_until(window.run.start_button.isEnabled, 30.0, "taking control")
-    except Exception:
-        print(window.run.message.text(), link.last_status, window.run.document is not None)
-        raise
-    settle(1.0)
-
-    gaps: list[float] = []
-    last = [time.monotonic()]
-
-    def probe() -> None:          # a 5 ms timer: the gaps between its runs are the stalls
-        now = time.monotonic()
-        gaps.append(now - last[0])
-        last[0] = now
-
-    timer = QTimer()
-    timer.setInterval(5)
-    timer.timeout.connect(probe)
-    before = link.client.status()
-    first_motion: list[float] = []
-    click = time.monotonic()
-    window.run.start_button.click()
-    wait_until(lambda: window.run.session_id is not None or bool(window.run.last_error),
-               300.0, "the session start")
-    assert window.run.session_id, window.run.last_error
-    replied = time.monotonic()
-    sid = window.run.session_id
-    # The first telemetry sample of this session, as the GUI's link receives it.
-    wait_until(lambda: window.run._latest is not None and window.run._latest.get("session")
-               == sid, 30.0, "the first telemetry of the session")
-    first_motion.append(time.monotonic())
-    frames0, thread_cpu0, proc_cpu0, wall0 = (window.run.frames, time.thread_time(),
-                                              time.process_time(), time.monotonic())
-    last[0] = time.monotonic()
-    timer.start()
-    wait_until(lambda: window.run.session_id is None, 600.0, "the end of the session")
-    timer.stop()
-    wall = time.monotonic() - wall0
-    frames = window.run.frames - frames0
-    thread_cpu = time.thread_time() - thread_cpu0
-    proc_cpu = time.process_time() - proc_cpu0
-    after = link.client.status()
-    stops = [f["cause"] for f in after["latched"]]
-    if stops:
-        link.client.reset()
-
-    # STOP: a second session, stopped by the button after 3 s.
-    wait_until(window.run.start_button.isEnabled, 30.0, "ready for the stop measurement")
-    window.run.start_button.click()
-    wait_until(lambda: window.run.session_id is not None or bool(window.run.last_error), 300.0,
-               "the second session")
-    assert window.run.session_id, window.run.last_error
-    settle(3.0)
-    while pub.recv(0.0) is not None:
-        pass
-    clicked_wall = time.time()
-    window.stops.stop_button.click()
-    event = None
-    end = time.monotonic() + 5.0
-    while event is None and time.monotonic() < end:
-        msg = pub.recv(0.05)
-        if msg and msg.get("cause") == "stop_client":
-            event = msg
-    window.close()
-    link.close()
-    cycles = after["cycles"] - before["cycles"]
-    misses = after["deadline_misses"] - before["deadline_misses"]
-    gaps.sort()
-    return {
-        "session_s": round(wall, 1),
-        "gui_longest_stall_ms": round(1000 * gaps[-1], 1) if gaps else None,
-        "gui_stall_p99_ms": round(1000 * gaps[int(0.99 * (len(gaps) - 1))], 1) if gaps else None,
-        "frames_per_s": round(frames / wall, 1),
-        "gui_thread_cpu_pct": round(100 * thread_cpu / wall, 1),
-        "gui_process_cpu_pct": round(100 * proc_cpu / wall, 1),
-        "cycles": cycles, "deadline_misses": misses,
-        "misses_per_1000": 1000.0 * misses / max(1, cycles), "stops": stops,
-        "start_click_to_reply_s": round(replied - click, 2),
-        "start_click_to_motion_s": round(first_motion[0] - click, 2),
-        "reply_to_motion_ms": round(1000 * (first_motion[0] - replied), 1),
-        "stop_click_to_soft_stop_ms": None if event is None
-        else round(1000 * (event["wall"] - clicked_wall), 1),
-    }
+    from app.gui_bench import gui_session_figures  # Qt lives in app/
+    return gui_session_figures(endpoint, doc, pub, tempfile.mkdtemp(prefix="talus-bench-gui-"))
 
 
 def main() -> None:
@@ -188,7 +88,11 @@ def main() -> None:
     print(f"GUI figures, sine Fz session of {g['session_s']} s, twin in real time, offscreen Qt")
     print(f"  GUI thread longest stall   {g['gui_longest_stall_ms']} ms "
           f"(p99 {g['gui_stall_p99_ms']} ms; target ≤ 50 ms)")
-    print(f"  live plot frame rate       {g['frames_per_s']} frames/s (target ≥ 30)")
+    print(f"  live plot frame rate       {g['frames_per_s']} frames/s (target ≥ 30); frame "
+          f"interval median {g['frame_interval_median_ms']} ms, p99 "
+          f"{g['frame_interval_p99_ms']} ms")
+    print(f"  RunPage.redraw             median {g['redraw_median_ms']} ms, p99 "
+          f"{g['redraw_p99_ms']} ms (GUI thread, painting excluded)")
     print(f"  CPU: GUI thread {g['gui_thread_cpu_pct']} %, GUI process "
           f"{g['gui_process_cpu_pct']} % of one core")
     print(f"  RT deadline misses         without GUI {a['deadline_misses']} / {a['cycles']} "

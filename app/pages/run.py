@@ -7,6 +7,7 @@ The plots are redrawn by a timer at :data:`FRAME_HZ` from the samples the link c
 """
 from __future__ import annotations
 
+import collections
 import time
 from typing import Any
 
@@ -71,6 +72,8 @@ class RunPage(QWidget):
         self.frames = 0
         self.samples_shown = 0
         self._drawn = -1
+        #: (monotonic time, seconds spent) of the recent frames drawn (bench/gui.py's figures)
+        self.frame_log: collections.deque[tuple[float, float]] = collections.deque(maxlen=20000)
         self._latest: dict[str, Any] | None = None
 
         self.protocol_label = QLabel(tr("No protocol prescribed: choose one in Prescribe."))
@@ -295,6 +298,7 @@ class RunPage(QWidget):
         ring = self.link.telemetry
         if ring.written == self._drawn or not self.isVisible():
             return
+        began = time.perf_counter()
         n, col = ring.snapshot()
         self._drawn = n
         if n == 0:
@@ -331,6 +335,7 @@ class RunPage(QWidget):
         if text != self.phase_label.text():
             self.phase_label.setText(text)
         self._show_repetitions()
+        self.frame_log.append((time.monotonic(), time.perf_counter() - began))
 
     def _revise_y(self, series: dict[str, np.ndarray]) -> None:
         """Y ranges from the data shown (and the ROM bands), changed only when the data leave
