@@ -7,9 +7,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import sqlalchemy as sa
-
-from patients.models import User
 from patients.roles import Action, Role
 from patients.service import Actor, ClinicalRecord, _enum, _user, _user_dict
 from rt.errors import InputError
@@ -19,8 +16,8 @@ def set_user_role(record: ClinicalRecord, actor: Actor, username: str,
                   role: Role | str) -> dict[str, Any]:
     """Give ``username`` the role ``role`` (admin only); the user's dict after the change.
 
-    Refuses an admin changing their own role and taking the role from the last active admin:
-    either would leave the record without anyone able to manage accounts.
+    Refuses an admin changing their own role: the acting admin stays one, so the record is
+    never left without anyone able to manage accounts.
     """
     new: Role = _enum(Role, role, "role")
     with record._tx() as db:
@@ -29,12 +26,6 @@ def set_user_role(record: ClinicalRecord, actor: Actor, username: str,
         if username == actor.username:
             raise InputError("an admin cannot change their own role (ask another admin)")
         before = user.role
-        if before == Role.ADMIN.value and new is not Role.ADMIN:
-            admins = db.execute(sa.select(sa.func.count()).select_from(User).where(
-                User.role == Role.ADMIN.value, User.disabled.is_(False))).scalar_one()
-            if admins <= 1 and not user.disabled:
-                raise InputError(f"{username!r} is the last active admin: give another user "
-                                 "the admin role first")
         if before == new.value:
             return _user_dict(user)
         user.role = new.value

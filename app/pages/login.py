@@ -42,6 +42,8 @@ class LoginPage(QWidget):
         self.button = QPushButton(tr("Log in"))
         #: True while the page creates the first administrator (the record has no user)
         self.first_admin = False
+        #: the record answered whether it has users
+        self.checked_users = False
         self.message = QLabel()
         self.message.setWordWrap(True)
         self.message.setStyleSheet("color: #c0262d;")
@@ -111,6 +113,7 @@ class LoginPage(QWidget):
 
     def _done(self, tag: str, actor: object, error: str) -> None:
         if tag == "has_users":
+            self.checked_users = True
             self._setup_mode(not error and actor is False)
             return
         self.button.setEnabled(True)
