@@ -68,6 +68,8 @@ class ReviewPage(QWidget):
             lambda title, suggested: ask_pdf_path(self, title, suggested)
         #: the last report written (its path), and where the next one is suggested
         self.last_report: Path | None = None
+        #: the clinical record's session the last report came from (None: the file alone)
+        self.last_report_session: str | None = None
         self.report_dir = Path.home()
         self._reports = Background("gui-report", self)
         self._reports.done.connect(self._reported)
@@ -181,6 +183,7 @@ class ReviewPage(QWidget):
             self.report_message.setText(tr("No report: %1").replace("%1", error))
             return
         self.last_report = Path(result["out"])
+        self.last_report_session = result["session"]
         self.report_message.setText(tr("Report written: %1 (%2 pages)")
                                     .replace("%1", result["out"])
                                     .replace("%2", str(result["pages"])))
