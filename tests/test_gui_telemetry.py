@@ -124,9 +124,9 @@ def test_ring_counts_only_the_running_session_while_it_plays():
 
 
 def test_run_page_draws_the_ring_and_shows_the_repetitions(qtbot):
+    from app.pages.run import WINDOW_S, RunPage
     from app.patient_context import PatientContext
     from app.rt_link import RtLink
-    from app.pages.run import WINDOW_S, RunPage
 
     link = RtLink("tcp://127.0.0.1:9")      # not started: nothing is contacted
     try:

@@ -17,12 +17,12 @@ EXPECTED = {"prescribe", "run", "review", "settings", "run_live", "stopped"}
 
 
 def _expected() -> set[str]:
-    """Log in and Patients are rendered when the clinical record is installed."""
+    """Log in, Patients and Users are rendered when the clinical record is installed."""
     try:
         import patients.service  # noqa: F401
     except ImportError:
         return EXPECTED
-    return EXPECTED | {"login", "patients"}
+    return EXPECTED | {"login", "patients", "users"}
 
 
 def _distinct_colours(image: QImage, step: int = 17) -> int:
