@@ -1,6 +1,6 @@
 """The main window: status band on top, the page rail on the left, STOP and E-STOP at the right
-edge on every page (GUI.md). Pages are one click (or Ctrl+1…) away each; the rail leaves room
-for Calibrate (engineer role) when the calibration issue lands."""
+edge on every page (GUI.md). Pages are one click (or Ctrl+1…) away each; Calibrate shows for
+the calibration engineer, Users for the administrator."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -36,7 +36,8 @@ SCREEN_SIZE = (1366, 768)
 RAIL_WIDTH_PX = 150
 #: The pages in rail order (screenshots are named after them); login, patients and users (the
 #: admin's) come with a clinical record.
-PAGE_KEYS = ("login", "patients", "prescribe", "run", "review", "settings", "users")
+PAGE_KEYS = ("login", "patients", "prescribe", "run", "review", "calibrate", "settings",
+             "users")
 
 
 class MainWindow(QMainWindow):
@@ -58,6 +59,9 @@ class MainWindow(QMainWindow):
         self.review = ReviewPage(rec_dir, settings=settings, record=record,
                                  actor=lambda: self.actor)
         self.settings_page = SettingsPage(settings, settings_path)
+        from app.pages.calibrate import CalibratePage
+        self.calibrate = CalibratePage(settings=settings, record=record,
+                                       actor=lambda: self.actor)
         self.pages: dict[str, QWidget] = {}
         self.stack = QStackedWidget()
         self.rail = QVBoxLayout()
@@ -76,6 +80,7 @@ class MainWindow(QMainWindow):
         entries += [("prescribe", tr("Prescribe"), self.prescribe),
                    ("run", tr("Run"), self.run),
                    ("review", tr("Review"), self.review),
+                   ("calibrate", tr("Calibrate"), self.calibrate),
                    ("settings", tr("Settings"), self.settings_page)]
         if record is not None:
             from app.pages.users import UsersPage
@@ -179,6 +184,8 @@ class MainWindow(QMainWindow):
             button.setEnabled(key == "login" or logged_in)
         self.rail_buttons["login"].setVisible(not logged_in)
         self.rail_buttons["users"].setVisible(self.may("users.manage"))
+        # The calibration engineer's wizard (the record stores what it certifies).
+        self.rail_buttons["calibrate"].setVisible(self.may("calibration.write"))
         self.logout_button.setVisible(logged_in)
         self.run.may_run = self.may("session.run")
         self.run.update_buttons()

@@ -13,7 +13,7 @@ from pathlib import Path
 import gui_support  # noqa: F401  (offscreen for this process; the child uses xcb)
 from PySide6.QtGui import QImage
 
-EXPECTED = {"prescribe", "run", "review", "settings", "run_live", "stopped"}
+EXPECTED = {"prescribe", "run", "review", "calibrate", "settings", "run_live", "stopped"}
 
 
 def _expected() -> set[str]:
