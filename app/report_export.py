@@ -106,3 +106,13 @@ def ask_pdf_path(parent: Any, title: str, suggested: Path) -> Path | None:
     name, _filter = QFileDialog.getSaveFileName(parent, title, str(suggested), "PDF (*.pdf)",
                                                 options=options)
     return Path(name) if name else None
+
+
+def open_file(path: Path | None) -> bool:
+    """Open ``path`` with the desktop's viewer (PDF reader); False when there is none."""
+    if path is None:
+        return False
+    from PySide6.QtCore import QUrl
+    from PySide6.QtGui import QDesktopServices
+
+    return bool(QDesktopServices.openUrl(QUrl.fromLocalFile(str(path))))

@@ -96,13 +96,13 @@
     </message>
     <message>
         <location filename="../field_labels.py" line="32"/>
-        <location filename="../pages/patients.py" line="121"/>
+        <location filename="../pages/patients.py" line="127"/>
         <source>Maximum force (N)</source>
         <translation>Fuerza máxima (N)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="33"/>
-        <location filename="../pages/patients.py" line="122"/>
+        <location filename="../pages/patients.py" line="128"/>
         <source>Maximum angular speed (°/s)</source>
         <translation>Velocidad angular máxima (°/s)</translation>
     </message>
@@ -118,25 +118,25 @@
     </message>
     <message>
         <location filename="../field_labels.py" line="35"/>
-        <location filename="../pages/patients.py" line="118"/>
+        <location filename="../pages/patients.py" line="124"/>
         <source>Dorsiflexion (°)</source>
         <translation>Dorsiflexión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="35"/>
-        <location filename="../pages/patients.py" line="119"/>
+        <location filename="../pages/patients.py" line="125"/>
         <source>Plantarflexion (°)</source>
         <translation>Plantarflexión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="36"/>
-        <location filename="../pages/patients.py" line="120"/>
+        <location filename="../pages/patients.py" line="126"/>
         <source>Inversion (°)</source>
         <translation>Inversión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="36"/>
-        <location filename="../pages/patients.py" line="120"/>
+        <location filename="../pages/patients.py" line="126"/>
         <source>Eversion (°)</source>
         <translation>Eversión (°)</translation>
     </message>
@@ -306,66 +306,71 @@
         <translation>Fin (s)</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="49"/>
+        <location filename="../main_window.py" line="50"/>
         <source>talus — rehabilitation robot</source>
         <extracomment>The clinic touchscreen (issue 14): everything fits without horizontal scrolling. The pages in rail order (screenshots are named after them); login, patients and users (the admin&apos;s) come with a clinical record.</extracomment>
         <translation>talus — robot de rehabilitación</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="74"/>
+        <location filename="../main_window.py" line="78"/>
         <location filename="../pages/login.py" line="42"/>
         <location filename="../pages/login.py" line="88"/>
         <source>Log in</source>
         <translation>Iniciar sesión</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="75"/>
+        <location filename="../main_window.py" line="79"/>
         <source>Patients</source>
         <translation>Pacientes</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="76"/>
+        <location filename="../main_window.py" line="80"/>
         <source>Prescribe</source>
         <translation>Prescribir</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="77"/>
+        <location filename="../main_window.py" line="81"/>
         <source>Run</source>
         <translation>Ejecutar</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="78"/>
+        <location filename="../main_window.py" line="82"/>
         <source>Review</source>
         <translation>Revisar</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="79"/>
+        <location filename="../main_window.py" line="83"/>
+        <source>Calibrate</source>
+        <translation>Calibrar</translation>
+    </message>
+    <message>
+        <location filename="../main_window.py" line="84"/>
         <source>Settings</source>
         <translation>Ajustes</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="83"/>
+        <location filename="../main_window.py" line="88"/>
         <location filename="../pages/users.py" line="122"/>
         <source>Users</source>
         <translation>Usuarios</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="89"/>
+        <location filename="../main_window.py" line="94"/>
         <source>Log out</source>
         <translation>Cerrar sesión</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="91"/>
+        <location filename="../main_window.py" line="96"/>
         <source>Logged out.</source>
         <translation>Sesión cerrada.</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="107"/>
+        <location filename="../main_window.py" line="112"/>
         <source>Locked after %1 min without use.</source>
         <translation>Bloqueado tras %1 min sin uso.</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="240"/>
+        <location filename="../main_window.py" line="247"/>
         <source>Reset refused: %1</source>
         <translation>Rearme rechazado: %1</translation>
     </message>
@@ -376,7 +381,7 @@
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="97"/>
-        <location filename="../pages/review.py" line="104"/>
+        <location filename="../pages/review.py" line="114"/>
         <location filename="../pages/run.py" line="107"/>
         <source>time (s)</source>
         <translation>tiempo (s)</translation>
@@ -434,14 +439,14 @@
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="198"/>
-        <location filename="../pages/review.py" line="206"/>
+        <location filename="../pages/review.py" line="218"/>
         <location filename="../pages/run.py" line="116"/>
         <source>plantar(+)/dorsi(−) flexion</source>
         <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="200"/>
-        <location filename="../pages/review.py" line="208"/>
+        <location filename="../pages/review.py" line="220"/>
         <source>roll (+ is inversion of a right foot)</source>
         <translation>balanceo (+ es inversión del pie derecho)</translation>
     </message>
@@ -501,82 +506,82 @@
         <translation>duración %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="84"/>
+        <location filename="../pages/review.py" line="90"/>
         <source>Refresh</source>
         <extracomment>where to save a report: (title, suggested path) → the chosen path, None to cancel the last report written (its path), and where the next one is suggested the clinical record&apos;s session the last report came from (None: the file alone)</extracomment>
         <translation>Actualizar</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="85"/>
+        <location filename="../pages/review.py" line="91"/>
         <source>Open</source>
         <translation>Abrir</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="86"/>
+        <location filename="../pages/review.py" line="92"/>
         <source>Session report (PDF)</source>
         <translation>Informe de la sesión (PDF)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="96"/>
+        <location filename="../pages/review.py" line="106"/>
         <source>Choose a session on the left.</source>
         <translation>Elija una sesión a la izquierda.</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="98"/>
+        <location filename="../pages/review.py" line="108"/>
         <location filename="../pages/run.py" line="92"/>
         <source>Force (N)</source>
         <translation>Fuerza (N)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="99"/>
+        <location filename="../pages/review.py" line="109"/>
         <location filename="../pages/run.py" line="93"/>
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="109"/>
+        <location filename="../pages/review.py" line="119"/>
         <source>Recorded sessions</source>
         <translation>Sesiones grabadas</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="148"/>
+        <location filename="../pages/review.py" line="159"/>
         <source>Reading %1…</source>
         <translation>Leyendo %1…</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="163"/>
+        <location filename="../pages/review.py" line="174"/>
         <source>Save the session report</source>
         <translation>Guardar el informe de la sesión</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="198"/>
+        <location filename="../pages/review.py" line="210"/>
         <source>Cannot open: %1</source>
         <translation>No se puede abrir: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="202"/>
+        <location filename="../pages/review.py" line="214"/>
         <location filename="../pages/run.py" line="111"/>
         <source>reference</source>
         <translation>referencia</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="204"/>
+        <location filename="../pages/review.py" line="216"/>
         <location filename="../pages/run.py" line="113"/>
         <source>measured</source>
         <translation>medida</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="217"/>
+        <location filename="../pages/review.py" line="229"/>
         <source>%1 — patient %2 — %3 s</source>
         <translation>%1 — paciente %2 — %3 s</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="220"/>
+        <location filename="../pages/review.py" line="232"/>
         <source>stops: %1</source>
         <translation>paradas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="223"/>
+        <location filename="../pages/review.py" line="235"/>
         <source>recording cut short (recovered up to its last whole block)</source>
         <translation>grabación interrumpida (recuperada hasta su último bloque completo)</translation>
     </message>
@@ -1063,247 +1068,253 @@
         <translation>Comprobando…</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="53"/>
+        <location filename="../pages/patients.py" line="59"/>
         <source>%1: a number is needed</source>
         <extracomment>Clinical limit fields edited here: (key, label) — degrees from neutral, N, deg/s.</extracomment>
         <translation>%1: se necesita un número</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="82"/>
+        <location filename="../pages/patients.py" line="88"/>
         <source>Search by code</source>
         <extracomment>where to save a report: (title, suggested path) → the chosen path, None to cancel</extracomment>
         <translation>Buscar por código</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="88"/>
+        <location filename="../pages/patients.py" line="94"/>
         <source>automatic when empty</source>
         <translation>automático si se deja vacío</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="91"/>
-        <location filename="../pages/patients.py" line="142"/>
+        <location filename="../pages/patients.py" line="97"/>
+        <location filename="../pages/patients.py" line="151"/>
         <source>right</source>
         <translation>derecho</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="92"/>
-        <location filename="../pages/patients.py" line="142"/>
+        <location filename="../pages/patients.py" line="98"/>
+        <location filename="../pages/patients.py" line="151"/>
         <source>left</source>
         <translation>izquierdo</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="93"/>
-        <location filename="../pages/patients.py" line="143"/>
+        <location filename="../pages/patients.py" line="99"/>
+        <location filename="../pages/patients.py" line="152"/>
         <source>both</source>
         <translation>ambos</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="95"/>
+        <location filename="../pages/patients.py" line="101"/>
         <source>Register patient</source>
         <translation>Registrar paciente</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="97"/>
+        <location filename="../pages/patients.py" line="103"/>
         <source>New patient</source>
         <translation>Nuevo paciente</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="99"/>
+        <location filename="../pages/patients.py" line="105"/>
         <source>Code</source>
         <translation>Código</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="100"/>
-        <location filename="../pages/patients.py" line="152"/>
-        <location filename="../pages/patients.py" line="263"/>
-        <location filename="../pages/patients.py" line="306"/>
+        <location filename="../pages/patients.py" line="106"/>
+        <location filename="../pages/patients.py" line="161"/>
+        <location filename="../pages/patients.py" line="276"/>
+        <location filename="../pages/patients.py" line="319"/>
         <source>Body mass (kg)</source>
         <translation>Masa corporal (kg)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="101"/>
-        <location filename="../pages/patients.py" line="154"/>
+        <location filename="../pages/patients.py" line="107"/>
+        <location filename="../pages/patients.py" line="163"/>
         <source>Affected side</source>
         <translation>Lado afectado</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="102"/>
-        <location filename="../pages/patients.py" line="155"/>
+        <location filename="../pages/patients.py" line="108"/>
+        <location filename="../pages/patients.py" line="164"/>
         <source>Diagnosis (no names)</source>
         <translation>Diagnóstico (sin nombres)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="110"/>
-        <location filename="../pages/patients.py" line="208"/>
+        <location filename="../pages/patients.py" line="116"/>
+        <location filename="../pages/patients.py" line="221"/>
         <source>Choose a patient.</source>
         <translation>Elija un paciente.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="116"/>
+        <location filename="../pages/patients.py" line="122"/>
         <source>Prescribe limits</source>
         <translation>Prescribir límites</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="123"/>
+        <location filename="../pages/patients.py" line="129"/>
         <source>Reason</source>
         <translation>Motivo</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="129"/>
+        <location filename="../pages/patients.py" line="135"/>
         <source>Save the new limits</source>
         <translation>Guardar los nuevos límites</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="134"/>
+        <location filename="../pages/patients.py" line="140"/>
         <source>Progress report (PDF)</source>
         <translation>Informe de evolución (PDF)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="147"/>
+        <location filename="../pages/patients.py" line="143"/>
+        <location filename="../pages/review.py" line="98"/>
+        <source>Open the report</source>
+        <translation>Abrir el informe</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="156"/>
         <source>Save clinical data</source>
         <translation>Guardar los datos clínicos</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="150"/>
+        <location filename="../pages/patients.py" line="159"/>
         <source>Clinical data</source>
         <translation>Datos clínicos</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="153"/>
-        <location filename="../pages/patients.py" line="307"/>
+        <location filename="../pages/patients.py" line="162"/>
+        <location filename="../pages/patients.py" line="320"/>
         <source>Height (cm)</source>
         <translation>Estatura (cm)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="156"/>
+        <location filename="../pages/patients.py" line="165"/>
         <source>Notes (no names)</source>
         <translation>Notas (sin nombres)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="161"/>
+        <location filename="../pages/patients.py" line="170"/>
         <source>Show identifying data (audited)</source>
         <translation>Mostrar datos identificativos (queda registrado)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="166"/>
+        <location filename="../pages/patients.py" line="175"/>
         <source>Use for the session</source>
         <translation>Usar para la sesión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="183"/>
+        <location filename="../pages/patients.py" line="193"/>
         <source>Sessions</source>
         <translation>Sesiones</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="287"/>
+        <location filename="../pages/patients.py" line="300"/>
         <source>Give the four ranges of motion.</source>
         <translation>Indique los cuatro rangos de movimiento.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="326"/>
+        <location filename="../pages/patients.py" line="339"/>
         <source>Save the progress report</source>
         <translation>Guardar el informe de evolución</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="340"/>
-        <location filename="../pages/review.py" line="176"/>
+        <location filename="../pages/patients.py" line="353"/>
+        <location filename="../pages/review.py" line="187"/>
         <source>Writing the report…</source>
         <translation>Escribiendo el informe…</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="348"/>
-        <location filename="../pages/review.py" line="183"/>
+        <location filename="../pages/patients.py" line="361"/>
+        <location filename="../pages/review.py" line="194"/>
         <source>No report: %1</source>
         <translation>Sin informe: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="351"/>
-        <location filename="../pages/review.py" line="187"/>
+        <location filename="../pages/patients.py" line="365"/>
+        <location filename="../pages/review.py" line="199"/>
         <source>Report written: %1 (%2 pages)</source>
         <translation>Informe escrito: %1 (%2 páginas)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="396"/>
+        <location filename="../pages/patients.py" line="410"/>
         <source>Patient %1 registered.</source>
         <translation>Paciente %1 registrado.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="400"/>
+        <location filename="../pages/patients.py" line="414"/>
         <source>Limits saved.</source>
         <translation>Límites guardados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="403"/>
+        <location filename="../pages/patients.py" line="417"/>
         <source>Clinical data saved.</source>
         <translation>Datos clínicos guardados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="407"/>
+        <location filename="../pages/patients.py" line="421"/>
         <source>No identifying data recorded.</source>
         <translation>No hay datos identificativos registrados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="425"/>
+        <location filename="../pages/patients.py" line="439"/>
         <source>Patient %1</source>
         <translation>Paciente %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="426"/>
+        <location filename="../pages/patients.py" line="440"/>
         <source>Body mass: %1 kg</source>
         <translation>Masa corporal: %1 kg</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="427"/>
+        <location filename="../pages/patients.py" line="441"/>
         <source>Height: %1 cm</source>
         <translation>Estatura: %1 cm</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="429"/>
+        <location filename="../pages/patients.py" line="443"/>
         <source>Affected side: %1</source>
         <translation>Lado afectado: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="430"/>
+        <location filename="../pages/patients.py" line="444"/>
         <source>Diagnosis: %1</source>
         <translation>Diagnóstico: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="431"/>
+        <location filename="../pages/patients.py" line="445"/>
         <source>Notes: %1</source>
         <translation>Notas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="441"/>
+        <location filename="../pages/patients.py" line="455"/>
         <source>No limits prescribed yet: a session needs them.</source>
         <translation>Aún no hay límites prescritos: una sesión los necesita.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="445"/>
+        <location filename="../pages/patients.py" line="459"/>
         <source>dorsiflexion</source>
         <translation>dorsiflexión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="446"/>
+        <location filename="../pages/patients.py" line="460"/>
         <source>plantarflexion</source>
         <translation>plantarflexión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="447"/>
+        <location filename="../pages/patients.py" line="461"/>
         <source>inversion</source>
         <translation>inversión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="447"/>
+        <location filename="../pages/patients.py" line="461"/>
         <source>eversion</source>
         <translation>eversión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="450"/>
+        <location filename="../pages/patients.py" line="464"/>
         <source>Limits in force: %1; force ≤ %2 N; speed ≤ %3 °/s — set by %4 on %5</source>
         <translation>Límites vigentes: %1; fuerza ≤ %2 N; velocidad ≤ %3 °/s — fijados por %4 el %5</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="465"/>
+        <location filename="../pages/patients.py" line="479"/>
         <source>No sessions yet.</source>
         <translation>Aún no hay sesiones.</translation>
     </message>
@@ -1408,6 +1419,166 @@
         <location filename="../pages/users.py" line="252"/>
         <source>active</source>
         <translation>activa</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="78"/>
+        <source>empty: the default plan</source>
+        <translation>vacío: el plan por defecto</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="80"/>
+        <source>robot twin (realistic)</source>
+        <translation>gemelo del robot (realista)</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="81"/>
+        <source>plate only (quick dry run)</source>
+        <translation>solo la plataforma (ensayo rápido)</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="85"/>
+        <source>1. Plan the loads</source>
+        <translation>1. Planificar las cargas</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="86"/>
+        <source>2. Run the trials</source>
+        <translation>2. Ejecutar los ensayos</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="87"/>
+        <source>3. Fit the calibration</source>
+        <translation>3. Ajustar la calibración</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="88"/>
+        <source>4. Verify at check sites</source>
+        <translation>4. Verificar en puntos de control</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="89"/>
+        <source>5. Certificate (PDF)</source>
+        <translation>5. Certificado (PDF)</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="97"/>
+        <source>Choose the plate description and a new work folder, then plan.</source>
+        <translation>Elija la descripción de la plataforma y una carpeta de trabajo nueva; después, planifique.</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="109"/>
+        <source>Plate (top view, m)</source>
+        <translation>Plataforma (vista superior, m)</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="116"/>
+        <source>Plate description</source>
+        <translation>Descripción de la plataforma</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="117"/>
+        <source>Work folder (new)</source>
+        <translation>Carpeta de trabajo (nueva)</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="118"/>
+        <source>Loading plan (YAML)</source>
+        <translation>Plan de cargas (YAML)</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="119"/>
+        <source>Run on</source>
+        <translation>Ejecutar en</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="149"/>
+        <source>%1 is not empty: choose a new work folder.</source>
+        <translation>%1 no está vacía: elija una carpeta de trabajo nueva.</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="178"/>
+        <source>Save the calibration certificate</source>
+        <translation>Guardar el certificado de calibración</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="192"/>
+        <source>Working…</source>
+        <translation>Trabajando…</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="199"/>
+        <source>Trial %1 of %2: %3</source>
+        <translation>Ensayo %1 de %2: %3</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="206"/>
+        <source>Step failed: %1</source>
+        <translation>El paso falló: %1</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="212"/>
+        <source>%1 trials at %2 sites (%3 held out for validation), loads %4 N.</source>
+        <translation>%1 ensayos en %2 puntos (%3 reservados para validación), cargas %4 N.</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="218"/>
+        <source>%1 trials run (%2 s of robot time).</source>
+        <translation>%1 ensayos ejecutados (%2 s de tiempo del robot).</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="224"/>
+        <source>PASS</source>
+        <translation>APTO</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="224"/>
+        <source>FAIL</source>
+        <translation>NO APTO</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="227"/>
+        <source>COP error RMS: %1 mm before, %2 mm after.</source>
+        <translation>Error RMS del COP: %1 mm antes, %2 mm después.</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="232"/>
+        <source>Verification passed: COP error RMS %1 mm.</source>
+        <translation>Verificación superada: error RMS del COP %1 mm.</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="233"/>
+        <source>Verification failed: COP error RMS %1 mm.</source>
+        <translation>Verificación no superada: error RMS del COP %1 mm.</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="237"/>
+        <source>Certificate written: %1 (%2 pages)</source>
+        <translation>Certificado escrito: %1 (%2 páginas)</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="248"/>
+        <source>plate</source>
+        <translation>plataforma</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="253"/>
+        <source>training sites</source>
+        <translation>puntos de ajuste</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="254"/>
+        <source>validation sites</source>
+        <translation>puntos de validación</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="266"/>
+        <source>COP error before (mm)</source>
+        <translation>Error del COP antes (mm)</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="267"/>
+        <source>COP error after (mm)</source>
+        <translation>Error del COP después (mm)</translation>
     </message>
 </context>
 </TS>

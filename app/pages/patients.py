@@ -34,7 +34,13 @@ from PySide6.QtWidgets import (
 from app.background import Background
 from app.i18n import tr
 from app.patient_context import PatientContext
-from app.report_export import ask_pdf_path, pdf_target, report_settings, write_progress_report
+from app.report_export import (
+    ask_pdf_path,
+    open_file,
+    pdf_target,
+    report_settings,
+    write_progress_report,
+)
 from app.settings import GuiSettings
 from app.style import TARGET_PX
 from rt.errors import TalusError
@@ -134,6 +140,9 @@ class PatientsPage(QWidget):
         self.report_button = QPushButton(tr("Progress report (PDF)"))
         self.report_button.setObjectName("progressReport")
         self.report_button.clicked.connect(self.make_report)
+        self.open_report_button = QPushButton(tr("Open the report"))
+        self.open_report_button.setEnabled(False)
+        self.open_report_button.clicked.connect(lambda: open_file(self.last_report))
 
         # the clinical data, editable by the roles allowed to (patient.update)
         self.edit_mass = QLineEdit()
@@ -170,7 +179,8 @@ class PatientsPage(QWidget):
         self.message.setWordWrap(True)
         for w in (self.search, self.new_code, self.new_mass, self.new_side, self.new_diagnosis,
                   self.create_button, self.limits_button, self.identity_button,
-                  self.use_button, self.report_button, self.clinical_button,
+                  self.use_button, self.report_button, self.open_report_button,
+                  self.clinical_button,
                   *self.clinical_edits, *self.limit_edits.values()):
             w.setMinimumHeight(TARGET_PX)
         card_widget = QWidget()
@@ -182,7 +192,10 @@ class PatientsPage(QWidget):
         right.addWidget(clinical_box)
         right.addWidget(QLabel(tr("Sessions")))
         right.addWidget(self.sessions)
-        right.addWidget(self.report_button)
+        reports_row = QHBoxLayout()
+        reports_row.addWidget(self.report_button)
+        reports_row.addWidget(self.open_report_button)
+        right.addLayout(reports_row)
         right.addWidget(self.identity_button)
         right.addWidget(self.identity)
         right.addStretch(1)
@@ -348,6 +361,7 @@ class PatientsPage(QWidget):
             self.message.setText(tr("No report: %1").replace("%1", error))
             return
         self.last_report = Path(result["out"])
+        self.open_report_button.setEnabled(True)
         self.message.setText(tr("Report written: %1 (%2 pages)").replace("%1", result["out"])
                              .replace("%2", str(result["pages"])))
 

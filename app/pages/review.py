@@ -25,7 +25,13 @@ from PySide6.QtWidgets import (
 
 from app.background import Background
 from app.i18n import tr
-from app.report_export import ask_pdf_path, pdf_target, report_settings, write_session_report
+from app.report_export import (
+    ask_pdf_path,
+    open_file,
+    pdf_target,
+    report_settings,
+    write_session_report,
+)
 from app.review_data import ReviewData, load_review
 from app.settings import GuiSettings
 from app.style import TARGET_PX
@@ -89,6 +95,10 @@ class ReviewPage(QWidget):
         self.report_button.clicked.connect(self.make_report)
         self.report_message = QLabel()
         self.report_message.setWordWrap(True)
+        self.open_report_button = QPushButton(tr("Open the report"))
+        self.open_report_button.setMinimumHeight(TARGET_PX)
+        self.open_report_button.setEnabled(False)
+        self.open_report_button.clicked.connect(lambda: open_file(self.last_report))
         for b in (self.refresh_button, self.open_button, self.report_button):
             b.setMinimumHeight(TARGET_PX)
         self.refresh_button.clicked.connect(self.refresh)
@@ -113,6 +123,7 @@ class ReviewPage(QWidget):
         buttons.addWidget(self.open_button)
         left.addLayout(buttons)
         left.addWidget(self.report_button)
+        left.addWidget(self.open_report_button)
         left.addWidget(self.report_message)
         right = QVBoxLayout()
         right.addWidget(self.info)
@@ -184,6 +195,7 @@ class ReviewPage(QWidget):
             return
         self.last_report = Path(result["out"])
         self.last_report_session = result["session"]
+        self.open_report_button.setEnabled(True)
         self.report_message.setText(tr("Report written: %1 (%2 pages)")
                                     .replace("%1", result["out"])
                                     .replace("%2", str(result["pages"])))
