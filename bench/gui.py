@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import tempfile
 import threading
 import time
@@ -25,6 +26,10 @@ from pathlib import Path
 from typing import Any
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+# Run as a script, bench/ is sys.path[0] and bench/calibration.py would shadow the calibration
+# package the GUI's Calibrate page imports.
+_HERE = str(Path(__file__).resolve().parent)
+sys.path[:] = [p for p in sys.path if str(Path(p or ".").resolve()) != _HERE]
 
 from protocols.library import LIBRARY_DIR
 from protocols.rt_session import protocol_document
