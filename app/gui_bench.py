@@ -37,6 +37,32 @@ def _ms(values: Any, q: float) -> float | None:
     return None if arr.size == 0 else round(1000.0 * float(np.percentile(arr, q)), 2)
 
 
+def _start(window: MainWindow, cleared: list[str]) -> tuple[dict[str, Any], float]:
+    """Click Start until the session runs (START_ATTEMPTS): a loaded machine's loop may have
+    soft-stopped (deadline_overruns), before or during the pre-flight; the stops are cleared
+    (acknowledged) and listed in ``cleared``. Returns (status before, click time)."""
+    link = window.link
+    assert link is not None
+    for attempt in range(START_ATTEMPTS):
+        latched = link.client.status()["latched"]
+        if latched:
+            link.client.reset([e["id"] for e in latched])
+            cleared += [e["cause"] for e in latched]
+            wait_until(window.run.start_button.isEnabled, 30.0, "the reset")
+        window.run.last_error = ""
+        before = link.client.status()
+        click = time.monotonic()
+        window.run.start_button.click()
+        wait_until(lambda: window.run.session_id is not None or bool(window.run.last_error),
+                   300.0, "the session start")
+        if window.run.session_id is not None or attempt == START_ATTEMPTS - 1:
+            break
+        cleared.append(f"refused: {window.run.last_error}")
+        wait_until(lambda: link.last_status is not None and bool(link.last_status["latched"])
+                   or window.run.start_button.isEnabled(), 30.0, "Start enabled again")
+    return before, click
+
+
 def gui_session_figures(endpoint: str, doc: dict[str, Any], pub: Subscriber,
                         recordings_dir: str) -> dict[str, Any]:
     """Run ``doc`` from the Run page of a real main window on the RT process at ``endpoint``
@@ -72,24 +98,7 @@ def gui_session_figures(endpoint: str, doc: dict[str, Any], pub: Subscriber,
     timer.timeout.connect(probe)
     first_motion: list[float] = []
     cleared: list[str] = []
-    for attempt in range(START_ATTEMPTS):
-        # A loaded machine's loop may have soft-stopped (deadline_overruns), or the
-        # pre-flight run out of time: clear, retry, report.
-        latched = link.client.status()["latched"]
-        if latched:
-            link.client.reset([e["id"] for e in latched])
-            cleared += [e["cause"] for e in latched]
-            wait_until(window.run.start_button.isEnabled, 30.0, "the reset")
-        window.run.last_error = ""
-        before = link.client.status()
-        click = time.monotonic()
-        window.run.start_button.click()
-        wait_until(lambda: window.run.session_id is not None or bool(window.run.last_error),
-                   300.0, "the session start")
-        if window.run.session_id is not None or attempt == START_ATTEMPTS - 1:
-            break
-        cleared.append(f"refused: {window.run.last_error}")
-        wait_until(window.run.start_button.isEnabled, 30.0, "Start enabled again")
+    before, click = _start(window, cleared)
     assert window.run.session_id, window.run.last_error
     replied = time.monotonic()
     sid = window.run.session_id
@@ -118,9 +127,7 @@ def gui_session_figures(endpoint: str, doc: dict[str, Any], pub: Subscriber,
 
     # STOP: a second session, stopped by the button after 3 s.
     wait_until(window.run.start_button.isEnabled, 30.0, "ready for the stop measurement")
-    window.run.start_button.click()
-    wait_until(lambda: window.run.session_id is not None or bool(window.run.last_error), 300.0,
-               "the second session")
+    _start(window, cleared)
     assert window.run.session_id, window.run.last_error
     settle(3.0)
     while pub.recv(0.0) is not None:

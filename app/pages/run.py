@@ -34,8 +34,10 @@ from app.telemetry import RepetitionCounter
 from app.words import event_words
 from rt.ipc.client import RtClient
 
-#: Redraw rate of the live plots, Hz (the issue asks ≥ 30 fps).
-FRAME_HZ = 30
+#: Redraw rate of the live plots, Hz: the issue asks ≥ 30 fps; a 33 ms timer gives at most
+#: 30.3 and any late tick drops below, so the timer runs at 40 (frames with no new telemetry,
+#: 60 Hz, are skipped).
+FRAME_HZ = 40
 #: Seconds of history on the live plots.
 WINDOW_S = 20.0
 
@@ -161,6 +163,7 @@ class RunPage(QWidget):
         layout.addWidget(self.events_label)
 
         self.timer = QTimer(self)
+        self.timer.setTimerType(Qt.TimerType.PreciseTimer)
         self.timer.setInterval(int(1000 / FRAME_HZ))
         self.timer.timeout.connect(self.redraw)
         if link is not None:
@@ -321,7 +324,7 @@ class RunPage(QWidget):
         for p in (self.force_plot, self.angle_plot):
             p.setXRange(max(float(t[0]), t1 - WINDOW_S), t1 + 0.001, padding=0.0)
         self.frames += 1
-        if self.frames % (FRAME_HZ // 2) == 1:
+        if self.frames % (FRAME_HZ // 2) == 1:      # y ranges twice a second
             self._revise_y(series)
         latest = ring.latest or {}
         self._latest = latest
