@@ -118,8 +118,9 @@ def gui_session_figures(endpoint: str, doc: dict[str, Any], pub: Subscriber,
     thread_cpu = time.thread_time() - thread_cpu0
     proc_cpu = time.process_time() - proc_cpu0
     log = list(window.run.frame_log)
-    costs = np.array([c for _, c in log])
-    intervals = np.diff([t for t, _ in log])
+    costs = np.array([c for _, c, _ in log])
+    cpu_costs = np.array([c for _, _, c in log])
+    intervals = np.diff([t for t, _, _ in log])
     after = link.client.status()
     stops = [f["cause"] for f in after["latched"]]
     if stops:
@@ -153,6 +154,7 @@ def gui_session_figures(endpoint: str, doc: dict[str, Any], pub: Subscriber,
         "frame_interval_median_ms": _ms(intervals, 50),
         "frame_interval_p99_ms": _ms(intervals, 99),
         "redraw_median_ms": _ms(costs, 50), "redraw_p99_ms": _ms(costs, 99),
+        "redraw_cpu_median_ms": _ms(cpu_costs, 50), "redraw_cpu_p99_ms": _ms(cpu_costs, 99),
         "gui_thread_cpu_pct": round(100 * thread_cpu / wall, 1),
         "gui_process_cpu_pct": round(100 * proc_cpu / wall, 1),
         "cycles": cycles, "deadline_misses": misses,
@@ -164,3 +166,59 @@ def gui_session_figures(endpoint: str, doc: dict[str, Any], pub: Subscriber,
         "stop_click_to_soft_stop_ms": None if event is None
         else round(1000 * (event["wall"] - clicked_wall), 1),
     }
+
+
+def frame_cost(frames: int = 600, telemetry_hz: float = 60.0,
+               frame_hz: float = 32.0) -> dict[str, Any]:
+    """The Run page's GUI-thread cost per frame without an RT process: synthetic telemetry
+    (a sine force and an ankle ROM swing, ``telemetry_hz``) pushed into the link's ring as the
+    subscriber thread would, then ``redraw`` and the painting it causes (``processEvents``)
+    per frame, ``frames`` times after the 20 s window has filled. CPU time of this thread
+    (``time.thread_time``), so a loaded machine's waiting for a core is not counted.
+    """
+    import math
+
+    from PySide6.QtWidgets import QApplication
+
+    from app.pages.run import WINDOW_S, RunPage
+
+    application()
+    link = RtLink("tcp://127.0.0.1:9")            # never started: nothing is contacted
+    page = RunPage(link)
+    page.timer.stop()                             # frames are driven here
+    page.resize(1100, 640)
+    page.show()
+    page.set_patient(PatientContext("BENCH", 70.0, {
+        "roll_min_deg": -10.0, "roll_max_deg": 10.0, "pitch_min_deg": -15.0,
+        "pitch_max_deg": 15.0, "max_force_n": 600.0, "max_angular_speed_deg_s": 30.0}))
+    t = 0.0
+    dt = 1.0 / telemetry_hz
+
+    def push(until: float) -> None:
+        nonlocal t
+        while t < until:
+            a = math.radians(10.0 * math.sin(2 * math.pi * t / 8.0))
+            link.telemetry.push({
+                "t": t, "force_ref_n": 300 + 100 * math.sin(2 * math.pi * t),
+                "force_n": 300 + 98 * math.sin(2 * math.pi * (t - 0.01)),
+                "pose": [0.63, 0.5 * a, a], "pose_ref": [0.63, 0.5 * a, a],
+                "progress": t / 600.0, "phase": "play", "session": "BENCH"})
+            t += dt
+
+    push(WINDOW_S + 1.0)
+    page.redraw()
+    QApplication.processEvents()
+    cpu, wall = [], []
+    for _ in range(frames):
+        push(t + 1.0 / frame_hz)
+        c0, w0 = time.thread_time(), time.perf_counter()
+        page.redraw()
+        QApplication.processEvents()              # the paint the redraw scheduled
+        cpu.append(time.thread_time() - c0)
+        wall.append(time.perf_counter() - w0)
+    page.close()
+    link.close()
+    return {"frames": frames, "points_per_curve": page.samples_shown,
+            "cpu_median_ms": _ms(cpu, 50), "cpu_p99_ms": _ms(cpu, 99),
+            "wall_median_ms": _ms(wall, 50), "wall_p99_ms": _ms(wall, 99),
+            "cpu_share_at_frame_rate_pct": round(100 * float(np.mean(cpu)) * frame_hz, 1)}
