@@ -1546,41 +1546,46 @@
     </message>
     <message>
         <location filename="../pages/calibrate.py" line="232"/>
+        <source>Not within the thresholds: %1.</source>
+        <translation>Fuera de los umbrales: %1.</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="237"/>
         <source>Verification passed: COP error RMS %1 mm.</source>
         <translation>Verificación superada: error RMS del COP %1 mm.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="233"/>
+        <location filename="../pages/calibrate.py" line="238"/>
         <source>Verification failed: COP error RMS %1 mm.</source>
         <translation>Verificación no superada: error RMS del COP %1 mm.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="237"/>
+        <location filename="../pages/calibrate.py" line="242"/>
         <source>Certificate written: %1 (%2 pages)</source>
         <translation>Certificado escrito: %1 (%2 páginas)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="248"/>
+        <location filename="../pages/calibrate.py" line="253"/>
         <source>plate</source>
         <translation>plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="253"/>
+        <location filename="../pages/calibrate.py" line="258"/>
         <source>training sites</source>
         <translation>puntos de ajuste</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="254"/>
+        <location filename="../pages/calibrate.py" line="259"/>
         <source>validation sites</source>
         <translation>puntos de validación</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="266"/>
+        <location filename="../pages/calibrate.py" line="271"/>
         <source>COP error before (mm)</source>
         <translation>Error del COP antes (mm)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="267"/>
+        <location filename="../pages/calibrate.py" line="272"/>
         <source>COP error after (mm)</source>
         <translation>Error del COP después (mm)</translation>
     </message>

@@ -224,9 +224,14 @@ class CalibratePage(QWidget):
             self.verdict.setText(tr("PASS") if ok else tr("FAIL"))
             self.verdict.setStyleSheet(f"color: {'#1a7f37' if ok else '#c0262d'};")
             m = result["metrics"]
-            self.status.setText(tr("COP error RMS: %1 mm before, %2 mm after.")
-                                .replace("%1", f"{m['before']['cop_rms_mm']:.1f}")
-                                .replace("%2", f"{m['nonlinear']['cop_rms_mm']:.1f}"))
+            text = tr("COP error RMS: %1 mm before, %2 mm after.") \
+                .replace("%1", f"{m['before']['cop_rms_mm']:.1f}") \
+                .replace("%2", f"{m['nonlinear']['cop_rms_mm']:.1f}")
+            failed = result["verdict"].get("failed") or []
+            if failed:
+                text += " " + tr("Not within the thresholds: %1.").replace(
+                    "%1", ", ".join(str(f) for f in failed))
+            self.status.setText(text)
         elif key == "verify":
             ok = bool(result["verdict"]["pass"])
             self.status.setText((tr("Verification passed: COP error RMS %1 mm.") if ok else
