@@ -1,6 +1,6 @@
 """The main window: status band on top, the page rail on the left, STOP and E-STOP at the right
-edge on every page (GUI.md). Pages are one click (or Ctrl+1…) away each; the rail leaves room
-for Calibrate (engineer role) when the calibration issue lands."""
+edge on every page (GUI.md). Pages are one click (or Ctrl+1…) away each; Calibrate shows for
+the calibration engineer, Users for the administrator."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -34,9 +34,10 @@ from app.style import LARGE_PX
 #: The clinic touchscreen (issue 14): everything fits without horizontal scrolling.
 SCREEN_SIZE = (1366, 768)
 RAIL_WIDTH_PX = 150
-#: The pages in rail order (screenshots are named after them); login and patients come with a
-#: clinical record.
-PAGE_KEYS = ("login", "patients", "prescribe", "run", "review", "settings")
+#: The pages in rail order (screenshots are named after them); login, patients and users (the
+#: admin's) come with a clinical record.
+PAGE_KEYS = ("login", "patients", "prescribe", "run", "review", "calibrate", "settings",
+             "users")
 
 
 class MainWindow(QMainWindow):
@@ -55,8 +56,12 @@ class MainWindow(QMainWindow):
         rec_dir = Path(settings.recordings_dir) if settings.recordings_dir else None
         self.prescribe = PrescribePage(link)
         self.run = RunPage(link)
-        self.review = ReviewPage(rec_dir)
+        self.review = ReviewPage(rec_dir, settings=settings, record=record,
+                                 actor=lambda: self.actor)
         self.settings_page = SettingsPage(settings, settings_path)
+        from app.pages.calibrate import CalibratePage
+        self.calibrate = CalibratePage(settings=settings, record=record,
+                                       actor=lambda: self.actor)
         self.pages: dict[str, QWidget] = {}
         self.stack = QStackedWidget()
         self.rail = QVBoxLayout()
@@ -69,13 +74,18 @@ class MainWindow(QMainWindow):
             from app.pages.login import LoginPage
             from app.pages.patients import PatientsPage
             self.login = LoginPage(record)
-            self.patients = PatientsPage(record)
+            self.patients = PatientsPage(record, settings=settings)
             entries += [("login", tr("Log in"), self.login),
                         ("patients", tr("Patients"), self.patients)]
         entries += [("prescribe", tr("Prescribe"), self.prescribe),
                    ("run", tr("Run"), self.run),
                    ("review", tr("Review"), self.review),
+                   ("calibrate", tr("Calibrate"), self.calibrate),
                    ("settings", tr("Settings"), self.settings_page)]
+        if record is not None:
+            from app.pages.users import UsersPage
+            self.users = UsersPage(record)
+            entries.append(("users", tr("Users"), self.users))
         for key, label, page in entries:
             self.add_page(key, label, page)
         self.rail.addStretch(1)
@@ -139,6 +149,7 @@ class MainWindow(QMainWindow):
         self.actor = actor
         self.who.setText(f"{actor.username}\n({actor.role.value})")
         self.patients.set_actor(actor)
+        self.users.set_actor(actor)
         if self.idle is not None:
             self.idle.reset()
         self._apply_role()
@@ -153,6 +164,7 @@ class MainWindow(QMainWindow):
         self.actor = None
         self.who.setText("")
         self.patients.set_actor(None)
+        self.users.set_actor(None)
         self._apply_role()
         self.login.ask(why)
         self.show_page("login")
@@ -171,6 +183,9 @@ class MainWindow(QMainWindow):
         for key, button in self.rail_buttons.items():
             button.setEnabled(key == "login" or logged_in)
         self.rail_buttons["login"].setVisible(not logged_in)
+        self.rail_buttons["users"].setVisible(self.may("users.manage"))
+        # The calibration engineer's wizard (the record stores what it certifies).
+        self.rail_buttons["calibrate"].setVisible(self.may("calibration.write"))
         self.logout_button.setVisible(logged_in)
         self.run.may_run = self.may("session.run")
         self.run.update_buttons()

@@ -11,8 +11,10 @@ threads):
 * a watcher thread asks ``status`` every :attr:`status_period_s` on its own client; a missed
   reply or telemetry older than ``stale_after_s`` is ``connection_changed(False, reason)`` at
   once, and the pages disable motion;
-* a subscriber thread keeps the telemetry; the Run page takes it at its own frame rate
-  (:meth:`take_telemetry`), so 60 Hz telemetry never floods the event loop.
+* a subscriber thread decodes the telemetry into a preallocated ring of numpy columns
+  (:class:`app.telemetry.TelemetryRing`, also counting repetitions); the Run page reads it at
+  its own frame rate, so 60 Hz telemetry never floods the event loop nor costs the GUI thread
+  per-sample work.
 
 The owner's heartbeat comes from a child process (:mod:`app.heartbeat`) that the GUI thread
 ticks: GUI stalls do not starve it, a hung GUI stops it, and when this process dies (SIGKILL
@@ -20,7 +22,6 @@ included) it sends a soft stop at once.
 """
 from __future__ import annotations
 
-import collections
 import threading
 import time
 from collections.abc import Callable
@@ -30,10 +31,11 @@ from typing import Any
 from PySide6.QtCore import QObject, QTimer, Signal
 
 from app.heartbeat import HeartbeatProcess
+from app.telemetry import TelemetryRing
 from rt.errors import TalusError
 from rt.ipc.client import RtClient, Subscriber, default_client_id
 
-#: Telemetry samples kept for the plots (≈ 60 Hz × 30 s).
+#: Telemetry samples kept for the plots (≈ 60 Hz × 33 s).
 TELEMETRY_BUFFER = 2000
 
 
@@ -72,9 +74,10 @@ class RtLink(QObject):
                                      timeout_s=1.0)
         self._pool = ThreadPoolExecutor(max_workers=3, thread_name_prefix="gui-rt")
         self._stop_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-stop")
-        self._telemetry: collections.deque[dict[str, Any]] = collections.deque(
-            maxlen=TELEMETRY_BUFFER)
+        #: the live samples (written by the subscriber thread, read at the frame rate)
+        self.telemetry = TelemetryRing(TELEMETRY_BUFFER)
         self._tlock = threading.Lock()
+        self._beat_lock = threading.Lock()   # the heartbeat child: started by a worker
         self._last_telemetry_mono = 0.0
         self._quit = threading.Event()
         self.connected = False
@@ -104,8 +107,9 @@ class RtLink(QObject):
             if t.is_alive():
                 t.join(timeout=2.0)
         self._tick_timer.stop()
-        if self.heartbeat is not None:
-            self.heartbeat.close()
+        with self._beat_lock:
+            if self.heartbeat is not None:
+                self.heartbeat.close()
         self._pool.shutdown(wait=False, cancel_futures=True)
         self._stop_pool.shutdown(wait=False, cancel_futures=True)
         self.client.close()
@@ -128,17 +132,25 @@ class RtLink(QObject):
             self.replied.emit(tag, result, "")
 
     def take_control(self) -> None:
-        """Become the owner (reply tag ``control``), then heartbeat from the child process."""
-        self.call("control", lambda c: c.control_acquire(self.name))
+        """Become the owner (reply tag ``control``), then heartbeat from the child process
+        (started on the worker too: forking a process the size of the GUI's takes tens of
+        milliseconds the GUI thread must not spend)."""
+        def acquire(c: RtClient) -> dict[str, Any]:
+            reply = c.control_acquire(self.name)
+            with self._beat_lock:
+                if (self.heartbeat is None or not self.heartbeat.alive()) \
+                        and not self._quit.is_set():
+                    beat = HeartbeatProcess(self.endpoint, self.client_id,
+                                            self.heartbeat_period_s)
+                    beat.start()
+                    self.heartbeat = beat
+            return reply
+        self.call("control", acquire)
 
     def _on_control(self, tag: str, result: object, error: str) -> None:
         if tag != "control" or error or self._quit.is_set():
             return
-        if self.heartbeat is None or not self.heartbeat.alive():
-            self.heartbeat = HeartbeatProcess(self.endpoint, self.client_id,
-                                              self.heartbeat_period_s)
-            self.heartbeat.start()
-            self._tick_timer.start()
+        self._tick_timer.start()
 
     def _tick(self) -> None:
         if self.heartbeat is not None:
@@ -153,13 +165,6 @@ class RtLink(QObject):
         self._stop_pool.submit(self._run, "estop", lambda c: c.estop(source), self._stop_client)
 
     # ------------------------------------------------------------------ telemetry
-
-    def take_telemetry(self) -> list[dict[str, Any]]:
-        """The samples received since the last call (GUI thread, at the frame rate)."""
-        with self._tlock:
-            out = list(self._telemetry)
-            self._telemetry.clear()
-        return out
 
     def _listen(self) -> None:
         sub: Subscriber | None = None
@@ -179,8 +184,8 @@ class RtLink(QObject):
                 if msg is None:
                     continue
                 if msg["topic"] == "telemetry":
+                    self.telemetry.push(msg)
                     with self._tlock:
-                        self._telemetry.append(msg)
                         self._last_telemetry_mono = time.monotonic()
                 elif not self._quit.is_set():
                     self.event_received.emit(msg)

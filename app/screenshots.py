@@ -71,9 +71,10 @@ def demo_record(directory: Path) -> tuple[Any, str, str]:
     return record, demo.CLINICIAN, password
 
 
-def log_in_and_choose(window: Any, user: str, password: str, timeout_s: float = 30.0) -> None:
-    """Log in on the login page and use the record's first patient for the session."""
+def log_in(window: Any, user: str, password: str, timeout_s: float = 30.0) -> None:
+    """Log in on the login page."""
     window.show_page("login")
+    wait_until(lambda: window.login.checked_users, timeout_s, "the record's users")
     window.login.user.setText(user)
     window.login.password.setText(password)
     window.login.button.click()
@@ -81,6 +82,11 @@ def log_in_and_choose(window: Any, user: str, password: str, timeout_s: float = 
                and bool(window.login.message.text()), timeout_s, "logging in")
     if window.actor is None:
         raise InputError(f"demo login refused: {window.login.message.text()}")
+
+
+def log_in_and_choose(window: Any, user: str, password: str, timeout_s: float = 30.0) -> None:
+    """Log in on the login page and use the record's first patient for the session."""
+    log_in(window, user, password, timeout_s)
     page = window.patients
     wait_until(lambda: page.list.count() > 0, timeout_s, "the patient list")
     page.list.setCurrentRow(0)
@@ -183,9 +189,17 @@ def render_all(directory: Path, settings: GuiSettings, force: bool = False) -> l
             window.review.open_button.click()
             wait_until(lambda: window.review.data is not None, 60.0, "reading the recording")
             for key in pages:
-                if key != "login":
+                if key not in ("login", "users"):
                     window.show_page(key)
                     shot(key)
+            if "users" in pages:
+                # The Users page is the administrator's: log in as the demo admin.
+                from patients import demo
+                window.lock("")
+                log_in(window, demo.ADMIN, password)
+                wait_until(lambda: window.users.list.count() > 0, 30.0, "the user list")
+                window.show_page("users")
+                shot("users")
         finally:
             window.close()
             link.close()

@@ -162,7 +162,9 @@ class CalibrationRecord(_Open):
     reference_sensor: ReferenceSensor
     registration: Registration
     plan: Plan
-    thresholds: dict[str, float]
+    #: numbers, and lists naming what a threshold covers (calibration.metrics writes
+    #: ``force_pct_fs_axes: [Fx, Fy, Fz]``)
+    thresholds: dict[str, float | list[str]]
     metrics: dict[Literal["before", "linear", "nonlinear"], Metrics]
     verdict: Verdict
     cop_error_map: CopErrorMap
@@ -261,7 +263,8 @@ def _first_page(rec: CalibrationRecord, st: Styles, width: float) -> list[Flowab
     rows: list[list[Any]] = []
     failed_keys = set(v.failed)
     for key, label, digits, unit, tkey in _METRIC_ROWS:
-        thr = rec.thresholds.get(tkey)
+        given = rec.thresholds.get(tkey)
+        thr = float(given) if isinstance(given, (int, float)) else None
         row: list[Any] = [f"{label} ({unit})"]
         for s in stages:
             row.append(fmt(_metric(rec.metrics[s], key), digits))

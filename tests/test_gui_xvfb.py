@@ -13,16 +13,16 @@ from pathlib import Path
 import gui_support  # noqa: F401  (offscreen for this process; the child uses xcb)
 from PySide6.QtGui import QImage
 
-EXPECTED = {"prescribe", "run", "review", "settings", "run_live", "stopped"}
+EXPECTED = {"prescribe", "run", "review", "calibrate", "settings", "run_live", "stopped"}
 
 
 def _expected() -> set[str]:
-    """Log in and Patients are rendered when the clinical record is installed."""
+    """Log in, Patients and Users are rendered when the clinical record is installed."""
     try:
         import patients.service  # noqa: F401
     except ImportError:
         return EXPECTED
-    return EXPECTED | {"login", "patients"}
+    return EXPECTED | {"login", "patients", "users"}
 
 
 def _distinct_colours(image: QImage, step: int = 17) -> int:

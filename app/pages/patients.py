@@ -1,13 +1,18 @@
 """Patients: search by code, register, the patient's card (dosing data, the limits in force in
 clinical terms with who set them and when, the sessions with their outcome), prescribe new
-limits, and — only for roles allowed to, only on request, every read audited by the record —
-the identifying data. "Use for the session" hands the pseudonymous patient to Prescribe/Run.
+limits, edit the clinical data (body mass, height, side, diagnosis, notes: audited by the record,
+refused if someone else saved in between), write the progress report (PDF, to a path the user
+chooses, never over a file), and — only for roles allowed to, only on request, every read
+audited by the record — the identifying data. "Use for the session" hands the pseudonymous
+patient to Prescribe/Run.
 
 The role decides what is enabled (``patients.roles.allowed``); the record enforces it anyway.
 Every record call runs on a worker (:class:`app.background.Background`).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from PySide6.QtCore import Qt, Signal
@@ -29,7 +34,16 @@ from PySide6.QtWidgets import (
 from app.background import Background
 from app.i18n import tr
 from app.patient_context import PatientContext
+from app.report_export import (
+    ask_pdf_path,
+    open_file,
+    pdf_target,
+    report_settings,
+    write_progress_report,
+)
+from app.settings import GuiSettings
 from app.style import TARGET_PX
+from rt.errors import TalusError
 
 #: Clinical limit fields edited here: (key, label) — degrees from neutral, N, deg/s.
 _ROM = ("dorsiflexion_deg", "plantarflexion_deg", "inversion_deg", "eversion_deg")
@@ -50,14 +64,24 @@ class PatientsPage(QWidget):
 
     patient_chosen = Signal(object)
 
-    def __init__(self, record: Any, parent: QWidget | None = None) -> None:
+    def __init__(self, record: Any, parent: QWidget | None = None,
+                 settings: GuiSettings | None = None) -> None:
         super().__init__(parent)
         self.record = record
+        self.settings = settings or GuiSettings()
+        #: where to save a report: (title, suggested path) → the chosen path, None to cancel
+        self.ask_path: Callable[[str, Path], Path | None] = \
+            lambda title, suggested: ask_pdf_path(self, title, suggested)
+        self.last_report: Path | None = None
+        self.report_dir = Path.home()
+        self.reports = Background("gui-progress-report", self)
+        self.reports.done.connect(self._reported)
         self.actor: Any = None
         self.current: dict[str, Any] | None = None
         self.worker = Background("gui-patients", self)
         self.worker.done.connect(self._done)
         self._all: list[dict[str, Any]] = []
+        self.reports_idle = True
 
         # left: search, list, registration
         self.search = QLineEdit()
@@ -113,6 +137,36 @@ class PatientsPage(QWidget):
         limits_form.addRow(self.limits_button)
         self.sessions = QListWidget()
         self.sessions.setStyleSheet("QListWidget::item { min-height: 32px; }")
+        self.report_button = QPushButton(tr("Progress report (PDF)"))
+        self.report_button.setObjectName("progressReport")
+        self.report_button.clicked.connect(self.make_report)
+        self.open_report_button = QPushButton(tr("Open the report"))
+        self.open_report_button.setEnabled(False)
+        self.open_report_button.clicked.connect(lambda: open_file(self.last_report))
+
+        # the clinical data, editable by the roles allowed to (patient.update)
+        self.edit_mass = QLineEdit()
+        self.edit_height = QLineEdit()
+        self.edit_side = QComboBox()
+        for label, value in ((tr("right"), "right"), (tr("left"), "left"),
+                             (tr("both"), "both")):
+            self.edit_side.addItem(label, value)
+        self.edit_diagnosis = QLineEdit()
+        self.edit_notes = QLineEdit()
+        self.clinical_button = QPushButton(tr("Save clinical data"))
+        self.clinical_button.setObjectName("saveClinical")
+        self.clinical_button.clicked.connect(self.save_clinical)
+        clinical_box = QGroupBox(tr("Clinical data"))
+        clinical_form = QFormLayout(clinical_box)
+        clinical_form.addRow(tr("Body mass (kg)"), self.edit_mass)
+        clinical_form.addRow(tr("Height (cm)"), self.edit_height)
+        clinical_form.addRow(tr("Affected side"), self.edit_side)
+        clinical_form.addRow(tr("Diagnosis (no names)"), self.edit_diagnosis)
+        clinical_form.addRow(tr("Notes (no names)"), self.edit_notes)
+        clinical_form.addRow(self.clinical_button)
+        self.clinical_edits: tuple[QWidget, ...] = (
+            self.edit_mass, self.edit_height, self.edit_side, self.edit_diagnosis,
+            self.edit_notes)
         self.identity_button = QPushButton(tr("Show identifying data (audited)"))
         self.identity_button.clicked.connect(self.show_identity)
         self.identity = QLabel()
@@ -125,7 +179,9 @@ class PatientsPage(QWidget):
         self.message.setWordWrap(True)
         for w in (self.search, self.new_code, self.new_mass, self.new_side, self.new_diagnosis,
                   self.create_button, self.limits_button, self.identity_button,
-                  self.use_button, *self.limit_edits.values()):
+                  self.use_button, self.report_button, self.open_report_button,
+                  self.clinical_button,
+                  *self.clinical_edits, *self.limit_edits.values()):
             w.setMinimumHeight(TARGET_PX)
         card_widget = QWidget()
         right = QVBoxLayout(card_widget)
@@ -133,8 +189,13 @@ class PatientsPage(QWidget):
         right.addWidget(self.limits_label)
         right.addWidget(self.use_button)
         right.addWidget(limits_box)
+        right.addWidget(clinical_box)
         right.addWidget(QLabel(tr("Sessions")))
         right.addWidget(self.sessions)
+        reports_row = QHBoxLayout()
+        reports_row.addWidget(self.report_button)
+        reports_row.addWidget(self.open_report_button)
+        right.addLayout(reports_row)
         right.addWidget(self.identity_button)
         right.addWidget(self.identity)
         right.addStretch(1)
@@ -179,7 +240,15 @@ class PatientsPage(QWidget):
             edit.setEnabled(self._may("limits.set"))
         self.identity_button.setVisible(self._may("identity.read"))
         self.identity_button.setEnabled(chosen)
-        self.use_button.setEnabled(chosen and bool(self.current and self.current.get("limits")))
+        has_limits = bool(self.current and self.current.get("limits"))
+        self.use_button.setEnabled(chosen and has_limits)
+        may_edit = self._may("patient.update")
+        for w in self.clinical_edits:
+            w.setEnabled(chosen and may_edit)
+        self.clinical_button.setEnabled(chosen and may_edit)
+        # The progress report compares with the prescribed range: it needs limits.
+        self.report_button.setEnabled(chosen and has_limits and self._may("session.read")
+                                      and self.reports_idle)
 
     # ------------------------------------------------------------------ record calls
 
@@ -241,6 +310,61 @@ class PatientsPage(QWidget):
             return record.set_limits(actor, code, reason=reason, **limits)
         self.worker.call("limits", save)
 
+    def save_clinical(self) -> None:
+        """Save the edited clinical data (audited; refused when the patient changed since it
+        was shown: ``expected_version``). Empty mass or height leaves them as they were."""
+        if self.current is None:
+            return
+        try:
+            mass = _number(self.edit_mass.text(), tr("Body mass (kg)"))
+            height_cm = _number(self.edit_height.text(), tr("Height (cm)"))
+        except ValueError as exc:
+            self.message.setText(str(exc))
+            return
+        changes = {"body_mass_kg": mass,
+                   "height_m": None if height_cm is None else height_cm / 100.0,
+                   "affected_side": self.edit_side.currentData(),
+                   "diagnosis": self.edit_diagnosis.text().strip(),
+                   "notes": self.edit_notes.text().strip()}
+        actor, record = self.actor, self.record
+        code, version = self.current["code"], self.current.get("version")
+        self.worker.call("clinical", lambda: record.update_patient(
+            actor, code, expected_version=version, **changes))
+
+    def make_report(self) -> None:
+        """Ask where, then write the chosen patient's progress report on a worker."""
+        if self.current is None:
+            return
+        code = str(self.current["code"])
+        chosen = self.ask_path(tr("Save the progress report"),
+                               self.report_dir / f"progress-{code}.pdf")
+        if chosen is None:
+            return
+        try:
+            out = pdf_target(chosen)
+            settings = report_settings(self.settings)
+        except TalusError as exc:
+            self.message.setText(str(exc))
+            return
+        self.report_dir = out.parent
+        actor, record = self.actor, self.record
+        self.reports_idle = False
+        self._enable()
+        self.message.setText(tr("Writing the report…"))
+        self.reports.call("progress", lambda: write_progress_report(
+            record, actor, code, out, settings))
+
+    def _reported(self, _tag: str, result: Any, error: str) -> None:
+        self.reports_idle = True
+        self._enable()
+        if error:
+            self.message.setText(tr("No report: %1").replace("%1", error))
+            return
+        self.last_report = Path(result["out"])
+        self.open_report_button.setEnabled(True)
+        self.message.setText(tr("Report written: %1 (%2 pages)").replace("%1", result["out"])
+                             .replace("%2", str(result["pages"])))
+
     def show_identity(self) -> None:
         if self.current is None:
             return
@@ -289,6 +413,9 @@ class PatientsPage(QWidget):
             assert self.current is not None
             self.message.setText(tr("Limits saved."))
             self.open(self.current["code"])
+        elif tag == "clinical":
+            self.message.setText(tr("Clinical data saved."))
+            self.open(result["code"])
         elif tag == "identity":
             ident = result.get("identity")
             self.identity.setText(tr("No identifying data recorded.") if not ident else "\n".join(
@@ -311,8 +438,18 @@ class PatientsPage(QWidget):
         self.card.setText("\n".join([
             tr("Patient %1").replace("%1", p["code"]),
             tr("Body mass: %1 kg").replace("%1", "—" if mass is None else f"{mass:g}"),
+            tr("Height: %1 cm").replace("%1", "—" if p.get("height_m") is None
+                                         else f"{100 * float(p['height_m']):.0f}"),
             tr("Affected side: %1").replace("%1", str(p.get("affected_side") or "—")),
-            tr("Diagnosis: %1").replace("%1", str(p.get("diagnosis") or "—"))]))
+            tr("Diagnosis: %1").replace("%1", str(p.get("diagnosis") or "—")),
+            tr("Notes: %1").replace("%1", str(p.get("notes") or "—"))]))
+        self.edit_mass.setText("" if mass is None else f"{mass:g}")
+        self.edit_height.setText("" if p.get("height_m") is None
+                                 else f"{100 * float(p['height_m']):g}")
+        side_index = self.edit_side.findData(p.get("affected_side"))
+        self.edit_side.setCurrentIndex(max(0, side_index))
+        self.edit_diagnosis.setText(str(p.get("diagnosis") or ""))
+        self.edit_notes.setText(str(p.get("notes") or ""))
         lim = p.get("limits")
         if not lim:
             self.limits_label.setText(tr("No limits prescribed yet: a session needs them."))

@@ -1,11 +1,15 @@
 """Review: a past session from its recording — force (measured solid, reference dashed) and
 the ankle angles, stops marked on the time axis with their cause in words; the plots can be
 zoomed and panned (scrubbed) with the mouse, finger or keyboard. Reading runs on a worker.
-(The report button arrives with the reports issue.)"""
+"Session report (PDF)" writes the opened session's report where the user chooses (never over
+an existing file), from the clinical record's session when it holds this recording; the
+report is drawn on a worker too."""
 from __future__ import annotations
 
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
@@ -19,8 +23,17 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from app.background import Background
 from app.i18n import tr
+from app.report_export import (
+    ask_pdf_path,
+    open_file,
+    pdf_target,
+    report_settings,
+    write_session_report,
+)
 from app.review_data import ReviewData, load_review
+from app.settings import GuiSettings
 from app.style import TARGET_PX
 from app.words import cause_words
 from rt.errors import TalusError
@@ -47,10 +60,25 @@ class ReviewPage(QWidget):
 
     loaded = Signal(object, str)
 
-    def __init__(self, recordings_dir: Path | None, parent: QWidget | None = None) -> None:
+    def __init__(self, recordings_dir: Path | None, parent: QWidget | None = None,
+                 settings: GuiSettings | None = None, record: Any = None,
+                 actor: Callable[[], Any] = lambda: None) -> None:
         super().__init__(parent)
         self.recordings_dir = recordings_dir
+        self.settings = settings or GuiSettings()
+        self.record = record
+        self.actor = actor
         self.data: ReviewData | None = None
+        #: where to save a report: (title, suggested path) → the chosen path, None to cancel
+        self.ask_path: Callable[[str, Path], Path | None] = \
+            lambda title, suggested: ask_pdf_path(self, title, suggested)
+        #: the last report written (its path), and where the next one is suggested
+        self.last_report: Path | None = None
+        #: the clinical record's session the last report came from (None: the file alone)
+        self.last_report_session: str | None = None
+        self.report_dir = Path.home()
+        self._reports = Background("gui-report", self)
+        self._reports.done.connect(self._reported)
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-review")
         self.sessions = QListWidget()
         self.sessions.setMinimumWidth(260)
@@ -61,7 +89,17 @@ class ReviewPage(QWidget):
             Qt.ItemDataRole.UserRole))))
         self.refresh_button = QPushButton(tr("Refresh"))
         self.open_button = QPushButton(tr("Open"))
-        for b in (self.refresh_button, self.open_button):
+        self.report_button = QPushButton(tr("Session report (PDF)"))
+        self.report_button.setObjectName("sessionReport")
+        self.report_button.setEnabled(False)
+        self.report_button.clicked.connect(self.make_report)
+        self.report_message = QLabel()
+        self.report_message.setWordWrap(True)
+        self.open_report_button = QPushButton(tr("Open the report"))
+        self.open_report_button.setMinimumHeight(TARGET_PX)
+        self.open_report_button.setEnabled(False)
+        self.open_report_button.clicked.connect(lambda: open_file(self.last_report))
+        for b in (self.refresh_button, self.open_button, self.report_button):
             b.setMinimumHeight(TARGET_PX)
         self.refresh_button.clicked.connect(self.refresh)
         self.open_button.clicked.connect(self._open_selected)
@@ -84,6 +122,9 @@ class ReviewPage(QWidget):
         buttons.addWidget(self.refresh_button)
         buttons.addWidget(self.open_button)
         left.addLayout(buttons)
+        left.addWidget(self.report_button)
+        left.addWidget(self.open_report_button)
+        left.addWidget(self.report_message)
         right = QVBoxLayout()
         right.addWidget(self.info)
         right.addWidget(self.force_plot, 1)
@@ -124,8 +165,45 @@ class ReviewPage(QWidget):
         except TalusError as exc:
             self.loaded.emit(None, str(exc))
 
+    def make_report(self) -> None:
+        """Ask where, then write the opened session's report on the worker."""
+        data = self.data
+        if data is None:
+            return
+        recording = Path(data.path)
+        chosen = self.ask_path(tr("Save the session report"),
+                               self.report_dir / f"session-{recording.stem}.pdf")
+        if chosen is None:
+            return
+        try:
+            out = pdf_target(chosen)
+            settings = report_settings(self.settings)
+        except TalusError as exc:
+            self.report_message.setText(str(exc))
+            return
+        self.report_dir = out.parent
+        record, actor = self.record, self.actor()
+        self.report_button.setEnabled(False)
+        self.report_message.setText(tr("Writing the report…"))
+        self._reports.call("session", lambda: write_session_report(
+            recording, out, settings, record, actor))
+
+    def _reported(self, _tag: str, result: Any, error: str) -> None:
+        self.report_button.setEnabled(self.data is not None)
+        if error:
+            self.report_message.setText(tr("No report: %1").replace("%1", error))
+            return
+        self.last_report = Path(result["out"])
+        self.last_report_session = result["session"]
+        self.open_report_button.setEnabled(True)
+        self.report_message.setText(tr("Report written: %1 (%2 pages)")
+                                    .replace("%1", result["out"])
+                                    .replace("%2", str(result["pages"])))
+
     def _show(self, data: ReviewData | None, error: str) -> None:
         self.data = data
+        self.report_button.setEnabled(data is not None)
+        self.report_message.setText("")
         self.force_plot.clear()
         self.angle_plot.clear()
         if data is None:

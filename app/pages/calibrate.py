@@ -1,0 +1,286 @@
+"""Calibrate (calibration engineer): a wizard over the calibration workflow — plate file and
+work folder → plan (the sites drawn on the plate) → run the trials on the twin (progress) → fit
+(PASS/FAIL, the COP error map before/after drawn on the plate) → verify at check sites →
+certificate (PDF where the engineer chooses, never over a file; stored in the clinical record
+when there is one). Each step is enabled once the one before it is done; every step runs on a
+worker (:mod:`app.calibration_flow`)."""
+from __future__ import annotations
+
+import datetime as dt
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import QObject, Signal
+from PySide6.QtWidgets import (
+    QComboBox,
+    QFormLayout,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QProgressBar,
+    QPushButton,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app.background import Background
+from app.calibration_flow import BACKENDS, CalibrationFlow, cop_error_points
+from app.i18n import tr
+from app.report_export import ask_pdf_path, pdf_target, report_settings
+from app.settings import GuiSettings
+from app.style import TARGET_PX
+from rt.errors import InputError, TalusError
+
+STEPS = ("plan", "run", "fit", "verify", "certificate")
+
+
+class _Progress(QObject):
+    """Trial progress from the worker to the GUI thread (a queued signal)."""
+
+    changed = Signal(int, int, str)
+
+
+def default_work_folder() -> Path:
+    """``~/talus-calibrations/<UTC time>``: a new folder per calibration."""
+    stamp = dt.datetime.now(dt.UTC).strftime("%Y%m%dT%H%M%SZ")
+    return Path.home() / "talus-calibrations" / stamp
+
+
+class CalibratePage(QWidget):
+    """The calibration wizard."""
+
+    def __init__(self, parent: QWidget | None = None, settings: GuiSettings | None = None,
+                 record: Any = None, actor: Callable[[], Any] = lambda: None) -> None:
+        super().__init__(parent)
+        from calibration.plate import TWIN_PLATE_FILE
+
+        self.settings = settings or GuiSettings()
+        self.record = record
+        self.actor = actor
+        self.flow: CalibrationFlow | None = None
+        self.done: set[str] = set()
+        self.busy = False
+        self.last_error = ""
+        self.last_certificate: Path | None = None
+        self.ask_path: Callable[[str, Path], Path | None] = \
+            lambda title, suggested: ask_pdf_path(self, title, suggested)
+        self.worker = Background("gui-calibration", self)
+        self.worker.done.connect(self._done)
+        self.progress_signal = _Progress(self)
+        self.progress_signal.changed.connect(self._progress)
+
+        self.plate_file = QLineEdit(str(TWIN_PLATE_FILE))
+        self.work_folder = QLineEdit(str(default_work_folder()))
+        self.plan_file = QLineEdit()
+        self.plan_file.setPlaceholderText(tr("empty: the default plan"))
+        self.backend = QComboBox()
+        for key, label in (("twin", tr("robot twin (realistic)")),
+                           ("direct", tr("plate only (quick dry run)"))):
+            self.backend.addItem(label, key)
+        assert {self.backend.itemData(i) for i in range(self.backend.count())} == set(BACKENDS)
+        self.buttons = {
+            "plan": QPushButton(tr("1. Plan the loads")),
+            "run": QPushButton(tr("2. Run the trials")),
+            "fit": QPushButton(tr("3. Fit the calibration")),
+            "verify": QPushButton(tr("4. Verify at check sites")),
+            "certificate": QPushButton(tr("5. Certificate (PDF)")),
+        }
+        for key, b in self.buttons.items():
+            b.setObjectName(f"calibrate:{key}")
+            b.clicked.connect(lambda _c=False, k=key: self.step(k))
+        self.progress = QProgressBar()
+        self.progress.setRange(0, 1)
+        self.progress.setValue(0)
+        self.status = QLabel(tr("Choose the plate description and a new work folder, then "
+                                "plan."))
+        self.status.setWordWrap(True)
+        self.verdict = QLabel()
+        font = self.verdict.font()
+        font.setPointSize(18)
+        font.setBold(True)
+        self.verdict.setFont(font)
+        for w in (self.plate_file, self.work_folder, self.plan_file, self.backend, self.progress,
+                  *self.buttons.values()):
+            w.setMinimumHeight(TARGET_PX)
+
+        self.plot = pg.PlotWidget(title=tr("Plate (top view, m)"))
+        self.plot.setBackground("w")
+        self.plot.setAspectLocked(True)
+        self.plot.showGrid(x=True, y=True, alpha=0.3)
+        self.plot.addLegend(offset=(10, 10))
+
+        form = QFormLayout()
+        form.addRow(tr("Plate description"), self.plate_file)
+        form.addRow(tr("Work folder (new)"), self.work_folder)
+        form.addRow(tr("Loading plan (YAML)"), self.plan_file)
+        form.addRow(tr("Run on"), self.backend)
+        left = QVBoxLayout()
+        left.addLayout(form)
+        for b in self.buttons.values():
+            left.addWidget(b)
+        left.addWidget(self.progress)
+        left.addWidget(self.verdict)
+        left.addWidget(self.status)
+        left.addStretch(1)
+        layout = QHBoxLayout(self)
+        layout.addLayout(left, 2)
+        layout.addWidget(self.plot, 3)
+        self._enable()
+
+    # ------------------------------------------------------------------ steps
+
+    def _enable(self) -> None:
+        for i, key in enumerate(STEPS):
+            ready = all(k in self.done for k in STEPS[:i])
+            self.buttons[key].setEnabled(not self.busy and ready)
+        for w in (self.plate_file, self.work_folder, self.plan_file, self.backend):
+            w.setEnabled(not self.busy and "run" not in self.done)
+
+    def step(self, key: str) -> None:
+        """Run step ``key`` on the worker (its button's slot)."""
+        if self.busy:
+            return
+        if key == "plan":
+            folder = Path(self.work_folder.text().strip()).expanduser()
+            if folder.exists() and any(folder.iterdir()):
+                self.status.setText(tr("%1 is not empty: choose a new work folder.")
+                                    .replace("%1", str(folder)))
+                return
+            self.flow = CalibrationFlow(folder, Path(self.plate_file.text().strip()),
+                                        str(self.backend.currentData()))
+            self.done.clear()
+            self.verdict.setText("")
+        flow = self.flow
+        if flow is None:
+            return
+        job: Callable[[], Any]
+        if key == "plan":
+            plan_path = self.plan_file.text().strip()
+
+            def job() -> Any:
+                text = None
+                if plan_path:
+                    try:
+                        text = Path(plan_path).expanduser().read_text(encoding="utf-8")
+                    except (OSError, UnicodeDecodeError) as exc:
+                        raise InputError(f"plan {plan_path}: cannot read: {exc}") from None
+                return flow.make_plan(text)
+        elif key == "run":
+            job = lambda: flow.run(self.progress_signal.changed.emit)
+        elif key == "fit":
+            job = flow.fit
+        elif key == "verify":
+            job = lambda: flow.verify(progress=self.progress_signal.changed.emit)
+        else:
+            chosen = self.ask_path(tr("Save the calibration certificate"),
+                                   flow.folder / "certificate.pdf")
+            if chosen is None:
+                return
+            try:
+                out = pdf_target(chosen)
+                settings = report_settings(self.settings)
+            except TalusError as exc:
+                self.status.setText(str(exc))
+                return
+            record, actor = self.record, self.actor()
+            job = lambda: flow.certificate(out, settings, record, actor)
+        self.busy = True
+        self.last_error = ""
+        self.status.setText(tr("Working…"))
+        self._enable()
+        self.worker.call(key, job)
+
+    def _progress(self, k: int, n: int, trial: str) -> None:
+        self.progress.setRange(0, n)
+        self.progress.setValue(k + 1)
+        self.status.setText(tr("Trial %1 of %2: %3").replace("%1", str(k + 1))
+                            .replace("%2", str(n)).replace("%3", trial))
+
+    def _done(self, key: str, result: Any, error: str) -> None:
+        self.busy = False
+        if error:
+            self.last_error = error
+            self.status.setText(tr("Step failed: %1").replace("%1", error))
+            self._enable()
+            return
+        self.done.add(key)
+        if key == "plan":
+            self._draw_plan(result)
+            self.status.setText(tr("%1 trials at %2 sites (%3 held out for validation), "
+                                   "loads %4 N.").replace("%1", str(result["trials"]))
+                                .replace("%2", str(len(result["sites"])))
+                                .replace("%3", str(result["held_out"]))
+                                .replace("%4", ", ".join(f"{x:g}" for x in result["loads_n"])))
+        elif key == "run":
+            self.status.setText(tr("%1 trials run (%2 s of robot time).")
+                                .replace("%1", str(result["trials"]))
+                                .replace("%2", f"{result['robot_time_s']:.0f}"))
+        elif key == "fit":
+            self._draw_cop(result)
+            ok = bool(result["verdict"]["pass"])
+            self.verdict.setText(tr("PASS") if ok else tr("FAIL"))
+            self.verdict.setStyleSheet(f"color: {'#1a7f37' if ok else '#c0262d'};")
+            m = result["metrics"]
+            text = tr("COP error RMS: %1 mm before, %2 mm after.") \
+                .replace("%1", f"{m['before']['cop_rms_mm']:.1f}") \
+                .replace("%2", f"{m['nonlinear']['cop_rms_mm']:.1f}")
+            failed = result["verdict"].get("failed") or []
+            if failed:
+                text += " " + tr("Not within the thresholds: %1.").replace(
+                    "%1", ", ".join(str(f) for f in failed))
+            self.status.setText(text)
+        elif key == "verify":
+            ok = bool(result["verdict"]["pass"])
+            self.status.setText((tr("Verification passed: COP error RMS %1 mm.") if ok else
+                                 tr("Verification failed: COP error RMS %1 mm.")).replace(
+                "%1", f"{result['metrics']['nonlinear']['cop_rms_mm']:.1f}"))
+        else:
+            self.last_certificate = Path(result["out"])
+            self.status.setText(tr("Certificate written: %1 (%2 pages)")
+                                .replace("%1", result["out"])
+                                .replace("%2", str(result["pages"])))
+        self._enable()
+
+    # ------------------------------------------------------------------ drawing
+
+    def _outline(self, size_m: tuple[float, float]) -> None:
+        w, h = size_m
+        x = np.array([-w / 2, w / 2, w / 2, -w / 2, -w / 2])
+        y = np.array([-h / 2, -h / 2, h / 2, h / 2, -h / 2])
+        self.plot.plot(x, y, pen=pg.mkPen("#333333", width=2), name=tr("plate"))
+
+    def _draw_plan(self, plan: dict[str, Any]) -> None:
+        self.plot.clear()
+        self._outline(tuple(plan["size_m"]))
+        for held, colour, name in ((False, "#1f5fbf", tr("training sites")),
+                                   (True, "#bf5f1f", tr("validation sites"))):
+            pts = [(x, y) for _n, x, y, h in plan["sites"] if h == held]
+            if pts:
+                xs, ys = zip(*pts, strict=True)
+                self.plot.plot(list(xs), list(ys), pen=None, symbol="o", symbolSize=12,
+                               symbolBrush=colour, name=name)
+
+    def _draw_cop(self, record: dict[str, Any]) -> None:
+        """The COP error per site before (hollow) and after (filled) the calibration: the
+        marker's size is the error (mm)."""
+        self.plot.clear()
+        self._outline(tuple(record["plate"]["size_m"]))
+        for stage, name, filled in (("before", tr("COP error before (mm)"), False),
+                                    ("after", tr("COP error after (mm)"), True)):
+            pts = cop_error_points(record, stage)
+            if not pts:
+                continue
+            xs, ys, err = (np.array(v) for v in zip(*pts, strict=True))
+            sizes = 8 + 4 * np.sqrt(err)
+            colour = "#c0262d" if stage == "before" else "#1a7f37"
+            scatter = pg.ScatterPlotItem(xs, ys, size=sizes, name=name,
+                                         pen=pg.mkPen(colour, width=2),
+                                         brush=pg.mkBrush(colour) if filled else None)
+            self.plot.addItem(scatter)
+            for x, y, e in pts if stage == "after" else ():
+                label = pg.TextItem(f"{e:.1f}", color=colour, anchor=(0, 1))
+                label.setPos(x, y)
+                self.plot.addItem(label)

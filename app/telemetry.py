@@ -1,0 +1,208 @@
+"""Live telemetry for the Run page, decoded off the GUI thread (Qt-free; tested without Qt).
+
+The link's subscriber thread pushes every published sample into a :class:`TelemetryRing`: a
+preallocated numpy array of the plotted columns (SI: s, N, rad), written in place, so the GUI
+thread's frame costs one small copy (:meth:`TelemetryRing.snapshot`) and ``setData`` per curve,
+never per-sample Python work or a growing list. The same thread counts repetitions
+(:class:`RepetitionCounter`) of range-of-motion and active-assist exercises from the measured
+platform angles while the reference is in its ``play`` phase.
+"""
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: The ring's columns, in order (SI units: s, N, rad; progress 0..1).
+COLUMNS = ("t", "force_ref", "force", "roll", "pitch", "roll_ref", "pitch_ref", "progress")
+_COL = {name: i for i, name in enumerate(COLUMNS)}
+#: A repetition's end counts when the angle passes this share of the prescribed amplitude
+#: (half: a patient who reaches half their range did the movement; noise near neutral does not).
+REACH_SHARE = 0.5
+#: With one end at neutral, the neutral end counts within this share of the other end's amplitude.
+NEUTRAL_SHARE = 0.25
+
+
+def _f(x: Any) -> float:
+    """A float, NaN for a missing value (None, or a malformed field)."""
+    try:
+        return math.nan if x is None else float(x)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _band(extent_neg: float, extent_pos: float) -> tuple[float, float]:
+    """(low, high) thresholds for an axis moved ``extent_neg`` below and ``extent_pos`` above
+    neutral (degrees, both ≥ 0)."""
+    hi = REACH_SHARE * extent_pos if extent_pos > 0 else -NEUTRAL_SHARE * extent_neg
+    lo = -REACH_SHARE * extent_neg if extent_neg > 0 else NEUTRAL_SHARE * extent_pos
+    return lo, hi
+
+
+@dataclass
+class _Axis:
+    """One axis' repetition state. The angle's zones are "low" (≤ lo) and "high" (≥ hi); a
+    repetition is two zone entries (one visit to each end: neutral → end → other end →
+    neutral, or one period of a back-and-forth guide). Re-entering the zone last visited, e.g.
+    wobbling at an end, is not an entry."""
+
+    column: str
+    lo_deg: float
+    hi_deg: float
+    last_zone: int = 0          # -1 low, +1 high, 0 none yet
+    entries: int = 0
+
+    @property
+    def count(self) -> int:
+        return self.entries // 2
+
+    def feed(self, angle_deg: float) -> None:
+        if math.isnan(angle_deg):
+            return
+        zone = -1 if angle_deg <= self.lo_deg else 1 if angle_deg >= self.hi_deg else 0
+        if zone and zone != self.last_zone:
+            self.last_zone = zone
+            self.entries += 1
+
+
+@dataclass
+class RepetitionCounter:
+    """Counts repetitions of an exercise from measured platform angles (degrees).
+
+    ``axes`` maps a ring column (``pitch``/``roll``) to its (low, high) thresholds; a
+    repetition on an axis is a visit to each threshold's side, in either order. ``expected``
+    is the prescribed count (None when the protocol does not fix one).
+    """
+
+    axes: dict[str, tuple[float, float]]
+    expected: int | None = None
+    _state: list[_Axis] = field(default_factory=list, repr=False)
+
+    def __post_init__(self) -> None:
+        self._state = [_Axis(col, lo, hi) for col, (lo, hi) in self.axes.items()]
+
+    @classmethod
+    def for_protocol(cls, document: dict[str, Any]) -> RepetitionCounter | None:
+        """The counter for a protocol document, None for kinds without repetitions (force
+        protocols, holds, playback).
+
+        ``ankle_rom``: ``dorsi_plantar`` and ``circuit`` count on pitch (plantarflexion is
+        +pitch, dorsiflexion −pitch), ``inversion_eversion`` on roll (its sign depends on the
+        foot: the smaller of the two amplitudes on both sides), ``repetitions`` per item.
+        ``active_assist``: one repetition per guide period on the first axis.
+        """
+        kind = document.get("kind")
+        if kind == "ankle_rom":
+            amp = document.get("amplitude_deg") or {}
+            seq = list(document.get("sequence") or [])
+            reps = int(document.get("repetitions") or 1)
+        elif kind == "active_assist":
+            amp = document.get("rom_deg") or {}
+            seq = list(document.get("axes") or [])[:1]
+            period = _f(document.get("guide_period_s"))
+            duration = _f(document.get("duration_s"))
+            reps = int(duration // period) if period > 0 and duration > 0 else 0
+        else:
+            return None
+
+        def extent(name: str) -> float:
+            v = _f(amp.get(name))
+            return 0.0 if math.isnan(v) else abs(v)
+        axes: dict[str, tuple[float, float]] = {}
+        pitch_items = sum(1 for s in seq if s in ("dorsi_plantar", "circuit"))
+        roll_items = sum(1 for s in seq if s == "inversion_eversion")
+        if pitch_items:
+            axes["pitch"] = _band(extent("dorsiflexion"), extent("plantarflexion"))
+        if roll_items and "circuit" not in seq:   # a circuit's roll swing is not a repetition
+            side = min(extent("inversion"), extent("eversion")) or \
+                max(extent("inversion"), extent("eversion"))
+            axes["roll"] = _band(side, side)
+        if not axes:
+            return None
+        expected = reps * (pitch_items + (roll_items if "roll" in axes else 0)) \
+            if kind == "ankle_rom" else reps
+        return cls(axes, expected or None)
+
+    @property
+    def count(self) -> int:
+        return sum(a.count for a in self._state)
+
+    def feed(self, pitch_deg: float, roll_deg: float) -> None:
+        for a in self._state:
+            a.feed(pitch_deg if a.column == "pitch" else roll_deg)
+
+
+class TelemetryRing:
+    """The last ``capacity`` telemetry samples as numpy columns, written by the subscriber
+    thread, read by the GUI thread at the frame rate (thread-safe)."""
+
+    def __init__(self, capacity: int) -> None:
+        if capacity < 2:
+            raise ValueError(f"telemetry ring capacity {capacity}: at least 2 samples")
+        self.capacity = capacity
+        self._data = np.full((capacity, len(COLUMNS)), math.nan)
+        self._written = 0
+        self._lock = threading.Lock()
+        self._latest: dict[str, Any] | None = None
+        self._session: str | None = None
+        self._counter: RepetitionCounter | None = None
+
+    @property
+    def written(self) -> int:
+        """Samples pushed since the last :meth:`clear` (a frame with no new sample is skipped)."""
+        return self._written
+
+    @property
+    def latest(self) -> dict[str, Any] | None:
+        """The last sample as published (phase, progress, session, ...)."""
+        return self._latest
+
+    def push(self, msg: dict[str, Any]) -> None:
+        """Decode one published sample into the ring (subscriber thread)."""
+        pose: list[Any] = list(msg.get("pose") or ())
+        ref: list[Any] = list(msg.get("pose_ref") or ())
+        row = (_f(msg.get("t")), _f(msg.get("force_ref_n")), _f(msg.get("force_n")),
+               _f(pose[1]) if len(pose) > 2 else math.nan,
+               _f(pose[2]) if len(pose) > 2 else math.nan,
+               _f(ref[1]) if len(ref) > 2 else math.nan,
+               _f(ref[2]) if len(ref) > 2 else math.nan,
+               _f(msg.get("progress")))
+        with self._lock:
+            self._data[self._written % self.capacity] = row
+            self._written += 1
+            self._latest = msg
+            counter = self._counter
+            if counter is not None and msg.get("session") == self._session \
+                    and msg.get("phase") == "play":
+                counter.feed(math.degrees(row[_COL["pitch"]]), math.degrees(row[_COL["roll"]]))
+
+    def snapshot(self) -> tuple[int, dict[str, np.ndarray]]:
+        """(samples written, each column oldest first) — copies, safe to keep and draw."""
+        with self._lock:
+            n, cap = self._written, self.capacity
+            if n <= cap:
+                block = self._data[:n].copy()
+            else:
+                i = n % cap
+                block = np.concatenate((self._data[i:], self._data[:i]))
+        return n, {name: block[:, j] for j, name in enumerate(COLUMNS)}
+
+    def clear(self) -> None:
+        with self._lock:
+            self._data.fill(math.nan)
+            self._written = 0
+
+    def count_repetitions(self, session: str | None,
+                          counter: RepetitionCounter | None) -> None:
+        """Count with ``counter`` from now on, on samples of ``session`` only (None: stop)."""
+        with self._lock:
+            self._session, self._counter = session, counter
+
+    def repetitions(self) -> tuple[int, int | None] | None:
+        """(counted, expected) of the current count, None when nothing is counted."""
+        with self._lock:
+            c = self._counter
+            return None if c is None else (c.count, c.expected)
