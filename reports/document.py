@@ -250,7 +250,13 @@ def write_pdf(out: str | os.PathLike[str], story: Sequence[Flowable], ctx: Repor
                               pageTemplates=[PageTemplate("page", [frame])])
         doc.build(list(story), canvasmaker=_numbered_canvas(ctx))
         pages = int(doc.page)
-        os.replace(tmp, out_path)
+        if force:
+            os.replace(tmp, out_path)
+        else:
+            os.link(tmp, out_path)         # fails if ``out`` appeared during the render
+    except FileExistsError:
+        raise ReportError(f"{out_path}: appeared while the report was rendered; left as it "
+                          "is (use --force to replace it)") from None
     except OSError as exc:
         raise ReportError(f"{out_path}: cannot write: {exc.strerror or exc}") from exc
     finally:

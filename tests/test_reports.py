@@ -538,3 +538,27 @@ def test_cli_session_is_reproducible(sessions, tmp_path):
         assert proc.returncode == 0, proc.stderr
         outs.append((tmp_path / name).read_bytes())
     assert outs[0] == outs[1]
+
+
+def test_a_file_appearing_during_the_render_is_left_as_it_is(tmp_path, monkeypatch) -> None:
+    """The existence check happens before the render; a file created meanwhile (another user,
+    another report) must survive: the final step links, it does not rename over."""
+    from reportlab.lib.styles import getSampleStyleSheet
+    from reportlab.platypus import BaseDocTemplate, Paragraph
+
+    from reports.document import ReportContext, write_pdf
+
+    out = tmp_path / "r.pdf"
+    build = BaseDocTemplate.build
+
+    def build_then_someone_writes(self, *args, **kwargs):
+        build(self, *args, **kwargs)
+        out.write_bytes(b"someone else's file")
+
+    monkeypatch.setattr(BaseDocTemplate, "build", build_then_someone_writes)
+    ctx = ReportContext(title="t", settings=ReportSettings(),
+                        generated_at=datetime(2026, 1, 1, tzinfo=UTC), software_version="x")
+    with pytest.raises(ReportError, match="appeared while the report was rendered"):
+        write_pdf(out, [Paragraph("hello", getSampleStyleSheet()["Normal"])], ctx)
+    assert out.read_bytes() == b"someone else's file"
+    assert [p.name for p in tmp_path.iterdir()] == ["r.pdf"]     # no temporary file left
