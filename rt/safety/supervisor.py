@@ -153,7 +153,8 @@ class Supervisor:
 
     def _track_carry_force(self, i: int, tau: float, dt: float) -> None:
         """Update axis ``i``'s carried-force estimate with this cycle's command (its count
-        moved, or the brakes still hold it): first-order, :data:`CARRY_TAU_S`."""
+        moved, the brakes still hold it, or a contact holds the platform): first-order,
+        :data:`CARRY_TAU_S`."""
         c = self.carry_force_n[i]
         if math.isnan(c):
             self.carry_force_n[i] = tau
@@ -279,6 +280,12 @@ class Supervisor:
                 else:
                     self._impulse[i] = 0.0
                     self._impulse_time[i] = 0.0
+                if not free:
+                    # In contact the platform is held by what it presses: the force that holds
+                    # the still axis now includes the contact's reaction (force control
+                    # changes it while the count stands), so it is the carried force when the
+                    # contact ends.
+                    self._track_carry_force(i, float(tau[i]), dt)
                 moved = self._impulse[i] * self._impulse_time[i] / (2.0 * self.axis_mass_kg)
                 if moved >= FROZEN_COUNTS * self.count_m or \
                         self._frozen_time[i] >= lim.frozen_encoder_s:
