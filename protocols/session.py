@@ -27,6 +27,7 @@ from protocols.generators import make_generator
 from protocols.library import load_protocol
 from protocols.schema import ProtocolModel
 from rt.components.blocks import SignalTap
+from rt.components.tare import TareState, refusal_message
 from rt.errors import ProtocolValidationError
 from rt.model import RobotModel
 from rt.position_loop import PositionLoop, build_protocol_loop, sim_devices
@@ -39,6 +40,7 @@ from rt.sessions import (
     COL_FZ,
     COL_PHASE,
     COL_PROGRESS,
+    COL_TARE,
     COLUMNS,
     SESSION_SIGNALS,
     SESSION_SOURCES,
@@ -193,6 +195,7 @@ class SessionFigures:
         self._last_phase = Phase.APPROACH
         self._play_seen = 0
         self._dt = 1.0 / RATE_HZ
+        self._tare: np.ndarray | None = None     # the force reader's last tare port
 
     def add(self, rows: np.ndarray) -> None:
         if not len(rows):
@@ -235,6 +238,27 @@ class SessionFigures:
                 lo_hi[0] = min(lo_hi[0], angle)
                 lo_hi[1] = max(lo_hi[1], angle)
         self._last_phase = Phase(int(phase[-1]))
+        tare = rows[:, COL_TARE:COL_TARE + 10]
+        started = np.flatnonzero(tare[:, 0] != TareState.NONE)
+        if len(started):
+            self._tare = tare[started[-1]].copy()
+
+    def tare(self) -> dict[str, Any] | None:
+        """The ATI's tare at the session's start (None: none was asked for, e.g. a position
+        protocol): state, the zero subtracted (N, N m) and the force the sensor read
+        unloaded, or why it was refused."""
+        if self._tare is None:
+            return None
+        row = self._tare
+        state = TareState(int(row[0]))
+        out: dict[str, Any] = {"state": state.name.lower(),
+                               "mean_force_n": float(row[3]) if math.isfinite(row[3]) else None}
+        if state == TareState.DONE:
+            out["offset_n"] = [float(x) for x in row[4:7]]
+            out["offset_nm"] = [float(x) for x in row[7:10]]
+        elif state == TareState.REFUSED:
+            out["reason"] = refusal_message(int(row[2]), float(row[3]))
+        return out
 
     def _contact(self, t: np.ndarray, force: np.ndarray, force_mode: np.ndarray) -> None:
         on = self._on
@@ -309,6 +333,9 @@ class SessionFigures:
                          "reaction": e.reaction.name.lower(), "message": e.message}
                         for e in events if e.reaction >= Reaction.SOFT_STOP
                         and e.kind == "fault"]
+        tare = self.tare()
+        if tare is not None:
+            out["ati_tare"] = tare
         out["completed"] = self._last_phase == Phase.REST and not out["stops"] \
             and self._phase_time["play"] > 0.0
         return out

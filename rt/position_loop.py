@@ -251,15 +251,18 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
             ("supervisor.volts", "drive.volts"), ("supervisor.enable", "drive.enable"),
             ("encoders.q", "recorder.q"), ("estimator.qd", "recorder.qd"),
             ("reference.q_ref", "recorder.q_ref"), ("controller.tau", "recorder.tau"),
-            ("force.wrench", "reference.wrench"),
+            ("force.wrench", "reference.wrench"), ("force.tare", "reference.tare"),
             ("supervisor.volts", "recorder.volts"), *own_connections,
             *(extra_connections or ())):
         b.connect(src, dst)
-    # The supervisor's verdict reaches the reference and the controller one cycle later, and
-    # the drive's failure flag the supervisor: these are the loop's only feedback edges.
+    # The supervisor's verdict reaches the reference and the controller one cycle later, the
+    # drive's failure flag the supervisor, and the sequencer's tare request the force reader:
+    # these are the loop's only feedback edges.
     b.connect("supervisor.mode", "reference.mode", delay=1)
     b.connect("supervisor.mode", "controller.mode", delay=1)
     b.connect("drive.failed", "supervisor.drive_failed", delay=1)
+    # The sequencer asks the force reader for a tare at a force program's start.
+    b.connect("reference.tare_request", "force.tare_request", delay=1)
     graph = b.build()
     graph.configure()
     loop = Loop(graph, rate_hz=rate_hz, mode=mode, **loop_kwargs)

@@ -27,13 +27,16 @@ from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits
 #: The session tap's signals (after its time column), each (loop port name, width).
 SESSION_SIGNALS: list[tuple[str, int]] = [
     ("q", 3), ("qd", 3), ("tau", 3), ("volts", 3), ("wrench", 6), ("flags", 2), ("force", 3),
-    ("ctrl_mode", 1), ("phase", 1), ("progress", 1)]
+    ("ctrl_mode", 1), ("phase", 1), ("progress", 1), ("tare", 10)]
 #: Where each signal comes from in the loop.
 SESSION_SOURCES: dict[str, str] = {
     "q": "encoders.q", "qd": "estimator.qd", "tau": "controller.tau",
     "volts": "supervisor.volts", "wrench": "force.wrench",
     "flags": "force.flags", "force": "reference.force", "ctrl_mode": "reference.ctrl_mode",
-    "phase": "reference.phase", "progress": "reference.progress"}
+    "phase": "reference.phase", "progress": "reference.progress",
+    # The ATI's tare at a force program's start (rt.components.tare): state, count, refusal,
+    # mean force, offset.
+    "tare": "force.tare"}
 
 
 def _columns() -> dict[str, slice]:
@@ -52,6 +55,7 @@ COL_FREF = COLUMNS["force"].start
 COL_CTRL_MODE = COLUMNS["ctrl_mode"].start
 COL_PHASE = COLUMNS["phase"].start
 COL_PROGRESS = COLUMNS["progress"].start
+COL_TARE = COLUMNS["tare"].start
 
 
 @dataclass(frozen=True)

@@ -66,18 +66,37 @@ def test_admittance_reference_is_floored():
 
 
 def test_supervisor_soft_stops_when_the_foot_is_pulled_on_the_twin():
-    """A strapped foot 5 mm above the platform pulls it up with 500 N when force control
-    starts: the measured Fz stays below 0 N for longer than max_pull_s → soft stop."""
+    """A strapped foot 5 mm above the platform pulls it up with 500 N. Pulling from the start,
+    the ATI's tare at the end of the approach refuses the loaded platform and nothing plays;
+    strapped once force control has started, the measured Fz stays below 0 N for longer than
+    max_pull_s → soft stop."""
+    from rt.references.sequencer import Phase
+
     proto = load_protocol(LIB["sine_fz.yaml"])
-    gen = make_generator(proto, dt=1e-3, kinematics=MODEL.kin)
-    assert gen.validate().ok
-    clock = SimClock()
     z = proto.pose.z_m
     sensor_z = z + MODEL.description.sensor.offset_m[2]
-    twin = Twin(MODEL.description, CompliantAnkle(neutral_z_m=sensor_z + 0.005,
-                                                  limb_weight_n=0.0), clock=clock)
-    twin.place(MODEL.kin.ik(z, 0.0, 0.0).q)
-    pl = build_protocol_loop(sim_devices(twin, clock), gen, MODEL)
+    strapped = CompliantAnkle(neutral_z_m=sensor_z + 0.005, limb_weight_n=0.0)
+
+    def loop(env):
+        gen = make_generator(proto, dt=1e-3, kinematics=MODEL.kin)
+        assert gen.validate().ok
+        clock = SimClock()
+        twin = Twin(MODEL.description, env, clock=clock)
+        twin.place(MODEL.kin.ik(z, 0.0, 0.0).q)
+        return build_protocol_loop(sim_devices(twin, clock), gen, MODEL)
+
+    pl = loop(strapped)
+    pl.loop.run(seconds=1.0)
+    assert pl.reference.tare_refused == 1 and "platform loaded" in pl.reference.last_error
+    assert pl.events.first("pulling") is None and pl.reference.current_phase != Phase.PLAY
+
+    pl = loop(CompliantAnkle(neutral_z_m=sensor_z, limb_weight_n=0.0))
+    for _ in range(1000):
+        pl.loop.run(cycles=1)
+        if pl.reference.current_phase == Phase.PLAY:
+            break
+    assert pl.reference.current_phase == Phase.PLAY
+    pl.twin.set_environment(strapped)
     pl.loop.run(seconds=1.0)
     ev = pl.events.first("pulling")
     assert ev is not None and ev.reaction == Reaction.SOFT_STOP
@@ -105,8 +124,9 @@ def test_preflight_refuses_an_actuator_force_beyond_the_limit():
 def test_preflight_refuses_a_force_below_the_preload(tmp_path):
     """A 3 Hz sine whose troughs touch the 10 N floor: the tracking error at the troughs takes
     the measured force below the preload (by more than the sensor's noise allowance), which
-    pre-flight refuses naming the time and the value; at 8 Hz the platform pulls and the
-    supervisor stops it on the twin."""
+    pre-flight refuses naming the time and the value. At 8 Hz the force law (Kp 40) still keeps
+    the foot loaded (above 0 N: no pull; the supervisor's pull stop is tested above) but below
+    the preload: refused for that."""
     path = tmp_path / "fast_sine.yaml"
     text = ("schema_version: 1\nkind: sine_fz\nname: fast\npose: {{z_m: 0.63}}\n"
             "mean_n: 210\namplitude_n: 200\nfrequency_hz: {f}\ncycles: 8\n"
@@ -117,5 +137,6 @@ def test_preflight_refuses_a_force_below_the_preload(tmp_path):
                              r"below the 10 N preload"):
         preflight(SessionSetup(path), MODEL)
     path.write_text(text.format(f=8))
-    with pytest.raises(ProtocolValidationError, match=r"stopped the robot at t = .* \(pulling: "):
+    with pytest.raises(ProtocolValidationError,
+                       match=r"the force falls to \d+\.\d N at t = \d+\.\d{3} s, below the 10 N"):
         preflight(SessionSetup(path), MODEL)

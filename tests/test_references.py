@@ -17,6 +17,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig, Trajectory
 
+from rt.components.tare import Tare
 from rt.errors import ProtocolValidationError
 from rt.references.approach import DEFAULT_MAX_ACCELERATION_M_S2 as AMAX
 from rt.references.approach import DEFAULT_MAX_JERK_M_S3 as JMAX
@@ -491,12 +492,19 @@ class Harness:
         self.ref.q_meas._bind(self.q, "test.q")
         self.ref.mode._bind(self.mode, "test.mode")
         self.ref.wrench._bind(self.wrench, "test.wrench")
+        # The force reader's tare, answering the sequencer's request one cycle late.
+        self.tare = Tare()
+        self.tare_port = np.zeros(10)
+        self.tare_request = np.zeros(1)
+        self.ref.tare._bind(self.tare_port, "test.tare")
         self.ref.configure()
         self.ref.start()
         self.t = 0.0
 
     def step(self) -> Phase:
+        self.tare.cycle(self.wrench.copy(), True, self.tare_request[0] > 0.5, self.tare_port)
         assert self.ref.update(self.t, DT) == 0
+        self.tare_request[:] = self.ref.tare_request.data
         self.t += DT
         self.q[:] = self.ref.q_ref.data
         return Phase(int(self.ref.phase.data[0]))

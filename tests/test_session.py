@@ -22,11 +22,13 @@ def test_sine_fz_session_recorded_and_summarized(tmp_path):
     s = run_session(SessionSetup(LIB["sine_fz.yaml"]), out)
     assert s["completed"] and s["stops"] == []
     # Force tracking on the twin's compliant foot at 1 Hz. Issue 6's target is ≤ 2 % of the
-    # amplitude; on the realistic twin (issue 15) the nominal model's per-axis friction is up to
-    # 30 % off the truth (+0.2 points) and the screw's compliance and backlash add +0.15: the
-    # law measures 2.1 % (1.7 % on the ideal twin, 2.0 % with an identified model). Tolerance
-    # 2.5 % until the explicit force law is retuned for the realistic plant.
-    assert s["rms_error_pct"] <= 2.5 and s["rms_error_basis"] == "amplitude"
+    # amplitude. On the realistic twin (issue 15) the nominal model's per-axis friction is up to
+    # 30 % off the truth and the screw's compliance and backlash add their share: with Kp 20
+    # the law measured 2.1 %; with Kp 40 (the retune for the realistic plant) 1.3 %.
+    assert s["rms_error_pct"] <= 2.0 and s["rms_error_basis"] == "amplitude"
+    # The ATI was tared on the unloaded platform before the force play (its tool side and
+    # drift: a few N), and the summary (recorded) says so.
+    assert s["ati_tare"]["state"] == "done" and abs(s["ati_tare"]["offset_n"][2]) < 10.0
     assert 380.0 <= s["peak_force_n"] <= 420.0          # 300 + 100 N
     rec = read_recording(out)
     state = rec["/robot/state"]

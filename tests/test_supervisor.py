@@ -76,3 +76,50 @@ def test_normal_run_raises_no_event():
     pl = build_sim_position_loop("paden_panja", duration_s=5.0)
     pl.loop.run(seconds=7.0)
     assert pl.events.snapshot() == []
+
+
+def _frozen_after(sup, tau_of_t, seconds: float, t0: float = 0.0, moving_s: float = 0.2):
+    """Feed a count that moves (one count per cycle) for ``moving_s`` and then stands still,
+    a still reference and the command ``tau_of_t(t)`` on every axis; time of the first
+    frozen-encoder trip (None: none)."""
+    dt = sup.period_s
+    z3 = (0.0, 0.0, 0.0)
+    q = 0.2
+    for k in range(int(seconds / dt)):
+        t = t0 + (k + 1) * dt
+        if t - t0 < moving_s:
+            q += sup.count_m
+        tau = (tau_of_t(t),) * 3
+        sup.check(t, dt, (q, q, q), 0, z3, z3, True, 0.0, 0.0, 0.0, 0.0, (q, q, q), z3, tau,
+                  math.nan, False, False, False, False, False)
+        if any(c.startswith("encoder_frozen") for c in sup.causes):
+            return t
+    return None
+
+
+def test_frozen_encoder_check_is_load_aware():
+    """A still axis carrying a heavy payload (a 100 kg platform load: ~330 N more per axis
+    than unloaded, far beyond the unloaded holding force) is not a frozen encoder; a command
+    that runs away from the force that carried the axis still is, payload or not."""
+    from rt.model.description import load_description
+    from rt.safety.supervisor import Supervisor, supervisor_physics
+
+    phys = supervisor_physics(load_description())
+    band = phys["holding_force_n"]
+    lim = effective((0.0, 0.4), RobotLimits(), PatientLimits())
+    loaded = 700.0                                        # N per axis under the payload
+    sup = Supervisor(lim, 0.001, **phys)
+    assert _frozen_after(sup, lambda t: loaded, 1.0) is None
+    # Sticking at a reversal: the command swings through the friction band and back.
+    sup = Supervisor(lim, 0.001, **phys)
+    swing = 0.9 * band
+    assert _frozen_after(sup, lambda t: loaded - swing * math.sin(math.pi * max(0.0, t - 0.2)
+                                                                  / 0.1) ** 2, 1.0) is None
+    # A truly frozen encoder: from 0.3 s the controller ramps the command up at 20 kN/s (the
+    # reference runs away from the still count). The axis (≈ 207 kg) must have moved 4 counts
+    # once ∫(excess) dt · T / (2 m) ≥ 80 µm: with the excess e = 20 kN/s·s' − band, about
+    # 11 ms + band / 20 kN/s after the ramp starts, i.e. ≈ 22 ms.
+    for base in (0.0, loaded):
+        sup = Supervisor(lim, 0.001, **phys)
+        t = _frozen_after(sup, lambda t, b=base: b + 2.0e4 * max(0.0, t - 0.3), 1.0)
+        assert t is not None and 0.3 + band / 2.0e4 < t < 0.3 + 0.04, (base, t)

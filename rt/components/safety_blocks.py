@@ -6,6 +6,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from rt.components.tare import Tare
 from rt.devices.interfaces import (
     ActuatorOutputs,
     DigitalInputs,
@@ -21,14 +22,20 @@ from rt.safety.supervisor import Supervisor
 
 
 class ForceReader(Component):
-    """Ports: out ``wrench``: float64[6], N and N m, sensor frame (NaN when never read);
-    out ``flags``: float64[2] — [stale, saturated] as 0/1."""
+    """Ports: out ``wrench``: float64[6], N and N m, sensor frame, minus the tare's zero (NaN
+    when never read); out ``flags``: float64[2] — [stale, saturated] as 0/1; in
+    ``tare_request``: float64[1] (a rising edge above 0.5 starts a tare, :mod:`rt.components.
+    tare`); out ``tare``: float64[10] — [:class:`TareState`, tares done, :class:`TareRefusal`,
+    mean force magnitude of the last tare (N), offset (6: N, N m)]."""
 
-    def __init__(self, name: str, sensor: ForceTorqueSensor):
+    def __init__(self, name: str, sensor: ForceTorqueSensor, tare: Tare | None = None):
         super().__init__(name)
         self.sensor = sensor
+        self.tare = tare or Tare()
         self.wrench = self.declare_output("wrench", Array(6), initial=np.full(6, math.nan))
         self.flags = self.declare_output("flags", Array(2))
+        self.tare_request = self.declare_input("tare_request", Array(1))
+        self.tare_out = self.declare_output("tare", Array(10))
         self._w = Wrench()
 
     def on_start(self) -> None:
@@ -40,6 +47,9 @@ class ForceReader(Component):
         out[0], out[1], out[2], out[3], out[4], out[5] = w.fx, w.fy, w.fz, w.tx, w.ty, w.tz
         self.flags.data[0] = 1.0 if w.stale else 0.0
         self.flags.data[1] = 1.0 if w.saturated else 0.0
+        valid = not (w.stale or w.saturated) and math.isfinite(
+            w.fx + w.fy + w.fz + w.tx + w.ty + w.tz)
+        self.tare.cycle(out, valid, self.tare_request.data[0] > 0.5, self.tare_out.data)
         return 0
 
 

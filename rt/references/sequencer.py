@@ -6,6 +6,10 @@
 
 * APPROACH: a ruckig (jerk-limited) move from where the reference is to the program's first
   sample; position limits are checked by our approach generator, never assumed from ruckig.
+  A program that starts in force mode then holds there while the force reader tares the
+  sensor on the still unloaded platform (:mod:`rt.components.tare`); a refused tare (the
+  platform is loaded) ends the program before it plays (RETURN, ``last_error`` says why,
+  ``tare_refused`` counts it), without latching a fault.
 * PLAY: the program writes one sample per cycle (:mod:`rt.references.program`); in force mode
   the hybrid controller tracks ``force`` in z with the angles of ``pose`` held.
 * RETURN: the jerk-limited stop brings the reference to rest from the program's last state (or
@@ -28,6 +32,7 @@ from enum import IntEnum
 
 import numpy as np
 
+from rt.components.tare import TareState, refusal_message
 from rt.engine import Array, Component
 from rt.references.approach import Approach, ApproachStatus
 from rt.references.program import Mode, Program, ProgramInput, ReferenceOutput
@@ -70,6 +75,9 @@ class _State:
     mode: SupervisorMode = SupervisorMode.RUN
     started: bool = False
     k: int = 0                       # samples played of the current program
+    taring: bool = False             # holding at the first sample while the sensor is tared
+    tare_measuring: bool = False     # the force reader has started this tare
+    tares_before: float = 0.0        # the force reader's tare count when the tare began
 
 
 class ProgramReference(Component):
@@ -78,7 +86,9 @@ class ProgramReference(Component):
     patient's torques for interactive programs). Out ``q_ref``, ``qd_ref``, ``qdd_ref``:
     float64[3] (m, m/s, m/s²); ``force``: float64[3] (F_d N, Ḟ_d N/s, F̈_d N/s²); ``pose``:
     float64[3] (z m, roll, pitch rad); ``ctrl_mode``: float64[1] (:class:`Mode`); ``phase``:
-    float64[1] (:class:`Phase`); ``progress``: float64[1] (0..1 of the program played).
+    float64[1] (:class:`Phase`); ``progress``: float64[1] (0..1 of the program played);
+    ``tare_request``: float64[1] (1 while a tare is wanted; to the force reader, one cycle
+    late); in ``tare``: the force reader's tare port (state, count, refusal, mean force).
 
     Attributes readable from other threads: ``epoch`` (programs started so far), ``refused``
     (requests whose approach was refused) and ``last_error`` (why), ``busy``.
@@ -100,6 +110,9 @@ class ProgramReference(Component):
         self.ctrl_mode = self.declare_output("ctrl_mode", Array(1))
         self.phase = self.declare_output("phase", Array(1), initial=np.full(1, float(Phase.REST)))
         self.progress = self.declare_output("progress", Array(1))
+        self.tare_request = self.declare_output("tare_request", Array(1))
+        self.tare = self.declare_input("tare", Array(10))
+        self.tare_refused = 0
         self._initial = None if program is None else _Request(program, program.new_output())
         self._pending: _Request | None = None
         self._abort = False
@@ -108,6 +121,7 @@ class ProgramReference(Component):
         self._n = 1
         self._req: _Request | None = None
         self._inp = ProgramInput()
+        self._needs_tare = False
         self.epoch = 0
         self.refused = 0
         self.last_error = ""
@@ -178,7 +192,9 @@ class ProgramReference(Component):
         self.program, self._out, self._req = program, out, req
         self._n = max(1, round(program.duration_s / self.approach.dt))
         st.k = 0
+        st.taring = False
         st.phase = Phase.APPROACH
+        self._needs_tare = out.mode == Mode.FORCE
         self.epoch += 1
 
     def _brake(self) -> None:
@@ -247,6 +263,8 @@ class ProgramReference(Component):
             status = self.approach.update(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
             if status < 0:
                 return STATUS_APPROACH_FAILED
+            if status == ApproachStatus.FINISHED and self._needs_tare:
+                status = self._tare_step()
             if status == ApproachStatus.FINISHED:
                 # This cycle emitted the first sample's state exactly: consume sample 0 so the
                 # next cycle plays sample 1 (no repeated sample at the seam).
@@ -262,9 +280,40 @@ class ProgramReference(Component):
             self._ramp_force(dt)
             if status == ApproachStatus.FINISHED and self.ctrl_mode.data[0] < 0.5:
                 st.phase = Phase.REST
+        if st.phase != Phase.APPROACH:
+            self.tare_request.data[0] = 0.0      # a stop or an abort ends a tare in progress
         self.phase.data[0] = float(emitted if emitted in (Phase.APPROACH, Phase.PLAY) else st.phase)
         self.progress.data[0] = min(1.0, st.k / self._n)
         return 0
+
+    def _tare_step(self) -> ApproachStatus:
+        """At the first sample of a force program: ask for a tare and hold until the force
+        reader has one (then FINISHED: play) or refused it (then RETURN, nothing played)."""
+        st = self.state
+        tare = self.tare.data
+        if not st.taring:
+            st.taring = True
+            st.tare_measuring = False
+            st.tares_before = float(tare[1])
+            self.tare_request.data[0] = 1.0
+            return ApproachStatus.WORKING
+        state = int(tare[0])
+        if state == TareState.MEASURING:
+            st.tare_measuring = True
+        if not st.tare_measuring:          # the port still shows an earlier tare's outcome
+            return ApproachStatus.WORKING
+        if state == TareState.DONE and tare[1] > st.tares_before:
+            self.tare_request.data[0] = 0.0
+            self._needs_tare = False
+            return ApproachStatus.FINISHED
+        if state == TareState.REFUSED:
+            self.tare_request.data[0] = 0.0
+            self.last_error = "ATI tare refused: " + refusal_message(int(tare[2]),
+                                                                     float(tare[3]))
+            self.tare_refused += 1
+            self._brake()
+            st.phase = Phase.RETURN
+        return ApproachStatus.WORKING
 
     def _play(self, dt: float) -> int:
         st = self.state

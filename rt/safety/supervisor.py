@@ -46,9 +46,14 @@ JUMP_STATUS = -3
 FROZEN_COUNTS = 4
 #: Fraction of the force limit at which a soft stop begins (the force's end cushion).
 FORCE_CUSHION = 0.9
-#: Margin on the holding force of a still axis (the frozen-encoder check must not trip on an
-#: axis that legitimately holds its share of an unmeasured load).
+#: Margin on the friction band a still axis can hold (the frozen-encoder check must not trip on
+#: an axis that legitimately sticks, e.g. at a velocity reversal).
 HOLDING_MARGIN = 1.5
+#: Time constant (s) of the running estimate of the force that carries an axis while its count
+#: moves (the load's share, friction and inertia): long enough to average the controller's
+#: cycle-to-cycle ripple, short next to a payload's arrival (the estimate follows it as the
+#: axis sinks under the new load) and to a velocity reversal's stick (tens of ms).
+CARRY_TAU_S = 0.02
 #: Lever ∂q/∂angle of a slider per radian of platform tilt, in platform radii (≈ 1.5 R_p for
 #: a 3-PRS with the spheres on a circle: the farthest leg moves R_p·(1 + 1/2) per radian).
 LEVER_PER_PLATFORM_RADIUS = 1.5
@@ -58,17 +63,17 @@ def supervisor_physics(d: RobotDescription) -> dict[str, float]:
     """The supervisor's physical constants from the robot description (SI):
 
     * ``axis_mass_kg``: slider mass + rotor inertia reflected through the screw;
-    * ``holding_force_n``: what a still axis may hold without moving: its gravity share (slider,
-      rod, a third of platform and sensor) plus the static friction, times
-      :data:`HOLDING_MARGIN`;
+    * ``holding_force_n``: how far the command may move from the force that last carried the
+      moving axis without moving it: from sliding one way (Coulomb) to breaking away the other
+      (static), at most twice the static friction, times :data:`HOLDING_MARGIN`. The load
+      (gravity of the links, of the platform and of any payload) is in the carried force
+      itself, so it is not part of this band;
     * ``count_m``: one encoder count;
     * ``lever_m_per_rad``: slider travel per radian of tilt (the soft stop's braking cushion).
     """
     b = d.bodies
-    gravity_share = d.gravity_m_s2 * (b.slider.mass_kg + b.rod.mass_kg
-                                      + (b.platform.mass_kg + b.sensor.mass_kg) / 3.0)
     return {"axis_mass_kg": b.slider.mass_kg + d.drive.reflected_inertia_kg,
-            "holding_force_n": HOLDING_MARGIN * (gravity_share + d.friction.static_n),
+            "holding_force_n": HOLDING_MARGIN * 2.0 * d.friction.static_n,
             "count_m": d.encoder.m_per_count,
             "lever_m_per_rad": LEVER_PER_PLATFORM_RADIUS * d.geometry.platform_radius_m}
 
@@ -95,7 +100,7 @@ class Supervisor:
     def __init__(self, limits: EffectiveLimits, period_s: float, log: EventLog | None = None,
                  soft_stop_accel_m_s2: float = 0.5, soft_stop_jerk_m_s3: float = 5.0,
                  lever_m_per_rad: float = 0.27, axis_mass_kg: float = 207.3,
-                 holding_force_n: float = 203.0, count_m: float = 2e-5):
+                 holding_force_n: float = 225.0, count_m: float = 2e-5):
         """The defaults are the nominal robot's (:func:`supervisor_physics`); the loop passes
         the values of the robot it drives."""
         self.limits = limits
@@ -108,9 +113,10 @@ class Supervisor:
         self.heartbeat_age: Callable[[], float] | None = None
         self.heartbeat_required = False
         self.force_control = False
-        # Frozen-encoder physics: the axis' inertia (slider + reflected rotor, kg), the force a
-        # still axis may hold without moving (gravity share + static friction, N), the encoder
-        # count (m), and the platform force above which something pushes back (contact).
+        # Frozen-encoder physics: the axis' inertia (slider + reflected rotor, kg), how far the
+        # command may move from the force that carried the moving axis without moving it (the
+        # friction band, N), the encoder count (m), and the platform force above which
+        # something pushes back (contact).
         self.axis_mass_kg = axis_mass_kg
         self.holding_force_n = holding_force_n
         self.count_m = count_m
@@ -133,6 +139,9 @@ class Supervisor:
         self._impulse = [0.0, 0.0, 0.0]
         self._impulse_time = [0.0, 0.0, 0.0]
         self._last_q = [math.nan, math.nan, math.nan]
+        # Running estimate of the force that carries each axis while its count moves (N):
+        # NaN until the first cycle (then the first command: the loop starts holding still).
+        self.carry_force_n = [math.nan, math.nan, math.nan]
         self._overruns = 0
         self.latched_ids: dict[str, int] = {}      # latched cause -> the event that latched it
         self._latched_wall: dict[str, float] = {}  # ... and its wall-clock time (s)
@@ -141,6 +150,34 @@ class Supervisor:
         self._stop_request = False
         self._reset_tickets: deque[ResetTicket] = deque()
         self._brakes_open_at = self.brake_release_s      # drives enabled at t = 0
+
+    def _track_carry_force(self, i: int, tau: float, dt: float) -> None:
+        """Update axis ``i``'s carried-force estimate with this cycle's command (its count
+        moved, the brakes still hold it, or a contact holds the platform): first-order,
+        :data:`CARRY_TAU_S`."""
+        c = self.carry_force_n[i]
+        if math.isnan(c):
+            self.carry_force_n[i] = tau
+        else:
+            self.carry_force_n[i] = c + (tau - c) * dt / (CARRY_TAU_S + dt)
+
+    def _frozen_net_force(self, i: int, tau: float) -> float:
+        """The part of axis ``i``'s command that must accelerate it although its count has not
+        moved (N; ≤ 0: none).
+
+        A still axis is in static equilibrium: its command balances the load it carries (the
+        links', the platform's and any payload's weight — unknown to the supervisor, a
+        patient may stand on the platform) within the friction it can hold. The load is
+        estimated as the force that carried the axis while its count last moved
+        (``carry_force_n``), so a heavy payload is not read as a frozen encoder; a truly
+        frozen encoder makes the controller push ever further from that force (the reference
+        runs away from a count that does not move), and the excess beyond the friction band
+        (``holding_force_n``) must move the axis.
+        """
+        carry = self.carry_force_n[i]
+        if math.isnan(carry):
+            carry = 0.0
+        return abs(tau - carry) - self.holding_force_n
 
     def braking_angle(self, rate: float, dt: float) -> float:
         """Angle (rad) the platform still turns at ``rate`` (rad/s) before a soft stop started
@@ -236,13 +273,19 @@ class Supervisor:
                     self._frozen_time[i] += dt
                 else:
                     self._frozen_time[i] = 0.0
-                net = abs(tau[i]) - self.holding_force_n
+                net = self._frozen_net_force(i, float(tau[i]))
                 if net > 0.0 and free:
                     self._impulse[i] += net * dt
                     self._impulse_time[i] += dt
                 else:
                     self._impulse[i] = 0.0
                     self._impulse_time[i] = 0.0
+                if not free:
+                    # In contact the platform is held by what it presses: the force that holds
+                    # the still axis now includes the contact's reaction (force control
+                    # changes it while the count stands), so it is the carried force when the
+                    # contact ends.
+                    self._track_carry_force(i, float(tau[i]), dt)
                 moved = self._impulse[i] * self._impulse_time[i] / (2.0 * self.axis_mass_kg)
                 if moved >= FROZEN_COUNTS * self.count_m or \
                         self._frozen_time[i] >= lim.frozen_encoder_s:
@@ -254,6 +297,7 @@ class Supervisor:
                 self._frozen_time[i] = 0.0
                 self._impulse[i] = 0.0
                 self._impulse_time[i] = 0.0
+                self._track_carry_force(i, float(tau[i]), dt)
             self._last_q[i] = qi
             # -- stroke, speed, acceleration, tracking, actuator force
             if qi < lim.stroke_lo_m or qi > lim.stroke_hi_m:
