@@ -48,15 +48,17 @@ from rt.model.kinematics import Kinematics
 #: above 150 mm is a typing error (cm for m) or a marker on the wrong landmark.
 HEIGHT_RANGE_M = (0.025, 0.150)
 #: Largest horizontal displacement (m) of the ankle centre pre-flight accepts by default.
-#: No standard states a tolerable ankle-centre misalignment; this default is taken from the
-#: soft-tissue motion of the shank under skin and straps, which marker studies put at up to
-#: 1-3 cm (Leardini, Chiari, Della Croce, Cappozzo, "Human movement analysis using
+#: No standard states a tolerable ankle-centre misalignment. The default is the upper end of
+#: the soft-tissue motion of the shank relative to its bones, which marker studies put at up
+#: to 1-3 cm (Leardini, Chiari, Della Croce, Cappozzo, "Human movement analysis using
 #: stereophotogrammetry. Part 3: soft tissue artifact assessment and compensation", Gait &
 #: Posture 21:212-225, 2005): within it the displacement is taken up by the soft tissue under
-#: the straps; beyond it the shank is dragged and the knee or hip must move (Schiele & van der
-#: Helm, IEEE TNSRE 14:456-469, 2006, on the constraint forces such misalignment creates).
-#: Configurable per session (``comfort_limit_m``).
-DEFAULT_COMFORT_LIMIT_M = 0.020
+#: the straps; beyond it the shank is dragged and the knee or hip must move, the constraint
+#: forces misalignment creates (Schiele & van der Helm, "Kinematic design to improve ergonomics
+#: in human machine interaction", IEEE TNSRE 14:456-469, 2006). With the ankle 150 mm above
+#: the platform's joint plane, 30 mm allows about ±11° of tilt. A clinician's choice per
+#: exercise (``ankle_displacement_limit_mm``), not a safety limit of the robot.
+DEFAULT_COMFORT_LIMIT_M = 0.030
 #: Foot placement offsets beyond this fraction of the platform radius leave the heel or the
 #: toes off the sensor plate.
 _FOOTPRINT_FRACTION = 1.0
@@ -191,6 +193,15 @@ class AnkleKinematics:
                 c.y + r[3] * ax + r[4] * ay + r[5] * az,
                 z + r[6] * ax + r[7] * ay + r[8] * az)
 
+    def z_for(self, roll: float, pitch: float) -> float:
+        """The heave (m) that keeps the ankle centre at its starting height at platform angles
+        (roll, pitch) (rad): z = A0_z - (R a_P)_z, R's last row (-sβ, cβ sγ, cβ cγ) being
+        free of the parasitic yaw (no IK needed: cheap enough for every cycle)."""
+        ax, ay, az = self.centre_P
+        cb = math.cos(pitch)
+        return self.start[2] - (-math.sin(pitch) * ax + cb * math.sin(roll) * ay
+                                + cb * math.cos(roll) * az)
+
     def pose_for_platform_angles(self, roll: float, pitch: float, compensate: bool = True
                                  ) -> AnklePose:
         """The pose for absolute platform angles (rad): z chosen so the ankle centre keeps its
@@ -215,6 +226,35 @@ class AnkleKinematics:
     def angles(self, roll: float, pitch: float) -> tuple[float, float]:
         """(plantarflexion, inversion) (rad) of the foot at platform angles (roll, pitch)."""
         return ankle_angles(roll - self.neutral[1], pitch - self.neutral[2], self.setup.side)
+
+
+    def limit_along(self, plantar_rad: float, inversion_rad: float, limit_m: float,
+                    compensate: bool = True) -> float:
+        """The largest fraction s in [0, 1] of the ankle angle (plantar, inversion) whose
+        horizontal displacement stays within ``limit_m`` (bisection to 1e-4; the displacement
+        grows monotonically along a ray from neutral over the ankle's range)."""
+        if self.pose(plantar_rad, inversion_rad, compensate).horizontal_m <= limit_m:
+            return 1.0
+        lo, hi = 0.0, 1.0
+        while hi - lo > 1e-4:
+            mid = 0.5 * (lo + hi)
+            if self.pose(mid * plantar_rad, mid * inversion_rad, compensate).horizontal_m \
+                    <= limit_m:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+
+def describe_angles(plantar_rad: float, inversion_rad: float) -> str:
+    """Clinical words for an ankle angle: ``plantarflexion 12.0 deg, eversion 3.0 deg``."""
+    parts = []
+    for value, pos, neg in ((plantar_rad, "plantarflexion", "dorsiflexion"),
+                            (inversion_rad, "inversion", "eversion")):
+        deg = math.degrees(value)
+        if abs(deg) >= 0.05:
+            parts.append(f"{pos if deg > 0 else neg} {abs(deg):.1f} deg")
+    return ", ".join(parts) or "neutral"
 
 
 def transfer_wrench(wrench_s: tuple[float, ...] | list[float], r_SA_S: tuple[float, float, float]
