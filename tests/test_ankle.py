@@ -156,3 +156,57 @@ def test_transfer_keeps_the_force_and_the_power() -> None:
     assert t[:3] == w[:3]
     dot = sum(w[i] * w[3 + i] for i in range(3))
     assert sum(t[i] * t[3 + i] for i in range(3)) == pytest.approx(dot, abs=1e-12)
+
+
+# ------------------------------------------------------------------------------ twin's ankle
+def _twin_wrench(env, z: float, roll: float, pitch: float):
+    """The twin ankle's wrench on the platform (sensor frame) and its state, at rest."""
+    import numpy as np
+
+    from rt.twin import physics
+    from rt.twin.plant import TwinPlant
+
+    plant = TwinPlant(MODEL.description, env)
+    c = MODEL.kin.ik(z, roll, pitch)
+    rot = np.array(c.rotation).reshape(3, 3)
+    pos = np.array([c.x, c.y, c.z])
+    state = np.zeros(physics.ENV_STATE_SIZE)
+    wrench, tau = np.zeros(6), np.zeros(3)
+    physics.environment_wrench(env.pack(), plant.bodies, rot, pos, np.zeros((6, 3)),
+                               np.zeros(3), state, wrench, tau)
+    return wrench, state
+
+
+def test_twin_ankle_about_its_joint_centre_matches_hand_statics() -> None:
+    """Pitch 10° about the platform's centre with the twin's ankle 70 mm above the sole: the
+    centre moves (h_P sin β, R_p (1 - cos β)/2, -h_P (1 - cos β)); the shank pushes back with
+    k_h, k_h, k_z times that; the joint's torque is -K β (1 + (β/θ_end)²); and the sensor's
+    wrench moved back to the ankle gives that torque."""
+    from rt.twin.environment import CompliantAnkle
+
+    env = CompliantAnkle.at_pose(MODEL.kin, Z0, 0.0, 0.0, limb_weight_n=0.0)
+    b = math.radians(10.0)
+    wrench, state = _twin_wrench(env, Z0, 0.0, b)
+    d = (H_P * math.sin(b), RP * (1.0 - math.cos(b)) / 2.0, -H_P * (1.0 - math.cos(b)))
+    f = (-1e4 * d[0], -1e4 * d[1], -1e5 * d[2])
+    assert tuple(state[4:7]) == pytest.approx(f, abs=1e-9)
+    k_true = -45.0 * b * (1.0 + (b / 0.3491) ** 2)
+    assert tuple(state[1:4]) == pytest.approx((0.0, k_true, 0.0), abs=1e-9)
+    # Sensor frame = R_yᵀ of the base-frame force.
+    cb, sb = math.cos(b), math.sin(b)
+    assert wrench[0] == pytest.approx(cb * f[0] - sb * f[2], abs=1e-9)
+    assert wrench[2] == pytest.approx(sb * f[0] + cb * f[2], abs=1e-9)
+    plantar, inversion, _ = ankle_torques(tuple(wrench), AnkleSetup(side="right",
+                                                                    height_above_sole_m=H))
+    assert plantar == pytest.approx(k_true, abs=1e-9)
+    assert inversion == pytest.approx(0.0, abs=1e-9)
+
+
+def test_about_the_ankle_the_twin_ankle_feels_only_the_horizontal_residual() -> None:
+    from rt.twin.environment import CompliantAnkle
+
+    env = CompliantAnkle.at_pose(MODEL.kin, Z0, 0.0, 0.0, limb_weight_n=0.0)
+    pose = kin().pose(math.radians(10.0), 0.0)
+    _, state = _twin_wrench(env, pose.z_m, pose.roll_rad, pose.pitch_rad)
+    assert state[6] == pytest.approx(0.0, abs=1e-9)
+    assert state[4] == pytest.approx(-1e4 * pose.displacement_m[0], abs=1e-9)

@@ -86,7 +86,7 @@ class TwinPlant:
         self._pack_bodies()
         self.environment = environment or FreeMotion()
         self.env = self.environment.pack()
-        self.env_state = np.zeros(4)
+        self.env_state = np.zeros(physics.ENV_STATE_SIZE)
         self.q = np.zeros(3)
         self.qd = np.zeros(3)
         self.qdd = np.zeros(3)
