@@ -39,7 +39,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from rt.errors import InputError, validation_summary
+from rt.errors import InputError, KinematicsError, validation_summary
 from rt.model.kinematics import Kinematics
 
 #: Plausible ankle-centre heights above the sole (m). The lateral malleolus of adults stands
@@ -287,3 +287,55 @@ def ankle_torques(wrench_s: tuple[float, ...] | list[float], setup: AnkleSetup
     _, _, _, mx, my, mz = transfer_wrench(wrench_s, sensor_to_ankle_S(setup))
     sign = 1.0 if setup.side == "right" else -1.0
     return my, sign * mx, mz
+
+
+class AnkleMonitor:
+    """The ankle's state in clinical terms from the loop's samples, for the ``/ankle/state``
+    recording channel (non-real-time: the recorder's pump thread).
+
+    Holds its own :class:`Kinematics` (forward kinematics keeps a warm start: sharing the
+    loop's would race with it). ``period_s`` spaces the messages (default 10 ms: 100 Hz, well
+    above an ankle exercise's bandwidth, a tenth of the 1 kHz channels' cost).
+    """
+
+    def __init__(self, kinematics: Kinematics, setup: AnkleSetup,
+                 neutral: tuple[float, float, float], period_s: float = 0.01) -> None:
+        own = Kinematics(kinematics.description)
+        self.ankle = AnkleKinematics(own, setup, list(own.description.sensor.offset_m), neutral)
+        self.period_s = period_s
+        self._next_t = -math.inf
+
+    def due(self, t: float) -> bool:
+        """True when a message is due at loop time ``t`` (s)."""
+        return t + 1e-9 >= self._next_t
+
+    def message(self, t: float, q: Any, wrench_s: Any) -> dict[str, Any] | None:
+        """The ``/ankle/state`` message at loop time ``t`` (s) (:meth:`state`), and the next
+        one is due a period later; None when there is none."""
+        msg = self.state(t, q, wrench_s)
+        if msg is not None:
+            self._next_t = t + self.period_s
+        return msg
+
+    def state(self, t: float, q: Any, wrench_s: Any) -> dict[str, Any] | None:
+        """The ankle's state at loop time ``t`` (s) from slider positions ``q`` (m)
+        and the sensor's wrench (N, N m; sensor frame); None when FK fails or the wrench has
+        no finite sample yet (as ``/robot/wrench``: not a measurement, not written)."""
+        ak = self.ankle
+        if not all(math.isfinite(float(x)) for x in wrench_s[:6]):
+            return None
+        try:
+            c = ak.kinematics.fk(q, check=False)
+        except KinematicsError:
+            return None
+        plantar, inversion = ak.angles(c.roll, c.pitch)
+        a = ak.centre(c.z, c.roll, c.pitch)
+        d = [(a[i] - ak.start[i]) * 1e3 for i in range(3)]
+        tp, ti, ta = ankle_torques(wrench_s, ak.setup)
+        return {"t": t, "plantarflexion_deg": math.degrees(plantar),
+                "inversion_deg": math.degrees(inversion),
+                "abduction_deg": math.degrees(c.yaw),
+                "plantarflexion_torque_nm": tp, "inversion_torque_nm": ti,
+                "abduction_torque_nm": ta, "centre_displacement_mm": d,
+                "platform_roll_deg": math.degrees(c.roll),
+                "platform_pitch_deg": math.degrees(c.pitch)}

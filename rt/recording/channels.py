@@ -35,6 +35,7 @@ WRENCH = "/robot/wrench"
 EVENTS = "/safety/events"
 METADATA = "/protocol/metadata"
 REFERENCE = "/protocol/reference"
+ANKLE = "/ankle/state"
 
 
 @dataclass(frozen=True)
@@ -148,6 +149,31 @@ _REFERENCE = _object(
     },
     ["t"])
 
+_ANKLE = _object(
+    "talus.AnkleState", "The patient's ankle in clinical terms (rt.model.ankle.AnkleMonitor): "
+    "angles of the foot from neutral, the torques about the ankle centre (the foot's effort: "
+    "plantarflexors and invertors +), the centre's displacement; written at 100 Hz when the "
+    "session has the patient's ankle setup.",
+    {
+        "t": _t(),
+        "plantarflexion_deg": _num("plantarflexion (+) / dorsiflexion (-), degrees"),
+        "inversion_deg": _num("inversion (+) / eversion (-), degrees"),
+        "abduction_deg": _num("rotation about the vertical (the platform's parasitic yaw), "
+                              "degrees"),
+        "plantarflexion_torque_nm": _num("plantarflexion (+) / dorsiflexion (-) torque about "
+                                         "the ankle centre, N·m"),
+        "inversion_torque_nm": _num("inversion (+) / eversion (-) torque, N·m"),
+        "abduction_torque_nm": _num("torque about the vertical through the ankle centre, N·m"),
+        "centre_displacement_mm": {"type": "array", "items": {"type": "number"},
+                                   "minItems": 3, "maxItems": 3,
+                                   "description": "the ankle centre's displacement from "
+                                                  "where it started, base frame x, y, z, mm"},
+        "platform_roll_deg": _num("platform roll (engineers), degrees"),
+        "platform_pitch_deg": _num("platform pitch (engineers), degrees"),
+    },
+    ["t", "plantarflexion_deg", "inversion_deg", "plantarflexion_torque_nm",
+     "inversion_torque_nm"])
+
 #: topic → spec; the writer registers all of them, in this order.
 CHANNELS: dict[str, ChannelSpec] = {
     STATE: ChannelSpec(STATE, "talus.RobotState", _STATE, {"rate_hz": "1000"}),
@@ -155,6 +181,7 @@ CHANNELS: dict[str, ChannelSpec] = {
     EVENTS: ChannelSpec(EVENTS, "talus.SafetyEvent", _EVENTS),
     METADATA: ChannelSpec(METADATA, "talus.SessionMetadata", _METADATA),
     REFERENCE: ChannelSpec(REFERENCE, "talus.ProtocolReference", _REFERENCE),
+    ANKLE: ChannelSpec(ANKLE, "talus.AnkleState", _ANKLE, {"rate_hz": "100"}),
 }
 
 #: Column layout of a ``RecorderTap`` row (rt.components.blocks): field name → width.

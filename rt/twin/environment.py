@@ -142,6 +142,18 @@ class CompliantAnkle(_Env):
         return env
 
 
+def patient_foot(kinematics, z_m: float, roll_rad: float, pitch_rad: float,
+                 ankle=None) -> CompliantAnkle:
+    """The patient's foot strapped on the platform at a session's start pose, unloaded: its
+    ankle centre where the patient's ankle setup (``rt.model.ankle.AnkleSetup``) puts it, or
+    the twin's default height above the sole when there is none."""
+    fields: dict = {"limb_weight_n": 0.0}
+    if ankle is not None:
+        fields["centre_from_sensor_m"] = (ankle.offset_x_m, ankle.offset_y_m,
+                                          ankle.sole_above_sensor_m + ankle.height_above_sole_m)
+    return CompliantAnkle.at_pose(kinematics, z_m, roll_rad, pitch_rad, **fields)
+
+
 class PayloadStep(_Env):
     """Free motion with a payload of ``mass_kg`` put on the platform at ``at_s`` (s).
 
