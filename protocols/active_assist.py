@@ -30,7 +30,7 @@ from protocols.output import (
 )
 from protocols.schema import ActiveAssist
 from rt.errors import KinematicsError
-from rt.model.ankle import AnkleSetup
+from rt.model.ankle import AnkleSetup, sensor_to_ankle_S
 from rt.model.kinematics import Kinematics
 
 #: Largest sqrt(g·K/I)·dt and B·dt/I the semi-implicit Euler step is allowed (stable up to 2;
@@ -74,6 +74,9 @@ class ActiveAssistGenerator(Generator):
         # The ankle kinematics when the heave follows the angles (the ankle centre keeps its
         # height), else None (heave held).
         self._heave = self.ankle.heave
+        # The patient's torque is taken about the ankle centre when it is known (the sensor
+        # origin otherwise): the sensor's moment less r_SA × f.
+        self._r_ankle = (0.0, 0.0, 0.0) if ankle is None else sensor_to_ankle_S(ankle)
         rom = p.rom_deg
         # Platform-frame ROM (relative to neutral) per axis: (lo, hi).
         d_lo, d_hi = -rad(rom.dorsiflexion or 0.0), rad(rom.plantarflexion or 0.0)
@@ -236,6 +239,11 @@ class ActiveAssistGenerator(Generator):
             return GeneratorStatus.FINISHED  # the last sample is already in ``out``
         src = inp if inp is not None else self._passive
         tau_r, tau_p = src.tau_roll_nm, src.tau_pitch_nm
+        rx, ry, rz = self._r_ankle
+        if rx != 0.0 or ry != 0.0 or rz != 0.0:
+            fx, fy, fz = src.force_x_n, src.force_y_n, src.force_z_n
+            tau_r -= ry * fz - rz * fy
+            tau_p -= rz * fx - rx * fz
         if not (math.isfinite(tau_r) and math.isfinite(tau_p)):
             return GeneratorStatus.ERROR_INPUT
         if k > 0:  # sample 0 is the neutral pose at rest
