@@ -27,22 +27,24 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
 from protocols.schema import validate_protocol_data
-from protocols.session import RATE_HZ, SessionSetup, _build, run_session
+from protocols.session import RATE_HZ, SessionSetup, _build
 from rt.model import RobotModel
 from rt.model.ankle import AnkleKinematics, AnkleSetup, ankle_angles, ankle_torques
-from rt.recording.reader import read_recording
+from rt.references.sequencer import Phase
+from rt.safety.limits import PatientLimits
+from rt.safety.events import Reaction
 from rt.sessions import COLUMNS
-from rt.twin.environment import CompliantAnkle
 
 SETUP = AnkleSetup(side="left", height_above_sole_m=0.07, offset_x_m=0.01)
-K_H, K_Z = (CompliantAnkle.model_fields["horizontal_stiffness_n_per_m"].default,
-            CompliantAnkle.model_fields["vertical_stiffness_n_per_m"].default)
+#: The patient's limits: the ±20° exercise ends exactly at the default ±20° ROM limit, where
+#: the supervisor's cushion stops it; a prescription of ±25° (and the force limit raised past
+#: the platform-centred variant's shank reaction) lets both variants run.
+LIMITS = PatientLimits(roll_min_deg=-25.0, roll_max_deg=25.0, pitch_min_deg=-25.0,
+                       pitch_max_deg=25.0, max_force_n=2000.0)
 
 
 def exercise(centre: str) -> dict:
@@ -75,25 +77,51 @@ def displacement(model: RobotModel) -> dict:
     return out
 
 
-def on_twin(model: RobotModel, folder: Path) -> dict:
+def _drive(model: RobotModel, doc: dict, sample) -> dict:
+    """Run a protocol on the in-process twin (no pre-flight: the platform-centred variant is
+    what pre-flight would refuse), calling ``sample(pl, twin, row)`` every 10 ms of loop time
+    until the program is back at rest or the supervisor stopped it."""
+    setup = SessionSetup(protocol=validate_protocol_data(doc), ankle=SETUP,
+                         patient_limits=LIMITS)
+    _protocol, gen, _report, pl, tap = _build(setup, model, "fast")
+    twin = pl.twin
+    assert twin is not None
+    t, end = 0.0, gen.duration_s + 20.0
+    while t < end:
+        pl.loop.run(seconds=0.01)
+        t += 0.01
+        if not tap.written:
+            continue
+        row = tap.ring[(tap.written - 1) % tap.capacity]
+        sample(pl, twin, row)
+        if row[COLUMNS["phase"].start] >= Phase.REST or pl.supervisor.reaction >= Reaction.SOFT_STOP:
+            break
+    stops = [e.cause for e in pl.events.snapshot() if e.reaction >= Reaction.SOFT_STOP]
+    return {"completed": bool(row[COLUMNS["phase"].start] >= Phase.REST) and not stops,
+            "stops": stops}
+
+
+def on_twin(model: RobotModel) -> dict:
     out = {}
     for centre in ("platform", "ankle"):
-        path = folder / f"{centre}.mcap"
-        s = run_session(SessionSetup(protocol=validate_protocol_data(exercise(centre)),
-                                     ankle=SETUP), path, model=model)
-        rec = read_recording(path)
-        err = []
-        for m in rec["/robot/state"][::10]:
-            c, r = model.kin.fk(m["q"], check=False), model.kin.fk(m["q_ref"], check=False)
+        err: list[list[float]] = []
+        force: list[float] = []
+
+        def sample(pl, twin, row, err=err, force=force) -> None:
+            if row[COLUMNS["phase"].start] != Phase.PLAY:
+                return
+            c = model.kin.fk(twin.plant.q, check=False)
+            r = model.kin.fk(pl.reference.q_ref.data, check=False)
             err.append([math.degrees(a - b) for a, b in zip(
                 ankle_angles(c.roll, c.pitch, SETUP.side),
                 ankle_angles(r.roll, r.pitch, SETUP.side), strict=True)])
-        e = np.array(err)
-        d = np.array([m["centre_displacement_mm"] for m in rec["/ankle/state"]]) * 1e-3
-        f = np.sqrt((K_H * d[:, 0]) ** 2 + (K_H * d[:, 1]) ** 2 + (K_Z * d[:, 2]) ** 2)
-        out[centre] = {"completed": s["completed"], "stops": [x["cause"] for x in s["stops"]],
-                       "angle_error_rms_deg": {"plantarflexion": float(np.sqrt(np.mean(
-                           e[:, 0] ** 2))), "inversion": float(np.sqrt(np.mean(e[:, 1] ** 2)))},
+            force.append(float(np.linalg.norm(twin.plant.env_state[4:7])))
+
+        run = _drive(model, exercise(centre), sample)
+        e, f = np.array(err), np.array(force)
+        out[centre] = {**run, "angle_error_rms_deg": {
+                           "plantarflexion": float(np.sqrt(np.mean(e[:, 0] ** 2))),
+                           "inversion": float(np.sqrt(np.mean(e[:, 1] ** 2)))},
                        "reaction_force_peak_n": float(f.max()),
                        "reaction_force_rms_n": float(np.sqrt(np.mean(f ** 2)))}
     return out
@@ -105,37 +133,27 @@ def isometric(model: RobotModel) -> dict:
            "holds": [{"roll_deg": 0.0, "pitch_deg": 10.0, "hold_s": 5.0, "rest_s": 0.5},
                      {"roll_deg": 0.0, "pitch_deg": -10.0, "hold_s": 5.0, "rest_s": 0.5}],
            "transition_speed_deg_s": 10.0}
-    setup = SessionSetup(protocol=validate_protocol_data(doc), ankle=SETUP)
-    _protocol, gen, _report, pl, tap = _build(setup, model, "fast")
-    twin = pl.twin
-    assert twin is not None
     high = SETUP.model_copy(update={"height_above_sole_m": SETUP.height_above_sole_m + 0.01})
     rows: list[tuple[float, float, float, float, float]] = []
-    t, end = 0.0, gen.duration_s + 12.0
-    while t < end:
-        pl.loop.run(seconds=0.01)
-        t += 0.01
-        if not tap.written:
-            continue
-        row = tap.ring[(tap.written - 1) % tap.capacity]
+
+    def sample(pl, twin, row) -> None:
         w = row[COLUMNS["wrench"]]
         if not np.all(np.isfinite(w)):
-            continue
-        rot = twin.plant.rot
-        m_base = twin.plant.env_state[1:4]
-        m_p = rot.T @ m_base                       # the joint's moment in the foot's axes
-        true = m_p[1]                              # plantarflexion axis (y)
+            return
+        # The joint's moment on the foot, in the foot's (platform's) axes: y is DF/PF.
+        true = float((twin.plant.rot.T @ twin.plant.env_state[1:4])[1])
         cfg = model.kin.fk(row[COLUMNS["q"]], check=False)
         rows.append((math.degrees(cfg.pitch), true, ankle_torques(tuple(w), SETUP)[0],
                      ankle_torques(tuple(w), high)[0], float(w[4])))
+
+    run = _drive(model, doc, sample)
     a = np.array(rows)
-    held = np.abs(np.abs(a[:, 0]) - 10.0) < 0.2     # samples at a hold's angle
-    h = a[held]
+    h = a[np.abs(np.abs(a[:, 0]) - 10.0) < 0.2]     # samples at a hold's angle
     rms = {name: float(np.sqrt(np.mean((h[:, k] - h[:, 1]) ** 2)))
            for name, k in (("about_the_ankle", 2), ("ankle_entered_10mm_high", 3),
                            ("about_the_sensor_origin", 4))}
-    return {"samples": int(held.sum()), "true_torque_nm": [float(h[:, 1].min()),
-                                                          float(h[:, 1].max())],
+    return {**run, "samples": len(h),
+            "true_torque_nm": [float(h[:, 1].min()), float(h[:, 1].max())],
             "rms_error_nm": rms}
 
 
@@ -144,10 +162,9 @@ def main() -> None:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     model = RobotModel.load()
-    with tempfile.TemporaryDirectory() as tmp:
-        result = {"rate_hz": RATE_HZ, "twin": True, "setup": SETUP.model_dump(),
-                  "displacement": displacement(model), "on_twin": on_twin(model, Path(tmp)),
-                  "isometric": isometric(model)}
+    result = {"rate_hz": RATE_HZ, "twin": True, "setup": SETUP.model_dump(),
+              "displacement": displacement(model), "on_twin": on_twin(model),
+              "isometric": isometric(model)}
     if args.json:
         print(json.dumps(result, indent=2))
         return
