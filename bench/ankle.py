@@ -31,12 +31,12 @@ import math
 import numpy as np
 
 from protocols.schema import validate_protocol_data
-from protocols.session import RATE_HZ, SessionSetup, _build
+from protocols.session import RATE_HZ, SessionSetup, build_twin_session
 from rt.model import RobotModel
 from rt.model.ankle import AnkleKinematics, AnkleSetup, ankle_angles, ankle_torques
 from rt.references.sequencer import Phase
-from rt.safety.limits import PatientLimits
 from rt.safety.events import Reaction
+from rt.safety.limits import PatientLimits
 from rt.sessions import COLUMNS
 
 SETUP = AnkleSetup(side="left", height_above_sole_m=0.07, offset_x_m=0.01)
@@ -83,7 +83,7 @@ def _drive(model: RobotModel, doc: dict, sample) -> dict:
     until the program is back at rest or the supervisor stopped it."""
     setup = SessionSetup(protocol=validate_protocol_data(doc), ankle=SETUP,
                          patient_limits=LIMITS)
-    _protocol, gen, _report, pl, tap = _build(setup, model, "fast")
+    _protocol, gen, _report, pl, tap = build_twin_session(setup, model, "fast")
     twin = pl.twin
     assert twin is not None
     t, end = 0.0, gen.duration_s + 20.0

@@ -101,7 +101,9 @@ def _environment(setup: SessionSetup, model: RobotModel, z: float, roll: float, 
     return patient_foot(model.kin, z, roll, pitch, setup.ankle)
 
 
-def _build(setup: SessionSetup, model: RobotModel, mode: str):
+def build_twin_session(setup: SessionSetup, model: RobotModel, mode: str):
+    """The protocol, its validated generator and report, and the position loop on an
+    in-process twin with the session tap, ready to run (pre-flight, benchmarks, tests)."""
     protocol = setup.load()
     gen = make_generator(protocol, dt=1.0 / RATE_HZ, kinematics=model.kin,
                          patient_weight_kg=setup.patient_weight_kg, base_dir=setup.base_dir,
@@ -407,7 +409,7 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     time and value).
     """
     model = model or RobotModel.load()
-    protocol, _gen, report, pl, tap = _build(setup, model, "fast")
+    protocol, _gen, report, pl, tap = build_twin_session(setup, model, "fast")
     problems = report.check_against(setup.patient_limits, setup.robot_limits)
     if problems:
         raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: "
@@ -465,7 +467,7 @@ def run_session(setup: SessionSetup, record: Path | None = None,
 
     model = model or RobotModel.load()
     pre = preflight(setup, model)
-    protocol, gen, report, pl, tap = _build(setup, model, "fast")
+    protocol, gen, report, pl, tap = build_twin_session(setup, model, "fast")
     recorder = None
     pump = None
     stop_pump = threading.Event()
@@ -478,6 +480,8 @@ def run_session(setup: SessionSetup, record: Path | None = None,
         if getattr(gen, "info", None):
             meta["source"] = gen.info          # traceability of the replayed record
         meta["preload_n"] = preload_of(pl)     # the force law's floor (the error's reference)
+        if setup.ankle is not None:
+            meta["ankle"] = setup.ankle.model_dump()   # where the ankle centre was
         recorder = SessionRecorder(record, meta, force=force, inputs=inputs)
         recorder.attach_state_ring(pl.recorder, start=0)
         pl.events.listener = recorder.event

@@ -4,13 +4,18 @@ gives ankle angles and torques in clinical terms and the recording an ``/ankle/s
 channel."""
 from __future__ import annotations
 
+import datetime as dt
 import math
+import shutil
+import subprocess
 
 import jsonschema
 import pytest
 
 from protocols.schema import validate_protocol_data
 from protocols.session import SessionSetup, preflight, run_session
+from reports.session_data import session_input_from_recording
+from reports.session_report import render_session_report
 from rt.errors import ProtocolValidationError
 from rt.model.ankle import AnkleSetup
 from rt.recording.channels import ANKLE, CHANNELS
@@ -57,6 +62,19 @@ def test_session_about_the_ankle_summarized_and_recorded_in_clinical_terms(tmp_p
     # within the tracking error (≤ 2 mm), its horizontal part is the mechanism's.
     assert max(abs(m["centre_displacement_mm"][2]) for m in states) < 2.0
     assert max(math.hypot(*m["centre_displacement_mm"][:2]) for m in states) > 15.0
+    # The session report reads the same channel: clinical angles and torques, the left foot.
+    inp = session_input_from_recording(out)
+    fig = inp.figures["ankle"]
+    assert fig["rom_deg"]["eversion"] == pytest.approx(ankle["rom_deg"]["eversion"], abs=0.2)
+    assert fig["peak_torque_nm"]["plantarflexion"] == pytest.approx(
+        ankle["peak_torque_nm"]["plantarflexion"], abs=1.0)
+    pdf = tmp_path / "rom.pdf"
+    render_session_report(inp, pdf, clock=lambda: dt.datetime(2026, 11, 25, tzinfo=dt.UTC))
+    if shutil.which("pdftotext"):
+        text = subprocess.run(["pdftotext", "-layout", str(pdf), "-"], capture_output=True,
+                              text=True, check=True).stdout
+        assert "Peak plantarflexion torque" in text and "Ankle centre moved" in text
+        assert "Foot" in text and "left" in text
 
 
 def test_preflight_refuses_a_range_the_ankle_centre_cannot_follow() -> None:
