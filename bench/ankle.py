@@ -6,7 +6,7 @@
    and horizontal (kinematics only: ``rt.model.ankle``; the RMS is over every 10th sample of
    the reference, holds included).
 2. The same exercise run on the twin (its foot turning about the same ankle centre, shank
-   springs 1e4 N/m horizontal, 1e5 N/m vertical): commanded vs achieved ankle angle (deg RMS,
+   springs 3e3 N/m horizontal, 1e5 N/m vertical): commanded vs achieved ankle angle (deg RMS,
    1 kHz samples of ``/robot/state``: forward kinematics of q_ref and of the measured q) and
    the shank's reaction force at the ankle centre the misalignment produces (N, peak and
    RMS; the twin's springs times the recorded ``/ankle/state`` centre displacement), about

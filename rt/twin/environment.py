@@ -80,11 +80,13 @@ class CompliantAnkle(_Env):
     * damping of order 1 N m s/rad (Kearney & Hunter, Crit. Rev. Biomed. Eng. 18:55-87, 1990).
 
     The translational stiffnesses are design values of this twin, not measurements: 1e5 N/m
-    vertically (heel pad and leg, as before) and 1e4 N/m horizontally (10 N per mm of
-    misalignment). ``neutral_z_m`` is the height of the sensor origin where the foot is
-    unloaded; when ``neutral_centre_m`` is not given the centre's rest position is computed from
-    it assuming no parasitic translation at the neutral pose (exact for a level neutral pose);
-    :meth:`at_pose` computes both from the robot's kinematics.
+    vertically (heel pad and leg, as before) and 3e3 N/m horizontally (3 N per mm of
+    misalignment: the seated patient's shank, pivoting at the knee, gives way before the ATI
+    sensor's lateral range is reached; 1e4 N/m saturated it at 50 mm). ``neutral_z_m`` is the
+    height of the sensor origin where the foot is unloaded; when ``neutral_centre_m`` is not
+    given the centre's rest position is computed from it assuming no parasitic translation at
+    the neutral pose (exact for a level neutral pose); :meth:`at_pose` computes both from the
+    robot's kinematics.
     """
 
     kind: Literal["ankle"] = "ankle"
@@ -96,8 +98,8 @@ class CompliantAnkle(_Env):
     neutral_centre_m: tuple[Finite, Finite, Finite] | None = None
     vertical_stiffness_n_per_m: NonNeg = 1.0e5
     vertical_damping_n_s_per_m: NonNeg = 1.0e3
-    horizontal_stiffness_n_per_m: NonNeg = 1.0e4
-    horizontal_damping_n_s_per_m: NonNeg = 2.0e2
+    horizontal_stiffness_n_per_m: NonNeg = 3.0e3
+    horizontal_damping_n_s_per_m: NonNeg = 1.0e2
     stiffness_n_m_per_rad: tuple[NonNeg, NonNeg, NonNeg] = (30.0, 45.0, 20.0)
     damping_n_m_s_per_rad: tuple[NonNeg, NonNeg, NonNeg] = (0.6, 1.0, 0.3)
     end_of_range_rad: tuple[NonNeg, NonNeg] = (0.2618, 0.3491)
