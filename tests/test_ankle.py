@@ -210,3 +210,24 @@ def test_about_the_ankle_the_twin_ankle_feels_only_the_horizontal_residual() -> 
     _, state = _twin_wrench(env, pose.z_m, pose.roll_rad, pose.pitch_rad)
     assert state[6] == pytest.approx(0.0, abs=1e-9)
     assert state[4] == pytest.approx(-3e3 * pose.displacement_m[0], abs=1e-9)
+
+
+def test_setup_from_the_malleoli_markers() -> None:
+    """Markers 70 mm apart across a right foot, the medial one 10 mm higher (as anatomy has
+    it): the centre is their midpoint; height above the sole (at the sensor's origin + 5 mm
+    plate) and offsets follow."""
+    from rt.model.ankle import setup_from_malleoli
+
+    s = MODEL.description.sensor.offset_m
+    lat = (0.02, -0.035, s[2] + 0.005 + 0.065)
+    med = (0.02, 0.035, s[2] + 0.005 + 0.075)
+    setup = setup_from_malleoli(lat, med, "right", s, sole_above_sensor_m=0.005)
+    assert setup.source == "camera" and setup.side == "right"
+    assert setup.height_above_sole_m == pytest.approx(0.070, abs=1e-12)
+    assert (setup.offset_x_m, setup.offset_y_m) == pytest.approx((0.02, 0.0), abs=1e-12)
+    with pytest.raises(InputError, match="medial marker is on the lateral side of a left"):
+        setup_from_malleoli(lat, med, "left", s)
+    with pytest.raises(InputError, match="250 mm apart"):
+        setup_from_malleoli((0.0, -0.125, 0.15), (0.0, 0.125, 0.15), "right", s)
+    with pytest.raises(InputError, match="below the sole"):
+        setup_from_malleoli((0.0, -0.035, 0.05), (0.0, 0.035, 0.05), "right", s)

@@ -127,6 +127,49 @@ def parse_ankle_setup(data: Any, platform_radius_m: float, side: str | None = No
     return setup
 
 
+#: Plausible distance between the malleoli's markers (m): the bimalleolar width of adults is
+#: about 60-80 mm (children's less); outside this the markers are not on the two malleoli.
+MALLEOLI_WIDTH_RANGE_M = (0.040, 0.110)
+
+
+def setup_from_malleoli(lateral_P: tuple[float, float, float] | list[float],
+                        medial_P: tuple[float, float, float] | list[float], side: str,
+                        sensor_offset_m: tuple[float, float, float] | list[float],
+                        sole_above_sensor_m: float = 0.0) -> AnkleSetup:
+    """The ankle setup from the two malleoli's marker centres in the platform frame P (m), as
+    the camera measures them (``source="camera"``): the centre is their midpoint (the
+    talocrural axis passes close to both malleoli's tips), its height taken above the sole at
+    ``sensor_offset_m[2] + sole_above_sensor_m`` in P.
+
+    Raises ``InputError`` when the markers are implausibly far apart or close together, or when
+    the medial marker is on the lateral side for that foot (medial is +y for a right foot:
+    ``FOOT_MOUNTING``), or the resulting height is implausible (:class:`AnkleSetup`).
+    """
+    lat = [float(v) for v in lateral_P]
+    med = [float(v) for v in medial_P]
+    width = math.dist(lat, med)
+    lo, hi = MALLEOLI_WIDTH_RANGE_M
+    if not lo <= width <= hi:
+        raise InputError(f"ankle setup from the camera: the malleoli markers are "
+                         f"{width * 1e3:.0f} mm apart, outside {lo * 1e3:.0f}-{hi * 1e3:.0f} mm: "
+                         "check that one marker is on each malleolus")
+    medial_sign = 1.0 if side == "right" else -1.0
+    if (med[1] - lat[1]) * medial_sign <= 0.0:
+        raise InputError(f"ankle setup from the camera: the medial marker is on the lateral "
+                         f"side of a {side} foot (toes towards +x): markers swapped, or the "
+                         "other foot")
+    centre = [(a + b) / 2.0 for a, b in zip(lat, med, strict=True)]
+    sole_z = float(sensor_offset_m[2]) + sole_above_sensor_m
+    data = {"side": side, "height_above_sole_m": centre[2] - sole_z,
+            "offset_x_m": centre[0] - float(sensor_offset_m[0]),
+            "offset_y_m": centre[1] - float(sensor_offset_m[1]),
+            "sole_above_sensor_m": sole_above_sensor_m, "source": "camera"}
+    try:
+        return AnkleSetup.model_validate(data)
+    except ValidationError as exc:
+        raise InputError(f"ankle setup from the camera: {validation_summary(exc)}") from None
+
+
 def platform_angles(plantar_rad: float, inversion_rad: float, side: str) -> tuple[float, float]:
     """(roll, pitch) offsets (rad) of the foot for a plantarflexion and an inversion angle (rad;
     negative values are dorsiflexion and eversion) on the ``side`` foot."""
