@@ -128,6 +128,10 @@ def build_twin_session(setup: SessionSetup, model: RobotModel, mode: str):
     return protocol, gen, report, pl, tap
 
 
+#: The name other branches know it by (renamed public for bench/ankle.py).
+_build = build_twin_session
+
+
 def start_pose(gen) -> tuple[float, float, float]:
     """The platform pose (z m, roll rad, pitch rad) of a generator's first sample."""
     first = gen.new_output()
