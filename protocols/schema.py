@@ -136,13 +136,13 @@ class _AnkleCentred(_Model):
 
     ``centre``: ``ankle`` turns the foot about the patient's ankle centre (the heave follows
     the angles; the patient's ankle setup is required), ``platform`` about the platform's centre
-    (heave held); unset = about the ankle when the patient's ankle setup is known, else the
-    platform. With a setup, pre-flight refuses an exercise that would move the ankle centre
+    (heave held); ``auto`` (the default) = about the ankle when the patient's ankle setup is
+    known, else the platform. With a setup, pre-flight refuses an exercise that would move the ankle centre
     horizontally by more than ``ankle_displacement_limit_mm`` (default
     ``rt.model.ankle.DEFAULT_COMFORT_LIMIT_M``, cited there).
     """
 
-    centre: Literal["ankle", "platform"] | None = None
+    centre: Literal["auto", "ankle", "platform"] = "auto"
     ankle_displacement_limit_mm: Annotated[float, Field(gt=0.0, le=100.0,
                                                         allow_inf_nan=False)] | None = None
 
