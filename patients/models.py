@@ -144,6 +144,27 @@ class PatientLimitsRow(Base):
     patient: Mapped[Patient] = relationship(back_populates="limits")
 
 
+class PatientAnkleRow(Base):
+    """One entry of where the patient's ankle joint centre sits on the platform
+    (``rt.model.ankle.AnkleSetup`` fields, m); the newest row is in force, history is never
+    edited. Entered by hand or measured with the camera (``source``)."""
+
+    __tablename__ = "patient_ankle_setups"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    patient_id: Mapped[int] = mapped_column(
+        sa.ForeignKey("patients.id", ondelete="CASCADE"), index=True)
+    side: Mapped[str] = mapped_column(sa.String(8))
+    height_above_sole_m: Mapped[float] = mapped_column(sa.Float)
+    offset_x_m: Mapped[float] = mapped_column(sa.Float)
+    offset_y_m: Mapped[float] = mapped_column(sa.Float)
+    sole_above_sensor_m: Mapped[float] = mapped_column(sa.Float)
+    source: Mapped[str] = mapped_column(sa.String(16))
+    set_by: Mapped[str] = mapped_column(sa.String(64))
+    set_at: Mapped[dt.datetime] = mapped_column(UTCDateTime())
+    reason: Mapped[str | None] = mapped_column(sa.Text)
+
+
 class Plan(Base):
     """A protocol assigned to a patient: the YAML document stored as data, with its hash."""
 

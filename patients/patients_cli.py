@@ -1,4 +1,5 @@
-"""``talus patients``: register, list, show, edit, limits, plans, forget, export, import."""
+"""``talus patients``: register, list, show, edit, limits, ankle, plans, forget, export,
+import."""
 from __future__ import annotations
 
 import argparse
@@ -84,6 +85,25 @@ def register(commands: argparse._SubParsersAction) -> None:
                    help="the foot on the platform (for the clinical ROM options)")
     p.add_argument("--reason", default=None, help="why (kept with the prescription)")
     p.set_defaults(func=_limits)
+
+    p = commands.add_parser(
+        "ankle", help="show or enter where the patient's ankle centre sits on the platform",
+        description="Without options: the ankle setup in force. With them: a new entry (unset "
+                    "fields keep their values; --side defaults to the affected side). The "
+                    "ankle joint centre (midpoint of the malleoli) relative to the platform: "
+                    "height above the sole, and its horizontal offset from the platform's "
+                    "centre along the foot (+ towards the toes) and across it, in m "
+                    "(rt/model/ankle.py). Ankle exercises turn the foot about it.")
+    add_common(p)
+    p.add_argument("code")
+    for flag in _ANKLE_ARGS:
+        p.add_argument(f"--{flag.replace('_', '-')}", dest=flag, type=float, default=None,
+                       help="m")
+    p.add_argument("--side", choices=("left", "right"), default=None)
+    p.add_argument("--source", choices=("entered", "camera"), default=None,
+                   help="entered by hand (default) or measured with the camera")
+    p.add_argument("--reason", default=None, help="why (kept with the entry)")
+    p.set_defaults(func=_ankle)
 
     p = commands.add_parser("plan", help="assign a protocol (YAML file, validated) to a "
                                          "patient, or --end a plan")
@@ -243,6 +263,30 @@ def _limits(args: argparse.Namespace) -> int:
     emit(args, history, lambda h: "\n".join(
         [f"{i + 1}. {_limits_text(x)}" + (f" — {x['reason']}" if x["reason"] else "")
          for i, x in enumerate(h)] or ["no limits prescribed"]))
+    return 0
+
+
+_ANKLE_ARGS = ("height_above_sole_m", "offset_x_m", "offset_y_m", "sole_above_sensor_m")
+
+
+def _ankle_text(a: dict[str, Any]) -> str:
+    return (f"{a['side']} foot, ankle centre {a['height_above_sole_m'] * 1e3:.0f} mm above the "
+            f"sole, offsets {a['offset_x_m'] * 1e3:+.0f} mm (toes +), "
+            f"{a['offset_y_m'] * 1e3:+.0f} mm across ({a['source']})")
+
+
+@command
+def _ankle(args: argparse.Namespace) -> int:
+    fields = {k: getattr(args, k) for k in (*_ANKLE_ARGS, "side", "source")
+              if getattr(args, k) is not None}
+    with open_record(args) as record:
+        actor = login(record, args)
+        if fields:
+            new = record.set_ankle(actor, args.code, reason=args.reason, **fields)
+            emit(args, new, "ankle setup in force: " + _ankle_text(new))
+            return 0
+        current = record.ankle_in_force(actor, args.code)
+    emit(args, current, lambda a: _ankle_text(a) if a else "no ankle setup entered")
     return 0
 
 

@@ -48,6 +48,7 @@ from patients.models import (
     Calibration,
     Outcome,
     Patient,
+    PatientAnkleRow,
     PatientIdentity,
     PatientLimitsRow,
     Plan,
@@ -493,6 +494,56 @@ class ClinicalRecord:
                                f"with `talus patients limits {code} ...`")
             return {**_limits_dict(row), "body_mass_kg": patient.body_mass_kg}
 
+    # ------------------------------------------------------------ ankle setup
+    @staticmethod
+    def _ankle_row(db: Session, patient: Patient) -> PatientAnkleRow | None:
+        return db.execute(sa.select(PatientAnkleRow)
+                          .where(PatientAnkleRow.patient_id == patient.id)
+                          .order_by(PatientAnkleRow.id.desc()).limit(1)).scalar_one_or_none()
+
+    def set_ankle(self, actor: Actor, code: str, reason: str | None = None,
+                  **fields: Any) -> dict[str, Any]:
+        """Record where the patient's ankle centre sits on the platform
+        (``rt.model.ankle.AnkleSetup`` fields: side, height_above_sole_m, offset_x_m,
+        offset_y_m, sole_above_sensor_m, source; m). Unset fields keep the values in force;
+        ``side`` defaults to the affected side. A missing or implausible setup (no height, at or
+        below the sole) is refused naming the field; the RT process also checks it lies on its
+        platform."""
+        from rt.errors import InputError as RtInputError
+        from rt.model.ankle import AnkleSetup, parse_ankle_setup
+        with self._tx() as db:
+            self._require(db, actor, Action.LIMITS_SET)
+            patient = self._patient(db, code, lock=True)
+            current = self._ankle_row(db, patient)
+            base: dict[str, Any] = _ankle_dict(current) if current else {
+                "side": patient.affected_side}
+            unknown = set(fields) - set(AnkleSetup.model_fields)
+            if unknown:
+                raise InputError(f"unknown ankle field(s) {sorted(unknown)}; known: "
+                                 f"{list(AnkleSetup.model_fields)}")
+            merged = {**base, **{k: v for k, v in fields.items() if v is not None}}
+            try:
+                # The platform's radius is the RT process's to check; here the widest any
+                # platform of this product could be (1 m) only catches unit mistakes.
+                checked = parse_ankle_setup(merged, 1.0).model_dump()
+            except RtInputError as exc:
+                raise InputError(f"ankle setup for {code} refused: {exc}") from None
+            row = PatientAnkleRow(patient_id=patient.id, set_by=actor.username,
+                                  set_at=self.clock(), reason=reason, **checked)
+            db.add(row)
+            self._audit(db, actor, "ankle.set", "patient", code,
+                        before=_ankle_dict(current) if current else None, after=checked)
+            db.flush()
+            return {**checked, "set_by": row.set_by, "set_at": _iso(row.set_at),
+                    "reason": reason}
+
+    def ankle_in_force(self, actor: Actor, code: str) -> dict[str, Any] | None:
+        """The ankle setup in force (``AnkleSetup`` fields), None when none was entered."""
+        with self._tx() as db:
+            self._require(db, actor, Action.PATIENT_READ)
+            row = self._ankle_row(db, self._patient(db, code))
+            return _ankle_dict(row) if row is not None else None
+
     def limits_history(self, actor: Actor, code: str) -> list[dict[str, Any]]:
         with self._tx() as db:
             self._require(db, actor, Action.PATIENT_READ)
@@ -572,9 +623,11 @@ class ClinicalRecord:
             self._audit(db, actor, "session.start", "session", s.uid,
                         after={"patient": code, "protocol": s.protocol_name,
                                "sha256": s.protocol_sha256})
+            ankle = self._ankle_row(db, patient)
             return {"uid": s.uid, "patient": code, "limits": dict(s.limits),
                     "body_mass_kg": s.body_mass_kg, "protocol_sha256": s.protocol_sha256,
-                    "started_at": s.started_at.isoformat()}
+                    "started_at": s.started_at.isoformat(),
+                    "ankle": _ankle_dict(ankle) if ankle is not None else None}
 
     def finish_session(self, actor: Actor, uid: str, outcome: Outcome | str,
                        stopped_by: str | None = None, summary: dict[str, Any] | None = None,
@@ -871,6 +924,15 @@ def _user_dict(u: User) -> dict[str, Any]:
 
 def _limits_dict(row: PatientLimitsRow) -> dict[str, float]:
     return {k: getattr(row, k) for k in LIMIT_FIELDS}
+
+
+#: The ankle-setup columns (``rt.model.ankle.AnkleSetup`` fields).
+ANKLE_FIELDS = ("side", "height_above_sole_m", "offset_x_m", "offset_y_m",
+                "sole_above_sensor_m", "source")
+
+
+def _ankle_dict(row: PatientAnkleRow) -> dict[str, Any]:
+    return {k: getattr(row, k) for k in ANKLE_FIELDS}
 
 
 def _limits_record(row: PatientLimitsRow, side: str | None) -> dict[str, Any]:

@@ -34,8 +34,11 @@ PERSON_CAUSES = {"hand_stop": "patient", "stop_client": "operator",
 def rt_patient(started: dict[str, Any]) -> dict[str, Any]:
     """The RT process's ``session_start.patient`` for a started session: the pseudonymous code
     (it names the recording and goes in its metadata), the body mass and the limits in force."""
-    return {"id": started["patient"], "weight_kg": started["body_mass_kg"],
-            "limits": {k: started["limits"][k] for k in LIMIT_FIELDS}}
+    out = {"id": started["patient"], "weight_kg": started["body_mass_kg"],
+           "limits": {k: started["limits"][k] for k in LIMIT_FIELDS}}
+    if started.get("ankle") is not None:
+        out["ankle"] = started["ankle"]      # where the ankle centre is (rt.model.ankle)
+    return out
 
 
 def twin_runner(protocol_path: Path, **run_options: Any) -> Runner:
@@ -43,10 +46,13 @@ def twin_runner(protocol_path: Path, **run_options: Any) -> Runner:
     and body mass; ``run_options`` go to ``run_session``."""
     def run(started: dict[str, Any], recording: Path | None) -> dict[str, Any]:
         from protocols.session import SessionSetup, run_session
+        from rt.model.ankle import AnkleSetup
         from rt.safety.limits import PatientLimits
         patient = rt_patient(started)
+        ankle = patient.get("ankle")
         setup = SessionSetup(Path(protocol_path), patient_weight_kg=patient["weight_kg"],
-                             patient_limits=PatientLimits(**patient["limits"]))
+                             patient_limits=PatientLimits(**patient["limits"]),
+                             ankle=None if ankle is None else AnkleSetup(**ankle))
         return run_session(setup, recording, **run_options)
     return run
 

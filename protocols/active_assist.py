@@ -12,7 +12,13 @@ import math
 
 import numpy as np
 
-from protocols.base import DERIVATIVE_STEP_S, Generator, anatomical_to_platform, check_limits
+from protocols.base import (
+    DERIVATIVE_STEP_S,
+    AnkleCentre,
+    Generator,
+    anatomical_to_platform,
+    check_limits,
+)
 from protocols.output import (
     FZ,
     FZ_DOT,
@@ -24,6 +30,7 @@ from protocols.output import (
 )
 from protocols.schema import ActiveAssist
 from rt.errors import KinematicsError
+from rt.model.ankle import AnkleSetup, sensor_to_ankle_S
 from rt.model.kinematics import Kinematics
 
 #: Largest sqrt(g·K/I)·dt and B·dt/I the semi-implicit Euler step is allowed (stable up to 2;
@@ -56,13 +63,20 @@ class ActiveAssistGenerator(Generator):
     mode = Mode.POSITION
 
     def __init__(self, protocol: ActiveAssist, dt: float, kinematics: Kinematics, source: str,
-                 side: str) -> None:
+                 side: str, ankle: AnkleSetup | None = None) -> None:
         super().__init__(protocol, dt, kinematics, source)
         p, rad = protocol, math.radians
         self.side = side
         self._set_length(round(p.duration_s / dt) + 1)
         self._z = p.pose.z_m
         self._r0, self._p0 = rad(p.pose.roll_deg), rad(p.pose.pitch_deg)
+        self.ankle = AnkleCentre(p, kinematics, ankle, (self._z, self._r0, self._p0), source)
+        # The ankle kinematics when the heave follows the angles (the ankle centre keeps its
+        # height), else None (heave held).
+        self._heave = self.ankle.heave
+        # The patient's torque is taken about the ankle centre when it is known (the sensor
+        # origin otherwise): the sensor's moment less r_SA × f.
+        self._r_ankle = (0.0, 0.0, 0.0) if ankle is None else sensor_to_ankle_S(ankle)
         rom = p.rom_deg
         # Platform-frame ROM (relative to neutral) per axis: (lo, hi).
         d_lo, d_hi = -rad(rom.dorsiflexion or 0.0), rad(rom.plantarflexion or 0.0)
@@ -178,7 +192,10 @@ class ActiveAssistGenerator(Generator):
         h = DERIVATIVE_STEP_S
         hh = 0.5 * h * h
         q_lo, q_hi, qd_peak, qdd_peak = math.inf, -math.inf, 0.0, 0.0
+        hv = self._heave
         for r, pt in ((float(r), float(pt)) for r in rolls for pt in pitches):
+            if hv is not None:
+                z = hv.z_for(r, pt)
             try:
                 c = kin.ik(z, r, pt, check=True)
             except KinematicsError as exc:
@@ -187,8 +204,12 @@ class ActiveAssistGenerator(Generator):
                 break
             q_lo, q_hi = min(q_lo, *c.q), max(q_hi, *c.q)
             for vr, vp, a_r, a_p in combos:
-                gp_ = kin.ik(z, r + h * vr + hh * a_r, pt + h * vp + hh * a_p, check=False).q
-                gm_ = kin.ik(z, r - h * vr + hh * a_r, pt - h * vp + hh * a_p, check=False).q
+                rp_, pp_ = r + h * vr + hh * a_r, pt + h * vp + hh * a_p
+                rm_, pm_ = r - h * vr + hh * a_r, pt - h * vp + hh * a_p
+                zp_ = z if hv is None else hv.z_for(rp_, pp_)
+                zm_ = z if hv is None else hv.z_for(rm_, pm_)
+                gp_ = kin.ik(zp_, rp_, pp_, check=False).q
+                gm_ = kin.ik(zm_, rm_, pm_, check=False).q
                 for i in range(3):
                     qd_peak = max(qd_peak, abs(gp_[i] - gm_[i]) / (2.0 * h))
                     qdd_peak = max(qdd_peak, abs(gp_[i] - 2.0 * c.q[i] + gm_[i]) / (h * h))
@@ -201,6 +222,8 @@ class ActiveAssistGenerator(Generator):
         report.peak_slider_accel_m_s2 = qdd_peak
         report.notes.append("active assist: angles, rates and slider speeds/accelerations are "
                             "worst-case bounds for any patient torque")
+        grid_r, grid_p = np.meshgrid(rolls, pitches)
+        self.ankle.check(report, grid_r.ravel(), grid_p.ravel(), None)
         check_limits(report, p)
         self.last_report = report
         self._ready = report.ok
@@ -216,6 +239,11 @@ class ActiveAssistGenerator(Generator):
             return GeneratorStatus.FINISHED  # the last sample is already in ``out``
         src = inp if inp is not None else self._passive
         tau_r, tau_p = src.tau_roll_nm, src.tau_pitch_nm
+        rx, ry, rz = self._r_ankle
+        if rx != 0.0 or ry != 0.0 or rz != 0.0:
+            fx, fy, fz = src.force_x_n, src.force_y_n, src.force_z_n
+            tau_r -= ry * fz - rz * fy
+            tau_p -= rz * fx - rx * fz
         if not (math.isfinite(tau_r) and math.isfinite(tau_p)):
             return GeneratorStatus.ERROR_INPUT
         if k > 0:  # sample 0 is the neutral pose at rest
@@ -231,10 +259,16 @@ class ActiveAssistGenerator(Generator):
         h = DERIVATIVE_STEP_S
         hh = 0.5 * h * h
         kin = self.kinematics
+        rp_, pp_ = r + h * vr + hh * ar, pt + h * vp + hh * ap
+        rm_, pm_ = r - h * vr + hh * ar, pt - h * vp + hh * ap
+        zp_ = zm_ = z
+        hv = self._heave
+        if hv is not None:
+            z, zp_, zm_ = hv.z_for(r, pt), hv.z_for(rp_, pp_), hv.z_for(rm_, pm_)
         try:
             q = kin.ik(z, r, pt, check=False).q
-            gp_ = kin.ik(z, r + h * vr + hh * ar, pt + h * vp + hh * ap, check=False).q
-            gm_ = kin.ik(z, r - h * vr + hh * ar, pt - h * vp + hh * ap, check=False).q
+            gp_ = kin.ik(zp_, rp_, pp_, check=False).q
+            gm_ = kin.ik(zm_, rm_, pm_, check=False).q
         except KinematicsError:
             return GeneratorStatus.ERROR_KINEMATICS
         b = out.buf
@@ -243,7 +277,7 @@ class ActiveAssistGenerator(Generator):
             b[3 + i] = (gp_[i] - gm_[i]) / (2.0 * h)
             b[6 + i] = (gp_[i] - 2.0 * q[i] + gm_[i]) / (h * h)
         b[9], b[10], b[11] = z, r, pt
-        b[12], b[13], b[14] = 0.0, vr, vp
+        b[12], b[13], b[14] = (zp_ - zm_) / (2.0 * h), vr, vp
         b[FZ] = b[FZ_DOT] = math.nan
         b[17] = b[18] = 0.0
         out.mode = self.mode

@@ -44,6 +44,13 @@ from protocols.output import (
 from protocols.profiles import PITCH, PITCH_D, ROLL, ROLL_D, TARGET
 from protocols.schema import ProtocolModel
 from rt.errors import KinematicsError, ProtocolValidationError
+from rt.model.ankle import (
+    DEFAULT_COMFORT_LIMIT_M,
+    AnkleKinematics,
+    AnkleSetup,
+    describe_angles,
+    platform_angles,
+)
 from rt.model.kinematics import Kinematics
 
 FOOT_MOUNTING = "foot along +x (toes +x); plantarflexion = +pitch; inversion = +roll (right foot)"
@@ -60,25 +67,37 @@ def anatomical_to_platform(plantar_rad: float, inversion_rad: float, side: str
                            ) -> tuple[float, float]:
     """(roll, pitch) offsets (rad) for a plantarflexion and an inversion angle (rad; negative
     values are dorsiflexion and eversion), for the ``side`` foot (:data:`FOOT_MOUNTING`)."""
-    sign = 1.0 if side == "right" else -1.0
-    return sign * inversion_rad, plantar_rad
+    return platform_angles(plantar_rad, inversion_rad, side)
 
 
 # ------------------------------------------------------------------------------ helpers
 def joint_references(kin: Kinematics, z: float, path: np.ndarray, dt: float,
-                     q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> str | None:
-    """Fill q, q̇, q̈ (n, 3) from an angle path (n, 7); returns the first workspace problem."""
+                     q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                     ankle: AnkleKinematics | None = None,
+                     z_out: np.ndarray | None = None) -> str | None:
+    """Fill q, q̇, q̈ (n, 3) from an angle path (n, 7); returns the first workspace problem.
+
+    With ``ankle`` the heave follows the angles (``AnkleKinematics.z_for``: the ankle centre
+    keeps its height) instead of ``z``, and is written to ``z_out``; the slider derivatives
+    then include the heave's."""
     h = DERIVATIVE_STEP_S
     hh = 0.5 * h * h
+
+    def heave(r: float, p: float) -> float:
+        return z if ankle is None else ankle.z_for(r, p)
+
     for k in range(path.shape[0]):
         r, p, vr, vp, ar, ap = (float(x) for x in path[k, :6])
+        zk = heave(r, p)
+        if z_out is not None:
+            z_out[k] = zk
         still = vr == 0.0 and vp == 0.0 and ar == 0.0 and ap == 0.0
         if still and k > 0 and r == path[k - 1, ROLL] and p == path[k - 1, PITCH]:
             q[k] = q[k - 1]
             qd[k] = qdd[k] = 0.0
             continue
         try:
-            c = kin.ik(z, r, p, check=True)
+            c = kin.ik(zk, r, p, check=True)
         except KinematicsError as exc:
             return f"t = {k * dt:.3f} s (roll {math.degrees(r):.2f} deg, pitch " \
                    f"{math.degrees(p):.2f} deg): {exc}"
@@ -86,8 +105,10 @@ def joint_references(kin: Kinematics, z: float, path: np.ndarray, dt: float,
         if still:
             qd[k] = qdd[k] = 0.0
             continue
-        gp = kin.ik(z, r + h * vr + hh * ar, p + h * vp + hh * ap, check=False).q
-        gm = kin.ik(z, r - h * vr + hh * ar, p - h * vp + hh * ap, check=False).q
+        rp, pp = r + h * vr + hh * ar, p + h * vp + hh * ap
+        rm, pm = r - h * vr + hh * ar, p - h * vp + hh * ap
+        gp = kin.ik(heave(rp, pp), rp, pp, check=False).q
+        gm = kin.ik(heave(rm, pm), rm, pm, check=False).q
         for i in range(3):
             qd[k, i] = (gp[i] - gm[i]) / (2.0 * h)
             qdd[k, i] = (gp[i] - 2.0 * c.q[i] + gm[i]) / (h * h)
@@ -307,15 +328,86 @@ class ForceGenerator(TableGenerator):
         return True
 
 
+class AnkleCentre:
+    """How an ankle exercise treats the patient's ankle centre (``rt.model.ankle``).
+
+    ``kinematics`` is None without an ankle setup (angles about the platform's centre, as
+    before); with one, ``compensate`` says whether the heave follows the angles (the protocol's
+    ``centre``: ``ankle``, the default when a setup is known, or ``platform``), and the ankle
+    centre's horizontal displacement is checked against ``limit_m`` either way.
+    """
+
+    def __init__(self, protocol: ProtocolModel, kinematics: Kinematics, setup: AnkleSetup | None,
+                 neutral: tuple[float, float, float], source: str) -> None:
+        centre = getattr(protocol, "centre", None)
+        limit_mm = getattr(protocol, "ankle_displacement_limit_mm", None)
+        self.limit_m = DEFAULT_COMFORT_LIMIT_M if limit_mm is None else limit_mm * 1e-3
+        if setup is None:
+            if centre == "ankle":
+                raise ProtocolValidationError(
+                    f"{source}: centre: 'ankle' needs the patient's ankle setup (its height "
+                    "above the sole, foot placement offsets and side), and none was given: "
+                    "enter it or measure it with the camera")
+            self.kinematics: AnkleKinematics | None = None
+            self.compensate = False
+            return
+        self.kinematics = AnkleKinematics(kinematics, setup,
+                                          list(kinematics.description.sensor.offset_m),
+                                          neutral)
+        self.compensate = centre != "platform"
+
+    @property
+    def heave(self) -> AnkleKinematics | None:
+        """The ankle kinematics when the heave follows the angles, else None."""
+        return self.kinematics if self.compensate else None
+
+    def check(self, report: ValidationReport, rolls: np.ndarray, pitches: np.ndarray,
+              times: np.ndarray | None) -> None:
+        """Peak and RMS horizontal displacement of the ankle centre over the angle samples
+        (rad); a violation naming the first ankle angle beyond the limit (and its time, s, when
+        ``times`` are given), with the largest angle in that direction that stays within it."""
+        ak = self.kinematics
+        if ak is None:
+            return
+        d = np.empty(len(rolls))
+        for k, (r, p) in enumerate(zip(rolls, pitches, strict=True)):
+            d[k] = ak.pose_for_platform_angles(float(r), float(p), self.compensate).horizontal_m
+        report.ankle_peak_displacement_m = float(d.max()) if len(d) else math.nan
+        report.ankle_rms_displacement_m = float(np.sqrt(np.mean(d ** 2))) if len(d) else \
+            math.nan
+        report.ankle_displacement_limit_m = self.limit_m
+        over = np.flatnonzero(d > self.limit_m)
+        if not len(over):
+            return
+        k = int(over[0])
+        plantar, inversion = ak.angles(float(rolls[k]), float(pitches[k]))
+        # The worst sample in the same direction sets how far that direction may go.
+        frac = ak.limit_along(plantar, inversion, self.limit_m, self.compensate)
+        when = f" (t = {float(times[k]):.2f} s)" if times is not None else ""
+        report.violations.append(
+            f"ankle centre: at {describe_angles(plantar, inversion)}{when} it would move "
+            f"{d[k] * 1e3:.1f} mm horizontally, beyond the comfort limit "
+            f"{self.limit_m * 1e3:.0f} mm (peak {d.max() * 1e3:.1f} mm): narrow the range in "
+            f"that direction to {describe_angles(frac * plantar, frac * inversion)} or raise "
+            "ankle_displacement_limit_mm")
+
+
 class PositionGenerator(TableGenerator):
-    """Slider references from an angle path at constant heave."""
+    """Slider references from an angle path at constant heave, or with the heave that keeps
+    the patient's ankle centre at its height (``ankle``)."""
 
     mode = Mode.POSITION
     _block_id = BLOCK_POSITION
+    #: Every n-th sample's ankle displacement is evaluated (at 1 kHz: 100 Hz).
+    ANKLE_DECIMATION = 10
 
     def __init__(self, protocol: ProtocolModel, dt: float, kinematics: Kinematics,
-                 source: str) -> None:
+                 source: str, ankle: AnkleSetup | None = None) -> None:
         super().__init__(protocol, dt, kinematics, source)
+        pose = protocol.pose  # type: ignore[union-attr]
+        self.ankle = AnkleCentre(protocol, kinematics, ankle,
+                                 (pose.z_m, math.radians(pose.roll_deg),
+                                  math.radians(pose.pitch_deg)), source)
         self._path = self._build_path()
         self._set_length(self._path.shape[0])
 
@@ -328,12 +420,17 @@ class PositionGenerator(TableGenerator):
         path = self._path
         n = path.shape[0]
         table = np.zeros((n, POSITION_BLOCK.stop))
+        table[:, 9] = z
         problem = joint_references(self.kinematics, z, path, self.dt, table[:, Q],
-                                   table[:, QD], table[:, QDD])
+                                   table[:, QD], table[:, QDD], self.ankle.heave, table[:, 9])
         if problem is not None:
             report.violations.append(problem)
             return None
-        table[:, 9] = z
+        if self.ankle.heave is not None and n >= 3:
+            table[:, 12] = np.gradient(table[:, 9], self.dt, edge_order=2)
+        step = self.ANKLE_DECIMATION
+        idx = np.r_[np.arange(0, n, step), n - 1] if n else np.arange(0)
+        self.ankle.check(report, path[idx, ROLL], path[idx, PITCH], idx * self.dt)
         table[:, 10], table[:, 11] = path[:, ROLL], path[:, PITCH]
         table[:, 13], table[:, 14] = path[:, ROLL_D], path[:, PITCH_D]
         table[:, FZ] = path[:, TARGET]

@@ -25,13 +25,13 @@ ramp_out_s: 2.0
 
 
 def _sine_error(freq: float, model) -> float:
-    from protocols.session import SessionSetup, _build, _run
+    from protocols.session import SessionSetup, _run, build_twin_session
     from rt.sessions import COL_FREF, COL_FZ, COL_PHASE
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "sine.yaml"
         path.write_text(SINE.format(f=freq, cycles=max(4, round(10 * freq))))
-        _protocol, _gen, report, pl, tap = _build(SessionSetup(path), model, "fast")
+        _protocol, _gen, report, pl, tap = build_twin_session(SessionSetup(path), model, "fast")
         _run(pl, tap, report.duration_s, None)
     rows = tap.ring[:tap.written]
     play = rows[:, COL_PHASE] == 1

@@ -81,6 +81,7 @@ from protocols.schema import (
     SineFz,
 )
 from rt.errors import ConfigurationError, ConvergenceError, ProtocolValidationError, WorkspaceError
+from rt.model.ankle import AnkleSetup
 from rt.model.kinematics import Kinematics
 from rt.references.playback import TrajectoryPlayback
 
@@ -261,9 +262,9 @@ class AnkleRomGenerator(PositionGenerator):
     protocol: AnkleRom
 
     def __init__(self, protocol: AnkleRom, dt: float, kinematics: Kinematics, source: str,
-                 side: str) -> None:
+                 side: str, ankle: AnkleSetup | None = None) -> None:
         self.side = side
-        super().__init__(protocol, dt, kinematics, source)
+        super().__init__(protocol, dt, kinematics, source, ankle)
 
     def _build_path(self) -> np.ndarray:
         p, rad = self.protocol, math.radians
@@ -367,7 +368,7 @@ class PositionPlaybackGenerator(TableGenerator):
 # ------------------------------------------------------------------------------ factory
 def make_generator(protocol: ProtocolModel, *, dt: float = 1.0e-3, kinematics: Kinematics,
                    patient_weight_kg: float | None = None, base_dir: str | Path | None = None,
-                   side: str = "right") -> Generator:
+                   side: str | None = None, ankle: AnkleSetup | None = None) -> Generator:
     """Build the generator of a validated protocol model (``protocols.library.load_protocol``).
 
     Args:
@@ -377,7 +378,10 @@ def make_generator(protocol: ProtocolModel, *, dt: float = 1.0e-3, kinematics: K
         patient_weight_kg: the patient's weight (kg); required by gait replay.
         base_dir: where relative file names in the protocol are resolved; default the
             protocol file's folder (or the working directory for an in-memory protocol).
-        side: ``"right"`` or ``"left"`` foot, for the anatomical directions.
+        side: ``"right"`` or ``"left"`` foot, for the anatomical directions (default: the
+            ankle setup's side, else right).
+        ankle: the patient's ankle setup (``rt.model.ankle``): ankle exercises then turn the
+            foot about its ankle centre and pre-flight checks the centre's displacement.
 
     Raises:
         ProtocolValidationError: a file the protocol names is missing or malformed, or a value
@@ -387,6 +391,8 @@ def make_generator(protocol: ProtocolModel, *, dt: float = 1.0e-3, kinematics: K
     """
     if not (math.isfinite(dt) and 1e-4 <= dt <= 1e-2):
         raise ConfigurationError(f"dt must be in [1e-4, 1e-2] s (got {dt!r})")
+    side_given = side
+    side = side if side is not None else "right"
     if side not in ("right", "left"):
         raise ConfigurationError(f"side must be 'right' or 'left' (got {side!r})")
     src_path = protocol.loaded_from
@@ -401,12 +407,17 @@ def make_generator(protocol: ProtocolModel, *, dt: float = 1.0e-3, kinematics: K
         return SineFzGenerator(protocol, dt, kinematics, source)
     if isinstance(protocol, GaitReplay):
         return GaitReplayGenerator(protocol, dt, kinematics, source, patient_weight_kg, base)
+    if ankle is not None and isinstance(protocol, (AnkleRom, IsometricHold, ActiveAssist)):
+        side = ankle.side if side_given is None else side_given
+        if ankle.side != side:
+            raise ProtocolValidationError(f"{source}: ankle setup: it is for the {ankle.side} "
+                                          f"foot but the session is for the {side} foot")
     if isinstance(protocol, AnkleRom):
-        return AnkleRomGenerator(protocol, dt, kinematics, source, side)
+        return AnkleRomGenerator(protocol, dt, kinematics, source, side, ankle)
     if isinstance(protocol, IsometricHold):
-        return IsometricHoldGenerator(protocol, dt, kinematics, source)
+        return IsometricHoldGenerator(protocol, dt, kinematics, source, ankle)
     if isinstance(protocol, ActiveAssist):
-        return ActiveAssistGenerator(protocol, dt, kinematics, source, side)
+        return ActiveAssistGenerator(protocol, dt, kinematics, source, side, ankle)
     if isinstance(protocol, PositionPlayback):
         return PositionPlaybackGenerator(protocol, dt, kinematics, source, base)
     raise ProtocolValidationError(f"{source}: kind: no generator for {protocol.kind!r}")

@@ -79,6 +79,11 @@ class ValidationReport:
     q_range_m: tuple[float, float] = (math.nan, math.nan)
     peak_slider_speed_m_s: float = math.nan
     peak_slider_accel_m_s2: float = math.nan
+    #: The patient's ankle centre's horizontal displacement over the exercise (m; NaN without
+    #: an ankle setup) and the comfort limit it was checked against.
+    ankle_peak_displacement_m: float = math.nan
+    ankle_rms_displacement_m: float = math.nan
+    ankle_displacement_limit_m: float = math.nan
     violations: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 

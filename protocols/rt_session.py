@@ -33,6 +33,7 @@ from protocols.session import (
 )
 from rt.errors import ProtocolValidationError
 from rt.model import RobotModel
+from rt.model.ankle import AnkleSetup
 from rt.references.program import Program
 from rt.safety.limits import ProtocolLimits
 from rt.sessions import PatientInfo, SessionContext
@@ -99,8 +100,10 @@ class ProtocolSession:
 
     def figures(self, preload_n: float) -> SessionFigures:
         assert self.model is not None
+        ankle = self.metadata.get("ankle")
         return SessionFigures(self.protocol, self.model, preload_n,
-                              info=self.metadata.get("source"))
+                              info=self.metadata.get("source"),
+                              ankle=None if ankle is None else AnkleSetup.model_validate(ankle))
 
 
 class ProtocolSessions:
@@ -164,11 +167,13 @@ def prepare_session(protocol: dict[str, Any], patient: PatientInfo, description:
     """Validate, build, pre-flight (in the worker process); raises ProtocolValidationError."""
     model = _model_for(description)
     model_obj = validate_protocol_data(protocol, DOCUMENT_SOURCE)
+    ankle = getattr(patient, "ankle", None)
     setup = SessionSetup(patient_weight_kg=patient.weight_kg, patient_limits=patient.limits,
-                         robot_limits=robot_limits, protocol=model_obj, base_dir=base_dir)
+                         robot_limits=robot_limits, protocol=model_obj, base_dir=base_dir,
+                         ankle=ankle)
     pre = preflight(setup, model)
     gen = make_generator(model_obj, dt=1.0 / rate_hz, kinematics=model.kin,
-                         patient_weight_kg=patient.weight_kg, base_dir=base_dir)
+                         patient_weight_kg=patient.weight_kg, base_dir=base_dir, ankle=ankle)
     report = gen.validate()
     if not report.ok:  # cannot differ from pre-flight's; kept as the program's own check
         raise ProtocolValidationError(f"{DOCUMENT_SOURCE}: " + "; ".join(report.violations))
@@ -183,4 +188,6 @@ def prepare_session(protocol: dict[str, Any], patient: PatientInfo, description:
         meta["data_file"] = {"path": str(data), "sha256": _sha256(data)}
     if getattr(gen, "info", None):
         meta["source"] = gen.info          # traceability of a replayed record
+    if ankle is not None:
+        meta["ankle"] = ankle.model_dump()
     return ProtocolSession(model_obj, gen, pre["predicted"], start_pose(gen), meta)

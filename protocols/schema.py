@@ -131,6 +131,22 @@ class _Base(_Model):
         return self
 
 
+class _AnkleCentred(_Model):
+    """Shared fields of the ankle exercises: about which centre the foot turns.
+
+    ``centre``: ``ankle`` turns the foot about the patient's ankle centre (the heave follows
+    the angles; the patient's ankle setup is required), ``platform`` about the platform's centre
+    (heave held); ``auto`` (the default) = about the ankle when the patient's ankle setup is
+    known, else the platform. With a setup, pre-flight refuses an exercise that would move the ankle centre
+    horizontally by more than ``ankle_displacement_limit_mm`` (default
+    ``rt.model.ankle.DEFAULT_COMFORT_LIMIT_M``, cited there).
+    """
+
+    centre: Literal["auto", "ankle", "platform"] = "auto"
+    ankle_displacement_limit_mm: Annotated[float, Field(gt=0.0, le=100.0,
+                                                        allow_inf_nan=False)] | None = None
+
+
 class _Smooth(_Model):
     """Shared motion-profile fields of the exercises that move between angles."""
 
@@ -240,7 +256,7 @@ class GaitReplay(_Base):
         return self
 
 
-class AnkleRom(_Base, _Smooth):
+class AnkleRom(_Base, _Smooth, _AnkleCentred):
     """Passive range of motion (module docstring for the direction conventions).
 
     Each item of ``sequence`` is repeated ``repetitions`` times: neutral → first end (hold
@@ -273,7 +289,7 @@ class Hold(_Model):
     rest_s: Annotated[float, Field(ge=0.0, le=600.0, allow_inf_nan=False)] = 0.0
 
 
-class IsometricHold(_Base, _Smooth):
+class IsometricHold(_Base, _Smooth, _AnkleCentred):
     """Isometric holds at set platform angles (degrees in the platform frame, not anatomical).
 
     The platform moves from the neutral pose to each hold's angles at ``transition_speed_deg_s``,
@@ -304,7 +320,7 @@ class Admittance(_Model):
     roll: AxisAdmittance | None = None
 
 
-class ActiveAssist(_Base):
+class ActiveAssist(_Base, _AnkleCentred):
     """Active-assisted exercise: the platform follows the patient's torque through an admittance.
 
     A guide motion oscillates between the ROM ends of each axis with period ``guide_period_s``

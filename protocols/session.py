@@ -30,6 +30,7 @@ from rt.components.blocks import SignalTap
 from rt.components.tare import TareState, refusal_message
 from rt.errors import ProtocolValidationError
 from rt.model import RobotModel
+from rt.model.ankle import AnkleMonitor, AnkleSetup, sensor_to_ankle_S
 from rt.position_loop import PositionLoop, build_protocol_loop, sim_devices
 from rt.references.sequencer import Phase
 from rt.safety.events import Reaction, SafetyEvent
@@ -46,7 +47,7 @@ from rt.sessions import (
     SESSION_SOURCES,
     record_rows,
 )
-from rt.twin.environment import CompliantAnkle, parse_environment
+from rt.twin.environment import parse_environment, patient_foot
 from rt.twin.twin import SimClock, Twin
 
 RATE_HZ = 1000.0
@@ -69,6 +70,9 @@ class SessionSetup:
     seed: int = 0
     protocol: ProtocolModel | None = None
     base_dir: Path | None = None
+    #: The patient's ankle centre (ankle exercises turn the foot about it; the twin's foot
+    #: turns about it).
+    ankle: AnkleSetup | None = None
 
     def load(self) -> ProtocolModel:
         if self.protocol is not None:
@@ -91,25 +95,27 @@ def protocol_limits_of(protocol) -> ProtocolLimits | None:
                              if k in ProtocolLimits.model_fields})
 
 
-def _environment(setup: SessionSetup, sensor_z: float, roll: float, pitch: float):
+def _environment(setup: SessionSetup, model: RobotModel, z: float, roll: float, pitch: float):
     if setup.environment:
         return parse_environment(setup.environment)
     # The patient's strapped foot, unloaded where the protocol starts (the clinician sets the
-    # platform under the foot before the session).
-    return CompliantAnkle(neutral_z_m=sensor_z, neutral_roll_rad=roll, neutral_pitch_rad=pitch,
-                          limb_weight_n=0.0)
+    # platform under the foot before the session), turning about its ankle centre.
+    return patient_foot(model.kin, z, roll, pitch, setup.ankle)
 
 
-def _build(setup: SessionSetup, model: RobotModel, mode: str):
+def build_twin_session(setup: SessionSetup, model: RobotModel, mode: str):
+    """The protocol, its validated generator and report, and the position loop on an
+    in-process twin with the session tap, ready to run (pre-flight, benchmarks, tests)."""
     protocol = setup.load()
     gen = make_generator(protocol, dt=1.0 / RATE_HZ, kinematics=model.kin,
-                         patient_weight_kg=setup.patient_weight_kg, base_dir=setup.base_dir)
+                         patient_weight_kg=setup.patient_weight_kg, base_dir=setup.base_dir,
+                         ankle=setup.ankle)
     report = gen.validate()
     if not report.ok:
         raise ProtocolValidationError(f"{setup.source}: " + "; ".join(report.violations))
     clock = SimClock()
     z0, roll0, pitch0 = start_pose(gen)
-    env = _environment(setup, z0 + model.description.sensor.offset_m[2], roll0, pitch0)
+    env = _environment(setup, model, z0, roll0, pitch0)
     # The twin is "the real rig" (its own perturbed truth and imperfections), not the model.
     twin = Twin(None, env, seed=setup.seed, clock=clock)
     twin.place(model.kin.ik(z0, roll0, pitch0).q)
@@ -122,6 +128,10 @@ def _build(setup: SessionSetup, model: RobotModel, mode: str):
                              extra_connections=[(src, f"session.{name}")
                                                 for name, src in SESSION_SOURCES.items()])
     return protocol, gen, report, pl, tap
+
+
+#: The name other branches know it by (renamed public for bench/ankle.py).
+_build = build_twin_session
 
 
 def start_pose(gen) -> tuple[float, float, float]:
@@ -172,8 +182,15 @@ class SessionFigures:
     """
 
     def __init__(self, protocol: ProtocolModel, model: RobotModel, preload_n: float = 0.0,
-                 robot_limits: RobotLimits | None = None, info: dict[str, Any] | None = None):
+                 robot_limits: RobotLimits | None = None, info: dict[str, Any] | None = None,
+                 ankle: AnkleSetup | None = None):
         self.protocol = protocol
+        # With the patient's ankle setup: ankle angles and torques in clinical terms.
+        self.ankle = ankle
+        self._r_ankle = None if ankle is None else sensor_to_ankle_S(ankle)
+        # Peak ankle torques over the play phase, N·m: [plantar max, plantar min, inversion
+        # max, inversion min].
+        self._ankle_tau = [-math.inf, math.inf, -math.inf, math.inf]
         self.kin = model.kin
         self.preload_n = preload_n
         self.robot = robot_limits or RobotLimits()
@@ -223,6 +240,8 @@ class SessionFigures:
         self._at_limit("actuator force", rows[:, 0], tau, self.robot.max_actuator_force_n)
         self._at_limit("drive command", rows[:, 0], volts, self.robot.max_command_v)
         self._peak_tau = max(self._peak_tau, float(tau.max()))
+        if self._r_ankle is not None and play.any():
+            self._add_ankle_torques(rows[play][:, COLUMNS["wrench"]])
         self._peak_qd = max(self._peak_qd, float(np.abs(rows[:, COLUMNS["qd"]]).max()))
         for p in Phase:
             self._phase_time[p.name.lower()] += float(np.count_nonzero(phase == p)) * self._dt
@@ -258,6 +277,50 @@ class SessionFigures:
             out["offset_nm"] = [float(x) for x in row[7:10]]
         elif state == TareState.REFUSED:
             out["reason"] = refusal_message(int(row[2]), float(row[3]))
+        return out
+
+    def _add_ankle_torques(self, w: np.ndarray) -> None:
+        """Peaks of the ankle torques (``rt.model.ankle.ankle_torques``, vectorized) of the
+        sensor's wrench rows (fx, fy, fz, mx, my, mz)."""
+        assert self._r_ankle is not None and self.ankle is not None
+        rx, ry, rz = self._r_ankle
+        fx, fy, fz, mx, my = w[:, 0], w[:, 1], w[:, 2], w[:, 3], w[:, 4]
+        plantar = my - (rz * fx - rx * fz)
+        sign = 1.0 if self.ankle.side == "right" else -1.0
+        inversion = sign * (mx - (ry * fz - rz * fy))
+        ok = ~(np.isnan(plantar) | np.isnan(inversion))
+        if not ok.any():
+            return
+        t = self._ankle_tau
+        t[0] = max(t[0], float(plantar[ok].max()))
+        t[1] = min(t[1], float(plantar[ok].min()))
+        t[2] = max(t[2], float(inversion[ok].max()))
+        t[3] = min(t[3], float(inversion[ok].min()))
+
+    def _ankle_result(self) -> dict[str, Any]:
+        """Ankle angles reached (deg from the neutral pose, each in its own direction) and
+        peak torques (N·m, each direction's effort as a positive number)."""
+        assert self.ankle is not None
+        pose = getattr(self.protocol, "pose", None)
+        r0 = math.radians(pose.roll_deg) if pose is not None else 0.0
+        p0 = math.radians(pose.pitch_deg) if pose is not None else 0.0
+        sign = 1.0 if self.ankle.side == "right" else -1.0
+        deg = math.degrees
+        (r_lo, r_hi), (p_lo, p_hi) = self._rom["roll"], self._rom["pitch"]
+        out: dict[str, Any] = {"side": self.ankle.side, "setup": self.ankle.model_dump()}
+        if math.isfinite(p_lo) and math.isfinite(r_lo):
+            inv = sorted((sign * (r_lo - r0), sign * (r_hi - r0)))
+            out["rom_deg"] = {"dorsiflexion": deg(-(p_lo - p0)), "plantarflexion": deg(p_hi - p0),
+                              "inversion": deg(inv[1]), "eversion": deg(-inv[0])}
+        else:
+            out["rom_deg"] = None
+        t = self._ankle_tau
+        if math.isfinite(t[0]):
+            out["peak_torque_nm"] = {"plantarflexion": max(t[0], 0.0),
+                                     "dorsiflexion": max(-t[1], 0.0),
+                                     "inversion": max(t[2], 0.0), "eversion": max(-t[3], 0.0)}
+        else:
+            out["peak_torque_nm"] = None
         return out
 
     def _contact(self, t: np.ndarray, force: np.ndarray, force_mode: np.ndarray) -> None:
@@ -326,6 +389,8 @@ class SessionFigures:
         deg = math.degrees
         out["rom_deg"] = {axis: [deg(lo), deg(hi)] if math.isfinite(lo) else None
                           for axis, (lo, hi) in self._rom.items()}
+        if self.ankle is not None:
+            out["ankle"] = self._ankle_result()
         out["peak_actuator_force_n"] = self._peak_tau
         out["peak_slider_speed_m_s"] = self._peak_qd
         out["phase_s"] = {k: round(v, 3) for k, v in self._phase_time.items() if v > 0.0}
@@ -348,19 +413,21 @@ def preload_of(pl: PositionLoop) -> float:
 
 
 def figures_of(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel,
-               robot_limits: RobotLimits | None = None) -> SessionFigures:
+               robot_limits: RobotLimits | None = None,
+               ankle: AnkleSetup | None = None) -> SessionFigures:
     """The figures of an in-process run whose tap holds the whole session."""
     program = pl.reference.program
     figures = SessionFigures(protocol, model, preload_of(pl), robot_limits,
-                             getattr(program, "info", None))
+                             getattr(program, "info", None), ankle)
     rows, _ = tap.drain(0)
     figures.add(rows)
     return figures
 
 
-def summarize(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel) -> dict:
+def summarize(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel,
+              ankle: AnkleSetup | None = None) -> dict:
     """The summary of an in-process run whose tap holds the whole session."""
-    return figures_of(pl, tap, protocol, model).result(pl.events.snapshot())
+    return figures_of(pl, tap, protocol, model, ankle=ankle).result(pl.events.snapshot())
 
 
 def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
@@ -373,7 +440,7 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     time and value).
     """
     model = model or RobotModel.load()
-    protocol, _gen, report, pl, tap = _build(setup, model, "fast")
+    protocol, _gen, report, pl, tap = build_twin_session(setup, model, "fast")
     problems = report.check_against(setup.patient_limits, setup.robot_limits)
     if problems:
         raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: "
@@ -381,7 +448,7 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     _run(pl, tap, report.duration_s, None)
     rows = tap.ring[:tap.written]
     stops = [e for e in pl.events.snapshot() if e.reaction >= Reaction.SOFT_STOP]
-    figures = figures_of(pl, tap, protocol, model, setup.robot_limits)
+    figures = figures_of(pl, tap, protocol, model, setup.robot_limits, setup.ankle)
     summary = figures.result(pl.events.snapshot())
     predicted = {
         "duration_s": report.duration_s,
@@ -392,6 +459,11 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
         "min_platform_force_n": summary["min_force_n"],
         "rms_error_pct": summary["rms_error_pct"],
     }
+    if not math.isnan(report.ankle_peak_displacement_m):
+        predicted["ankle_displacement_mm"] = {
+            "peak": report.ankle_peak_displacement_m * 1e3,
+            "rms": report.ankle_rms_displacement_m * 1e3,
+            "limit": report.ankle_displacement_limit_m * 1e3}
     if stops:
         raise ProtocolValidationError(
             f"{setup.source}: refused by pre-flight: on the twin the supervisor stopped "
@@ -426,7 +498,7 @@ def run_session(setup: SessionSetup, record: Path | None = None,
 
     model = model or RobotModel.load()
     pre = preflight(setup, model)
-    protocol, gen, report, pl, tap = _build(setup, model, "fast")
+    protocol, gen, report, pl, tap = build_twin_session(setup, model, "fast")
     recorder = None
     pump = None
     stop_pump = threading.Event()
@@ -439,10 +511,15 @@ def run_session(setup: SessionSetup, record: Path | None = None,
         if getattr(gen, "info", None):
             meta["source"] = gen.info          # traceability of the replayed record
         meta["preload_n"] = preload_of(pl)     # the force law's floor (the error's reference)
+        if setup.ankle is not None:
+            meta["ankle"] = setup.ankle.model_dump()   # where the ankle centre was
         recorder = SessionRecorder(record, meta, force=force, inputs=inputs)
         recorder.attach_state_ring(pl.recorder, start=0)
         pl.events.listener = recorder.event
-        pump = threading.Thread(target=_pump, args=(tap, recorder, stop_pump), daemon=True)
+        ankle = None if setup.ankle is None else AnkleMonitor(model.kin, setup.ankle,
+                                                              start_pose(gen))
+        pump = threading.Thread(target=_pump, args=(tap, recorder, stop_pump, ankle),
+                                daemon=True)
         pump.start()
     try:
         _run(pl, tap, report.duration_s, progress)
@@ -451,7 +528,7 @@ def run_session(setup: SessionSetup, record: Path | None = None,
         stop_pump.set()
         if pump is not None:
             pump.join()
-    summary = summarize(pl, tap, protocol, model)
+    summary = summarize(pl, tap, protocol, model, setup.ankle)
     summary["preflight"] = pre["predicted"]
     if recorder is not None:
         info = recorder.close()
@@ -461,13 +538,14 @@ def run_session(setup: SessionSetup, record: Path | None = None,
     return summary
 
 
-def _pump(tap: SignalTap, recorder, stop: threading.Event) -> None:
+def _pump(tap: SignalTap, recorder, stop: threading.Event,
+          ankle: AnkleMonitor | None = None) -> None:
     """Non-real-time: the tap's rows → the recorder's channels."""
     start = 0
     while True:
         final = stop.wait(0.05)
         rows, start = tap.drain(start)
-        record_rows(recorder, rows)
+        record_rows(recorder, rows, ankle)
         if final:
             return
 

@@ -35,7 +35,7 @@ from protocols.session_figures import (
 )
 from reports.decimate import Envelope, EnvelopeDecimator
 from reports.inputs import ReportInputError
-from rt.recording.channels import EVENTS, METADATA, REFERENCE, STATE, WRENCH
+from rt.recording.channels import ANKLE, EVENTS, METADATA, REFERENCE, STATE, WRENCH
 from rt.recording.reader import RecordingScan
 
 #: The lead's end-of-session message: the summary dict (incl. ``preflight``, ``stops``, ``rt``).
@@ -231,6 +231,52 @@ def _load_robot(robot: Any) -> Any:
     return RobotModel.load()
 
 
+class AnkleFigures:
+    """The ankle in clinical terms from ``/ankle/state`` messages: angles reached per direction
+    (deg from neutral), peak torques per direction (N·m, the foot's effort), the ankle centre's
+    largest displacement (mm, horizontal and vertical)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self._lo = {"plantarflexion_deg": math.inf, "inversion_deg": math.inf,
+                    "plantarflexion_torque_nm": math.inf, "inversion_torque_nm": math.inf}
+        self._hi = {k: -math.inf for k in self._lo}
+        self._horizontal_mm = 0.0
+        self._vertical_mm = 0.0
+
+    def add(self, m: dict[str, Any]) -> None:
+        for k in self._lo:
+            v = m.get(k)
+            if isinstance(v, (int, float)) and math.isfinite(v):
+                self._lo[k] = min(self._lo[k], float(v))
+                self._hi[k] = max(self._hi[k], float(v))
+        d = m.get("centre_displacement_mm")
+        if isinstance(d, list) and len(d) == 3 and all(isinstance(x, (int, float)) for x in d):
+            self._horizontal_mm = max(self._horizontal_mm, math.hypot(d[0], d[1]))
+            self._vertical_mm = max(self._vertical_mm, abs(d[2]))
+        self.n += 1
+
+    def result(self) -> dict[str, Any] | None:
+        if not self.n:
+            return None
+        lo, hi = self._lo, self._hi
+
+        def pos(x: float) -> float | None:
+            return max(x, 0.0) if math.isfinite(x) else None
+
+        return {"rom_deg": {"dorsiflexion": pos(-lo["plantarflexion_deg"]),
+                            "plantarflexion": pos(hi["plantarflexion_deg"]),
+                            "inversion": pos(hi["inversion_deg"]),
+                            "eversion": pos(-lo["inversion_deg"])},
+                "peak_torque_nm": {"dorsiflexion": pos(-lo["plantarflexion_torque_nm"]),
+                                   "plantarflexion": pos(hi["plantarflexion_torque_nm"]),
+                                   "inversion": pos(hi["inversion_torque_nm"]),
+                                   "eversion": pos(-lo["inversion_torque_nm"])},
+                "centre_displacement_mm": {"horizontal": self._horizontal_mm,
+                                           "vertical": self._vertical_mm},
+                "messages": self.n}
+
+
 def session_input_from_recording(path: str | os.PathLike[str], robot: Any = None,
                                  session_id: str | None = None) -> SessionReportInput:
     """Read a session recording (complete or truncated) for its report, in one pass.
@@ -252,7 +298,8 @@ def session_input_from_recording(path: str | os.PathLike[str], robot: Any = None
     notes: list[str] = []
     model = _load_robot(robot)
     scan = RecordingScan(path, topics=[STATE, WRENCH, REFERENCE, EVENTS, METADATA,
-                                       SUMMARY_TOPIC])
+                                       SUMMARY_TOPIC, ANKLE])
+    ankle = AnkleFigures()
     it = iter(scan)
     # The metadata is the file's first message: it says the kind, which sets the figures.
     metadata: dict[str, Any] = {}
@@ -317,6 +364,8 @@ def session_input_from_recording(path: str | os.PathLike[str], robot: Any = None
             events.append(payload)
         elif topic == SUMMARY_TOPIC:
             summary = payload
+        elif topic == ANKLE:
+            ankle.add(payload)
 
     def flush(final: bool = False) -> None:
         for block in joiner.ready(final):
@@ -342,6 +391,8 @@ def session_input_from_recording(path: str | os.PathLike[str], robot: Any = None
                                f"{'empty' if info.messages.get(STATE) is not None else 'absent'}"
                                "): there is no session to report")
     result = figures.result(events)
+    if ankle.n:
+        result["ankle"] = ankle.result()
     if not info.complete:
         notes.append(f"The recording is incomplete ({info.tail}): its writer did not finish. "
                      f"Figures cover the {result['duration_s']:.1f} s that could be read "

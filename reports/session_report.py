@@ -56,7 +56,9 @@ TITLE = "Session report"
 
 def _side(inp: SessionReportInput) -> tuple[str, bool]:
     """The foot (``right``/``left``) and whether the recording said so."""
-    side = inp.metadata.get("side") or (inp.identity or {}).get("side")
+    ankle = inp.metadata.get("ankle")
+    side = inp.metadata.get("side") or (inp.identity or {}).get("side") or \
+        (ankle.get("side") if isinstance(ankle, dict) else None)
     if side in ("right", "left"):
         return str(side), True
     return "right", False
@@ -119,6 +121,11 @@ def _first_page(inp: SessionReportInput, st: Styles, width: float) -> list[Flowa
     limits = narrowed_limits(inp.limits, _protocol_limits(inp))
     lim_dir = limits_by_direction(limits, side)
     reached = reached_by_direction(f.get("rom_deg"), side)
+    ankle_rom = (f.get("ankle") or {}).get("rom_deg")
+    if ankle_rom:
+        # Angles of the foot about the patient's ankle centre (/ankle/state): the recording's
+        # own clinical terms, foot side included.
+        reached = {d: ankle_rom.get(d) for d in DIRECTIONS}
     res_rows: list[list[Any]] = []
     for d in DIRECTIONS:
         r, lim = reached[d], lim_dir[d]
@@ -135,6 +142,15 @@ def _first_page(inp: SessionReportInput, st: Styles, width: float) -> list[Flowa
     res_rows.append(["Peak force on the foot", fmt(f.get("peak_force_n"), 1, "N"),
                      fmt(lim_force, 0, "N", "not recorded"),
                      _force_comment(f.get("peak_force_n"), lim_force)])
+    ankle = f.get("ankle")
+    if ankle:
+        # The torques the patient produced about the ankle centre (/ankle/state).
+        for d, value in (ankle.get("peak_torque_nm") or {}).items():
+            res_rows.append([f"Peak {d} torque", fmt(value, 1, "N·m"), "—",
+                             f"the patient's {d} effort about the ankle"])
+        disp = ankle.get("centre_displacement_mm") or {}
+        res_rows.append(["Ankle centre moved", fmt(disp.get("horizontal"), 1, "mm"), "—",
+                         "horizontal; the platform cannot follow the ankle in x, y"])
     n_stops = len(f.get("stops") or [])
     res_rows.append(["Stops", str(n_stops), "—",
                      "none" if not n_stops else "see “Stops” below"])

@@ -45,6 +45,7 @@ from rt.ipc.messages import (
     describe_validation_error,
 )
 from rt.ipc.security import ServerCurveConfig
+from rt.model.ankle import AnkleMonitor, AnkleSetup, parse_ankle_setup
 from rt.position_loop import PositionLoop, build_protocol_loop, shm_devices, sim_devices
 from rt.references.program import Program, TrajectoryProgram
 from rt.references.sequencer import Phase
@@ -405,7 +406,8 @@ class RtService:
             stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
             session = _Session(id=f"S{stamp}-{os.getpid()}-{self._session_count}",
                                owner=client, record_dir=record_dir,
-                               patient=PatientInfo(patient.id, patient.weight_kg, limits))
+                               patient=PatientInfo(patient.id, patient.weight_kg, limits,
+                                                   self._patient_ankle(patient)))
             self.session = session
         requested = self._now()
         threading.Thread(target=self._session_worker, args=(session, protocol, requested),
@@ -434,7 +436,8 @@ class RtService:
         sessions = self.sessions
         if sessions is None:
             raise InputError("this RT process offers no protocol sessions")
-        info = PatientInfo(patient.id, patient.weight_kg, self._patient_limits(patient))
+        info = PatientInfo(patient.id, patient.weight_kg, self._patient_limits(patient),
+                           self._patient_ankle(patient))
         future: Future = Future()
 
         def work() -> None:
@@ -452,6 +455,14 @@ class RtService:
         threading.Thread(target=work, name="session-preflight", daemon=True).start()
         return Deferred(lambda: future.result() if future.done() else None,
                         timeout_s=SESSION_START_TIMEOUT_S, what="session_preflight")
+
+    def _patient_ankle(self, patient: PatientArgs) -> AnkleSetup | None:
+        """The patient's ankle setup checked against this robot's platform (None when not
+        sent); ``InputError`` naming the field when it is implausible."""
+        if patient.ankle is None:
+            return None
+        return parse_ankle_setup(patient.ankle,
+                                 self.pl.model.description.geometry.platform_radius_m)
 
     def _patient_limits(self, patient: PatientArgs) -> PatientLimits:
         try:
@@ -540,6 +551,7 @@ class RtService:
         t_now = float(pl.loop.stats().t)
         meta = {**prep.metadata, "patient_id": s.patient.id,
                 "limits": s.patient.limits.model_dump(), "session_id": s.id,
+                "ankle": None if s.patient.ankle is None else s.patient.ankle.model_dump(),
                 "rt": {"pid": os.getpid(), "endpoint": self.endpoint,
                        "backend": self.config.backend},
                 "robot_description": d.name, "preflight": prep.preflight,
@@ -557,10 +569,9 @@ class RtService:
         pl.events.listener = self._event_listener(recorder)
         env = None
         if pl.twin is not None and self.config.session_environment == "patient_foot":
-            from rt.twin.environment import CompliantAnkle
+            from rt.twin.environment import patient_foot
             z, roll, pitch = prep.start_pose
-            env = CompliantAnkle(neutral_z_m=z + d.sensor.offset_m[2], neutral_roll_rad=roll,
-                                 neutral_pitch_rad=pitch, limb_weight_n=0.0)
+            env = patient_foot(pl.model.kin, z, roll, pitch, s.patient.ankle)
 
         def begin(loop: Any) -> float:
             pl.supervisor.limits = limits
@@ -601,6 +612,8 @@ class RtService:
         start = self._tap_start
         seen_motion = False
         still_since: float | None = None
+        ankle = None if s.patient.ankle is None else \
+            AnkleMonitor(self.pl.model.kin, s.patient.ankle, s.prepared.start_pose)
         fz, fr = COL_FZ, COL_FREF
         qd = COLUMNS["qd"]
         try:
@@ -608,13 +621,13 @@ class RtService:
                 if self.shutting_down.wait(0.05):
                     rows, start = self.tap.drain(start)
                     figures.add(rows[rows[:, 0] >= s.t_start])
-                    record_rows(recorder, rows[rows[:, 0] >= s.t_start])
+                    record_rows(recorder, rows[rows[:, 0] >= s.t_start], ankle)
                     break
                 rows, start = self.tap.drain(start)
                 rows = rows[rows[:, 0] >= s.t_start]
                 if len(rows):
                     figures.add(rows)
-                    record_rows(recorder, rows)
+                    record_rows(recorder, rows, ankle)
                     last = rows[-1]
                     s.phase = Phase(int(last[COL_PHASE]))
                     s.progress = float(last[COL_PROGRESS])

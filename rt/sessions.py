@@ -20,6 +20,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from rt.model import RobotModel
+from rt.model.ankle import AnkleMonitor, AnkleSetup
 from rt.references.program import Program
 from rt.safety.events import SafetyEvent
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits
@@ -65,6 +66,9 @@ class PatientInfo:
     id: str
     weight_kg: float | None = None
     limits: PatientLimits = field(default_factory=PatientLimits)
+    #: Where the patient's ankle centre is on the platform (None: not entered); ankle
+    #: exercises then turn the foot about it (``rt.model.ankle``).
+    ankle: AnkleSetup | None = None
 
 
 @dataclass(frozen=True)
@@ -139,12 +143,14 @@ def unique_path(directory: Path, stem: str, suffix: str = ".mcap") -> Path:
     return candidate
 
 
-def record_rows(recorder: Any, rows: np.ndarray) -> None:
+def record_rows(recorder: Any, rows: np.ndarray, ankle: AnkleMonitor | None = None) -> None:
     """Session-tap rows → the recorder's ``/robot/wrench`` and ``/protocol/reference``
-    channels (non-real-time; the recorder's methods only enqueue)."""
+    channels, and ``/ankle/state`` with an ``ankle`` monitor (non-real-time; the recorder's
+    methods only enqueue)."""
     from rt.references.sequencer import Phase
 
     w = COLUMNS["wrench"]
+    qc = COLUMNS["q"]
     flags = COLUMNS["flags"].start
     wait = getattr(recorder, "wait_for_room", None)
     for k, r in enumerate(rows):
@@ -157,3 +163,7 @@ def record_rows(recorder: Any, rows: np.ndarray) -> None:
             "t": t, "force": [0.0, 0.0, float(r[COL_FREF])],
             "phase": Phase(int(r[COL_PHASE])).name.lower(),
             "mode": "force" if r[COL_CTRL_MODE] > 0.5 else "position"})
+        if ankle is not None and ankle.due(t):
+            msg = ankle.message(t, r[qc], r[w])
+            if msg is not None:
+                recorder.publish("/ankle/state", msg)

@@ -129,6 +129,9 @@ class PatientArgs(_Args):
     id: Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9._-]+$")]
     weight_kg: Annotated[float, Field(gt=0.0, le=400.0)] | None = None
     limits: dict[str, Any] | None = None
+    #: The ankle setup (``rt.model.ankle.AnkleSetup`` fields: side, height_above_sole_m,
+    #: offset_x_m, offset_y_m ...), validated by the RT process against its platform.
+    ankle: dict[str, Any] | None = None
 
 
 class RecordArgs(_Args):

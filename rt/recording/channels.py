@@ -74,6 +74,7 @@ WRENCH = "/robot/wrench"
 EVENTS = "/safety/events"
 METADATA = "/protocol/metadata"
 REFERENCE = "/protocol/reference"
+ANKLE = "/ankle/state"
 
 
 @dataclass(frozen=True)
@@ -207,6 +208,31 @@ REFERENCE_PROTO = ProtoMessage("talus.ProtocolReference", [
     ProtoField("position", 3, _F, VARIABLE), ProtoField("phase", 4, _S),
     ProtoField("mode", 5, _S)])
 
+_ANKLE = _object(
+    "talus.AnkleState", "The patient's ankle in clinical terms (rt.model.ankle.AnkleMonitor): "
+    "angles of the foot from neutral, the torques about the ankle centre (the foot's effort: "
+    "plantarflexors and invertors +), the centre's displacement; written at 100 Hz when the "
+    "session has the patient's ankle setup.",
+    {
+        "t": _t(),
+        "plantarflexion_deg": _num("plantarflexion (+) / dorsiflexion (-), degrees"),
+        "inversion_deg": _num("inversion (+) / eversion (-), degrees"),
+        "abduction_deg": _num("rotation about the vertical (the platform's parasitic yaw), "
+                              "degrees"),
+        "plantarflexion_torque_nm": _num("plantarflexion (+) / dorsiflexion (-) torque about "
+                                         "the ankle centre, N·m"),
+        "inversion_torque_nm": _num("inversion (+) / eversion (-) torque, N·m"),
+        "abduction_torque_nm": _num("torque about the vertical through the ankle centre, N·m"),
+        "centre_displacement_mm": {"type": "array", "items": {"type": "number"},
+                                   "minItems": 3, "maxItems": 3,
+                                   "description": "the ankle centre's displacement from "
+                                                  "where it started, base frame x, y, z, mm"},
+        "platform_roll_deg": _num("platform roll (engineers), degrees"),
+        "platform_pitch_deg": _num("platform pitch (engineers), degrees"),
+    },
+    ["t", "plantarflexion_deg", "inversion_deg", "plantarflexion_torque_nm",
+     "inversion_torque_nm"])
+
 #: topic → spec; the writer registers all of them, in this order.
 CHANNELS: dict[str, ChannelSpec] = {
     STATE: ChannelSpec(STATE, "talus.RobotState", _STATE, {"rate_hz": "1000"}, STATE_PROTO),
@@ -215,6 +241,7 @@ CHANNELS: dict[str, ChannelSpec] = {
     METADATA: ChannelSpec(METADATA, "talus.SessionMetadata", _METADATA),
     REFERENCE: ChannelSpec(REFERENCE, "talus.ProtocolReference", _REFERENCE,
                            proto=REFERENCE_PROTO),
+    ANKLE: ChannelSpec(ANKLE, "talus.AnkleState", _ANKLE, {"rate_hz": "100"}),
 }
 
 #: Protobuf messages talus writes, by full name: the reader's fast decoders.

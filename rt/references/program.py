@@ -119,15 +119,20 @@ class ProgramInput:
     """Measurements an interactive program (active assist) reads each cycle.
 
     The loop writes plain floats before ``update``: the patient's torque on the platform about
-    its roll (x) and pitch (y) axes (N·m, platform frame, from the force/torque sensor with the
-    platform's own weight removed).
+    the roll (x) and pitch (y) axes through the sensor origin (N·m, platform frame, from the
+    force/torque sensor with the platform's own weight removed), and the force (N, sensor
+    frame) so a program can move the torque to the patient's ankle centre
+    (``rt.model.ankle.transfer_wrench``).
     """
 
-    __slots__ = ("tau_pitch_nm", "tau_roll_nm")
+    __slots__ = ("force_x_n", "force_y_n", "force_z_n", "tau_pitch_nm", "tau_roll_nm")
 
     def __init__(self) -> None:
         self.tau_roll_nm = 0.0
         self.tau_pitch_nm = 0.0
+        self.force_x_n = 0.0
+        self.force_y_n = 0.0
+        self.force_z_n = 0.0
 
 
 class Program(Protocol):

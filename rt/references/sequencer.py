@@ -324,6 +324,9 @@ class ProgramReference(Component):
         # The patient's torques on the platform about roll (x) and pitch (y), N·m.
         inp.tau_roll_nm = 0.0 if math.isnan(w[3]) else float(w[3])
         inp.tau_pitch_nm = 0.0 if math.isnan(w[4]) else float(w[4])
+        inp.force_x_n = 0.0 if math.isnan(w[0]) else float(w[0])
+        inp.force_y_n = 0.0 if math.isnan(w[1]) else float(w[1])
+        inp.force_z_n = 0.0 if math.isnan(w[2]) else float(w[2])
         status = self.program.update(o, inp)
         if status < 0:
             return status

@@ -31,6 +31,7 @@ from numba import njit
 from rt.twin import physics
 from rt.twin.physics import (
     B_F_PER_A,
+    ENV_STATE_SIZE,
     N_BODY_PARAMS,
     N_FRICTION,
     N_REAL,
@@ -73,20 +74,20 @@ S_CURRENT = 18
 S_CABLE_TAU = 21
 S_VOLTS = 24
 S_VOLTS_PREV = 27
-S_ENV_STATE = 30          # 4
-S_WRENCH = 34             # 6, the environment's wrench at the sensor (sensor frame)
-S_ROT = 40                # 9, R_BP row-major
-S_TEMP = 49               # 3, temperature rise (K)
-S_HEAT_ENERGY = 52        # 3, friction energy since the last temperature update (J)
-S_ENC = 55                # 3, what the motor encoders hold (m)
-S_W_FILTERED = 58         # 6, the ATI filter's state
-S_W_SENSED = 64           # 6, wrench + tool weight (filter input)
-S_W_MEAS = 70             # 6, what the gauges feel after the filter (the ATI model's input)
-S_DELAY_LEFT = 76         # substeps the amplifiers still act on the previous command
-S_HEAT_TIME = 77          # s since the last temperature update
-S_DRIVES_ON = 78          # 1.0 while the amplifiers are enabled
-S_DRIVES_CHANGED_T = 79   # s, when they were last switched
-S_SIZE = 80
+S_ENV_STATE = 30          # ENV_STATE_SIZE (8)
+S_WRENCH = 38             # 6, the environment's wrench at the sensor (sensor frame)
+S_ROT = 44                # 9, R_BP row-major
+S_TEMP = 53               # 3, temperature rise (K)
+S_HEAT_ENERGY = 56        # 3, friction energy since the last temperature update (J)
+S_ENC = 59                # 3, what the motor encoders hold (m)
+S_W_FILTERED = 62         # 6, the ATI filter's state
+S_W_SENSED = 68           # 6, wrench + tool weight (filter input)
+S_W_MEAS = 74             # 6, what the gauges feel after the filter (the ATI model's input)
+S_DELAY_LEFT = 80         # substeps the amplifiers still act on the previous command
+S_HEAT_TIME = 81          # s since the last temperature update
+S_DRIVES_ON = 82          # 1.0 while the amplifiers are enabled
+S_DRIVES_CHANGED_T = 83   # s, when they were last switched
+S_SIZE = 84
 
 # ---- scratch array W
 _W_FORCE = 0
@@ -211,7 +212,7 @@ def advance(geom, P, env, S, W, volts, dt, n, t, realistic, integrator):
     """One held command: ``TwinPlant.advance(dt, volts)`` at time ``t`` (s) with ``n``
     substeps, then the sensor stage. Returns the physics' status (0 ok)."""
     bodies = P[P_BODIES:P_BODIES + N_BODY_PARAMS]
-    env_state = S[S_ENV_STATE:S_ENV_STATE + 4]
+    env_state = S[S_ENV_STATE:S_ENV_STATE + ENV_STATE_SIZE]
     qdd = S[S_QDD:S_QDD + 3]
     wrench = S[S_WRENCH:S_WRENCH + 6]
     q = S[S_Q:S_Q + 3]

@@ -24,7 +24,7 @@ Parameter arrays (packed by ``rt.twin.plant``):
   tanh(v/v_smooth).
 * ``real`` (float64[N_REAL]): the unmodelled effects of ``rt.twin.realism`` (``R_*`` below);
   used by ``integrate_real`` only.
-* ``env`` (float64[16]): env[0] selects the environment (see ``ENV_*``), the rest its
+* ``env`` (float64[ENV_SIZE]): env[0] selects the environment (see ``ENV_*``), the rest its
   parameters (documented in ``rt.twin.environment``).
 """
 from __future__ import annotations
@@ -51,6 +51,12 @@ from rt.model.kernels import (
 ENV_FREE = 0.0
 ENV_PLATE = 1.0
 ENV_ANKLE = 2.0
+#: Length of the environment parameter array.
+ENV_SIZE = 24
+#: Length of the environment's state array: [0] plate contact (1/0); ankle: [1:4] the joint's
+#: moment on the foot about the ankle centre, [4:7] the shank's reaction force at the centre
+#: (base frame, N m and N; limb weight not included).
+ENV_STATE_SIZE = 8
 
 B_M_SLIDER = 0
 B_M_ROD = 1
@@ -686,16 +692,45 @@ def environment_wrench(env, bodies, rot, pos, twist, qd, env_state, wrench_s, ta
         else:
             env_state[0] = 0.0
     elif kind == ENV_ANKLE:
-        # env: [2, z0, roll0, pitch0, k_z, c_z, k_roll, k_pitch, k_yaw, d_roll, d_pitch, d_yaw,
-        #       limb_weight]: a strapped foot, bilateral, as springs and dampers about the
-        # neutral pose, plus the limb's weight.
+        # env (rt.twin.environment.CompliantAnkle.pack): [2, A0(3), c(3), k_h, k_z, c_h, c_z,
+        # K(3), D(3), roll0, pitch0, yaw0, end_roll, end_pitch, limb_weight]. A strapped foot
+        # turning about its ankle joint centre A, ``c`` from the sensor origin (P axes); the
+        # shank holds A near A0 (base frame) through translational springs-dampers, and the
+        # joint resists rotation from neutral with a stiffness that rises towards the end of
+        # range, τ = K θ (1 + (θ/θ_end)²), and viscous damping. Bilateral (strapped).
+        cx = rot[0, 0] * env[4] + rot[0, 1] * env[5] + rot[0, 2] * env[6]
+        cy = rot[1, 0] * env[4] + rot[1, 1] * env[5] + rot[1, 2] * env[6]
+        cz = rot[2, 0] * env[4] + rot[2, 1] * env[5] + rot[2, 2] * env[6]
+        dx = pos[0] + obx + cx - env[1]
+        dy = pos[1] + oby + cy - env[2]
+        dz = oz + cz - env[3]
+        ax_, ay_, az_ = _cross(wx, wy, wz, cx, cy, cz)
+        fx = -env[7] * dx - env[9] * (vox + ax_)
+        fy = -env[7] * dy - env[9] * (voy + ay_)
+        fz = -env[8] * dz - env[10] * (voz + az_)
         roll = math.atan2(rot[2, 1], rot[2, 2])
         pitch = math.atan2(-rot[2, 0], math.sqrt(rot[2, 1] ** 2 + rot[2, 2] ** 2))
         yaw = math.atan2(rot[1, 0], rot[0, 0])
-        fz = -env[4] * (oz - env[1]) - env[5] * voz - env[12]
-        mx = -env[6] * (roll - env[2]) - env[9] * wx
-        my = -env[7] * (pitch - env[3]) - env[10] * wy
-        mz = -env[8] * yaw - env[11] * wz
+        tr = roll - env[17]
+        tp = pitch - env[18]
+        ty = yaw - env[19]
+        er = tr / env[20] if env[20] > 0.0 else 0.0
+        ep = tp / env[21] if env[21] > 0.0 else 0.0
+        ma_x = -env[11] * tr * (1.0 + er * er) - env[14] * wx
+        ma_y = -env[12] * tp * (1.0 + ep * ep) - env[15] * wy
+        ma_z = -env[13] * ty - env[16] * wz
+        env_state[1] = ma_x
+        env_state[2] = ma_y
+        env_state[3] = ma_z
+        env_state[4] = fx
+        env_state[5] = fy
+        env_state[6] = fz
+        fz -= env[22]
+        # The same wrench about the sensor origin O: m_O = m_A + (A - O) × f.
+        mcx, mcy, mcz = _cross(cx, cy, cz, fx, fy, fz)
+        mx = ma_x + mcx
+        my = ma_y + mcy
+        mz = ma_z + mcz
     # Express in the sensor frame (axes of P).
     for a in range(3):
         wrench_s[a] = rot[0, a] * fx + rot[1, a] * fy + rot[2, a] * fz

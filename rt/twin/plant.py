@@ -99,7 +99,7 @@ class TwinPlant:
         self._pack_bodies()
         self.environment = environment or FreeMotion()
         self.env = self.environment.pack()
-        self.env_state = S[K.S_ENV_STATE:K.S_ENV_STATE + 4]
+        self.env_state = S[K.S_ENV_STATE:K.S_ENV_STATE + physics.ENV_STATE_SIZE]
         self.q = S[K.S_Q:K.S_Q + 3]
         self.qd = S[K.S_QD:K.S_QD + 3]
         self.qdd = S[K.S_QDD:K.S_QDD + 3]
