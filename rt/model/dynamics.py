@@ -27,6 +27,7 @@ import pinocchio as pin
 
 from rt.errors import InputError
 from rt.model.description import Body, RobotDescription
+from rt.model import rigid_body as rb
 from rt.model.kernels import TREE_DOF, tree_maps
 from rt.model.kinematics import Configuration, Kinematics
 
@@ -108,15 +109,11 @@ class State:
 
     def __init__(self) -> None:
         self.cfg: Configuration | None = None
-        self.Q = np.zeros(TREE_DOF)
-        self.Qd = np.zeros(TREE_DOF)
-        self.qd = np.zeros(3)
-        self.S = np.zeros((TREE_DOF, 3))
-        self.Sd = np.zeros((TREE_DOF, 3))
-        self.twist = np.zeros((6, 3))
-        self.rot = np.zeros((3, 3))
-        self._q = np.zeros(3)
-        self._phi = np.zeros(3)
+        # One buffer, the arrays views of it: a compiled kernel takes the state as one argument
+        # (layout in ``rt.model.rigid_body``, STATE_*).
+        self.buf = np.zeros(rb.STATE_SIZE)
+        (self.Q, self.Qd, self.qd, self.S, self.Sd, self.twist, self.rot, self._q,
+         self._phi) = rb.unpack_state(self.buf)
         self.forward_det = 0.0
 
     @property
@@ -165,6 +162,11 @@ class Dynamics:
         self._upper[np.diag_indices(TREE_DOF)] = 0.5
         self._m_half = np.zeros((TREE_DOF, TREE_DOF))
         self._m_tree = np.zeros((TREE_DOF, TREE_DOF))
+        # The same model packed for the compiled kernels (``rt.model.rigid_body``);
+        # ``set_payload`` keeps the platform's parameters in step.
+        self.tree_i, self.tree_f = rb.pack_tree(self.model, self.reflected_inertia, self.viscous,
+                                                self.coulomb, self.coulomb_v)
+        self._platform_pi = rb.pi_slice(TREE_DOF, PLATFORM_JOINT - 1)
 
     def _tree_mass(self, Q: np.ndarray) -> np.ndarray:
         """Full symmetric tree mass matrix (kg, kg m, kg m²) at tree configuration Q."""
@@ -289,4 +291,5 @@ class Dynamics:
         """Put a payload on the platform (or remove it with ``None``); takes effect at once."""
         base = self._platform_nominal
         self.model.inertias[PLATFORM_JOINT] = base if payload is None else base + payload.inertia()
+        self.tree_f[self._platform_pi] = self.model.inertias[PLATFORM_JOINT].toDynamicParameters()
         self.payload = payload

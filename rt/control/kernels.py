@@ -1,0 +1,203 @@
+"""The position laws' arithmetic compiled with numba (one call per cycle and law).
+
+Each kernel is the compiled twin of a law's interpreted ``_law`` in ``rt.control.laws`` /
+``rt.control.adaptive``, which stay as the reference implementation
+(``create(..., compiled=False)``); ``tests/test_compiled_cycle.py`` replays recorded cycles
+through both and holds them within 1e-12 (relative to the force's scale). The model terms come
+from ``rt.model.rigid_body`` (RNEA on the tree, projected with S): M q̈ + C q̇ + G is formed as
+products, never as matrices. Arguments are the packed model (``ti``, ``tf``), the cycle's
+``State.buf``, the reference's q, q̇, q̈ (m, m/s, m/s²) and a float64 ``gains`` array; τ (N) is
+written into ``out``; nothing is allocated.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from rt.model import rigid_body as rb
+
+#: ``gains`` layouts: PD-family [Kp (N/m), Kd (N s/m)]; computed torque [Kp (1/s²), Kd (1/s)];
+#: PID [Kp, Kd, Ki (N/(m s)), integral limit (N)]; adaptive [Λ (1/s), K_D (N s/m)].
+
+
+@njit(cache=True)
+def pd(stb, rq, rqd, kp, kd, out):
+    """out = −Kp e − Kd ė (N), e = q − q_d."""
+    q = stb[rb.STATE_Q_ACT:rb.STATE_Q_ACT + 3]
+    qd = stb[rb.STATE_QD:rb.STATE_QD + 3]
+    for i in range(3):
+        e = q[i] - rq[i]
+        out[i] = -kp * e - kd * (qd[i] - rqd[i])
+
+
+@njit(cache=True)
+def paden_panja(ti, tf, stb, rq, rqd, rqdd, gains, work, out):
+    """τ = M q̈_d + C(q, q̇) q̇_d + G + F(q̇_d) − Kp e − Kd ė (thesis eq. 19)."""
+    pi = rb.unpack_tree(ti, tf)[5]
+    ff = work[0:3]
+    rb.mixed_torque(ti, tf, pi, stb, rqdd, rqd, True, work[3:], ff)
+    rb.friction(ti, tf, rqd, ff)
+    pd(stb, rq, rqd, gains[0], gains[1], out)
+    for i in range(3):
+        out[i] += ff[i]
+
+
+@njit(cache=True)
+def pd_gravity(ti, tf, stb, rq, rqd, gains, work, out):
+    """τ = −Kp e − Kd ė + G(q) (PD+G)."""
+    pi = rb.unpack_tree(ti, tf)[5]
+    g = work[0:3]
+    zero = work[3:6]
+    zero[0] = 0.0
+    zero[1] = 0.0
+    zero[2] = 0.0
+    rb.mixed_torque(ti, tf, pi, stb, zero, zero, True, work[6:], g)
+    pd(stb, rq, rqd, gains[0], gains[1], out)
+    for i in range(3):
+        out[i] += g[i]
+
+
+@njit(cache=True)
+def gravity(ti, tf, stb, work, out):
+    """out = G(q) (N) at the state's configuration."""
+    pi = rb.unpack_tree(ti, tf)[5]
+    zero = work[0:3]
+    zero[0] = 0.0
+    zero[1] = 0.0
+    zero[2] = 0.0
+    rb.mixed_torque(ti, tf, pi, stb, zero, zero, True, work[3:], out)
+
+
+@njit(cache=True)
+def computed_torque(ti, tf, stb, rq, rqd, rqdd, gains, trajectory, work, out):
+    """τ = M v + C q̇ + G + F(q̇) with v = q̈_d − Kd ė − Kp e (``trajectory``, eq. 31) or
+    v = −Kd q̇ − Kp e (regulation, eq. 29)."""
+    pi = rb.unpack_tree(ti, tf)[5]
+    q = stb[rb.STATE_Q_ACT:rb.STATE_Q_ACT + 3]
+    qd = stb[rb.STATE_QD:rb.STATE_QD + 3]
+    v = work[0:3]
+    kp = gains[0]
+    kd = gains[1]
+    for i in range(3):
+        if trajectory:
+            v[i] = rqdd[i] - kd * (qd[i] - rqd[i]) - kp * (q[i] - rq[i])
+        else:
+            v[i] = -kd * qd[i] - kp * (q[i] - rq[i])
+    rb.mixed_torque(ti, tf, pi, stb, v, qd, True, work[3:], out)
+    rb.friction(ti, tf, qd, out)
+
+
+@njit(cache=True)
+def pid(stb, rq, rqd, gains, integral, dt, dry_run, out):
+    """τ = −Kp e − Kd ė − Ki ∫e, the integral clamped to ±limit/Ki (anti-windup)."""
+    pd(stb, rq, rqd, gains[0], gains[1], out)
+    ki = gains[2]
+    limit = gains[3] / ki if ki > 0 else 0.0
+    q = stb[rb.STATE_Q_ACT:rb.STATE_Q_ACT + 3]
+    for i in range(3):
+        integ = integral[i] + (q[i] - rq[i]) * dt
+        integ = max(-limit, min(limit, integ))
+        if not dry_run:
+            integral[i] = integ
+        out[i] -= ki * integ
+
+
+# Adaptive law: ``amap`` (int64) = [n_rigid, n_drive, rigid_pos, rigid_joint, rigid_param,
+# drive_pos, drive_kind (0 J_r, 1 f_v, 2 f_c), drive_axis]; ``est`` (float64) = [θ̂, Γ, θ_lo,
+# θ_hi, Yᵀ s] (n_base each) followed by the n × 10 tree parameters of θ̂ and s, q̇_r, q̈_r.
+
+
+@njit(cache=True)
+def adaptive(ti, tf, stb, rq, rqd, rqdd, gains, amap, est, nb, dt, dry_run, work, out):
+    """Slotine-Li with projection: τ = Y θ̂ − K_D s; θ̂ −= Γ Yᵀ s dt, clipped to its box.
+
+    Y θ̂ is an RNEA with θ̂'s parameters on the bodies (three passes, the mixed regressor's
+    Christoffel form) and Yᵀ s the parameter gradient of those passes against the bodies'
+    velocities for joint rates S s."""
+    parent, kind, axis, prot, ptrans, _, g, _, _, _, vs = rb.unpack_tree(ti, tf)
+    n = parent.shape[0]
+    R, p, v, a, f, tau, V, A, tmp, u, ua, _, grad, e, zero3 = rb.unpack_work(work, n)
+    Q, Qd, qd, S, Sd, _, _, q, _ = rb.unpack_state(stb)
+    theta = est[0:nb]
+    gamma = est[nb:2 * nb]
+    lo = est[2 * nb:3 * nb]
+    hi = est[3 * nb:4 * nb]
+    ys = est[4 * nb:5 * nb]
+    o = 5 * nb
+    pith = est[o:o + rb.N_PARAMS * n].reshape((n, rb.N_PARAMS))
+    o += rb.N_PARAMS * n
+    s = est[o:o + 3]
+    qd_r = est[o + 3:o + 6]
+    qdd_r = est[o + 6:o + 9]
+    lam = gains[0]
+    kd = gains[1]
+    for i in range(3):
+        ei = q[i] - rq[i]
+        edi = qd[i] - rqd[i]
+        s[i] = edi + lam * ei
+        qd_r[i] = rqd[i] - lam * ei
+        qdd_r[i] = rqdd[i] - lam * edi
+    n_rigid = amap[0]
+    n_drive = amap[1]
+    o = 2
+    for k in range(n * rb.N_PARAMS):
+        pith[k // rb.N_PARAMS, k % rb.N_PARAMS] = 0.0
+    for r in range(n_rigid):
+        pith[amap[o + n_rigid + r], amap[o + 2 * n_rigid + r]] = theta[amap[o + r]]
+    zero3[0] = 0.0
+    zero3[1] = 0.0
+    zero3[2] = 0.0
+    rb.tree_kinematics(parent, kind, axis, prot, ptrans, Q, R, p)
+    # u: the bodies' velocities for joint rates S s (the virtual displacement of Yᵀ s).
+    for j in range(n):
+        V[j] = S[j, 0] * s[0] + S[j, 1] * s[1] + S[j, 2] * s[2]
+        A[j] = 0.0
+    rb.forward_pass(parent, kind, axis, R, p, V, A, zero3, u, ua)
+    for j in range(n):
+        for k in range(rb.N_PARAMS):
+            grad[j, k] = 0.0
+    # Pass 1: M_t (S q̈_r + Ṡ q̇_r) + g_t.
+    for j in range(n):
+        V[j] = 0.0
+        A[j] = (S[j, 0] * qdd_r[0] + S[j, 1] * qdd_r[1] + S[j, 2] * qdd_r[2]
+                + Sd[j, 0] * qd_r[0] + Sd[j, 1] * qd_r[1] + Sd[j, 2] * qd_r[2])
+    rb.rnea(parent, kind, axis, R, p, pith, V, A, g, v, a, f, tmp)
+    rb.param_gradient(v, a, u, 1.0, grad, e)
+    for j in range(n):
+        tau[j] = tmp[j]
+        A[j] = 0.0
+    # Passes 2, 3: ¼ [h(S(q̇ + q̇_r)) − h(S(q̇ − q̇_r))] = Γ_t(S q̇, S q̇_r).
+    for sign in (1.0, -1.0):
+        for j in range(n):
+            V[j] = Qd[j] + sign * (S[j, 0] * qd_r[0] + S[j, 1] * qd_r[1] + S[j, 2] * qd_r[2])
+        rb.rnea(parent, kind, axis, R, p, pith, V, A, zero3, v, a, f, tmp)
+        rb.param_gradient(v, a, u, 0.25 * sign, grad, e)
+        for j in range(n):
+            tau[j] += 0.25 * sign * tmp[j]
+    for i in range(3):
+        acc = 0.0
+        for j in range(n):
+            acc += S[j, i] * tau[j]
+        out[i] = acc
+    for r in range(n_rigid):
+        ys[amap[o + r]] = grad[amap[o + n_rigid + r], amap[o + 2 * n_rigid + r]]
+    o += 3 * n_rigid
+    for r in range(n_drive):
+        pos = amap[o + r]
+        kind_d = amap[o + n_drive + r]
+        ax = amap[o + 2 * n_drive + r]
+        if kind_d == 0:
+            value = qdd_r[ax]
+        elif kind_d == 1:
+            value = qd_r[ax]
+        else:
+            value = math.tanh(qd_r[ax] / vs)
+        out[ax] += theta[pos] * value
+        ys[pos] = s[ax] * value
+    for i in range(3):
+        out[i] -= kd * s[i]
+    if not dry_run and dt > 0.0:
+        for k in range(nb):
+            theta[k] -= ys[k] * gamma[k] * dt
+            theta[k] = min(max(theta[k], lo[k]), hi[k])
