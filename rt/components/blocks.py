@@ -15,6 +15,8 @@ from rt.errors import InputError, KinematicsError, TalusError
 from rt.estimation.velocity import KalmanVelocityEstimator
 from rt.model import RobotModel
 from rt.model.dynamics import State
+from rt.model.kernels import MODEL_STATE_WORK, model_state
+from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
 from rt.safety.events import SupervisorMode
 
 STATUS_SENSOR = 10
@@ -67,17 +69,35 @@ class ModelState(Component):
     (estimated velocities); out ``state``: model ``State`` — forward kinematics (warm-started),
     the closed-chain maps S, Ṡ and the platform pose for this cycle; out ``fk_ok``: float64[1]
     — 0 when FK failed this cycle (the state then keeps the last good pose; the supervisor
-    stops the robot: the block itself keeps running, so the loop can still hold it safely)."""
+    stops the robot: the block itself keeps running, so the loop can still hold it safely).
 
-    def __init__(self, name: str, model: RobotModel):
+    The cycle runs compiled (``rt.model.kernels.model_state``: one call, no Python objects);
+    ``compiled=False`` runs the interpreted ``Dynamics.state``, the reference it is tested
+    against. Both share the kinematics' FK warm start."""
+
+    def __init__(self, name: str, model: RobotModel, compiled: bool = True):
         super().__init__(name)
         self.model = model
+        self.compiled = compiled
+        self._work = np.zeros(MODEL_STATE_WORK)
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.qd = self.declare_input("qd", Array(3))
         self.state_out = self.declare_output("state", Struct(State))
         self.fk_ok = self.declare_output("fk_ok", Array(1))
 
     def update(self, t: float, dt: float) -> int:
+        if self.compiled:
+            kin = self.model.kin
+            st = self.state_out.data
+            status = model_state(kin.geom, kin.limits_array, kin._phi_guess, self.q_meas.data,
+                                 self.qd.data, st.buf, FK_STEP_TOL_RAD, FK_MAX_ITERATIONS,
+                                 self._work)
+            if status >= 0:
+                st.buffer_filled()
+                self.fk_ok.data[0] = 1.0
+            else:
+                self.fk_ok.data[0] = 0.0
+            return 0
         try:
             self.model.dyn.state(self.q_meas.data, self.qd.data, out=self.state_out.data)
             self.fk_ok.data[0] = 1.0

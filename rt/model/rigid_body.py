@@ -345,7 +345,10 @@ STATE_TWIST = 99       # platform twist map (6×3)
 STATE_ROT = 117        # R_BP (3×3)
 STATE_Q_ACT = 126      # q (3), m
 STATE_PHI = 129        # rod angles φ (3), rad
-STATE_SIZE = 132
+STATE_SPHERES = 132    # sphere centres B_i (3×3), m
+STATE_ITERATIONS = 141  # Newton iterations of this cycle's FK
+STATE_DET = 142        # det(∂f/∂φ), 0 at a forward singularity
+STATE_SIZE = 143
 
 
 @njit(cache=True)
