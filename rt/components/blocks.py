@@ -12,6 +12,7 @@ from rt.control.base import Controller, Reference
 from rt.devices.interfaces import EncoderBank
 from rt.engine import Array, Component, Struct
 from rt.errors import InputError, KinematicsError, TalusError
+from rt.estimation.compiled import CompiledKalmanEstimator
 from rt.estimation.velocity import KalmanVelocityEstimator
 from rt.model import RobotModel
 from rt.model.dynamics import State
@@ -39,18 +40,22 @@ class EncoderReader(Component):
 class VelocityEstimation(Component):
     """Ports: in ``q_meas``: float64[3], m; out ``q``, ``qd``, ``qdd``: float64[3] (m, m/s,
     m/s²) — the Kalman estimate from the quantized encoders; out ``status``: float64[1] — the
-    estimator's status (−3 = implausible jump, for the supervisor)."""
+    estimator's status (−3 = implausible jump, for the supervisor).
 
-    def __init__(self, name: str):
+    The filter runs compiled (``rt.estimation.compiled``); ``compiled=False`` runs the
+    interpreted ``KalmanVelocityEstimator``, its reference."""
+
+    def __init__(self, name: str, compiled: bool = True):
         super().__init__(name)
+        self.compiled = compiled
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.q = self.declare_output("q", Array(3))
         self.qd = self.declare_output("qd", Array(3))
         self.qdd = self.declare_output("qdd", Array(3))
         self.status = self.declare_output("status", Array(1))
 
-    def make_state(self):
-        return KalmanVelocityEstimator()
+    def make_state(self) -> KalmanVelocityEstimator | CompiledKalmanEstimator:
+        return CompiledKalmanEstimator() if self.compiled else KalmanVelocityEstimator()
 
     def update(self, t: float, dt: float) -> int:
         est = self.state
@@ -80,6 +85,13 @@ class ModelState(Component):
         self.model = model
         self.compiled = compiled
         self._work = np.zeros(MODEL_STATE_WORK)
+        if compiled:
+            # Compile (or load from numba's cache) now, not in the first cycle; on a copy of
+            # the warm start, so the model's own is untouched.
+            kin = model.kin
+            model_state(kin.geom, kin.limits_array, kin._phi_guess.copy(),
+                        np.full(3, 0.5 * (kin.stroke[0] + kin.stroke[1])), np.zeros(3),
+                        State().buf, FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, self._work)
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.qd = self.declare_input("qd", Array(3))
         self.state_out = self.declare_output("state", Struct(State))

@@ -116,6 +116,9 @@ class Controller(abc.ABC):
         self._work = np.zeros(8 + rb.work_size(TREE_DOF))
         self._pack_gains()
         self.reset()
+        if compiled:
+            from rt.control.kernels import warm_up
+            warm_up(self.dyn)
 
     # ------------------------------------------------------------------ parameters
     def _validate(self, gains: Gains | dict) -> Gains:

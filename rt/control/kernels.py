@@ -201,3 +201,37 @@ def adaptive(ti, tf, stb, rq, rqd, rqdd, gains, amap, est, nb, dt, dry_run, work
         for k in range(nb):
             theta[k] -= ys[k] * gamma[k] * dt
             theta[k] = min(max(theta[k], lo[k]), hi[k])
+
+
+_warm = False
+
+
+def warm_up(dyn) -> None:
+    """Compile (or load from numba's cache) every law's kernel now, at construction, never in
+    a cycle: a first call compiles for seconds. Runs once per process on a state built from IK
+    at the home pose (the model's FK warm start is not touched)."""
+    global _warm
+    if _warm:
+        return
+    import numpy as np
+
+    from rt.model.dynamics import State
+    from rt.model.kernels import TREE_DOF
+
+    kin = dyn.kin
+    cfg = kin.ik(0.5 * (kin.stroke[0] + kin.stroke[1]) + 0.45, 0.0, 0.0, check=False)
+    st = dyn.state(np.array(cfg.q), np.zeros(3), out=State(), cfg=cfg)
+    z3 = np.zeros(3)
+    out = np.zeros(3)
+    gains = np.ones(4)
+    work = np.zeros(8 + rb.work_size(TREE_DOF))
+    ti, tf = dyn.tree_i, dyn.tree_f
+    paden_panja(ti, tf, st.buf, z3, z3, z3, gains, work, out)
+    pd_gravity(ti, tf, st.buf, z3, z3, gains, work, out)
+    gravity(ti, tf, st.buf, work, out)
+    computed_torque(ti, tf, st.buf, z3, z3, z3, gains, True, work, out)
+    pid(st.buf, z3, z3, gains, np.zeros(3), 1e-3, True, out)
+    amap = np.array([0, 0], dtype=np.int64)
+    adaptive(ti, tf, st.buf, z3, z3, z3, gains, amap, np.zeros(rb.N_PARAMS * TREE_DOF + 9), 0,
+             1e-3, True, work, out)
+    _warm = True
