@@ -182,3 +182,33 @@ def test_payload_reaches_the_compiled_model(model) -> None:
     want = dyn.gravity(st)
     assert np.allclose(after, want, rtol=0.0, atol=RTOL * np.abs(want).max())
     assert (after - before).sum() == pytest.approx(100.0 * 9.81, rel=0.05)
+
+
+def _kernels():
+    from rt.control import kernels as ck
+    from rt.estimation import compiled as ec
+    from rt.model import kernels as mk
+
+    return (ck.pid, ck.paden_panja, ck.adaptive, ck.pd_gravity, ck.computed_torque,
+            ck.gravity, ec.kalman_update, mk.model_state)
+
+
+@pytest.mark.parametrize("controller", ["paden_panja", "adaptive", "pid"])
+def test_no_kernel_compiles_inside_a_cycle(controller, model) -> None:
+    """Kernels are compiled at construction for the argument types the loop passes (read-only
+    port views): a first-cycle compile would stall the loop for seconds."""
+    from rt.position_loop import build_protocol_loop, sim_devices
+    from rt.twin.environment import FreeMotion
+    from rt.twin.twin import SimClock, Twin
+
+    pl = build_sim_position_loop(controller, duration_s=1.0, model=model)
+    clock = SimClock()
+    twin = Twin(None, FreeMotion(), clock=clock)
+    twin.place((0.2, 0.2, 0.2))
+    hybrid = build_protocol_loop(sim_devices(twin, clock), model=model, controller=controller)
+    before = [len(k.signatures) for k in _kernels()]
+    pl.loop.run(cycles=20)
+    hybrid.loop.run(cycles=20)
+    pl.graph.stop()
+    hybrid.graph.stop()
+    assert [len(k.signatures) for k in _kernels()] == before

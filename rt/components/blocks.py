@@ -88,10 +88,13 @@ class ModelState(Component):
         if compiled:
             # Compile (or load from numba's cache) now, not in the first cycle; on a copy of
             # the warm start, so the model's own is untouched.
+            # Inputs as the loop passes them: read-only port views (numba types them apart).
             kin = model.kin
-            model_state(kin.geom, kin.limits_array, kin._phi_guess.copy(),
-                        np.full(3, 0.5 * (kin.stroke[0] + kin.stroke[1])), np.zeros(3),
-                        State().buf, FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, self._work)
+            q = np.full(3, 0.5 * (kin.stroke[0] + kin.stroke[1]))
+            qd = np.zeros(3)
+            q.flags.writeable = qd.flags.writeable = False
+            model_state(kin.geom, kin.limits_array, kin._phi_guess.copy(), q, qd, State().buf,
+                        FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, self._work)
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.qd = self.declare_input("qd", Array(3))
         self.state_out = self.declare_output("state", Struct(State))

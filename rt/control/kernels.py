@@ -221,17 +221,22 @@ def warm_up(dyn) -> None:
     kin = dyn.kin
     cfg = kin.ik(0.5 * (kin.stroke[0] + kin.stroke[1]) + 0.45, 0.0, 0.0, check=False)
     st = dyn.state(np.array(cfg.q), np.zeros(3), out=State(), cfg=cfg)
-    z3 = np.zeros(3)
     out = np.zeros(3)
     gains = np.ones(4)
     work = np.zeros(8 + rb.work_size(TREE_DOF))
     ti, tf = dyn.tree_i, dyn.tree_f
-    paden_panja(ti, tf, st.buf, z3, z3, z3, gains, work, out)
-    pd_gravity(ti, tf, st.buf, z3, z3, gains, work, out)
-    gravity(ti, tf, st.buf, work, out)
-    computed_torque(ti, tf, st.buf, z3, z3, z3, gains, True, work, out)
-    pid(st.buf, z3, z3, gains, np.zeros(3), 1e-3, True, out)
     amap = np.array([0, 0], dtype=np.int64)
-    adaptive(ti, tf, st.buf, z3, z3, z3, gains, amap, np.zeros(rb.N_PARAMS * TREE_DOF + 9), 0,
-             1e-3, True, work, out)
+    est = np.zeros(rb.N_PARAMS * TREE_DOF + 9)
+    writable = np.zeros(3)
+    read_only = np.zeros(3)
+    read_only.flags.writeable = False
+    # Both array flavours numba types apart: the loop's references are read-only port views,
+    # a law hosted by another (the hybrid force law) may pass writable arrays.
+    for z3 in (read_only, writable):
+        paden_panja(ti, tf, st.buf, z3, z3, z3, gains, work, out)
+        pd_gravity(ti, tf, st.buf, z3, z3, gains, work, out)
+        computed_torque(ti, tf, st.buf, z3, z3, z3, gains, True, work, out)
+        pid(st.buf, z3, z3, gains, np.zeros(3), 1e-3, True, out)
+        adaptive(ti, tf, st.buf, z3, z3, z3, gains, amap, est, 0, 1e-3, True, work, out)
+    gravity(ti, tf, st.buf, work, out)
     _warm = True

@@ -107,6 +107,7 @@ class PdG(Controller):
     """PD+G: τ = −Kp e − Kd ė + G(q)."""
 
     name = "pd_g"
+    gains: PdGains
     gains_type = PdGains
     gain_ranges = PD_RANGES
 
@@ -131,6 +132,7 @@ class PdG0(Controller):
     """PD+G0: τ = −Kp e − Kd ė + G(q_d); G at the desired position, cached while q_d holds."""
 
     name = "pd_g0"
+    gains: PdGains
     gains_type = PdGains
     gain_ranges = PD_RANGES
 
@@ -179,6 +181,7 @@ class PadenPanja(Controller):
     """τ = M(q) q̈_d + C(q, q̇) q̇_d + G(q) + F(q̇_d) − Kp e − Kd ė (thesis eq. 19)."""
 
     name = "paden_panja"
+    gains: PdGains
     gains_type = PdGains
     gain_ranges = PD_RANGES
 
@@ -210,6 +213,7 @@ class ComputedTorquePtp(Controller):
     """τ = M(q)(−Kd q̇ − Kp e) + C q̇ + G + F(q̇) (thesis eq. 29): regulation to q_d."""
 
     name = "computed_torque_ptp"
+    gains: CtGains
     gains_type = CtGains
     gain_ranges = CT_RANGES
 
@@ -235,6 +239,7 @@ class ComputedTorqueTrajectory(Controller):
     """τ = M(q)(q̈_d − Kd ė − Kp e) + C q̇ + G + F(q̇) (thesis eq. 31): ë + Kd ė + Kp e = 0."""
 
     name = "computed_torque"
+    gains: CtGains
     gains_type = CtGains
     gain_ranges = CT_RANGES
 

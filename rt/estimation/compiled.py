@@ -187,7 +187,12 @@ class CompiledKalmanEstimator:
         self.qdd = self._out[6:9]
         self.innovation = self._out[9:12]
         self.reset()
-        kalman_update(self._c, self._s.copy(), np.zeros(3), c.dt_s, self._out.copy())
+        # Compile (or load from numba's cache) now, not in a cycle, for the loop's read-only
+        # port views and for writable arrays (numba types them apart).
+        z = np.zeros(3)
+        kalman_update(self._c, self._s.copy(), z, c.dt_s, self._out.copy())
+        z.flags.writeable = False
+        kalman_update(self._c, self._s.copy(), z, c.dt_s, self._out.copy())
 
     def reset(self) -> None:
         """Forget the state; the next valid sample re-initialises the filter."""
