@@ -26,8 +26,8 @@ import numpy as np
 import pinocchio as pin
 
 from rt.errors import InputError
-from rt.model.description import Body, RobotDescription
 from rt.model import rigid_body as rb
+from rt.model.description import Body, RobotDescription
 from rt.model.kernels import TREE_DOF, tree_maps
 from rt.model.kinematics import Configuration, Kinematics
 
