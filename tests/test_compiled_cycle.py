@@ -8,6 +8,8 @@ to their scale (the compiled RNEA sums in another order than Pinocchio: ~1e-16 o
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -212,3 +214,32 @@ def test_no_kernel_compiles_inside_a_cycle(controller, model) -> None:
     pl.graph.stop()
     hybrid.graph.stop()
     assert [len(k.signatures) for k in _kernels()] == before
+
+
+def test_explicit_force_law_matches_its_interpreted_reference(stream) -> None:
+    """The hybrid force law on the recorded states, with a force profile that loads, holds,
+    learns the stiffness (RLS), saturates the feedforward and loses the sensor (NaN)."""
+    from rt.control.force import ExplicitForce, ForceReference
+
+    states = _replay_front(RobotModel.load(), RobotModel.load(), stream)
+    law_c = ExplicitForce(RobotModel.load(), compiled=True)
+    law_i = ExplicitForce(RobotModel.load(), compiled=False)
+    out_c, out_i = np.zeros(3), np.zeros(3)
+    worst = 0.0
+    for k, (st_c, st_i, fk_ok) in enumerate(states):
+        if not fk_ok:
+            continue
+        t = k * DT
+        ref = ForceReference(f=300.0 + 200.0 * np.sin(6.0 * t), f_dot=1200.0 * np.cos(6.0 * t),
+                             f_ddot=-7200.0 * np.sin(6.0 * t), roll=0.02, pitch=-0.01,
+                             roll_rate=0.0, pitch_rate=0.0)
+        if k == 100:
+            ref.f_dot = 1.0e5                  # beyond the feedforward's speed bound
+        force = math.nan if 350 <= k < 360 else 280.0 + 150.0 * np.sin(6.0 * t + 0.3)
+        law_c.update(st_c, force, ref, DT, out_c)
+        law_i.update(st_i, force, ref, DT, out_i)
+        worst = max(worst, float(np.abs(out_c - out_i).max()) / max(1.0, np.abs(out_i).max()))
+    assert worst <= RTOL
+    assert law_c.integral == pytest.approx(law_i.integral, rel=RTOL, abs=RTOL)
+    assert law_c.k_est == pytest.approx(law_i.k_est, rel=RTOL)
+    assert law_i.k_est != law_i.gains.stiffness_guess_n_per_m     # the RLS ran

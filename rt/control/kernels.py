@@ -16,6 +16,7 @@ import math
 from numba import njit
 
 from rt.model import rigid_body as rb
+from rt.model.kernels import inv3
 
 #: ``gains`` layouts: PD-family [Kp (N/m), Kd (N s/m)]; computed torque [Kp (1/s²), Kd (1/s)];
 #: PID [Kp, Kd, Ki (N/(m s)), integral limit (N)]; adaptive [Λ (1/s), K_D (N s/m)].
@@ -239,4 +240,111 @@ def warm_up(dyn) -> None:
         pid(st.buf, z3, z3, gains, np.zeros(3), 1e-3, True, out)
         adaptive(ti, tf, st.buf, z3, z3, z3, gains, amap, est, 0, 1e-3, True, work, out)
     gravity(ti, tf, st.buf, work, out)
+    fg = np.ones(13)
+    fs = np.ones(FS_SIZE)
+    explicit_force(ti, tf, st.buf, fg, fs, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-3,
+                   np.zeros(30 + rb.work_size(TREE_DOF)), out)
     _warm = True
+
+
+# Explicit force law (``rt.control.force.ExplicitForce``). ``fg`` (float64) = [Kp, Ki, D,
+# integral limit, angle Kp, angle Kd, stiffness guess, estimate stiffness (0/1), forgetting,
+# preload, max ż_ff, max z̈_ff, axis inertia]; ``fs`` (float64) = [∫e, last z, k̂, RLS θ (2),
+# RLS P (2×2 row-major)]; the reference as scalars.
+FS_INTEGRAL, FS_LAST_Z, FS_K, FS_THETA, FS_P = 0, 1, 2, 3, 5
+FS_SIZE = 9
+
+
+@njit(cache=True)
+def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, roll_ref,
+                   pitch_ref, roll_rate_ref, pitch_rate_ref, dt, work, out):
+    """Hybrid explicit force in z, PD on roll and pitch, G and the motion feedforward."""
+    Q, _, qd, S, _, _, _, _, _ = rb.unpack_state(stb)
+    z = Q[8]
+    pitch = Q[10]
+    roll = Q[11]
+    zd = S[8, 0] * qd[0] + S[8, 1] * qd[1] + S[8, 2] * qd[2]
+    rd = S[11, 0] * qd[0] + S[11, 1] * qd[1] + S[11, 2] * qd[2]
+    pd_ = S[10, 0] * qd[0] + S[10, 1] * qd[1] + S[10, 2] * qd[2]
+    floor = fg[9]
+    f_d = f_ref
+    f_dot = f_dot_ref
+    f_ddot = f_ddot_ref
+    if not f_d > floor:
+        f_d = floor
+        f_dot = 0.0
+        f_ddot = 0.0
+    k = fs[FS_K]
+    vmax = fg[10]
+    z_dot_ff = max(-vmax, min(vmax, f_dot / k))
+    amax = fg[11]
+    z_ddot_ff = max(-amax, min(amax, f_ddot / k)) if abs(f_dot / k) < vmax else 0.0
+    integral = fs[FS_INTEGRAL]
+    ki = fg[1]
+    if not math.isnan(force_n):
+        e = f_d - force_n
+        limit = fg[3] / ki if ki > 0 else 0.0
+        integral = max(-limit, min(limit, integral + e * dt))
+        if fg[7] != 0.0 and force_n > 50.0:
+            last_z = fs[FS_LAST_Z]
+            if not math.isnan(last_z) and abs(z - last_z) > 1e-7:
+                # RLS of F ≈ k z + c with forgetting (``rt.control.force._Rls.update``).
+                lam = fg[8]
+                phi0 = z
+                phi1 = 1.0
+                p00 = fs[FS_P]
+                p01 = fs[FS_P + 1]
+                p10 = fs[FS_P + 2]
+                p11 = fs[FS_P + 3]
+                a0 = p00 * phi0 + p01 * phi1
+                a1 = p10 * phi0 + p11 * phi1
+                denom = lam + phi0 * a0 + phi1 * a1
+                k0 = a0 / denom
+                k1 = a1 / denom
+                err = force_n - (fs[FS_THETA] * phi0 + fs[FS_THETA + 1] * phi1)
+                fs[FS_THETA] += k0 * err
+                fs[FS_THETA + 1] += k1 * err
+                fs[FS_P] = (p00 - k0 * a0) / lam
+                fs[FS_P + 1] = (p01 - k0 * a1) / lam
+                fs[FS_P + 2] = (p10 - k1 * a0) / lam
+                fs[FS_P + 3] = (p11 - k1 * a1) / lam
+                guess = fg[6]
+                fs[FS_K] = min(20.0 * guess, max(0.2 * guess, fs[FS_THETA]))
+            fs[FS_LAST_Z] = z
+    else:
+        e = 0.0
+    fz = f_d + fg[0] * e + ki * integral - fg[2] * (zd - z_dot_ff)
+    if fz < floor and not force_n > floor:
+        fz = floor
+        fs[FS_INTEGRAL] = max(fs[FS_INTEGRAL], integral)
+    else:
+        fs[FS_INTEGRAL] = integral
+    q_roll = -fg[4] * (roll - roll_ref) - fg[5] * (rd - roll_rate_ref)
+    q_pitch = -fg[4] * (pitch - pitch_ref) - fg[5] * (pd_ - pitch_rate_ref)
+    grav = work[0:3]
+    zero = work[3:6]
+    zero[0] = 0.0
+    zero[1] = 0.0
+    zero[2] = 0.0
+    pi = rb.unpack_tree(ti, tf)[5]
+    rb.mixed_torque(ti, tf, pi, stb, zero, zero, True, work[30:], grav)
+    for i in range(3):
+        out[i] = grav[i] + S[8, i] * fz + S[11, i] * q_roll + S[10, i] * q_pitch
+    # J_ik = (rows z, roll, pitch of S)⁻¹; its first column maps ż to the sliders.
+    jfk = work[6:15].reshape((3, 3))
+    jik = work[15:24].reshape((3, 3))
+    for c in range(3):
+        jfk[0, c] = S[8, c]
+        jfk[1, c] = S[11, c]
+        jfk[2, c] = S[10, c]
+    inv3(jfk, jik)
+    qd_ff = work[24:27]
+    for i in range(3):
+        qd_ff[i] = jik[i, 0] * z_dot_ff
+    fric = work[27:30]
+    fric[0] = 0.0
+    fric[1] = 0.0
+    fric[2] = 0.0
+    rb.friction(ti, tf, qd_ff, fric)
+    for i in range(3):
+        out[i] += fric[i] + fg[12] * (jik[i, 0] * z_ddot_ff)

@@ -73,7 +73,8 @@ def constraint_terms(geom, q, p0, p1, p2):
 
 
 @njit(cache=True)
-def _inv3(a, out):
+def inv3(a, out):
+    """out = a⁻¹ for a 3×3 ``a`` by cofactors; returns det(a)."""
     c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
     c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
     c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
@@ -142,7 +143,7 @@ def tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work):
         f_q[p, i] = 2.0 * d
         f_q[p, j] = -2.0 * d
     f_phi_inv = work[30:39].reshape((3, 3))
-    det = _inv3(f_phi, f_phi_inv)
+    det = inv3(f_phi, f_phi_inv)
     # Platform geometry: sphere offsets r_i = B_i - p (p is the centroid), normal n.
     nx = rot[0, 2]
     ny = rot[1, 2]
