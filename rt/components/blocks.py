@@ -141,6 +141,7 @@ class ControllerBlock(Component):
         self._ref = Reference()
         self._dt = 1e-3
         self._mode = SupervisorMode.RUN
+        self._mode_raw = float(SupervisorMode.RUN)
 
     def _bind_reference(self) -> Reference:
         self._ref.q = self.q_ref.data
@@ -163,14 +164,20 @@ class ControllerBlock(Component):
 
     def update(self, t: float, dt: float) -> int:
         self._dt = dt
-        mode = SupervisorMode.from_port(self.mode.data[0])
+        raw = self.mode.data[0]
+        # The enum is built only when the mode changed (it costs more than the compiled law).
+        if raw != self._mode_raw:
+            self._mode_raw = raw
+            self._mode_changed(SupervisorMode.from_port(raw))
+        return self.controller.update(self.state_in.data, self._bind_reference(), dt,
+                                      self.tau.data)
+
+    def _mode_changed(self, mode: SupervisorMode) -> None:
         if mode != self._mode:
             if self._mode == SupervisorMode.HARD_STOP:
                 # Drives back after a hard stop: integrators and estimates start afresh.
                 self.controller.reset()
             self._mode = mode
-        return self.controller.update(self.state_in.data, self._bind_reference(), dt,
-                                      self.tau.data)
 
 
 class SignalTap(Component):
