@@ -12,9 +12,12 @@ from rt.control.base import Controller, Reference
 from rt.devices.interfaces import EncoderBank
 from rt.engine import Array, Component, Struct
 from rt.errors import InputError, KinematicsError, TalusError
+from rt.estimation.compiled import CompiledKalmanEstimator
 from rt.estimation.velocity import KalmanVelocityEstimator
 from rt.model import RobotModel
 from rt.model.dynamics import State
+from rt.model.kernels import MODEL_STATE_WORK, model_state
+from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
 from rt.safety.events import SupervisorMode
 
 STATUS_SENSOR = 10
@@ -37,18 +40,22 @@ class EncoderReader(Component):
 class VelocityEstimation(Component):
     """Ports: in ``q_meas``: float64[3], m; out ``q``, ``qd``, ``qdd``: float64[3] (m, m/s,
     m/s²) — the Kalman estimate from the quantized encoders; out ``status``: float64[1] — the
-    estimator's status (−3 = implausible jump, for the supervisor)."""
+    estimator's status (−3 = implausible jump, for the supervisor).
 
-    def __init__(self, name: str):
+    The filter runs compiled (``rt.estimation.compiled``); ``compiled=False`` runs the
+    interpreted ``KalmanVelocityEstimator``, its reference."""
+
+    def __init__(self, name: str, compiled: bool = True):
         super().__init__(name)
+        self.compiled = compiled
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.q = self.declare_output("q", Array(3))
         self.qd = self.declare_output("qd", Array(3))
         self.qdd = self.declare_output("qdd", Array(3))
         self.status = self.declare_output("status", Array(1))
 
-    def make_state(self):
-        return KalmanVelocityEstimator()
+    def make_state(self) -> KalmanVelocityEstimator | CompiledKalmanEstimator:
+        return CompiledKalmanEstimator() if self.compiled else KalmanVelocityEstimator()
 
     def update(self, t: float, dt: float) -> int:
         est = self.state
@@ -67,17 +74,45 @@ class ModelState(Component):
     (estimated velocities); out ``state``: model ``State`` — forward kinematics (warm-started),
     the closed-chain maps S, Ṡ and the platform pose for this cycle; out ``fk_ok``: float64[1]
     — 0 when FK failed this cycle (the state then keeps the last good pose; the supervisor
-    stops the robot: the block itself keeps running, so the loop can still hold it safely)."""
+    stops the robot: the block itself keeps running, so the loop can still hold it safely).
 
-    def __init__(self, name: str, model: RobotModel):
+    The cycle runs compiled (``rt.model.kernels.model_state``: one call, no Python objects);
+    ``compiled=False`` runs the interpreted ``Dynamics.state``, the reference it is tested
+    against. Both share the kinematics' FK warm start."""
+
+    def __init__(self, name: str, model: RobotModel, compiled: bool = True):
         super().__init__(name)
         self.model = model
+        self.compiled = compiled
+        self._work = np.zeros(MODEL_STATE_WORK)
+        if compiled:
+            # Compile (or load from numba's cache) now, not in the first cycle; on a copy of
+            # the warm start, so the model's own is untouched.
+            # Inputs as the loop passes them: read-only port views (numba types them apart).
+            kin = model.kin
+            q = np.full(3, 0.5 * (kin.stroke[0] + kin.stroke[1]))
+            qd = np.zeros(3)
+            q.flags.writeable = qd.flags.writeable = False
+            model_state(kin.geom, kin.limits_array, kin._phi_guess.copy(), q, qd, State().buf,
+                        FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, self._work)
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.qd = self.declare_input("qd", Array(3))
         self.state_out = self.declare_output("state", Struct(State))
         self.fk_ok = self.declare_output("fk_ok", Array(1))
 
     def update(self, t: float, dt: float) -> int:
+        if self.compiled:
+            kin = self.model.kin
+            st = self.state_out.data
+            status = model_state(kin.geom, kin.limits_array, kin._phi_guess, self.q_meas.data,
+                                 self.qd.data, st.buf, FK_STEP_TOL_RAD, FK_MAX_ITERATIONS,
+                                 self._work)
+            if status >= 0:
+                st.buffer_filled()
+                self.fk_ok.data[0] = 1.0
+            else:
+                self.fk_ok.data[0] = 0.0
+            return 0
         try:
             self.model.dyn.state(self.q_meas.data, self.qd.data, out=self.state_out.data)
             self.fk_ok.data[0] = 1.0
@@ -106,6 +141,7 @@ class ControllerBlock(Component):
         self._ref = Reference()
         self._dt = 1e-3
         self._mode = SupervisorMode.RUN
+        self._mode_raw = float(SupervisorMode.RUN)
 
     def _bind_reference(self) -> Reference:
         self._ref.q = self.q_ref.data
@@ -128,14 +164,20 @@ class ControllerBlock(Component):
 
     def update(self, t: float, dt: float) -> int:
         self._dt = dt
-        mode = SupervisorMode.from_port(self.mode.data[0])
+        raw = self.mode.data[0]
+        # The enum is built only when the mode changed (it costs more than the compiled law).
+        if raw != self._mode_raw:
+            self._mode_raw = raw
+            self._mode_changed(SupervisorMode.from_port(raw))
+        return self.controller.update(self.state_in.data, self._bind_reference(), dt,
+                                      self.tau.data)
+
+    def _mode_changed(self, mode: SupervisorMode) -> None:
         if mode != self._mode:
             if self._mode == SupervisorMode.HARD_STOP:
                 # Drives back after a hard stop: integrators and estimates start afresh.
                 self.controller.reset()
             self._mode = mode
-        return self.controller.update(self.state_in.data, self._bind_reference(), dt,
-                                      self.tau.data)
 
 
 class SignalTap(Component):

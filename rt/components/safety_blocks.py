@@ -104,11 +104,13 @@ class SupervisorBlock(Component):
 
     def update(self, t: float, dt: float) -> int:
         st = self.state_in.data
-        fk_ok = self.fk_ok.data[0] > 0.5 and st.cfg is not None
+        fk_ok = self.fk_ok.data[0] > 0.5 and st.filled
         roll = pitch = roll_rate = pitch_rate = 0.0
         if fk_ok:
-            cfg = st.cfg
-            roll, pitch = cfg.roll, cfg.pitch
+            # The pose from the state's arrays (Q: ..., yaw, pitch, roll), not its
+            # Configuration, which the compiled model block does not build.
+            Q = st.Q
+            roll, pitch = float(Q[11]), float(Q[10])
             S, qd = st.S, st.qd
             roll_rate = S[11, 0] * qd[0] + S[11, 1] * qd[1] + S[11, 2] * qd[2]
             pitch_rate = S[10, 0] * qd[0] + S[10, 1] * qd[1] + S[10, 2] * qd[2]

@@ -20,9 +20,12 @@ from typing import Annotated, ClassVar
 import numpy as np
 from pydantic import Field
 
+from rt.control import kernels as ck
 from rt.control.base import STATUS_OK, Controller, GainRange, Gains, register
 from rt.control.laws import PD_RANGES
+from rt.model import rigid_body as rb
 from rt.model.dynamics import Payload
+from rt.model.kernels import TREE_DOF
 from rt.model.regressor import Regressor
 
 Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
@@ -56,12 +59,17 @@ class Adaptive(Controller):
         "max_payload_kg": GainRange(1.0, 250.0, "kg"),
         "payload_com_box_m": GainRange(0.01, 0.5, "m")}
 
-    def __init__(self, model, gains=None):
+    def __init__(self, model, gains=None, compiled: bool = True):
         self.regressor = Regressor(model.dyn)
-        super().__init__(model, gains)
+        super().__init__(model, gains, compiled=compiled)
 
     def _gains_changed(self) -> None:
         self._set_bounds()
+        self._pack_estimate(self.theta)
+
+    def _pack_gains(self) -> None:
+        self._gain_array[0] = self.gains.lambda_per_s
+        self._gain_array[1] = self.gains.kd_n_s_per_m
 
     def _set_bounds(self) -> None:
         g = self.gains
@@ -101,7 +109,7 @@ class Adaptive(Controller):
         super().reset()
         if not hasattr(self, "theta_lo"):
             self._set_bounds()
-        self.theta = self.nominal.copy()
+        self._pack_estimate(self.nominal)
         self._qd_r = np.zeros(3)
         self._qdd_r = np.zeros(3)
         self._s = np.zeros(3)
@@ -133,6 +141,37 @@ class Adaptive(Controller):
             step *= dt
             self.theta -= step
             np.clip(self.theta, self.theta_lo, self.theta_hi, out=self.theta)
+        return STATUS_OK
+
+    def _pack_estimate(self, theta: np.ndarray) -> None:
+        """The kernel's arrays (``rt.control.kernels.adaptive``): the index map of the base
+        parameters and one buffer holding θ̂ (``self.theta`` is a view of it), Γ, the box and
+        scratch."""
+        nb = len(self.nominal)
+        reg = self.regressor
+        rigid_pos, rigid_joint, rigid_param = [], [], []
+        for pos, col in zip(reg._base_rigid_pos, reg._base_rigid_tree):
+            rigid_pos.append(int(pos))
+            rigid_joint.append(int(col) // rb.N_PARAMS)
+            rigid_param.append(int(col) % rb.N_PARAMS)
+        drive = [(int(pos), kind, axis) for pos, (kind, axis)
+                 in zip(reg._base_drive_pos, reg._base_drive)]
+        self._amap = np.array([len(rigid_pos), len(drive), *rigid_pos, *rigid_joint,
+                               *rigid_param, *(d[0] for d in drive), *(d[1] for d in drive),
+                               *(d[2] for d in drive)], dtype=np.int64)
+        est = np.zeros(5 * nb + rb.N_PARAMS * TREE_DOF + 9)
+        est[0:nb] = theta
+        est[nb:2 * nb] = self.gamma
+        est[2 * nb:3 * nb] = self.theta_lo
+        est[3 * nb:4 * nb] = self.theta_hi
+        self._est = est
+        self._nb = nb
+        self.theta = est[0:nb]
+
+    def _law_compiled(self, st, ref, dt, out, dry_run):
+        d = self.dyn
+        ck.adaptive(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd, self._gain_array,
+                    self._amap, self._est, self._nb, dt, dry_run, self._work, out)
         return STATUS_OK
 
     def estimate(self, name: str) -> float:

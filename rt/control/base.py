@@ -30,7 +30,9 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 from rt.errors import ConfigurationError
 from rt.model import RobotModel
+from rt.model import rigid_body as rb
 from rt.model.dynamics import State
+from rt.model.kernels import TREE_DOF
 
 STATUS_OK = 0
 
@@ -99,14 +101,24 @@ class Controller(abc.ABC):
     gain_ranges: ClassVar[Mapping[str, GainRange]]
     bumpless_time_s: float = 0.2
 
-    def __init__(self, model: RobotModel, gains: Gains | dict | None = None):
+    def __init__(self, model: RobotModel, gains: Gains | dict | None = None,
+                 compiled: bool = True):
         self.model = model
         self.dyn = model.dyn
         self.gains = self._validate(gains or {})
         self._offset = np.zeros(3)
         self._offset_weight = 0.0
         self.tau = np.zeros(3)
+        #: The compiled kernel (``rt.control.kernels``) runs the law; ``False`` runs the
+        #: interpreted ``_law``, the reference the compiled one is tested against.
+        self.compiled = compiled
+        self._gain_array = np.zeros(4)
+        self._work = np.zeros(8 + rb.work_size(TREE_DOF))
+        self._pack_gains()
         self.reset()
+        if compiled:
+            from rt.control.kernels import warm_up
+            warm_up(self.dyn)
 
     # ------------------------------------------------------------------ parameters
     def _validate(self, gains: Gains | dict) -> Gains:
@@ -137,10 +149,14 @@ class Controller(abc.ABC):
     def set_gains(self, **changes: Any) -> None:
         """Change gains at run time; invalid values raise and change nothing."""
         self.gains = self.check_gains(**changes)
+        self._pack_gains()
         self._gains_changed()
 
     def _gains_changed(self) -> None:
         """Hook for laws that precompute from their gains."""
+
+    def _pack_gains(self) -> None:
+        """Hook: copy the gains into ``_gain_array`` in the layout the law's kernel reads."""
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -151,7 +167,7 @@ class Controller(abc.ABC):
     def handover(self, previous_tau: np.ndarray, st: State, ref: Reference, dt: float) -> None:
         """Take over from a controller whose last output was ``previous_tau`` (N)."""
         probe = np.zeros(3)
-        self._law(st, ref, dt, probe, dry_run=True)
+        self._run_law(st, ref, dt, probe, True)
         self._absorb(np.asarray(previous_tau, dtype=float) - probe)
 
     def _absorb(self, difference: np.ndarray) -> None:
@@ -161,7 +177,7 @@ class Controller(abc.ABC):
     # ------------------------------------------------------------------ cycle
     def update(self, st: State, ref: Reference, dt: float, out: np.ndarray) -> int:
         """Write τ (N) into ``out``; returns a status (0 = ok)."""
-        status = self._law(st, ref, dt, out, dry_run=False)
+        status = self._run_law(st, ref, dt, out, False)
         if self._offset_weight > 0.0:
             out += self._offset_weight * self._offset
             self._offset_weight *= math.exp(-dt / self.bumpless_time_s)
@@ -170,9 +186,21 @@ class Controller(abc.ABC):
         self.tau[:] = out
         return status
 
+    def _run_law(self, st: State, ref: Reference, dt: float, out: np.ndarray,
+                 dry_run: bool) -> int:
+        if self.compiled:
+            return self._law_compiled(st, ref, dt, out, dry_run)
+        return self._law(st, ref, dt, out, dry_run)
+
     @abc.abstractmethod
     def _law(self, st: State, ref: Reference, dt: float, out: np.ndarray, dry_run: bool) -> int:
-        """The control law; with ``dry_run`` it must not change the controller's state."""
+        """The control law, interpreted (the reference implementation); with ``dry_run`` it
+        must not change the controller's state."""
+
+    def _law_compiled(self, st: State, ref: Reference, dt: float, out: np.ndarray,
+                      dry_run: bool) -> int:
+        """The same law through its compiled kernel; laws without one run ``_law``."""
+        return self._law(st, ref, dt, out, dry_run)
 
 
 CONTROLLERS: dict[str, type[Controller]] = {}
@@ -187,8 +215,10 @@ def register(cls: type[Controller]) -> type[Controller]:
     return cls
 
 
-def create(name: str, model: RobotModel, gains: dict | None = None) -> Controller:
-    """A controller by name, with gains from config (defaults when omitted)."""
+def create(name: str, model: RobotModel, gains: dict | None = None,
+           compiled: bool = True) -> Controller:
+    """A controller by name, with gains from config (defaults when omitted); ``compiled=False``
+    runs the interpreted reference implementation of the law."""
     import rt.control.adaptive
     import rt.control.laws  # noqa: F401  (registers the laws)
     from rt.cli_args import canonical_name
@@ -198,4 +228,4 @@ def create(name: str, model: RobotModel, gains: dict | None = None) -> Controlle
     except KeyError:
         raise ConfigurationError(f"unknown controller {name!r}; known: "
                                  f"{', '.join(sorted(CONTROLLERS))}") from None
-    return cls(model, gains)
+    return cls(model, gains, compiled=compiled)

@@ -35,10 +35,13 @@ from typing import Annotated, Any, TypeVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from rt.control import kernels as ck
 from rt.control.base import GainRange, Reference, check_gain_ranges, check_range_table, create
 from rt.errors import ConfigurationError
 from rt.model import RobotModel
+from rt.model import rigid_body as rb
 from rt.model.dynamics import State
+from rt.model.kernels import TREE_DOF
 
 Pos = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
 NonNeg = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
@@ -152,17 +155,64 @@ class ExplicitForce:
     gains_type = ExplicitForceGains
     gain_ranges = EXPLICIT_FORCE_RANGES
 
-    def __init__(self, model: RobotModel, gains: dict | None = None):
+    def __init__(self, model: RobotModel, gains: dict | None = None, compiled: bool = True):
         self.model = model
         self.dyn = model.dyn
         self.gains = _validate(self.name, ExplicitForceGains, self.gain_ranges, gains)
         self.axis_inertia = model.description.drive.reflected_inertia_kg
+        #: ``update`` runs the compiled kernel (``rt.control.kernels.explicit_force``);
+        #: ``False`` runs the interpreted law, its reference. Both keep their state in
+        #: ``_fs`` (the properties below and the RLS are views of it).
+        self.compiled = compiled
+        self._fs = np.zeros(ck.FS_SIZE)
+        self._fg = np.zeros(13)
+        self._work = np.zeros(30 + rb.work_size(TREE_DOF))
+        self._pack_gains()
         self.reset()
+        if compiled:
+            ck.warm_up(self.dyn)
+
+    def _pack_gains(self) -> None:
+        g = self.gains
+        self._fg[:] = (g.kp, g.ki_per_s, g.damping_n_s_per_m, g.integral_limit_n,
+                       g.angle_kp_n_m_per_rad, g.angle_kd_n_m_s_per_rad,
+                       g.stiffness_guess_n_per_m, 1.0 if g.estimate_stiffness else 0.0,
+                       g.forgetting, g.preload_n, g.max_feedforward_speed_m_s,
+                       g.max_feedforward_accel_m_s2, self.axis_inertia)
+
+    @property
+    def integral(self) -> float:
+        """∫(F_d − F) dt (N s)."""
+        return float(self._fs[ck.FS_INTEGRAL])
+
+    @integral.setter
+    def integral(self, value: float) -> None:
+        self._fs[ck.FS_INTEGRAL] = value
+
+    @property
+    def k_est(self) -> float:
+        """The contact stiffness estimate (N/m)."""
+        return float(self._fs[ck.FS_K])
+
+    @k_est.setter
+    def k_est(self, value: float) -> None:
+        self._fs[ck.FS_K] = value
+
+    @property
+    def _last_z(self) -> float:
+        return float(self._fs[ck.FS_LAST_Z])
+
+    @_last_z.setter
+    def _last_z(self, value: float) -> None:
+        self._fs[ck.FS_LAST_Z] = value
 
     def reset(self) -> None:
         g = self.gains
         self.integral = 0.0
-        self.rls = _Rls()
+        fs = self._fs
+        self.rls = _Rls(fs[ck.FS_THETA:ck.FS_THETA + 2], fs[ck.FS_P:ck.FS_P + 4].reshape(2, 2))
+        self.rls.P[:] = np.eye(2)
+        self.rls.theta[:] = 0.0
         self.rls.theta[0] = g.stiffness_guess_n_per_m
         # Prior: the guess is good to about ±50 %; the offset c (= −k z_contact) is unknown.
         self.rls.theta[1] = -g.stiffness_guess_n_per_m * 0.7
@@ -174,11 +224,21 @@ class ExplicitForce:
     def set_gains(self, **changes) -> None:
         self.gains = _validate(self.name, ExplicitForceGains, self.gain_ranges,
                                {**self.gains.model_dump(), **changes})
+        self._pack_gains()
 
     def update(self, st: State, force_n: float, ref: ForceReference, dt: float,
                out: np.ndarray) -> int:
         """τ (N) into ``out``. ``force_n`` is the measured F (NaN → the law holds its integral
         and runs on feedforward; the supervisor decides whether that is acceptable)."""
+        if self.compiled:
+            d = self.dyn
+            # float(): an int that slipped into the reference would make numba compile anew.
+            ck.explicit_force(d.tree_i, d.tree_f, st.buf, self._fg, self._fs, float(force_n),
+                              float(ref.f), float(ref.f_dot), float(ref.f_ddot),
+                              float(ref.roll), float(ref.pitch), float(ref.roll_rate),
+                              float(ref.pitch_rate), float(dt), self._work, out)
+            self.tau[:] = out
+            return 0
         g = self.gains
         cfg = st.config
         S = st.S

@@ -18,6 +18,7 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field
 
+from rt.control import kernels as ck
 from rt.control.base import STATUS_OK, Controller, GainRange, Gains, Reference, register
 from rt.model.dynamics import State
 
@@ -84,6 +85,14 @@ class Pid(Controller):
             out[i] -= g.ki_n_per_m_s * integ
         return STATUS_OK
 
+    def _pack_gains(self) -> None:
+        g = self.gains
+        self._gain_array[:] = (g.kp_n_per_m, g.kd_n_s_per_m, g.ki_n_per_m_s, g.integral_limit_n)
+
+    def _law_compiled(self, st, ref, dt, out, dry_run):
+        ck.pid(st.buf, ref.q, ref.qd, self._gain_array, self.integral, dt, dry_run, out)
+        return STATUS_OK
+
     def _absorb(self, difference: np.ndarray) -> None:
         # Bumpless: preload the integrator so the first output equals the previous one.
         ki = self.gains.ki_n_per_m_s
@@ -98,6 +107,7 @@ class PdG(Controller):
     """PD+G: τ = −Kp e − Kd ė + G(q)."""
 
     name = "pd_g"
+    gains: PdGains
     gains_type = PdGains
     gain_ranges = PD_RANGES
 
@@ -106,12 +116,23 @@ class PdG(Controller):
         out += self.dyn.gravity(st)
         return STATUS_OK
 
+    def _pack_gains(self) -> None:
+        self._gain_array[0] = self.gains.kp_n_per_m
+        self._gain_array[1] = self.gains.kd_n_s_per_m
+
+    def _law_compiled(self, st, ref, dt, out, dry_run):
+        d = self.dyn
+        ck.pd_gravity(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, self._gain_array, self._work,
+                      out)
+        return STATUS_OK
+
 
 @register
 class PdG0(Controller):
     """PD+G0: τ = −Kp e − Kd ė + G(q_d); G at the desired position, cached while q_d holds."""
 
     name = "pd_g0"
+    gains: PdGains
     gains_type = PdGains
     gain_ranges = PD_RANGES
 
@@ -120,6 +141,8 @@ class PdG0(Controller):
         self._g_at = None
         self._g = np.zeros(3)
         self._state_d = None
+        self._g_q = np.zeros(3)
+        self._g_ok = False
 
     def _law(self, st, ref, dt, out, dry_run):
         key = (float(ref.q[0]), float(ref.q[1]), float(ref.q[2]))
@@ -132,12 +155,33 @@ class PdG0(Controller):
         out += self._g
         return STATUS_OK
 
+    def _pack_gains(self) -> None:
+        self._gain_array[0] = self.gains.kp_n_per_m
+        self._gain_array[1] = self.gains.kd_n_s_per_m
+
+    def _law_compiled(self, st, ref, dt, out, dry_run):
+        q0, q1, q2 = ref.q
+        if q0 != self._g_q[0] or q1 != self._g_q[1] or q2 != self._g_q[2] or not self._g_ok:
+            # A new desired position: FK there (interpreted, it shares the model's warm start
+            # like ``_law``), G through the kernel.
+            if self._state_d is None:
+                self._state_d = State()
+            st_d = self.dyn.state(ref.q, out=self._state_d)
+            d = self.dyn
+            ck.gravity(d.tree_i, d.tree_f, st_d.buf, self._work, self._g)
+            self._g_q[:] = ref.q
+            self._g_ok = True
+        ck.pd(st.buf, ref.q, ref.qd, self._gain_array[0], self._gain_array[1], out)
+        out += self._g
+        return STATUS_OK
+
 
 @register
 class PadenPanja(Controller):
     """τ = M(q) q̈_d + C(q, q̇) q̇_d + G(q) + F(q̇_d) − Kp e − Kd ė (thesis eq. 19)."""
 
     name = "paden_panja"
+    gains: PdGains
     gains_type = PdGains
     gain_ranges = PD_RANGES
 
@@ -145,6 +189,16 @@ class PadenPanja(Controller):
         m, c, g = self.dyn.mcg(st)
         _pd(self.gains, st, ref, out)
         out += m @ ref.qdd + c @ ref.qd + g + self.dyn.friction(ref.qd)
+        return STATUS_OK
+
+    def _pack_gains(self) -> None:
+        self._gain_array[0] = self.gains.kp_n_per_m
+        self._gain_array[1] = self.gains.kd_n_s_per_m
+
+    def _law_compiled(self, st, ref, dt, out, dry_run):
+        d = self.dyn
+        ck.paden_panja(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd, self._gain_array,
+                       self._work, out)
         return STATUS_OK
 
 
@@ -159,6 +213,7 @@ class ComputedTorquePtp(Controller):
     """τ = M(q)(−Kd q̇ − Kp e) + C q̇ + G + F(q̇) (thesis eq. 29): regulation to q_d."""
 
     name = "computed_torque_ptp"
+    gains: CtGains
     gains_type = CtGains
     gain_ranges = CT_RANGES
 
@@ -168,12 +223,23 @@ class ComputedTorquePtp(Controller):
         _computed_torque(self.dyn, st, v, out)
         return STATUS_OK
 
+    def _pack_gains(self) -> None:
+        self._gain_array[0] = self.gains.kp_per_s2
+        self._gain_array[1] = self.gains.kd_per_s
+
+    def _law_compiled(self, st, ref, dt, out, dry_run):
+        d = self.dyn
+        ck.computed_torque(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
+                           self._gain_array, False, self._work, out)
+        return STATUS_OK
+
 
 @register
 class ComputedTorqueTrajectory(Controller):
     """τ = M(q)(q̈_d − Kd ė − Kp e) + C q̇ + G + F(q̇) (thesis eq. 31): ë + Kd ė + Kp e = 0."""
 
     name = "computed_torque"
+    gains: CtGains
     gains_type = CtGains
     gain_ranges = CT_RANGES
 
@@ -181,4 +247,14 @@ class ComputedTorqueTrajectory(Controller):
         g_ = self.gains
         v = ref.qdd - g_.kd_per_s * (st.qd - ref.qd) - g_.kp_per_s2 * (np.asarray(st.cfg.q) - ref.q)
         _computed_torque(self.dyn, st, v, out)
+        return STATUS_OK
+
+    def _pack_gains(self) -> None:
+        self._gain_array[0] = self.gains.kp_per_s2
+        self._gain_array[1] = self.gains.kd_per_s
+
+    def _law_compiled(self, st, ref, dt, out, dry_run):
+        d = self.dyn
+        ck.computed_torque(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
+                           self._gain_array, True, self._work, out)
         return STATUS_OK

@@ -30,6 +30,8 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import numpy as np
+
 from rt.engine import rt_hygiene
 from rt.engine.commands import Call, CommandQueue, CommandResult, SetParams, SetRate, Swap
 from rt.engine.component import Component
@@ -461,6 +463,14 @@ class Loop:
         return self._queue.submit(cmd)
 
     # ------------------------------------------------------------------ reporting
+    def lateness_samples(self) -> np.ndarray:
+        """Copy of the lateness ring (ns), oldest first, over the last min(cycles counted,
+        capacity) realtime cycles (empty in fast mode): for benchmarks that need histograms,
+        not only the summaries. Call it between runs (``run`` returns) for an exact copy."""
+        n = min(self._lat_count, self._capacity)
+        idx = np.arange(self._lat_idx - n, self._lat_idx) % self._capacity
+        return self._lat_ring[idx].copy()
+
     def stats(self) -> LoopStats:
         """Current statistics (safe to call from another thread while running)."""
         lateness = summarize(self._lat_ring, self._lat_count, self._lat_max)

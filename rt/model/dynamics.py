@@ -26,6 +26,7 @@ import numpy as np
 import pinocchio as pin
 
 from rt.errors import InputError
+from rt.model import rigid_body as rb
 from rt.model.description import Body, RobotDescription
 from rt.model.kernels import TREE_DOF, tree_maps
 from rt.model.kinematics import Configuration, Kinematics
@@ -107,24 +108,64 @@ class State:
     """
 
     def __init__(self) -> None:
-        self.cfg: Configuration | None = None
-        self.Q = np.zeros(TREE_DOF)
-        self.Qd = np.zeros(TREE_DOF)
-        self.qd = np.zeros(3)
-        self.S = np.zeros((TREE_DOF, 3))
-        self.Sd = np.zeros((TREE_DOF, 3))
-        self.twist = np.zeros((6, 3))
-        self.rot = np.zeros((3, 3))
-        self._q = np.zeros(3)
-        self._phi = np.zeros(3)
-        self.forward_det = 0.0
+        self._cfg: Configuration | None = None
+        self._filled = False
+        # One buffer, the arrays views of it: a compiled kernel takes the state as one argument
+        # (layout in ``rt.model.rigid_body``, STATE_*).
+        self.buf = np.zeros(rb.STATE_SIZE)
+        (self.Q, self.Qd, self.qd, self.S, self.Sd, self.twist, self.rot, self._q,
+         self._phi) = rb.unpack_state(self.buf)
+
+    @property
+    def cfg(self) -> Configuration | None:
+        """The configuration of this cycle, or None before the first fill. The compiled model
+        block fills only the buffer; the ``Configuration`` is then built here on first use (the
+        cycle's compiled code never asks for it)."""
+        if self._cfg is None and self._filled:
+            b = self.buf
+            q, phi, Q = self._q, self._phi, self.Q
+            sph = b[rb.STATE_SPHERES:rb.STATE_SPHERES + 9].tolist()
+            self._cfg = Configuration(
+                (float(q[0]), float(q[1]), float(q[2])),
+                (float(phi[0]), float(phi[1]), float(phi[2])), float(Q[8]), float(Q[11]),
+                float(Q[10]), float(Q[6]), float(Q[7]), float(Q[9]),
+                tuple(self.rot.ravel().tolist()),
+                (tuple(sph[0:3]), tuple(sph[3:6]), tuple(sph[6:9])),
+                int(b[rb.STATE_ITERATIONS]))
+        return self._cfg
+
+    @cfg.setter
+    def cfg(self, value: Configuration | None) -> None:
+        self._cfg = value
+        self._filled = value is not None
+
+    @property
+    def filled(self) -> bool:
+        """True once a cycle's state has been computed into this State."""
+        return self._filled
+
+    def buffer_filled(self) -> None:
+        """The buffer holds a new cycle's state (compiled model block): drop the cached
+        ``Configuration``."""
+        self._cfg = None
+        self._filled = True
+
+    @property
+    def forward_det(self) -> float:
+        """det(∂f/∂φ) of this cycle's FK constraint Jacobian (0 at a forward singularity)."""
+        return float(self.buf[rb.STATE_DET])
+
+    @forward_det.setter
+    def forward_det(self, value: float) -> None:
+        self.buf[rb.STATE_DET] = value
 
     @property
     def config(self) -> Configuration:
         """The configuration of this cycle (set by ``Dynamics.state``)."""
-        if self.cfg is None:
+        cfg = self.cfg
+        if cfg is None:
             raise InputError("this State has no configuration yet: fill it with Dynamics.state")
-        return self.cfg
+        return cfg
 
     def forward_jacobian(self) -> np.ndarray:
         """∂(z, roll, pitch)/∂q (3×3; m/m and rad/m): pose rates from slider velocities."""
@@ -165,6 +206,11 @@ class Dynamics:
         self._upper[np.diag_indices(TREE_DOF)] = 0.5
         self._m_half = np.zeros((TREE_DOF, TREE_DOF))
         self._m_tree = np.zeros((TREE_DOF, TREE_DOF))
+        # The same model packed for the compiled kernels (``rt.model.rigid_body``);
+        # ``set_payload`` keeps the platform's parameters in step.
+        self.tree_i, self.tree_f = rb.pack_tree(self.model, self.reflected_inertia, self.viscous,
+                                                self.coulomb, self.coulomb_v)
+        self._platform_pi = rb.pi_slice(TREE_DOF, PLATFORM_JOINT - 1)
 
     def _tree_mass(self, Q: np.ndarray) -> np.ndarray:
         """Full symmetric tree mass matrix (kg, kg m, kg m²) at tree configuration Q."""
@@ -289,4 +335,5 @@ class Dynamics:
         """Put a payload on the platform (or remove it with ``None``); takes effect at once."""
         base = self._platform_nominal
         self.model.inertias[PLATFORM_JOINT] = base if payload is None else base + payload.inertia()
+        self.tree_f[self._platform_pi] = self.model.inertias[PLATFORM_JOINT].toDynamicParameters()
         self.payload = payload

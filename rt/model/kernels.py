@@ -17,6 +17,8 @@ import math
 import numpy as np
 from numba import njit
 
+from rt.model import rigid_body as rb
+
 TREE_DOF = 12
 IX_X, IX_Y, IX_Z, IX_YAW, IX_PITCH, IX_ROLL = 6, 7, 8, 9, 10, 11
 _PAIR_I = (0, 1, 2)
@@ -71,7 +73,8 @@ def constraint_terms(geom, q, p0, p1, p2):
 
 
 @njit(cache=True)
-def _inv3(a, out):
+def inv3(a, out):
+    """out = a⁻¹ for a 3×3 ``a`` by cofactors; returns det(a)."""
     c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
     c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
     c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
@@ -140,7 +143,7 @@ def tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work):
         f_q[p, i] = 2.0 * d
         f_q[p, j] = -2.0 * d
     f_phi_inv = work[30:39].reshape((3, 3))
-    det = _inv3(f_phi, f_phi_inv)
+    det = inv3(f_phi, f_phi_inv)
     # Platform geometry: sphere offsets r_i = B_i - p (p is the centroid), normal n.
     nx = rot[0, 2]
     ny = rot[1, 2]
@@ -433,3 +436,93 @@ def assemble(geom, q, phi, rot, pos, spheres):
     rot[2, 0] = fz * e1x + gz * e2x
     rot[2, 1] = fz * e1y + gz * e2y
     rot[2, 2] = nz
+
+
+# ---------------------------------------------------------------------------- the model block
+FK_OUTSIDE = -3
+#: ``limits`` layout for :func:`model_state`.
+LIMIT_STROKE_LO, LIMIT_STROKE_HI, LIMIT_ROD, LIMIT_CONE, LIMIT_ROLL, LIMIT_PITCH = range(6)
+MODEL_STATE_WORK = 27 + TREE_MAPS_WORK
+
+
+@njit(cache=True)
+def model_state(geom, limits, phi_guess, q_meas, qd, stb, step_tol, max_iterations, work):
+    """The model block's cycle, compiled: FK warm-started from ``phi_guess`` (updated on
+    success), the workspace check, S, Ṡ and the twist map for ``qd``, written into the State
+    buffer ``stb`` (layout ``rt.model.rigid_body.STATE_*``).
+
+    Returns the Newton iterations (≥ 0), or ``FK_SINGULAR`` / ``FK_NO_CONVERGENCE`` /
+    ``FK_OUTSIDE`` (non-finite q, outside the stroke or the workspace); then ``stb`` and
+    ``phi_guess`` are untouched, as when ``Kinematics.fk`` raises. Same arithmetic as
+    ``Kinematics.fk`` + ``Dynamics.state``; ``work`` is float64[MODEL_STATE_WORK].
+    """
+    q0 = q_meas[0]
+    q1 = q_meas[1]
+    q2 = q_meas[2]
+    if not (math.isfinite(q0) and math.isfinite(q1) and math.isfinite(q2)):
+        return FK_OUTSIDE
+    lo = limits[LIMIT_STROKE_LO]
+    hi = limits[LIMIT_STROKE_HI]
+    if not (lo <= q0 <= hi and lo <= q1 <= hi and lo <= q2 <= hi):
+        return FK_OUTSIDE
+    q = work[0:3]
+    phi = work[3:6]
+    rot = work[6:15].reshape((3, 3))
+    pos = work[15:18]
+    q[0] = q0
+    q[1] = q1
+    q[2] = q2
+    phi[0] = phi_guess[0]
+    phi[1] = phi_guess[1]
+    phi[2] = phi_guess[2]
+    iterations = fk_solve(geom, q, phi, step_tol, max_iterations)
+    if iterations < 0:
+        return iterations
+    spheres = stb[rb.STATE_SPHERES:rb.STATE_SPHERES + 9].reshape((3, 3))
+    sph = work[18:27].reshape((3, 3))
+    assemble(geom, q, phi, rot, pos, sph)
+    roll = math.atan2(rot[2, 1], rot[2, 2])
+    pitch = math.atan2(-rot[2, 0], math.hypot(rot[2, 1], rot[2, 2]))
+    yaw = math.atan2(rot[1, 0], rot[0, 0])
+    # Workspace (Kinematics.workspace_violations): rods, spherical cones, roll, pitch.
+    nx = rot[0, 2]
+    ny = rot[1, 2]
+    nz = rot[2, 2]
+    for i in range(3):
+        p = phi[i]
+        if abs(p) > limits[LIMIT_ROD]:
+            return FK_OUTSIDE
+        dot = math.sin(p) * (geom[3 + i] * nx + geom[6 + i] * ny) + math.cos(p) * nz
+        if math.acos(max(-1.0, min(1.0, dot))) > limits[LIMIT_CONE]:
+            return FK_OUTSIDE
+    if abs(roll) > limits[LIMIT_ROLL] or abs(pitch) > limits[LIMIT_PITCH]:
+        return FK_OUTSIDE
+    phi_guess[0] = phi[0]
+    phi_guess[1] = phi[1]
+    phi_guess[2] = phi[2]
+    Q, Qd, qd_s, S, Sd, twist, rot_s, q_s, phi_s = rb.unpack_state(stb)
+    for i in range(3):
+        q_s[i] = q[i]
+        phi_s[i] = phi[i]
+        qd_s[i] = qd[i]
+        for c in range(3):
+            rot_s[i, c] = rot[i, c]
+            spheres[i, c] = sph[i, c]
+    stb[rb.STATE_ITERATIONS] = iterations
+    stb[rb.STATE_DET] = tree_maps_work(geom, q_s, phi_s, rot_s, qd_s, S, Sd, twist,
+                                       work[27:27 + TREE_MAPS_WORK])
+    Q[0] = q0
+    Q[1] = phi[0]
+    Q[2] = q1
+    Q[3] = phi[1]
+    Q[4] = q2
+    Q[5] = phi[2]
+    Q[6] = pos[0]
+    Q[7] = pos[1]
+    Q[8] = pos[2]
+    Q[9] = yaw
+    Q[10] = pitch
+    Q[11] = roll
+    for j in range(TREE_DOF):
+        Qd[j] = S[j, 0] * qd_s[0] + S[j, 1] * qd_s[1] + S[j, 2] * qd_s[2]
+    return iterations

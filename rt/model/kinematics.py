@@ -28,10 +28,10 @@ from rt.errors import ConvergenceError, WorkspaceError
 from rt.model.description import RobotDescription
 from rt.model.kernels import FK_SINGULAR, assemble, fk_solve, pack_geometry
 
-_FK_MAX_ITERATIONS = 25
+FK_MAX_ITERATIONS = 25
 # Newton stops when the largest rod-angle update is below this (rad). 1e-12 rad on a 0.45 m rod
 # is 4.5e-13 m, far below the 2e-5 m encoder resolution and above float round-off (~1e-16).
-_FK_STEP_TOL_RAD = 1e-12
+FK_STEP_TOL_RAD = 1e-12
 
 
 @dataclass(slots=True)
@@ -101,7 +101,12 @@ class Kinematics:
         self.pitch_max = math.radians(lim.pitch_max_deg)
         # Rod angle with the platform level and centred: sin φ0 = (R_p - R_b) / L.
         self.phi_nominal = math.asin((self.platform_radius - self.base_radius) / self.rod_length)
-        self._phi_guess = [self.phi_nominal] * 3
+        # The FK warm start, shared by ``fk`` and the compiled model block
+        # (``rt.model.kernels.model_state``), so both continue from the same solution.
+        self._phi_guess = np.full(3, self.phi_nominal)
+        #: The workspace limits as ``model_state`` reads them (``kernels.LIMIT_*``).
+        self.limits_array = np.array([self.stroke[0], self.stroke[1], self.rod_angle_max,
+                                      self.cone_half_angle, self.roll_max, self.pitch_max])
         self.geom = pack_geometry(self.base_radius, self.platform_radius, self.rod_length,
                                   self.cos_theta, self.sin_theta, self._cos_pair)
         self._q_buf = np.zeros(3)
@@ -184,14 +189,14 @@ class Kinematics:
         phi = self._phi_work
         g = self._phi_guess if guess is None else guess
         phi[0], phi[1], phi[2] = g[0], g[1], g[2]
-        iterations = fk_solve(self.geom, self._q_buf, phi, _FK_STEP_TOL_RAD, _FK_MAX_ITERATIONS)
+        iterations = fk_solve(self.geom, self._q_buf, phi, FK_STEP_TOL_RAD, FK_MAX_ITERATIONS)
         if iterations == FK_SINGULAR:
             raise ConvergenceError(f"forward kinematics hit a singular configuration at "
                                    f"q = {(q0, q1, q2)} m")
         if iterations < 0:
             raise ConvergenceError(
                 f"forward kinematics did not converge for q = {(q0, q1, q2)} m within "
-                f"{_FK_MAX_ITERATIONS} Newton iterations; the sliders may be outside the "
+                f"{FK_MAX_ITERATIONS} Newton iterations; the sliders may be outside the "
                 "assembly range")
         p0, p1, p2 = float(phi[0]), float(phi[1]), float(phi[2])
         cfg = self._assemble((q0, q1, q2), (p0, p1, p2), iterations)

@@ -1,0 +1,82 @@
+"""The cycle's compiled blocks against their interpreted references, one call at a time
+(this machine; issue 16): every position law, the explicit-force law, the model block and the
+velocity estimator. Prints median / p99 (µs) per implementation.
+
+    .venv/bin/python bench/cycle_kernels.py [--calls 3000]
+
+Each figure times ``update`` alone on a state at a tilted pose with the slider moving (warm
+caches: a lower bound of what the block costs inside the loop, where ``talus bench loop``
+measures it among the others).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+import rt.control.adaptive
+import rt.control.laws  # noqa: F401  (registers the laws)
+from rt.components.blocks import ModelState
+from rt.control.base import CONTROLLERS, Reference, create
+from rt.control.force import ExplicitForce, ForceReference
+from rt.estimation.compiled import CompiledKalmanEstimator
+from rt.estimation.velocity import KalmanVelocityEstimator
+from rt.model import RobotModel
+from rt.model.dynamics import State
+
+
+def _time(fn: Callable[[], object], calls: int) -> tuple[float, float]:
+    for _ in range(50):
+        fn()
+    ts = np.empty(calls)
+    pc = time.perf_counter_ns
+    for i in range(calls):
+        t0 = pc()
+        fn()
+        ts[i] = pc() - t0
+    return float(np.median(ts)) / 1e3, float(np.percentile(ts, 99)) / 1e3
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--calls", type=int, default=3000)
+    args = p.parse_args(argv)
+    model = RobotModel.load()
+    cfg = model.kin.ik(0.63, 0.1, 0.05)
+    st = model.dyn.state(np.array(cfg.q), np.array([0.01, 0.02, -0.01]), out=State())
+    ref = Reference(np.array(cfg.q), np.array([0.01, 0.0, 0.02]), np.array([0.1, 0.2, 0.3]))
+    out = np.zeros(3)
+    rows: list[tuple[str, str, float, float]] = []
+    for name in sorted(CONTROLLERS):
+        for compiled in (True, False):
+            law = create(name, model, compiled=compiled)
+            n = args.calls if compiled else max(200, args.calls // 10)
+            rows.append((name, "compiled" if compiled else "interpreted",
+                         *_time(lambda law=law: law.update(st, ref, 1e-3, out), n)))
+    fref = ForceReference(f=300.0, f_dot=100.0, roll=0.02)
+    for compiled in (True, False):
+        force = ExplicitForce(model, compiled=compiled)
+        rows.append(("explicit_force", "compiled" if compiled else "interpreted",
+                     *_time(lambda f=force: f.update(st, 280.0, fref, 1e-3, out), args.calls)))
+    for compiled in (True, False):
+        blk = ModelState("model", model, compiled=compiled)
+        blk.q_meas.data = np.array(cfg.q)
+        blk.qd.data = np.array([0.01, 0.02, -0.01])
+        blk.state_out.data = State()
+        blk.fk_ok.data = np.zeros(1)
+        rows.append(("model block", "compiled" if compiled else "interpreted",
+                     *_time(lambda b=blk: b.update(0.0, 1e-3), args.calls)))
+    q = np.array(cfg.q)
+    for est in (CompiledKalmanEstimator(), KalmanVelocityEstimator()):
+        rows.append(("estimator", "compiled" if isinstance(est, CompiledKalmanEstimator)
+                     else "interpreted", *_time(lambda e=est: e.update(q, 1e-3), args.calls)))
+    print(f"{'block':22s} {'implementation':14s} {'median µs':>10s} {'p99 µs':>10s}")
+    for name, impl, med, p99 in rows:
+        print(f"{name:22s} {impl:14s} {med:10.1f} {p99:10.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

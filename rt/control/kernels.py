@@ -1,0 +1,350 @@
+"""The position laws' arithmetic compiled with numba (one call per cycle and law).
+
+Each kernel is the compiled twin of a law's interpreted ``_law`` in ``rt.control.laws`` /
+``rt.control.adaptive``, which stay as the reference implementation
+(``create(..., compiled=False)``); ``tests/test_compiled_cycle.py`` replays recorded cycles
+through both and holds them within 1e-12 (relative to the force's scale). The model terms come
+from ``rt.model.rigid_body`` (RNEA on the tree, projected with S): M q̈ + C q̇ + G is formed as
+products, never as matrices. Arguments are the packed model (``ti``, ``tf``), the cycle's
+``State.buf``, the reference's q, q̇, q̈ (m, m/s, m/s²) and a float64 ``gains`` array; τ (N) is
+written into ``out``; nothing is allocated.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from rt.model import rigid_body as rb
+from rt.model.kernels import inv3
+
+#: ``gains`` layouts: PD-family [Kp (N/m), Kd (N s/m)]; computed torque [Kp (1/s²), Kd (1/s)];
+#: PID [Kp, Kd, Ki (N/(m s)), integral limit (N)]; adaptive [Λ (1/s), K_D (N s/m)].
+
+
+@njit(cache=True)
+def pd(stb, rq, rqd, kp, kd, out):
+    """out = −Kp e − Kd ė (N), e = q − q_d."""
+    q = stb[rb.STATE_Q_ACT:rb.STATE_Q_ACT + 3]
+    qd = stb[rb.STATE_QD:rb.STATE_QD + 3]
+    for i in range(3):
+        e = q[i] - rq[i]
+        out[i] = -kp * e - kd * (qd[i] - rqd[i])
+
+
+@njit(cache=True)
+def paden_panja(ti, tf, stb, rq, rqd, rqdd, gains, work, out):
+    """τ = M q̈_d + C(q, q̇) q̇_d + G + F(q̇_d) − Kp e − Kd ė (thesis eq. 19)."""
+    pi = rb.unpack_tree(ti, tf)[5]
+    ff = work[0:3]
+    rb.mixed_torque(ti, tf, pi, stb, rqdd, rqd, True, work[3:], ff)
+    rb.friction(ti, tf, rqd, ff)
+    pd(stb, rq, rqd, gains[0], gains[1], out)
+    for i in range(3):
+        out[i] += ff[i]
+
+
+@njit(cache=True)
+def pd_gravity(ti, tf, stb, rq, rqd, gains, work, out):
+    """τ = −Kp e − Kd ė + G(q) (PD+G)."""
+    pi = rb.unpack_tree(ti, tf)[5]
+    g = work[0:3]
+    zero = work[3:6]
+    zero[0] = 0.0
+    zero[1] = 0.0
+    zero[2] = 0.0
+    rb.mixed_torque(ti, tf, pi, stb, zero, zero, True, work[6:], g)
+    pd(stb, rq, rqd, gains[0], gains[1], out)
+    for i in range(3):
+        out[i] += g[i]
+
+
+@njit(cache=True)
+def gravity(ti, tf, stb, work, out):
+    """out = G(q) (N) at the state's configuration."""
+    pi = rb.unpack_tree(ti, tf)[5]
+    zero = work[0:3]
+    zero[0] = 0.0
+    zero[1] = 0.0
+    zero[2] = 0.0
+    rb.mixed_torque(ti, tf, pi, stb, zero, zero, True, work[3:], out)
+
+
+@njit(cache=True)
+def computed_torque(ti, tf, stb, rq, rqd, rqdd, gains, trajectory, work, out):
+    """τ = M v + C q̇ + G + F(q̇) with v = q̈_d − Kd ė − Kp e (``trajectory``, eq. 31) or
+    v = −Kd q̇ − Kp e (regulation, eq. 29)."""
+    pi = rb.unpack_tree(ti, tf)[5]
+    q = stb[rb.STATE_Q_ACT:rb.STATE_Q_ACT + 3]
+    qd = stb[rb.STATE_QD:rb.STATE_QD + 3]
+    v = work[0:3]
+    kp = gains[0]
+    kd = gains[1]
+    for i in range(3):
+        if trajectory:
+            v[i] = rqdd[i] - kd * (qd[i] - rqd[i]) - kp * (q[i] - rq[i])
+        else:
+            v[i] = -kd * qd[i] - kp * (q[i] - rq[i])
+    rb.mixed_torque(ti, tf, pi, stb, v, qd, True, work[3:], out)
+    rb.friction(ti, tf, qd, out)
+
+
+@njit(cache=True)
+def pid(stb, rq, rqd, gains, integral, dt, dry_run, out):
+    """τ = −Kp e − Kd ė − Ki ∫e, the integral clamped to ±limit/Ki (anti-windup)."""
+    pd(stb, rq, rqd, gains[0], gains[1], out)
+    ki = gains[2]
+    limit = gains[3] / ki if ki > 0 else 0.0
+    q = stb[rb.STATE_Q_ACT:rb.STATE_Q_ACT + 3]
+    for i in range(3):
+        integ = integral[i] + (q[i] - rq[i]) * dt
+        integ = max(-limit, min(limit, integ))
+        if not dry_run:
+            integral[i] = integ
+        out[i] -= ki * integ
+
+
+# Adaptive law: ``amap`` (int64) = [n_rigid, n_drive, rigid_pos, rigid_joint, rigid_param,
+# drive_pos, drive_kind (0 J_r, 1 f_v, 2 f_c), drive_axis]; ``est`` (float64) = [θ̂, Γ, θ_lo,
+# θ_hi, Yᵀ s] (n_base each) followed by the n × 10 tree parameters of θ̂ and s, q̇_r, q̈_r.
+
+
+@njit(cache=True)
+def adaptive(ti, tf, stb, rq, rqd, rqdd, gains, amap, est, nb, dt, dry_run, work, out):
+    """Slotine-Li with projection: τ = Y θ̂ − K_D s; θ̂ −= Γ Yᵀ s dt, clipped to its box.
+
+    Y θ̂ is an RNEA with θ̂'s parameters on the bodies (three passes, the mixed regressor's
+    Christoffel form) and Yᵀ s the parameter gradient of those passes against the bodies'
+    velocities for joint rates S s."""
+    parent, kind, axis, prot, ptrans, _, g, _, _, _, vs = rb.unpack_tree(ti, tf)
+    n = parent.shape[0]
+    R, p, v, a, f, tau, V, A, tmp, u, ua, _, grad, e, zero3 = rb.unpack_work(work, n)
+    Q, Qd, qd, S, Sd, _, _, q, _ = rb.unpack_state(stb)
+    theta = est[0:nb]
+    gamma = est[nb:2 * nb]
+    lo = est[2 * nb:3 * nb]
+    hi = est[3 * nb:4 * nb]
+    ys = est[4 * nb:5 * nb]
+    o = 5 * nb
+    pith = est[o:o + rb.N_PARAMS * n].reshape((n, rb.N_PARAMS))
+    o += rb.N_PARAMS * n
+    s = est[o:o + 3]
+    qd_r = est[o + 3:o + 6]
+    qdd_r = est[o + 6:o + 9]
+    lam = gains[0]
+    kd = gains[1]
+    for i in range(3):
+        ei = q[i] - rq[i]
+        edi = qd[i] - rqd[i]
+        s[i] = edi + lam * ei
+        qd_r[i] = rqd[i] - lam * ei
+        qdd_r[i] = rqdd[i] - lam * edi
+    n_rigid = amap[0]
+    n_drive = amap[1]
+    o = 2
+    for k in range(n * rb.N_PARAMS):
+        pith[k // rb.N_PARAMS, k % rb.N_PARAMS] = 0.0
+    for r in range(n_rigid):
+        pith[amap[o + n_rigid + r], amap[o + 2 * n_rigid + r]] = theta[amap[o + r]]
+    zero3[0] = 0.0
+    zero3[1] = 0.0
+    zero3[2] = 0.0
+    rb.tree_kinematics(parent, kind, axis, prot, ptrans, Q, R, p)
+    # u: the bodies' velocities for joint rates S s (the virtual displacement of Yᵀ s).
+    for j in range(n):
+        V[j] = S[j, 0] * s[0] + S[j, 1] * s[1] + S[j, 2] * s[2]
+        A[j] = 0.0
+    rb.forward_pass(parent, kind, axis, R, p, V, A, zero3, u, ua)
+    for j in range(n):
+        for k in range(rb.N_PARAMS):
+            grad[j, k] = 0.0
+    # Pass 1: M_t (S q̈_r + Ṡ q̇_r) + g_t.
+    for j in range(n):
+        V[j] = 0.0
+        A[j] = (S[j, 0] * qdd_r[0] + S[j, 1] * qdd_r[1] + S[j, 2] * qdd_r[2]
+                + Sd[j, 0] * qd_r[0] + Sd[j, 1] * qd_r[1] + Sd[j, 2] * qd_r[2])
+    rb.rnea(parent, kind, axis, R, p, pith, V, A, g, v, a, f, tmp)
+    rb.param_gradient(v, a, u, 1.0, grad, e)
+    for j in range(n):
+        tau[j] = tmp[j]
+        A[j] = 0.0
+    # Passes 2, 3: ¼ [h(S(q̇ + q̇_r)) − h(S(q̇ − q̇_r))] = Γ_t(S q̇, S q̇_r).
+    for sign in (1.0, -1.0):
+        for j in range(n):
+            V[j] = Qd[j] + sign * (S[j, 0] * qd_r[0] + S[j, 1] * qd_r[1] + S[j, 2] * qd_r[2])
+        rb.rnea(parent, kind, axis, R, p, pith, V, A, zero3, v, a, f, tmp)
+        rb.param_gradient(v, a, u, 0.25 * sign, grad, e)
+        for j in range(n):
+            tau[j] += 0.25 * sign * tmp[j]
+    for i in range(3):
+        acc = 0.0
+        for j in range(n):
+            acc += S[j, i] * tau[j]
+        out[i] = acc
+    for r in range(n_rigid):
+        ys[amap[o + r]] = grad[amap[o + n_rigid + r], amap[o + 2 * n_rigid + r]]
+    o += 3 * n_rigid
+    for r in range(n_drive):
+        pos = amap[o + r]
+        kind_d = amap[o + n_drive + r]
+        ax = amap[o + 2 * n_drive + r]
+        if kind_d == 0:
+            value = qdd_r[ax]
+        elif kind_d == 1:
+            value = qd_r[ax]
+        else:
+            value = math.tanh(qd_r[ax] / vs)
+        out[ax] += theta[pos] * value
+        ys[pos] = s[ax] * value
+    for i in range(3):
+        out[i] -= kd * s[i]
+    if not dry_run and dt > 0.0:
+        for k in range(nb):
+            theta[k] -= ys[k] * gamma[k] * dt
+            theta[k] = min(max(theta[k], lo[k]), hi[k])
+
+
+_warm = False
+
+
+def warm_up(dyn) -> None:
+    """Compile (or load from numba's cache) every law's kernel now, at construction, never in
+    a cycle: a first call compiles for seconds. Runs once per process on a state built from IK
+    at the home pose (the model's FK warm start is not touched)."""
+    global _warm
+    if _warm:
+        return
+    import numpy as np
+
+    from rt.model.dynamics import State
+    from rt.model.kernels import TREE_DOF
+
+    kin = dyn.kin
+    cfg = kin.ik(0.5 * (kin.stroke[0] + kin.stroke[1]) + 0.45, 0.0, 0.0, check=False)
+    st = dyn.state(np.array(cfg.q), np.zeros(3), out=State(), cfg=cfg)
+    out = np.zeros(3)
+    gains = np.ones(4)
+    work = np.zeros(8 + rb.work_size(TREE_DOF))
+    ti, tf = dyn.tree_i, dyn.tree_f
+    amap = np.array([0, 0], dtype=np.int64)
+    est = np.zeros(rb.N_PARAMS * TREE_DOF + 9)
+    writable = np.zeros(3)
+    read_only = np.zeros(3)
+    read_only.flags.writeable = False
+    # Both array flavours numba types apart: the loop's references are read-only port views,
+    # a law hosted by another (the hybrid force law) may pass writable arrays.
+    for z3 in (read_only, writable):
+        paden_panja(ti, tf, st.buf, z3, z3, z3, gains, work, out)
+        pd_gravity(ti, tf, st.buf, z3, z3, gains, work, out)
+        computed_torque(ti, tf, st.buf, z3, z3, z3, gains, True, work, out)
+        pid(st.buf, z3, z3, gains, np.zeros(3), 1e-3, True, out)
+        adaptive(ti, tf, st.buf, z3, z3, z3, gains, amap, est, 0, 1e-3, True, work, out)
+    gravity(ti, tf, st.buf, work, out)
+    fg = np.ones(13)
+    fs = np.ones(FS_SIZE)
+    explicit_force(ti, tf, st.buf, fg, fs, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-3,
+                   np.zeros(30 + rb.work_size(TREE_DOF)), out)
+    _warm = True
+
+
+# Explicit force law (``rt.control.force.ExplicitForce``). ``fg`` (float64) = [Kp, Ki, D,
+# integral limit, angle Kp, angle Kd, stiffness guess, estimate stiffness (0/1), forgetting,
+# preload, max ż_ff, max z̈_ff, axis inertia]; ``fs`` (float64) = [∫e, last z, k̂, RLS θ (2),
+# RLS P (2×2 row-major)]; the reference as scalars.
+FS_INTEGRAL, FS_LAST_Z, FS_K, FS_THETA, FS_P = 0, 1, 2, 3, 5
+FS_SIZE = 9
+
+
+@njit(cache=True)
+def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, roll_ref,
+                   pitch_ref, roll_rate_ref, pitch_rate_ref, dt, work, out):
+    """Hybrid explicit force in z, PD on roll and pitch, G and the motion feedforward."""
+    Q, _, qd, S, _, _, _, _, _ = rb.unpack_state(stb)
+    z = Q[8]
+    pitch = Q[10]
+    roll = Q[11]
+    zd = S[8, 0] * qd[0] + S[8, 1] * qd[1] + S[8, 2] * qd[2]
+    rd = S[11, 0] * qd[0] + S[11, 1] * qd[1] + S[11, 2] * qd[2]
+    pd_ = S[10, 0] * qd[0] + S[10, 1] * qd[1] + S[10, 2] * qd[2]
+    floor = fg[9]
+    f_d = f_ref
+    f_dot = f_dot_ref
+    f_ddot = f_ddot_ref
+    if not f_d > floor:
+        f_d = floor
+        f_dot = 0.0
+        f_ddot = 0.0
+    k = fs[FS_K]
+    vmax = fg[10]
+    z_dot_ff = max(-vmax, min(vmax, f_dot / k))
+    amax = fg[11]
+    z_ddot_ff = max(-amax, min(amax, f_ddot / k)) if abs(f_dot / k) < vmax else 0.0
+    integral = fs[FS_INTEGRAL]
+    ki = fg[1]
+    if not math.isnan(force_n):
+        e = f_d - force_n
+        limit = fg[3] / ki if ki > 0 else 0.0
+        integral = max(-limit, min(limit, integral + e * dt))
+        if fg[7] != 0.0 and force_n > 50.0:
+            last_z = fs[FS_LAST_Z]
+            if not math.isnan(last_z) and abs(z - last_z) > 1e-7:
+                # RLS of F ≈ k z + c with forgetting (``rt.control.force._Rls.update``).
+                lam = fg[8]
+                phi0 = z
+                phi1 = 1.0
+                p00 = fs[FS_P]
+                p01 = fs[FS_P + 1]
+                p10 = fs[FS_P + 2]
+                p11 = fs[FS_P + 3]
+                a0 = p00 * phi0 + p01 * phi1
+                a1 = p10 * phi0 + p11 * phi1
+                denom = lam + phi0 * a0 + phi1 * a1
+                k0 = a0 / denom
+                k1 = a1 / denom
+                err = force_n - (fs[FS_THETA] * phi0 + fs[FS_THETA + 1] * phi1)
+                fs[FS_THETA] += k0 * err
+                fs[FS_THETA + 1] += k1 * err
+                fs[FS_P] = (p00 - k0 * a0) / lam
+                fs[FS_P + 1] = (p01 - k0 * a1) / lam
+                fs[FS_P + 2] = (p10 - k1 * a0) / lam
+                fs[FS_P + 3] = (p11 - k1 * a1) / lam
+                guess = fg[6]
+                fs[FS_K] = min(20.0 * guess, max(0.2 * guess, fs[FS_THETA]))
+            fs[FS_LAST_Z] = z
+    else:
+        e = 0.0
+    fz = f_d + fg[0] * e + ki * integral - fg[2] * (zd - z_dot_ff)
+    if fz < floor and not force_n > floor:
+        fz = floor
+        fs[FS_INTEGRAL] = max(fs[FS_INTEGRAL], integral)
+    else:
+        fs[FS_INTEGRAL] = integral
+    q_roll = -fg[4] * (roll - roll_ref) - fg[5] * (rd - roll_rate_ref)
+    q_pitch = -fg[4] * (pitch - pitch_ref) - fg[5] * (pd_ - pitch_rate_ref)
+    grav = work[0:3]
+    zero = work[3:6]
+    zero[0] = 0.0
+    zero[1] = 0.0
+    zero[2] = 0.0
+    pi = rb.unpack_tree(ti, tf)[5]
+    rb.mixed_torque(ti, tf, pi, stb, zero, zero, True, work[30:], grav)
+    for i in range(3):
+        out[i] = grav[i] + S[8, i] * fz + S[11, i] * q_roll + S[10, i] * q_pitch
+    # J_ik = (rows z, roll, pitch of S)⁻¹; its first column maps ż to the sliders.
+    jfk = work[6:15].reshape((3, 3))
+    jik = work[15:24].reshape((3, 3))
+    for c in range(3):
+        jfk[0, c] = S[8, c]
+        jfk[1, c] = S[11, c]
+        jfk[2, c] = S[10, c]
+    inv3(jfk, jik)
+    qd_ff = work[24:27]
+    for i in range(3):
+        qd_ff[i] = jik[i, 0] * z_dot_ff
+    fric = work[27:30]
+    fric[0] = 0.0
+    fric[1] = 0.0
+    fric[2] = 0.0
+    rb.friction(ti, tf, qd_ff, fric)
+    for i in range(3):
+        out[i] += fric[i] + fg[12] * (jik[i, 0] * z_ddot_ff)
