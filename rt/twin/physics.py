@@ -42,10 +42,10 @@ from rt.model.kernels import (
     IX_YAW,
     IX_Z,
     TREE_MAPS_WORK,
-    _inv3,
     assemble,
     constraint_terms,
     fk_solve,
+    inv3,
 )
 
 ENV_FREE = 0.0
@@ -197,7 +197,7 @@ def tree_maps_drift(geom, q, phi, rot, qd, S, sdq, twist, work):
         f_q[p, i] = 2.0 * d
         f_q[p, j] = -2.0 * d
     f_phi_inv = work[30:39].reshape((3, 3))
-    det = _inv3(f_phi, f_phi_inv)
+    det = inv3(f_phi, f_phi_inv)
     # Platform geometry: sphere offsets r_i = B_i - p (p is the centroid), normal n.
     nx = rot[0, 2]
     ny = rot[1, 2]
