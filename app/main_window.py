@@ -20,6 +20,7 @@ from PySide6.QtWidgets import (
 
 from app.i18n import tr
 from app.idle_lock import IdleWatcher
+from app.main_thread_gc import MainThreadGc
 from app.pages.prescribe import PrescribePage
 from app.pages.review import ReviewPage
 from app.pages.run import RunPage
@@ -47,6 +48,10 @@ class MainWindow(QMainWindow):
                  settings_path: Path | None = None, record: Any = None,
                  idle_clock: Any = None) -> None:
         super().__init__()
+        # Cyclic garbage collection only on this (GUI) thread while the window is open: see
+        # app/main_thread_gc.py for the deadlock it prevents.
+        self.gc = MainThreadGc(self)
+        self.gc.start()
         self.setWindowTitle(tr("talus — rehabilitation robot"))
         self.link = link
         self.settings = settings
@@ -263,5 +268,6 @@ class MainWindow(QMainWindow):
     def closeEvent(self, event: Any) -> None:
         if self.link is not None:
             self.link.close()
+        self.gc.stop()
         super().closeEvent(event)
 

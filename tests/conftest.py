@@ -30,3 +30,19 @@ def fresh_robot() -> RobotModel:
 def scratch_robot() -> RobotModel:
     """A model whose payload property tests set explicitly in every example."""
     return RobotModel.load()
+
+
+@pytest.fixture(autouse=True)
+def _gui_garbage_on_the_main_thread(request):
+    """A GUI test's windows hold cyclic collection to the GUI thread (app/main_thread_gc.py);
+    one left open by a test must not keep it off for the rest of the session, and its Qt
+    objects must be freed here, on the main thread, not later by a collection in some worker
+    thread (the deadlock that module describes)."""
+    yield
+    if "gui" not in request.module.__name__:
+        return
+    import gc
+
+    from app.main_thread_gc import MainThreadGc
+    MainThreadGc.release_all()
+    gc.collect()
