@@ -1,8 +1,11 @@
 """Work the GUI thread must not wait for (a database query, an Argon2 password check), run on a
-worker thread and answered as a Qt signal: ``done(tag, result, error)``. Only the product's
-errors (``TalusError``) become ``error``; anything else is a bug and propagates."""
+worker thread and answered as a Qt signal: ``done(tag, result, error)``. The product's errors
+(``TalusError``) become ``error`` as they are; anything else is a bug: logged with its traceback
+and answered as an internal error, so the page never waits for an answer that a pool thread
+swallowed."""
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -10,6 +13,8 @@ from typing import Any
 from PySide6.QtCore import QObject, Signal
 
 from rt.errors import TalusError
+
+log = logging.getLogger(__name__)
 
 
 class Background(QObject):
@@ -30,6 +35,11 @@ class Background(QObject):
             result = fn()
         except TalusError as exc:
             self.done.emit(tag, None, str(exc))
+            return
+        except Exception as exc:      # a bug: logged, and the page told
+            log.exception("background task %r failed", tag)
+            self.done.emit(tag, None, f"internal error ({type(exc).__name__}: {exc}); "
+                                      "the log has the details")
             return
         self.done.emit(tag, result, "")
 

@@ -259,6 +259,7 @@ class PatientsPage(QWidget):
     def _selected(self, item: QListWidgetItem | None, _previous: object = None) -> None:
         if item is None:
             return
+        self.message.setText("")
         self.open(str(item.data(Qt.ItemDataRole.UserRole)))
 
     def open(self, code: str) -> None:
@@ -391,7 +392,10 @@ class PatientsPage(QWidget):
         if error:
             self.message.setText(error)
             return
-        self.message.setText("")
+        if tag not in ("open", "identity") and not tag.startswith("list:"):
+            # A refresh that follows a save ("Clinical data saved.") must not erase what the
+            # user's action said; choosing another patient clears the message (_selected).
+            self.message.setText("")
         if tag.startswith("list:"):
             self._all = list(result)
             self._filter()
