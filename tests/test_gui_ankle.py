@@ -5,6 +5,7 @@ predicted ankle-centre displacement shown in clinical words on Prescribe."""
 from __future__ import annotations
 
 import gui_support  # noqa: F401  (offscreen platform before Qt)
+import numpy as np
 import pytest
 from PySide6.QtCore import Qt
 
@@ -12,10 +13,11 @@ from app.journal import SessionJournal
 from app.main_window import MainWindow
 from app.pages.prescribe import _key, _peaks
 from app.patient_context import PatientContext
+from app.review_data import ReviewData, load_review
 from app.settings import GuiSettings
 from patients.service import ClinicalRecord
 from protocols.schema import validate_protocol_data
-from protocols.session import SessionSetup, preflight
+from protocols.session import SessionSetup, preflight, run_session
 from rt.errors import ProtocolValidationError
 from rt.model.ankle import AnkleSetup
 
@@ -154,3 +156,51 @@ def test_peaks_without_an_ankle_setup_say_nothing_about_the_ankle() -> None:
     assert "ankle centre" not in _peaks({"duration_s": 12.0, "peak_platform_force_n": 40.0})
     # A malformed figure (missing limit) is left out rather than shown half.
     assert "ankle centre" not in _peaks({"ankle_displacement_mm": {"peak": 3.0, "rms": 1.0}})
+
+
+def test_review_shows_the_ankle_in_clinical_terms(qtbot, tmp_path):
+    # A real recording: an 8° ROM about a left ankle 70 mm above the sole on the twin.
+    doc = {"schema_version": 1, "kind": "ankle_rom", "name": "rom", "pose": {"z_m": 0.63},
+           "sequence": ["dorsi_plantar", "inversion_eversion"], "amplitude_deg": {
+               "dorsiflexion": 8.0, "plantarflexion": 8.0, "inversion": 8.0,
+               "eversion": 8.0}, "speed_deg_s": 20.0, "hold_s": 0.3,
+           "max_acceleration_deg_s2": 200.0, "max_jerk_deg_s3": 4000.0}
+    out = tmp_path / "rom.mcap"
+    ankle = AnkleSetup(side="left", height_above_sole_m=0.07, offset_x_m=0.01)
+    summary = run_session(SessionSetup(protocol=validate_protocol_data(doc), ankle=ankle), out)
+    assert summary["completed"], summary["stops"]
+
+    data = load_review(out)
+    assert data.has_ankle and len(data.t_ankle) > 100
+    # The position loop on the twin reaches the commanded 8° within 0.5° each way.
+    assert float(data.plantarflexion_deg.max()) == pytest.approx(8.0, abs=0.5)
+    assert float(data.plantarflexion_deg.min()) == pytest.approx(-8.0, abs=0.5)
+    assert float(np.abs(data.inversion_deg).max()) == pytest.approx(8.0, abs=0.5)
+
+    w = MainWindow(None, GuiSettings(recordings_dir=str(tmp_path)), tmp_path / "gui.json")
+    qtbot.addWidget(w)
+    review = w.review
+    review.open(out)
+    qtbot.waitUntil(lambda: review.data is not None, timeout=120_000)
+    names = [item.name() for item in review.angle_plot.getPlotItem().listDataItems()]
+    assert "ankle: plantar(+)/dorsi(−) flexion" in names
+    assert "ankle: inversion(+)/eversion(−)" in names
+    assert "platform pitch (engineers)" in names          # kept for engineers
+    info = review.info.text()
+    assert "ankle reached dorsiflexion 8." in info or "ankle reached dorsiflexion 7." in info
+    # The passive ankle pushes back at 8°: a few N·m (test_ankle_session: 5-10 N·m).
+    df_torque = float(info.split("peak torques DF ")[1].split(",")[0])
+    assert 5.0 < df_torque < 10.0
+
+
+def test_review_without_an_ankle_setup_keeps_the_platform_angles(qtbot, tmp_path):
+    data = ReviewData("x.mcap", True, np.array([0.0, 1.0]), np.array([0.0, 2.0]),
+                      np.array([0.0, -3.0]), np.zeros(0), np.zeros(0), np.zeros(0),
+                      np.zeros(0))
+    assert not data.has_ankle
+    w = MainWindow(None, GuiSettings(recordings_dir=str(tmp_path)), tmp_path / "gui.json")
+    qtbot.addWidget(w)
+    w.review._show(data, "")
+    names = [item.name() for item in w.review.angle_plot.getPlotItem().listDataItems()]
+    assert "plantar(+)/dorsi(−) flexion" in names and not any("ankle:" in n for n in names)
+    assert "ankle reached" not in w.review.info.text()

@@ -438,14 +438,14 @@
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="198"/>
-        <location filename="../pages/review.py" line="218"/>
+        <location filename="../pages/review.py" line="234"/>
         <location filename="../pages/run.py" line="127"/>
         <source>plantar(+)/dorsi(−) flexion</source>
         <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="200"/>
-        <location filename="../pages/review.py" line="220"/>
+        <location filename="../pages/review.py" line="237"/>
         <source>roll (+ is inversion of a right foot)</source>
         <translation>balanceo (+ es inversión del pie derecho)</translation>
     </message>
@@ -575,19 +575,44 @@
         <translation>medida</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="229"/>
+        <location filename="../pages/review.py" line="222"/>
+        <source>ankle: plantar(+)/dorsi(−) flexion</source>
+        <translation>tobillo: flexión plantar(+)/dorsal(−)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="225"/>
+        <source>ankle: inversion(+)/eversion(−)</source>
+        <translation>tobillo: inversión(+)/eversión(−)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="228"/>
+        <source>platform pitch (engineers)</source>
+        <translation>cabeceo de la plataforma (ingeniería)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="230"/>
+        <source>platform roll (engineers)</source>
+        <translation>alabeo de la plataforma (ingeniería)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="246"/>
         <source>%1 — patient %2 — %3 s</source>
         <translation>%1 — paciente %2 — %3 s</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="232"/>
+        <location filename="../pages/review.py" line="251"/>
         <source>stops: %1</source>
         <translation>paradas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="235"/>
+        <location filename="../pages/review.py" line="254"/>
         <source>recording cut short (recovered up to its last whole block)</source>
         <translation>grabación interrumpida (recuperada hasta su último bloque completo)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="263"/>
+        <source>ankle reached dorsiflexion %1°, plantarflexion %2°, inversion %3°, eversion %4°; peak torques DF %5, PF %6, INV %7, EV %8 N·m</source>
+        <translation>el tobillo alcanzó flexión dorsal %1°, flexión plantar %2°, inversión %3°, eversión %4°; pares máximos FD %5, FP %6, INV %7, EV %8 N·m</translation>
     </message>
     <message>
         <location filename="../pages/run.py" line="46"/>
