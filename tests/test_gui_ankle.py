@@ -204,3 +204,21 @@ def test_review_without_an_ankle_setup_keeps_the_platform_angles(qtbot, tmp_path
     names = [item.name() for item in w.review.angle_plot.getPlotItem().listDataItems()]
     assert "plantar(+)/dorsi(−) flexion" in names and not any("ankle:" in n for n in names)
     assert "ankle reached" not in w.review.info.text()
+
+
+def test_run_reads_inversion_on_the_foot_of_the_ankle_setup(qtbot, tmp_path):
+    limits = {"pitch_min_deg": -15.0, "pitch_max_deg": 15.0, "roll_min_deg": -4.0,
+              "roll_max_deg": 10.0}
+    w = MainWindow(None, GuiSettings(recordings_dir=str(tmp_path)), tmp_path / "gui.json")
+    qtbot.addWidget(w)
+    run = w.run
+    # Affected side "both" falls back to right; the ankle setup says the left foot is on it.
+    left = {"side": "left", "height_above_sole_m": 0.08, "offset_x_m": 0.0, "offset_y_m": 0.0,
+            "sole_above_sensor_m": 0.0, "source": "entered"}
+    run.set_patient(PatientContext("P-0002", 70.0, limits, side="right", ankle=left))
+    assert run._inversion_sign() == -1.0
+    # Left foot: the roll band −4…10° is inversion −10…4° (mirrored).
+    assert run.rom_bands["roll"].getRegion() == pytest.approx((-10.0, 4.0))
+    run.set_patient(PatientContext("P-0002", 70.0, limits, side="right"))
+    assert run._inversion_sign() == 1.0
+    assert run.rom_bands["roll"].getRegion() == pytest.approx((-4.0, 10.0))

@@ -186,8 +186,13 @@ class RunPage(QWidget):
     # ------------------------------------------------------------------ inputs
 
     def _inversion_sign(self) -> float:
-        """+1 when the platform's positive roll is the patient's inversion (right foot)."""
-        return -1.0 if self.patient is not None and self.patient.side == "left" else 1.0
+        """+1 when the platform's positive roll is the patient's inversion (right foot).
+        The foot on the platform is the ankle setup's side when one is in force (what the RT
+        process turns about, ``rt.model.ankle.ankle_angles``), else the affected side."""
+        if self.patient is None:
+            return 1.0
+        side = (self.patient.ankle or {}).get("side") or self.patient.side
+        return -1.0 if side == "left" else 1.0
 
     def set_patient(self, patient: PatientContext | None) -> None:
         """Draw this patient's ROM: plantar(+)/dorsi(−) flexion is the platform's pitch;
