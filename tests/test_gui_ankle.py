@@ -222,3 +222,30 @@ def test_run_reads_inversion_on_the_foot_of_the_ankle_setup(qtbot, tmp_path):
     run.set_patient(PatientContext("P-0002", 70.0, limits, side="right"))
     assert run._inversion_sign() == 1.0
     assert run.rom_bands["roll"].getRegion() == pytest.approx((-4.0, 10.0))
+
+
+def test_run_shows_live_ankle_torques_in_clinical_words(qtbot, tmp_path):
+    from rt.model.ankle import ankle_torques
+    limits = {"pitch_min_deg": -15.0, "pitch_max_deg": 15.0}
+    w = MainWindow(None, GuiSettings(recordings_dir=str(tmp_path)), tmp_path / "gui.json")
+    qtbot.addWidget(w)
+    run = w.run
+    run.set_patient(PatientContext("P-0003", 70.0, limits, side="right"))
+    run.show_ankle({"wrench": [0.0, 0.0, -200.0, 0.0, 0.0, 0.0]})
+    assert run.ankle_label.isHidden()                     # no ankle setup: nothing invented
+    setup = {"side": "right", "height_above_sole_m": 0.08, "offset_x_m": 0.03,
+             "offset_y_m": 0.0, "sole_above_sensor_m": 0.01, "source": "entered"}
+    run.set_patient(PatientContext("P-0003", 70.0, limits, side="right", ankle=setup))
+    assert not run.ankle_label.isHidden() and run.ankle_label.text() == "Ankle torque: —"
+    # 200 N down on the plate and 3 N·m about the sensor's x: the torques about the ankle
+    # centre are rt.model.ankle's (hand statics tested in test_ankle.py), in words.
+    wrench = [5.0, 0.0, -200.0, 3.0, 0.0, 0.0]
+    tp, ti, _ = ankle_torques(wrench, AnkleSetup(**setup))
+    run.show_ankle({"wrench": wrench})
+    text = run.ankle_label.text()
+    pf = "plantarflexion" if tp >= 0 else "dorsiflexion"
+    inv = "inversion" if ti >= 0 else "eversion"
+    assert text == f"Ankle torque: {pf} {abs(tp):.1f} N·m, {inv} {abs(ti):.1f} N·m"
+    assert abs(tp) > 1.0                       # the 30 mm offset makes a real moment arm
+    run.show_ankle({"wrench": [None] * 6})     # a stale sensor sample
+    assert run.ankle_label.text() == "Ankle torque: —"

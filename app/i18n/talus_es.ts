@@ -662,62 +662,72 @@
         <translation>segundos antes de ahora</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="212"/>
+        <location filename="../pages/run.py" line="227"/>
         <source>Protocol: %1</source>
         <translation>Protocolo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="227"/>
+        <location filename="../pages/run.py" line="242"/>
         <source>Checking the protocol on the robot model, then starting…</source>
         <translation>Comprobando el protocolo en el modelo del robot; después se inicia…</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="240"/>
+        <location filename="../pages/run.py" line="255"/>
         <source>Could not take control: %1</source>
         <translation>No se pudo tomar el control: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="241"/>
+        <location filename="../pages/run.py" line="256"/>
         <source>You control the robot.</source>
         <translation>Usted controla el robot.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="245"/>
+        <location filename="../pages/run.py" line="260"/>
         <source>The session did not start: %1</source>
         <translation>La sesión no se inició: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="260"/>
+        <location filename="../pages/run.py" line="275"/>
         <source>Session running.</source>
         <translation>Sesión en curso.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="274"/>
+        <location filename="../pages/run.py" line="289"/>
         <source>Session ended: %1</source>
         <translation>Sesión terminada: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="278"/>
+        <location filename="../pages/run.py" line="293"/>
         <source>Stopped: %1</source>
         <translation>Detenido: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="283"/>
+        <location filename="../pages/run.py" line="298"/>
         <source>The clinical record did not take the session: %1</source>
         <translation>La historia clínica no registró la sesión: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="341"/>
+        <location filename="../pages/run.py" line="356"/>
         <source>%1 s left</source>
         <translation>quedan %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="380"/>
+        <location filename="../pages/run.py" line="401"/>
+        <source>Ankle torque: —</source>
+        <translation>Par en el tobillo: —</translation>
+    </message>
+    <message>
+        <location filename="../pages/run.py" line="404"/>
+        <source>Ankle torque: %1 %2 N·m, %3 %4 N·m</source>
+        <translation>Par en el tobillo: %1 %2 N·m, %3 %4 N·m</translation>
+    </message>
+    <message>
+        <location filename="../pages/run.py" line="419"/>
         <source>Repetitions: %1</source>
         <translation>Repeticiones: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="382"/>
+        <location filename="../pages/run.py" line="421"/>
         <source>Repetitions: %1 of %2</source>
         <translation>Repeticiones: %1 de %2</translation>
     </message>
@@ -1387,21 +1397,25 @@
     </message>
     <message>
         <location filename="../pages/patients.py" line="549"/>
+        <location filename="../pages/run.py" line="405"/>
         <source>dorsiflexion</source>
         <translation>dorsiflexión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="550"/>
+        <location filename="../pages/run.py" line="405"/>
         <source>plantarflexion</source>
         <translation>plantarflexión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="551"/>
+        <location filename="../pages/run.py" line="407"/>
         <source>inversion</source>
         <translation>inversión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="551"/>
+        <location filename="../pages/run.py" line="407"/>
         <source>eversion</source>
         <translation>eversión</translation>
     </message>

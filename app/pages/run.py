@@ -152,6 +152,11 @@ class RunPage(QWidget):
         self.reps_label.setObjectName("repetitions")
         self.reps_label.setFont(font)
         self.reps_label.hide()
+        # The patient's ankle torques live, in clinical words (only with an ankle setup).
+        self.ankle_label = QLabel()
+        self.ankle_label.setObjectName("ankleTorque")
+        self.ankle_label.hide()
+        self._ankle_setup: Any = None
 
         top = QHBoxLayout()
         top.addWidget(self.protocol_label, 3)
@@ -170,6 +175,7 @@ class RunPage(QWidget):
         layout.addLayout(phase_row)
         layout.addWidget(self.progress)
         layout.addWidget(self.events_label)
+        layout.addWidget(self.ankle_label)
 
         self.timer = QTimer(self)
         self.timer.setTimerType(Qt.TimerType.PreciseTimer)
@@ -198,6 +204,10 @@ class RunPage(QWidget):
         """Draw this patient's ROM: plantar(+)/dorsi(−) flexion is the platform's pitch;
         inversion(+)/eversion(−) is its roll, mirrored for a left foot."""
         self.patient = patient
+        from rt.model.ankle import AnkleSetup
+        self._ankle_setup = None if patient is None or patient.ankle is None \
+            else AnkleSetup(**patient.ankle)
+        self.show_ankle(None)
         lim = None if patient is None else patient.patient_limits()
         inv = self._inversion_sign()
         for axis, band in self.rom_bands.items():
@@ -349,6 +359,7 @@ class RunPage(QWidget):
         if text != self.phase_label.text():
             self.phase_label.setText(text)
         self._show_repetitions()
+        self.show_ankle(latest)
         self.frame_log.append((time.monotonic(), time.perf_counter() - began,
                                time.thread_time() - began_cpu))
 
@@ -375,6 +386,29 @@ class RunPage(QWidget):
             if lo < c0 or hi > c1 or (c1 - c0) > 2.0 * 1.1 * span:
                 margin = 0.05 * span
                 plot.setYRange(lo - margin, hi + margin, padding=0.0)
+
+    def show_ankle(self, latest: dict[str, Any] | None) -> None:
+        """The ankle torques of the latest telemetry sample (its sensor wrench moved to the
+        patient's ankle centre, ``rt.model.ankle.ankle_torques``) in clinical words; hidden
+        without an ankle setup, a dash while the sensor has no finite sample."""
+        if self._ankle_setup is None:
+            self.ankle_label.hide()
+            return
+        from rt.model.ankle import ankle_torques
+        wrench = (latest or {}).get("wrench") or []
+        values = [float(x) for x in wrench[:6] if x is not None]
+        if len(values) < 6 or not all(np.isfinite(values)):
+            text = tr("Ankle torque: —")
+        else:
+            tp, ti, _ = ankle_torques(values, self._ankle_setup)
+            text = tr("Ankle torque: %1 %2 N·m, %3 %4 N·m").replace(
+                "%1", tr("plantarflexion") if tp >= 0 else tr("dorsiflexion")) \
+                .replace("%2", f"{abs(tp):.1f}") \
+                .replace("%3", tr("inversion") if ti >= 0 else tr("eversion")) \
+                .replace("%4", f"{abs(ti):.1f}")
+        if text != self.ankle_label.text():
+            self.ankle_label.setText(text)
+        self.ankle_label.show()
 
     def _show_repetitions(self) -> None:
         assert self.link is not None
