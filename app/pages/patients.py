@@ -1,6 +1,7 @@
 """Patients: search by code, register, the patient's card (dosing data, the limits in force in
-clinical terms with who set them and when, the sessions with their outcome), prescribe new
-limits, edit the clinical data (body mass, height, side, diagnosis, notes: audited by the record,
+clinical terms with who set them and when, the ankle setup in force, the sessions with their
+outcome), prescribe new limits, enter where the ankle centre sits on the platform (audited by
+the record, its refusal shown as it words it), edit the clinical data (body mass, height, side, diagnosis, notes: audited by the record,
 refused if someone else saved in between), write the progress report (PDF, to a path the user
 chooses, never over a file), and — only for roles allowed to, only on request, every read
 audited by the record — the identifying data. "Use for the session" hands the pseudonymous

@@ -1,6 +1,7 @@
 """Run: take control, start the prescribed session, live plots (reference dashed, measured
 solid: force in N; the ankle angles in clinical terms with the patient's ROM drawn as a shaded
-band), progress with phase and time left. Nothing on this page needs typing.
+band), progress with phase and time left; with the patient's ankle setup, the ankle torques
+in clinical words. Nothing on this page needs typing.
 
 The plots are redrawn by a timer at :data:`FRAME_HZ` from the samples the link collected
 (the GUI thread never waits for telemetry); each redraw costs one ``setData`` per curve.
