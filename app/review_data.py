@@ -2,7 +2,10 @@
 
 Recordings hold the 1 kHz loop state in joint space; the platform angles are computed here by
 forward kinematics at :data:`REVIEW_RATE_HZ` (plots need no more). Stops are the recorded
-safety events with a reaction of soft stop or worse, marked on the time axis.
+safety events with a reaction of soft stop or worse, marked on the time axis. A session run with
+the patient's ankle setup also has ``/ankle/state`` (100 Hz): the foot's angles from neutral
+and the torques about the ankle centre in clinical terms, which a clinician reads instead of
+the platform's roll and pitch (kept for engineers).
 """
 from __future__ import annotations
 
@@ -14,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from rt.errors import KinematicsError
-from rt.recording.channels import EVENTS, METADATA, REFERENCE, STATE, WRENCH
+from rt.recording.channels import ANKLE, EVENTS, METADATA, REFERENCE, STATE, WRENCH
 from rt.recording.reader import TruncatedRecordingError, read_recording, recover
 
 #: Rate of the reviewed curves, Hz.
@@ -37,6 +40,17 @@ class ReviewData:
     force_ref_n: np.ndarray
     stops: list[tuple[float, str, dict[str, Any]]] = field(default_factory=list)
     metadata: dict[str, Any] = field(default_factory=dict)
+    #: ``/ankle/state`` on the same time axis (empty without an ankle setup): plantarflexion
+    #: (+) / dorsiflexion (−) and inversion (+) / eversion (−) in degrees, their torques N·m.
+    t_ankle: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    plantarflexion_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    inversion_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    plantarflexion_torque_nm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    inversion_torque_nm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def has_ankle(self) -> bool:
+        return len(self.t_ankle) > 0
 
 
 def _every(rows: list[dict[str, Any]], rate_hz: float) -> list[dict[str, Any]]:
@@ -54,7 +68,7 @@ def load_review(path: str | Path, model: Any | None = None) -> ReviewData:
     Raises:
         RecordingFileError: not a readable recording (the message names the file).
     """
-    topics = [STATE, WRENCH, EVENTS, METADATA, REFERENCE]
+    topics = [STATE, WRENCH, EVENTS, METADATA, REFERENCE, ANKLE]
     try:
         data, complete = read_recording(path, topics), True
     except TruncatedRecordingError:
@@ -82,10 +96,21 @@ def load_review(path: str | Path, model: Any | None = None) -> ReviewData:
     stops = [(float(e["t"]) - t0, str(e.get("cause", "")), e) for e in data.get(EVENTS, [])
              if e.get("reaction") in _STOP_REACTIONS]
     meta = (data.get(METADATA) or [{}])[0]
-    return ReviewData(
+    ankle = data.get(ANKLE, [])
+
+    def column(key: str) -> np.ndarray:
+        return np.array([float(a[key]) for a in ankle])
+    review = ReviewData(
         str(path), complete, np.array(t), np.array(roll), np.array(pitch),
         np.array([float(w["t"]) - t0 for w in wrench]),
         np.array([-float(w["fz"]) for w in wrench]),   # the platform pushes up: F = −fz
         np.array([float(r["t"]) - t0 for r in ref]),
         np.array([float(r["force"][-1]) for r in ref]),
         stops, meta)
+    if ankle:
+        review.t_ankle = np.array([float(a["t"]) - t0 for a in ankle])
+        review.plantarflexion_deg = column("plantarflexion_deg")
+        review.inversion_deg = column("inversion_deg")
+        review.plantarflexion_torque_nm = column("plantarflexion_torque_nm")
+        review.inversion_torque_nm = column("inversion_torque_nm")
+    return review

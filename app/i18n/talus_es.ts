@@ -96,13 +96,13 @@
     </message>
     <message>
         <location filename="../field_labels.py" line="32"/>
-        <location filename="../pages/patients.py" line="127"/>
+        <location filename="../pages/patients.py" line="130"/>
         <source>Maximum force (N)</source>
         <translation>Fuerza máxima (N)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="33"/>
-        <location filename="../pages/patients.py" line="128"/>
+        <location filename="../pages/patients.py" line="131"/>
         <source>Maximum angular speed (°/s)</source>
         <translation>Velocidad angular máxima (°/s)</translation>
     </message>
@@ -118,25 +118,25 @@
     </message>
     <message>
         <location filename="../field_labels.py" line="35"/>
-        <location filename="../pages/patients.py" line="124"/>
+        <location filename="../pages/patients.py" line="127"/>
         <source>Dorsiflexion (°)</source>
         <translation>Dorsiflexión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="35"/>
-        <location filename="../pages/patients.py" line="125"/>
+        <location filename="../pages/patients.py" line="128"/>
         <source>Plantarflexion (°)</source>
         <translation>Plantarflexión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="36"/>
-        <location filename="../pages/patients.py" line="126"/>
+        <location filename="../pages/patients.py" line="129"/>
         <source>Inversion (°)</source>
         <translation>Inversión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="36"/>
-        <location filename="../pages/patients.py" line="126"/>
+        <location filename="../pages/patients.py" line="129"/>
         <source>Eversion (°)</source>
         <translation>Eversión (°)</translation>
     </message>
@@ -438,14 +438,14 @@
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="198"/>
-        <location filename="../pages/review.py" line="218"/>
+        <location filename="../pages/review.py" line="234"/>
         <location filename="../pages/run.py" line="127"/>
         <source>plantar(+)/dorsi(−) flexion</source>
         <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="200"/>
-        <location filename="../pages/review.py" line="220"/>
+        <location filename="../pages/review.py" line="237"/>
         <source>roll (+ is inversion of a right foot)</source>
         <translation>balanceo (+ es inversión del pie derecho)</translation>
     </message>
@@ -495,12 +495,17 @@
         <translation>inversión/eversión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="263"/>
+        <location filename="../pages/prescribe.py" line="266"/>
+        <source>the ankle centre moves at most %1 mm (RMS %2 mm; comfort limit %3 mm)</source>
+        <translation>el centro del tobillo se desplaza como máximo %1 mm (RMS %2 mm; límite de confort %3 mm)</translation>
+    </message>
+    <message>
+        <location filename="../pages/prescribe.py" line="271"/>
         <source>force tracking error %1 %</source>
         <translation>error de seguimiento de fuerza %1 %</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="266"/>
+        <location filename="../pages/prescribe.py" line="274"/>
         <source>duration %1 s</source>
         <translation>duración %1 s</translation>
     </message>
@@ -570,19 +575,44 @@
         <translation>medida</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="229"/>
+        <location filename="../pages/review.py" line="222"/>
+        <source>ankle: plantar(+)/dorsi(−) flexion</source>
+        <translation>tobillo: flexión plantar(+)/dorsal(−)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="225"/>
+        <source>ankle: inversion(+)/eversion(−)</source>
+        <translation>tobillo: inversión(+)/eversión(−)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="228"/>
+        <source>platform pitch (engineers)</source>
+        <translation>cabeceo de la plataforma (ingeniería)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="230"/>
+        <source>platform roll (engineers)</source>
+        <translation>alabeo de la plataforma (ingeniería)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="246"/>
         <source>%1 — patient %2 — %3 s</source>
         <translation>%1 — paciente %2 — %3 s</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="232"/>
+        <location filename="../pages/review.py" line="251"/>
         <source>stops: %1</source>
         <translation>paradas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="235"/>
+        <location filename="../pages/review.py" line="254"/>
         <source>recording cut short (recovered up to its last whole block)</source>
         <translation>grabación interrumpida (recuperada hasta su último bloque completo)</translation>
+    </message>
+    <message>
+        <location filename="../pages/review.py" line="263"/>
+        <source>ankle reached dorsiflexion %1°, plantarflexion %2°, inversion %3°, eversion %4°; peak torques DF %5, PF %6, INV %7, EV %8 N·m</source>
+        <translation>el tobillo alcanzó flexión dorsal %1°, flexión plantar %2°, inversión %3°, eversión %4°; pares máximos FD %5, FP %6, INV %7, EV %8 N·m</translation>
     </message>
     <message>
         <location filename="../pages/run.py" line="46"/>
@@ -632,62 +662,72 @@
         <translation>segundos antes de ahora</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="212"/>
+        <location filename="../pages/run.py" line="227"/>
         <source>Protocol: %1</source>
         <translation>Protocolo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="227"/>
+        <location filename="../pages/run.py" line="242"/>
         <source>Checking the protocol on the robot model, then starting…</source>
         <translation>Comprobando el protocolo en el modelo del robot; después se inicia…</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="240"/>
+        <location filename="../pages/run.py" line="255"/>
         <source>Could not take control: %1</source>
         <translation>No se pudo tomar el control: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="241"/>
+        <location filename="../pages/run.py" line="256"/>
         <source>You control the robot.</source>
         <translation>Usted controla el robot.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="245"/>
+        <location filename="../pages/run.py" line="260"/>
         <source>The session did not start: %1</source>
         <translation>La sesión no se inició: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="260"/>
+        <location filename="../pages/run.py" line="275"/>
         <source>Session running.</source>
         <translation>Sesión en curso.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="274"/>
+        <location filename="../pages/run.py" line="289"/>
         <source>Session ended: %1</source>
         <translation>Sesión terminada: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="278"/>
+        <location filename="../pages/run.py" line="293"/>
         <source>Stopped: %1</source>
         <translation>Detenido: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="283"/>
+        <location filename="../pages/run.py" line="298"/>
         <source>The clinical record did not take the session: %1</source>
         <translation>La historia clínica no registró la sesión: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="341"/>
+        <location filename="../pages/run.py" line="356"/>
         <source>%1 s left</source>
         <translation>quedan %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="380"/>
+        <location filename="../pages/run.py" line="401"/>
+        <source>Ankle torque: —</source>
+        <translation>Par en el tobillo: —</translation>
+    </message>
+    <message>
+        <location filename="../pages/run.py" line="404"/>
+        <source>Ankle torque: %1 %2 N·m, %3 %4 N·m</source>
+        <translation>Par en el tobillo: %1 %2 N·m, %3 %4 N·m</translation>
+    </message>
+    <message>
+        <location filename="../pages/run.py" line="419"/>
         <source>Repetitions: %1</source>
         <translation>Repeticiones: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="382"/>
+        <location filename="../pages/run.py" line="421"/>
         <source>Repetitions: %1 of %2</source>
         <translation>Repeticiones: %1 de %2</translation>
     </message>
@@ -1072,253 +1112,320 @@
         <translation>Comprobando…</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="59"/>
+        <location filename="../pages/patients.py" line="62"/>
         <source>%1: a number is needed</source>
-        <extracomment>Clinical limit fields edited here: (key, label) — degrees from neutral, N, deg/s.</extracomment>
+        <extracomment>Ankle-setup lengths entered here, in mm (``AnkleSetup`` stores m). Clinical limit fields edited here: (key, label) — degrees from neutral, N, deg/s.</extracomment>
         <translation>%1: se necesita un número</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="88"/>
+        <location filename="../pages/patients.py" line="91"/>
         <source>Search by code</source>
         <extracomment>where to save a report: (title, suggested path) → the chosen path, None to cancel</extracomment>
         <translation>Buscar por código</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="94"/>
+        <location filename="../pages/patients.py" line="97"/>
         <source>automatic when empty</source>
         <translation>automático si se deja vacío</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="97"/>
-        <location filename="../pages/patients.py" line="151"/>
+        <location filename="../pages/patients.py" line="100"/>
+        <location filename="../pages/patients.py" line="148"/>
+        <location filename="../pages/patients.py" line="182"/>
         <source>right</source>
         <translation>derecho</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="98"/>
-        <location filename="../pages/patients.py" line="151"/>
+        <location filename="../pages/patients.py" line="101"/>
+        <location filename="../pages/patients.py" line="149"/>
+        <location filename="../pages/patients.py" line="182"/>
         <source>left</source>
         <translation>izquierdo</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="99"/>
-        <location filename="../pages/patients.py" line="152"/>
+        <location filename="../pages/patients.py" line="102"/>
+        <location filename="../pages/patients.py" line="183"/>
         <source>both</source>
         <translation>ambos</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="101"/>
+        <location filename="../pages/patients.py" line="104"/>
         <source>Register patient</source>
         <translation>Registrar paciente</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="103"/>
+        <location filename="../pages/patients.py" line="106"/>
         <source>New patient</source>
         <translation>Nuevo paciente</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="105"/>
+        <location filename="../pages/patients.py" line="108"/>
         <source>Code</source>
         <translation>Código</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="106"/>
-        <location filename="../pages/patients.py" line="161"/>
-        <location filename="../pages/patients.py" line="276"/>
-        <location filename="../pages/patients.py" line="319"/>
+        <location filename="../pages/patients.py" line="109"/>
+        <location filename="../pages/patients.py" line="192"/>
+        <location filename="../pages/patients.py" line="316"/>
+        <location filename="../pages/patients.py" line="378"/>
         <source>Body mass (kg)</source>
         <translation>Masa corporal (kg)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="107"/>
-        <location filename="../pages/patients.py" line="163"/>
+        <location filename="../pages/patients.py" line="110"/>
+        <location filename="../pages/patients.py" line="194"/>
         <source>Affected side</source>
         <translation>Lado afectado</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="108"/>
-        <location filename="../pages/patients.py" line="164"/>
+        <location filename="../pages/patients.py" line="111"/>
+        <location filename="../pages/patients.py" line="195"/>
         <source>Diagnosis (no names)</source>
         <translation>Diagnóstico (sin nombres)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="116"/>
-        <location filename="../pages/patients.py" line="221"/>
+        <location filename="../pages/patients.py" line="119"/>
+        <location filename="../pages/patients.py" line="255"/>
         <source>Choose a patient.</source>
         <translation>Elija un paciente.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="122"/>
+        <location filename="../pages/patients.py" line="125"/>
         <source>Prescribe limits</source>
         <translation>Prescribir límites</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="129"/>
+        <location filename="../pages/patients.py" line="132"/>
+        <location filename="../pages/patients.py" line="159"/>
         <source>Reason</source>
         <translation>Motivo</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="135"/>
+        <location filename="../pages/patients.py" line="138"/>
         <source>Save the new limits</source>
         <translation>Guardar los nuevos límites</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="140"/>
+        <location filename="../pages/patients.py" line="151"/>
+        <source>Ankle centre on the platform</source>
+        <translation>Centro del tobillo sobre la plataforma</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="153"/>
+        <source>Foot on the platform</source>
+        <translation>Pie sobre la plataforma</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="155"/>
+        <source>Ankle centre above the sole (mm, malleoli)</source>
+        <translation>Centro del tobillo sobre la planta (mm, maléolos)</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="156"/>
+        <source>Offset along the foot (mm, toes +)</source>
+        <translation>Desplazamiento a lo largo del pie (mm, dedos +)</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="157"/>
+        <source>Offset across the foot (mm)</source>
+        <translation>Desplazamiento transversal al pie (mm)</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="158"/>
+        <source>Foot plate thickness (mm)</source>
+        <translation>Espesor de la placa del pie (mm)</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="165"/>
+        <source>Save the ankle setup</source>
+        <translation>Guardar la configuración del tobillo</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="171"/>
         <source>Progress report (PDF)</source>
         <translation>Informe de evolución (PDF)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="143"/>
+        <location filename="../pages/patients.py" line="174"/>
         <location filename="../pages/review.py" line="98"/>
         <source>Open the report</source>
         <translation>Abrir el informe</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="156"/>
+        <location filename="../pages/patients.py" line="187"/>
         <source>Save clinical data</source>
         <translation>Guardar los datos clínicos</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="159"/>
+        <location filename="../pages/patients.py" line="190"/>
         <source>Clinical data</source>
         <translation>Datos clínicos</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="162"/>
-        <location filename="../pages/patients.py" line="320"/>
+        <location filename="../pages/patients.py" line="193"/>
+        <location filename="../pages/patients.py" line="379"/>
         <source>Height (cm)</source>
         <translation>Estatura (cm)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="165"/>
+        <location filename="../pages/patients.py" line="196"/>
         <source>Notes (no names)</source>
         <translation>Notas (sin nombres)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="170"/>
+        <location filename="../pages/patients.py" line="201"/>
         <source>Show identifying data (audited)</source>
         <translation>Mostrar datos identificativos (queda registrado)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="175"/>
+        <location filename="../pages/patients.py" line="206"/>
         <source>Use for the session</source>
         <translation>Usar para la sesión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="193"/>
+        <location filename="../pages/patients.py" line="227"/>
         <source>Sessions</source>
         <translation>Sesiones</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="300"/>
+        <location filename="../pages/patients.py" line="340"/>
         <source>Give the four ranges of motion.</source>
         <translation>Indique los cuatro rangos de movimiento.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="339"/>
+        <location filename="../pages/patients.py" line="398"/>
         <source>Save the progress report</source>
         <translation>Guardar el informe de evolución</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="353"/>
+        <location filename="../pages/patients.py" line="412"/>
         <location filename="../pages/review.py" line="187"/>
         <source>Writing the report…</source>
         <translation>Escribiendo el informe…</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="361"/>
+        <location filename="../pages/patients.py" line="420"/>
         <location filename="../pages/review.py" line="194"/>
         <source>No report: %1</source>
         <translation>Sin informe: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="365"/>
+        <location filename="../pages/patients.py" line="424"/>
         <location filename="../pages/review.py" line="199"/>
         <source>Report written: %1 (%2 pages)</source>
         <translation>Informe escrito: %1 (%2 páginas)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="410"/>
+        <location filename="../pages/patients.py" line="470"/>
+        <source>Ankle setup saved.</source>
+        <translation>Configuración del tobillo guardada.</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="476"/>
         <source>Patient %1 registered.</source>
         <translation>Paciente %1 registrado.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="414"/>
+        <location filename="../pages/patients.py" line="480"/>
         <source>Limits saved.</source>
         <translation>Límites guardados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="417"/>
+        <location filename="../pages/patients.py" line="483"/>
         <source>Clinical data saved.</source>
         <translation>Datos clínicos guardados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="421"/>
+        <location filename="../pages/patients.py" line="487"/>
         <source>No identifying data recorded.</source>
         <translation>No hay datos identificativos registrados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="439"/>
+        <location filename="../pages/patients.py" line="505"/>
+        <source>No ankle setup entered: exercises turn about the platform&apos;s centre.</source>
+        <translation>No se ha introducido la configuración del tobillo: los ejercicios giran alrededor del centro de la plataforma.</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="511"/>
+        <source>measured with the camera</source>
+        <translation>medido con la cámara</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="512"/>
+        <source>entered by hand</source>
+        <translation>introducido a mano</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="514"/>
+        <source>Ankle centre in force (%1 foot): %2 mm above the sole; %3 mm along the foot (toes +), %4 mm across; foot plate %5 mm; %6</source>
+        <translation>Centro del tobillo vigente (pie %1): %2 mm sobre la planta; %3 mm a lo largo del pie (dedos +), %4 mm transversal; placa del pie %5 mm; %6</translation>
+    </message>
+    <message>
+        <location filename="../pages/patients.py" line="529"/>
         <source>Patient %1</source>
         <translation>Paciente %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="440"/>
+        <location filename="../pages/patients.py" line="530"/>
         <source>Body mass: %1 kg</source>
         <translation>Masa corporal: %1 kg</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="441"/>
+        <location filename="../pages/patients.py" line="531"/>
         <source>Height: %1 cm</source>
         <translation>Estatura: %1 cm</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="443"/>
+        <location filename="../pages/patients.py" line="533"/>
         <source>Affected side: %1</source>
         <translation>Lado afectado: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="444"/>
+        <location filename="../pages/patients.py" line="534"/>
         <source>Diagnosis: %1</source>
         <translation>Diagnóstico: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="445"/>
+        <location filename="../pages/patients.py" line="535"/>
         <source>Notes: %1</source>
         <translation>Notas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="455"/>
+        <location filename="../pages/patients.py" line="545"/>
         <source>No limits prescribed yet: a session needs them.</source>
         <translation>Aún no hay límites prescritos: una sesión los necesita.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="459"/>
+        <location filename="../pages/patients.py" line="549"/>
+        <location filename="../pages/run.py" line="405"/>
         <source>dorsiflexion</source>
         <translation>dorsiflexión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="460"/>
+        <location filename="../pages/patients.py" line="550"/>
+        <location filename="../pages/run.py" line="405"/>
         <source>plantarflexion</source>
         <translation>plantarflexión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="461"/>
+        <location filename="../pages/patients.py" line="551"/>
+        <location filename="../pages/run.py" line="407"/>
         <source>inversion</source>
         <translation>inversión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="461"/>
+        <location filename="../pages/patients.py" line="551"/>
+        <location filename="../pages/run.py" line="407"/>
         <source>eversion</source>
         <translation>eversión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="464"/>
+        <location filename="../pages/patients.py" line="554"/>
         <source>Limits in force: %1; force ≤ %2 N; speed ≤ %3 °/s — set by %4 on %5</source>
         <translation>Límites vigentes: %1; fuerza ≤ %2 N; velocidad ≤ %3 °/s — fijados por %4 el %5</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="479"/>
+        <location filename="../pages/patients.py" line="569"/>
         <source>No sessions yet.</source>
         <translation>Aún no hay sesiones.</translation>
     </message>

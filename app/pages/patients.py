@@ -1,6 +1,7 @@
 """Patients: search by code, register, the patient's card (dosing data, the limits in force in
-clinical terms with who set them and when, the sessions with their outcome), prescribe new
-limits, edit the clinical data (body mass, height, side, diagnosis, notes: audited by the record,
+clinical terms with who set them and when, the ankle setup in force, the sessions with their
+outcome), prescribe new limits, enter where the ankle centre sits on the platform (audited by
+the record, its refusal shown as it words it), edit the clinical data (body mass, height, side, diagnosis, notes: audited by the record,
 refused if someone else saved in between), write the progress report (PDF, to a path the user
 chooses, never over a file), and — only for roles allowed to, only on request, every read
 audited by the record — the identifying data. "Use for the session" hands the pseudonymous
@@ -44,6 +45,9 @@ from app.report_export import (
 from app.settings import GuiSettings
 from app.style import TARGET_PX
 from rt.errors import TalusError
+
+#: Ankle-setup lengths entered here, in mm (``AnkleSetup`` stores m).
+_ANKLE_MM = ("height_above_sole_m", "offset_x_m", "offset_y_m", "sole_above_sensor_m")
 
 #: Clinical limit fields edited here: (key, label) — degrees from neutral, N, deg/s.
 _ROM = ("dorsiflexion_deg", "plantarflexion_deg", "inversion_deg", "eversion_deg")
@@ -135,6 +139,34 @@ class PatientsPage(QWidget):
         self.limits_button = QPushButton(tr("Save the new limits"))
         self.limits_button.clicked.connect(self.save_limits)
         limits_form.addRow(self.limits_button)
+
+        # where the ankle centre sits on the platform (the exercises turn the foot about it)
+        self.ankle_label = QLabel()
+        self.ankle_label.setObjectName("ankleInForce")
+        self.ankle_label.setWordWrap(True)
+        self.ankle_label.setTextFormat(Qt.TextFormat.PlainText)
+        self.ankle_side = QComboBox()
+        self.ankle_side.addItem(tr("right"), "right")
+        self.ankle_side.addItem(tr("left"), "left")
+        self.ankle_edits: dict[str, QLineEdit] = {}
+        ankle_box = QGroupBox(tr("Ankle centre on the platform"))
+        ankle_form = QFormLayout(ankle_box)
+        ankle_form.addRow(tr("Foot on the platform"), self.ankle_side)
+        ankle_labels = {
+            "height_above_sole_m": tr("Ankle centre above the sole (mm, malleoli)"),
+            "offset_x_m": tr("Offset along the foot (mm, toes +)"),
+            "offset_y_m": tr("Offset across the foot (mm)"),
+            "sole_above_sensor_m": tr("Foot plate thickness (mm)"),
+            "reason": tr("Reason")}
+        for key, label in ankle_labels.items():
+            edit = QLineEdit()
+            edit.setObjectName(f"ankle:{key}")
+            self.ankle_edits[key] = edit
+            ankle_form.addRow(label, edit)
+        self.ankle_button = QPushButton(tr("Save the ankle setup"))
+        self.ankle_button.setObjectName("saveAnkle")
+        self.ankle_button.clicked.connect(self.save_ankle)
+        ankle_form.addRow(self.ankle_button)
         self.sessions = QListWidget()
         self.sessions.setStyleSheet("QListWidget::item { min-height: 32px; }")
         self.report_button = QPushButton(tr("Progress report (PDF)"))
@@ -180,15 +212,18 @@ class PatientsPage(QWidget):
         for w in (self.search, self.new_code, self.new_mass, self.new_side, self.new_diagnosis,
                   self.create_button, self.limits_button, self.identity_button,
                   self.use_button, self.report_button, self.open_report_button,
-                  self.clinical_button,
-                  *self.clinical_edits, *self.limit_edits.values()):
+                  self.clinical_button, self.ankle_button, self.ankle_side,
+                  *self.clinical_edits, *self.limit_edits.values(),
+                  *self.ankle_edits.values()):
             w.setMinimumHeight(TARGET_PX)
         card_widget = QWidget()
         right = QVBoxLayout(card_widget)
         right.addWidget(self.card)
         right.addWidget(self.limits_label)
+        right.addWidget(self.ankle_label)
         right.addWidget(self.use_button)
         right.addWidget(limits_box)
+        right.addWidget(ankle_box)
         right.addWidget(clinical_box)
         right.addWidget(QLabel(tr("Sessions")))
         right.addWidget(self.sessions)
@@ -220,6 +255,7 @@ class PatientsPage(QWidget):
         self.list.clear()
         self.card.setText(tr("Choose a patient."))
         self.limits_label.setText("")
+        self.ankle_label.setText("")
         self.identity.setText("")
         self.sessions.clear()
         self._enable()
@@ -238,6 +274,10 @@ class PatientsPage(QWidget):
         self.limits_button.setEnabled(chosen and self._may("limits.set"))
         for edit in self.limit_edits.values():
             edit.setEnabled(self._may("limits.set"))
+        # The record guards the ankle setup with the limits' permission (a prescription).
+        self.ankle_button.setEnabled(chosen and self._may("limits.set"))
+        for w in (self.ankle_side, *self.ankle_edits.values()):
+            w.setEnabled(chosen and self._may("limits.set"))
         self.identity_button.setVisible(self._may("identity.read"))
         self.identity_button.setEnabled(chosen)
         has_limits = bool(self.current and self.current.get("limits"))
@@ -269,7 +309,8 @@ class PatientsPage(QWidget):
 
         def load() -> dict[str, Any]:
             return {"patient": record.get_patient(actor, code),
-                    "sessions": record.list_sessions(actor, code)}
+                    "sessions": record.list_sessions(actor, code),
+                    "ankle": record.ankle_in_force(actor, code)}
         self.worker.call("open", load)
 
     def create_patient(self) -> None:
@@ -310,6 +351,25 @@ class PatientsPage(QWidget):
             limits.update({k: v for k, v in extra.items() if v is not None})
             return record.set_limits(actor, code, reason=reason, **limits)
         self.worker.call("limits", save)
+
+    def save_ankle(self) -> None:
+        """Enter a new ankle setup (``ClinicalRecord.set_ankle``: audited, history kept). Empty
+        fields keep the values in force; the record's refusal is shown as it words it and
+        nothing is saved."""
+        if self.current is None:
+            return
+        try:
+            mm = {k: _number(self.ankle_edits[k].text(), k) for k in _ANKLE_MM}
+        except ValueError as exc:
+            self.message.setText(str(exc))
+            return
+        fields: dict[str, Any] = {k: v / 1000.0 for k, v in mm.items() if v is not None}
+        fields["side"] = self.ankle_side.currentData()
+        fields["source"] = "entered"        # typed here; the camera path is not wired yet
+        actor, record, code = self.actor, self.record, self.current["code"]
+        reason = self.ankle_edits["reason"].text().strip() or None
+        self.worker.call("ankle", lambda: record.set_ankle(actor, code, reason=reason,
+                                                           **fields))
 
     def save_clinical(self) -> None:
         """Save the edited clinical data (audited; refused when the patient changed since it
@@ -382,9 +442,11 @@ class PatientsPage(QWidget):
         fields = {k: float(lim[k]) for k in PatientLimits.model_fields if k in lim}
         side = str(p["affected_side"]) if p.get("affected_side") in ("left", "right") \
             else "right"
+        ankle = p.get("ankle")
         self.patient_chosen.emit(PatientContext(
             p["code"], p.get("body_mass_kg"), fields,
-            f"{lim.get('set_by')} {lim.get('set_at', '')[:16]}", side))
+            f"{lim.get('set_by')} {lim.get('set_at', '')[:16]}", side,
+            None if ankle is None else dict(ankle)))
 
     # ------------------------------------------------------------------ results
 
@@ -405,8 +467,13 @@ class PatientsPage(QWidget):
                     if self.list.item(i).data(Qt.ItemDataRole.UserRole) == select:
                         self.list.setCurrentRow(i)
         elif tag == "open":
-            self.current = result["patient"]
+            self.current = {**result["patient"], "ankle": result["ankle"]}
             self._show_card(result["patient"], result["sessions"])
+            self._show_ankle(result["ankle"])
+        elif tag == "ankle":
+            assert self.current is not None
+            self.message.setText(tr("Ankle setup saved."))
+            self.open(self.current["code"])
         elif tag == "create":
             self.new_code.clear()
             self.new_mass.clear()
@@ -436,6 +503,30 @@ class PatientsPage(QWidget):
                 item.setData(Qt.ItemDataRole.UserRole, p["code"])
                 self.list.addItem(item)
         self.list.blockSignals(False)
+
+    def _show_ankle(self, ankle: dict[str, Any] | None) -> None:
+        if ankle is None:
+            self.ankle_label.setText(tr(
+                "No ankle setup entered: exercises turn about the platform's centre."))
+            side = self.current.get("affected_side") if self.current else None
+            self.ankle_side.setCurrentIndex(max(0, self.ankle_side.findData(side)))
+            for key in _ANKLE_MM:
+                self.ankle_edits[key].setText("")
+            return
+        source = tr("measured with the camera") if ankle.get("source") == "camera" \
+            else tr("entered by hand")
+        self.ankle_label.setText(
+            tr("Ankle centre in force (%1 foot): %2 mm above the sole; %3 mm along the foot "
+               "(toes +), %4 mm across; foot plate %5 mm; %6")
+            .replace("%1", tr(str(ankle["side"])))
+            .replace("%2", f"{ankle['height_above_sole_m'] * 1e3:.0f}")
+            .replace("%3", f"{ankle['offset_x_m'] * 1e3:+.0f}")
+            .replace("%4", f"{ankle['offset_y_m'] * 1e3:+.0f}")
+            .replace("%5", f"{ankle['sole_above_sensor_m'] * 1e3:.0f}")
+            .replace("%6", source))
+        self.ankle_side.setCurrentIndex(max(0, self.ankle_side.findData(ankle["side"])))
+        for key in _ANKLE_MM:
+            self.ankle_edits[key].setText(f"{ankle[key] * 1e3:g}")
 
     def _show_card(self, p: dict[str, Any], sessions: list[dict[str, Any]]) -> None:
         mass = p.get("body_mass_kg")

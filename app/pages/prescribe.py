@@ -258,6 +258,14 @@ def _peaks(predicted: dict[str, Any]) -> str:
     for axis, span in angles.items():
         if isinstance(span, list) and len(span) == 2 and axis in words:
             parts.append(f"{words[axis]} {span[0]:+.1f}° … {span[1]:+.1f}°")
+    ankle = predicted.get("ankle_displacement_mm")
+    if isinstance(ankle, dict) and all(isinstance(ankle.get(k), (int, float))
+                                       for k in ("peak", "rms", "limit")):
+        # How far the patient's ankle centre is pushed off its place (the shank dragged):
+        # what the comfort limit of pre-flight is about.
+        parts.append(tr("the ankle centre moves at most %1 mm (RMS %2 mm; comfort limit %3 mm)")
+                     .replace("%1", f"{ankle['peak']:.1f}").replace("%2", f"{ankle['rms']:.1f}")
+                     .replace("%3", f"{ankle['limit']:.0f}"))
     err = predicted.get("rms_error_pct")
     if isinstance(err, (int, float)):
         parts.append(tr("force tracking error %1 %").replace("%1", f"{err:.1f}"))

@@ -215,10 +215,27 @@ class ReviewPage(QWidget):
                                  pen=pg.mkPen("#555555", width=2, style=dash))
         self.force_plot.plot(data.t_force, data.force_n, name=tr("measured"),
                              pen=pg.mkPen("#1f5fbf", width=2), connect="finite")
-        self.angle_plot.plot(data.t, data.pitch_deg, name=tr("plantar(+)/dorsi(−) flexion"),
-                             pen=pg.mkPen("#1f5fbf", width=2), connect="finite")
-        self.angle_plot.plot(data.t, data.roll_deg, name=tr("roll (+ is inversion of a right foot)"),
-                             pen=pg.mkPen("#bf5f1f", width=2), connect="finite")
+        if data.has_ankle:
+            # The foot's angles about the patient's ankle centre, in clinical terms; the
+            # platform's pitch and roll stay, thin and dotted, for engineers.
+            self.angle_plot.plot(data.t_ankle, data.plantarflexion_deg,
+                                 name=tr("ankle: plantar(+)/dorsi(−) flexion"),
+                                 pen=pg.mkPen("#1f5fbf", width=2))
+            self.angle_plot.plot(data.t_ankle, data.inversion_deg,
+                                 name=tr("ankle: inversion(+)/eversion(−)"),
+                                 pen=pg.mkPen("#bf5f1f", width=2))
+            dot = Qt.PenStyle.DotLine
+            self.angle_plot.plot(data.t, data.pitch_deg, name=tr("platform pitch (engineers)"),
+                                 pen=pg.mkPen("#7f9fcf", width=1, style=dot), connect="finite")
+            self.angle_plot.plot(data.t, data.roll_deg, name=tr("platform roll (engineers)"),
+                                 pen=pg.mkPen("#cf9f7f", width=1, style=dot), connect="finite")
+        else:
+            self.angle_plot.plot(data.t, data.pitch_deg,
+                                 name=tr("plantar(+)/dorsi(−) flexion"),
+                                 pen=pg.mkPen("#1f5fbf", width=2), connect="finite")
+            self.angle_plot.plot(data.t, data.roll_deg,
+                                 name=tr("roll (+ is inversion of a right foot)"),
+                                 pen=pg.mkPen("#bf5f1f", width=2), connect="finite")
         for t, cause, _event in data.stops:
             for plot in (self.force_plot, self.angle_plot):
                 line = pg.InfiniteLine(pos=t, angle=90, pen=pg.mkPen("#c0262d", width=2),
@@ -228,9 +245,28 @@ class ReviewPage(QWidget):
         duration = float(data.t[-1]) if len(data.t) else 0.0
         text = tr("%1 — patient %2 — %3 s").replace("%1", str(meta.get("protocol_name", "?"))) \
             .replace("%2", str(meta.get("patient_id", "?"))).replace("%3", f"{duration:.1f}")
+        if data.has_ankle:
+            text += " — " + _ankle_words(data)
         if data.stops:
             text += " — " + tr("stops: %1").replace("%1", "; ".join(
                 f"{t:.1f} s {cause_words(c)}" for t, c, _ in data.stops))
         if not data.complete:
             text += " — " + tr("recording cut short (recovered up to its last whole block)")
         self.info.setText(text)
+
+
+def _ankle_words(data: ReviewData) -> str:
+    """The ankle's range reached and peak torques, in clinical words (from ``/ankle/state``):
+    dorsiflexion and eversion are the negative sides of the recorded angles and torques."""
+    pf, inv = data.plantarflexion_deg, data.inversion_deg
+    tpf, tinv = data.plantarflexion_torque_nm, data.inversion_torque_nm
+    return (tr("ankle reached dorsiflexion %1°, plantarflexion %2°, inversion %3°, eversion "
+               "%4°; peak torques DF %5, PF %6, INV %7, EV %8 N·m")
+            .replace("%1", f"{max(0.0, -float(pf.min())):.1f}")
+            .replace("%2", f"{max(0.0, float(pf.max())):.1f}")
+            .replace("%3", f"{max(0.0, float(inv.max())):.1f}")
+            .replace("%4", f"{max(0.0, -float(inv.min())):.1f}")
+            .replace("%5", f"{max(0.0, -float(tpf.min())):.1f}")
+            .replace("%6", f"{max(0.0, float(tpf.max())):.1f}")
+            .replace("%7", f"{max(0.0, float(tinv.max())):.1f}")
+            .replace("%8", f"{max(0.0, -float(tinv.min())):.1f}"))

@@ -1,6 +1,7 @@
 """Run: take control, start the prescribed session, live plots (reference dashed, measured
 solid: force in N; the ankle angles in clinical terms with the patient's ROM drawn as a shaded
-band), progress with phase and time left. Nothing on this page needs typing.
+band), progress with phase and time left; with the patient's ankle setup, the ankle torques
+in clinical words. Nothing on this page needs typing.
 
 The plots are redrawn by a timer at :data:`FRAME_HZ` from the samples the link collected
 (the GUI thread never waits for telemetry); each redraw costs one ``setData`` per curve.
@@ -152,6 +153,11 @@ class RunPage(QWidget):
         self.reps_label.setObjectName("repetitions")
         self.reps_label.setFont(font)
         self.reps_label.hide()
+        # The patient's ankle torques live, in clinical words (only with an ankle setup).
+        self.ankle_label = QLabel()
+        self.ankle_label.setObjectName("ankleTorque")
+        self.ankle_label.hide()
+        self._ankle_setup: Any = None
 
         top = QHBoxLayout()
         top.addWidget(self.protocol_label, 3)
@@ -170,6 +176,7 @@ class RunPage(QWidget):
         layout.addLayout(phase_row)
         layout.addWidget(self.progress)
         layout.addWidget(self.events_label)
+        layout.addWidget(self.ankle_label)
 
         self.timer = QTimer(self)
         self.timer.setTimerType(Qt.TimerType.PreciseTimer)
@@ -186,13 +193,22 @@ class RunPage(QWidget):
     # ------------------------------------------------------------------ inputs
 
     def _inversion_sign(self) -> float:
-        """+1 when the platform's positive roll is the patient's inversion (right foot)."""
-        return -1.0 if self.patient is not None and self.patient.side == "left" else 1.0
+        """+1 when the platform's positive roll is the patient's inversion (right foot).
+        The foot on the platform is the ankle setup's side when one is in force (what the RT
+        process turns about, ``rt.model.ankle.ankle_angles``), else the affected side."""
+        if self.patient is None:
+            return 1.0
+        side = (self.patient.ankle or {}).get("side") or self.patient.side
+        return -1.0 if side == "left" else 1.0
 
     def set_patient(self, patient: PatientContext | None) -> None:
         """Draw this patient's ROM: plantar(+)/dorsi(−) flexion is the platform's pitch;
         inversion(+)/eversion(−) is its roll, mirrored for a left foot."""
         self.patient = patient
+        from rt.model.ankle import AnkleSetup
+        self._ankle_setup = None if patient is None or patient.ankle is None \
+            else AnkleSetup(**patient.ankle)
+        self.show_ankle(None)
         lim = None if patient is None else patient.patient_limits()
         inv = self._inversion_sign()
         for axis, band in self.rom_bands.items():
@@ -344,6 +360,7 @@ class RunPage(QWidget):
         if text != self.phase_label.text():
             self.phase_label.setText(text)
         self._show_repetitions()
+        self.show_ankle(latest)
         self.frame_log.append((time.monotonic(), time.perf_counter() - began,
                                time.thread_time() - began_cpu))
 
@@ -370,6 +387,29 @@ class RunPage(QWidget):
             if lo < c0 or hi > c1 or (c1 - c0) > 2.0 * 1.1 * span:
                 margin = 0.05 * span
                 plot.setYRange(lo - margin, hi + margin, padding=0.0)
+
+    def show_ankle(self, latest: dict[str, Any] | None) -> None:
+        """The ankle torques of the latest telemetry sample (its sensor wrench moved to the
+        patient's ankle centre, ``rt.model.ankle.ankle_torques``) in clinical words; hidden
+        without an ankle setup, a dash while the sensor has no finite sample."""
+        if self._ankle_setup is None:
+            self.ankle_label.hide()
+            return
+        from rt.model.ankle import ankle_torques
+        wrench = (latest or {}).get("wrench") or []
+        values = [float(x) for x in wrench[:6] if x is not None]
+        if len(values) < 6 or not all(np.isfinite(values)):
+            text = tr("Ankle torque: —")
+        else:
+            tp, ti, _ = ankle_torques(values, self._ankle_setup)
+            text = tr("Ankle torque: %1 %2 N·m, %3 %4 N·m").replace(
+                "%1", tr("plantarflexion") if tp >= 0 else tr("dorsiflexion")) \
+                .replace("%2", f"{abs(tp):.1f}") \
+                .replace("%3", tr("inversion") if ti >= 0 else tr("eversion")) \
+                .replace("%4", f"{abs(ti):.1f}")
+        if text != self.ankle_label.text():
+            self.ankle_label.setText(text)
+        self.ankle_label.show()
 
     def _show_repetitions(self) -> None:
         assert self.link is not None
