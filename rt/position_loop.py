@@ -69,14 +69,15 @@ class PositionLoop:
 class Devices:
     """What the loop talks to: the twin in-process ("sim"), the rig process over shared memory
     ("twin_shm") or, on the rig, the real cards. ``monitor`` reads the amplifier inputs back
-    (the rig's current monitors); ``feed_watchdog`` is called at the end of every cycle;
+    (the rig's current monitors; None when no reading newer than the last command is available
+    yet); ``feed_watchdog`` is called at the end of every cycle;
     ``first`` is a block run before everything else (the in-process twin's physics)."""
 
     encoders: EncoderBank
     cards: Sequence[ActuatorOutputs]
     force: ForceTorqueSensor
     stops: DigitalInputs
-    monitor: Callable[[], Sequence[float] | np.ndarray] | None = None
+    monitor: Callable[[], Sequence[float] | np.ndarray | None] | None = None
     feed_watchdog: Callable[[], None] | None = None
     first: Component | None = None
     twin: Twin | None = None
@@ -105,7 +106,7 @@ def shm_devices(shm_name: str) -> Devices:
     rig = ShmRig(shm_name)
     cards = [ShmActuators(rig, 0), ShmActuators(rig, 1)]
     return Devices(ShmEncoders(rig), cards, ShmForceTorque(rig), ShmDigitalInputs(rig),
-                   monitor=lambda: rig.amplifier_state().volts, feed_watchdog=rig.feed_watchdog,
+                   monitor=rig.applied_volts, feed_watchdog=rig.feed_watchdog,
                    close=rig.close)
 
 

@@ -315,6 +315,52 @@ def test_the_amplifier_monitor_catches_a_dead_dac_channel(robot) -> None:
     assert active == 1 and world.max_excursion_m < 1e-3, world.max_excursion_m
 
 
+class _RecordingCard:
+    """An ActuatorOutputs that remembers what it was told."""
+
+    def __init__(self) -> None:
+        self.volts = np.zeros(3)
+        self.enabled = False
+
+    def enable(self) -> None:
+        self.enabled = True
+
+    def disable(self) -> None:
+        self.enabled = False
+
+    def write_volts(self, volts) -> None:
+        self.volts = np.array(volts, dtype=float)
+
+
+def test_a_monitor_with_no_fresh_reading_neither_fails_over_nor_hides_a_dead_channel() -> None:
+    """RedundantDrive: cycles whose monitor answers None (the rig process late) neither count
+    nor clear a disagreement; fresh readings that disagree for ``confirm_cycles`` cycles in a
+    row still fail over to the second card."""
+    from rt.components.safety_blocks import RedundantDrive
+    from rt.safety.events import EventLog
+
+    readings: list = [None]                          # the first cycle: nothing read yet
+    cards = [_RecordingCard(), _RecordingCard()]
+    drive = RedundantDrive("drive", cards, EventLog(), monitor=lambda: readings.pop(0),
+                           confirm_cycles=3)
+    drive.enable._bind(np.ones(1), "test.enable")    # the inputs a builder would connect
+    drive.volts._bind(np.array([1.0, -1.0, 0.5]), "test.volts")
+    drive.on_start()
+    drive.update(0.0, 0.001)
+    readings.extend([None] * 50)                     # a long-late rig: no reading at all
+    for k in range(50):
+        drive.update(0.001 * (k + 1), 0.001)
+    assert drive.active_card.data[0] == 0 and drive.failed.data[0] == 0.0
+    dead = (1.0, 0.0, 0.5)                           # channel 1 outputs nothing
+    readings.extend([dead, None, dead, None, None, dead])
+    for k in range(5):
+        drive.update(0.1 + 0.001 * k, 0.001)
+    assert drive.active_card.data[0] == 0            # two fresh disagreements so far
+    drive.update(0.2, 0.001)
+    assert drive.active_card.data[0] == 1 and cards[1].enabled and not cards[0].enabled
+    np.testing.assert_array_equal(cards[1].volts, (1.0, -1.0, 0.5))
+
+
 def test_amplifier_monitor_reads_volts_and_refuses_bad_wiring() -> None:
     from rt.drivers.comedi_ai import ComediAmplifierMonitor
 

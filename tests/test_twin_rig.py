@@ -367,6 +367,37 @@ def test_watchdog_logic_step_by_step(hold_volts):
     assert not os.path.exists(f"/dev/shm/{name}")
 
 
+def test_applied_volts_answer_only_readings_newer_than_the_last_command(hold_volts):
+    """The loop's amplifier monitor over the rig: a snapshot the rig published before it read
+    this cycle's commands is no reading (None), so a late rig process is never taken for a
+    DAC channel that disagrees with its command; once read, the applied volts are answered."""
+    from rt.twin.rig import RigProcess
+
+    name = _unique_name()
+    rig = RigProcess(name, "free", seed=1, watchdog_timeout_s=WATCHDOG_S)
+    try:
+        handle = ShmRig(name, RIG_TIMEOUT_S)
+        card = ShmActuators(handle, 0)
+        t = rig.epoch_s
+        card.enable()
+        card.write_volts(hold_volts)
+        handle.feed_watchdog()                   # the loop's cycle: write, then feed
+        assert handle.applied_volts() is None    # the rig has not run since
+        t += RIG_PERIOD_S
+        rig.step(t)
+        assert handle.applied_volts() == _quantized(hold_volts)
+        card.write_volts([0.0, 0.0, 0.0])        # the next cycle, the rig late for it
+        handle.feed_watchdog()
+        assert handle.applied_volts() is None
+        t += RIG_PERIOD_S
+        rig.step(t)
+        assert handle.applied_volts() == _quantized([0.0, 0.0, 0.0])
+        card.close()
+        handle.close()
+    finally:
+        rig.close()
+
+
 def test_run_rig_serves_until_its_stop_event_and_unlinks():
     """``run_rig`` as a multiprocessing-style target (here in a thread, to stay fast)."""
     from rt.twin.rig import run_rig

@@ -146,10 +146,12 @@ class RedundantDrive(Component):
     write error, or the amplifier input (read back through ``monitor``, the rig's current
     monitors) disagreeing with the command for ``confirm_cycles`` cycles — moves all outputs to
     the other card in the same cycle (thesis 3.7.3): the period is kept and an event recorded.
+    A monitor answering None has no reading newer than the last command (the twin's rig
+    process running late): that cycle neither counts nor clears a disagreement.
     """
 
     def __init__(self, name: str, cards: Sequence[ActuatorOutputs], log: EventLog,
-                 monitor: Callable[[], Sequence[float] | np.ndarray] | None = None,
+                 monitor: Callable[[], Sequence[float] | np.ndarray | None] | None = None,
                  tolerance_v: float = 0.1, confirm_cycles: int = 3):
         super().__init__(name)
         self.cards = list(cards)
@@ -214,8 +216,9 @@ class RedundantDrive(Component):
         v = self.volts.data
         enabled = self.enable.data[0] > 0.5
         card = self.cards[self._card]
-        if enabled and self.monitor is not None and self._enabled:
-            measured = self.monitor()
+        measured = self.monitor() if enabled and self.monitor is not None and \
+            self._enabled else None
+        if measured is not None:               # None: no reading newer than the last command
             for i in range(3):
                 if abs(measured[i] - self._last[i]) > self.tolerance_v:
                     self._mismatch[i] += 1

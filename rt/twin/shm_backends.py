@@ -153,6 +153,21 @@ class ShmRig:
             rig_monotonic_s=float(s.rig_monotonic_s[0]),
             heartbeat=int(s.heartbeat[0]))
 
+    def applied_volts(self) -> tuple[float, float, float] | None:
+        """The amplifier inputs the rig applied after this handle's latest card write, or
+        None while the rig has not yet read the commands of this handle's last completed cycle
+        (its ``feed_seen`` is behind our feed counter).
+
+        Why: the rig is a separate process; on a loaded machine it can run a period late, and a
+        readback that predates the command is not a disagreement between command and output.
+        The real current monitors are sampled after the DAC settles, so they are never stale.
+        """
+        self.read()
+        s = self.sensors
+        if int(s.feed_seen[0]) != int(self._cmd.feed[0]):
+            return None
+        return (float(s.amp_volts[0]), float(s.amp_volts[1]), float(s.amp_volts[2]))
+
     # ------------------------------------------------------------------ commands
     def feed_watchdog(self) -> None:
         """Feed the amplifier watchdog (call once per RT cycle; ≈ 2 µs)."""
