@@ -258,3 +258,39 @@ def test_rt_process_stopped_mid_session_closes_a_complete_recording(tmp_path):
     [last] = rec["/session/summary"]
     assert last["summary"]["outcome"] == "aborted"
     assert "shutting down" in last["summary"]["aborted_by"]
+
+
+def test_the_preflight_worker_ends_when_its_rt_process_is_killed(tmp_path):
+    """A SIGKILLed RT process cannot shut its pre-flight pool down: the spawned worker must
+    notice and end by itself, not live on as an orphan holding a robot model."""
+    script = textwrap.dedent("""
+        import sys, time
+        from protocols.rt_session import ProtocolSessions
+        from rt.model.description import load_description
+        sessions = ProtocolSessions()
+        sessions.warm(load_description())
+        pool = sessions._worker()
+        while not pool._processes:
+            time.sleep(0.01)
+        print(next(iter(pool._processes)), flush=True)
+        time.sleep(600)
+    """)
+    owner = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True,
+                             cwd=Path(__file__).resolve().parents[1])
+    try:
+        assert owner.stdout is not None                       # stdout=PIPE
+        worker_pid = int(owner.stdout.readline())
+        os.kill(worker_pid, 0)                                # the worker is alive
+    finally:
+        owner.kill()
+        owner.wait()
+    # The worker polls its parent every 0.5 s; the bound is for a loaded machine.
+    end = time.monotonic() + 30.0
+    while time.monotonic() < end:
+        try:
+            os.kill(worker_pid, 0)
+        except ProcessLookupError:
+            return
+        time.sleep(0.1)
+    os.kill(worker_pid, signal.SIGKILL)
+    raise AssertionError(f"pre-flight worker {worker_pid} outlived its killed RT process")
