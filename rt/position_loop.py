@@ -29,7 +29,7 @@ from rt.control.base import Controller, create
 from rt.control.experiment import RefFn, benchmark_reference
 from rt.devices.interfaces import ActuatorOutputs, DigitalInputs, EncoderBank, ForceTorqueSensor
 from rt.engine import Component, Graph, GraphBuilder, Loop
-from rt.errors import ConfigurationError
+from rt.errors import ConfigurationError, HardwareError
 from rt.model import RobotModel
 from rt.model.description import RobotDescription
 from rt.references.program import Program, TrajectoryProgram
@@ -79,6 +79,8 @@ class Devices:
     stops: DigitalInputs
     monitor: Callable[[], Sequence[float] | np.ndarray | None] | None = None
     feed_watchdog: Callable[[], None] | None = None
+    watchdog_tripped: Callable[[], bool] | None = None
+    rearm_watchdog: Callable[[], None] | None = None
     first: Component | None = None
     twin: Twin | None = None
     close: Callable[[], None] | None = None
@@ -107,19 +109,37 @@ def shm_devices(shm_name: str) -> Devices:
     cards = [ShmActuators(rig, 0), ShmActuators(rig, 1)]
     return Devices(ShmEncoders(rig), cards, ShmForceTorque(rig), ShmDigitalInputs(rig),
                    monitor=rig.applied_volts, feed_watchdog=rig.feed_watchdog,
+                   watchdog_tripped=rig.watchdog_tripped, rearm_watchdog=rig.rearm,
                    close=rig.close)
 
 
 class WatchdogFeed(Component):
     """Ports: none. Feeds the amplifier watchdog at the end of each cycle: only a loop that
-    completes its cycles keeps the drives powered."""
+    completes its cycles keeps the drives powered.
 
-    def __init__(self, name: str, feed: Callable[[], None]):
+    With ``tripped`` (the watchdog's latched state) the block faults when the watchdog has
+    dropped the drives (the loop stalled longer than its timeout): the supervisor then
+    hard-stops naming it, and the operator's reset restarts the block, which re-arms the
+    watchdog (``rearm``; honoured by the amplifiers only once feeding has resumed)."""
+
+    def __init__(self, name: str, feed: Callable[[], None],
+                 tripped: Callable[[], bool] | None = None,
+                 rearm: Callable[[], None] | None = None):
         super().__init__(name)
         self.feed = feed
+        self.tripped = tripped
+        self.rearm = rearm
+
+    def on_start(self) -> None:
+        if self.rearm is not None:
+            self.feed()
+            self.rearm()
 
     def update(self, t: float, dt: float) -> int:
         self.feed()
+        if self.tripped is not None and self.tripped():
+            raise HardwareError("the amplifiers' watchdog dropped the drives (the loop stalled "
+                                "longer than its timeout)")
         return 0
 
 
@@ -235,7 +255,8 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
     b.add(RedundantDrive("drive", devices.cards, events, monitor=devices.monitor))
     rec = b.add(RecorderTap("recorder"))
     if devices.feed_watchdog is not None:
-        b.add(WatchdogFeed("watchdog", devices.feed_watchdog))
+        b.add(WatchdogFeed("watchdog", devices.feed_watchdog, devices.watchdog_tripped,
+                           devices.rearm_watchdog))
     for block in extra_blocks or ():
         b.add(block)
     for src, dst in (
@@ -266,6 +287,9 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
     b.connect("reference.tare_request", "force.tare_request", delay=1)
     graph = b.build()
     graph.configure()
+    sup_block = graph.component("supervisor")
+    assert isinstance(sup_block, SupervisorBlock)
+    sup_block.failed_components = graph.failed_components
     loop = Loop(graph, rate_hz=rate_hz, mode=mode, **loop_kwargs)
     graph.start()
     return PositionLoop(loop, graph, model, devices.twin, rec, ref, supervisor, events, devices)

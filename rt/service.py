@@ -284,6 +284,7 @@ class RtService:
         return {
             "state": self._mode().name.lower(),
             "causes": sorted(sup.causes), "latched": sup.latched(),
+            "failed_blocks": dict(g.failed),
             "t": stats.t, "cycles": stats.cycles, "deadline_misses": stats.misses,
             "rate_hz": self.config.rate_hz,
             "controller": pl.controller.name,
@@ -342,9 +343,24 @@ class RtService:
         from rt.ipc.server import Deferred
 
         self._require_owner(client, "reset")
-        ticket = self.pl.supervisor.request_reset(acknowledge)
+        # Blocks a fault put in error are restarted first, in the loop's thread between cycles;
+        # the supervisor then takes the reset with their cause gone, or still present.
+        # The estimator restarts with the encoders: their stale reading is no history to judge
+        # the next one against (it would be flagged as a jump). A jump seen while the encoders
+        # worked (spurious counts) is not cleared this way: the position is then unknown.
+        also = ("estimator",) if "encoders" in self.pl.graph.failed else ()
+        restart = None
+        if self.pl.graph.failed or also:
+            restart = self.pl.loop.call(lambda loop: loop.graph.restart_failed(also),
+                                        "restart the failed blocks")
+        tickets: list[Any] = []
 
         def outcome() -> dict[str, Any] | None:
+            if not tickets:
+                if restart is not None and not restart.done():
+                    return None
+                tickets.append(self.pl.supervisor.request_reset(acknowledge))
+            ticket = tickets[0]
             if not ticket.done:
                 return None
             if ticket.refused:

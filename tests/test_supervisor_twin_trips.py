@@ -204,3 +204,79 @@ def test_both_dac_cards_failing_on_a_channel_hard_stops():
     ev = pl.events.first("drive_channel")
     assert ev is not None and ev.reaction == Reaction.HARD_STOP
     assert_hard_stop_within_20_ms(pl, ev.t)
+
+
+def test_a_failed_block_hard_stops_and_restarts_on_reset_once_its_device_works():
+    """An encoder card whose read fails puts the loop's encoder block in error: its port keeps
+    a stale position, so the supervisor hard-stops naming the block (drives off ≤ 20 ms). A
+    reset restarts the block: refused while the card still fails, accepted once it reads."""
+    from rt.errors import HardwareError
+
+    hold = step(at_s=1e9, axis=0, size_m=0.0)
+    pl = run(0.0, trajectory=hold)
+    pl.loop.run(seconds=0.3)
+    bank = pl.graph.component("encoders").encoders
+    works = bank.read_positions_m
+
+    def broken(out):
+        raise HardwareError("PCL-833 read timed out")
+
+    bank.read_positions_m = broken
+    pl.loop.run(seconds=0.1)
+    ev = first_stop(pl)
+    assert ev.cause == "component_failed" and ev.reaction == Reaction.HARD_STOP
+    assert "encoders" in ev.message and "PCL-833 read timed out" in ev.message
+    assert_hard_stop_within_20_ms(pl, ev.t)
+
+    def reset_outcome(also=("estimator",)):
+        refused = pl.graph.restart_failed(also)       # what the RT process does on a reset
+        ticket = pl.supervisor.request_reset(None)
+        pl.loop.run(seconds=0.01)
+        assert ticket.done
+        return refused, ticket
+
+    refused, ticket = reset_outcome()                 # the card still fails: in error again
+    assert refused == {} and [r["cause"] for r in ticket.refused] == ["component_failed"]
+    assert "encoders" in pl.graph.failed
+    bank.read_positions_m = works
+    pl.twin.place(pl.twin.plant.q + 0.002)           # it moved meanwhile (brakes slipping)
+    refused, ticket = reset_outcome()
+    assert refused == {} and ticket.refused == [] and pl.graph.failed == {}
+    assert [c["cause"] for c in ticket.cleared] == ["component_failed"]
+    pl.loop.run(seconds=0.05)
+    assert pl.graph.component("encoders").lifecycle.value == "active"
+    # The realistic twin's encoders sit on the motor side of a compliant screw: tens of µm.
+    np.testing.assert_allclose(pl.graph.output("encoders.q"), pl.twin.plant.q, atol=5e-5)
+
+
+@pytest.mark.parametrize("restart_estimator", [True, False])
+def test_encoders_failing_from_the_first_cycle_recover_only_with_the_estimator(
+        restart_estimator):
+    """The RT process's start on a loaded machine: the encoder block fails before its first
+    reading, its port still 0 m (every slider in its stroke-end margin). Restarting the
+    encoders alone leaves the estimator judging the first true reading against 0 m — an
+    encoder jump that never clears; restarting the estimator with them clears everything."""
+    from rt.errors import HardwareError
+
+    hold = step(at_s=1e9, axis=0, size_m=0.0)
+    pl = run(0.0, trajectory=hold)
+    bank = pl.graph.component("encoders").encoders
+    works = bank.read_positions_m
+
+    def broken(out):
+        raise HardwareError("rig not published for 80 ms")
+
+    bank.read_positions_m = broken
+    pl.loop.run(seconds=0.05)
+    causes = {e["cause"] for e in pl.supervisor.latched()}
+    assert {"component_failed", "stroke_margin_0"} <= causes, causes
+    bank.read_positions_m = works
+    pl.graph.restart_failed(("estimator",) if restart_estimator else ())
+    ticket = pl.supervisor.request_reset(None)
+    pl.loop.run(seconds=0.05)
+    assert ticket.done
+    if restart_estimator:
+        assert ticket.refused == [] and pl.supervisor.latched() == []
+    else:
+        still = {e["cause"] for e in pl.supervisor.latched()}
+        assert "encoder_jump" in still, still

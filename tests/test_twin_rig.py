@@ -398,6 +398,50 @@ def test_applied_volts_answer_only_readings_newer_than_the_last_command(hold_vol
         rig.close()
 
 
+def test_a_tripped_watchdog_faults_the_feed_block_and_its_restart_rearms_it(hold_volts):
+    """The loop's WatchdogFeed over the rig: a stall past the watchdog's timeout faults the
+    block (the supervisor then hard-stops naming it) and the drive monitor reads nothing (no
+    DAC channel is blamed); restarting the block (the operator's reset) re-arms the watchdog."""
+    from rt.position_loop import WatchdogFeed
+    from rt.twin.rig import RigProcess
+
+    name = _unique_name()
+    rig = RigProcess(name, "free", seed=1, watchdog_timeout_s=WATCHDOG_S)
+    try:
+        handle = ShmRig(name, RIG_TIMEOUT_S)
+        card = ShmActuators(handle, 0)
+        block = WatchdogFeed("watchdog", handle.feed_watchdog, handle.watchdog_tripped,
+                             handle.rearm)
+        t = rig.epoch_s
+        card.enable()
+        card.write_volts(hold_volts)
+        assert block.update(0.0, 0.001) == 0
+        t += RIG_PERIOD_S
+        rig.step(t)
+        assert not handle.watchdog_tripped() and handle.applied_volts() is not None
+        t += WATCHDOG_S + RIG_PERIOD_S                  # the loop stalls past the timeout
+        rig.step(t)
+        assert handle.watchdog_tripped()
+        with pytest.raises(HardwareError, match="watchdog dropped the drives"):
+            block.update(0.03, 0.03)
+        t += RIG_PERIOD_S
+        rig.step(t)
+        assert handle.applied_volts() is None           # the watchdog's doing, not a channel's
+        block.on_start()                                # the restart: feed, then re-arm
+        assert not handle.watchdog_tripped()            # the re-arm is on its way: no verdict
+        t += RIG_PERIOD_S
+        rig.step(t)
+        assert not handle.watchdog_tripped()
+        assert block.update(0.04, 0.001) == 0
+        t += RIG_PERIOD_S
+        rig.step(t)
+        assert handle.applied_volts() == _quantized(hold_volts)
+        card.close()
+        handle.close()
+    finally:
+        rig.close()
+
+
 def test_run_rig_serves_until_its_stop_event_and_unlinks():
     """``run_rig`` as a multiprocessing-style target (here in a thread, to stay fast)."""
     from rt.twin.rig import run_rig

@@ -101,6 +101,9 @@ class SupervisorBlock(Component):
         self.volts = self.declare_output("volts", Array(3))
         self.enable = self.declare_output("enable", Array(1), initial=np.ones(1))
         self.mode = self.declare_output("mode", Array(1))
+        #: Names the graph's components in error (``Graph.failed_components``); wired by the
+        #: loop's builder once the graph exists.
+        self.failed_components: Callable[[], str | None] = lambda: None
 
     def update(self, t: float, dt: float) -> int:
         st = self.state_in.data
@@ -122,7 +125,7 @@ class SupervisorBlock(Component):
             t, dt, self.q.data, int(self.est_status.data[0]), self.qd.data, self.qdd.data,
             fk_ok, roll, pitch, roll_rate, pitch_rate, self.q_ref.data, self.qd_ref.data,
             self.tau.data, force, flags[0] > 0.5, flags[1] > 0.5, ins[0] > 0.5, ins[1] > 0.5,
-            self.drive_failed.data[0] > 0.5, -w[2])
+            self.drive_failed.data[0] > 0.5, -w[2], self.failed_components())
         v = self.volts.data
         if reaction >= Reaction.HARD_STOP:
             v[:] = 0.0

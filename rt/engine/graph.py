@@ -301,6 +301,9 @@ class Graph:
         self._cycles = 0
         self._faults: deque[Fault] = deque(maxlen=FAULT_HISTORY)
         self.fault_count = 0
+        #: Slots whose component a fault in ``update`` put in error, with the reason; emptied
+        #: by :meth:`restart_failed` / :meth:`reset`. Read every cycle by the supervisor.
+        self.failed: dict[str, str] = {}
         """Total faults so far; a supervisor may poll it every cycle (a plain int read)."""
         self._running = False
         for _, comp in slots:
@@ -408,6 +411,38 @@ class Graph:
         if failures:
             raise LifecycleError("; ".join(failures))
 
+    def failed_components(self) -> str | None:
+        """``"slot: reason; ..."`` for the components a fault put in error, None when none
+        (cheap when none: the supervisor asks every cycle)."""
+        if not self.failed:
+            return None
+        return "; ".join(f"{slot}: {why}" for slot, why in self.failed.items())
+
+    def restart_failed(self, also: tuple[str, ...] = ()) -> dict[str, str]:
+        """Between cycles of a running graph: reset and start again each component a fault put
+        in error, and the running ones of ``also`` (state rebuilt from its parameters, as a
+        fresh start). Returns ``{slot: why}`` for those that would not restart (a failed one
+        stays in error, and in :attr:`failed`).
+
+        Why: a device read that failed once (a stalled twin rig process, a card that timed
+        out) must not leave the loop without that component for the life of the process; the
+        supervisor hard-stops while one is in error, and the operator's reset restarts it."""
+        refused: dict[str, str] = {}
+        for slot in list(self.failed) + [s for s in also if s not in self.failed]:
+            comp = self._components[slot]
+            try:
+                if comp.lifecycle is Lifecycle.ACTIVE:
+                    comp.stop()
+                if comp.lifecycle in (Lifecycle.ERROR, Lifecycle.INACTIVE):
+                    comp.reset()
+                if comp.lifecycle is Lifecycle.INACTIVE:
+                    comp.start()
+            except (LifecycleError, ConfigurationError) as exc:
+                refused[slot] = str(exc)
+                continue
+            self.failed.pop(slot, None)
+        return refused
+
     def reset(self) -> None:
         """Back to the initial condition for a deterministic replay: components' state rebuilt
         (faults cleared), outputs and delay latches back to their initial values. The graph
@@ -418,6 +453,7 @@ class Graph:
             comp = self._components[slot]
             if comp.lifecycle in (Lifecycle.INACTIVE, Lifecycle.ERROR):
                 comp.reset()
+            self.failed.pop(slot, None)
             for port in comp.outputs.values():
                 port.reset_value()
         for lt in self._latch_specs:
@@ -470,6 +506,7 @@ class Graph:
         # The fault path may allocate: it runs once per fault, and faults latch.
         comp.error(reason)
         self.fault_count += 1
+        self.failed[self._order[k]] = comp.fault_reason or reason
         self._faults.append(Fault(self._cycles, t, self._order[k], comp.name, code,
                                   comp.fault_reason or reason))
         if exc is not None:

@@ -219,9 +219,11 @@ class Supervisor:
     def check(self, t: float, dt: float, q, est_status: int, qd, qdd, fk_ok: bool, roll: float,
               pitch: float, roll_rate: float, pitch_rate: float, q_ref, qd_ref, tau,
               force_n: float, wrench_stale: bool, wrench_saturated: bool, hw_estop: bool,
-              hand_stop: bool, drive_failed: bool, fz_n: float = math.nan) -> Reaction:
+              hand_stop: bool, drive_failed: bool, fz_n: float = math.nan,
+              failed_components: str | None = None) -> Reaction:
         """Run every check; returns the latched reaction for this cycle. ``force_n`` is the
-        magnitude of the sensor's force, ``fz_n`` the platform's push along its z (N)."""
+        magnitude of the sensor's force, ``fz_n`` the platform's push along its z (N);
+        ``failed_components`` names the loop's components a fault put in error (None: none)."""
         lim = self.limits
         active = self._active
         active.clear()
@@ -254,6 +256,12 @@ class Supervisor:
             trip("stop_client", Reaction.SOFT_STOP, "stop requested by a client")
         if drive_failed:
             trip("drive_channel", Reaction.HARD_STOP, "an actuator channel failed on both cards")
+        if failed_components is not None:
+            # A sensor or law that stopped updating leaves stale values on its ports: nothing
+            # downstream of it can be trusted.
+            trip("component_failed", Reaction.HARD_STOP,
+                 f"a block of the control loop failed ({failed_components})",
+                 components=failed_components)
         # -- sensors and kinematics
         if not fk_ok:
             trip("fk_failed", Reaction.HARD_STOP, "forward kinematics failed: pose unknown")

@@ -164,9 +164,19 @@ class ShmRig:
         """
         self.read()
         s = self.sensors
-        if int(s.feed_seen[0]) != int(self._cmd.feed[0]):
+        if int(s.feed_seen[0]) != int(self._cmd.feed[0]) or int(s.watchdog_tripped[0]):
+            # Not yet read, or the watchdog holds every amplifier off: that is the watchdog's
+            # fault (:meth:`watchdog_tripped`), not a channel's.
             return None
         return (float(s.amp_volts[0]), float(s.amp_volts[1]), float(s.amp_volts[2]))
+
+    def watchdog_tripped(self) -> bool:
+        """True while the amplifier watchdog holds the drives off (latched until a re-arm) and
+        no re-arm of this handle is still on its way to the rig (the rig reads it at its next
+        period; until then the outcome is not known)."""
+        self.read()
+        s = self.sensors
+        return bool(s.watchdog_tripped[0]) and int(s.rearm_seen[0]) == int(self._cmd.rearm[0])
 
     # ------------------------------------------------------------------ commands
     def feed_watchdog(self) -> None:
