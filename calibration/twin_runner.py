@@ -355,6 +355,7 @@ def make_runner(backend: str, plate: PlateDescription, seed: int, registration: 
     if backend == "direct":
         return DirectTrialRunner(plate, twin_plate, seed=seed), truth
     if backend == "rt":
+        assert plan is not None            # checked above
         moves = _SiteMoves(registration, seed, level_sigma_rad, operator, tolerance)
         model = RobotModel.load()
         daq = None

