@@ -183,3 +183,40 @@ def test_the_rt_side_refuses_a_wire_that_does_not_exist() -> None:
         WirePublisher("talus-plate-none-00000000")
     with pytest.raises(InputError, match="malformed"):
         WirePublisher("../etc/passwd")
+
+
+def test_blocks_across_a_gap_in_the_plate_scans_are_not_fitted(monkeypatch) -> None:
+    """A software-timed DAQ on a loaded host leaves gaps (127 ms measured); interpolated across
+    a ramp they are tens of N off, so their blocks are dropped (dataset.MAX_PLATE_GAP_S)."""
+    import dataclasses
+
+    from calibration import dataset
+    from calibration.plan import ProfileKind, default_plan, expand, force_profile
+    from calibration.twin_runner import DirectTrialRunner
+
+    plate = load_plate(TWIN_PLATE_FILE)
+    truth = draw_truth(plate, TruthSettings.ideal(), seed=2)
+    runner = DirectTrialRunner(plate, TwinPlate(plate, truth, seed=1), ati_noise=(0.0,) * 6)
+    plan = default_plan()
+    trial = next(t for t in expand(plan, plate.size_m) if t.profile == ProfileKind.STEPS)
+    d = runner.run(trial.id, trial.site_xy_m, (0.63, 0.0, 0.0), force_profile(plan, trial, 1e-3),
+                   1e-3)
+    clock = dataset.align_clocks(plate, [d])
+    # A 120 ms hole in the plate's scans where the ramp from 1000 to 1500 N bends away from
+    # the hold (ideal plate: its clock is the robot's).
+    t_mid = plan.baseline_s + 3 * (plan.steps.ramp_s + plan.steps.hold_s) + 0.03
+    keep = np.abs(d.t_plate - t_mid) > 0.06
+    gappy = dataclasses.replace(d, t_plate=d.t_plate[keep], channels=d.channels[keep])
+
+    def worst_fz_error(data) -> tuple[int, float]:
+        s = dataset.build_samples(plate, [data], [trial.site], clock)
+        fz = s.v @ truth.C_true[2]
+        return len(s), float(np.max(np.abs(fz - s.w_ref[:, 2])))
+
+    n_full, err_full = worst_fz_error(d)
+    n_gap, err_gap = worst_fz_error(gappy)
+    assert err_full < 1.0 and err_gap < 1.0
+    assert 5 <= n_full - n_gap <= 8                  # 120 ms of 20 ms blocks, and the edges
+    monkeypatch.setattr(dataset, "MAX_PLATE_GAP_S", 1.0)
+    n_all, err_all = worst_fz_error(gappy)
+    assert n_all == n_full and err_all > 10.0        # what the interpolated blocks would cost
