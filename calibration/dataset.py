@@ -35,6 +35,9 @@ MIN_LOAD_N = 20.0
 #: (127 ms measured at a load of 20), and a straight line across a gap on a ramp is tens of N
 #: off. 10 ms costs < 0.3 N on the plans' fastest ramps (raised cosine, 600 N in 0.4 s).
 MAX_PLATE_GAP_S = 0.010
+#: The same for the robot's rows (s): a late RT loop re-phases and skips cycles (92 ms seen at
+#: a load of 14); a block spanning that is not a block of ``block_s``.
+MAX_ROBOT_GAP_S = 0.010
 
 
 @dataclass
@@ -126,7 +129,8 @@ def build_samples(plate: PlateDescription, trials: list[TrialData], sites: list[
         v = np.column_stack([np.interp(t, t_on_robot, v_plate[:, j])
                              for j in range(v_plate.shape[1])])
         right = np.clip(np.searchsorted(t_on_robot, t), 1, len(t_on_robot) - 1)
-        bracketed = (t_on_robot[right] - t_on_robot[right - 1]) <= MAX_PLATE_GAP_S
+        bracketed = ((t_on_robot[right] - t_on_robot[right - 1]) <= MAX_PLATE_GAP_S) \
+            & np.r_[True, np.diff(t) <= MAX_ROBOT_GAP_S]
         n_per = max(1, round(block_s / float(np.median(np.diff(t)))))
         m = len(t) // n_per
         if m == 0:

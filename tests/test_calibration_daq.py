@@ -220,3 +220,30 @@ def test_blocks_across_a_gap_in_the_plate_scans_are_not_fitted(monkeypatch) -> N
     monkeypatch.setattr(dataset, "MAX_PLATE_GAP_S", 1.0)
     n_all, err_all = worst_fz_error(gappy)
     assert n_all == n_full and err_all > 10.0        # what the interpolated blocks would cost
+
+
+def test_blocks_across_a_stall_of_the_rt_loop_are_not_fitted() -> None:
+    """A late RT loop skips cycles (92 ms seen at a load of 14): blocks spanning the hole in the
+    robot's rows are dropped (dataset.MAX_ROBOT_GAP_S), the others kept as they were."""
+    import dataclasses
+
+    from calibration import dataset
+    from calibration.plan import ProfileKind, default_plan, expand, force_profile
+    from calibration.twin_runner import DirectTrialRunner
+
+    plate = load_plate(TWIN_PLATE_FILE)
+    truth = draw_truth(plate, TruthSettings.ideal(), seed=2)
+    runner = DirectTrialRunner(plate, TwinPlate(plate, truth, seed=1), ati_noise=(0.0,) * 6)
+    plan = default_plan()
+    trial = next(t for t in expand(plan, plate.size_m) if t.profile == ProfileKind.STEPS)
+    d = runner.run(trial.id, trial.site_xy_m, (0.63, 0.0, 0.0), force_profile(plan, trial, 1e-3),
+                   1e-3)
+    clock = dataset.align_clocks(plate, [d])
+    keep = np.abs(d.t_robot - (plan.baseline_s + 2.0)) > 0.046          # a 92 ms stall
+    stalled = dataclasses.replace(d, t_robot=d.t_robot[keep], ati=d.ati[keep],
+                                  p_BS=d.p_BS[keep], R_BS=d.R_BS[keep],
+                                  force_ref=d.force_ref[keep])
+    full = dataset.build_samples(plate, [d], [trial.site], clock)
+    cut = dataset.build_samples(plate, [stalled], [trial.site], clock)
+    assert 4 <= len(full) - len(cut) <= 7
+    assert np.max(np.abs(cut.v @ truth.C_true[2] - cut.w_ref[:, 2])) < 1.0
