@@ -1,12 +1,14 @@
 """Force-plate calibration figures on the twin plate (issue 12).
 
 Run:  .venv/bin/python bench/calibration.py [--campaign DIR | --out DIR] [--backend twin|direct]
-      [--json]
+      [--plan PLAN.yaml | --shear] [--json]
 
 Runs the default campaign (plan → run → fit) on the twin — by default the robot twin pressing
 the twin plate through its ATI under force control; ``--backend direct`` feeds the plate the
 commanded load without the robot (seconds instead of minutes) — or reuses a campaign folder
-made by ``talus calibrate demo|run``. Prints, on the held-out sites and trials (never fitted):
+made by ``talus calibrate demo|run``. ``--plan`` runs another plan; ``--shear`` adds to the
+default plan the four shear pushes of :data:`SHEAR_PUSHES` (roll ±1.5°, pitch ±1.5° under
+600 N: shear along both plate axes, both signs), to measure what they identify. Prints, on the held-out sites and trials (never fitted):
 
 * ``cop_rms_mm``, ``cop_max_mm``, ``force_pct_fs`` (max over Fx, Fy, Fz), each
   ``{before, linear, nonlinear}``;
@@ -37,8 +39,13 @@ sys.path = [p for p in sys.path if os.path.abspath(p or os.curdir) != _HERE]
 import numpy as np
 
 from calibration import campaign, metrics
-from calibration.plan import default_plan
+from calibration.plan import ShearPush, default_plan, load_plan
 from calibration.plate import TWIN_PLATE_FILE, cop_F, load_plate
+
+#: ``--shear``: shear along +y/-y (roll) and +x/-x (pitch) at the centre, at the default
+#: ShearPush's load and (slow) tilt ramp.
+SHEAR_PUSHES = (ShearPush(roll_deg=1.5), ShearPush(roll_deg=-1.5), ShearPush(pitch_deg=1.5),
+                ShearPush(pitch_deg=-1.5))
 
 
 def figures(folder: Path) -> dict:
@@ -59,6 +66,10 @@ def figures(folder: Path) -> dict:
         "robot_time_s": p.index.get("robot_time_s"),
         "processing_time_s": round(p.processing_time_s, 2),
         "held_out_samples": len(p.held),
+        "not_identified_entries": [
+            f"{r}<-{c}" for i, r in enumerate(record["matrix"]["row_order"])
+            for j, c in enumerate(record["matrix"]["channel_order"])
+            if not record["matrix"]["identified"][i][j]],
         "uncertainty_k2": {"force_n": record["uncertainty"]["force_n"][:3],
                            "cop_mm": record["uncertainty"]["cop_mm"]},
     }
@@ -102,8 +113,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", help="new folder for the campaign (default: a temporary one)")
     ap.add_argument("--backend", choices=("twin", "direct"), default="twin")
     ap.add_argument("--seed", type=int, default=12)
+    ap.add_argument("--plan", help="plan file (default: the default plan)")
+    ap.add_argument("--shear", action="store_true",
+                    help="the default plan plus the shear pushes of SHEAR_PUSHES")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
+    if args.plan and args.shear:
+        ap.error("--plan and --shear exclude each other")
     if args.campaign:
         folder = Path(args.campaign)
         wall = None
@@ -112,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
 
         folder = Path(args.out or tempfile.mkdtemp(prefix="talus-cal-")) / "campaign"
         plate = load_plate(TWIN_PLATE_FILE)
-        plan = default_plan()
+        plan = (load_plan(args.plan) if args.plan
+                else default_plan(shear=list(SHEAR_PUSHES)) if args.shear else default_plan())
         runner, truth = make_runner(args.backend, plate, args.seed, plan.registration,
                                     plan.level_sigma_rad())
         t0 = time.perf_counter()
@@ -122,6 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     if wall is not None:
         out["run_wall_time_s"] = round(wall, 1)
         out["backend"] = args.backend
+        out["plan"] = args.plan or ("default + shear" if args.shear else "default")
     if args.json:
         print(json.dumps(out))
         return 0

@@ -11,7 +11,13 @@
   (``DIR/calibration_record.json`` unless ``--record``) and prints the figures.
 * ``verify --record CAL.json --out DIR`` runs a short CalTester-like check (≥ 200 N at the
   centre and four points near the corners) and applies the record's calibration, without
-  fitting.
+  fitting; ``--backend rt`` plays it through the RT process, as ``run`` does.
+* ``run|verify --backend rt --plate-daq FILE`` (a real plate): this client reads the plate's DAQ
+  on the plate's clock while the RT process pushes (:mod:`calibration.plate_daq`); between
+  sites it waits for the operator to move the plate and the camera (``--camera``) confirms the
+  move (:mod:`calibration.operator`; ``--yes`` for scripts: no waiting, a move outside the
+  tolerance is refused). ``--plate-daq twin``: the same path with the twin plate behind the
+  comedi driver (:mod:`calibration.twin_plate_daq`), moves simulated.
 * ``export --campaign DIR --c3d OUT.c3d --reference-csv REF.csv`` writes the C3D (TYPE 4 or, for
   a Kistler plate, TYPE 3 with calibrated channels;
   fitted CAL_MATRIX, validation trials' raw channels) and the ATI reference in its frame.
@@ -24,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -56,6 +63,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--endpoint", help="backend rt: the RT process's endpoint (default: "
                    "its default); it must be configured for the plan's loads "
                    "(patient_limits.max_force_n)")
+    _plate_daq_args(p)
     p.set_defaults(func=_guard(_run))
 
     p = commands.add_parser("fit", help="fit a campaign and write its calibration record")
@@ -75,9 +83,13 @@ def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser("verify", help="short check of a calibration, without fitting")
     p.add_argument("--record", required=True)
     p.add_argument("--out", required=True, help="new folder for the check's trials")
-    p.add_argument("--backend", choices=("twin", "direct"), default="twin")
+    p.add_argument("--backend", choices=("twin", "direct", "rt"), default="twin")
+    p.add_argument("--plate", help="plate description YAML (default: the twin plate); the "
+                   "record's plate")
     p.add_argument("--seed", type=int, default=DEFAULT_SEED)
     p.add_argument("--load", type=float, default=800.0, help="static load (N, ≥ 200)")
+    p.add_argument("--endpoint", help="backend rt: the RT process's endpoint")
+    _plate_daq_args(p)
     _threshold_args(p)
     p.set_defaults(func=_guard(_verify))
 
@@ -94,6 +106,38 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--backend", choices=("twin", "direct"), default="twin")
     p.add_argument("--seed", type=int, default=DEFAULT_SEED)
     p.set_defaults(func=_guard(_demo))
+
+
+def _plate_daq_args(p: argparse.ArgumentParser) -> None:
+    from calibration.operator import TOLERANCE_M, TOLERANCE_RAD
+
+    p.add_argument("--plate-daq", help="backend rt: the plate's DAQ, read by this client on "
+                   "the plate's clock while the RT process pushes: a DAQ file "
+                   "(calibration/plate_daq.py) for a real plate, or 'twin' (the twin plate "
+                   "behind the same comedi driver). Default: the RT process's twin records "
+                   "the plate")
+    p.add_argument("--camera", help="real plate: the camera confirming each move, "
+                   "BACKEND[:SOURCE] (default opencv:0)")
+    p.add_argument("--yes", action="store_true",
+                   help="real plate, for scripts: do not wait for the operator between sites; "
+                        "a move the camera does not confirm is refused")
+    p.add_argument("--move-tolerance-mm", type=float, default=TOLERANCE_M * 1e3,
+                   help="how far the registered plate may be from a site's planned pose (mm)")
+    p.add_argument("--move-tolerance-deg", type=float,
+                   default=math.degrees(TOLERANCE_RAD), help="... and turned (deg)")
+
+
+def _runner_kw(args: argparse.Namespace) -> dict[str, Any]:
+    """make_runner's keywords for the plate's DAQ, the operator and the camera."""
+    from calibration.operator import MoveTolerance, terminal_or_refuse
+
+    daq = getattr(args, "plate_daq", None)
+    real = daq is not None and daq != "twin"
+    tolerance = MoveTolerance(getattr(args, "move_tolerance_mm", 10.0) * 1e-3,
+                              math.radians(getattr(args, "move_tolerance_deg", 2.0)))
+    return {"endpoint": getattr(args, "endpoint", None), "plate_daq": daq,
+            "camera": getattr(args, "camera", None), "tolerance": tolerance,
+            "operator": terminal_or_refuse(getattr(args, "yes", False)) if real else None}
 
 
 def _threshold_args(p: argparse.ArgumentParser) -> None:
@@ -188,7 +232,7 @@ def _run(args: argparse.Namespace) -> dict:
     plate_file = _plate_file(args)
     plate = load_plate(plate_file)
     runner, truth = make_runner(args.backend, plate, args.seed, plan.registration,
-                                plan.level_sigma_rad(), plan=plan, endpoint=args.endpoint)
+                                plan.level_sigma_rad(), plan=plan, **_runner_kw(args))
     only = [t.strip() for t in args.trials.split(",")] if args.trials else None
     t0 = time.perf_counter()
     try:
@@ -260,7 +304,7 @@ def _verify(args: argparse.Namespace) -> dict:
     from calibration.verify import verify
 
     return verify(Path(args.record), Path(args.out), args.backend, args.seed, args.load,
-                  _thresholds(args), _progress)
+                  _thresholds(args), _progress, _plate_file(args), runner_kw=_runner_kw(args))
 
 
 def _demo(args: argparse.Namespace) -> dict:

@@ -9,7 +9,8 @@ For each trial:
    the plate's stated transducer origin O: ``M_O = R_FS m_S + (p_S - O) × F``. The load's point
    (the tool tip, ``tool_length`` along S's z) in F is the reference centre of pressure.
 3. The plate's samples are put on the robot's clock (:mod:`calibration.alignment`) and
-   interpolated at the robot's sample times.
+   interpolated at the robot's sample times; an instant in a gap of the plate's scans longer
+   than :data:`MAX_PLATE_GAP_S` is not (its block is dropped).
 4. Block means over ``block_s`` (default 20 ms): the fit works on these (less noise, less
    data; the loads change slowly against 20 ms).
 """
@@ -29,6 +30,14 @@ BLOCK_S = 0.02
 BASELINE_S = 0.5
 #: Below this reference load (N) a block is "unloaded" and not used.
 MIN_LOAD_N = 20.0
+#: A robot instant whose bracketing plate scans are further apart than this (s) is not
+#: interpolated, and its block not used: a software-timed DAQ on a loaded host leaves gaps
+#: (127 ms measured at a load of 20), and a straight line across a gap on a ramp is tens of N
+#: off. 10 ms costs < 0.3 N on the plans' fastest ramps (raised cosine, 600 N in 0.4 s).
+MAX_PLATE_GAP_S = 0.010
+#: The same for the robot's rows (s): a late RT loop re-phases and skips cycles (92 ms seen at
+#: a load of 14); a block spanning that is not a block of ``block_s``.
+MAX_ROBOT_GAP_S = 0.010
 
 
 @dataclass
@@ -119,16 +128,20 @@ def build_samples(plate: PlateDescription, trials: list[TrialData], sites: list[
         t = d.t_robot[inside]
         v = np.column_stack([np.interp(t, t_on_robot, v_plate[:, j])
                              for j in range(v_plate.shape[1])])
+        right = np.clip(np.searchsorted(t_on_robot, t), 1, len(t_on_robot) - 1)
+        bracketed = ((t_on_robot[right] - t_on_robot[right - 1]) <= MAX_PLATE_GAP_S) \
+            & np.r_[True, np.diff(t) <= MAX_ROBOT_GAP_S]
         n_per = max(1, round(block_s / float(np.median(np.diff(t)))))
         m = len(t) // n_per
         if m == 0:
             continue
-        rows["v"].append(_block_means(v, m, n_per))
-        rows["w"].append(_block_means(w[inside], m, n_per))
-        rows["p"].append(_block_means(p[inside], m, n_per))
-        rows["f"].append(_block_means(d.force_ref[inside], m, n_per))
-        rows["trial"].append(np.full(m, k))
-        rows["site"].append(np.full(m, site_names.index(site)))
+        whole = _block_means(bracketed.astype(float), m, n_per) == 1.0
+        rows["v"].append(_block_means(v, m, n_per)[whole])
+        rows["w"].append(_block_means(w[inside], m, n_per)[whole])
+        rows["p"].append(_block_means(p[inside], m, n_per)[whole])
+        rows["f"].append(_block_means(d.force_ref[inside], m, n_per)[whole])
+        rows["trial"].append(np.full(int(whole.sum()), k))
+        rows["site"].append(np.full(int(whole.sum()), site_names.index(site)))
     if not rows["v"]:
         raise InputError("no trial has data to fit")
     s = Samples(np.vstack(rows["v"]), np.vstack(rows["w"]), np.vstack(rows["p"]),

@@ -248,6 +248,9 @@ class NonlinearCorrection:
     gain: np.ndarray = field(default_factory=lambda: np.zeros(0))
     fz_quadratic: float = 0.0
     full_scale_fz_n: float = 1.0
+    #: Degree of the Fz gain's polynomial in (u, v): 2, or the COP's degree when the sites
+    #: support fewer terms (:func:`fit_nonlinear`).
+    gain_degree: int = 2
     cross_validation_mm: dict[int, float] = field(default_factory=dict)
 
     def apply(self, w_lin: np.ndarray) -> np.ndarray:
@@ -264,7 +267,7 @@ class NonlinearCorrection:
         py = cop[ok, 1] + (T @ self.cop_y if self.degree > 0 else 0.0)
         f = w_lin[ok, :3].copy()
         fz = f[:, 2]
-        f[:, 2] = fz * (1.0 + _poly_terms(u, v, 2) @ self.gain
+        f[:, 2] = fz * (1.0 + _poly_terms(u, v, self.gain_degree) @ self.gain
                         + self.fz_quadratic * fz / self.full_scale_fz_n)
         ox, oy, oz = self.origin_m
         out[ok, :3] = f
@@ -280,14 +283,15 @@ class NonlinearCorrection:
         return cls(int(entry["degree"]), tuple(entry["half_size_m"]),
                    origin_m, np.array(entry["cop_x_m"]), np.array(entry["cop_y_m"]),
                    np.array(entry["fz_gain"]), float(entry["fz_quadratic"]),
-                   float(entry["full_scale_fz_n"]))
+                   float(entry["full_scale_fz_n"]),
+                   gain_degree=int(entry.get("fz_gain_degree", 2)))
 
     def record_entry(self) -> dict:
         return {"model": "polynomial_cop_correction", "degree": self.degree,
                 "variables": "u = COPx/half_x, v = COPy/half_y of the linearly calibrated COP; "
                              "terms u^i v^j, i + j <= degree, ordered by i then j",
                 "half_size_m": list(self.half_size_m), "cop_x_m": self.cop_x.tolist(),
-                "cop_y_m": self.cop_y.tolist(), "fz_gain_degree": 2,
+                "cop_y_m": self.cop_y.tolist(), "fz_gain_degree": self.gain_degree,
                 "fz_gain": self.gain.tolist(), "fz_quadratic": self.fz_quadratic,
                 "full_scale_fz_n": self.full_scale_fz_n,
                 "degree_cross_validation_mm": {str(k): v
@@ -350,7 +354,12 @@ def fit_nonlinear(plate: PlateDescription, lin: LinearFit, s: Samples, degree: i
     else:
         corr.cop_x, corr.cop_y = _cop_polys(T, dx), _cop_polys(T, dy)
     fz = w_lin[use, 2]
-    G = np.column_stack([_poly_terms(u, v, 2) * fz[:, None],
+    # The gain's polynomial is capped by the degree the sites support (the cross-validated
+    # COP degree): with few sites (a 2×2 grid and corners) u² and v² barely vary over the
+    # fitted sites, a full quadratic gain is collinear with the constant, and it extrapolated
+    # to the held-out sites by tens of % of Fz (seen on a kistler8 twin campaign).
+    corr.gain_degree = min(2, chosen)
+    G = np.column_stack([_poly_terms(u, v, corr.gain_degree) * fz[:, None],
                          fz ** 2 / corr.full_scale_fz_n])
     coef, *_ = np.linalg.lstsq(G, s.w_ref[use, 2] - fz, rcond=None)
     corr.gain, corr.fz_quadratic = coef[:-1], float(coef[-1])

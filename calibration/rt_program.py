@@ -12,8 +12,17 @@ robot is back at rest or stopped:
 * ``contact``: the plate's sensing element. On the twin it is the twin's true contact wrench
   and slider positions (t, wrench 6, q 3), sampled at the cycle the program plays — what the
   plate feels, which the loop never sees; the calibration client turns it into the twin plate's
-  channels on the plate's own clock. On the rig the plate's channels come from the plate's DAQ,
-  which the RT process does not acquire yet: the program is refused there.
+  channels on the plate's own clock. Empty when the client acquires the plate's DAQ itself.
+
+Where the plate's channels come from (param ``plate_daq``):
+
+* ``rt_twin`` (the default; twin only): from ``contact`` above, as just described.
+* ``client``: the calibration client reads the plate's DAQ on its own thread and clock
+  (:mod:`calibration.plate_daq`) while this program pushes — the rig's way (the RT process
+  never owns the plate's card). On the twin the twin plate then sits behind a comedi double in
+  the client, fed through the shared-memory wire ``twin_contact_shm`` that this program
+  publishes the twin's contact to every played cycle (:mod:`calibration.twin_plate_daq`). The
+  rig refuses ``rt_twin`` and ``twin_contact_shm`` (it has no twin).
 * ``meta``: JSON: the trial, the plate height, the outcome (``completed`` or ``stopped``) and the
   supervisor's causes when stopped.
 
@@ -47,6 +56,7 @@ from calibration.push import (
     TOOL_LENGTH_M,
     ForceTableGenerator,
 )
+from calibration.twin_plate_daq import WirePublisher
 from rt.errors import InputError, validation_summary
 from rt.references.program import ProgramInput, ReferenceOutput
 from rt.references.sequencer import Phase
@@ -56,6 +66,9 @@ if TYPE_CHECKING:
     from rt.service import RtService
 
 PROGRAM_NAME = "calibration_push"
+#: ``plate_daq`` values (module docstring).
+PLATE_DAQ_RT_TWIN = "rt_twin"
+PLATE_DAQ_CLIENT = "client"
 #: Gap between the tool tip and the plate at the held pose before loading (m), as in the
 #: in-process runner: the explicit force law closes it under its preload, and the impact on a
 #: stiff plate (2e6 N/m) grows with the gap (2 mm made the tool bounce to 900 N on the twin).
@@ -89,17 +102,28 @@ def plate_height_m(model: Any, z_m: float, tool_length_m: float, gap_m: float) -
 
 
 class ContactRecordingProgram:
-    """A program that plays ``inner`` and samples the twin's true contact each cycle it plays
-    (preallocated ring, no allocation in ``update``)."""
+    """A program that plays ``inner`` and, on the twin, samples the twin's true contact each
+    cycle it plays (preallocated ring, no allocation in ``update``) and publishes it to the twin
+    plate's wire when there is one (``publisher``). On the rig (``twin`` None) it only plays."""
 
-    def __init__(self, inner: Any, twin: Any, loop: Any, capacity: int) -> None:
+    def __init__(self, inner: Any, twin: Any, loop: Any, capacity: int,
+                 publisher: WirePublisher | None = None) -> None:
         self.inner = inner
         self.duration_s = inner.duration_s
         self.twin = twin
         self.loop = loop
-        self.ring = np.full((capacity, CONTACT_WIDTH), np.nan)
+        self.ring = np.full((capacity if twin is not None else 0, CONTACT_WIDTH), np.nan)
         self.written = 0
         self.armed = False
+        self.publisher = publisher
+
+    def close_wire(self) -> None:
+        """Stop publishing and unmap the wire (the recorder's thread, after the program ended:
+        the loop no longer calls ``update``; a few cycles' grace all the same)."""
+        pub, self.publisher = self.publisher, None
+        if pub is not None:
+            time.sleep(0.05)
+            pub.close()
 
     def new_output(self) -> ReferenceOutput:
         return self.inner.new_output()
@@ -118,6 +142,9 @@ class ContactRecordingProgram:
             row[1:7] = self.twin.plant.wrench_s
             row[7:10] = self.twin.plant.q
             self.written += 1
+        pub = self.publisher
+        if pub is not None:
+            pub.publish(self.loop.t, self.twin.plant.wrench_s, self.twin.plant.q)
         return status
 
 
@@ -138,10 +165,16 @@ def calibration_push(params: dict[str, Any], service: RtService) -> ContactRecor
     """``run calibration_push {plan, trial, out}`` (module docstring)."""
     from rt.twin.environment import ForcePlateContact
 
-    extra = sorted(set(params) - {"plan", "trial", "out"})
+    allowed = {"plan", "trial", "out", "plate_daq", "twin_contact_shm"}
+    extra = sorted(set(params) - allowed)
     if extra:
         raise InputError(f"calibration_push: unknown parameter(s) {extra}; allowed: "
-                         "['out', 'plan', 'trial']")
+                         f"{sorted(allowed)}")
+    plate_daq = params.get("plate_daq", PLATE_DAQ_RT_TWIN)
+    if plate_daq not in (PLATE_DAQ_RT_TWIN, PLATE_DAQ_CLIENT):
+        raise InputError(f"calibration_push: plate_daq must be {PLATE_DAQ_RT_TWIN!r} or "
+                         f"{PLATE_DAQ_CLIENT!r}, got {plate_daq!r}")
+    wire_name = params.get("twin_contact_shm")
     try:
         plan = Plan.model_validate(params.get("plan"))
         trial = Trial.model_validate(params.get("trial"))
@@ -149,9 +182,18 @@ def calibration_push(params: dict[str, Any], service: RtService) -> ContactRecor
         raise InputError(f"calibration_push: {validation_summary(exc)}") from None
     out = _check_out(params.get("out"))
     pl = service.pl
-    if pl.twin is None:
-        raise InputError("calibration_push: this RT process drives the rig, whose plate DAQ it "
-                         "does not acquire yet; calibrate on the twin (backend sim)")
+    if pl.twin is None and plate_daq != PLATE_DAQ_CLIENT:
+        raise InputError("calibration_push: this RT process drives the rig: the plate's DAQ is "
+                         "read by the calibration client (plate_daq: client; talus calibrate "
+                         "run --backend rt --plate-daq FILE)")
+    if pl.twin is None and wire_name is not None:
+        raise InputError("calibration_push: twin_contact_shm: this RT process drives the rig "
+                         "and has no twin contact to publish")
+    if pl.twin is not None and plate_daq == PLATE_DAQ_CLIENT and wire_name is None:
+        raise InputError("calibration_push: on the twin a plate read by the client needs "
+                         "twin_contact_shm (the twin plate's wire, calibration.twin_plate_daq)")
+    if plate_daq == PLATE_DAQ_RT_TWIN and wire_name is not None:
+        raise InputError("calibration_push: twin_contact_shm goes with plate_daq: client")
     dt = 1.0 / service.config.rate_hz
     try:
         profile = force_profile(plan, trial, dt)
@@ -173,18 +215,26 @@ def calibration_push(params: dict[str, Any], service: RtService) -> ContactRecor
         raise InputError(f"calibration_push: trial {trial.id}: " + "; ".join(report.violations))
     height = plate_height_m(pl.model, plan.pose_z_m, TOOL_LENGTH_M, START_GAP_M)
     _check_at_pose(pl, trial.id, pose, height)
-    env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
-                            tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-                            friction_coefficient=TIP_FRICTION_COEFFICIENT)
     twin = pl.twin
+    publisher = WirePublisher(wire_name) if wire_name is not None else None
+    if twin is not None:
+        env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
+                                tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+                                friction_coefficient=TIP_FRICTION_COEFFICIENT)
 
-    def place_plate(loop: Any) -> None:
-        twin.set_environment(env)          # the operator placed the plate (simulated)
-    pl.loop.call(place_plate, f"calibration plate at {height:.4f} m").result(timeout=2.0)
-    program = ContactRecordingProgram(gen, twin, pl.loop, len(profile) + 16)
+        def place_plate(loop: Any) -> None:
+            twin.set_environment(env)          # the operator placed the plate (simulated)
+        try:
+            pl.loop.call(place_plate, f"calibration plate at {height:.4f} m").result(timeout=2.0)
+        except BaseException:
+            if publisher is not None:
+                publisher.close()
+            raise
+    program = ContactRecordingProgram(gen, twin, pl.loop, len(profile) + 16, publisher)
     meta = {"trial": trial.model_dump(mode="json"), "plate_height_m": height,
             "tool_length_m": TOOL_LENGTH_M, "dt": dt, "pose": list(pose),
-            "profile_sha256": profile_digest(profile), "rt_pid": os.getpid()}
+            "profile_sha256": profile_digest(profile), "rt_pid": os.getpid(),
+            "plate_daq": plate_daq}
     threading.Thread(target=_record, args=(service, program, out, meta, service.tap.written),
                      name=f"calibration-{trial.id}", daemon=True).start()
     return program
@@ -242,6 +292,7 @@ def _record(service: RtService, program: ContactRecordingProgram, out: Path,
                 outcome = "stopped"
                 time.sleep(0.3)        # let the stop's events reach the log
                 break
+        program.close_wire()
         robot = np.vstack(chunks) if chunks else np.zeros((0, ROBOT_WIDTH))
         meta = {**meta, "outcome": outcome,
                 "causes": sorted(service.pl.supervisor.causes),
@@ -250,6 +301,7 @@ def _record(service: RtService, program: ContactRecordingProgram, out: Path,
     except Exception:
         import logging
         logging.getLogger(__name__).exception("calibration trial recording failed")
+        program.close_wire()
         _write(out, np.zeros((0, ROBOT_WIDTH)), np.zeros((0, CONTACT_WIDTH)),
                {**meta, "outcome": "failed", "causes": [], "events": []})
 

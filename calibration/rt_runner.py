@@ -4,11 +4,21 @@ The client's side of :mod:`calibration.rt_program`: it takes control of the robo
 and for each trial sends ``run calibration_push {plan, trial, out}``; the RT process plays the
 force-controlled push under its supervisor and writes the trial's rows to ``out`` (a temporary
 folder of this runner, on the file system both share, as session recordings are). The runner
-turns them into a :class:`~calibration.trial.TrialData` exactly as the in-process twin runner
-does (:func:`calibration.twin_runner.trial_from_rows`): the ATI and encoders as the loop saw
-them; the plate's channels from the plate's sensing element through the twin plate, on the
-plate's own clock. The operator's move of the plate between sites and its registration are
-simulated here, as on the in-process twin.
+turns them into a :class:`~calibration.trial.TrialData`: the ATI and encoders as the loop saw
+them, and the plate's channels either
+
+* from the twin's true contact the RT process recorded, through the twin plate on the plate's
+  own clock, exactly as the in-process twin runner does
+  (:func:`calibration.twin_runner.trial_from_rows`; the default on the twin), or
+* from the plate's DAQ, which this client reads on a thread of its own on the plate's clock
+  while the RT process pushes (:mod:`calibration.plate_daq`; :func:`trial_from_acquisition`):
+  a real plate's comedi card on the rig, or the twin plate behind the same driver
+  (:mod:`calibration.twin_plate_daq`). The robot's rows then stay on the RT loop's clock,
+  continuous over the campaign, so that the clock model's offset and drift (cross-correlation,
+  :mod:`calibration.alignment`) relate two real clocks.
+
+Before a site's first trial the plate is moved there: by the operator on the rig (the CLI
+waits; the camera confirms the pose, :mod:`calibration.operator`), simulated on the twin.
 """
 from __future__ import annotations
 
@@ -23,16 +33,22 @@ import numpy as np
 
 from calibration.plan import Plan, Trial, expand, force_profile
 from calibration.plate import PlateDescription
-from calibration.rt_program import PROGRAM_NAME, profile_digest
+from calibration.plate_daq import PlateAcquisition
+from calibration.registration import Registration
+from calibration.rt_program import PLATE_DAQ_CLIENT, PROGRAM_NAME, profile_digest
+from calibration.site_moves import SiteMoves
 from calibration.trial import TrialData, TrialRunner
 from calibration.twin_plate import TwinPlate
+from calibration.twin_plate_daq import TwinPlateDaq
 from calibration.twin_runner import (
     TOOL_LENGTH_M,
     _SiteMoves,
     sensor_poses,
+    site_name,
     tip_points_B,
     trial_from_rows,
 )
+from rt.devices.interfaces import ForcePlate
 from rt.errors import HardwareError, InputError, SafetyTrip
 from rt.ipc.client import RtUnavailableError
 from rt.model import RobotModel
@@ -49,23 +65,49 @@ WAIT_MARGIN_S = 45.0
 
 
 class RtTrialRunner(TrialRunner):
-    """Trials as ``calibration_push`` programs of the RT process at ``endpoint``."""
+    """Trials as ``calibration_push`` programs of the RT process at ``endpoint``.
 
-    def __init__(self, plate: PlateDescription, twin_plate: TwinPlate, plan: Plan,
+    The plate's channels come from one of (module docstring):
+
+    * ``daq`` None: the RT process's twin records the true contact; the twin plate turns it
+      into channels here (twin only);
+    * ``daq`` a :class:`calibration.twin_plate_daq.TwinPlateDaq`: the twin plate behind the
+      comedi driver, acquired here on the plate's clock (the rig's path, on the twin);
+    * ``daq`` a real ``ForcePlate`` device: the rig's plate DAQ, acquired here; the operator
+      moves the plate (``operator``) and ``camera`` confirms each move.
+
+    ``trials``: the trials that may be run (default: the plan's; a verification passes its
+    own).
+    """
+
+    def __init__(self, plate: PlateDescription, twin_plate: TwinPlate | None, plan: Plan,
                  endpoint: str, registration: str = "camera", seed: int = 0,
                  model: RobotModel | None = None,
                  level_sigma_rad: float | None = math.radians(0.1),
-                 timeout_s: float = 5.0) -> None:
+                 timeout_s: float = 5.0, daq: ForcePlate | TwinPlateDaq | None = None,
+                 moves: SiteMoves | None = None,
+                 trials: list[Trial] | None = None) -> None:
         from rt.ipc.client import RtClient, default_client_id
 
+        if daq is None and twin_plate is None:
+            raise InputError("the rt backend needs the plate's DAQ (--plate-daq) unless the "
+                             "RT process's twin records the plate")
         self.plate = plate
         self.twin_plate = twin_plate
         self.plan = plan
-        self.trials: dict[str, Trial] = {t.id: t for t in expand(plan, plate.size_m)}
+        self.trials: dict[str, Trial] = {t.id: t for t in (
+            trials if trials is not None else expand(plan, plate.size_m))}
         self.model = model or RobotModel.load()
-        self.moves = _SiteMoves(registration, seed, level_sigma_rad)
+        self.moves: SiteMoves = moves or _SiteMoves(registration, seed, level_sigma_rad)
         self.robot_time_s = 0.0
         self._t_offset = 0.0
+        self.daq = daq
+        self.acquisition: PlateAcquisition | None = None
+        if daq is not None:
+            device = daq.device if isinstance(daq, TwinPlateDaq) else daq
+            clock = daq.clock if isinstance(daq, TwinPlateDaq) else time.monotonic
+            self.acquisition = PlateAcquisition(device, plate.n_channels, plate.sample_rate_hz,
+                                                clock)
         self.folder = Path(tempfile.mkdtemp(prefix="talus-calibration-"))
         self.client = RtClient(endpoint, client_id=default_client_id("calibrate"),
                                timeout_s=timeout_s)
@@ -92,16 +134,38 @@ class RtTrialRunner(TrialRunner):
         expected = profile_digest(force_profile(self.plan, trial, dt))
         if profile_digest(profile_n) != expected:
             raise InputError(f"trial {trial_id}: its profile is not the plan's")
+        model = self.model
+        p_lvl, R_lvl = sensor_poses(model, np.array([model.kin.ik(pose[0], 0.0, 0.0).q]))
+        tip_lvl = tip_points_B(p_lvl, R_lvl, TOOL_LENGTH_M)[0]
+        # The operator moves the plate to the site (the robot resting clear below it since the
+        # last trial), and the camera confirms the move, before the robot comes to the pose.
+        T_true, registered = self.moves.place(tip_lvl, site_xy_m, site_name(trial_id))
         self._move_to(trial_id, pose)
-        started = self.client.run(PROGRAM_NAME, {
-            "plan": self.plan.model_dump(mode="json"), "trial": trial.model_dump(mode="json"),
-            "out": str(out)})
-        deadline = time.monotonic() + float(started["duration_s"]) + WAIT_MARGIN_S
-        while not out.exists():
-            if time.monotonic() > deadline:
-                raise HardwareError(f"trial {trial_id}: the RT process wrote no recording "
-                                    f"within {started['duration_s'] + WAIT_MARGIN_S:.0f} s")
-            time.sleep(POLL_S)
+        params: dict[str, object] = {"plan": self.plan.model_dump(mode="json"),
+                                     "trial": trial.model_dump(mode="json"), "out": str(out)}
+        acq = self.acquisition
+        if acq is not None:
+            params["plate_daq"] = PLATE_DAQ_CLIENT
+            if isinstance(self.daq, TwinPlateDaq):
+                self.daq.place(T_true)
+                params["twin_contact_shm"] = self.daq.wire_name
+            acq.start(len(profile_n) * dt + 2.0 * WAIT_MARGIN_S)
+        try:
+            started = self.client.run(PROGRAM_NAME, params)
+            deadline = time.monotonic() + float(started["duration_s"]) + WAIT_MARGIN_S
+            while not out.exists():
+                if time.monotonic() > deadline:
+                    raise HardwareError(f"trial {trial_id}: the RT process wrote no recording "
+                                        f"within {started['duration_s'] + WAIT_MARGIN_S:.0f} s")
+                time.sleep(POLL_S)
+        except BaseException:
+            if acq is not None and acq.running:
+                try:
+                    acq.stop()
+                except HardwareError:
+                    pass      # the trial failed already; that failure is the one to report
+            raise
+        plate_scans = acq.stop() if acq is not None else None
         with np.load(out, allow_pickle=False) as z:
             robot, contact = z["robot"], z["contact"]
             meta = json.loads(str(z["meta"]))
@@ -120,16 +184,16 @@ class RtTrialRunner(TrialRunner):
                                 f"{1.0 / dt:g} Hz (rate_hz in its config)")
         if meta["profile_sha256"] != expected:
             raise HardwareError(f"trial {trial_id}: the RT process played another profile")
-        rows, true_rows = _common_instants(trial_id, robot, contact)
-        model = self.model
-        z0 = pose[0]
-        p_lvl, R_lvl = sensor_poses(model, np.array([model.kin.ik(z0, 0.0, 0.0).q]))
-        tip_lvl = tip_points_B(p_lvl, R_lvl, TOOL_LENGTH_M)[0]
-        T_true, registered = self.moves.place(tip_lvl, site_xy_m)
-        data = trial_from_rows(trial_id, model, rows, true_rows, T_true, registered,
-                               self.twin_plate, self._t_offset)
+        if plate_scans is not None:
+            data = trial_from_acquisition(trial_id, model, robot, plate_scans[0],
+                                          plate_scans[1], registered, dt)
+        else:
+            assert self.twin_plate is not None
+            rows, true_rows = _common_instants(trial_id, robot, contact)
+            data = trial_from_rows(trial_id, model, rows, true_rows, T_true, registered,
+                                   self.twin_plate, self._t_offset)
+            self._t_offset = float(data.t_robot[-1]) + 2.0
         self.robot_time_s += float(data.t_robot[-1] - data.t_robot[0])
-        self._t_offset = float(data.t_robot[-1]) + 2.0
         return data
 
     def _move_to(self, trial_id: str, pose: tuple[float, float, float]) -> None:
@@ -165,8 +229,20 @@ class RtTrialRunner(TrialRunner):
                 except (InputError, RtUnavailableError):
                     pass        # still moving or gone: control lapses with the heartbeat
         finally:
-            self.client.close()
-            shutil.rmtree(self.folder, ignore_errors=True)
+            try:
+                self.client.close()
+            finally:
+                shutil.rmtree(self.folder, ignore_errors=True)
+                if self.acquisition is not None and self.acquisition.running:
+                    try:
+                        self.acquisition.stop()
+                    except HardwareError:
+                        pass          # closing: the trial that used it reported already
+                if self.daq is not None:
+                    self.daq.close()
+                close_moves = getattr(self.moves, "close", None)
+                if close_moves is not None:
+                    close_moves()
 
 
 def _common_instants(trial_id: str, robot: np.ndarray, contact: np.ndarray
@@ -184,3 +260,37 @@ def _common_instants(trial_id: str, robot: np.ndarray, contact: np.ndarray
     true_rows = np.column_stack([rows[:, 0]] + [np.interp(rows[:, 0], contact[:, 0],
                                                           contact[:, k]) for k in range(1, 10)])
     return rows, true_rows
+
+
+#: The longest gap tolerated between the loop's recorded rows (s): a late loop skips cycles
+#: (92 ms seen at a load of 14; the fit drops blocks across such gaps,
+#: ``dataset.MAX_ROBOT_GAP_S``); beyond this, rows are missing (the session tap overflowed).
+MAX_ROW_GAP_S = 0.5
+
+
+def trial_from_acquisition(trial_id: str, model: RobotModel, robot: np.ndarray,
+                           t_plate: np.ndarray, channels: np.ndarray,
+                           registered: Registration, dt: float) -> TrialData:
+    """A trial from the loop's rows (t, ATI wrench 6, q 3, force reference 3, phase) on the RT
+    loop's clock and the plate's scans on the plate's clock, as acquired: the clocks are
+    related later, by cross-correlation over the campaign (:mod:`calibration.alignment`)."""
+    finite = np.isfinite(robot[:, 1:7]).all(axis=1) if len(robot) else np.zeros(0, bool)
+    if not finite.any():
+        raise HardwareError(f"trial {trial_id}: the ATI sensor gave no reading")
+    rows = robot[int(np.argmax(finite)):]
+    if not np.isfinite(rows[:, 1:7]).all():
+        raise HardwareError(f"trial {trial_id}: the ATI sensor's readings stopped during "
+                            "the trial (NaN); repeat it")
+    gaps = np.diff(rows[:, 0])
+    if len(rows) < 10 or np.any(gaps <= 0.0) or float(gaps.max()) > max(MAX_ROW_GAP_S, 5 * dt):
+        raise HardwareError(f"trial {trial_id}: the RT process's rows are incomplete (a gap of "
+                            f"{float(gaps.max()) if len(gaps) else 0.0:.3f} s: the loop stalled "
+                            "or its session tap overflowed); repeat the trial")
+    if len(t_plate) < 10:
+        raise HardwareError(f"trial {trial_id}: the plate DAQ recorded {len(t_plate)} scans")
+    p_BS, R_BS = sensor_poses(model, rows[:, 7:10])
+    return TrialData(trial_id, rows[:, 0].copy(), rows[:, 1:7].copy(), p_BS, R_BS,
+                     rows[:, 10].copy(), np.asarray(t_plate, float),
+                     np.asarray(channels, float), registered.T_BF,
+                     registered.sigma_translation_m, registered.sigma_rotation_rad,
+                     TOOL_LENGTH_M)

@@ -135,8 +135,14 @@ class TwinPlate:
         return (np.asarray(t_plate) - s.clock_offset_s) / (1.0 + s.clock_drift_ppm * 1e-6)
 
     def channels(self, force_F: np.ndarray, point_F: np.ndarray,
-                 t_plate: np.ndarray) -> np.ndarray:
-        """Channel values (n, N) for loads (n, 3) at points (n, 3), at plate times (n,)."""
+                 t_plate: np.ndarray, quantized: bool = True,
+                 play_state: np.ndarray | None = None) -> np.ndarray:
+        """Channel values (n, N) for loads (n, 3) at points (n, 3), at plate times (n,).
+
+        ``quantized=False`` leaves the 16-bit quantization to a DAQ that reads the values (the
+        twin plate behind a comedi double, :mod:`calibration.twin_plate_daq`); ``play_state``
+        (N,) carries the hysteresis across calls that feed one sample at a time (updated in
+        place; None: the loop starts at the first sample)."""
         s = self.truth.settings
         felt = point_F + self.truth.bending_F(self.plate, point_F)
         w_eff = wrench_at_point(force_F, felt, self.truth.origin_true_m)
@@ -144,11 +150,11 @@ class TwinPlate:
         if s.nonlinearity:
             v = v + s.nonlinearity * v * np.abs(v) / self.ranges
         if s.hysteresis:
-            v = _play(v, s.hysteresis * self.ranges)
+            v = _play(v, s.hysteresis * self.ranges, play_state)
         v = v + self.truth.zero_offset_v + np.outer(t_plate, self.truth.drift_v_per_s)
         if s.noise_v:
             v = v + self.rng.normal(0.0, s.noise_v, v.shape)
-        if s.quantize:
+        if s.quantize and quantized:
             v = quantize(v, self.ranges)
         return v
 
@@ -173,12 +179,16 @@ def quantize(v: np.ndarray, ranges: np.ndarray, bits: int = DAQ_BITS) -> np.ndar
     return code / top * 2.0 * ranges - ranges
 
 
-def _play(v: np.ndarray, half_width: np.ndarray) -> np.ndarray:
+def _play(v: np.ndarray, half_width: np.ndarray, state: np.ndarray | None = None
+          ) -> np.ndarray:
     """Play (backlash) operator per column: the output moves only when the input pulls it
-    further than ``half_width`` — a rate-independent hysteresis loop of width 2 half_width."""
+    further than ``half_width`` — a rate-independent hysteresis loop of width 2 half_width.
+    ``state``: the output before ``v[0]`` (updated in place); None starts at ``v[0]``."""
     out = np.empty_like(v)
-    y = v[0].copy()
+    y = v[0].copy() if state is None or not np.isfinite(state).all() else state.copy()
     for k in range(v.shape[0]):
         y = np.minimum(np.maximum(y, v[k] - half_width), v[k] + half_width)
         out[k] = y
+    if state is not None:
+        state[:] = y
     return out

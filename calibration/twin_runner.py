@@ -17,7 +17,8 @@ import math
 import numpy as np
 
 from calibration import registration as reg
-from calibration.plan import Plan
+from calibration.operator import MoveTolerance, Operator, SimulatedOperator, confirm_move
+from calibration.plan import Plan, ProfileKind
 from calibration.plate import PlateDescription
 from calibration.push import (
     TIP_FRICTION_COEFFICIENT,
@@ -73,6 +74,19 @@ class ContactTruthTap(Component):
         return 0
 
 
+PROFILE_WORDS = frozenset({*(p.value for p in ProfileKind), "hold"})
+
+
+def site_name(trial_id: str) -> str:
+    """The site of a trial id (``<site>-<profile>[-k]``, :func:`calibration.plan.expand`;
+    ``<site>-hold`` for a verification's)."""
+    parts = trial_id.split("-")
+    for k, part in enumerate(parts[1:], start=1):
+        if part in PROFILE_WORDS:
+            return "-".join(parts[:k])
+    return trial_id
+
+
 def sensor_poses(model: RobotModel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(p_BS (n,3), R_BS (n,9)) from slider positions (n,3), FK every ``FK_DECIMATION``."""
     n = len(q)
@@ -96,37 +110,53 @@ def tip_points_B(p_BS: np.ndarray, R_BS: np.ndarray, tool_length_m: float) -> np
 
 
 class _SiteMoves:
-    """The operator moving the plate between sites: the true pose, then its registration."""
+    """The operator moving the plate between sites (simulated: a placement error drawn per
+    move), then its registration, checked against the planned pose when the camera registers
+    (:func:`calibration.operator.confirm_move`)."""
 
-    def __init__(self, method: str, seed: int, level_sigma_rad: float | None) -> None:
+    def __init__(self, method: str, seed: int, level_sigma_rad: float | None,
+                 operator: Operator | None = None, tolerance: MoveTolerance | None = None,
+                 placement_sigma_m: float = PLACEMENT_SIGMA_M,
+                 placement_sigma_yaw_rad: float = PLACEMENT_SIGMA_YAW_RAD) -> None:
         self.method = method
         self.level_sigma_rad = level_sigma_rad
         self.rng = np.random.default_rng(seed)
         self.rig = reg.MarkerRig()
+        self.operator: Operator = operator or SimulatedOperator()
+        self.tolerance = tolerance or MoveTolerance()
+        self.placement_sigma_m = placement_sigma_m
+        self.placement_sigma_yaw_rad = placement_sigma_yaw_rad
         self.T_BF_centre: np.ndarray | None = None
         self.current: tuple[tuple[float, float], np.ndarray, reg.Registration] | None = None
 
-    def place(self, tip_B: np.ndarray, site: tuple[float, float]
+    def place(self, tip_B: np.ndarray, site: tuple[float, float], name: str = ""
               ) -> tuple[np.ndarray, reg.Registration]:
         if self.current is not None and self.current[0] == site:
             return self.current[1], self.current[2]
         if self.T_BF_centre is None:
             self.T_BF_centre = reg.nominal_T_BF(tip_B, (0.0, 0.0))
+        T_centre = self.T_BF_centre
         planned = reg.nominal_T_BF(tip_B, site)
-        error = reg.transform(reg.rot_z(self.rng.normal(0.0, PLACEMENT_SIGMA_YAW_RAD)),
-                              np.r_[self.rng.normal(0.0, PLACEMENT_SIGMA_M, 2), 0.0])
-        true = planned @ error
-        if self.method == "camera":
+        true = [planned]
+
+        def move() -> None:        # the operator's hand: a placement error per move
+            error = reg.transform(reg.rot_z(self.rng.normal(0.0, self.placement_sigma_yaw_rad)),
+                                  np.r_[self.rng.normal(0.0, self.placement_sigma_m, 2), 0.0])
+            true[0] = planned @ error
+
+        def register() -> reg.Registration:
+            if self.method != "camera":
+                return reg.nominal(tip_B, site)
             registered = reg.average_registrations([
-                reg.camera_registration(reg.render_rig(self.rig, true, self.T_BF_centre,
-                                                       self.rng),
-                                        self.rig, self.rig.T_B_R(self.T_BF_centre))
+                reg.camera_registration(reg.render_rig(self.rig, true[0], T_centre, self.rng),
+                                        self.rig, self.rig.T_B_R(T_centre))
                 for _ in range(CAMERA_FRAMES)])
-            registered = reg.with_level_prior(registered, self.level_sigma_rad)
-        else:
-            registered = reg.nominal(tip_B, site)
-        self.current = (site, true, registered)
-        return true, registered
+            return reg.with_level_prior(registered, self.level_sigma_rad)
+
+        registered = confirm_move(self.operator, name or f"{site}", site, planned, move,
+                                  register, self.tolerance if self.method == "camera" else None)
+        self.current = (site, true[0], registered)
+        return true[0], registered
 
 
 class TwinTrialRunner(TrialRunner):
@@ -135,12 +165,13 @@ class TwinTrialRunner(TrialRunner):
     def __init__(self, plate: PlateDescription, twin_plate: TwinPlate,
                  registration: str = "camera", seed: int = 0,
                  model: RobotModel | None = None,
-                 level_sigma_rad: float | None = math.radians(0.1)) -> None:
+                 level_sigma_rad: float | None = math.radians(0.1),
+                 moves: _SiteMoves | None = None) -> None:
         self.plate = plate
         self.twin_plate = twin_plate
         self.model = model or RobotModel.load()
         self.seed = seed
-        self.moves = _SiteMoves(registration, seed, level_sigma_rad)
+        self.moves = moves or _SiteMoves(registration, seed, level_sigma_rad)
         self.robot_time_s = 0.0
         self._t_offset = 0.0      # robot clock across trials (s)
 
@@ -152,7 +183,7 @@ class TwinTrialRunner(TrialRunner):
         # The plate's height is the same for every pose: set by the level pose's tool tip.
         p_lvl, R_lvl = sensor_poses(model, np.array([model.kin.ik(z0, 0.0, 0.0).q]))
         tip_lvl = tip_points_B(p_lvl, R_lvl, TOOL_LENGTH_M)[0]
-        T_true, registered = self.moves.place(tip_lvl, site_xy_m)
+        T_true, registered = self.moves.place(tip_lvl, site_xy_m, site_name(trial_id))
         height = float(tip_lvl[2]) + START_GAP_M
         env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
                                 tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
@@ -291,23 +322,85 @@ class DirectTrialRunner(TrialRunner):
 
 def make_runner(backend: str, plate: PlateDescription, seed: int, registration: str,
                 level_sigma_rad: float | None = math.radians(0.1), plan: Plan | None = None,
-                endpoint: str | None = None) -> tuple[TrialRunner, PlateTruth]:
-    """The runner named ``backend`` on a twin plate drawn from ``seed``: ``twin`` (the robot
-    twin in this process), ``direct`` (no robot) or ``rt`` (the RT process at ``endpoint``
-    plays each trial; ``plan`` is the campaign's plan, sent with each trial)."""
+                endpoint: str | None = None, plate_daq: str | None = None,
+                operator: Operator | None = None, camera: str | None = None,
+                tolerance: MoveTolerance | None = None, trials: list | None = None
+                ) -> tuple[TrialRunner, PlateTruth | None]:
+    """The runner named ``backend``: ``twin`` (the robot twin in this process), ``direct`` (no
+    robot) or ``rt`` (the RT process at ``endpoint`` plays each trial; ``plan`` is the
+    campaign's plan, sent with each trial; ``trials`` the ones it may run, default the plan's).
+
+    The plate: the twin plate drawn from ``seed`` (its truth returned), unless ``plate_daq``
+    (``rt`` only) names a real DAQ's file (:mod:`calibration.plate_daq`): then the client
+    acquires that plate, ``operator`` moves it between sites and ``camera`` (``opencv[:N]``,
+    a registry camera backend) confirms each move; no truth. ``plate_daq="twin"``: the twin
+    plate behind the same driver (:mod:`calibration.twin_plate_daq`), moves simulated."""
     if backend not in ("twin", "direct", "rt"):
         raise InputError(f"unknown backend {backend!r}: use twin, direct or rt")
-    truth = draw_truth(plate, seed=seed)
-    twin_plate = TwinPlate(plate, truth, seed=seed + 1)
-    if backend == "direct":
-        return DirectTrialRunner(plate, twin_plate, seed=seed), truth
+    if plate_daq is not None and backend != "rt":
+        raise InputError("--plate-daq goes with --backend rt (the twin and direct backends "
+                         "simulate the plate in this process)")
     if backend == "rt":
         from calibration.rt_runner import RtTrialRunner
         from rt.ipc.messages import DEFAULT_ENDPOINT
 
         if plan is None:
             raise InputError("the rt backend needs the campaign's plan")
-        return RtTrialRunner(plate, twin_plate, plan, endpoint or DEFAULT_ENDPOINT,
-                             registration, seed, level_sigma_rad=level_sigma_rad), truth
+        ep = endpoint or DEFAULT_ENDPOINT
+        if plate_daq is not None and plate_daq != "twin":
+            return _real_plate_runner(plate, plan, ep, plate_daq, registration, level_sigma_rad,
+                                      operator, camera, tolerance, trials), None
+    truth = draw_truth(plate, seed=seed)
+    twin_plate = TwinPlate(plate, truth, seed=seed + 1)
+    if backend == "direct":
+        return DirectTrialRunner(plate, twin_plate, seed=seed), truth
+    if backend == "rt":
+        assert plan is not None            # checked above
+        moves = _SiteMoves(registration, seed, level_sigma_rad, operator, tolerance)
+        model = RobotModel.load()
+        daq = None
+        if plate_daq == "twin":
+            from calibration.twin_plate_daq import TwinPlateDaq
+
+            daq = TwinPlateDaq(plate, twin_plate, model, TOOL_LENGTH_M)
+        try:
+            return RtTrialRunner(plate, twin_plate, plan, ep, registration, seed, model=model,
+                                 level_sigma_rad=level_sigma_rad, daq=daq, moves=moves,
+                                 trials=trials), truth
+        except BaseException:
+            if daq is not None:
+                daq.close()
+            raise
     return TwinTrialRunner(plate, twin_plate, registration=registration, seed=seed,
-                           level_sigma_rad=level_sigma_rad), truth
+                           level_sigma_rad=level_sigma_rad,
+                           moves=_SiteMoves(registration, seed, level_sigma_rad, operator,
+                                            tolerance)), truth
+
+
+def _real_plate_runner(plate: PlateDescription, plan: Plan, endpoint: str, daq_file: str,
+                       registration: str, level_sigma_rad: float | None,
+                       operator: Operator | None, camera: str | None,
+                       tolerance: MoveTolerance | None, trials: list | None) -> TrialRunner:
+    """A real plate's DAQ and camera, the RT process pushing (``make_runner``)."""
+    from calibration.plate_daq import load_daq_config, open_plate_device
+    from calibration.rt_runner import RtTrialRunner
+    from calibration.site_moves import CameraSiteMoves
+    from rt.devices import registry
+
+    if operator is None:
+        raise InputError("a real plate needs an operator to move it between sites")
+    cam = None
+    device = open_plate_device(load_daq_config(daq_file), plate.n_channels)
+    try:
+        if registration == "camera":
+            name, _, source = (camera or "opencv").partition(":")
+            kw = {"source": int(source) if source.isdigit() else source} if source else {}
+            cam = registry.create("camera", name, **kw)
+        moves = CameraSiteMoves(operator, cam, registration, level_sigma_rad, tolerance)
+        return RtTrialRunner(plate, None, plan, endpoint, registration, daq=device,
+                             moves=moves, trials=trials, level_sigma_rad=level_sigma_rad)
+    except BaseException:
+        device.close()
+        if cam is not None:
+            cam.close()
+        raise

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +39,10 @@ def check_sites(size_m: tuple[float, float]) -> list[tuple[str, float, float]]:
 def verify(record_path: Path, out: Path, backend: str, seed: int, load_n: float,
            thresholds: metrics.Thresholds,
            progress: Callable[[int, int, str], None] | None = None,
-           plate_file: Path = TWIN_PLATE_FILE) -> dict:
+           plate_file: Path = TWIN_PLATE_FILE, runner_kw: dict[str, Any] | None = None) -> dict:
+    """Run the check into the new folder ``out`` and judge it (module docstring).
+    ``runner_kw``: :func:`calibration.twin_runner.make_runner`'s keywords for the rt backend
+    (endpoint, plate DAQ, operator, camera, move tolerance)."""
     if not math.isfinite(load_n) or load_n < MIN_LOAD_N:
         raise InputError(f"--load must be at least {MIN_LOAD_N:.0f} N (COP is not judged "
                          f"below it), got {load_n}")
@@ -53,9 +57,12 @@ def verify(record_path: Path, out: Path, backend: str, seed: int, load_n: float,
     plan = default_plan(registration=record["registration"]["method"])
     trials = [Trial(id=f"{name}-hold", site=name, site_xy_m=(x, y), profile=ProfileKind.TILTED,
                     held_out=True, load_n=load_n) for name, x, y in check_sites(plate.size_m)]
-    runner, _ = make_runner(backend, plate, seed, plan.registration,
-                               plan.level_sigma_rad())
-    run_campaign(plan, plate_file, runner, out, None, progress, trials=trials)
+    runner, _ = make_runner(backend, plate, seed, plan.registration, plan.level_sigma_rad(),
+                            plan=plan, trials=trials, **(runner_kw or {}))
+    try:
+        run_campaign(plan, plate_file, runner, out, None, progress, trials=trials)
+    finally:
+        runner.close()          # the RT runner's heartbeat, control and DAQ
     index = read_campaign(out)
     data = [TrialData.load(out / TRIALS_DIR / f"{e['id']}.npz") for e in index["trials"]]
     clock = dataset.align_clocks(plate, data)
