@@ -15,6 +15,11 @@
    ankle torque the product reports (the twin ATI sensor's wrench moved to the ankle centre)
    vs the twin ankle's true joint torque, N·m RMS over the holds; also the torque about the
    sensor origin (what was reported before) and about an ankle centre entered 10 mm too high.
+4. Isometric holds with an ankle-torque target regulated by the loop (``protocols.
+   torque_hold``; plantarflexion and dorsiflexion 8 N·m, inversion and eversion 5 N·m, 5 s
+   at full target each, on the twin's passive ankle, through pre-flight): per hold, the
+   torque reported against the target and against the twin ankle's true torque (N·m RMS
+   over the full-target stretch, 1 kHz samples).
 
     .venv/bin/python bench/ankle.py [--json]
 
@@ -157,6 +162,22 @@ def isometric(model: RobotModel) -> dict:
             "rms_error_nm": rms}
 
 
+TORQUE_HOLDS = {"schema_version": 1, "kind": "isometric_hold", "name": "ankle-torque holds",
+                "pose": {"z_m": 0.63},
+                "holds": [{"roll_deg": 0.0, "pitch_deg": 0.0, "hold_s": 5.0, "rest_s": 0.5,
+                           "torque": {"direction": d, "target_nm": t}}
+                          for d, t in (("plantarflexion", 8.0), ("dorsiflexion", 8.0),
+                                       ("inversion", 5.0), ("eversion", 5.0))],
+                "transition_speed_deg_s": 10.0}
+
+
+def torque_holds(model: RobotModel) -> list[dict]:
+    from protocols.session import preflight
+    setup = SessionSetup(protocol=validate_protocol_data(TORQUE_HOLDS), ankle=SETUP,
+                         patient_limits=LIMITS)
+    return preflight(setup, model)["predicted"]["ankle_torque_holds"]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", action="store_true")
@@ -164,7 +185,7 @@ def main() -> None:
     model = RobotModel.load()
     result = {"rate_hz": RATE_HZ, "twin": True, "setup": SETUP.model_dump(),
               "displacement": displacement(model), "on_twin": on_twin(model),
-              "isometric": isometric(model)}
+              "isometric": isometric(model), "torque_holds": torque_holds(model)}
     if args.json:
         print(json.dumps(result, indent=2))
         return
@@ -189,6 +210,13 @@ def main() -> None:
           "the reported torque:")
     for k, v in r["rms_error_nm"].items():
         print(f"   {k:26s} {v:.3f} N m")
+    print("4. ankle-torque holds regulated on the twin's passive ankle (N m, full-target "
+          "stretch, 1 kHz):")
+    for h in result["torque_holds"]:
+        print(f"   {h['direction']:15s} target {h['target_nm']:4.1f}: reported mean "
+              f"{h['reported_mean_nm']:6.2f} (RMS {h['rms_error_to_target_nm']:.3f} from the "
+              f"target), true mean {h['true_mean_nm']:6.2f}; reported vs true RMS "
+              f"{h['rms_reported_vs_true_nm']:.3f}")
 
 
 if __name__ == "__main__":

@@ -200,6 +200,9 @@ class _Session:
     first_event: int = 0
     start_latency_s: float = math.nan
     stop: threading.Event = field(default_factory=threading.Event)
+    #: The pump's ankle monitor (``/ankle/state``) when the patient has an ankle setup: its
+    #: last message is the ankle's live state in telemetry.
+    ankle: AnkleMonitor | None = None
 
 
 class RtService:
@@ -614,6 +617,7 @@ class RtService:
         still_since: float | None = None
         ankle = None if s.patient.ankle is None else \
             AnkleMonitor(self.pl.model.kin, s.patient.ankle, s.prepared.start_pose)
+        s.ankle = ankle
         fz, fr = COL_FZ, COL_FREF
         qd = COLUMNS["qd"]
         try:
@@ -883,4 +887,8 @@ def telemetry(service: RtService) -> dict[str, Any]:
         "causes": sorted(pl.supervisor.causes),
         "session": None if s is None else s.id,
         "owner": service.owner.name,
+        # The ankle's state during a session with the patient's ankle setup: the last
+        # /ankle/state message (rt.model.ankle.AnkleMonitor.state: angles from neutral deg,
+        # torques about the ankle centre N·m, centre displacement mm), else None.
+        "ankle": None if s is None or s.ankle is None else s.ankle.last,
     }
