@@ -269,6 +269,17 @@ class TorqueHoldGenerator(IsometricHoldGenerator):
         return {"torque_holds": [w.as_dict(self.dt) for w in self.windows],
                 "dt": self.dt}
 
+    def live_target(self) -> dict[str, Any] | None:
+        """The regulated hold being played and its target now (clinical N·m, ramps included),
+        for live views (the RT process's telemetry, another thread: reads ``index`` only);
+        None outside the regulated holds."""
+        k = self.index
+        for w in self.windows:
+            if w.k_arrive < k <= w.k_zero:
+                return {"hold": w.hold, "direction": w.direction, "target_nm": w.target_nm,
+                        "now_nm": w.clinical_sign * w.target_at(k)}
+        return None
+
     # ------------------------------------------------------------------ the cycle
     def reset(self) -> None:
         super().reset()

@@ -891,4 +891,15 @@ def telemetry(service: RtService) -> dict[str, Any]:
         # /ankle/state message (rt.model.ankle.AnkleMonitor.state: angles from neutral deg,
         # torques about the ankle centre N·m, centre displacement mm), else None.
         "ankle": None if s is None or s.ankle is None else s.ankle.last,
+        # An isometric hold's ankle-torque target now ({hold, direction, target_nm, now_nm}:
+        # protocols.torque_hold.TorqueHoldGenerator.live_target), else None.
+        "ankle_target": _live_target(s),
     }
+
+
+def _live_target(s: _Session | None) -> dict[str, Any] | None:
+    """The session program's live target, when it has one (duck-typed: rt does not know
+    protocols)."""
+    live = getattr(s.prepared.program, "live_target", None) \
+        if s is not None and s.prepared is not None else None
+    return None if live is None else live()

@@ -66,13 +66,16 @@ def test_an_ankle_torque_hold_in_the_rt_process_streams_the_ankle_live(tmp_path)
                                                   "ankle": SETUP.model_dump()})
             sid = started["session_id"]
             assert started["preflight"]["ankle_torque_holds"][0]["target_nm"] == 5.0
-            live = []
+            live: list[dict] = []
+            targets: list[dict] = []
             end = time.monotonic() + 120.0
             summary = None
             while time.monotonic() < end:
                 msg = sub.recv(0.2)
                 if msg is not None and msg.get("session") == sid and msg.get("ankle"):
                     live.append(msg["ankle"])
+                    if msg.get("ankle_target"):
+                        targets.append(msg["ankle_target"])
                 st = client.session_status()
                 if st["session"] != sid:
                     summary = st["last_summary"]
@@ -88,6 +91,10 @@ def test_an_ankle_torque_hold_in_the_rt_process_streams_the_ankle_live(tmp_path)
             "inversion_torque_nm", "centre_displacement_mm"} <= set(live[-1])
     assert max(m["plantarflexion_torque_nm"] for m in live) == pytest.approx(5.0, abs=1.0)
     assert min(m["plantarflexion_deg"] for m in live) < -3.0
+    # The hold's target rides along while it is regulated, ramps included.
+    assert targets and all(t["direction"] == "plantarflexion" and t["target_nm"] == 5.0
+                           and 0.0 <= t["now_nm"] <= 5.0 for t in targets)
+    assert max(t["now_nm"] for t in targets) == 5.0
     # The RT process regulated the torque about the ankle centre to the target.
     (h,) = summary["ankle"]["torque_holds"]
     assert h["reported_mean_nm"] == pytest.approx(5.0, abs=0.4)
