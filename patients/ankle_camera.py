@@ -16,8 +16,8 @@ camera, its centre on the malleolus's most prominent point. From one frame:
    the sensor's axis → an :class:`~rt.model.ankle.AnkleSetup` with ``source="camera"``.
 
 Uncertainty: each pose's covariance is ``s² (JᵀJ)⁻¹`` (J the projection Jacobian, s² the
-reprojection residual variance floored at the detector's ~0.05 px, as the force-plate
-registration); the centre's standard uncertainty per axis of P comes from sampling the three
+reprojection residual variance floored at the detector's ~0.05 px for the board, as the
+force-plate registration, 0.15 px for a lone marker: :data:`MARKER_CORNER_SIGMA_FLOOR_PX`); the centre's standard uncertainty per axis of P comes from sampling the three
 poses (Monte Carlo, fixed seed). It covers the camera's part only: where the clinician put the
 markers on the malleoli is not seen by the camera (palpation repeatability is a few mm).
 
@@ -39,8 +39,13 @@ from rt.drivers.synthetic_frames import MarkerBoard, PinholeCamera, render_board
 from rt.errors import InputError
 from rt.model.ankle import AnkleSetup, sensor_to_ankle_S, setup_from_malleoli
 
-#: Corner localization floor (px, 1 σ) when the residuals are smaller than that.
+#: Corner localization floor (px, 1 σ) when the residuals are smaller than that: the board's
+#: many corners (as the force-plate registration); a lone malleolus marker's four corners
+#: leave 2 degrees of freedom to estimate it from, and its sub-pixel corners were biased
+#: inwards by ~0.1 px on the twin (its centre 1-2 mm too far along the optical axis), so its
+#: floor is set at 0.15 px.
 CORNER_SIGMA_FLOOR_PX = 0.05
+MARKER_CORNER_SIGMA_FLOOR_PX = 0.15
 #: Half the distance between the malleoli's markers the twin puts about the centre (m): adults'
 #: bimalleolar width is 60-80 mm (``rt.model.ankle.MALLEOLI_WIDTH_RANGE_M``); the lateral tip
 #: sits a little lower and further back than the medial one.
@@ -48,7 +53,7 @@ TWIN_HALF_WIDTH_M = 0.035
 TWIN_LATERAL_OFFSET_M = (-0.006, -0.006)    # (along the foot, vertical), medial: the opposite
 
 
-def _transform(R: np.ndarray, p: Sequence[float]) -> np.ndarray:
+def _transform(R: np.ndarray, p: Sequence[float] | np.ndarray) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, np.asarray(p, float)
     return T
@@ -143,15 +148,19 @@ def _detect(frame: np.ndarray, dictionary: int) -> dict[int, np.ndarray]:
     if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
         raise InputError(f"camera frame: expected a BGR uint8 image (H × W × 3), got "
                          f"{frame.dtype} {frame.shape}")
-    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(dictionary),
-                                       cv2.aruco.DetectorParameters())
+    params = cv2.aruco.DetectorParameters()
+    # Sub-pixel corners: a lone malleolus marker has only its four corners to give its depth
+    # (without refinement its centre was off by 5-9 mm along the optical axis on the twin).
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(dictionary), params)
     corners, ids, _ = detector.detectMarkers(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
     if ids is None:
         return {}
     return {int(i): c.reshape(4, 2).astype(np.float64) for c, i in zip(corners, ids.ravel())}
 
 
-def _pose(obj: np.ndarray, img: np.ndarray, camera: PinholeCamera, first: tuple | None = None
+def _pose(obj: np.ndarray, img: np.ndarray, camera: PinholeCamera, first: tuple | None = None,
+          floor_px: float = CORNER_SIGMA_FLOOR_PX
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(rvec, tvec, 6 × 6 covariance, residuals px) of object points seen at ``img``."""
     if first is None:
@@ -166,7 +175,7 @@ def _pose(obj: np.ndarray, img: np.ndarray, camera: PinholeCamera, first: tuple 
     proj, jac = cv2.projectPoints(obj, rvec, tvec, camera.K, camera.dist_coeffs)
     resid = (proj.reshape(-1, 2) - img).ravel()
     dof = max(resid.size - 6, 1)
-    s2 = max(float(resid @ resid) / dof, CORNER_SIGMA_FLOOR_PX ** 2)
+    s2 = max(float(resid @ resid) / dof, floor_px ** 2)
     J = jac[:, :6]
     return rvec.reshape(3), tvec.reshape(3), s2 * np.linalg.inv(J.T @ J), resid
 
@@ -202,7 +211,8 @@ def measure_malleoli(frame: np.ndarray, rig: MalleoliRig, side: str,
     residuals = [res_b]
     for marker_id in (rig.lateral_id, rig.medial_id):
         corners = rig.marker(marker_id).marker_corners_B(marker_id)
-        r_m, t_m, cov_m, res_m = _pose(corners, seen[marker_id], rig.camera)
+        _, t_m, cov_m, res_m = _pose(corners, seen[marker_id], rig.camera,
+                                     floor_px=MARKER_CORNER_SIGMA_FLOOR_PX)
         markers.append((t_m, cov_m))
         residuals.append(res_m)
     T_P_R = rig.T_P_R()
@@ -213,8 +223,10 @@ def measure_malleoli(frame: np.ndarray, rig: MalleoliRig, side: str,
 
     lateral = to_P(r_b, t_b, markers[0][0])
     medial = to_P(r_b, t_b, markers[1][0])
-    setup = setup_from_malleoli(tuple(lateral), tuple(medial), side, sensor_offset_m,
-                                sole_above_sensor_m)
+    setup = setup_from_malleoli(
+        (float(lateral[0]), float(lateral[1]), float(lateral[2])),
+        (float(medial[0]), float(medial[1]), float(medial[2])), side,
+        [float(v) for v in sensor_offset_m], sole_above_sensor_m)
     # Monte Carlo over the three poses: the centre's spread in P.
     rng = np.random.default_rng(seed)
     xb = rng.multivariate_normal(np.r_[r_b, t_b], cov_b, size=samples)
@@ -247,8 +259,8 @@ def twin_malleoli(truth: AnkleSetup, sensor_offset_m: Sequence[float]
     return (centre + np.array([dx, -medial_y, dz]), centre + np.array([-dx, medial_y, -dz]))
 
 
-def render_malleoli(rig: MalleoliRig, lateral_P: Sequence[float] | None,
-                    medial_P: Sequence[float] | None, seed: int = 0,
+def render_malleoli(rig: MalleoliRig, lateral_P: Sequence[float] | np.ndarray | None,
+                    medial_P: Sequence[float] | np.ndarray | None, seed: int = 0,
                     show_board: bool = True) -> np.ndarray:
     """The twin camera's frame (BGR uint8): the platform's board and the malleolus markers
     (None: that marker is not in view) at their poses in P, facing the camera's way

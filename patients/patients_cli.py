@@ -319,8 +319,9 @@ def _measure_ankle(args: argparse.Namespace, side: str) -> tuple[dict[str, Any],
             raise InputError(f"--twin-truth {args.twin_truth!r}: give H,X,Y in m, e.g. "
                              "0.07,0.01,0") from None
         try:
-            truth = AnkleSetup(side=side, height_above_sole_m=h, offset_x_m=x, offset_y_m=y,
-                               sole_above_sensor_m=sole)
+            truth = AnkleSetup.model_validate({
+                "side": side, "height_above_sole_m": h, "offset_x_m": x, "offset_y_m": y,
+                "sole_above_sensor_m": sole})
         except ValidationError as exc:
             raise InputError(f"--twin-truth: {validation_summary(exc)}") from None
         frame = render_malleoli(rig, *twin_malleoli(truth, offset))

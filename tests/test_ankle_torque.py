@@ -3,6 +3,7 @@ hand-computed spring ankle, the worst-case bounds pre-flight checks, the per-hol
 and on the twin's passive ankle the torque reported against the target and the truth."""
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -82,7 +83,7 @@ def test_the_target_ramps_in_holds_and_ramps_out() -> None:
     assert w.target_at((w.k_arrive + w.k_full) // 2) == pytest.approx(-3.0)
     assert w.target_at(w.k_full) == w.target_at(w.k_release) == -6.0
     ramp = [w.target_at(k) for k in range(w.k_arrive, w.k_full + 1)]
-    assert all(b <= a for a, b in zip(ramp, ramp[1:], strict=False))
+    assert all(b <= a for a, b in itertools.pairwise(ramp))
 
 
 def _drive(gen: TorqueHoldGenerator, stiffness: float) -> np.ndarray:
