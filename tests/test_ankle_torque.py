@@ -191,13 +191,15 @@ def test_per_hold_figures_match_hand_statics() -> None:
 
 
 def test_preflight_on_the_twin_reports_the_torque_against_target_and_truth() -> None:
-    doc = holds(("plantarflexion", 6.0), hold_s=2.0)
+    doc = holds(("plantarflexion", 6.0), hold_s=4.0)
     pre = preflight(SessionSetup(protocol=validate_protocol_data(doc), ankle=RIGHT), MODEL)
     (h,) = pre["predicted"]["ankle_torque_holds"]
-    # The loop regulates the reported torque to the target (2 s at full target; the twin's
-    # ankle 45 N m/rad, rising towards 20°, so about 7.5° of dorsiflexion).
-    assert h["reported_mean_nm"] == pytest.approx(6.0, abs=0.3)
-    assert h["rms_error_to_target_nm"] < 0.5
+    # The loop regulates the reported torque to the target: the twin's ankle (45 N m/rad,
+    # rising towards 20°) settles at about 6.9° of dorsiflexion with the admittance's slow
+    # pole K/B = 2.25 /s, so the torque still lags by ~2 N m when the ramp ends and meets the
+    # target within 0.05 N m after 2 s (measured); the mean over the 4 s is ~0.3 N m low.
+    assert h["reported_mean_nm"] == pytest.approx(6.0, abs=0.5)
+    assert h["rms_error_to_target_nm"] < 1.0
     # What the product reports is the twin ankle's true joint torque within the sensor's
     # noise and filter lag (0.05 N m RMS measured at fixed angles: bench/ankle.py).
     assert h["true_mean_nm"] == pytest.approx(6.0, abs=0.4)
