@@ -3,8 +3,11 @@ hand-computed spring ankle, the worst-case bounds pre-flight checks, the per-hol
 and on the twin's passive ankle the torque reported against the target and the truth."""
 from __future__ import annotations
 
+import datetime as dt
 import itertools
 import math
+import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -12,8 +15,10 @@ import pytest
 from protocols.generators import make_generator
 from protocols.output import GeneratorInput, GeneratorStatus
 from protocols.schema import validate_protocol_data
-from protocols.session import SessionSetup, preflight
+from protocols.session import SessionSetup, preflight, run_session
 from protocols.torque_hold import TorqueHoldFigures, TorqueHoldGenerator
+from reports.session_data import session_input_from_recording
+from reports.session_report import render_session_report
 from rt.errors import ProtocolValidationError
 from rt.model import RobotModel
 from rt.model.ankle import AnkleSetup, ankle_torques
@@ -204,3 +209,26 @@ def test_preflight_on_the_twin_reports_the_torque_against_target_and_truth() -> 
     # noise and filter lag (0.05 N m RMS measured at fixed angles: bench/ankle.py).
     assert h["true_mean_nm"] == pytest.approx(6.0, abs=0.4)
     assert h["rms_reported_vs_true_nm"] < 0.3
+
+
+def test_the_session_and_its_report_give_each_hold_against_target_and_truth(tmp_path) -> None:
+    out = tmp_path / "holds.mcap"
+    doc = holds(("dorsiflexion", 5.0), hold_s=3.0)
+    s = run_session(SessionSetup(protocol=validate_protocol_data(doc), ankle=RIGHT), out)
+    assert s["completed"], s["stops"]
+    (h,) = s["ankle"]["torque_holds"]
+    assert h["direction"] == "dorsiflexion" and h["target_nm"] == 5.0
+    assert h["reported_mean_nm"] == pytest.approx(5.0, abs=0.6)
+    # In process the twin's truth is beside the rows: the reported torque is the true one.
+    assert h["rms_reported_vs_true_nm"] < 0.3
+    assert s["preflight"]["ankle_torque_holds"][0]["rms_reported_vs_true_nm"] < 0.3
+    assert "source" not in s      # the holds' windows are not a replayed record's source
+    inp = session_input_from_recording(out)
+    inp.summary = s               # the RT process writes it into /session/summary
+    pdf = tmp_path / "holds.pdf"
+    render_session_report(inp, pdf, clock=lambda: dt.datetime(2026, 11, 25, tzinfo=dt.UTC))
+    if shutil.which("pdftotext"):
+        text = subprocess.run(["pdftotext", "-layout", str(pdf), "-"], capture_output=True,
+                              text=True, check=True).stdout
+        assert "Hold 1: dorsiflexion torque" in text and "target 5.0 N·m" in text
+        assert "pre-flight (twin)" in text
