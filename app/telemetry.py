@@ -16,8 +16,15 @@ from typing import Any
 
 import numpy as np
 
-#: The ring's columns, in order (SI units: s, N, rad; progress 0..1).
-COLUMNS = ("t", "force_ref", "force", "roll", "pitch", "roll_ref", "pitch_ref", "progress")
+#: The ring's columns, in order (SI units: s, N, rad, N·m, m; progress 0..1). The ``ankle_``
+#: columns are the patient's ankle during a session with an ankle setup (telemetry's
+#: ``ankle``, the RT process's ``/ankle/state``), NaN otherwise: plantarflexion (+) /
+#: dorsiflexion (-) and inversion (+) / eversion (-) from the neutral pose (rad), the torques
+#: about the ankle centre in the same directions (N·m), and the ankle centre's horizontal
+#: displacement (m).
+COLUMNS = ("t", "force_ref", "force", "roll", "pitch", "roll_ref", "pitch_ref", "progress",
+           "ankle_plantarflexion", "ankle_inversion", "ankle_plantarflexion_torque",
+           "ankle_inversion_torque", "ankle_centre_displacement")
 _COL = {name: i for i, name in enumerate(COLUMNS)}
 #: A repetition's end counts when the angle passes this share of the prescribed amplitude
 #: (half: a patient who reaches half their range did the movement; noise near neutral does not).
@@ -135,6 +142,20 @@ class RepetitionCounter:
             a.feed(pitch_deg if a.column == "pitch" else roll_deg)
 
 
+def _ankle_row(ankle: Any) -> tuple[float, float, float, float, float]:
+    """The ring's ankle columns (SI) from telemetry's ``ankle`` (deg, N·m, mm); NaN when
+    absent or malformed."""
+    if not isinstance(ankle, dict):
+        return (math.nan,) * 5
+    d = ankle.get("centre_displacement_mm")
+    horizontal = math.hypot(_f(d[0]), _f(d[1])) * 1e-3 \
+        if isinstance(d, list | tuple) and len(d) >= 2 else math.nan
+    return (math.radians(_f(ankle.get("plantarflexion_deg"))),
+            math.radians(_f(ankle.get("inversion_deg"))),
+            _f(ankle.get("plantarflexion_torque_nm")), _f(ankle.get("inversion_torque_nm")),
+            horizontal)
+
+
 class TelemetryRing:
     """The last ``capacity`` telemetry samples as numpy columns, written by the subscriber
     thread, read by the GUI thread at the frame rate (thread-safe)."""
@@ -169,7 +190,7 @@ class TelemetryRing:
                _f(pose[2]) if len(pose) > 2 else math.nan,
                _f(ref[1]) if len(ref) > 2 else math.nan,
                _f(ref[2]) if len(ref) > 2 else math.nan,
-               _f(msg.get("progress")))
+               _f(msg.get("progress")), *_ankle_row(msg.get("ankle")))
         with self._lock:
             self._data[self._written % self.capacity] = row
             self._written += 1

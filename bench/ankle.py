@@ -15,6 +15,15 @@
    ankle torque the product reports (the twin ATI sensor's wrench moved to the ankle centre)
    vs the twin ankle's true joint torque, N·m RMS over the holds; also the torque about the
    sensor origin (what was reported before) and about an ankle centre entered 10 mm too high.
+4. Isometric holds with an ankle-torque target regulated by the loop (``protocols.
+   torque_hold``; plantarflexion and dorsiflexion 8 N·m, inversion and eversion 5 N·m, 5 s
+   at full target each, on the twin's passive ankle, through pre-flight): per hold, the
+   torque reported against the target and against the twin ankle's true torque (N·m RMS
+   over the full-target stretch, 1 kHz samples).
+
+5. The ankle centre measured by the twin camera (``patients.ankle_camera``: ArUco markers on
+   both malleoli and the platform's board, one 1280 × 960 frame per foot placement, 5
+   placements): error against the truth per axis (mm) and the stated 1 σ.
 
     .venv/bin/python bench/ankle.py [--json]
 
@@ -157,6 +166,48 @@ def isometric(model: RobotModel) -> dict:
             "rms_error_nm": rms}
 
 
+TORQUE_HOLDS = {"schema_version": 1, "kind": "isometric_hold", "name": "ankle-torque holds",
+                "pose": {"z_m": 0.63},
+                "holds": [{"roll_deg": 0.0, "pitch_deg": 0.0, "hold_s": 5.0, "rest_s": 0.5,
+                           "torque": {"direction": d, "target_nm": t}}
+                          for d, t in (("plantarflexion", 8.0), ("dorsiflexion", 8.0),
+                                       ("inversion", 5.0), ("eversion", 5.0))],
+                "transition_speed_deg_s": 10.0}
+
+
+def torque_holds(model: RobotModel) -> list[dict]:
+    from protocols.session import preflight
+    setup = SessionSetup(protocol=validate_protocol_data(TORQUE_HOLDS), ankle=SETUP,
+                         patient_limits=LIMITS)
+    return preflight(setup, model)["predicted"]["ankle_torque_holds"]
+
+
+def camera() -> dict:
+    # Run as a script, bench/ is first on sys.path and bench/patients.py would shadow the
+    # package: the repository's root goes first (as bench/patients.py does).
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from patients.ankle_camera import MalleoliRig, measure_malleoli, render_malleoli, twin_malleoli
+    from rt.model.description import load_description
+    offset = list(load_description().sensor.offset_m)
+    rig = MalleoliRig()
+    errors, sigmas = [], []
+    for side, h, x, y in (("right", 0.07, 0.0, 0.0), ("left", 0.085, 0.02, -0.015),
+                          ("right", 0.06, -0.01, 0.01), ("left", 0.075, 0.0, 0.02),
+                          ("right", 0.09, 0.03, -0.02)):
+        truth = AnkleSetup(side=side, height_above_sole_m=h, offset_x_m=x, offset_y_m=y)
+        m = measure_malleoli(render_malleoli(rig, *twin_malleoli(truth, offset)), rig, side,
+                             offset)
+        errors.append([(m.setup.offset_x_m - x) * 1e3, (m.setup.offset_y_m - y) * 1e3,
+                       (m.setup.height_above_sole_m - h) * 1e3])
+        sigmas.append([v * 1e3 for v in m.centre_sigma_m])
+    e, sg = np.abs(np.array(errors)), np.array(sigmas)
+    return {"placements": len(errors), "max_abs_error_mm": e.max(axis=0).tolist(),
+            "rms_error_mm": np.sqrt((e ** 2).mean(axis=0)).tolist(),
+            "mean_sigma_mm": sg.mean(axis=0).tolist()}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", action="store_true")
@@ -164,7 +215,8 @@ def main() -> None:
     model = RobotModel.load()
     result = {"rate_hz": RATE_HZ, "twin": True, "setup": SETUP.model_dump(),
               "displacement": displacement(model), "on_twin": on_twin(model),
-              "isometric": isometric(model)}
+              "isometric": isometric(model), "torque_holds": torque_holds(model),
+              "camera": camera()}
     if args.json:
         print(json.dumps(result, indent=2))
         return
@@ -189,6 +241,19 @@ def main() -> None:
           "the reported torque:")
     for k, v in r["rms_error_nm"].items():
         print(f"   {k:26s} {v:.3f} N m")
+    print("4. ankle-torque holds regulated on the twin's passive ankle (N m, full-target "
+          "stretch, 1 kHz):")
+    for h in result["torque_holds"]:
+        print(f"   {h['direction']:15s} target {h['target_nm']:4.1f}: reported mean "
+              f"{h['reported_mean_nm']:6.2f} (RMS {h['rms_error_to_target_nm']:.3f} from the "
+              f"target), true mean {h['true_mean_nm']:6.2f}; reported vs true RMS "
+              f"{h['rms_reported_vs_true_nm']:.3f}")
+    c = result["camera"]
+    print(f"5. ankle centre by the twin camera ({c['placements']} placements; x along the "
+          "foot, y across, z height; mm): max |error| "
+          + ", ".join(f"{v:.2f}" for v in c["max_abs_error_mm"]) + "; RMS "
+          + ", ".join(f"{v:.2f}" for v in c["rms_error_mm"]) + "; stated σ (mean) "
+          + ", ".join(f"{v:.2f}" for v in c["mean_sigma_mm"]))
 
 
 if __name__ == "__main__":

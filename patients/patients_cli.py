@@ -103,6 +103,18 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--source", choices=("entered", "camera"), default=None,
                    help="entered by hand (default) or measured with the camera")
     p.add_argument("--reason", default=None, help="why (kept with the entry)")
+    p.add_argument("--measure", action="store_true",
+                   help="measure the ankle centre with the camera (ArUco markers on both "
+                        "malleoli and the platform's board, patients/ankle_camera.py): from "
+                        "--frame, or on the twin from --twin-truth; stored with "
+                        "source=camera and its uncertainty in the reason")
+    p.add_argument("--frame", type=Path, default=None,
+                   help="with --measure: a camera frame (image file) showing the board and "
+                        "both malleolus markers")
+    p.add_argument("--twin-truth", default=None, metavar="H,X,Y",
+                   help="with --measure: the twin camera renders a foot whose ankle centre is "
+                        "H m above the sole, X, Y m from the sensor's axis (default "
+                        "0.07,0,0)")
     p.set_defaults(func=_ankle)
 
     p = commands.add_parser("plan", help="assign a protocol (YAML file, validated) to a "
@@ -275,12 +287,77 @@ def _ankle_text(a: dict[str, Any]) -> str:
             f"{a['offset_y_m'] * 1e3:+.0f} mm across ({a['source']})")
 
 
+def _measure_ankle(args: argparse.Namespace, side: str) -> tuple[dict[str, Any], str]:
+    """The camera's ankle setup (fields for ``set_ankle``) and the uncertainty's words."""
+    import cv2
+    from pydantic import ValidationError
+
+    from patients.ankle_camera import (
+        MalleoliRig,
+        measure_malleoli,
+        render_malleoli,
+        twin_malleoli,
+    )
+    from rt.errors import InputError as RtInputError
+    from rt.errors import validation_summary
+    from rt.model.ankle import AnkleSetup
+    from rt.model.description import load_description
+
+    offset = list(load_description().sensor.offset_m)
+    rig = MalleoliRig()
+    sole = args.sole_above_sensor_m or 0.0
+    if args.frame is not None:
+        if args.twin_truth is not None:
+            raise InputError("--frame and --twin-truth: give one (a camera frame, or the twin)")
+        frame = cv2.imread(str(args.frame), cv2.IMREAD_COLOR)
+        if frame is None:
+            raise InputError(f"--frame {args.frame}: not a readable image file")
+    else:
+        try:
+            h, x, y = (float(v) for v in (args.twin_truth or "0.07,0,0").split(","))
+        except ValueError:
+            raise InputError(f"--twin-truth {args.twin_truth!r}: give H,X,Y in m, e.g. "
+                             "0.07,0.01,0") from None
+        try:
+            truth = AnkleSetup.model_validate({
+                "side": side, "height_above_sole_m": h, "offset_x_m": x, "offset_y_m": y,
+                "sole_above_sensor_m": sole})
+        except ValidationError as exc:
+            raise InputError(f"--twin-truth: {validation_summary(exc)}") from None
+        frame = render_malleoli(rig, *twin_malleoli(truth, offset))
+    try:
+        m = measure_malleoli(frame, rig, side, offset, sole)
+    except RtInputError as exc:
+        raise InputError(str(exc)) from None
+    sigma = ", ".join(f"{v * 1e3:.1f}" for v in m.centre_sigma_m)
+    words = (f"measured with the camera: centre σ (x, y, z) = {sigma} mm, reprojection "
+             f"{m.reprojection_rms_px:.2f} px RMS")
+    fields = {k: v for k, v in m.setup.model_dump().items() if k != "side"}
+    return fields, words
+
+
 @command
 def _ankle(args: argparse.Namespace) -> int:
     fields = {k: getattr(args, k) for k in (*_ANKLE_ARGS, "side", "source")
               if getattr(args, k) is not None}
+    if not args.measure and (args.frame is not None or args.twin_truth is not None):
+        raise InputError("--frame and --twin-truth go with --measure")
+    if args.measure and set(fields) - {"side", "sole_above_sensor_m"}:
+        raise InputError("--measure: the camera measures the height and offsets; give only "
+                         "--side and --sole-above-sensor-m with it")
     with open_record(args) as record:
         actor = login(record, args)
+        if args.measure:
+            side = args.side or (record.ankle_in_force(actor, args.code) or {}).get("side") \
+                or record.get_patient(actor, args.code).get("affected_side")
+            if side not in ("left", "right"):
+                raise InputError("--measure: which foot? give --side left|right")
+            measured, words = _measure_ankle(args, side)
+            reason = words if not args.reason else f"{args.reason} ({words})"
+            new = record.set_ankle(actor, args.code, reason=reason, side=side, **measured)
+            emit(args, {**new, "uncertainty": words},
+                 "ankle setup in force: " + _ankle_text(new) + "; " + words)
+            return 0
         if fields:
             new = record.set_ankle(actor, args.code, reason=args.reason, **fields)
             emit(args, new, "ankle setup in force: " + _ankle_text(new))

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from protocols.admittance import step_axis, stop_speed
 from protocols.base import (
     DERIVATIVE_STEP_S,
     AnkleCentre,
@@ -134,34 +135,14 @@ class ActiveAssistGenerator(Generator):
         return gr, gp, gr_d, gp_d
 
     def _stop_speed(self, distance: float) -> float:
-        """Largest speed (rad/s) for this step from which braking at α stops within
-        ``distance`` (rad): v·dt + v²/(2α) - v·dt/2 ≤ d (the step, then the discrete braking),
-        and never more than reaches the end in this step (v·dt ≤ d), so the angle arrives at a
-        ROM end with its rate, not by the clamp."""
-        a, dt = self._a_max, self.dt
-        if distance <= 0.0:
-            return 0.0
-        return min(a * (math.sqrt(0.25 * dt * dt + 2.0 * distance / a) - 0.5 * dt),
-                   distance / dt)
+        """``protocols.admittance.stop_speed`` with this exercise's α and dt."""
+        return stop_speed(distance, self._a_max, self.dt)
 
     def _step_axis(self, th: float, w: float, tau: float, guide: float, guide_rate: float,
                    imk: tuple[float, float, float], lo: float, hi: float
                    ) -> tuple[float, float, float]:
-        inertia, damping, stiffness = imk
-        a_max, w_max, g = self._a_max, self._w_max, self._gain
-        acc = (tau - damping * (w - g * guide_rate) - g * stiffness * (th - guide)) / inertia
-        acc = min(max(acc, -a_max), a_max)
-        w_new = min(max(w + acc * self.dt, -w_max), w_max)
-        if w_new > 0.0:
-            w_new = min(w_new, self._stop_speed(hi - th))
-        elif w_new < 0.0:
-            w_new = max(w_new, -self._stop_speed(th - lo))
-        th_new = th + w_new * self.dt
-        if th_new > hi:
-            th_new, w_new = hi, 0.0
-        elif th_new < lo:
-            th_new, w_new = lo, 0.0
-        return th_new, w_new, (w_new - w) / self.dt
+        return step_axis(th, w, tau, guide, guide_rate, imk, lo, hi, self._gain, self._a_max,
+                         self._w_max, self.dt)
 
     def validate(self) -> ValidationReport:
         self._ready = False

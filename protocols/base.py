@@ -415,6 +415,13 @@ class PositionGenerator(TableGenerator):
     def _build_path(self) -> np.ndarray:
         """The (n, 7) angle path (``protocols.profiles`` columns)."""
 
+    def _ankle_samples(self, path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The (roll, pitch, t) samples (rad, rad, s) whose ankle-centre displacement
+        pre-flight checks: every ``ANKLE_DECIMATION``-th sample of the path and the last."""
+        n = path.shape[0]
+        idx = np.r_[np.arange(0, n, self.ANKLE_DECIMATION), n - 1] if n else np.arange(0)
+        return path[idx, ROLL], path[idx, PITCH], idx * self.dt
+
     def _build(self, report: ValidationReport) -> np.ndarray | None:
         z = self.protocol.pose.z_m  # type: ignore[union-attr]
         path = self._path
@@ -428,9 +435,7 @@ class PositionGenerator(TableGenerator):
             return None
         if self.ankle.heave is not None and n >= 3:
             table[:, 12] = np.gradient(table[:, 9], self.dt, edge_order=2)
-        step = self.ANKLE_DECIMATION
-        idx = np.r_[np.arange(0, n, step), n - 1] if n else np.arange(0)
-        self.ankle.check(report, path[idx, ROLL], path[idx, PITCH], idx * self.dt)
+        self.ankle.check(report, *self._ankle_samples(path))
         table[:, 10], table[:, 11] = path[:, ROLL], path[:, PITCH]
         table[:, 13], table[:, 14] = path[:, ROLL_D], path[:, PITCH_D]
         table[:, FZ] = path[:, TARGET]

@@ -31,6 +31,9 @@ How each kind is produced (``dt`` = loop period):
   kinematics of every sample (pose rates by central differences).
 * active_assist — position mode, computed online from the patient's torque
   (:class:`ActiveAssistGenerator`).
+* isometric_hold with ankle-torque targets — position mode, the holds' angles precomputed and
+  the regulated holds computed online from the patient's torque
+  (``protocols.torque_hold.TorqueHoldGenerator``).
 
 Position kinds get their slider references from the pose path through ``kinematics.ik``
 (``protocols.base``); force kinds hold the pose (``q_ref`` = its IK) and stream fz.
@@ -415,6 +418,10 @@ def make_generator(protocol: ProtocolModel, *, dt: float = 1.0e-3, kinematics: K
     if isinstance(protocol, AnkleRom):
         return AnkleRomGenerator(protocol, dt, kinematics, source, side, ankle)
     if isinstance(protocol, IsometricHold):
+        if protocol.has_torque_targets:
+            # Imported here: protocols.torque_hold builds on this module's isometric holds.
+            from protocols.torque_hold import TorqueHoldGenerator
+            return TorqueHoldGenerator(protocol, dt, kinematics, source, ankle)
         return IsometricHoldGenerator(protocol, dt, kinematics, source, ankle)
     if isinstance(protocol, ActiveAssist):
         return ActiveAssistGenerator(protocol, dt, kinematics, source, side, ankle)

@@ -15,7 +15,8 @@ Kinds:
 * ``ankle_rom`` — passive range of motion: dorsi/plantar flexion (pitch), inversion/eversion
   (roll), or an elliptical circuit through the four ends; smooth profiles, holds at the ends.
 * ``isometric_hold`` — the platform held at set angles while the patient pushes; optional
-  force target shown to the patient.
+  force target shown to the patient, or per hold an ankle-torque target the RT process
+  regulates (``torque``, ``torque_control``).
 * ``active_assist`` — an admittance (virtual mass, damping, stiffness per axis) driven by the
   patient's torque, pulled towards a guide motion by ``assistance_gain``.
 * ``position_playback`` — slider positions from a CSV file (thesis 3.7.4).
@@ -280,13 +281,72 @@ class AnkleRom(_Base, _Smooth, _AnkleCentred):
         return self
 
 
+#: Largest ankle-torque target (N·m) a hold may set. Adults' maximal voluntary isometric
+#: torques are about 100-150 N·m in plantarflexion, 30-45 N·m in dorsiflexion and 20-40 N·m in
+#: inversion/eversion (e.g. Winter 2009; Anderson, Madigan, Nussbaum, "Maximum voluntary joint
+#: torque as a function of joint angle and angular velocity", Clin. Biomech. 22:1022-1031,
+#: 2007 (ankle)); rehabilitation holds stay well below. Beyond 100 N·m is a typing error.
+MAX_TORQUE_TARGET_NM = 100.0
+AnkleDirection = Literal["plantarflexion", "dorsiflexion", "inversion", "eversion"]
+
+
+class TorqueTarget(_Model):
+    """An ankle-torque target: the patient's torque about the ankle centre
+    (``rt.model.ankle.ankle_torques``) in one clinical direction, N·m (> 0)."""
+
+    direction: AnkleDirection
+    target_nm: Annotated[float, Field(gt=0.0, le=MAX_TORQUE_TARGET_NM, allow_inf_nan=False)]
+
+
 class Hold(_Model):
-    """One isometric hold: the platform angles, the hold and the rest after it."""
+    """One isometric hold: the platform angles, the hold and the rest after it; optionally an
+    ankle-torque target the RT process regulates during the hold (``torque``)."""
 
     roll_deg: Angle
     pitch_deg: Angle
     hold_s: Annotated[float, Field(gt=0.0, le=120.0, allow_inf_nan=False)]
     rest_s: Annotated[float, Field(ge=0.0, le=600.0, allow_inf_nan=False)] = 0.0
+    torque: TorqueTarget | None = None
+
+
+class TorqueControl(_Model):
+    """How the RT process regulates a hold's ankle torque (``protocols.torque_hold``).
+
+    The platform turns the foot about the hold's axis through an admittance driven by the
+    torque error, I θ̈ + B θ̇ = τ_measured - τ_target (θ the angle from the hold's angle, τ
+    about the ankle centre), so it pushes with the target torque and a patient holding still
+    against it contracts isometrically at the target; a patient who yields is turned at most
+    ``max_excursion_deg`` from the hold's angle, never faster than ``max_speed_deg_s``. The
+    target ramps in and out over ``ramp_s`` (raised cosine); the foot then returns to the
+    hold's angle within ``return_s`` (braked to rest, then a raised cosine).
+    """
+
+    max_excursion_deg: Annotated[float, Field(gt=0.0, le=20.0, allow_inf_nan=False)] = 10.0
+    virtual_inertia_kg_m2: Annotated[float, Field(gt=0.0, le=50.0, allow_inf_nan=False)] = 0.2
+    damping_n_m_s_rad: Annotated[float, Field(gt=0.0, le=2000.0, allow_inf_nan=False)] = 20.0
+    ramp_s: Annotated[float, Field(ge=0.2, le=10.0, allow_inf_nan=False)] = 1.0
+    return_s: Annotated[float, Field(ge=0.2, le=20.0, allow_inf_nan=False)] = 2.0
+    max_speed_deg_s: Speed = 10.0
+    max_acceleration_deg_s2: AccelDeg = 60.0
+
+    @property
+    def brake_s(self) -> float:
+        """Longest time (s) the return spends braking the admittance's rate to rest."""
+        return self.max_speed_deg_s / self.max_acceleration_deg_s2
+
+    @model_validator(mode="after")
+    def _return_within_limits(self) -> TorqueControl:
+        # The return brakes to rest (at most brake_s), then a raised cosine from the largest
+        # excursion over the rest of return_s, T: peak rate π e/(2T), acceleration π² e/(2T²).
+        e, t = self.max_excursion_deg, self.return_s - self.brake_s
+        rate = math.pi * e / (2.0 * t) if t > 0.0 else math.inf
+        acc = math.pi ** 2 * e / (2.0 * t * t) if t > 0.0 else math.inf
+        if rate > self.max_speed_deg_s or acc > self.max_acceleration_deg_s2:
+            raise FieldProblem("return_s", f"{self.return_s:g} s is too short: returning from "
+                               f"max_excursion_deg {e:g} would reach {rate:.1f} deg/s and "
+                               f"{acc:.1f} deg/s² (limits {self.max_speed_deg_s:g} deg/s, "
+                               f"{self.max_acceleration_deg_s2:g} deg/s²)")
+        return self
 
 
 class IsometricHold(_Base, _Smooth, _AnkleCentred):
@@ -295,6 +355,11 @@ class IsometricHold(_Base, _Smooth, _AnkleCentred):
     The platform moves from the neutral pose to each hold's angles at ``transition_speed_deg_s``,
     holds them ``hold_s`` (the patient pushes; ``target_force_n`` is shown as the goal), stays
     there ``rest_s`` with no target, and finally returns to neutral. Position mode throughout.
+
+    A hold with ``torque`` (an ankle-torque target, N·m about DF/PF or INV/EV; needs the
+    patient's ankle setup) is regulated instead (:class:`TorqueControl`): at the hold's angles
+    the target ramps in over ``torque_control.ramp_s``, is held ``hold_s``, ramps out, the foot
+    returns to the hold's angles over ``torque_control.return_s``, then ``rest_s``.
     """
 
     kind: Literal["isometric_hold"]
@@ -302,6 +367,12 @@ class IsometricHold(_Base, _Smooth, _AnkleCentred):
     holds: Annotated[list[Hold], Field(min_length=1, max_length=100)]
     target_force_n: Annotated[float, Field(gt=0.0, le=2000.0, allow_inf_nan=False)] | None = None
     transition_speed_deg_s: Speed = 10.0
+    torque_control: TorqueControl = TorqueControl()
+
+    @property
+    def has_torque_targets(self) -> bool:
+        """True when a hold sets an ankle-torque target (the RT process regulates it)."""
+        return any(h.torque is not None for h in self.holds)
 
 
 class AxisAdmittance(_Model):

@@ -26,9 +26,11 @@ import numpy as np
 from protocols.generators import make_generator
 from protocols.library import load_protocol
 from protocols.schema import ProtocolModel
+from protocols.torque_hold import TorqueHoldFigures
 from rt.components.blocks import SignalTap
 from rt.components.tare import TareState, refusal_message
-from rt.errors import ProtocolValidationError
+from rt.engine import Array, Component
+from rt.errors import InputError, ProtocolValidationError
 from rt.model import RobotModel
 from rt.model.ankle import AnkleMonitor, AnkleSetup, sensor_to_ankle_S
 from rt.position_loop import PositionLoop, build_protocol_loop, sim_devices
@@ -47,7 +49,7 @@ from rt.sessions import (
     SESSION_SOURCES,
     record_rows,
 )
-from rt.twin.environment import parse_environment, patient_foot
+from rt.twin.environment import CompliantAnkle, parse_environment, patient_foot
 from rt.twin.twin import SimClock, Twin
 
 RATE_HZ = 1000.0
@@ -121,17 +123,59 @@ def build_twin_session(setup: SessionSetup, model: RobotModel, mode: str):
     twin.place(model.kin.ik(z0, roll0, pitch0).q)
     n = int((report.duration_s + 15.0) * RATE_HZ)
     tap = SignalTap("session", SESSION_SIGNALS, capacity=n)
+    blocks: list[Any] = [tap]
+    connections = [(src, f"session.{name}") for name, src in SESSION_SOURCES.items()]
+    if isinstance(env, CompliantAnkle) and setup.ankle is not None:
+        # The twin ankle's true joint torque beside the session's rows (same cycles), so the
+        # figures can compare the torque the product reports with it.
+        blocks += [TwinAnkleTruth(TRUTH_BLOCK, twin), SignalTap(TRUTH_TAP, [("torque", 3)],
+                                                               capacity=n)]
+        connections.append((f"{TRUTH_BLOCK}.torque", f"{TRUTH_TAP}.torque"))
     pl = build_protocol_loop(sim_devices(twin, clock), gen, model, RATE_HZ, mode,
                              robot_limits=setup.robot_limits,
                              patient_limits=setup.patient_limits,
-                             protocol_limits=protocol_limits_of(protocol), extra_blocks=[tap],
-                             extra_connections=[(src, f"session.{name}")
-                                                for name, src in SESSION_SOURCES.items()])
+                             protocol_limits=protocol_limits_of(protocol), extra_blocks=blocks,
+                             extra_connections=connections)
     return protocol, gen, report, pl, tap
+
+
+def truth_tap(pl: PositionLoop) -> SignalTap | None:
+    """The tap of the twin ankle's true torque (:class:`TwinAnkleTruth`) in a loop built by
+    :func:`build_twin_session`, None when it has none."""
+    try:
+        comp = pl.graph.component(TRUTH_TAP)
+    except InputError:
+        return None
+    return comp if isinstance(comp, SignalTap) else None
 
 
 #: The name other branches know it by (renamed public for bench/ankle.py).
 _build = build_twin_session
+
+
+#: Slots of the twin ankle's truth in a pre-flight loop.
+TRUTH_BLOCK, TRUTH_TAP = "ankle_truth", "ankle_truth_tap"
+
+
+class TwinAnkleTruth(Component):
+    """Ports: out ``torque``: float64[3] — the twin ankle joint's moment on the foot (N·m) in
+    the foot's (platform's) axes: roll, pitch, yaw; what the product's reported ankle torque
+    (the sensor's wrench moved to the ankle centre) should equal. Reads the in-process twin's
+    environment state (``rt.twin.physics``: the joint's moment in the base frame), so it only
+    exists where a twin does (pre-flight, benchmarks, tests)."""
+
+    def __init__(self, name: str, twin: Twin) -> None:
+        super().__init__(name)
+        self.twin = twin
+        self.torque = self.declare_output("torque", Array(3))
+
+    def update(self, t: float, dt: float) -> int:
+        p = self.twin.plant
+        r, m = p.rot, p.env_state
+        out = self.torque.data
+        for a in range(3):        # Rᵀ m, on floats
+            out[a] = r[0, a] * m[1] + r[1, a] * m[2] + r[2, a] * m[3]
+        return 0
 
 
 def start_pose(gen) -> tuple[float, float, float]:
@@ -191,6 +235,10 @@ class SessionFigures:
         # Peak ankle torques over the play phase, N·m: [plantar max, plantar min, inversion
         # max, inversion min].
         self._ankle_tau = [-math.inf, math.inf, -math.inf, math.inf]
+        windows = (info or {}).get("torque_holds")
+        # Per regulated hold: the reported ankle torque against the target (and the truth).
+        self._torque = TorqueHoldFigures(windows, ankle) if windows and ankle is not None \
+            else None
         self.kin = model.kin
         self.preload_n = preload_n
         self.robot = robot_limits or RobotLimits()
@@ -214,11 +262,16 @@ class SessionFigures:
         self._dt = 1.0 / RATE_HZ
         self._tare: np.ndarray | None = None     # the force reader's last tare port
 
-    def add(self, rows: np.ndarray) -> None:
+    def add(self, rows: np.ndarray, truth: np.ndarray | None = None) -> None:
+        """Session-tap rows; ``truth``: the twin ankle's true torques (roll, pitch, yaw axes,
+        N·m) of the same cycles, where a twin runs in process (:class:`TwinAnkleTruth`)."""
         if not len(rows):
             return
         phase = rows[:, COL_PHASE]
         play = phase == Phase.PLAY
+        if self._torque is not None and play.any():
+            self._torque.add(rows[play][:, COLUMNS["wrench"]],
+                             None if truth is None else truth[play][:, :2])
         force = -rows[:, COL_FZ]
         f_ref = rows[:, COL_FREF]
         force_mode = play & (rows[:, COL_CTRL_MODE] > 0.5)
@@ -384,13 +437,16 @@ class SessionFigures:
         out["peak_force_n"] = self._peak_force if math.isfinite(self._peak_force) else None
         out["min_force_n"] = self._min_contact[0] if math.isfinite(self._min_contact[0]) \
             else None
-        if self.info:
-            out["source"] = self.info
+        source = {k: v for k, v in self.info.items() if k not in ("torque_holds", "dt")}
+        if source:
+            out["source"] = source
         deg = math.degrees
         out["rom_deg"] = {axis: [deg(lo), deg(hi)] if math.isfinite(lo) else None
                           for axis, (lo, hi) in self._rom.items()}
         if self.ankle is not None:
             out["ankle"] = self._ankle_result()
+            if self._torque is not None:
+                out["ankle"]["torque_holds"] = self._torque.result()
         out["peak_actuator_force_n"] = self._peak_tau
         out["peak_slider_speed_m_s"] = self._peak_qd
         out["phase_s"] = {k: round(v, 3) for k, v in self._phase_time.items() if v > 0.0}
@@ -420,7 +476,8 @@ def figures_of(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel,
     figures = SessionFigures(protocol, model, preload_of(pl), robot_limits,
                              getattr(program, "info", None), ankle)
     rows, _ = tap.drain(0)
-    figures.add(rows)
+    truth = truth_tap(pl)
+    figures.add(rows, None if truth is None else truth.drain(0)[0][:, 1:])
     return figures
 
 
@@ -459,6 +516,11 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
         "min_platform_force_n": summary["min_force_n"],
         "rms_error_pct": summary["rms_error_pct"],
     }
+    holds = summary.get("ankle", {}).get("torque_holds")
+    if holds is not None:
+        # Per regulated hold on the twin's passive ankle: the torque reported vs the target
+        # and vs the twin ankle's true torque.
+        predicted["ankle_torque_holds"] = holds
     if not math.isnan(report.ankle_peak_displacement_m):
         predicted["ankle_displacement_mm"] = {
             "peak": report.ankle_peak_displacement_m * 1e3,

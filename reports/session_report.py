@@ -151,6 +151,7 @@ def _first_page(inp: SessionReportInput, st: Styles, width: float) -> list[Flowa
         disp = ankle.get("centre_displacement_mm") or {}
         res_rows.append(["Ankle centre moved", fmt(disp.get("horizontal"), 1, "mm"), "—",
                          "horizontal; the platform cannot follow the ankle in x, y"])
+    res_rows += _torque_hold_rows(inp)
     n_stops = len(f.get("stops") or [])
     res_rows.append(["Stops", str(n_stops), "—",
                      "none" if not n_stops else "see “Stops” below"])
@@ -164,6 +165,30 @@ def _first_page(inp: SessionReportInput, st: Styles, width: float) -> list[Flowa
         story.append(p("What is missing or doubtful", st.h2))
         story += [p("• " + n, st.note) for n in inp.notes]
     return story
+
+
+def _torque_hold_rows(inp: SessionReportInput) -> list[list[Any]]:
+    """One row per isometric hold with an ankle-torque target (the session summary's
+    ``ankle.torque_holds``): the torque reported about the ankle centre against the target,
+    and pre-flight's twin figure of the reported torque against the twin ankle's true one."""
+    summary = inp.summary or {}
+    holds = (summary.get("ankle") or {}).get("torque_holds") or []
+    pre = summary.get("preflight") or inp.metadata.get("preflight") or {}
+    twin = {h.get("hold"): h for h in (pre.get("ankle_torque_holds") or [])
+            if isinstance(h, dict)}
+    rows: list[list[Any]] = []
+    for h in holds:
+        if not isinstance(h, dict):
+            continue
+        meaning = (f"target {fmt(h.get('target_nm'), 1, 'N·m')}; RMS "
+                   f"{fmt(h.get('rms_error_to_target_nm'), 2, 'N·m')} from it")
+        t = twin.get(h.get("hold")) or {}
+        if t.get("rms_reported_vs_true_nm") is not None:
+            meaning += (f"; pre-flight (twin): reported vs the twin ankle's true torque "
+                        f"{fmt(t['rms_reported_vs_true_nm'], 2, 'N·m')} RMS")
+        rows.append([f"Hold {int(h.get('hold', 0)) + 1}: {h.get('direction')} torque",
+                     fmt(h.get("reported_mean_nm"), 1, "N·m"), "—", meaning])
+    return rows
 
 
 def _rom_comment(reached: float | None, limit: float | None) -> str:

@@ -200,6 +200,9 @@ class _Session:
     first_event: int = 0
     start_latency_s: float = math.nan
     stop: threading.Event = field(default_factory=threading.Event)
+    #: The pump's ankle monitor (``/ankle/state``) when the patient has an ankle setup: its
+    #: last message is the ankle's live state in telemetry.
+    ankle: AnkleMonitor | None = None
 
 
 class RtService:
@@ -630,6 +633,7 @@ class RtService:
         still_since: float | None = None
         ankle = None if s.patient.ankle is None else \
             AnkleMonitor(self.pl.model.kin, s.patient.ankle, s.prepared.start_pose)
+        s.ankle = ankle
         fz, fr = COL_FZ, COL_FREF
         qd = COLUMNS["qd"]
         try:
@@ -899,4 +903,19 @@ def telemetry(service: RtService) -> dict[str, Any]:
         "causes": sorted(pl.supervisor.causes),
         "session": None if s is None else s.id,
         "owner": service.owner.name,
+        # The ankle's state during a session with the patient's ankle setup: the last
+        # /ankle/state message (rt.model.ankle.AnkleMonitor.state: angles from neutral deg,
+        # torques about the ankle centre N·m, centre displacement mm), else None.
+        "ankle": None if s is None or s.ankle is None else s.ankle.last,
+        # An isometric hold's ankle-torque target now ({hold, direction, target_nm, now_nm}:
+        # protocols.torque_hold.TorqueHoldGenerator.live_target), else None.
+        "ankle_target": _live_target(s),
     }
+
+
+def _live_target(s: _Session | None) -> dict[str, Any] | None:
+    """The session program's live target, when it has one (duck-typed: rt does not know
+    protocols)."""
+    live = getattr(s.prepared.program, "live_target", None) \
+        if s is not None and s.prepared is not None else None
+    return None if live is None else live()

@@ -347,6 +347,9 @@ class AnkleMonitor:
         self.ankle = AnkleKinematics(own, setup, list(own.description.sensor.offset_m), neutral)
         self.period_s = period_s
         self._next_t = -math.inf
+        #: The last message (:meth:`message`), for live views (the RT process's telemetry):
+        #: replaced whole, so a reader on another thread sees one message or the next.
+        self.last: dict[str, Any] | None = None
 
     def due(self, t: float) -> bool:
         """True when a message is due at loop time ``t`` (s)."""
@@ -358,6 +361,7 @@ class AnkleMonitor:
         msg = self.state(t, q, wrench_s)
         if msg is not None:
             self._next_t = t + self.period_s
+            self.last = msg
         return msg
 
     def state(self, t: float, q: Any, wrench_s: Any) -> dict[str, Any] | None:
