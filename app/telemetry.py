@@ -6,6 +6,11 @@ thread's frame costs one small copy (:meth:`TelemetryRing.snapshot`) and ``setDa
 never per-sample Python work or a growing list. The same thread counts repetitions
 (:class:`RepetitionCounter`) of range-of-motion and active-assist exercises from the measured
 platform angles while the reference is in its ``play`` phase.
+
+During an exercise about the patient's ankle the RT process also publishes the ankle's state in
+clinical terms (:data:`ANKLE_FIELDS`: angles from the neutral pose, torques about the ankle
+centre, the centre's displacement); they fill the ``ankle_*`` columns (SI: rad, N·m, m), NaN
+in samples without them, so the Run page shows the ankle view only while they arrive.
 """
 from __future__ import annotations
 
@@ -16,8 +21,16 @@ from typing import Any
 
 import numpy as np
 
-#: The ring's columns, in order (SI units: s, N, rad; progress 0..1).
-COLUMNS = ("t", "force_ref", "force", "roll", "pitch", "roll_ref", "pitch_ref", "progress")
+#: The telemetry's ankle fields (``rt.model.ankle``'s signs: plantarflexion, inversion and
+#: their efforts positive) → the ring's column and the factor to SI.
+ANKLE_FIELDS = {"ankle_dfpf_deg": ("ankle_dfpf", math.pi / 180.0),
+                "ankle_inev_deg": ("ankle_inev", math.pi / 180.0),
+                "ankle_torque_dfpf_nm": ("ankle_torque_dfpf", 1.0),
+                "ankle_torque_inev_nm": ("ankle_torque_inev", 1.0),
+                "ankle_centre_displacement_mm": ("ankle_displacement", 1e-3)}
+#: The ring's columns, in order (SI units: s, N, rad, N·m, m; progress 0..1).
+COLUMNS = ("t", "force_ref", "force", "roll", "pitch", "roll_ref", "pitch_ref", "progress",
+           *(column for column, _ in ANKLE_FIELDS.values()))
 _COL = {name: i for i, name in enumerate(COLUMNS)}
 #: A repetition's end counts when the angle passes this share of the prescribed amplitude
 #: (half: a patient who reaches half their range did the movement; noise near neutral does not).
@@ -32,6 +45,15 @@ def _f(x: Any) -> float:
         return math.nan if x is None else float(x)
     except (TypeError, ValueError):
         return math.nan
+
+
+def magnitude(x: Any) -> float:
+    """A displacement's size: the value itself, or the norm of a vector of components (the
+    ankle centre's displacement may come as its x, y, z); NaN when missing or malformed."""
+    if isinstance(x, (list, tuple)):
+        parts = [_f(v) for v in x]
+        return math.sqrt(sum(v * v for v in parts)) if parts else math.nan
+    return _f(x)
 
 
 def _band(extent_neg: float, extent_pos: float) -> tuple[float, float]:
@@ -169,7 +191,10 @@ class TelemetryRing:
                _f(pose[2]) if len(pose) > 2 else math.nan,
                _f(ref[1]) if len(ref) > 2 else math.nan,
                _f(ref[2]) if len(ref) > 2 else math.nan,
-               _f(msg.get("progress")))
+               _f(msg.get("progress")),
+               *((magnitude(msg.get(key)) if column == "ankle_displacement"
+                  else _f(msg.get(key))) * factor
+                 for key, (column, factor) in ANKLE_FIELDS.items()))
         with self._lock:
             self._data[self._written % self.capacity] = row
             self._written += 1
@@ -177,7 +202,12 @@ class TelemetryRing:
             counter = self._counter
             if counter is not None and msg.get("session") == self._session \
                     and msg.get("phase") == "play":
-                counter.feed(math.degrees(row[_COL["pitch"]]), math.degrees(row[_COL["roll"]]))
+                # The ankle's angles from neutral when the telemetry has them (the prescribed
+                # amplitudes are from neutral), else the platform's.
+                pitch, roll = row[_COL["ankle_dfpf"]], row[_COL["ankle_inev"]]
+                if math.isnan(pitch) or math.isnan(roll):
+                    pitch, roll = row[_COL["pitch"]], row[_COL["roll"]]
+                counter.feed(math.degrees(pitch), math.degrees(roll))
 
     def snapshot(self) -> tuple[int, dict[str, np.ndarray]]:
         """(samples written, each column oldest first) — copies, safe to keep and draw."""
