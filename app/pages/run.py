@@ -201,8 +201,7 @@ class RunPage(QWidget):
         self.engineer_button.setObjectName("engineerView")
         self.engineer_button.setCheckable(True)
         self.engineer_button.setMinimumHeight(TARGET_PX)
-        self.engineer_button.toggled.connect(lambda _on: self._set_angle_mode(self.ankle_mode,
-                                                                              force=True))
+        self.engineer_button.toggled.connect(self._toggle_engineer)
         self.engineer_button.hide()
         self.platform_label = QLabel()
         self.platform_label.setObjectName("platformAngles")
@@ -398,7 +397,7 @@ class RunPage(QWidget):
                   "roll": inv * np.degrees(col["roll"][keep]),
                   "roll_ref": inv * np.degrees(col["roll_ref"][keep])}
         dfpf = np.degrees(col["ankle_dfpf"][keep])
-        self._set_angle_mode(bool(np.isfinite(dfpf).any()))
+        switched = self._set_angle_mode(bool(np.isfinite(dfpf).any()))
         if self.ankle_mode:
             inev = np.degrees(col["ankle_inev"][keep])
             series["ankle_dfpf"], series["ankle_inev"] = dfpf, inev
@@ -415,7 +414,7 @@ class RunPage(QWidget):
             curve.setData(t, y, connect="all" if finite else "finite", skipFiniteCheck=finite)
         self.samples_shown = int(t.size)
         self.frames += 1
-        if self.frames % (FRAME_HZ // 2) == 1:      # y ranges twice a second
+        if switched or self.frames % (FRAME_HZ // 2) == 1:      # y ranges twice a second
             self._revise_y(series)
         latest = ring.latest or {}
         self._latest = latest
@@ -458,12 +457,17 @@ class RunPage(QWidget):
                 margin = 0.05 * span
                 plot.setYRange(lo - margin, hi + margin, padding=0.0)
 
-    def _set_angle_mode(self, ankle: bool, force: bool = False) -> None:
+    def _toggle_engineer(self, _on: bool) -> None:
+        self._set_angle_mode(self.ankle_mode, force=True)
+        self._drawn = -1            # the next frame draws the curves now shown
+
+    def _set_angle_mode(self, ankle: bool, force: bool = False) -> bool:
         """Show the ankle view (``ankle``: the telemetry carries the ankle's state) or the
         platform's angles; in the ankle view the platform's curves are the engineers' (dotted,
-        behind the toggle). Legend, title and curves change only when the mode does."""
+        behind the toggle). Legend, title and curves change only when the mode does (or
+        ``force``); returns whether they changed."""
         if ankle == self.ankle_mode and not force:
-            return
+            return False
         self.ankle_mode = ankle
         engineer = ankle and self.engineer_button.isChecked()
         self.engineer_button.setVisible(ankle)
@@ -498,6 +502,7 @@ class RunPage(QWidget):
                 legend.addItem(curve, names[key])
         if not ankle:
             self.ankle_angles_label.setText("")
+        return True
 
     def show_ankle(self, latest: dict[str, Any] | None) -> None:
         """The ankle in clinical words from the latest telemetry sample.
