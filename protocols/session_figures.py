@@ -323,18 +323,29 @@ class SessionFigures:
                 self._min_contact = (float(force[k]), float(t[k]))
 
     def _at_limit(self, what: str, t: np.ndarray, values: np.ndarray, limit: float) -> None:
+        """The longest stretch of consecutive samples at ``limit`` (a stretch may continue
+        from the last block). Each stretch is found from the block's edges of ``values >=
+        limit``, so samples below the limit always end one (the former per-sample loop only
+        visited samples at the limit in a block that began below it, and joined stretches)."""
         run = self._runs[what]
-        over = values >= limit - 1e-9
-        for k in np.flatnonzero(over | (run[1] > 0)):   # only samples that start/continue/end
-            if over[k]:
-                if run[1] == 0:
-                    run[0] = float(t[k])
-                run[1] += 1
-                if run[1] > run[2]:
-                    run[2], run[3] = run[1], run[0]
-                run[4] = max(run[4], float(values[k]))
+        over = values >= limit - 1e-9           # NaN compares False
+        if not over.any():
+            run[1] = 0
+            return
+        edges = np.flatnonzero(np.diff(np.r_[0, over.astype(np.int8), 0]))
+        start = length = 0.0
+        for s, e in zip(edges[::2], edges[1::2], strict=True):
+            if s == 0 and run[1] > 0:           # continues the stretch of the last block
+                start, length = run[0], run[1] + (e - s)
             else:
-                run[1] = 0
+                start, length = float(t[s]), float(e - s)
+            if length > run[2]:
+                run[2], run[3] = length, start
+            run[4] = max(run[4], float(np.max(values[s:e])))
+        if over[-1]:
+            run[0], run[1] = start, length
+        else:
+            run[1] = 0
 
     def _add_ankle_torques(self, w: np.ndarray) -> None:
         """Peaks of the ankle torques (``rt.model.ankle.ankle_torques``, vectorized) of the

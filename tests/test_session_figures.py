@@ -94,6 +94,19 @@ def test_tap_rows_and_blocks_give_the_same_figures_however_split(seed):
     assert a["min_force_n"] == lo_f and whole._min_contact[1] == lo_t
     assert lo_f < 100.0 - 2.0 and whole.unloading()
     assert a["peak_actuator_force_n"] == pytest.approx(np.abs(rows[:, COLUMNS["tau"]]).max())
+    # The longest stretch at the drive's limit: consecutive samples, whole or split.
+    limit = whole.robot.max_command_v
+    over = np.abs(rows[:, COLUMNS["volts"]]).max(axis=1) >= limit - 1e-9
+    longest, current, start, longest_at = 0, 0, 0, 0
+    for k, o in enumerate(over):
+        current = current + 1 if o else 0
+        start = k - current + 1
+        if current > longest:
+            longest, longest_at = current, start
+    assert 0 < longest < over.sum()                 # stretches separated by samples below it
+    for figures in (whole, split):
+        assert figures._runs["drive command"][2] == longest
+        assert figures._runs["drive command"][3] == rows[longest_at, 0]
 
 
 def test_a_recording_without_drive_commands_leaves_their_figures_out():
