@@ -182,7 +182,11 @@ class CalibrationFlow:
 
         from calibration import registration as reg
         from calibration.plate import load_plate
-        from calibration.twin_runner import PLACEMENT_SIGMA_M, PLACEMENT_SIGMA_YAW_RAD
+        from calibration.twin_runner import (
+            CAMERA_FRAMES,
+            PLACEMENT_SIGMA_M,
+            PLACEMENT_SIGMA_YAW_RAD,
+        )
 
         if self.plan is None:
             raise InputError("make the plan first")
@@ -194,8 +198,13 @@ class CalibrationFlow:
         planned = reg.nominal_T_BF(self._tip_B(), (0.0, 0.0))
         true = planned @ reg.transform(reg.rot_z(rng.normal(0.0, PLACEMENT_SIGMA_YAW_RAD)),
                                        np.r_[rng.normal(0.0, PLACEMENT_SIGMA_M, 2), 0.0])
-        frame = reg.render_rig(rig, true, planned, rng)
-        registered = reg.camera_registration(frame, rig, rig.T_B_R(planned))
+        # As the trials register a site: CAMERA_FRAMES frames averaged, the tilt fused with
+        # the levelled plate's prior; the first frame is the one shown.
+        frames = [reg.render_rig(rig, true, planned, rng) for _ in range(CAMERA_FRAMES)]
+        registered = reg.with_level_prior(reg.average_registrations(
+            [reg.camera_registration(f, rig, rig.T_B_R(planned)) for f in frames]),
+            self.plan.level_sigma_rad())
+        frame = frames[0]
         # The detection drawn is the one the registration made (same detector, same frame).
         detector = cv2.aruco.ArucoDetector(
             cv2.aruco.getPredefinedDictionary(rig.plate_board.dictionary),
@@ -223,17 +232,19 @@ class CalibrationFlow:
             float(np.linalg.norm(registered.T_BF[:3, 3] - true[:3, 3]) * 1e3))
 
     def _tip_B(self) -> np.ndarray:
-        """The tool tip at the plan's level pose in the robot's base (m), as the twin runner
-        places the plate under it."""
+        """The tool tip at the plan's level pose in the robot's base (m), where the twin
+        runner places the plate (``calibration.twin_runner``: the sensor's origin by forward
+        kinematics, the tool along the sensor's z). Kinematics only: the dynamics model is
+        not needed here and takes seconds to build."""
         from calibration.push import TOOL_LENGTH_M
-        from calibration.twin_runner import sensor_poses, tip_points_B
-        from rt.model import RobotModel
+        from rt.model import Kinematics, load_description
 
         assert self.plan is not None
-        model = RobotModel.load()
-        q = np.array([model.kin.ik(self.plan.pose_z_m, 0.0, 0.0).q])
-        p, R = sensor_poses(model, q)
-        return tip_points_B(p, R, TOOL_LENGTH_M)[0]
+        kin = Kinematics(load_description())
+        c = kin.fk(kin.ik(self.plan.pose_z_m, 0.0, 0.0).q, check=False)
+        R = np.array(c.rotation).reshape(3, 3)
+        p_BS = np.array([c.x, c.y, c.z]) + R @ np.array(kin.description.sensor.offset_m)
+        return p_BS + TOOL_LENGTH_M * R[:, 2]
 
     def run(self, progress: Progress | None = None,
             trial_done: TrialDone | None = None) -> dict[str, Any]:

@@ -7,6 +7,7 @@ calibration engineer's."""
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import subprocess
 
@@ -140,9 +141,10 @@ def test_only_the_engineer_sees_calibrate(qtbot, tmp_path):
 def _check_live_plot(page: CalibratePage, flow: CalibrationFlow) -> None:
     """The Trials tab shows every trial of the campaign, in order, each segment on its own
     trial's robot-clock span, and the forces the trial files hold: the ATI's peak is the
-    plan's peak load (the direct runner presses exactly the commanded load, plus the ATI's
-    0.25 N noise), the plate's peak through its nominal matrix within 5 % of it (the twin
-    plate's drawn sensitivity errors are ±3 %, crosstalk ±2 %)."""
+    trial's peak load within 1 % (the direct runner presses exactly the commanded load, plus
+    the ATI's 0.25 N noise; the plot keeps every 20th sample, which may miss a gait curve's
+    sharp peak by a few newtons), the plate's peak through its nominal matrix within 5 % of it
+    (the twin plate's drawn sensitivity errors are ±3 %, crosstalk ±2 %)."""
     assert page.tabs.currentIndex() == TABS.index("trials")
     index = json.loads((flow.campaign / "campaign.json").read_text())
     ids = [e["id"] for e in index["trials"]]
@@ -156,11 +158,13 @@ def _check_live_plot(page: CalibratePage, flow: CalibrationFlow) -> None:
         d = TrialData.load(flow.campaign / TRIALS_DIR / f"{s.trial_id}.npz")
         assert s.t_ati_s[0] == d.t_robot[0] and s.t_ati_s[-1] == d.t_robot[-1]
         peak_ref = float(d.force_ref.max())
-        assert float(s.ati_fz_n.max()) == pytest.approx(peak_ref, abs=2.0)
+        assert float(s.ati_fz_n.max()) == pytest.approx(peak_ref, rel=0.01)
         assert float(s.plate_fz_n.max()) == pytest.approx(peak_ref, rel=0.05)
         assert s.aligned                     # on the robot's clock: the peaks line up
-        k_a, k_p = int(np.argmax(s.ati_fz_n)), int(np.argmax(s.plate_fz_n))
-        assert abs(s.t_ati_s[k_a] - s.t_plate_s[k_p]) < 0.5
+        # Lined up: the plate's curve at the ATI's times differs by its calibration error only.
+        inside = (s.t_ati_s >= s.t_plate_s[0]) & (s.t_ati_s <= s.t_plate_s[-1])
+        diff = np.interp(s.t_ati_s[inside], s.t_plate_s, s.plate_fz_n) - s.ati_fz_n[inside]
+        assert float(np.sqrt(np.mean(diff ** 2))) < 0.05 * peak_ref, s.trial_id
     finite = np.isfinite(y)
     assert float(y[finite].max()) == pytest.approx(
         max(float(s.ati_fz_n.max()) for s in page.live_series))
@@ -211,7 +215,10 @@ def test_registration_shows_the_camera_with_the_markers_drawn(qtbot, tmp_path):
     assert view is not None
     assert page.tabs.currentIndex() == TABS.index("camera")
     assert sorted(view.marker_ids) == sorted(view.expected_ids) and view.markers == 24
-    assert view.error_mm < 1.0                         # the registration found the plate
+    # The registration found the plate: within 3 σ (of a 3-D distance) of the twin's truth,
+    # σ of the order the trials' registrations have (the campaign's uncertainty budget).
+    assert view.sigma_translation_mm < 1.5
+    assert view.error_mm < 3.0 * math.sqrt(3.0) * view.sigma_translation_mm
     frame = page.camera.frame
     assert frame is not None and (frame.width(), frame.height()) == (1600, 1600)
     assert view.image_bgr.shape == (1600, 1600, 3)
