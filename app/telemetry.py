@@ -8,9 +8,11 @@ never per-sample Python work or a growing list. The same thread counts repetitio
 platform angles while the reference is in its ``play`` phase.
 
 During an exercise about the patient's ankle the RT process also publishes the ankle's state in
-clinical terms (:data:`ANKLE_FIELDS`: angles from the neutral pose, torques about the ankle
+clinical terms (:func:`ankle_state`: angles from the neutral pose, torques about the ankle
 centre, the centre's displacement); they fill the ``ankle_*`` columns (SI: rad, N·m, m), NaN
-in samples without them, so the Run page shows the ankle view only while they arrive.
+in samples without them, so the Run page shows the ankle view only while they arrive. Two
+shapes are read: the sample's ``ankle`` object (the RT process's last ``/ankle/state`` message,
+``rt.model.ankle.AnkleMonitor``) or flat ``ankle_*`` fields (:data:`ANKLE_FIELDS`).
 """
 from __future__ import annotations
 
@@ -21,16 +23,19 @@ from typing import Any
 
 import numpy as np
 
-#: The telemetry's ankle fields (``rt.model.ankle``'s signs: plantarflexion, inversion and
-#: their efforts positive) → the ring's column and the factor to SI.
-ANKLE_FIELDS = {"ankle_dfpf_deg": ("ankle_dfpf", math.pi / 180.0),
-                "ankle_inev_deg": ("ankle_inev", math.pi / 180.0),
-                "ankle_torque_dfpf_nm": ("ankle_torque_dfpf", 1.0),
-                "ankle_torque_inev_nm": ("ankle_torque_inev", 1.0),
-                "ankle_centre_displacement_mm": ("ankle_displacement", 1e-3)}
+#: The ankle's live state: ring column → (flat telemetry field, the ``ankle`` object's field
+#: as ``/ankle/state`` names it, factor to SI). Signs of ``rt.model.ankle``: plantarflexion,
+#: inversion and their efforts positive; the displacement is the centre's from where it was
+#: at the neutral pose (its x, y, z in mm, or its size).
+ANKLE_FIELDS = {
+    "ankle_dfpf": ("ankle_dfpf_deg", "plantarflexion_deg", math.pi / 180.0),
+    "ankle_inev": ("ankle_inev_deg", "inversion_deg", math.pi / 180.0),
+    "ankle_torque_dfpf": ("ankle_torque_dfpf_nm", "plantarflexion_torque_nm", 1.0),
+    "ankle_torque_inev": ("ankle_torque_inev_nm", "inversion_torque_nm", 1.0),
+    "ankle_displacement": ("ankle_centre_displacement_mm", "centre_displacement_mm", 1e-3)}
 #: The ring's columns, in order (SI units: s, N, rad, N·m, m; progress 0..1).
 COLUMNS = ("t", "force_ref", "force", "roll", "pitch", "roll_ref", "pitch_ref", "progress",
-           *(column for column, _ in ANKLE_FIELDS.values()))
+           *ANKLE_FIELDS)
 _COL = {name: i for i, name in enumerate(COLUMNS)}
 #: A repetition's end counts when the angle passes this share of the prescribed amplitude
 #: (half: a patient who reaches half their range did the movement; noise near neutral does not).
@@ -54,6 +59,18 @@ def magnitude(x: Any) -> float:
         parts = [_f(v) for v in x]
         return math.sqrt(sum(v * v for v in parts)) if parts else math.nan
     return _f(x)
+
+
+def ankle_state(msg: dict[str, Any]) -> dict[str, float]:
+    """The sample's ankle state in clinical units (column → deg, N·m, mm: the displacement's
+    size), NaN for what it lacks (:data:`ANKLE_FIELDS`)."""
+    nested = msg.get("ankle")
+    nested = nested if isinstance(nested, dict) else {}
+    out = {}
+    for column, (flat, name, _factor) in ANKLE_FIELDS.items():
+        x = msg[flat] if flat in msg else nested.get(name)
+        out[column] = magnitude(x) if column == "ankle_displacement" else _f(x)
+    return out
 
 
 def _band(extent_neg: float, extent_pos: float) -> tuple[float, float]:
@@ -192,9 +209,8 @@ class TelemetryRing:
                _f(ref[1]) if len(ref) > 2 else math.nan,
                _f(ref[2]) if len(ref) > 2 else math.nan,
                _f(msg.get("progress")),
-               *((magnitude(msg.get(key)) if column == "ankle_displacement"
-                  else _f(msg.get(key))) * factor
-                 for key, (column, factor) in ANKLE_FIELDS.items()))
+               *(value * ANKLE_FIELDS[column][2]
+                 for column, value in ankle_state(msg).items()))
         with self._lock:
             self._data[self._written % self.capacity] = row
             self._written += 1

@@ -27,18 +27,29 @@ LEFT = {"side": "left", "height_above_sole_m": 0.08, "offset_x_m": 0.0, "offset_
 
 
 def _ankle_sample(t: float, plantar_deg: float, inversion_deg: float, *, ref_lead_deg: float = 1.0,
-                  session: str = "S1") -> dict:
+                  session: str = "S1", flat: bool = False) -> dict:
     """A left foot (inversion is −roll from neutral, rt.model.ankle.ankle_angles): the platform
-    at the neutral pose plus the ankle's rotation; the reference leads by ``ref_lead_deg``."""
+    at the neutral pose plus the ankle's rotation; the reference leads by ``ref_lead_deg``.
+    The ankle's state as the RT process publishes it (its last ``/ankle/state`` message under
+    ``ankle``), or as flat ``ankle_*`` fields (``flat``)."""
     roll = ROLL0 - inversion_deg
     pitch = PITCH0 + plantar_deg
-    return {"t": t, "pose": [0.63, math.radians(roll), math.radians(pitch)],
-            "pose_ref": [0.63, math.radians(roll - ref_lead_deg),
-                         math.radians(pitch + ref_lead_deg)],
-            "force_ref_n": 0.0, "force_n": 20.0, "progress": t / 60.0, "phase": "play",
-            "session": session, "ankle_dfpf_deg": plantar_deg, "ankle_inev_deg": inversion_deg,
-            "ankle_torque_dfpf_nm": -4.25, "ankle_torque_inev_nm": 1.5,
-            "ankle_centre_displacement_mm": [3.0, 4.0, 12.0]}
+    msg = {"t": t, "pose": [0.63, math.radians(roll), math.radians(pitch)],
+           "pose_ref": [0.63, math.radians(roll - ref_lead_deg),
+                        math.radians(pitch + ref_lead_deg)],
+           "force_ref_n": 0.0, "force_n": 20.0, "progress": t / 60.0, "phase": "play",
+           "session": session}
+    if flat:
+        msg.update({"ankle_dfpf_deg": plantar_deg, "ankle_inev_deg": inversion_deg,
+                    "ankle_torque_dfpf_nm": -4.25, "ankle_torque_inev_nm": 1.5,
+                    "ankle_centre_displacement_mm": 13.0})
+    else:
+        msg["ankle"] = {"t": t, "plantarflexion_deg": plantar_deg,
+                        "inversion_deg": inversion_deg, "abduction_deg": 0.1,
+                        "plantarflexion_torque_nm": -4.25, "inversion_torque_nm": 1.5,
+                        "abduction_torque_nm": 0.0, "centre_displacement_mm": [3.0, 4.0, 12.0],
+                        "platform_roll_deg": roll, "platform_pitch_deg": pitch}
+    return msg
 
 
 def _legend(page: RunPage) -> list[str]:
@@ -76,8 +87,8 @@ def test_ankle_view_shows_the_foot_from_neutral_and_hides_without_the_fields(pag
     # With them: the ankle from neutral; the platform's curves go to the engineer view.
     ring.clear()
     motion = [(i / 30, 8.0 * math.sin(i / 20), -3.0 * math.sin(i / 20)) for i in range(300)]
-    for t, pf, ie in motion:
-        ring.push(_ankle_sample(t, pf, ie))
+    for i, (t, pf, ie) in enumerate(motion):
+        ring.push(_ankle_sample(t, pf, ie, flat=i % 2 == 1))        # either shape reads alike
     page.redraw()
     assert page.ankle_mode
     assert all(page.curves[k].isVisible() for k in ANKLE_CURVES)
@@ -121,8 +132,15 @@ def test_ankle_view_shows_the_foot_from_neutral_and_hides_without_the_fields(pag
     qtbot.mouseClick(page.engineer_button, Qt.MouseButton.LeftButton)
     assert not page.curves["pitch"].isVisible() and page.platform_label.isHidden()
 
+    # A torque hold regulated on the ankle: its target now, in words.
+    ring.push({**_ankle_sample(10.05, 0.0, 0.0), "ankle_target": {
+        "hold": 2, "direction": "dorsiflexion", "target_nm": 6.0, "now_nm": -3.25}})
+    page.redraw()
+    assert page.ankle_angles_label.text().endswith(
+        "\nHold 2: dorsiflexion 6.0 N·m (target now 3.2 N·m)")
+
     # A sample whose ankle fields are missing reads as a dash, not an invented angle.
-    ring.push({**_ankle_sample(10.1, 0.0, 0.0), "ankle_dfpf_deg": None,
+    ring.push({**_ankle_sample(10.1, 0.0, 0.0, flat=True), "ankle_dfpf_deg": None,
                "ankle_torque_inev_nm": None})
     page.redraw()
     assert page.ankle_angles_label.text().startswith("Ankle from neutral: —")
@@ -161,7 +179,7 @@ def test_repetitions_count_on_the_ankle_from_neutral():
             msg = _ankle_sample(i / 30, a, 0.0)
             msg["pose"][2] = math.radians(8.0 + a)
             if not with_ankle:
-                msg = {k: v for k, v in msg.items() if not k.startswith("ankle_")}
+                del msg["ankle"]
             ring.push(msg)
         reps = ring.repetitions()
         assert reps is not None

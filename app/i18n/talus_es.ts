@@ -440,7 +440,7 @@
     <message>
         <location filename="../pages/prescribe.py" line="198"/>
         <location filename="../pages/review.py" line="197"/>
-        <location filename="../pages/run.py" line="146"/>
+        <location filename="../pages/run.py" line="153"/>
         <source>plantar(+)/dorsi(−) flexion</source>
         <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
@@ -451,7 +451,7 @@
         <translation>balanceo (+ es inversión del pie derecho)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="149"/>
+        <location filename="../pages/run.py" line="156"/>
         <source>inversion(+)/eversion(−)</source>
         <translation>inversión(+)/eversión(−)</translation>
     </message>
@@ -533,14 +533,14 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="95"/>
-        <location filename="../pages/run.py" line="115"/>
+        <location filename="../pages/run.py" line="122"/>
         <source>Force (N)</source>
         <translation>Fuerza (N)</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="96"/>
-        <location filename="../pages/run.py" line="116"/>
-        <location filename="../pages/run.py" line="477"/>
+        <location filename="../pages/run.py" line="123"/>
+        <location filename="../pages/run.py" line="484"/>
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
@@ -566,13 +566,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="177"/>
-        <location filename="../pages/run.py" line="141"/>
+        <location filename="../pages/run.py" line="148"/>
         <source>reference</source>
         <translation>referencia</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="179"/>
-        <location filename="../pages/run.py" line="143"/>
+        <location filename="../pages/run.py" line="150"/>
         <source>measured</source>
         <translation>medida</translation>
     </message>
@@ -588,13 +588,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="191"/>
-        <location filename="../pages/run.py" line="491"/>
+        <location filename="../pages/run.py" line="498"/>
         <source>platform pitch (engineers)</source>
         <translation>cabeceo de la plataforma (ingeniería)</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="193"/>
-        <location filename="../pages/run.py" line="492"/>
+        <location filename="../pages/run.py" line="499"/>
         <source>platform roll (engineers)</source>
         <translation>alabeo de la plataforma (ingeniería)</translation>
     </message>
@@ -619,166 +619,170 @@
         <translation>el tobillo alcanzó flexión dorsal %1°, flexión plantar %2°, inversión %3°, eversión %4°; pares máximos FD %5, FP %6, INV %7, EV %8 N·m</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="65"/>
+        <location filename="../pages/run.py" line="72"/>
         <source>moving to the start position</source>
-        <extracomment>Redraw rate of the live plots, Hz: the issue asks ≥ 30 fps; a 33 ms timer gives at most 30.3 and any late tick drops below, so the timer runs a little faster (frames with no new telemetry, 60 Hz, are skipped). Seconds of history on the live plots. The angle curves of the ankle view (from neutral) and of the platform (absolute).</extracomment>
         <translation>yendo a la posición inicial</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="65"/>
+        <location filename="../pages/run.py" line="72"/>
         <source>exercise</source>
         <translation>ejercicio</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="66"/>
+        <location filename="../pages/run.py" line="73"/>
         <source>returning to rest</source>
         <translation>volviendo al reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="66"/>
+        <location filename="../pages/run.py" line="73"/>
         <source>stopped</source>
         <translation>detenido</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="67"/>
+        <location filename="../pages/run.py" line="74"/>
         <source>at rest</source>
         <translation>en reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="102"/>
+        <location filename="../pages/run.py" line="109"/>
         <source>No protocol prescribed: choose one in Prescribe.</source>
         <extracomment>False for roles that may not move the robot (viewer, engineer, admin) the clinical record&apos;s journal of sessions (None: no record) frames drawn, and the samples on the plots at the last one (monotonic time, seconds spent, CPU seconds of this thread) of the recent frames drawn (bench/gui.py&apos;s figures)</extracomment>
         <translation>Ningún protocolo prescrito: elija uno en Prescribir.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="104"/>
+        <location filename="../pages/run.py" line="111"/>
         <source>Take control of the robot</source>
         <translation>Tomar el control del robot</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="105"/>
+        <location filename="../pages/run.py" line="112"/>
         <source>Start session</source>
         <translation>Iniciar sesión</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="132"/>
+        <location filename="../pages/run.py" line="139"/>
         <source>seconds before now</source>
         <translation>segundos antes de ahora</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="155"/>
+        <location filename="../pages/run.py" line="162"/>
         <source>ankle: plantar(+)/dorsi(−) flexion from neutral</source>
         <translation>tobillo: flexión plantar(+)/dorsal(−) desde la posición neutra</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="160"/>
+        <location filename="../pages/run.py" line="167"/>
         <source>ankle: inversion(+)/eversion(−) from neutral</source>
         <translation>tobillo: inversión(+)/eversión(−) desde la posición neutra</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="200"/>
+        <location filename="../pages/run.py" line="207"/>
         <source>Platform angles (engineers)</source>
         <extracomment>True while the angle plot shows the ankle view (the telemetry&apos;s ankle fields)</extracomment>
         <translation>Ángulos de la plataforma (ingeniería)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="284"/>
+        <location filename="../pages/run.py" line="291"/>
         <source>Protocol: %1</source>
         <translation>Protocolo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="299"/>
+        <location filename="../pages/run.py" line="306"/>
         <source>Checking the protocol on the robot model, then starting…</source>
         <translation>Comprobando el protocolo en el modelo del robot; después se inicia…</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="312"/>
+        <location filename="../pages/run.py" line="319"/>
         <source>Could not take control: %1</source>
         <translation>No se pudo tomar el control: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="313"/>
+        <location filename="../pages/run.py" line="320"/>
         <source>You control the robot.</source>
         <translation>Usted controla el robot.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="317"/>
+        <location filename="../pages/run.py" line="324"/>
         <source>The session did not start: %1</source>
         <translation>La sesión no se inició: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="332"/>
+        <location filename="../pages/run.py" line="339"/>
         <source>Session running.</source>
         <translation>Sesión en curso.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="346"/>
+        <location filename="../pages/run.py" line="353"/>
         <source>Session ended: %1</source>
         <translation>Sesión terminada: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="350"/>
+        <location filename="../pages/run.py" line="357"/>
         <source>Stopped: %1</source>
         <translation>Detenido: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="355"/>
+        <location filename="../pages/run.py" line="362"/>
         <source>The clinical record did not take the session: %1</source>
         <translation>La historia clínica no registró la sesión: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="425"/>
+        <location filename="../pages/run.py" line="432"/>
         <source>%1 s left</source>
         <translation>quedan %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="476"/>
+        <location filename="../pages/run.py" line="483"/>
         <source>Ankle angles from neutral (°)</source>
         <translation>Ángulos del tobillo desde la posición neutra (°)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="527"/>
-        <location filename="../pages/run.py" line="573"/>
+        <location filename="../pages/run.py" line="534"/>
+        <location filename="../pages/run.py" line="587"/>
         <source>Ankle torque: —</source>
         <translation>Par en el tobillo: —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="537"/>
+        <location filename="../pages/run.py" line="544"/>
         <source>Ankle torque: %1 %2 N·m, %3 %4 N·m</source>
         <translation>Par en el tobillo: %1 %2 N·m, %3 %4 N·m</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="560"/>
+        <location filename="../pages/run.py" line="563"/>
         <source>Ankle from neutral: %1 %2°, %3 %4°</source>
         <translation>Tobillo desde la posición neutra: %1 %2°, %3 %4°</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="566"/>
+        <location filename="../pages/run.py" line="569"/>
         <source>Ankle from neutral: —</source>
         <translation>Tobillo desde la posición neutra: —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="569"/>
+        <location filename="../pages/run.py" line="572"/>
         <source>the ankle centre moved %1 mm (comfort limit %2 mm)</source>
         <translation>el centro del tobillo se ha desplazado %1 mm (límite de confort %2 mm)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="581"/>
+        <location filename="../pages/run.py" line="579"/>
+        <source>Hold %1: %2 %3 N·m (target now %4 N·m)</source>
+        <translation>Mantenimiento %1: %2 %3 N·m (objetivo ahora %4 N·m)</translation>
+    </message>
+    <message>
+        <location filename="../pages/run.py" line="595"/>
         <source>Platform (engineers): roll %1°, pitch %2°</source>
         <translation>Plataforma (ingeniería): alabeo %1°, cabeceo %2°</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="585"/>
+        <location filename="../pages/run.py" line="599"/>
         <source>Platform (engineers): —</source>
         <translation>Plataforma (ingeniería): —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="595"/>
+        <location filename="../pages/run.py" line="609"/>
         <source>Repetitions: %1</source>
         <translation>Repeticiones: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="597"/>
+        <location filename="../pages/run.py" line="611"/>
         <source>Repetitions: %1 of %2</source>
         <translation>Repeticiones: %1 de %2</translation>
     </message>
@@ -1445,29 +1449,34 @@
     </message>
     <message>
         <location filename="../pages/patients.py" line="516"/>
-        <location filename="../pages/run.py" line="538"/>
-        <location filename="../pages/run.py" line="561"/>
+        <location filename="../pages/run.py" line="61"/>
+        <location filename="../pages/run.py" line="545"/>
+        <location filename="../pages/run.py" line="564"/>
         <source>dorsiflexion</source>
         <translation>dorsiflexión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="517"/>
-        <location filename="../pages/run.py" line="538"/>
-        <location filename="../pages/run.py" line="561"/>
+        <location filename="../pages/run.py" line="61"/>
+        <location filename="../pages/run.py" line="545"/>
+        <location filename="../pages/run.py" line="564"/>
         <source>plantarflexion</source>
+        <extracomment>Redraw rate of the live plots, Hz: the issue asks ≥ 30 fps; a 33 ms timer gives at most 30.3 and any late tick drops below, so the timer runs a little faster (frames with no new telemetry, 60 Hz, are skipped). Seconds of history on the live plots. The angle curves of the ankle view (from neutral) and of the platform (absolute).</extracomment>
         <translation>plantarflexión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="518"/>
-        <location filename="../pages/run.py" line="540"/>
-        <location filename="../pages/run.py" line="563"/>
+        <location filename="../pages/run.py" line="62"/>
+        <location filename="../pages/run.py" line="547"/>
+        <location filename="../pages/run.py" line="566"/>
         <source>inversion</source>
         <translation>inversión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="518"/>
-        <location filename="../pages/run.py" line="540"/>
-        <location filename="../pages/run.py" line="563"/>
+        <location filename="../pages/run.py" line="62"/>
+        <location filename="../pages/run.py" line="547"/>
+        <location filename="../pages/run.py" line="566"/>
         <source>eversion</source>
         <translation>eversión</translation>
     </message>

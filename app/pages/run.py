@@ -4,7 +4,7 @@ band), progress with phase and time left; with the patient's ankle setup, the an
 in clinical words. Nothing on this page needs typing.
 
 The ankle view: while the telemetry carries the ankle's state (an exercise about the patient's
-ankle centre: ``app.telemetry.ANKLE_FIELDS``), the angle plot shows the foot's dorsi/plantar
+ankle centre: ``app.telemetry.ankle_state``), the angle plot shows the foot's dorsi/plantar
 flexion and inversion/eversion *from the neutral pose* (their references derived from the
 platform's, which differ from them by the neutral pose only), a line reads the angles, the
 torques about the ankle and how far the ankle centre moved in clinical words, and the
@@ -40,7 +40,7 @@ from app.journal import SessionJournal
 from app.patient_context import PatientContext
 from app.rt_link import RtLink
 from app.style import LARGE_PX, TARGET_PX
-from app.telemetry import RepetitionCounter, magnitude
+from app.telemetry import RepetitionCounter, ankle_state
 from app.words import event_words
 from rt.ipc.client import RtClient
 
@@ -53,6 +53,13 @@ WINDOW_S = 20.0
 #: The angle curves of the ankle view (from neutral) and of the platform (absolute).
 ANKLE_CURVES = ("ankle_dfpf_ref", "ankle_dfpf", "ankle_inev_ref", "ankle_inev")
 PLATFORM_CURVES = ("pitch_ref", "pitch", "roll_ref", "roll")
+
+
+def _direction_words() -> dict[str, str]:
+    """Clinical directions as a torque hold names them (``protocols.torque_hold``), in the
+    installed language."""
+    return {"plantarflexion": tr("plantarflexion"), "dorsiflexion": tr("dorsiflexion"),
+            "inversion": tr("inversion"), "eversion": tr("eversion")}
 
 
 def _last_finite(x: np.ndarray) -> float:
@@ -550,12 +557,8 @@ class RunPage(QWidget):
 
     def _show_ankle_state(self, latest: dict[str, Any]) -> None:
         """The ankle view's words (:meth:`show_ankle`)."""
-        def value(key: str) -> float:
-            x = latest.get(key)
-            return magnitude(x) if key == "ankle_centre_displacement_mm" else \
-                float(x) if isinstance(x, (int, float)) else float("nan")
-
-        pf, ie = value("ankle_dfpf_deg"), value("ankle_inev_deg")
+        state = ankle_state(latest)
+        pf, ie = state["ankle_dfpf"], state["ankle_inev"]
         if np.isfinite(pf) and np.isfinite(ie):
             angles = tr("Ankle from neutral: %1 %2°, %3 %4°").replace(
                 "%1", tr("plantarflexion") if pf >= 0 else tr("dorsiflexion")) \
@@ -564,11 +567,22 @@ class RunPage(QWidget):
                 .replace("%4", f"{abs(ie):.1f}")
         else:
             angles = tr("Ankle from neutral: —")
-        moved = value("ankle_centre_displacement_mm")
+        moved = state["ankle_displacement"]
         if np.isfinite(moved):
             angles += " — " + tr("the ankle centre moved %1 mm (comfort limit %2 mm)") \
-                .replace("%1", f"{moved:.0f}").replace("%2", f"{self._displacement_limit_mm():.0f}")
-        tp, ti = value("ankle_torque_dfpf_nm"), value("ankle_torque_inev_nm")
+                .replace("%1", f"{moved:.0f}") \
+                .replace("%2", f"{self._displacement_limit_mm():.0f}")
+        target = latest.get("ankle_target")
+        if isinstance(target, dict) and isinstance(target.get("target_nm"), (int, float)) \
+                and isinstance(target.get("now_nm"), (int, float)):
+            # An isometric hold regulated on the ankle torque: its target, ramps included.
+            angles += "\n" + tr("Hold %1: %2 %3 N·m (target now %4 N·m)") \
+                .replace("%1", str(target.get("hold", ""))) \
+                .replace("%2", _direction_words().get(str(target.get("direction")),
+                                                     str(target.get("direction", "")))) \
+                .replace("%3", f"{abs(float(target['target_nm'])):.1f}") \
+                .replace("%4", f"{abs(float(target['now_nm'])):.1f}")
+        tp, ti = state["ankle_torque_dfpf"], state["ankle_torque_inev"]
         torque = self._torque_words(tp, ti) if np.isfinite(tp) and np.isfinite(ti) \
             else tr("Ankle torque: —")
         for label, text in ((self.ankle_angles_label, angles), (self.ankle_label, torque)):
