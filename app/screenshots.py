@@ -119,7 +119,7 @@ def start_demo_session(window: object, timeout_s: float = 180.0) -> None:
     window.prescribe.start_button.click()
     window.run.control_button.click()
     try:
-        wait_until(lambda: window.run.start_button.isEnabled(), 10.0, "taking control")
+        wait_until(lambda: window.run.start_button.isEnabled(), 30.0, "taking control")
     except HardwareError as exc:
         raise HardwareError(f"{exc}: {window.run.message.text()}") from None
     window.run.start_button.click()

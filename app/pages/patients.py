@@ -67,7 +67,7 @@ class PatientsPage(QWidget):
         self.settings = settings or GuiSettings()
         #: the progress report (messages on the page's message line)
         self.report = ReportAction(self, "gui-progress-report", self.settings)
-        self.report.message.connect(lambda text: self.message.setText(text))
+        self.report.message.connect(self._report_said)
         self.report.busy_changed.connect(lambda _busy: self._enable())
         self.actor: Any = None
         self.current: dict[str, Any] | None = None
@@ -377,6 +377,9 @@ class PatientsPage(QWidget):
         code, version = self.current["code"], self.current.get("version")
         self.worker.call("clinical", lambda: record.update_patient(
             actor, code, expected_version=version, **changes))
+
+    def _report_said(self, text: str) -> None:
+        self.message.setText(text)
 
     def make_report(self) -> None:
         """Ask where, then write the chosen patient's progress report on a worker."""

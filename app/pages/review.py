@@ -66,9 +66,8 @@ class ReviewPage(QWidget):
         #: the session report (its ``last_result["session"]``: the clinical record's session
         #: it came from, None when from the file alone)
         self.report = ReportAction(self, "gui-report", self.settings)
-        self.report.message.connect(lambda text: self.report_message.setText(text))
-        self.report.busy_changed.connect(lambda _busy: self.report_button.setEnabled(
-            self.data is not None and not self.report.busy))
+        self.report.message.connect(self._report_said)
+        self.report.busy_changed.connect(self._report_busy)
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-review")
         self.sessions = QListWidget()
         self.sessions.setMinimumWidth(260)
@@ -151,6 +150,12 @@ class ReviewPage(QWidget):
             self.loaded.emit(load_review(path), "")
         except TalusError as exc:
             self.loaded.emit(None, str(exc))
+
+    def _report_said(self, text: str) -> None:
+        self.report_message.setText(text)
+
+    def _report_busy(self, busy: bool) -> None:
+        self.report_button.setEnabled(self.data is not None and not busy)
 
     def make_report(self) -> None:
         """Ask where, then write the opened session's report on the worker."""
