@@ -306,6 +306,16 @@
         <translation>Fin (s)</translation>
     </message>
     <message>
+        <location filename="../field_labels.py" line="55"/>
+        <source>Turn about</source>
+        <translation>Girar alrededor de</translation>
+    </message>
+    <message>
+        <location filename="../field_labels.py" line="56"/>
+        <source>Ankle comfort limit (mm)</source>
+        <translation>Confort del tobillo (mm)</translation>
+    </message>
+    <message>
         <location filename="../main_window.py" line="55"/>
         <source>talus — rehabilitation robot</source>
         <extracomment>The clinic touchscreen (issue 14): everything fits without horizontal scrolling. The pages in rail order (screenshots are named after them); login, patients and users (the admin&apos;s) come with a clinical record.</extracomment>
@@ -380,73 +390,73 @@
         <translation>Protocolos</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="97"/>
-        <location filename="../pages/review.py" line="101"/>
+        <location filename="../pages/prescribe.py" line="106"/>
+        <location filename="../pages/review.py" line="100"/>
         <source>time (s)</source>
         <translation>tiempo (s)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="101"/>
-        <location filename="../pages/prescribe.py" line="158"/>
+        <location filename="../pages/prescribe.py" line="110"/>
+        <location filename="../pages/prescribe.py" line="167"/>
         <source>Pre-flight not run yet.</source>
         <translation>Comprobación previa aún no realizada.</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="105"/>
+        <location filename="../pages/prescribe.py" line="114"/>
         <source>Check on the robot model (pre-flight)</source>
         <translation>Comprobar en el modelo del robot (comprobación previa)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="106"/>
+        <location filename="../pages/prescribe.py" line="115"/>
         <source>Start on the Run page</source>
         <translation>Iniciar en la página Ejecutar</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="159"/>
+        <location filename="../pages/prescribe.py" line="168"/>
         <source>Correct the fields marked in red first.</source>
         <translation>Corrija primero los campos marcados en rojo.</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="168"/>
+        <location filename="../pages/prescribe.py" line="177"/>
         <source>Computing the preview…</source>
         <translation>Calculando la vista previa…</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="185"/>
+        <location filename="../pages/prescribe.py" line="194"/>
         <source>No preview: %1</source>
         <translation>Sin vista previa: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="188"/>
+        <location filename="../pages/prescribe.py" line="197"/>
         <source>This protocol cannot be played: %1</source>
         <translation>Este protocolo no se puede ejecutar: %1</translation>
     </message>
     <message>
         <location filename="../pages/calibrate.py" line="187"/>
-        <location filename="../pages/prescribe.py" line="192"/>
+        <location filename="../pages/prescribe.py" line="201"/>
         <source>force (N)</source>
         <translation>fuerza (N)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="194"/>
+        <location filename="../pages/prescribe.py" line="203"/>
         <source>force reference</source>
         <translation>referencia de fuerza</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="196"/>
+        <location filename="../pages/prescribe.py" line="205"/>
         <source>angle (°)</source>
         <translation>ángulo (°)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="198"/>
-        <location filename="../pages/review.py" line="197"/>
+        <location filename="../pages/prescribe.py" line="207"/>
+        <location filename="../pages/review.py" line="202"/>
         <location filename="../pages/run.py" line="153"/>
         <source>plantar(+)/dorsi(−) flexion</source>
         <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="200"/>
-        <location filename="../pages/review.py" line="200"/>
+        <location filename="../pages/prescribe.py" line="209"/>
+        <location filename="../pages/review.py" line="205"/>
         <source>roll (+ is inversion of a right foot)</source>
         <translation>balanceo (+ es inversión del pie derecho)</translation>
     </message>
@@ -456,165 +466,165 @@
         <translation>inversión(+)/eversión(−)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="201"/>
+        <location filename="../pages/prescribe.py" line="210"/>
         <source>Duration: %1 s</source>
         <translation>Duración: %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="212"/>
+        <location filename="../pages/prescribe.py" line="221"/>
         <source>Pre-flight running on the robot model…</source>
         <translation>Comprobación previa en curso en el modelo del robot…</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="225"/>
+        <location filename="../pages/prescribe.py" line="234"/>
         <source>REFUSED: %1</source>
         <translation>RECHAZADO: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="231"/>
+        <location filename="../pages/prescribe.py" line="240"/>
         <source>Pre-flight passed. Predicted peaks: %1</source>
         <translation>Comprobación previa superada. Picos previstos: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="242"/>
+        <location filename="../pages/prescribe.py" line="251"/>
         <source>Choose a patient first</source>
         <translation>Elija primero un paciente</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="255"/>
+        <location filename="../pages/prescribe.py" line="264"/>
         <source>platform force %1 N</source>
         <translation>fuerza en la plataforma %1 N</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="257"/>
+        <location filename="../pages/prescribe.py" line="266"/>
         <source>dorsi/plantarflexion</source>
         <translation>dorsi/plantarflexión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="257"/>
+        <location filename="../pages/prescribe.py" line="266"/>
         <source>inversion/eversion</source>
         <translation>inversión/eversión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="266"/>
+        <location filename="../pages/prescribe.py" line="275"/>
         <source>the ankle centre moves at most %1 mm (RMS %2 mm; comfort limit %3 mm)</source>
         <translation>el centro del tobillo se desplaza como máximo %1 mm (RMS %2 mm; límite de confort %3 mm)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="271"/>
+        <location filename="../pages/prescribe.py" line="280"/>
         <source>force tracking error %1 %</source>
         <translation>error de seguimiento de fuerza %1 %</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="274"/>
+        <location filename="../pages/prescribe.py" line="283"/>
         <source>duration %1 s</source>
         <translation>duración %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="80"/>
+        <location filename="../pages/review.py" line="79"/>
         <source>Refresh</source>
         <extracomment>the session report (its ``last_result[&quot;session&quot;]``: the clinical record&apos;s session it came from, None when from the file alone)</extracomment>
         <translation>Actualizar</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="81"/>
+        <location filename="../pages/review.py" line="80"/>
         <source>Open</source>
         <translation>Abrir</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="82"/>
+        <location filename="../pages/review.py" line="81"/>
         <source>Session report (PDF)</source>
         <translation>Informe de la sesión (PDF)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="93"/>
+        <location filename="../pages/review.py" line="92"/>
         <source>Choose a session on the left.</source>
         <translation>Elija una sesión a la izquierda.</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="95"/>
+        <location filename="../pages/review.py" line="94"/>
         <location filename="../pages/run.py" line="122"/>
         <source>Force (N)</source>
         <translation>Fuerza (N)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="96"/>
+        <location filename="../pages/review.py" line="95"/>
         <location filename="../pages/run.py" line="123"/>
         <location filename="../pages/run.py" line="484"/>
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="106"/>
+        <location filename="../pages/review.py" line="105"/>
         <source>Recorded sessions</source>
         <translation>Sesiones grabadas</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="146"/>
+        <location filename="../pages/review.py" line="145"/>
         <source>Reading %1…</source>
         <translation>Leyendo %1…</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="162"/>
+        <location filename="../pages/review.py" line="167"/>
         <source>Save the session report</source>
         <translation>Guardar el informe de la sesión</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="173"/>
+        <location filename="../pages/review.py" line="178"/>
         <source>Cannot open: %1</source>
         <translation>No se puede abrir: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="177"/>
+        <location filename="../pages/review.py" line="182"/>
         <location filename="../pages/run.py" line="148"/>
         <source>reference</source>
         <translation>referencia</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="179"/>
+        <location filename="../pages/review.py" line="184"/>
         <location filename="../pages/run.py" line="150"/>
         <source>measured</source>
         <translation>medida</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="185"/>
+        <location filename="../pages/review.py" line="190"/>
         <source>ankle: plantar(+)/dorsi(−) flexion</source>
         <translation>tobillo: flexión plantar(+)/dorsal(−)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="188"/>
+        <location filename="../pages/review.py" line="193"/>
         <source>ankle: inversion(+)/eversion(−)</source>
         <translation>tobillo: inversión(+)/eversión(−)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="191"/>
+        <location filename="../pages/review.py" line="196"/>
         <location filename="../pages/run.py" line="498"/>
         <source>platform pitch (engineers)</source>
         <translation>cabeceo de la plataforma (ingeniería)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="193"/>
+        <location filename="../pages/review.py" line="198"/>
         <location filename="../pages/run.py" line="499"/>
         <source>platform roll (engineers)</source>
         <translation>alabeo de la plataforma (ingeniería)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="209"/>
+        <location filename="../pages/review.py" line="214"/>
         <source>%1 — patient %2 — %3 s</source>
         <translation>%1 — paciente %2 — %3 s</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="214"/>
+        <location filename="../pages/review.py" line="219"/>
         <source>stops: %1</source>
         <translation>paradas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="217"/>
+        <location filename="../pages/review.py" line="222"/>
         <source>recording cut short (recovered up to its last whole block)</source>
         <translation>grabación interrumpida (recuperada hasta su último bloque completo)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="226"/>
+        <location filename="../pages/review.py" line="231"/>
         <source>ankle reached dorsiflexion %1°, plantarflexion %2°, inversion %3°, eversion %4°; peak torques DF %5, PF %6, INV %7, EV %8 N·m</source>
         <translation>el tobillo alcanzó flexión dorsal %1°, flexión plantar %2°, inversión %3°, eversión %4°; pares máximos FD %5, FP %6, INV %7, EV %8 N·m</translation>
     </message>
@@ -1348,7 +1358,7 @@
         <translation>Indique los cuatro rangos de movimiento.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="387"/>
+        <location filename="../pages/patients.py" line="390"/>
         <source>Save the progress report</source>
         <translation>Guardar el informe de evolución</translation>
     </message>
@@ -1368,87 +1378,87 @@
         <translation>Informe escrito: %1 (%2 páginas)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="437"/>
+        <location filename="../pages/patients.py" line="440"/>
         <source>Ankle setup saved.</source>
         <translation>Configuración del tobillo guardada.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="443"/>
+        <location filename="../pages/patients.py" line="446"/>
         <source>Patient %1 registered.</source>
         <translation>Paciente %1 registrado.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="447"/>
+        <location filename="../pages/patients.py" line="450"/>
         <source>Limits saved.</source>
         <translation>Límites guardados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="450"/>
+        <location filename="../pages/patients.py" line="453"/>
         <source>Clinical data saved.</source>
         <translation>Datos clínicos guardados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="454"/>
+        <location filename="../pages/patients.py" line="457"/>
         <source>No identifying data recorded.</source>
         <translation>No hay datos identificativos registrados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="472"/>
+        <location filename="../pages/patients.py" line="475"/>
         <source>No ankle setup entered: exercises turn about the platform&apos;s centre.</source>
         <translation>No se ha introducido la configuración del tobillo: los ejercicios giran alrededor del centro de la plataforma.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="478"/>
+        <location filename="../pages/patients.py" line="481"/>
         <source>measured with the camera</source>
         <translation>medido con la cámara</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="479"/>
+        <location filename="../pages/patients.py" line="482"/>
         <source>entered by hand</source>
         <translation>introducido a mano</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="481"/>
+        <location filename="../pages/patients.py" line="484"/>
         <source>Ankle centre in force (%1 foot): %2 mm above the sole; %3 mm along the foot (toes +), %4 mm across; foot plate %5 mm; %6</source>
         <translation>Centro del tobillo vigente (pie %1): %2 mm sobre la planta; %3 mm a lo largo del pie (dedos +), %4 mm transversal; placa del pie %5 mm; %6</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="496"/>
+        <location filename="../pages/patients.py" line="499"/>
         <source>Patient %1</source>
         <translation>Paciente %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="497"/>
+        <location filename="../pages/patients.py" line="500"/>
         <source>Body mass: %1 kg</source>
         <translation>Masa corporal: %1 kg</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="498"/>
+        <location filename="../pages/patients.py" line="501"/>
         <source>Height: %1 cm</source>
         <translation>Estatura: %1 cm</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="500"/>
+        <location filename="../pages/patients.py" line="503"/>
         <source>Affected side: %1</source>
         <translation>Lado afectado: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="501"/>
+        <location filename="../pages/patients.py" line="504"/>
         <source>Diagnosis: %1</source>
         <translation>Diagnóstico: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="502"/>
+        <location filename="../pages/patients.py" line="505"/>
         <source>Notes: %1</source>
         <translation>Notas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="512"/>
+        <location filename="../pages/patients.py" line="515"/>
         <source>No limits prescribed yet: a session needs them.</source>
         <translation>Aún no hay límites prescritos: una sesión los necesita.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="516"/>
+        <location filename="../pages/patients.py" line="519"/>
         <location filename="../pages/run.py" line="61"/>
         <location filename="../pages/run.py" line="545"/>
         <location filename="../pages/run.py" line="564"/>
@@ -1456,7 +1466,7 @@
         <translation>dorsiflexión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="517"/>
+        <location filename="../pages/patients.py" line="520"/>
         <location filename="../pages/run.py" line="61"/>
         <location filename="../pages/run.py" line="545"/>
         <location filename="../pages/run.py" line="564"/>
@@ -1465,7 +1475,7 @@
         <translation>plantarflexión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="518"/>
+        <location filename="../pages/patients.py" line="521"/>
         <location filename="../pages/run.py" line="62"/>
         <location filename="../pages/run.py" line="547"/>
         <location filename="../pages/run.py" line="566"/>
@@ -1473,7 +1483,7 @@
         <translation>inversión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="518"/>
+        <location filename="../pages/patients.py" line="521"/>
         <location filename="../pages/run.py" line="62"/>
         <location filename="../pages/run.py" line="547"/>
         <location filename="../pages/run.py" line="566"/>
@@ -1481,12 +1491,12 @@
         <translation>eversión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="521"/>
+        <location filename="../pages/patients.py" line="524"/>
         <source>Limits in force: %1; force ≤ %2 N; speed ≤ %3 °/s — set by %4 on %5</source>
         <translation>Límites vigentes: %1; fuerza ≤ %2 N; velocidad ≤ %3 °/s — fijados por %4 el %5</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="536"/>
+        <location filename="../pages/patients.py" line="539"/>
         <source>No sessions yet.</source>
         <translation>Aún no hay sesiones.</translation>
     </message>
