@@ -25,8 +25,8 @@ import numpy as np
 
 #: The ankle's live state: ring column → (flat telemetry field, the ``ankle`` object's field
 #: as ``/ankle/state`` names it, factor to SI). Signs of ``rt.model.ankle``: plantarflexion,
-#: inversion and their efforts positive; the displacement is the centre's from where it was
-#: at the neutral pose (its x, y, z in mm, or its size).
+#: inversion and their efforts positive; the displacement is the centre's horizontal one
+#: from where it was at the neutral pose (its x, y, z in mm, or its horizontal size).
 ANKLE_FIELDS = {
     "ankle_dfpf": ("ankle_dfpf_deg", "plantarflexion_deg", math.pi / 180.0),
     "ankle_inev": ("ankle_inev_deg", "inversion_deg", math.pi / 180.0),
@@ -52,12 +52,13 @@ def _f(x: Any) -> float:
         return math.nan
 
 
-def magnitude(x: Any) -> float:
-    """A displacement's size: the value itself, or the norm of a vector of components (the
-    ankle centre's displacement may come as its x, y, z); NaN when missing or malformed."""
+def horizontal(x: Any) -> float:
+    """A displacement's horizontal size (what pre-flight's comfort limit bounds,
+    ``rt.model.ankle``): the value itself, or the norm of a vector's x and y (the ankle
+    centre's displacement comes as its x, y, z); NaN when missing or malformed."""
     if isinstance(x, (list, tuple)):
-        parts = [_f(v) for v in x]
-        return math.sqrt(sum(v * v for v in parts)) if parts else math.nan
+        parts = [_f(v) for v in x[:2]]
+        return math.hypot(*parts) if len(parts) == 2 else math.nan
     return _f(x)
 
 
@@ -69,7 +70,7 @@ def ankle_state(msg: dict[str, Any]) -> dict[str, float]:
     out = {}
     for column, (flat, name, _factor) in ANKLE_FIELDS.items():
         x = msg[flat] if flat in msg else nested.get(name)
-        out[column] = magnitude(x) if column == "ankle_displacement" else _f(x)
+        out[column] = horizontal(x) if column == "ankle_displacement" else _f(x)
     return out
 
 

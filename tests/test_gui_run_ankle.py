@@ -47,7 +47,7 @@ def _ankle_sample(t: float, plantar_deg: float, inversion_deg: float, *, ref_lea
         msg["ankle"] = {"t": t, "plantarflexion_deg": plantar_deg,
                         "inversion_deg": inversion_deg, "abduction_deg": 0.1,
                         "plantarflexion_torque_nm": -4.25, "inversion_torque_nm": 1.5,
-                        "abduction_torque_nm": 0.0, "centre_displacement_mm": [3.0, 4.0, 12.0],
+                        "abduction_torque_nm": 0.0, "centre_displacement_mm": [3.0, 4.0, 12.0],  # 5 mm horizontally,
                         "platform_roll_deg": roll, "platform_pitch_deg": pitch}
     return msg
 
@@ -138,6 +138,7 @@ def test_ankle_view_shows_the_foot_from_neutral_and_hides_without_the_fields(pag
     page.redraw()
     assert page.ankle_angles_label.text().endswith(
         "\nHold 2: dorsiflexion 6.0 N·m (target now 3.2 N·m)")
+    assert "the ankle centre moved 5 mm" in page.ankle_angles_label.text()   # horizontal
 
     # A sample whose ankle fields are missing reads as a dash, not an invented angle.
     ring.push({**_ankle_sample(10.1, 0.0, 0.0, flat=True), "ankle_dfpf_deg": None,
