@@ -52,6 +52,8 @@ def _labels() -> dict[str, str]:
         "stance": tr("Stance"), "transition_speed_deg_s": tr("Transition speed (°/s)"),
         "max_speed_deg_s": tr("Maximum speed (°/s)"), "axes": tr("Axes"),
         "rom_deg": tr("Range (°)"), "start_s": tr("Start (s)"), "end_s": tr("End (s)"),
+        "centre": tr("Turn about"),
+        "ankle_displacement_limit_mm": tr("Ankle comfort limit (mm)"),
     }
 
 

@@ -8,6 +8,7 @@ it exists (never overwritten; the report is written to a temporary file and rena
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +50,21 @@ def pdf_target(chosen: str | Path) -> Path:
     if not path.parent.is_dir():
         raise InputError(f"{path}: folder {path.parent} does not exist")
     return path
+
+
+def choose_report_target(ask: Callable[[str, Path], Path | None], title: str,
+                         suggested: Path, settings: GuiSettings) -> tuple[Path, Any] | None:
+    """Ask where to write a report (``ask(title, suggested)``; None: cancelled) and check it:
+    the file to write (:func:`pdf_target`) and the reports' settings (:func:`report_settings`).
+
+    Raises:
+        InputError: the chosen file exists or its folder does not.
+        ConfigurationError: the clinic's logo is not a readable image.
+    """
+    chosen = ask(title, suggested)
+    if chosen is None:
+        return None
+    return pdf_target(chosen), report_settings(settings)
 
 
 def session_uid_for_recording(record: Any, actor: Any, recording: Path) -> str | None:

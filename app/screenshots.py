@@ -26,8 +26,9 @@ DEMO_PATIENT = PatientContext(
     {"roll_min_deg": -12.0, "roll_max_deg": 12.0, "pitch_min_deg": -15.0,
      "pitch_max_deg": 15.0, "max_force_n": 600.0, "max_angular_speed_deg_s": 30.0},
     limits_set_by="demo")
-#: Shots besides one per page: the Run page live, and stopped with Reset asking.
-EXTRA_SHOTS = ("run_live", "stopped")
+#: Shots besides one per page: the Run page live, stopped with Reset asking, and Calibrate
+#: after its plan and camera registration (the markers detected in the twin camera's frame).
+EXTRA_SHOTS = ("run_live", "stopped", "calibrate_camera")
 #: Heartbeat timeout of the demo's embedded RT process, s.
 DEMO_HEARTBEAT_TIMEOUT_S = 1.0
 #: The demo session: sine Fz shortened to a few cycles.
@@ -118,7 +119,7 @@ def start_demo_session(window: object, timeout_s: float = 180.0) -> None:
     window.prescribe.start_button.click()
     window.run.control_button.click()
     try:
-        wait_until(lambda: window.run.start_button.isEnabled(), 10.0, "taking control")
+        wait_until(lambda: window.run.start_button.isEnabled(), 30.0, "taking control")
     except HardwareError as exc:
         raise HardwareError(f"{exc}: {window.run.message.text()}") from None
     window.run.start_button.click()
@@ -126,6 +127,20 @@ def start_demo_session(window: object, timeout_s: float = 180.0) -> None:
                timeout_s, "the session start")
     if window.run.last_error:
         raise InputError(f"demo session did not start: {window.run.last_error}")
+
+
+def register_demo_plate(window: Any, folder: Path, timeout_s: float = 120.0) -> None:
+    """Calibrate: plan the default campaign in ``folder`` (new) and register the twin plate
+    with the camera, as an engineer's first two clicks (the camera tab then shows the markers
+    detected)."""
+    page = window.calibrate
+    window.show_page("calibrate")
+    page.work_folder.setText(str(folder))
+    for step in ("plan", "register"):
+        page.buttons[step].click()
+        wait_until(lambda: not page.busy, timeout_s, f"the calibration's {step} step")
+        if step not in page.done:
+            raise InputError(f"demo calibration {step} failed: {page.last_error}")
 
 
 def render_all(directory: Path, settings: GuiSettings, force: bool = False) -> list[Path]:
@@ -192,6 +207,9 @@ def render_all(directory: Path, settings: GuiSettings, force: bool = False) -> l
                 if key not in ("login", "users"):
                     window.show_page(key)
                     shot(key)
+            if "calibrate" in pages:
+                register_demo_plate(window, work / "calibration")
+                shot("calibrate_camera")
             if "users" in pages:
                 # The Users page is the administrator's: log in as the demo admin.
                 from patients import demo

@@ -6,6 +6,13 @@ thread's frame costs one small copy (:meth:`TelemetryRing.snapshot`) and ``setDa
 never per-sample Python work or a growing list. The same thread counts repetitions
 (:class:`RepetitionCounter`) of range-of-motion and active-assist exercises from the measured
 platform angles while the reference is in its ``play`` phase.
+
+During an exercise about the patient's ankle the RT process also publishes the ankle's state in
+clinical terms (:func:`ankle_state`: angles from the neutral pose, torques about the ankle
+centre, the centre's displacement); they fill the ``ankle_*`` columns (SI: rad, N·m, m), NaN
+in samples without them, so the Run page shows the ankle view only while they arrive. Two
+shapes are read: the sample's ``ankle`` object (the RT process's last ``/ankle/state`` message,
+``rt.model.ankle.AnkleMonitor``) or flat ``ankle_*`` fields (:data:`ANKLE_FIELDS`).
 """
 from __future__ import annotations
 
@@ -16,15 +23,19 @@ from typing import Any
 
 import numpy as np
 
-#: The ring's columns, in order (SI units: s, N, rad, N·m, m; progress 0..1). The ``ankle_``
-#: columns are the patient's ankle during a session with an ankle setup (telemetry's
-#: ``ankle``, the RT process's ``/ankle/state``), NaN otherwise: plantarflexion (+) /
-#: dorsiflexion (-) and inversion (+) / eversion (-) from the neutral pose (rad), the torques
-#: about the ankle centre in the same directions (N·m), and the ankle centre's horizontal
-#: displacement (m).
+#: The ankle's live state: ring column → (flat telemetry field, the ``ankle`` object's field
+#: as ``/ankle/state`` names it, factor to SI). Signs of ``rt.model.ankle``: plantarflexion,
+#: inversion and their efforts positive; the displacement is the centre's horizontal one
+#: from where it was at the neutral pose (its x, y, z in mm, or its horizontal size).
+ANKLE_FIELDS = {
+    "ankle_dfpf": ("ankle_dfpf_deg", "plantarflexion_deg", math.pi / 180.0),
+    "ankle_inev": ("ankle_inev_deg", "inversion_deg", math.pi / 180.0),
+    "ankle_torque_dfpf": ("ankle_torque_dfpf_nm", "plantarflexion_torque_nm", 1.0),
+    "ankle_torque_inev": ("ankle_torque_inev_nm", "inversion_torque_nm", 1.0),
+    "ankle_displacement": ("ankle_centre_displacement_mm", "centre_displacement_mm", 1e-3)}
+#: The ring's columns, in order (SI units: s, N, rad, N·m, m; progress 0..1).
 COLUMNS = ("t", "force_ref", "force", "roll", "pitch", "roll_ref", "pitch_ref", "progress",
-           "ankle_plantarflexion", "ankle_inversion", "ankle_plantarflexion_torque",
-           "ankle_inversion_torque", "ankle_centre_displacement")
+           *ANKLE_FIELDS)
 _COL = {name: i for i, name in enumerate(COLUMNS)}
 #: A repetition's end counts when the angle passes this share of the prescribed amplitude
 #: (half: a patient who reaches half their range did the movement; noise near neutral does not).
@@ -39,6 +50,28 @@ def _f(x: Any) -> float:
         return math.nan if x is None else float(x)
     except (TypeError, ValueError):
         return math.nan
+
+
+def horizontal(x: Any) -> float:
+    """A displacement's horizontal size (what pre-flight's comfort limit bounds,
+    ``rt.model.ankle``): the value itself, or the norm of a vector's x and y (the ankle
+    centre's displacement comes as its x, y, z); NaN when missing or malformed."""
+    if isinstance(x, (list, tuple)):
+        parts = [_f(v) for v in x[:2]]
+        return math.hypot(*parts) if len(parts) == 2 else math.nan
+    return _f(x)
+
+
+def ankle_state(msg: dict[str, Any]) -> dict[str, float]:
+    """The sample's ankle state in clinical units (column → deg, N·m, mm: the displacement's
+    size), NaN for what it lacks (:data:`ANKLE_FIELDS`)."""
+    nested = msg.get("ankle")
+    nested = nested if isinstance(nested, dict) else {}
+    out = {}
+    for column, (flat, name, _factor) in ANKLE_FIELDS.items():
+        x = msg[flat] if flat in msg else nested.get(name)
+        out[column] = horizontal(x) if column == "ankle_displacement" else _f(x)
+    return out
 
 
 def _band(extent_neg: float, extent_pos: float) -> tuple[float, float]:
@@ -142,20 +175,6 @@ class RepetitionCounter:
             a.feed(pitch_deg if a.column == "pitch" else roll_deg)
 
 
-def _ankle_row(ankle: Any) -> tuple[float, float, float, float, float]:
-    """The ring's ankle columns (SI) from telemetry's ``ankle`` (deg, N·m, mm); NaN when
-    absent or malformed."""
-    if not isinstance(ankle, dict):
-        return (math.nan,) * 5
-    d = ankle.get("centre_displacement_mm")
-    horizontal = math.hypot(_f(d[0]), _f(d[1])) * 1e-3 \
-        if isinstance(d, list | tuple) and len(d) >= 2 else math.nan
-    return (math.radians(_f(ankle.get("plantarflexion_deg"))),
-            math.radians(_f(ankle.get("inversion_deg"))),
-            _f(ankle.get("plantarflexion_torque_nm")), _f(ankle.get("inversion_torque_nm")),
-            horizontal)
-
-
 class TelemetryRing:
     """The last ``capacity`` telemetry samples as numpy columns, written by the subscriber
     thread, read by the GUI thread at the frame rate (thread-safe)."""
@@ -190,7 +209,9 @@ class TelemetryRing:
                _f(pose[2]) if len(pose) > 2 else math.nan,
                _f(ref[1]) if len(ref) > 2 else math.nan,
                _f(ref[2]) if len(ref) > 2 else math.nan,
-               _f(msg.get("progress")), *_ankle_row(msg.get("ankle")))
+               _f(msg.get("progress")),
+               *(value * ANKLE_FIELDS[column][2]
+                 for column, value in ankle_state(msg).items()))
         with self._lock:
             self._data[self._written % self.capacity] = row
             self._written += 1
@@ -198,7 +219,12 @@ class TelemetryRing:
             counter = self._counter
             if counter is not None and msg.get("session") == self._session \
                     and msg.get("phase") == "play":
-                counter.feed(math.degrees(row[_COL["pitch"]]), math.degrees(row[_COL["roll"]]))
+                # The ankle's angles from neutral when the telemetry has them (the prescribed
+                # amplitudes are from neutral), else the platform's.
+                pitch, roll = row[_COL["ankle_dfpf"]], row[_COL["ankle_inev"]]
+                if math.isnan(pitch) or math.isnan(roll):
+                    pitch, roll = row[_COL["pitch"]], row[_COL["roll"]]
+                counter.feed(math.degrees(pitch), math.degrees(roll))
 
     def snapshot(self) -> tuple[int, dict[str, np.ndarray]]:
         """(samples written, each column oldest first) — copies, safe to keep and draw."""

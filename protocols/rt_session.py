@@ -103,9 +103,9 @@ class ProtocolSession:
     def figures(self, preload_n: float) -> SessionFigures:
         assert self.model is not None
         ankle = self.metadata.get("ankle")
-        return SessionFigures(self.protocol, self.model, preload_n,
-                              info=self.metadata.get("source"),
-                              ankle=None if ankle is None else AnkleSetup.model_validate(ankle))
+        return SessionFigures.for_protocol(
+            self.protocol, self.model, preload_n, info=self.metadata.get("source"),
+            ankle=None if ankle is None else AnkleSetup.model_validate(ankle))
 
 
 class ProtocolSessions:

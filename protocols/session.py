@@ -7,9 +7,10 @@ when its references break the patient's or the robot's limits, or when running i
 as fast as possible makes the safety supervisor stop the robot. Its report gives the predicted
 peaks: actuator force, slider speed, platform angles and platform force.
 
-The figures (:class:`SessionFigures`) are computed from the session tap's rows
-(``rt.sessions.SESSION_SIGNALS``) as they stream, so an hour at 1 kHz is never held at once;
-pre-flight, the in-process twin run (benchmarks) and the RT process all use them.
+The figures (:class:`protocols.session_figures.SessionFigures`, the one definition the session
+report uses too) are computed from the session tap's rows (``rt.sessions.SESSION_SIGNALS``) as
+they stream, so an hour at 1 kHz is never held at once; pre-flight, the in-process twin run
+(benchmarks) and the RT process all use them.
 """
 from __future__ import annotations
 
@@ -21,30 +22,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from protocols.generators import make_generator
 from protocols.library import load_protocol
 from protocols.schema import ProtocolModel
-from protocols.torque_hold import TorqueHoldFigures
+from protocols.session_figures import SessionFigures
 from rt.components.blocks import SignalTap
-from rt.components.tare import TareState, refusal_message
 from rt.engine import Array, Component
 from rt.errors import InputError, ProtocolValidationError
 from rt.model import RobotModel
-from rt.model.ankle import AnkleMonitor, AnkleSetup, sensor_to_ankle_S
+from rt.model.ankle import AnkleMonitor, AnkleSetup
 from rt.position_loop import PositionLoop, build_protocol_loop, sim_devices
 from rt.references.sequencer import Phase
-from rt.safety.events import Reaction, SafetyEvent
+from rt.safety.events import Reaction
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits
 from rt.sessions import (
-    COL_CTRL_MODE,
-    COL_FREF,
-    COL_FZ,
     COL_PHASE,
     COL_PROGRESS,
-    COL_TARE,
-    COLUMNS,
     SESSION_SIGNALS,
     SESSION_SOURCES,
     record_rows,
@@ -53,10 +46,6 @@ from rt.twin.environment import CompliantAnkle, parse_environment, patient_foot
 from rt.twin.twin import SimClock, Twin
 
 RATE_HZ = 1000.0
-#: ROM figures use every n-th sample's forward kinematics (at 1 kHz: 100 Hz, ample for angles).
-ROM_DECIMATION = 10
-#: Sensor noise allowed below the preload before pre-flight calls it unloading (N).
-PRELOAD_TOLERANCE_N = 2.0
 
 
 @dataclass
@@ -211,257 +200,6 @@ def _run(pl: PositionLoop, tap: SignalTap, duration_s: float,
             break
 
 
-class SessionFigures:
-    """A session's figures, accumulated from session-tap rows as they stream (twin figures on
-    the twin): force RMS error (% of the sine's amplitude, else of the peak reference) over the
-    samples played in force mode, against the reference the force law tracked (floored at the
-    preload); peak platform force; the least force in contact (below 0 the platform would pull
-    on the foot); ROM reached per axis; peaks of actuator force and slider speed; the longest
-    stretch with the actuator force or the drive command at the robot's limit; phases'
-    durations; stops come from the events.
-
-    "In contact" (:meth:`add`): force-controlled play from the moment the contact first carries
-    the preload (each stretch of force control counts anew); before it the platform is still
-    bringing the unloaded foot up to the preload and the sensor reads its noise around 0 N.
-    """
-
-    def __init__(self, protocol: ProtocolModel, model: RobotModel, preload_n: float = 0.0,
-                 robot_limits: RobotLimits | None = None, info: dict[str, Any] | None = None,
-                 ankle: AnkleSetup | None = None):
-        self.protocol = protocol
-        # With the patient's ankle setup: ankle angles and torques in clinical terms.
-        self.ankle = ankle
-        self._r_ankle = None if ankle is None else sensor_to_ankle_S(ankle)
-        # Peak ankle torques over the play phase, N·m: [plantar max, plantar min, inversion
-        # max, inversion min].
-        self._ankle_tau = [-math.inf, math.inf, -math.inf, math.inf]
-        windows = (info or {}).get("torque_holds")
-        # Per regulated hold: the reported ankle torque against the target (and the truth).
-        self._torque = TorqueHoldFigures(windows, ankle) if windows and ankle is not None \
-            else None
-        self.kin = model.kin
-        self.preload_n = preload_n
-        self.robot = robot_limits or RobotLimits()
-        self.info = info or {}
-        self._on = False                  # in contact (see the class docstring)
-        self._min_contact = (math.inf, math.nan)             # (force N, t s)
-        # Longest run at the limit: [current start t, current length, longest length, its t,
-        # its peak] for the actuator force and the drive command.
-        self._runs = {"actuator force": [math.nan, 0, 0, math.nan, 0.0],
-                      "drive command": [math.nan, 0, 0, math.nan, 0.0]}
-        self._se = 0.0                  # Σ e² over force-mode play samples, N²
-        self._n_force = 0
-        self._peak_ref = -math.inf
-        self._peak_force = -math.inf
-        self._rom = {"roll": [math.inf, -math.inf], "pitch": [math.inf, -math.inf]}
-        self._peak_tau = 0.0
-        self._peak_qd = 0.0
-        self._phase_time = {p.name.lower(): 0.0 for p in Phase}
-        self._last_phase = Phase.APPROACH
-        self._play_seen = 0
-        self._dt = 1.0 / RATE_HZ
-        self._tare: np.ndarray | None = None     # the force reader's last tare port
-
-    def add(self, rows: np.ndarray, truth: np.ndarray | None = None) -> None:
-        """Session-tap rows; ``truth``: the twin ankle's true torques (roll, pitch, yaw axes,
-        N·m) of the same cycles, where a twin runs in process (:class:`TwinAnkleTruth`)."""
-        if not len(rows):
-            return
-        phase = rows[:, COL_PHASE]
-        play = phase == Phase.PLAY
-        if self._torque is not None and play.any():
-            self._torque.add(rows[play][:, COLUMNS["wrench"]],
-                             None if truth is None else truth[play][:, :2])
-        force = -rows[:, COL_FZ]
-        f_ref = rows[:, COL_FREF]
-        force_mode = play & (rows[:, COL_CTRL_MODE] > 0.5)
-        if force_mode.any():
-            # Against the reference the force law tracked: the protocol's, floored at the
-            # preload.
-            f_ref = np.maximum(f_ref, self.preload_n)
-            e = (f_ref - force)[force_mode]
-            e = e[~np.isnan(e)]
-            self._se += float(np.sum(e ** 2))
-            self._n_force += len(e)
-            self._peak_ref = max(self._peak_ref, float(np.nanmax(f_ref[force_mode])))
-        valid = ~np.isnan(force)
-        if valid.any():
-            self._peak_force = max(self._peak_force, float(np.max(force[valid])))
-        self._contact(rows[:, 0], force, force_mode)
-        tau = np.abs(rows[:, COLUMNS["tau"]]).max(axis=1)
-        volts = np.abs(rows[:, COLUMNS["volts"]]).max(axis=1)
-        self._at_limit("actuator force", rows[:, 0], tau, self.robot.max_actuator_force_n)
-        self._at_limit("drive command", rows[:, 0], volts, self.robot.max_command_v)
-        self._peak_tau = max(self._peak_tau, float(tau.max()))
-        if self._r_ankle is not None and play.any():
-            self._add_ankle_torques(rows[play][:, COLUMNS["wrench"]])
-        self._peak_qd = max(self._peak_qd, float(np.abs(rows[:, COLUMNS["qd"]]).max()))
-        for p in Phase:
-            self._phase_time[p.name.lower()] += float(np.count_nonzero(phase == p)) * self._dt
-        # Every ROM_DECIMATION-th play sample, counted from the session's first play sample
-        # (continuing across calls; the same samples as protocols.session_figures).
-        idx = np.flatnonzero(play)
-        counter = self._play_seen + np.arange(len(idx))
-        self._play_seen += len(idx)
-        for q in rows[idx[counter % ROM_DECIMATION == 0]][:, COLUMNS["q"]]:
-            cfg = self.kin.fk(q, check=False)
-            for axis, angle in (("roll", cfg.roll), ("pitch", cfg.pitch)):
-                lo_hi = self._rom[axis]
-                lo_hi[0] = min(lo_hi[0], angle)
-                lo_hi[1] = max(lo_hi[1], angle)
-        self._last_phase = Phase(int(phase[-1]))
-        tare = rows[:, COL_TARE:COL_TARE + 10]
-        started = np.flatnonzero(tare[:, 0] != TareState.NONE)
-        if len(started):
-            self._tare = tare[started[-1]].copy()
-
-    def tare(self) -> dict[str, Any] | None:
-        """The ATI's tare at the session's start (None: none was asked for, e.g. a position
-        protocol): state, the zero subtracted (N, N m) and the force the sensor read
-        unloaded, or why it was refused."""
-        if self._tare is None:
-            return None
-        row = self._tare
-        state = TareState(int(row[0]))
-        out: dict[str, Any] = {"state": state.name.lower(),
-                               "mean_force_n": float(row[3]) if math.isfinite(row[3]) else None}
-        if state == TareState.DONE:
-            out["offset_n"] = [float(x) for x in row[4:7]]
-            out["offset_nm"] = [float(x) for x in row[7:10]]
-        elif state == TareState.REFUSED:
-            out["reason"] = refusal_message(int(row[2]), float(row[3]))
-        return out
-
-    def _add_ankle_torques(self, w: np.ndarray) -> None:
-        """Peaks of the ankle torques (``rt.model.ankle.ankle_torques``, vectorized) of the
-        sensor's wrench rows (fx, fy, fz, mx, my, mz)."""
-        assert self._r_ankle is not None and self.ankle is not None
-        rx, ry, rz = self._r_ankle
-        fx, fy, fz, mx, my = w[:, 0], w[:, 1], w[:, 2], w[:, 3], w[:, 4]
-        plantar = my - (rz * fx - rx * fz)
-        sign = 1.0 if self.ankle.side == "right" else -1.0
-        inversion = sign * (mx - (ry * fz - rz * fy))
-        ok = ~(np.isnan(plantar) | np.isnan(inversion))
-        if not ok.any():
-            return
-        t = self._ankle_tau
-        t[0] = max(t[0], float(plantar[ok].max()))
-        t[1] = min(t[1], float(plantar[ok].min()))
-        t[2] = max(t[2], float(inversion[ok].max()))
-        t[3] = min(t[3], float(inversion[ok].min()))
-
-    def _ankle_result(self) -> dict[str, Any]:
-        """Ankle angles reached (deg from the neutral pose, each in its own direction) and
-        peak torques (N·m, each direction's effort as a positive number)."""
-        assert self.ankle is not None
-        pose = getattr(self.protocol, "pose", None)
-        r0 = math.radians(pose.roll_deg) if pose is not None else 0.0
-        p0 = math.radians(pose.pitch_deg) if pose is not None else 0.0
-        sign = 1.0 if self.ankle.side == "right" else -1.0
-        deg = math.degrees
-        (r_lo, r_hi), (p_lo, p_hi) = self._rom["roll"], self._rom["pitch"]
-        out: dict[str, Any] = {"side": self.ankle.side, "setup": self.ankle.model_dump()}
-        if math.isfinite(p_lo) and math.isfinite(r_lo):
-            inv = sorted((sign * (r_lo - r0), sign * (r_hi - r0)))
-            out["rom_deg"] = {"dorsiflexion": deg(-(p_lo - p0)), "plantarflexion": deg(p_hi - p0),
-                              "inversion": deg(inv[1]), "eversion": deg(-inv[0])}
-        else:
-            out["rom_deg"] = None
-        t = self._ankle_tau
-        if math.isfinite(t[0]):
-            out["peak_torque_nm"] = {"plantarflexion": max(t[0], 0.0),
-                                     "dorsiflexion": max(-t[1], 0.0),
-                                     "inversion": max(t[2], 0.0), "eversion": max(-t[3], 0.0)}
-        else:
-            out["peak_torque_nm"] = None
-        return out
-
-    def _contact(self, t: np.ndarray, force: np.ndarray, force_mode: np.ndarray) -> None:
-        on = self._on
-        lo_f, lo_t = self._min_contact
-        for k in range(len(t)):          # a state machine over samples (non-real-time thread)
-            f = force[k]
-            on = bool(force_mode[k]) and (on or f >= self.preload_n)
-            if on and f < lo_f:
-                lo_f, lo_t = float(f), float(t[k])
-        self._on = on
-        self._min_contact = (lo_f, lo_t)
-
-    def _at_limit(self, what: str, t: np.ndarray, values: np.ndarray, limit: float) -> None:
-        run = self._runs[what]
-        over = values >= limit - 1e-9
-        for k in np.flatnonzero(over | (run[1] > 0)):   # only samples that start/continue/end
-            if over[k]:
-                if run[1] == 0:
-                    run[0] = float(t[k])
-                run[1] += 1
-                if run[1] > run[2]:
-                    run[2], run[3] = run[1], run[0]
-                run[4] = max(run[4], float(values[k]))
-            else:
-                run[1] = 0
-
-    def saturation(self, dt: float) -> list[str]:
-        """The stretches at the robot's limit longer than ``RobotLimits.max_saturation_s``."""
-        out = []
-        for what, limit, unit in (("actuator force", self.robot.max_actuator_force_n, "N"),
-                                  ("drive command", self.robot.max_command_v, "V")):
-            _, _, longest, t0, peak = self._runs[what]
-            if longest * dt > self.robot.max_saturation_s:
-                out.append(f"{what} {peak:.4g} {unit} at the robot's limit {limit:g} {unit} for "
-                           f"{longest * dt * 1e3:.0f} ms from t = {t0:.3f} s (the drives "
-                           f"saturate; at most {self.robot.max_saturation_s * 1e3:.0f} ms "
-                           "allowed)")
-        return out
-
-    def unloading(self) -> list[str]:
-        """The force in contact below the preload (less the sensor's noise), if it happened."""
-        f, t = self._min_contact
-        if f < self.preload_n - PRELOAD_TOLERANCE_N:
-            return [(f"the force falls to {f:.1f} N at t = {t:.3f} s, below the "
-                    f"{self.preload_n:g} N preload (the platform would unload or pull on the "
-                    "foot)")]
-        return []
-
-    def result(self, events: list[SafetyEvent]) -> dict[str, Any]:
-        p = self.protocol
-        out: dict[str, Any] = {"protocol": p.name, "kind": p.kind, "twin": True}
-        if self._n_force:
-            # Sine: % of the protocol's amplitude; gait and others: % of the peak reference.
-            span = float(p.amplitude_n) if p.kind == "sine_fz" else self._peak_ref
-            out["rms_error_pct"] = math.sqrt(self._se / self._n_force) / span * 100.0 \
-                if span > 0 else None
-            out["rms_error_basis"] = "amplitude" if p.kind == "sine_fz" else "peak"
-        else:
-            out["rms_error_pct"] = None
-        out["peak_force_n"] = self._peak_force if math.isfinite(self._peak_force) else None
-        out["min_force_n"] = self._min_contact[0] if math.isfinite(self._min_contact[0]) \
-            else None
-        source = {k: v for k, v in self.info.items() if k not in ("torque_holds", "dt")}
-        if source:
-            out["source"] = source
-        deg = math.degrees
-        out["rom_deg"] = {axis: [deg(lo), deg(hi)] if math.isfinite(lo) else None
-                          for axis, (lo, hi) in self._rom.items()}
-        if self.ankle is not None:
-            out["ankle"] = self._ankle_result()
-            if self._torque is not None:
-                out["ankle"]["torque_holds"] = self._torque.result()
-        out["peak_actuator_force_n"] = self._peak_tau
-        out["peak_slider_speed_m_s"] = self._peak_qd
-        out["phase_s"] = {k: round(v, 3) for k, v in self._phase_time.items() if v > 0.0}
-        out["stops"] = [{"t": round(e.t, 3), "cause": e.cause,
-                         "reaction": e.reaction.name.lower(), "message": e.message}
-                        for e in events if e.reaction >= Reaction.SOFT_STOP
-                        and e.kind == "fault"]
-        tare = self.tare()
-        if tare is not None:
-            out["ati_tare"] = tare
-        out["completed"] = self._last_phase == Phase.REST and not out["stops"] \
-            and self._phase_time["play"] > 0.0
-        return out
-
-
 def preload_of(pl: PositionLoop) -> float:
     """The force law's preload (N) of a protocol loop's hybrid controller."""
     controller = pl.graph.component("controller")
@@ -473,8 +211,8 @@ def figures_of(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel,
                ankle: AnkleSetup | None = None) -> SessionFigures:
     """The figures of an in-process run whose tap holds the whole session."""
     program = pl.reference.program
-    figures = SessionFigures(protocol, model, preload_of(pl), robot_limits,
-                             getattr(program, "info", None), ankle)
+    figures = SessionFigures.for_protocol(protocol, model, preload_of(pl), robot_limits,
+                                          getattr(program, "info", None), ankle, RATE_HZ)
     rows, _ = tap.drain(0)
     truth = truth_tap(pl)
     figures.add(rows, None if truth is None else truth.drain(0)[0][:, 1:])

@@ -39,14 +39,14 @@ def test_the_ring_decodes_the_ankle_in_si_and_nan_without_it() -> None:
         "inversion_torque_nm": -1.0, "centre_displacement_mm": [3.0, -4.0, 0.0]}})
     ring.push({"t": 1.2, "ankle": {"plantarflexion_deg": "bad", "centre_displacement_mm": 1}})
     _, cols = ring.snapshot()
-    assert np.isnan(cols["ankle_plantarflexion"][0])
-    assert cols["ankle_plantarflexion"][1] == pytest.approx(math.radians(-8.0))
-    assert cols["ankle_inversion"][1] == pytest.approx(math.radians(2.0))
-    assert cols["ankle_plantarflexion_torque"][1] == 6.0
-    assert cols["ankle_inversion_torque"][1] == -1.0
-    assert cols["ankle_centre_displacement"][1] == pytest.approx(0.005)
-    assert np.isnan(cols["ankle_plantarflexion"][2])
-    assert np.isnan(cols["ankle_centre_displacement"][2])
+    assert np.isnan(cols["ankle_dfpf"][0])
+    assert cols["ankle_dfpf"][1] == pytest.approx(math.radians(-8.0))
+    assert cols["ankle_inev"][1] == pytest.approx(math.radians(2.0))
+    assert cols["ankle_torque_dfpf"][1] == 6.0
+    assert cols["ankle_torque_inev"][1] == -1.0
+    assert cols["ankle_displacement"][1] == pytest.approx(0.005)
+    assert np.isnan(cols["ankle_dfpf"][2])
+    assert np.isnan(cols["ankle_displacement"][2])
 
 
 HOLD = {"schema_version": 1, "kind": "isometric_hold", "name": "plantarflexion 5 N m",

@@ -1,20 +1,28 @@
-"""The calibration wizard driven by its buttons: plan (sites drawn), run (progress), fit
-(PASS/FAIL and the COP error map), verify, certificate (a PDF read back, never over a file,
-stored in the clinical record for the engineer); steps refuse to run out of order; the page
-is the calibration engineer's."""
+"""The calibration wizard driven by its buttons: plan (sites drawn), registration (the
+camera's frame with the detected markers and the registered outline drawn), run (progress and
+the live force plot, checked against the trial files), fit (PASS/FAIL and the COP error map,
+checked against the record), verify, certificate (a PDF read back, never over a file, stored
+in the clinical record for the engineer); steps refuse to run out of order; the page is the
+calibration engineer's."""
 from __future__ import annotations
 
+import json
+import math
 import shutil
 import subprocess
 
 import gui_support  # noqa: F401  (offscreen platform before Qt)
+import numpy as np
 import pytest
 from patients_helpers import PASSWORD, open_record, staff
 from PySide6.QtCore import Qt
+from PySide6.QtGui import QColor
 
-from app.calibration_flow import CalibrationFlow
+from app.calibration_flow import MARKER_BGR, OUTLINE_BGR, CalibrationFlow, cop_error_points
 from app.main_window import MainWindow
+from app.pages.calibrate import TABS, CalibratePage
 from app.settings import GuiSettings
+from calibration.trial import TRIALS_DIR, TrialData
 from rt.errors import InputError
 
 WAIT_MS = 300_000
@@ -33,7 +41,7 @@ def test_steps_refuse_to_run_out_of_order(tmp_path):
     from calibration.plate import TWIN_PLATE_FILE
 
     flow = CalibrationFlow(tmp_path / "cal", TWIN_PLATE_FILE, "direct")
-    for step in (flow.run, flow.fit, flow.verify):
+    for step in (flow.register, flow.run, flow.fit, flow.verify):
         with pytest.raises(InputError, match="first"):
             step()
     with pytest.raises(InputError, match="plan"):
@@ -74,13 +82,19 @@ def test_engineer_calibrates_a_plate_through_the_wizard(qtbot, tmp_path):
 
         click("plan")
         assert "trials at" in page.status.text()
+        assert not page.buttons["run"].isEnabled()         # register first
+        click("register")                                  # this plan: nominal, no camera
+        assert page.camera_view is None and "no camera" in page.camera_caption.text()
         assert not page.buttons["fit"].isEnabled()         # run first
         click("run")
         assert page.progress.value() == page.progress.maximum() > 0
         assert not page.plate_file.isEnabled()             # the campaign is fixed now
-        click("fit")
         flow = page.flow
-        assert flow is not None and flow.record is not None
+        assert flow is not None
+        _check_live_plot(page, flow)
+        click("fit")
+        assert flow.record is not None
+        _check_cop_map(page, flow.record)
         verdict = flow.record["verdict"]["pass"]
         assert page.verdict.text() == ("PASS" if verdict else "FAIL")
         m = flow.record["metrics"]
@@ -122,3 +136,109 @@ def test_only_the_engineer_sees_calibrate(qtbot, tmp_path):
         assert not window.rail_buttons["calibrate"].isVisible()
     finally:
         record.close()
+
+
+def _check_live_plot(page: CalibratePage, flow: CalibrationFlow) -> None:
+    """The Trials tab shows every trial of the campaign, in order, each segment on its own
+    trial's robot-clock span, and the forces the trial files hold: the ATI's peak is the
+    trial's peak load within 1 % (the direct runner presses exactly the commanded load, plus
+    the ATI's 0.25 N noise; the plot keeps every 20th sample, which may miss a gait curve's
+    sharp peak by a few newtons), the plate's peak through its nominal matrix within 5 % of it
+    (the twin plate's drawn sensitivity errors are ±3 %, crosstalk ±2 %)."""
+    assert page.tabs.currentIndex() == TABS.index("trials")
+    index = json.loads((flow.campaign / "campaign.json").read_text())
+    ids = [e["id"] for e in index["trials"]]
+    assert [s.trial_id for s in page.live_series] == ids
+    assert [s.index for s in page.live_series] == list(range(len(ids)))
+    x, y = page.live_curves["ati"].getData()
+    xp, _yp = page.live_curves["plate"].getData()
+    assert x is not None and xp is not None and len(x) > 20 * len(ids)
+    assert np.isnan(x).sum() == len(ids) == np.isnan(xp).sum()     # one gap after each trial
+    for s in page.live_series:
+        d = TrialData.load(flow.campaign / TRIALS_DIR / f"{s.trial_id}.npz")
+        assert s.t_ati_s[0] == d.t_robot[0] and s.t_ati_s[-1] == d.t_robot[-1]
+        peak_ref = float(d.force_ref.max())
+        assert float(s.ati_fz_n.max()) == pytest.approx(peak_ref, rel=0.01)
+        assert float(s.plate_fz_n.max()) == pytest.approx(peak_ref, rel=0.05)
+        assert s.aligned                     # on the robot's clock: the peaks line up
+        # Lined up: the plate's curve at the ATI's times differs by its calibration error only.
+        inside = (s.t_ati_s >= s.t_plate_s[0]) & (s.t_ati_s <= s.t_plate_s[-1])
+        diff = np.interp(s.t_ati_s[inside], s.t_plate_s, s.plate_fz_n) - s.ati_fz_n[inside]
+        assert float(np.sqrt(np.mean(diff ** 2))) < 0.05 * peak_ref, s.trial_id
+    finite = np.isfinite(y)
+    assert float(y[finite].max()) == pytest.approx(
+        max(float(s.ati_fz_n.max()) for s in page.live_series))
+
+
+def _check_cop_map(page: CalibratePage, record: dict) -> None:
+    """The Plate tab after the fit: one hollow marker per site with a COP error before, one
+    filled per site after, at the record's positions, each after-marker labelled in mm."""
+    import pyqtgraph as pg
+
+    assert page.tabs.currentIndex() == TABS.index("plate")
+    items = page.plot.getPlotItem().items
+    scatters = [i for i in items if isinstance(i, pg.ScatterPlotItem)]
+    drawn = {}
+    for sc in scatters:
+        xs, ys = sc.getData()
+        drawn[sc.name()] = sorted(zip(np.round(xs, 6), np.round(ys, 6), strict=True))
+    for stage, name in (("before", "COP error before (mm)"), ("after", "COP error after (mm)")):
+        want = sorted((round(x, 6), round(y, 6)) for x, y, _ in cop_error_points(record, stage))
+        assert want and drawn[name] == want, stage
+    labels = sorted(i.textItem.toPlainText() for i in items if isinstance(i, pg.TextItem))
+    assert labels == sorted(f"{e:.1f}" for _x, _y, e in cop_error_points(record, "after"))
+
+
+CAMERA_PLAN = SHORT_PLAN.replace("registration: nominal", "registration: camera")
+
+
+def test_registration_shows_the_camera_with_the_markers_drawn(qtbot, tmp_path):
+    """The twin camera's frame: both boards' 24 markers detected and outlined, the plate
+    outline drawn where the registration put it — within a millimetre of the twin's true
+    placement — and shown on the Camera tab at the frame's own size."""
+    from calibration.plate import TWIN_PLATE_FILE
+
+    page = CalibratePage()
+    qtbot.addWidget(page)
+    page.resize(1366 - 150 - 160, 620)
+    page.show()
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(CAMERA_PLAN)
+    page.plan_file.setText(str(plan))
+    page.work_folder.setText(str(tmp_path / "work"))
+    page.plate_file.setText(str(TWIN_PLATE_FILE))
+    for step in ("plan", "register"):
+        qtbot.mouseClick(page.buttons[step], Qt.MouseButton.LeftButton)
+        qtbot.waitUntil(lambda: not page.busy, timeout=WAIT_MS)
+        assert step in page.done, page.last_error
+    view = page.camera_view
+    assert view is not None
+    assert page.tabs.currentIndex() == TABS.index("camera")
+    assert sorted(view.marker_ids) == sorted(view.expected_ids) and view.markers == 24
+    # The registration found the plate: within 3 σ (of a 3-D distance) of the twin's truth,
+    # σ of the order the trials' registrations have (the campaign's uncertainty budget).
+    assert view.sigma_translation_mm < 1.5
+    assert view.error_mm < 3.0 * math.sqrt(3.0) * view.sigma_translation_mm
+    frame = page.camera.frame
+    assert frame is not None and (frame.width(), frame.height()) == (1600, 1600)
+    assert view.image_bgr.shape == (1600, 1600, 3)
+    # What is drawn: the marker outlines and the plate outline, in their colours.
+    green = QColor(MARKER_BGR[2], MARKER_BGR[1], MARKER_BGR[0])
+    red = QColor(OUTLINE_BGR[2], OUTLINE_BGR[1], OUTLINE_BGR[0])
+    bgr = view.image_bgr
+    n_green = int(np.all(bgr == MARKER_BGR, axis=2).sum())
+    assert n_green > 24 * 4 * 20                       # 24 squares' borders
+    u, v = np.rint(view.outline_px[0]).astype(int)
+    assert frame.pixelColor(int(u), int(v)) == red
+    corners = [tuple(int(c) for c in np.argwhere(np.all(bgr == MARKER_BGR, axis=2))[0])]
+    r, c = corners[0]
+    assert frame.pixelColor(c, r) == green
+    # The outline is the plate's size as the camera sees it (0.6 m at 1.2 m, f = 1300 px).
+    from calibration.plate import load_plate
+    width_m = load_plate(TWIN_PLATE_FILE).size_m[0]
+    side_px = float(np.linalg.norm(view.outline_px[0] - view.outline_px[1]))
+    assert side_px == pytest.approx(width_m * 1300.0 / 1.2, rel=0.02)
+    # Shown scaled into the tab, keeping the frame's aspect.
+    pix = page.camera.pixmap()
+    assert not pix.isNull() and pix.width() == pix.height() <= page.camera.height()
+    assert "24 of 24 markers" in page.camera_caption.text()

@@ -69,30 +69,36 @@ def test_session_and_progress_reports_from_their_buttons(qtbot, treated, tmp_pat
     qtbot.mouseClick(review.open_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: review.data is not None, timeout=WAIT_MS)
     asked: list[tuple[str, Path]] = []
-    review.ask_path = lambda title, suggested: asked.append((title, suggested)) or \
+    report = review.report
+    report.ask_path = lambda title, suggested: asked.append((title, suggested)) or \
         out_dir / "session"                                # ".pdf" is added
     qtbot.mouseClick(review.report_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: review.last_report is not None or "No report" in
+    assert not review.report_button.isEnabled()            # one report at a time
+    qtbot.waitUntil(lambda: report.last is not None or "No report" in
                     review.report_message.text(), timeout=WAIT_MS)
-    assert review.last_report == out_dir / "session.pdf", review.report_message.text()
+    assert report.last == out_dir / "session.pdf", review.report_message.text()
     assert asked[0][1].name == "session-rom.pdf"
-    text = _text(review.last_report)
+    assert review.report_button.isEnabled() and review.open_report_button.isEnabled()
+    assert "Report written" in review.report_message.text()
+    text = _text(report.last)
     assert "COMPLETED" in text
-    assert review.last_report_session == stored["uid"]     # built from the record's session
+    assert report.last_result is not None
+    assert report.last_result["session"] == stored["uid"]  # built from the record's session
     assert "Hospital La Fe" in text                        # the clinic from the settings
     pitch = stored["summary"]["rom_deg"]["pitch"][1]
     assert f"{pitch:.1f}" in text
 
     # the same path again: refused, the file untouched
-    before = review.last_report.read_bytes()
-    review.last_report = None
+    before = report.last.read_bytes()
+    report.last = None
     qtbot.mouseClick(review.report_button, Qt.MouseButton.LeftButton)
     assert "already exists" in review.report_message.text()
     assert (out_dir / "session.pdf").read_bytes() == before
+    assert review.report_button.isEnabled()                # nothing started
     # cancelled: nothing happens
-    review.ask_path = lambda title, suggested: None
+    report.ask_path = lambda title, suggested: None
     qtbot.mouseClick(review.report_button, Qt.MouseButton.LeftButton)
-    assert review.last_report is None and sorted(p.name for p in out_dir.iterdir()) == \
+    assert report.last is None and sorted(p.name for p in out_dir.iterdir()) == \
         ["session.pdf"]
 
     # Patients: the progress report of the chosen patient
@@ -101,11 +107,15 @@ def test_session_and_progress_reports_from_their_buttons(qtbot, treated, tmp_pat
     qtbot.waitUntil(lambda: page.list.count() == 1, timeout=WAIT_MS)
     page.list.setCurrentRow(0)
     qtbot.waitUntil(lambda: page.report_button.isEnabled(), timeout=WAIT_MS)
-    page.ask_path = lambda title, suggested: out_dir / suggested.name
+    # the folder of the last report is suggested again (one helper, per page)
+    suggested_in: list[Path] = []
+    page.report.ask_path = lambda title, suggested: suggested_in.append(suggested) or \
+        out_dir / suggested.name
     qtbot.mouseClick(page.report_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: page.last_report is not None or "No report" in
+    qtbot.waitUntil(lambda: page.report.last is not None or "No report" in
                     page.message.text(), timeout=WAIT_MS)
-    assert page.last_report == out_dir / f"progress-{code}.pdf", page.message.text()
-    text = _text(page.last_report)
+    assert page.report.last == out_dir / f"progress-{code}.pdf", page.message.text()
+    assert suggested_in[0].parent == Path.home()           # this page's first report
+    text = _text(page.report.last)
     assert code in text and "Hospital La Fe" in text
     assert not list(out_dir.glob("*.tmp"))                 # written by rename, nothing left

@@ -13,7 +13,8 @@ from pathlib import Path
 import gui_support  # noqa: F401  (offscreen for this process; the child uses xcb)
 from PySide6.QtGui import QImage
 
-EXPECTED = {"prescribe", "run", "review", "calibrate", "settings", "run_live", "stopped"}
+EXPECTED = {"prescribe", "run", "review", "calibrate", "settings", "run_live", "stopped",
+            "calibrate_camera"}
 
 
 def _expected() -> set[str]:

@@ -1,9 +1,12 @@
 """Calibrate (calibration engineer): a wizard over the calibration workflow — plate file and
-work folder → plan (the sites drawn on the plate) → run the trials on the twin (progress) → fit
-(PASS/FAIL, the COP error map before/after drawn on the plate) → verify at check sites →
-certificate (PDF where the engineer chooses, never over a file; stored in the clinical record
-when there is one). Each step is enabled once the one before it is done; every step runs on a
-worker (:mod:`app.calibration_flow`)."""
+work folder → plan (the sites drawn on the plate) → register the plate with the camera (the
+camera's image with the detected ArUco markers and the registered plate outline drawn) → run
+the trials on the twin (live plot of the vertical force as the ATI reference and the plate
+measured it, trial by trial, with the progress) → fit (PASS/FAIL, the COP error map
+before/after drawn on the plate) → verify at check sites → certificate (PDF where the engineer
+chooses, never over a file; stored in the clinical record when there is one). Each step is
+enabled once the one before it is done; every step runs on a worker
+(:mod:`app.calibration_flow`); the right side's tabs (plate, camera, trials) follow the step."""
 from __future__ import annotations
 
 import datetime as dt
@@ -13,7 +16,8 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import QObject, Signal
+from PySide6.QtCore import QObject, Qt, Signal
+from PySide6.QtGui import QImage, QPixmap
 from PySide6.QtWidgets import (
     QComboBox,
     QFormLayout,
@@ -22,25 +26,76 @@ from PySide6.QtWidgets import (
     QLineEdit,
     QProgressBar,
     QPushButton,
+    QSizePolicy,
+    QTabWidget,
     QVBoxLayout,
     QWidget,
 )
 
 from app.background import Background
-from app.calibration_flow import BACKENDS, CalibrationFlow, cop_error_points
+from app.calibration_flow import (
+    BACKENDS,
+    CalibrationFlow,
+    CameraView,
+    TrialSeries,
+    cop_error_points,
+)
 from app.i18n import tr
-from app.report_export import ask_pdf_path, pdf_target, report_settings
+from app.report_export import ask_pdf_path, choose_report_target
 from app.settings import GuiSettings
 from app.style import TARGET_PX
 from rt.errors import InputError, TalusError
 
-STEPS = ("plan", "run", "fit", "verify", "certificate")
+STEPS = ("plan", "register", "run", "fit", "verify", "certificate")
+#: The right side's tabs, and the one each step's result shows.
+TABS = ("plate", "camera", "trials")
+TAB_OF_STEP = {"plan": "plate", "register": "camera", "run": "trials", "fit": "plate",
+               "verify": "plate"}
 
 
 class _Progress(QObject):
-    """Trial progress from the worker to the GUI thread (a queued signal)."""
+    """Trial progress and each finished trial's forces, from the worker to the GUI thread
+    (queued signals)."""
 
     changed = Signal(int, int, str)
+    trial = Signal(object)
+
+
+def qimage_from_bgr(image: np.ndarray) -> QImage:
+    """A QImage owning a copy of a BGR uint8 (h, w, 3) array (OpenCV's layout)."""
+    if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+        raise ValueError(f"a BGR uint8 image is (h, w, 3) uint8, got {image.shape} "
+                         f"{image.dtype}")
+    data = np.ascontiguousarray(image)
+    h, w, _ = data.shape
+    return QImage(data.data, w, h, data.strides[0], QImage.Format.Format_BGR888).copy()
+
+
+class CameraLabel(QLabel):
+    """The camera frame, scaled to the label keeping its aspect (the frame itself is kept)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.setMinimumSize(200, 200)
+        self.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Ignored)
+        self.frame: QImage | None = None
+
+    def set_frame(self, image: QImage | None) -> None:
+        self.frame = image
+        self._rescale()
+
+    def resizeEvent(self, event: Any) -> None:
+        super().resizeEvent(event)
+        self._rescale()
+
+    def _rescale(self) -> None:
+        if self.frame is None:
+            self.setPixmap(QPixmap())
+            return
+        self.setPixmap(QPixmap.fromImage(self.frame).scaled(
+            self.size(), Qt.AspectRatioMode.KeepAspectRatio,
+            Qt.TransformationMode.SmoothTransformation))
 
 
 def default_work_folder() -> Path:
@@ -71,6 +126,7 @@ class CalibratePage(QWidget):
         self.worker.done.connect(self._done)
         self.progress_signal = _Progress(self)
         self.progress_signal.changed.connect(self._progress)
+        self.progress_signal.trial.connect(self._trial)
 
         self.plate_file = QLineEdit(str(TWIN_PLATE_FILE))
         self.work_folder = QLineEdit(str(default_work_folder()))
@@ -83,10 +139,11 @@ class CalibratePage(QWidget):
         assert {self.backend.itemData(i) for i in range(self.backend.count())} == set(BACKENDS)
         self.buttons = {
             "plan": QPushButton(tr("1. Plan the loads")),
-            "run": QPushButton(tr("2. Run the trials")),
-            "fit": QPushButton(tr("3. Fit the calibration")),
-            "verify": QPushButton(tr("4. Verify at check sites")),
-            "certificate": QPushButton(tr("5. Certificate (PDF)")),
+            "register": QPushButton(tr("2. Register the plate (camera)")),
+            "run": QPushButton(tr("3. Run the trials")),
+            "fit": QPushButton(tr("4. Fit the calibration")),
+            "verify": QPushButton(tr("5. Verify at check sites")),
+            "certificate": QPushButton(tr("6. Certificate (PDF)")),
         }
         for key, b in self.buttons.items():
             b.setObjectName(f"calibrate:{key}")
@@ -112,6 +169,44 @@ class CalibratePage(QWidget):
         self.plot.showGrid(x=True, y=True, alpha=0.3)
         self.plot.addLegend(offset=(10, 10))
 
+        # Camera: the frame with the detected markers and the registered outline drawn.
+        self.camera = CameraLabel()
+        self.camera.setObjectName("calibrate:camera")
+        self.camera_caption = QLabel(tr("The camera's view of the plate appears when the "
+                                        "plate is registered."))
+        self.camera_caption.setWordWrap(True)
+        self.camera_view: CameraView | None = None
+        camera_tab = QWidget()
+        camera_box = QVBoxLayout(camera_tab)
+        camera_box.addWidget(self.camera, 1)
+        camera_box.addWidget(self.camera_caption)
+
+        # Trials: the vertical force as the reference (ATI) and the plate measured it.
+        self.live = pg.PlotWidget(title=tr("Vertical force on the plate"))
+        self.live.setBackground("w")
+        self.live.setLabel("left", tr("force (N)"))
+        self.live.setLabel("bottom", tr("robot time (s)"))
+        self.live.setMouseEnabled(x=False, y=False)
+        self.live.addLegend(offset=(10, 10))
+        self.live_curves = {
+            "ati": self.live.plot(pen=pg.mkPen("#1f5fbf", width=2),
+                                  name=tr("reference (ATI)")),
+            "plate": self.live.plot(pen=pg.mkPen("#c0262d", width=1,
+                                                 style=Qt.PenStyle.DashLine),
+                                    name=tr("plate (nominal matrix)"))}
+        #: the live plot's data: per curve, the trials' segments (x, y) in arrival order
+        self.live_series: list[TrialSeries] = []
+
+        self.tabs = QTabWidget()
+        self.tabs.setObjectName("calibrate:views")
+        self.tabs.tabBar().setStyleSheet(f"QTabBar::tab {{ min-height: {TARGET_PX}px; "
+                                         "padding: 0 16px; }")
+        for key, widget, label in (("plate", self.plot, tr("Plate")),
+                                   ("camera", camera_tab, tr("Camera")),
+                                   ("trials", self.live, tr("Trials"))):
+            self.tabs.addTab(widget, label)
+            widget.setObjectName(f"calibrate:tab:{key}")
+
         form = QFormLayout()
         form.addRow(tr("Plate description"), self.plate_file)
         form.addRow(tr("Work folder (new)"), self.work_folder)
@@ -127,7 +222,7 @@ class CalibratePage(QWidget):
         left.addStretch(1)
         layout = QHBoxLayout(self)
         layout.addLayout(left, 2)
-        layout.addWidget(self.plot, 3)
+        layout.addWidget(self.tabs, 3)
         self._enable()
 
     # ------------------------------------------------------------------ steps
@@ -153,6 +248,7 @@ class CalibratePage(QWidget):
                                         str(self.backend.currentData()))
             self.done.clear()
             self.verdict.setText("")
+            self._clear_views()
         flow = self.flow
         if flow is None:
             return
@@ -168,23 +264,28 @@ class CalibratePage(QWidget):
                     except (OSError, UnicodeDecodeError) as exc:
                         raise InputError(f"plan {plan_path}: cannot read: {exc}") from None
                 return flow.make_plan(text)
+        elif key == "register":
+            job = flow.register
         elif key == "run":
-            job = lambda: flow.run(self.progress_signal.changed.emit)
+            self._clear_live()
+            self.tabs.setCurrentIndex(TABS.index("trials"))
+            job = lambda: flow.run(self.progress_signal.changed.emit,
+                                   self.progress_signal.trial.emit)
         elif key == "fit":
             job = flow.fit
         elif key == "verify":
             job = lambda: flow.verify(progress=self.progress_signal.changed.emit)
         else:
-            chosen = self.ask_path(tr("Save the calibration certificate"),
-                                   flow.folder / "certificate.pdf")
-            if chosen is None:
-                return
             try:
-                out = pdf_target(chosen)
-                settings = report_settings(self.settings)
+                target = choose_report_target(self.ask_path,
+                                              tr("Save the calibration certificate"),
+                                              flow.folder / "certificate.pdf", self.settings)
             except TalusError as exc:
                 self.status.setText(str(exc))
                 return
+            if target is None:
+                return
+            out, settings = target
             record, actor = self.record, self.actor()
             job = lambda: flow.certificate(out, settings, record, actor)
         self.busy = True
@@ -207,6 +308,8 @@ class CalibratePage(QWidget):
             self._enable()
             return
         self.done.add(key)
+        if key in TAB_OF_STEP:
+            self.tabs.setCurrentIndex(TABS.index(TAB_OF_STEP[key]))
         if key == "plan":
             self._draw_plan(result)
             self.status.setText(tr("%1 trials at %2 sites (%3 held out for validation), "
@@ -214,6 +317,8 @@ class CalibratePage(QWidget):
                                 .replace("%2", str(len(result["sites"])))
                                 .replace("%3", str(result["held_out"]))
                                 .replace("%4", ", ".join(f"{x:g}" for x in result["loads_n"])))
+        elif key == "register":
+            self._show_camera(result)
         elif key == "run":
             self.status.setText(tr("%1 trials run (%2 s of robot time).")
                                 .replace("%1", str(result["trials"]))
@@ -245,6 +350,56 @@ class CalibratePage(QWidget):
         self._enable()
 
     # ------------------------------------------------------------------ drawing
+
+    def _clear_views(self) -> None:
+        self.plot.clear()
+        self.camera_view = None
+        self.camera.set_frame(None)
+        self.camera_caption.setText(tr("The camera's view of the plate appears when the "
+                                       "plate is registered."))
+        self._clear_live()
+
+    def _clear_live(self) -> None:
+        self.live_series = []
+        for curve in self.live_curves.values():
+            curve.setData([], [])
+
+    def _show_camera(self, view: CameraView | None) -> None:
+        """The registration step's frame and what it found, in words."""
+        self.camera_view = view
+        if view is None:
+            self.camera.set_frame(None)
+            text = tr("This plan places the plate by hand to its marks (nominal "
+                      "registration): no camera.")
+        else:
+            self.camera.set_frame(qimage_from_bgr(view.image_bgr))
+            text = tr("%1 of %2 markers detected (green). The plate outline (red) is where "
+                      "the camera puts it: %3 mm, %4 mm from the planned place, turned %5°; "
+                      "uncertainty %6 mm, %7° (1 σ).") \
+                .replace("%1", str(view.markers)).replace("%2", str(len(view.expected_ids))) \
+                .replace("%3", f"{view.offset_mm[0]:+.1f}") \
+                .replace("%4", f"{view.offset_mm[1]:+.1f}") \
+                .replace("%5", f"{view.yaw_deg:+.2f}") \
+                .replace("%6", f"{view.sigma_translation_mm:.2f}") \
+                .replace("%7", f"{view.sigma_rotation_deg:.3f}")
+        self.camera_caption.setText(text)
+        self.status.setText(text)
+
+    def _trial(self, series: TrialSeries) -> None:
+        """A finished trial's forces appended to the live plot (one gap between trials)."""
+        self.live_series.append(series)
+        gap = np.array([np.nan])
+        for key, curve in self.live_curves.items():
+            xs: list[np.ndarray] = []
+            ys: list[np.ndarray] = []
+            for s in self.live_series:
+                x, y = (s.t_ati_s, s.ati_fz_n) if key == "ati" else (s.t_plate_s, s.plate_fz_n)
+                xs += [x, gap]
+                ys += [y, gap]
+            curve.setData(np.concatenate(xs), np.concatenate(ys), connect="finite")
+        self.live.setTitle(tr("Vertical force on the plate — trial %1 of %2: %3")
+                           .replace("%1", str(series.index + 1))
+                           .replace("%2", str(series.count)).replace("%3", series.trial_id))
 
     def _outline(self, size_m: tuple[float, float]) -> None:
         w, h = size_m

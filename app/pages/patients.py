@@ -12,8 +12,6 @@ Every record call runs on a worker (:class:`app.background.Background`).
 """
 from __future__ import annotations
 
-from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 from PySide6.QtCore import Qt, Signal
@@ -35,16 +33,10 @@ from PySide6.QtWidgets import (
 from app.background import Background
 from app.i18n import tr
 from app.patient_context import PatientContext
-from app.report_export import (
-    ask_pdf_path,
-    open_file,
-    pdf_target,
-    report_settings,
-    write_progress_report,
-)
+from app.report_action import ReportAction
+from app.report_export import write_progress_report
 from app.settings import GuiSettings
 from app.style import TARGET_PX
-from rt.errors import TalusError
 
 #: Ankle-setup lengths entered here, in mm (``AnkleSetup`` stores m).
 _ANKLE_MM = ("height_above_sole_m", "offset_x_m", "offset_y_m", "sole_above_sensor_m")
@@ -73,19 +65,15 @@ class PatientsPage(QWidget):
         super().__init__(parent)
         self.record = record
         self.settings = settings or GuiSettings()
-        #: where to save a report: (title, suggested path) → the chosen path, None to cancel
-        self.ask_path: Callable[[str, Path], Path | None] = \
-            lambda title, suggested: ask_pdf_path(self, title, suggested)
-        self.last_report: Path | None = None
-        self.report_dir = Path.home()
-        self.reports = Background("gui-progress-report", self)
-        self.reports.done.connect(self._reported)
+        #: the progress report (messages on the page's message line)
+        self.report = ReportAction(self, "gui-progress-report", self.settings)
+        self.report.message.connect(self._report_said)
+        self.report.busy_changed.connect(lambda _busy: self._enable())
         self.actor: Any = None
         self.current: dict[str, Any] | None = None
         self.worker = Background("gui-patients", self)
         self.worker.done.connect(self._done)
         self._all: list[dict[str, Any]] = []
-        self.reports_idle = True
 
         # left: search, list, registration
         self.search = QLineEdit()
@@ -172,9 +160,7 @@ class PatientsPage(QWidget):
         self.report_button = QPushButton(tr("Progress report (PDF)"))
         self.report_button.setObjectName("progressReport")
         self.report_button.clicked.connect(self.make_report)
-        self.open_report_button = QPushButton(tr("Open the report"))
-        self.open_report_button.setEnabled(False)
-        self.open_report_button.clicked.connect(lambda: open_file(self.last_report))
+        self.open_report_button = self.report.open_button
 
         # the clinical data, editable by the roles allowed to (patient.update)
         self.edit_mass = QLineEdit()
@@ -288,7 +274,7 @@ class PatientsPage(QWidget):
         self.clinical_button.setEnabled(chosen and may_edit)
         # The progress report compares with the prescribed range: it needs limits.
         self.report_button.setEnabled(chosen and has_limits and self._may("session.read")
-                                      and self.reports_idle)
+                                      and not self.report.busy)
 
     # ------------------------------------------------------------------ record calls
 
@@ -392,39 +378,18 @@ class PatientsPage(QWidget):
         self.worker.call("clinical", lambda: record.update_patient(
             actor, code, expected_version=version, **changes))
 
+    def _report_said(self, text: str) -> None:
+        self.message.setText(text)
+
     def make_report(self) -> None:
         """Ask where, then write the chosen patient's progress report on a worker."""
         if self.current is None:
             return
         code = str(self.current["code"])
-        chosen = self.ask_path(tr("Save the progress report"),
-                               self.report_dir / f"progress-{code}.pdf")
-        if chosen is None:
-            return
-        try:
-            out = pdf_target(chosen)
-            settings = report_settings(self.settings)
-        except TalusError as exc:
-            self.message.setText(str(exc))
-            return
-        self.report_dir = out.parent
         actor, record = self.actor, self.record
-        self.reports_idle = False
-        self._enable()
-        self.message.setText(tr("Writing the report…"))
-        self.reports.call("progress", lambda: write_progress_report(
-            record, actor, code, out, settings))
-
-    def _reported(self, _tag: str, result: Any, error: str) -> None:
-        self.reports_idle = True
-        self._enable()
-        if error:
-            self.message.setText(tr("No report: %1").replace("%1", error))
-            return
-        self.last_report = Path(result["out"])
-        self.open_report_button.setEnabled(True)
-        self.message.setText(tr("Report written: %1 (%2 pages)").replace("%1", result["out"])
-                             .replace("%2", str(result["pages"])))
+        self.report.write(tr("Save the progress report"), f"progress-{code}.pdf",
+                          lambda out, settings: write_progress_report(
+                              record, actor, code, out, settings))
 
     def show_identity(self) -> None:
         if self.current is None:

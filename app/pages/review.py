@@ -23,15 +23,9 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.background import Background
 from app.i18n import tr
-from app.report_export import (
-    ask_pdf_path,
-    open_file,
-    pdf_target,
-    report_settings,
-    write_session_report,
-)
+from app.report_action import ReportAction
+from app.report_export import write_session_report
 from app.review_data import ReviewData, load_review
 from app.settings import GuiSettings
 from app.style import TARGET_PX
@@ -69,16 +63,11 @@ class ReviewPage(QWidget):
         self.record = record
         self.actor = actor
         self.data: ReviewData | None = None
-        #: where to save a report: (title, suggested path) → the chosen path, None to cancel
-        self.ask_path: Callable[[str, Path], Path | None] = \
-            lambda title, suggested: ask_pdf_path(self, title, suggested)
-        #: the last report written (its path), and where the next one is suggested
-        self.last_report: Path | None = None
-        #: the clinical record's session the last report came from (None: the file alone)
-        self.last_report_session: str | None = None
-        self.report_dir = Path.home()
-        self._reports = Background("gui-report", self)
-        self._reports.done.connect(self._reported)
+        #: the session report (its ``last_result["session"]``: the clinical record's session
+        #: it came from, None when from the file alone)
+        self.report = ReportAction(self, "gui-report", self.settings)
+        self.report.message.connect(self._report_said)
+        self.report.busy_changed.connect(self._report_busy)
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-review")
         self.sessions = QListWidget()
         self.sessions.setMinimumWidth(260)
@@ -95,10 +84,7 @@ class ReviewPage(QWidget):
         self.report_button.clicked.connect(self.make_report)
         self.report_message = QLabel()
         self.report_message.setWordWrap(True)
-        self.open_report_button = QPushButton(tr("Open the report"))
-        self.open_report_button.setMinimumHeight(TARGET_PX)
-        self.open_report_button.setEnabled(False)
-        self.open_report_button.clicked.connect(lambda: open_file(self.last_report))
+        self.open_report_button = self.report.open_button
         for b in (self.refresh_button, self.open_button, self.report_button):
             b.setMinimumHeight(TARGET_PX)
         self.refresh_button.clicked.connect(self.refresh)
@@ -165,44 +151,26 @@ class ReviewPage(QWidget):
         except TalusError as exc:
             self.loaded.emit(None, str(exc))
 
+    def _report_said(self, text: str) -> None:
+        self.report_message.setText(text)
+
+    def _report_busy(self, busy: bool) -> None:
+        self.report_button.setEnabled(self.data is not None and not busy)
+
     def make_report(self) -> None:
         """Ask where, then write the opened session's report on the worker."""
         data = self.data
         if data is None:
             return
         recording = Path(data.path)
-        chosen = self.ask_path(tr("Save the session report"),
-                               self.report_dir / f"session-{recording.stem}.pdf")
-        if chosen is None:
-            return
-        try:
-            out = pdf_target(chosen)
-            settings = report_settings(self.settings)
-        except TalusError as exc:
-            self.report_message.setText(str(exc))
-            return
-        self.report_dir = out.parent
         record, actor = self.record, self.actor()
-        self.report_button.setEnabled(False)
-        self.report_message.setText(tr("Writing the report…"))
-        self._reports.call("session", lambda: write_session_report(
-            recording, out, settings, record, actor))
-
-    def _reported(self, _tag: str, result: Any, error: str) -> None:
-        self.report_button.setEnabled(self.data is not None)
-        if error:
-            self.report_message.setText(tr("No report: %1").replace("%1", error))
-            return
-        self.last_report = Path(result["out"])
-        self.last_report_session = result["session"]
-        self.open_report_button.setEnabled(True)
-        self.report_message.setText(tr("Report written: %1 (%2 pages)")
-                                    .replace("%1", result["out"])
-                                    .replace("%2", str(result["pages"])))
+        self.report.write(tr("Save the session report"), f"session-{recording.stem}.pdf",
+                          lambda out, settings: write_session_report(
+                              recording, out, settings, record, actor))
 
     def _show(self, data: ReviewData | None, error: str) -> None:
         self.data = data
-        self.report_button.setEnabled(data is not None)
+        self.report_button.setEnabled(data is not None and not self.report.busy)
         self.report_message.setText("")
         self.force_plot.clear()
         self.angle_plot.clear()

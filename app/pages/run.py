@@ -3,6 +3,15 @@ solid: force in N; the ankle angles in clinical terms with the patient's ROM dra
 band), progress with phase and time left; with the patient's ankle setup, the ankle torques
 in clinical words. Nothing on this page needs typing.
 
+The ankle view: while the telemetry carries the ankle's state (an exercise about the patient's
+ankle centre: ``app.telemetry.ankle_state``), the angle plot shows the foot's dorsi/plantar
+flexion and inversion/eversion *from the neutral pose* (their references derived from the
+platform's, which differ from them by the neutral pose only), a line reads the angles, the
+torques about the ankle and how far the ankle centre moved in clinical words, and the
+platform's own roll and pitch go to an engineer view (a toggle: dotted curves and their
+values). Without those fields the ankle view is hidden and the plot shows the platform's
+angles in clinical signs, as before.
+
 The plots are redrawn by a timer at :data:`FRAME_HZ` from the samples the link collected
 (the GUI thread never waits for telemetry); each redraw costs one ``setData`` per curve.
 """
@@ -31,7 +40,7 @@ from app.journal import SessionJournal
 from app.patient_context import PatientContext
 from app.rt_link import RtLink
 from app.style import LARGE_PX, TARGET_PX
-from app.telemetry import RepetitionCounter
+from app.telemetry import RepetitionCounter, ankle_state
 from app.words import event_words
 from rt.ipc.client import RtClient
 
@@ -41,6 +50,22 @@ from rt.ipc.client import RtClient
 FRAME_HZ = 32
 #: Seconds of history on the live plots.
 WINDOW_S = 20.0
+#: The angle curves of the ankle view (from neutral) and of the platform (absolute).
+ANKLE_CURVES = ("ankle_dfpf_ref", "ankle_dfpf", "ankle_inev_ref", "ankle_inev")
+PLATFORM_CURVES = ("pitch_ref", "pitch", "roll_ref", "roll")
+
+
+def _direction_words() -> dict[str, str]:
+    """Clinical directions as a torque hold names them (``protocols.torque_hold``), in the
+    installed language."""
+    return {"plantarflexion": tr("plantarflexion"), "dorsiflexion": tr("dorsiflexion"),
+            "inversion": tr("inversion"), "eversion": tr("eversion")}
+
+
+def _last_finite(x: np.ndarray) -> float:
+    """The newest finite value of ``x``; NaN when there is none."""
+    finite = np.flatnonzero(np.isfinite(x))
+    return float(x[finite[-1]]) if finite.size else float("nan")
 
 
 def phase_words(phase: str) -> str:
@@ -129,7 +154,21 @@ class RunPage(QWidget):
             "roll_ref": self.angle_plot.plot(pen=pg.mkPen("#bf5f1f", width=1, style=dash)),
             "roll": self.angle_plot.plot(pen=pg.mkPen("#bf5f1f", width=2),
                                          name=tr("inversion(+)/eversion(−)")),
+            # The ankle view (only while the telemetry carries the ankle's state).
+            "ankle_dfpf_ref": self.angle_plot.plot(
+                pen=pg.mkPen("#1f5fbf", width=1, style=dash)),
+            "ankle_dfpf": self.angle_plot.plot(
+                pen=pg.mkPen("#1f5fbf", width=2),
+                name=tr("ankle: plantar(+)/dorsi(−) flexion from neutral")),
+            "ankle_inev_ref": self.angle_plot.plot(
+                pen=pg.mkPen("#bf5f1f", width=1, style=dash)),
+            "ankle_inev": self.angle_plot.plot(
+                pen=pg.mkPen("#bf5f1f", width=2),
+                name=tr("ankle: inversion(+)/eversion(−) from neutral")),
         }
+        self._legend_names = {key: curve.name() for key, curve in self.curves.items()}
+        #: True while the angle plot shows the ankle view (the telemetry's ankle fields)
+        self.ankle_mode = False
         self.angle_plot.getViewBox().setLimits(minYRange=10.0)
         self.rom_bands = {
             axis: pg.LinearRegionItem(orientation="horizontal", movable=False,
@@ -158,6 +197,22 @@ class RunPage(QWidget):
         self.ankle_label.setObjectName("ankleTorque")
         self.ankle_label.hide()
         self._ankle_setup: Any = None
+        # The ankle view's readout (angles from neutral, centre displacement), and the
+        # engineers' platform angles behind a toggle.
+        self.ankle_angles_label = QLabel()
+        self.ankle_angles_label.setObjectName("ankleAngles")
+        self.ankle_angles_label.setFont(font)
+        self.ankle_angles_label.setWordWrap(True)
+        self.ankle_angles_label.hide()
+        self.engineer_button = QPushButton(tr("Platform angles (engineers)"))
+        self.engineer_button.setObjectName("engineerView")
+        self.engineer_button.setCheckable(True)
+        self.engineer_button.setMinimumHeight(TARGET_PX)
+        self.engineer_button.toggled.connect(self._toggle_engineer)
+        self.engineer_button.hide()
+        self.platform_label = QLabel()
+        self.platform_label.setObjectName("platformAngles")
+        self.platform_label.hide()
 
         top = QHBoxLayout()
         top.addWidget(self.protocol_label, 3)
@@ -176,7 +231,15 @@ class RunPage(QWidget):
         layout.addLayout(phase_row)
         layout.addWidget(self.progress)
         layout.addWidget(self.events_label)
-        layout.addWidget(self.ankle_label)
+        ankle_row = QHBoxLayout()
+        ankle_column = QVBoxLayout()
+        ankle_column.addWidget(self.ankle_angles_label)
+        ankle_column.addWidget(self.ankle_label)
+        ankle_column.addWidget(self.platform_label)
+        ankle_row.addLayout(ankle_column, 1)
+        ankle_row.addWidget(self.engineer_button, 0, Qt.AlignmentFlag.AlignTop)
+        layout.addLayout(ankle_row)
+        self._set_angle_mode(False, force=True)
 
         self.timer = QTimer(self)
         self.timer.setTimerType(Qt.TimerType.PreciseTimer)
@@ -340,13 +403,25 @@ class RunPage(QWidget):
                   "pitch_ref": np.degrees(col["pitch_ref"][keep]),
                   "roll": inv * np.degrees(col["roll"][keep]),
                   "roll_ref": inv * np.degrees(col["roll_ref"][keep])}
+        dfpf = np.degrees(col["ankle_dfpf"][keep])
+        switched = self._set_angle_mode(bool(np.isfinite(dfpf).any()))
+        if self.ankle_mode:
+            inev = np.degrees(col["ankle_inev"][keep])
+            series["ankle_dfpf"], series["ankle_inev"] = dfpf, inev
+            # The ankle's angle is the platform's rotation from the neutral pose
+            # (rt.model.ankle): the references from neutral are the platform's, less the
+            # neutral pose the newest sample shows.
+            series["ankle_dfpf_ref"] = series["pitch_ref"] - _last_finite(series["pitch"] - dfpf)
+            series["ankle_inev_ref"] = series["roll_ref"] - _last_finite(series["roll"] - inev)
         for key, curve in self.curves.items():
+            if not curve.isVisible():
+                continue
             y = series[key]
             finite = bool(np.isfinite(y).all())
             curve.setData(t, y, connect="all" if finite else "finite", skipFiniteCheck=finite)
         self.samples_shown = int(t.size)
         self.frames += 1
-        if self.frames % (FRAME_HZ // 2) == 1:      # y ranges twice a second
+        if switched or self.frames % (FRAME_HZ // 2) == 1:      # y ranges twice a second
             self._revise_y(series)
         latest = ring.latest or {}
         self._latest = latest
@@ -367,9 +442,10 @@ class RunPage(QWidget):
     def _revise_y(self, series: dict[str, np.ndarray]) -> None:
         """Y ranges from the data shown (and the ROM bands), changed only when the data leave
         them or use less than half of them: a steady plot does not jitter."""
+        angles = tuple(k for k in (*ANKLE_CURVES, *PLATFORM_CURVES)
+                       if k in series and self.curves[k].isVisible())
         for plot, keys, floor in ((self.force_plot, ("force_ref", "force"), 50.0),
-                                  (self.angle_plot, ("pitch", "pitch_ref", "roll",
-                                                     "roll_ref"), 10.0)):
+                                  (self.angle_plot, angles, 10.0)):
             values = [v[np.isfinite(v)] for v in (series[k] for k in keys)]
             values = [v for v in values if v.size]
             lo = min((float(v.min()) for v in values), default=0.0)
@@ -388,28 +464,141 @@ class RunPage(QWidget):
                 margin = 0.05 * span
                 plot.setYRange(lo - margin, hi + margin, padding=0.0)
 
+    def _toggle_engineer(self, _on: bool) -> None:
+        self._set_angle_mode(self.ankle_mode, force=True)
+        self._drawn = -1            # the next frame draws the curves now shown
+
+    def _set_angle_mode(self, ankle: bool, force: bool = False) -> bool:
+        """Show the ankle view (``ankle``: the telemetry carries the ankle's state) or the
+        platform's angles; in the ankle view the platform's curves are the engineers' (dotted,
+        behind the toggle). Legend, title and curves change only when the mode does (or
+        ``force``); returns whether they changed."""
+        if ankle == self.ankle_mode and not force:
+            return False
+        self.ankle_mode = ankle
+        engineer = ankle and self.engineer_button.isChecked()
+        self.engineer_button.setVisible(ankle)
+        self.ankle_angles_label.setVisible(ankle)
+        self.platform_label.setVisible(engineer)
+        self.angle_plot.setTitle(tr("Ankle angles from neutral (°)") if ankle
+                                 else tr("Ankle angles (°)"))
+        dot, dash = Qt.PenStyle.DotLine, Qt.PenStyle.DashLine
+        platform_pens = {"pitch": ("#1f5fbf", 2, Qt.PenStyle.SolidLine),
+                         "pitch_ref": ("#1f5fbf", 1, dash),
+                         "roll": ("#bf5f1f", 2, Qt.PenStyle.SolidLine),
+                         "roll_ref": ("#bf5f1f", 1, dash)}
+        for key, (colour, width, style) in platform_pens.items():
+            self.curves[key].setPen(pg.mkPen(colour, width=1 if ankle else width,
+                                             style=dot if ankle else style))
+        legend = self.angle_plot.getPlotItem().legend
+        if legend is not None:
+            legend.clear()
+        names = dict(self._legend_names)
+        if ankle:
+            names["pitch"] = tr("platform pitch (engineers)")
+            names["roll"] = tr("platform roll (engineers)")
+        for key in (*PLATFORM_CURVES, *ANKLE_CURVES):
+            curve = self.curves[key]
+            shown = key in ANKLE_CURVES if ankle else key in PLATFORM_CURVES
+            if ankle and engineer and key in PLATFORM_CURVES:
+                shown = key in ("pitch", "roll")      # the platform's measured angles only
+            curve.setVisible(shown)
+            if not shown:
+                curve.setData([], [])
+            elif legend is not None and names.get(key):
+                legend.addItem(curve, names[key])
+        if not ankle:
+            self.ankle_angles_label.setText("")
+        return True
+
     def show_ankle(self, latest: dict[str, Any] | None) -> None:
-        """The ankle torques of the latest telemetry sample (its sensor wrench moved to the
-        patient's ankle centre, ``rt.model.ankle.ankle_torques``) in clinical words; hidden
-        without an ankle setup, a dash while the sensor has no finite sample."""
+        """The ankle in clinical words from the latest telemetry sample.
+
+        With the ankle's state in the telemetry (the ankle view): its angles from neutral,
+        its torques and how far its centre moved, as the RT process computed them about the
+        patient's ankle centre; the platform's angles for the engineer view. Else, with the
+        patient's ankle setup, the torques from the sensor's wrench moved to the ankle centre
+        (``rt.model.ankle.ankle_torques``); hidden without either, a dash while the sensor has
+        no finite sample."""
+        latest = latest or {}
+        if self.ankle_mode:
+            self._show_ankle_state(latest)
+            return
         if self._ankle_setup is None:
             self.ankle_label.hide()
             return
         from rt.model.ankle import ankle_torques
-        wrench = (latest or {}).get("wrench") or []
+        wrench = latest.get("wrench") or []
         values = [float(x) for x in wrench[:6] if x is not None]
         if len(values) < 6 or not all(np.isfinite(values)):
             text = tr("Ankle torque: —")
         else:
             tp, ti, _ = ankle_torques(values, self._ankle_setup)
-            text = tr("Ankle torque: %1 %2 N·m, %3 %4 N·m").replace(
-                "%1", tr("plantarflexion") if tp >= 0 else tr("dorsiflexion")) \
-                .replace("%2", f"{abs(tp):.1f}") \
-                .replace("%3", tr("inversion") if ti >= 0 else tr("eversion")) \
-                .replace("%4", f"{abs(ti):.1f}")
+            text = self._torque_words(tp, ti)
         if text != self.ankle_label.text():
             self.ankle_label.setText(text)
         self.ankle_label.show()
+
+    @staticmethod
+    def _torque_words(plantar_nm: float, inversion_nm: float) -> str:
+        return tr("Ankle torque: %1 %2 N·m, %3 %4 N·m").replace(
+            "%1", tr("plantarflexion") if plantar_nm >= 0 else tr("dorsiflexion")) \
+            .replace("%2", f"{abs(plantar_nm):.1f}") \
+            .replace("%3", tr("inversion") if inversion_nm >= 0 else tr("eversion")) \
+            .replace("%4", f"{abs(inversion_nm):.1f}")
+
+    def _displacement_limit_mm(self) -> float:
+        """The ankle centre's comfort limit of the prescribed protocol (mm; the product's
+        default when the protocol does not set one)."""
+        from rt.model.ankle import DEFAULT_COMFORT_LIMIT_M
+        value = (self.document or {}).get("ankle_displacement_limit_mm")
+        return float(value) if isinstance(value, (int, float)) \
+            else DEFAULT_COMFORT_LIMIT_M * 1e3
+
+    def _show_ankle_state(self, latest: dict[str, Any]) -> None:
+        """The ankle view's words (:meth:`show_ankle`)."""
+        state = ankle_state(latest)
+        pf, ie = state["ankle_dfpf"], state["ankle_inev"]
+        if np.isfinite(pf) and np.isfinite(ie):
+            angles = tr("Ankle from neutral: %1 %2°, %3 %4°").replace(
+                "%1", tr("plantarflexion") if pf >= 0 else tr("dorsiflexion")) \
+                .replace("%2", f"{abs(pf):.1f}") \
+                .replace("%3", tr("inversion") if ie >= 0 else tr("eversion")) \
+                .replace("%4", f"{abs(ie):.1f}")
+        else:
+            angles = tr("Ankle from neutral: —")
+        moved = state["ankle_displacement"]
+        if np.isfinite(moved):
+            angles += " — " + tr("the ankle centre moved %1 mm (comfort limit %2 mm)") \
+                .replace("%1", f"{moved:.0f}") \
+                .replace("%2", f"{self._displacement_limit_mm():.0f}")
+        target = latest.get("ankle_target")
+        if isinstance(target, dict) and isinstance(target.get("target_nm"), (int, float)) \
+                and isinstance(target.get("now_nm"), (int, float)):
+            # An isometric hold regulated on the ankle torque: its target, ramps included.
+            angles += "\n" + tr("Hold %1: %2 %3 N·m (target now %4 N·m)") \
+                .replace("%1", str(target.get("hold", ""))) \
+                .replace("%2", _direction_words().get(str(target.get("direction")),
+                                                     str(target.get("direction", "")))) \
+                .replace("%3", f"{abs(float(target['target_nm'])):.1f}") \
+                .replace("%4", f"{abs(float(target['now_nm'])):.1f}")
+        tp, ti = state["ankle_torque_dfpf"], state["ankle_torque_inev"]
+        torque = self._torque_words(tp, ti) if np.isfinite(tp) and np.isfinite(ti) \
+            else tr("Ankle torque: —")
+        for label, text in ((self.ankle_angles_label, angles), (self.ankle_label, torque)):
+            if text != label.text():
+                label.setText(text)
+        self.ankle_label.show()
+        if self.engineer_button.isChecked():
+            pose = latest.get("pose") or []
+            if len(pose) > 2 and all(isinstance(x, (int, float)) for x in pose[1:3]):
+                text = tr("Platform (engineers): roll %1°, pitch %2°") \
+                    .replace("%1", f"{np.degrees(pose[1]):+.1f}") \
+                    .replace("%2", f"{np.degrees(pose[2]):+.1f}")
+            else:
+                text = tr("Platform (engineers): —")
+            if text != self.platform_label.text():
+                self.platform_label.setText(text)
 
     def _show_repetitions(self) -> None:
         assert self.link is not None
