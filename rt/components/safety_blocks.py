@@ -103,6 +103,22 @@ class SupervisorBlock(Component):
         self.mode = self.declare_output("mode", Array(1))
 
     def update(self, t: float, dt: float) -> int:
+        if self.sup.compiled:
+            # Checks and outputs in one compiled call on the port buffers (no Python objects
+            # unless something new tripped or a request is pending).
+            st = self.state_in.data
+            self.sup.check_block(t, dt, self.q.data, self.est_status.data, self.qd.data,
+                                 self.qdd.data, st.buf, self.fk_ok.data, st.filled,
+                                 self.q_ref.data, self.qd_ref.data, self.tau.data,
+                                 self.wrench.data, self.wrench_flags.data, self.stops.data,
+                                 self.drive_failed.data, self.k, self.volts.data,
+                                 self.enable.data, self.mode.data)
+            return 0
+        return self._update_interpreted(t, dt)
+
+    def _update_interpreted(self, t: float, dt: float) -> int:
+        """The block as it ran before it was compiled (with an ``InterpretedSupervisor``):
+        the reference of ``tests/test_supervisor_compiled.py``."""
         st = self.state_in.data
         fk_ok = self.fk_ok.data[0] > 0.5 and st.filled
         roll = pitch = roll_rate = pitch_rate = 0.0
