@@ -5,6 +5,7 @@ import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from numba import njit
 
 from rt.components.tare import Tare
 from rt.devices.interfaces import (
@@ -154,6 +155,22 @@ class SupervisorBlock(Component):
         return 0
 
 
+@njit(cache=True)
+def _disagreement(measured, last, mismatch, tolerance_v, confirm_cycles):
+    """Count each channel's consecutive cycles of amplifier input (``measured``, V) away from
+    the last command (``last``, V) by more than ``tolerance_v``; a channel that agrees clears
+    its count. Returns the first channel confirmed (``confirm_cycles`` in a row) — the
+    channels after it are not counted this cycle — or -1."""
+    for i in range(3):
+        if abs(measured[i] - last[i]) > tolerance_v:
+            mismatch[i] += 1
+            if mismatch[i] >= confirm_cycles:
+                return i
+        else:
+            mismatch[i] = 0
+    return -1
+
+
 class RedundantDrive(Component):
     """Ports: in ``volts``: float64[3] V; in ``enable``: float64[1]; out ``failed``: float64[1]
     (1 when a channel has failed on both cards); out ``active_card``: float64[1].
@@ -173,8 +190,8 @@ class RedundantDrive(Component):
         self.cards = list(cards)
         self.log = log
         self.monitor = monitor
-        self.tolerance_v = tolerance_v
-        self.confirm_cycles = confirm_cycles
+        self.tolerance_v = float(tolerance_v)
+        self.confirm_cycles = int(confirm_cycles)
         self.volts = self.declare_input("volts", Array(3))
         self.enable = self.declare_input("enable", Array(1))
         self.failed = self.declare_output("failed", Array(1))
@@ -182,8 +199,13 @@ class RedundantDrive(Component):
         self._card = 0
         self._last = np.zeros(3)
         self._zero = np.zeros(3)
-        self._mismatch = [0, 0, 0]
+        self._measured = np.zeros(3)
+        self._mismatch = np.zeros(3, dtype=np.int64)
         self._enabled = False
+        # Compile (or load from numba's cache) now, not in the first cycle.
+        _disagreement(self._measured, self._last, self._mismatch, self.tolerance_v,
+                      self.confirm_cycles)
+        self._mismatch[:] = 0
 
     def on_start(self) -> None:
         self._card = 0
@@ -205,7 +227,7 @@ class RedundantDrive(Component):
         self._card = old + 1
         self.cards[self._card].enable()
         self.active_card.data[0] = self._card
-        self._mismatch = [0, 0, 0]
+        self._mismatch[:] = 0
         self.log.append(SafetyEvent(t, "failover", f"dac_card_{old}", Reaction.FAILOVER,
                                     f"channel {channel} failed on card {old} ({why}); card "
                                     f"{self._card} took over", {"card": old,
@@ -235,18 +257,15 @@ class RedundantDrive(Component):
         measured = self.monitor() if enabled and self.monitor is not None and \
             self._enabled else None
         if measured is not None:               # None: no reading newer than the last command
-            for i in range(3):
-                if abs(measured[i] - self._last[i]) > self.tolerance_v:
-                    self._mismatch[i] += 1
-                    if self._mismatch[i] >= self.confirm_cycles:
-                        if not self._fail_over(t, i, "amplifier input disagrees with the "
-                                                     "command"):
-                            self._all_off()
-                            return 0
-                        card = self.cards[self._card]
-                        break
-                else:
-                    self._mismatch[i] = 0
+            m = self._measured
+            m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
+            i = _disagreement(m, self._last, self._mismatch, self.tolerance_v,
+                              self.confirm_cycles)
+            if i >= 0:
+                if not self._fail_over(t, i, "amplifier input disagrees with the command"):
+                    self._all_off()
+                    return 0
+                card = self.cards[self._card]
         if enabled != self._enabled:
             if enabled:
                 card.enable()
