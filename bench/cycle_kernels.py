@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         # Advancing times; the count stands still under a still reference (no trip).
         clock = iter(range(10**9))
         rows.append(("supervisor block", "compiled" if compiled else "interpreted",
-                     *_time(lambda b=blk: b.update(1.0 + next(clock) * 1e-3, 1e-3),
+                     *_time(lambda b=blk, c=clock: b.update(1.0 + next(c) * 1e-3, 1e-3),
                             args.calls)))
     r = Reference()
     for name, sampler in (("compiled", benchmark_reference()),

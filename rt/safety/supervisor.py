@@ -121,7 +121,7 @@ class _Packed:
 
 
 class _PackedFlag(_Packed):
-    def __get__(self, obj: Supervisor | None, owner: type | None = None) -> bool:  # type: ignore[override]
+    def __get__(self, obj: Supervisor | None, owner: type | None = None) -> bool:
         return obj is not None and bool(obj._par[self.index])
 
     def __set__(self, obj: Supervisor, value: bool) -> None:  # type: ignore[override]

@@ -269,8 +269,9 @@ def outputs(par, reaction, tau, volts_per_n, volts, enable, mode):
     limit = par[P_MAX_COMMAND_V]
     for i in range(3):
         x = tau[i] * volts_per_n
-        # As Python's max(x, -limit): a NaN command stays NaN (the drive refuses it).
-        volts[i] = limit if x > limit else (-limit if -limit > x else x)
+        # Spelled out as Python's max(x, -limit) behaves (numba's max may differ on NaN): a
+        # NaN command stays NaN (the drive refuses it).
+        volts[i] = limit if x > limit else (-limit if -limit > x else x)  # noqa: FURB136
     enable[0] = 1.0
     mode[0] = float(R_SOFT) if reaction == R_SOFT else 0.0
 
