@@ -1,6 +1,7 @@
 """The cycle's compiled blocks against their interpreted references, one call at a time
-(this machine; issue 16): every position law, the explicit-force law, the model block and the
-velocity estimator. Prints median / p99 (µs) per implementation.
+(this machine; issue 16): every position law, the explicit-force law, the model block, the
+velocity estimator, the supervisor block and the benchmark trajectory's sampler. Prints
+median / p99 (µs) per implementation.
 
     .venv/bin/python bench/cycle_kernels.py [--calls 3000]
 
@@ -19,12 +20,39 @@ import numpy as np
 import rt.control.adaptive
 import rt.control.laws  # noqa: F401  (registers the laws)
 from rt.components.blocks import ModelState
+from rt.components.safety_blocks import SupervisorBlock
 from rt.control.base import CONTROLLERS, Reference, create
+from rt.control.experiment import benchmark_reference, benchmark_reference_interpreted
 from rt.control.force import ExplicitForce, ForceReference
 from rt.estimation.compiled import CompiledKalmanEstimator
 from rt.estimation.velocity import KalmanVelocityEstimator
 from rt.model import RobotModel
 from rt.model.dynamics import State
+from rt.safety.events import EventLog
+from rt.safety.limits import PatientLimits, RobotLimits, effective
+from rt.safety.supervisor import InterpretedSupervisor, Supervisor, supervisor_physics
+
+
+def _supervisor_block(model: RobotModel, st: State, q: np.ndarray, compiled: bool
+                      ) -> SupervisorBlock:
+    """A supervisor block on read-only input views (as a graph binds them), healthy inputs."""
+    d = model.description
+    lim = effective(d.limits.stroke, RobotLimits(), PatientLimits())
+    cls = Supervisor if compiled else InterpretedSupervisor
+    blk = SupervisorBlock("supervisor", cls(lim, 1e-3, EventLog(), **supervisor_physics(d)),
+                          d.drive.force_per_volt_n)
+    values = {"q": q, "est_status": np.zeros(1), "qd": np.array([0.01, 0.02, -0.01]),
+              "qdd": np.zeros(3), "fk_ok": np.ones(1), "q_ref": q + 1e-4,
+              "qd_ref": np.array([0.001, 0.0, 0.002]), "tau": np.array([120.0, -40.0, 300.0]),
+              "wrench": np.array([1.0, -2.0, -30.0, 0.1, 0.2, 0.0]), "wrench_flags": np.zeros(2),
+              "stops": np.zeros(2), "drive_failed": np.zeros(1)}
+    for name, value in values.items():
+        view = np.array(value, dtype=float)
+        view.flags.writeable = False
+        getattr(blk, name).data = view
+    blk.state_in.data = st
+    blk.volts.data, blk.enable.data, blk.mode.data = np.zeros(3), np.ones(1), np.zeros(1)
+    return blk
 
 
 def _time(fn: Callable[[], object], calls: int) -> tuple[float, float]:
@@ -72,6 +100,18 @@ def main(argv: list[str] | None = None) -> int:
     for est in (CompiledKalmanEstimator(), KalmanVelocityEstimator()):
         rows.append(("estimator", "compiled" if isinstance(est, CompiledKalmanEstimator)
                      else "interpreted", *_time(lambda e=est: e.update(q, 1e-3), args.calls)))
+    for compiled in (True, False):
+        blk = _supervisor_block(model, st, q, compiled)
+        # Advancing times; the count stands still under a still reference (no trip).
+        clock = iter(range(10**9))
+        rows.append(("supervisor block", "compiled" if compiled else "interpreted",
+                     *_time(lambda b=blk, c=clock: b.update(1.0 + next(c) * 1e-3, 1e-3),
+                            args.calls)))
+    r = Reference()
+    for name, sampler in (("compiled", benchmark_reference()),
+                          ("interpreted", benchmark_reference_interpreted())):
+        rows.append(("benchmark sampler", name,
+                     *_time(lambda s=sampler: s(1.234, r), args.calls)))
     print(f"{'block':22s} {'implementation':14s} {'median µs':>10s} {'p99 µs':>10s}")
     for name, impl, med, p99 in rows:
         print(f"{name:22s} {impl:14s} {med:10.1f} {p99:10.1f}")

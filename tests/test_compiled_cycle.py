@@ -243,3 +243,21 @@ def test_explicit_force_law_matches_its_interpreted_reference(stream) -> None:
     assert law_c.integral == pytest.approx(law_i.integral, rel=RTOL, abs=RTOL)
     assert law_c.k_est == pytest.approx(law_i.k_est, rel=RTOL)
     assert law_i.k_est != law_i.gains.stiffness_guess_n_per_m     # the RLS ran
+
+
+def test_benchmark_sampler_matches_its_interpreted_reference() -> None:
+    """The compiled benchmark trajectory gives the interpreted one's samples bit for bit (and
+    still takes lists)."""
+    from rt.control.experiment import benchmark_reference, benchmark_reference_interpreted
+
+    compiled, interpreted = benchmark_reference(0.21), benchmark_reference_interpreted(0.21)
+    rc, ri = Reference(), Reference()
+    for t in np.linspace(0.0, 60.0, 7919):
+        compiled(float(t), rc)
+        interpreted(float(t), ri)
+        for name in ("q", "qd", "qdd"):
+            assert np.array_equal(getattr(rc, name), getattr(ri, name)), (t, name)
+    lists = Reference([0.0] * 3, [0.0] * 3, [0.0] * 3)  # type: ignore[arg-type]
+    compiled(1.5, lists)
+    interpreted(1.5, ri)
+    assert lists.q == list(ri.q) and lists.qdd == list(ri.qdd)

@@ -5,6 +5,7 @@ import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from numba import njit
 
 from rt.components.tare import Tare
 from rt.devices.interfaces import (
@@ -106,6 +107,22 @@ class SupervisorBlock(Component):
         self.failed_components: Callable[[], str | None] = lambda: None
 
     def update(self, t: float, dt: float) -> int:
+        if self.sup.compiled:
+            # Checks and outputs in one compiled call on the port buffers (no Python objects
+            # unless something new tripped or a request is pending).
+            st = self.state_in.data
+            self.sup.check_block(t, dt, self.q.data, self.est_status.data, self.qd.data,
+                                 self.qdd.data, st.buf, self.fk_ok.data, st.filled,
+                                 self.q_ref.data, self.qd_ref.data, self.tau.data,
+                                 self.wrench.data, self.wrench_flags.data, self.stops.data,
+                                 self.drive_failed.data, self.k, self.volts.data,
+                                 self.enable.data, self.mode.data, self.failed_components())
+            return 0
+        return self._update_interpreted(t, dt)
+
+    def _update_interpreted(self, t: float, dt: float) -> int:
+        """The block as it ran before it was compiled (with an ``InterpretedSupervisor``):
+        the reference of ``tests/test_supervisor_compiled.py``."""
         st = self.state_in.data
         fk_ok = self.fk_ok.data[0] > 0.5 and st.filled
         roll = pitch = roll_rate = pitch_rate = 0.0
@@ -141,6 +158,22 @@ class SupervisorBlock(Component):
         return 0
 
 
+@njit(cache=True)
+def _disagreement(measured, last, mismatch, tolerance_v, confirm_cycles):
+    """Count each channel's consecutive cycles of amplifier input (``measured``, V) away from
+    the last command (``last``, V) by more than ``tolerance_v``; a channel that agrees clears
+    its count. Returns the first channel confirmed (``confirm_cycles`` in a row) — the
+    channels after it are not counted this cycle — or -1."""
+    for i in range(3):
+        if abs(measured[i] - last[i]) > tolerance_v:
+            mismatch[i] += 1
+            if mismatch[i] >= confirm_cycles:
+                return i
+        else:
+            mismatch[i] = 0
+    return -1
+
+
 class RedundantDrive(Component):
     """Ports: in ``volts``: float64[3] V; in ``enable``: float64[1]; out ``failed``: float64[1]
     (1 when a channel has failed on both cards); out ``active_card``: float64[1].
@@ -160,8 +193,8 @@ class RedundantDrive(Component):
         self.cards = list(cards)
         self.log = log
         self.monitor = monitor
-        self.tolerance_v = tolerance_v
-        self.confirm_cycles = confirm_cycles
+        self.tolerance_v = float(tolerance_v)
+        self.confirm_cycles = int(confirm_cycles)
         self.volts = self.declare_input("volts", Array(3))
         self.enable = self.declare_input("enable", Array(1))
         self.failed = self.declare_output("failed", Array(1))
@@ -169,8 +202,13 @@ class RedundantDrive(Component):
         self._card = 0
         self._last = np.zeros(3)
         self._zero = np.zeros(3)
-        self._mismatch = [0, 0, 0]
+        self._measured = np.zeros(3)
+        self._mismatch = np.zeros(3, dtype=np.int64)
         self._enabled = False
+        # Compile (or load from numba's cache) now, not in the first cycle.
+        _disagreement(self._measured, self._last, self._mismatch, self.tolerance_v,
+                      self.confirm_cycles)
+        self._mismatch[:] = 0
 
     def on_start(self) -> None:
         self._card = 0
@@ -192,7 +230,7 @@ class RedundantDrive(Component):
         self._card = old + 1
         self.cards[self._card].enable()
         self.active_card.data[0] = self._card
-        self._mismatch = [0, 0, 0]
+        self._mismatch[:] = 0
         self.log.append(SafetyEvent(t, "failover", f"dac_card_{old}", Reaction.FAILOVER,
                                     f"channel {channel} failed on card {old} ({why}); card "
                                     f"{self._card} took over", {"card": old,
@@ -222,18 +260,15 @@ class RedundantDrive(Component):
         measured = self.monitor() if enabled and self.monitor is not None and \
             self._enabled else None
         if measured is not None:               # None: no reading newer than the last command
-            for i in range(3):
-                if abs(measured[i] - self._last[i]) > self.tolerance_v:
-                    self._mismatch[i] += 1
-                    if self._mismatch[i] >= self.confirm_cycles:
-                        if not self._fail_over(t, i, "amplifier input disagrees with the "
-                                                     "command"):
-                            self._all_off()
-                            return 0
-                        card = self.cards[self._card]
-                        break
-                else:
-                    self._mismatch[i] = 0
+            m = self._measured
+            m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
+            i = _disagreement(m, self._last, self._mismatch, self.tolerance_v,
+                              self.confirm_cycles)
+            if i >= 0:
+                if not self._fail_over(t, i, "amplifier input disagrees with the command"):
+                    self._all_off()
+                    return 0
+                card = self.cards[self._card]
         if enabled != self._enabled:
             if enabled:
                 card.enable()

@@ -29,6 +29,12 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
 * consecutive deadline overruns (measured period > 1.5 × nominal) → soft stop;
 * client heartbeat older than its timeout while a client drives the robot → soft stop;
 * both DAC cards failed on a channel → hard stop (a single card's failure is a failover).
+
+The numeric checks run compiled (:mod:`rt.safety.supervisor_kernel`, one call per cycle that
+allocates nothing); this module keeps what users and tests see: cause names, latching, events,
+reset tickets, client requests. :class:`InterpretedSupervisor` runs the same checks in Python:
+it is the reference the compiled one is tested against (a recorded cycle stream replayed
+through both gives the same events and outputs).
 """
 from __future__ import annotations
 
@@ -37,15 +43,19 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from rt.model.description import RobotDescription
+from rt.safety import supervisor_kernel as sk
 from rt.safety.events import EventLog, Reaction, SafetyEvent
 from rt.safety.limits import EffectiveLimits
 
-JUMP_STATUS = -3
+# The checks' constants live with the compiled checks (one source for both implementations).
+JUMP_STATUS = sk.JUMP_STATUS
 #: Counts a free axis must have moved under its commanded force before "frozen" is declared.
-FROZEN_COUNTS = 4
+FROZEN_COUNTS = sk.FROZEN_COUNTS
 #: Fraction of the force limit at which a soft stop begins (the force's end cushion).
-FORCE_CUSHION = 0.9
+FORCE_CUSHION = sk.FORCE_CUSHION
 #: Margin on the friction band a still axis can hold (the frozen-encoder check must not trip on
 #: an axis that legitimately sticks, e.g. at a velocity reversal).
 HOLDING_MARGIN = 1.5
@@ -53,7 +63,7 @@ HOLDING_MARGIN = 1.5
 #: moves (the load's share, friction and inertia): long enough to average the controller's
 #: cycle-to-cycle ripple, short next to a payload's arrival (the estimate follows it as the
 #: axis sinks under the new load) and to a velocity reversal's stick (tens of ms).
-CARRY_TAU_S = 0.02
+CARRY_TAU_S = sk.CARRY_TAU_S
 #: Lever ∂q/∂angle of a slider per radian of platform tilt, in platform radii (≈ 1.5 R_p for
 #: a 3-PRS with the spheres on a circle: the farthest leg moves R_p·(1 + 1/2) per radian).
 LEVER_PER_PLATFORM_RADIUS = 1.5
@@ -94,8 +104,121 @@ class ResetTicket:
     still_latched: list[dict] = field(default_factory=list)
 
 
+class _Packed:
+    """A supervisor parameter kept in the compiled checks' ``par`` array, so the kernel reads
+    whatever Python assigns (e.g. ``force_control``, flipped by the hybrid controller)."""
+
+    def __init__(self, index: int):
+        self.index = index
+
+    def __get__(self, obj: Supervisor | None, owner: type | None = None) -> float:
+        if obj is None:
+            return math.nan
+        return float(obj._par[self.index])
+
+    def __set__(self, obj: Supervisor, value: float) -> None:
+        obj._par[self.index] = float(value)
+
+
+class _PackedFlag(_Packed):
+    def __get__(self, obj: Supervisor | None, owner: type | None = None) -> bool:
+        return obj is not None and bool(obj._par[self.index])
+
+    def __set__(self, obj: Supervisor, value: bool) -> None:  # type: ignore[override]
+        obj._par[self.index] = 1.0 if value else 0.0
+
+
+def _cause_names() -> tuple[str, ...]:
+    names = ["estop_hardware", "hand_stop", "drive_channel", "fk_failed", "encoder_jump"]
+    for i in range(3):
+        names += [f"encoder_frozen_{i}", f"stroke_{i}", f"stroke_margin_{i}", f"speed_{i}",
+                  f"accel_{i}", f"tracking_{i}", f"actuator_force_{i}"]
+    names += ["rom_roll", "angular_speed_roll", "rom_pitch", "angular_speed_pitch",
+              "force_saturated", "force_stale", "force_implausible", "force_limit", "pulling",
+              "deadline_overruns"]
+    assert len(names) == sk.N_CAUSES
+    return tuple(names)
+
+
+#: The compiled checks' causes by kernel index (the interpreted check's order).
+CAUSES = _cause_names()
+_INDEX = {name: k for k, name in enumerate(CAUSES)}
+
+
+def _event_text(c: int, reaction: int, v: np.ndarray) -> tuple[str, dict]:
+    """Message and values of kernel cause ``c`` tripped with ``reaction`` and values ``v``,
+    word for word those of the interpreted check."""
+    if c == sk.C_ESTOP_HW:
+        return "hardware e-stop pressed", {}
+    if c == sk.C_HAND:
+        return "patient's hand-held stop pressed", {}
+    if c == sk.C_DRIVE:
+        return "an actuator channel failed on both cards", {}
+    if c == sk.C_FK:
+        return "forward kinematics failed: pose unknown", {}
+    if c == sk.C_JUMP:
+        return "encoder reading jumped beyond physics", {"q": [float(x) for x in v]}
+    if c < sk.C_ROM_ROLL:
+        i, slot = divmod(c - sk.C_AXIS, sk.AXIS_SLOTS)
+        x = float(v[0])
+        if slot == sk.A_FROZEN:
+            return (f"encoder {i} frozen while commanded to move",
+                    {"frozen_s": x, "expected_m": float(v[1]), "qd_ref": float(v[2])})
+        if slot == sk.A_STROKE:
+            return f"slider {i} beyond its stroke", {"q": x}
+        if slot == sk.A_MARGIN:
+            return f"slider {i} inside the stroke-end margin", {"q": x}
+        if slot == sk.A_SPEED:
+            return f"slider {i} too fast", {"qd": x}
+        if slot == sk.A_ACCEL:
+            return f"slider {i} acceleration beyond the robot limit", {"qdd": x}
+        if slot == sk.A_TRACKING:
+            return f"slider {i} tracking error", {"error": x}
+        return f"actuator {i} force command beyond the robot limit (saturated)", {"tau": x}
+    if c in (sk.C_ROM_ROLL, sk.C_ROM_PITCH):
+        name = "roll" if c == sk.C_ROM_ROLL else "pitch"
+        if reaction == sk.R_HARD:
+            return f"{name} beyond the patient's ROM", {"angle_deg": math.degrees(v[0])}
+        return (f"{name} reaching the patient's ROM end",
+                {"angle_deg": math.degrees(v[0]), "rate_deg_s": math.degrees(v[1])})
+    if c in (sk.C_ANG_ROLL, sk.C_ANG_PITCH):
+        name = "roll" if c == sk.C_ANG_ROLL else "pitch"
+        return f"{name} rate beyond the patient's limit", {"rate_deg_s": math.degrees(v[0])}
+    if c == sk.C_FORCE_SAT:
+        return "force sensor saturated (overload)", {}
+    if c == sk.C_FORCE_STALE:
+        return "force sensor data stale", {}
+    if c == sk.C_FORCE_IMPL:
+        return "force sensor reading invalid", {}
+    if c == sk.C_FORCE_LIMIT:
+        if reaction == sk.R_HARD:
+            return "platform force beyond the limit", {"force_n": float(v[0])}
+        return "platform force reaching the limit", {"force_n": float(v[0])}
+    if c == sk.C_PULL:
+        return ("the platform is pulling on the foot (measured Fz below 0 N)",
+                {"fz_n": float(v[0]), "for_s": float(v[1])})
+    return "consecutive deadline overruns", {"count": int(v[0]), "dt": float(v[1])}
+
+
 class Supervisor:
-    """Checks + latch. The owning component fills the inputs and calls ``check`` each cycle."""
+    """Checks + latch. The owning component fills the inputs and calls ``check`` each cycle
+    (the supervisor block calls :meth:`check_block` on its port buffers).
+
+    The numeric checks are compiled (:func:`rt.safety.supervisor_kernel.check`); a cycle in
+    which nothing new trips, nobody requested anything and no reset is pending runs no Python
+    beyond the call. :class:`InterpretedSupervisor` is the reference."""
+
+    compiled = True
+
+    period_s = _Packed(sk.P_PERIOD)
+    alpha_stop = _Packed(sk.P_ALPHA_STOP)
+    jerk_time = _Packed(sk.P_JERK_TIME)
+    axis_mass_kg = _Packed(sk.P_AXIS_MASS)
+    holding_force_n = _Packed(sk.P_HOLDING)
+    count_m = _Packed(sk.P_COUNT_M)
+    contact_force_n = _Packed(sk.P_CONTACT)
+    startup_grace_s = _Packed(sk.P_GRACE)
+    force_control = _PackedFlag(sk.P_FORCE_CONTROL)
 
     def __init__(self, limits: EffectiveLimits, period_s: float, log: EventLog | None = None,
                  soft_stop_accel_m_s2: float = 0.5, soft_stop_jerk_m_s3: float = 5.0,
@@ -103,6 +226,7 @@ class Supervisor:
                  holding_force_n: float = 225.0, count_m: float = 2e-5):
         """The defaults are the nominal robot's (:func:`supervisor_physics`); the loop passes
         the values of the robot it drives."""
+        self._par = np.zeros(sk.PAR_SIZE)
         self.limits = limits
         self.period_s = period_s
         self.log = log or EventLog()
@@ -129,55 +253,54 @@ class Supervisor:
         # this long (s, with margin) after every enable — at start and after a hard stop's reset.
         self.brake_release_s = 0.05
         self.reset_state()
+        sk.warm_up()
+
+    @property
+    def limits(self) -> EffectiveLimits:
+        """The effective limits (assigning new ones takes effect at the next cycle)."""
+        return self._limits
+
+    @limits.setter
+    def limits(self, lim: EffectiveLimits) -> None:
+        p = self._par
+        for index, value in (
+                (sk.P_STROKE_LO, lim.stroke_lo_m), (sk.P_STROKE_HI, lim.stroke_hi_m),
+                (sk.P_STROKE_MARGIN, lim.stroke_margin_m),
+                (sk.P_MAX_SPEED, lim.max_slider_speed_m_s),
+                (sk.P_MAX_ACCEL, lim.max_slider_accel_m_s2),
+                (sk.P_MAX_COMMAND_V, lim.max_command_v),
+                (sk.P_MAX_ACTUATOR, lim.max_actuator_force_n),
+                (sk.P_MAX_TRACKING, lim.max_tracking_error_m), (sk.P_MAX_FORCE, lim.max_force_n),
+                (sk.P_ROLL_MIN, lim.roll_min), (sk.P_ROLL_MAX, lim.roll_max),
+                (sk.P_PITCH_MIN, lim.pitch_min), (sk.P_PITCH_MAX, lim.pitch_max),
+                (sk.P_MAX_ANGULAR, lim.max_angular_speed), (sk.P_ROM_TOL, lim.rom_tolerance),
+                (sk.P_DEADLINE_OVERRUNS, lim.deadline_overruns),
+                (sk.P_FROZEN_S, lim.frozen_encoder_s),
+                (sk.P_FROZEN_MIN_REF, lim.frozen_min_ref_speed_m_s),
+                (sk.P_MAX_PULL_S, lim.max_pull_s)):
+            p[index] = value
+        self._limits = lim
 
     def reset_state(self) -> None:
         self.reaction = Reaction.NONE
         self.causes: dict[str, Reaction] = {}      # latched causes
-        self._active: set[str] = set()             # causes true in the last cycle
-        self._reported: set[str] = set()           # warn causes already logged
-        self._frozen_time = [0.0, 0.0, 0.0]
-        self._impulse = [0.0, 0.0, 0.0]
-        self._impulse_time = [0.0, 0.0, 0.0]
-        self._last_q = [math.nan, math.nan, math.nan]
-        # Running estimate of the force that carries each axis while its count moves (N):
-        # NaN until the first cycle (then the first command: the loop starts holding still).
-        self.carry_force_n = [math.nan, math.nan, math.nan]
-        self._overruns = 0
         self.latched_ids: dict[str, int] = {}      # latched cause -> the event that latched it
         self._latched_wall: dict[str, float] = {}  # ... and its wall-clock time (s)
-        self._pull_time = 0.0
+        self._py_active: set[str] = set()          # Python-side causes true this cycle
         self._estop_request: str | None = None
         self._stop_request = False
+        self._failed_components: str | None = None  # the loop's blocks in error (None: none)
         self._reset_tickets: deque[ResetTicket] = deque()
-        self._brakes_open_at = self.brake_release_s      # drives enabled at t = 0
+        # The compiled checks' running state: frozen-encoder integrators, last counts, carried
+        # forces, overruns, pull time, brakes, per-cause latch/report flags.
+        self._mem = sk.new_mem()
+        self._mem[sk.M_BRAKES_OPEN_AT] = self.brake_release_s   # drives enabled at t = 0
 
-    def _track_carry_force(self, i: int, tau: float, dt: float) -> None:
-        """Update axis ``i``'s carried-force estimate with this cycle's command (its count
-        moved, the brakes still hold it, or a contact holds the platform): first-order,
-        :data:`CARRY_TAU_S`."""
-        c = self.carry_force_n[i]
-        if math.isnan(c):
-            self.carry_force_n[i] = tau
-        else:
-            self.carry_force_n[i] = c + (tau - c) * dt / (CARRY_TAU_S + dt)
-
-    def _frozen_net_force(self, i: int, tau: float) -> float:
-        """The part of axis ``i``'s command that must accelerate it although its count has not
-        moved (N; ≤ 0: none).
-
-        A still axis is in static equilibrium: its command balances the load it carries (the
-        links', the platform's and any payload's weight — unknown to the supervisor, a
-        patient may stand on the platform) within the friction it can hold. The load is
-        estimated as the force that carried the axis while its count last moved
-        (``carry_force_n``), so a heavy payload is not read as a frozen encoder; a truly
-        frozen encoder makes the controller push ever further from that force (the reference
-        runs away from a count that does not move), and the excess beyond the friction band
-        (``holding_force_n``) must move the axis.
-        """
-        carry = self.carry_force_n[i]
-        if math.isnan(carry):
-            carry = 0.0
-        return abs(tau - carry) - self.holding_force_n
+    @property
+    def carry_force_n(self) -> list[float]:
+        """Running estimate of the force that carries each axis while its count moves (N; NaN
+        until the first cycle)."""
+        return [float(x) for x in self._mem[sk.M_CARRY:sk.M_CARRY + 3]]
 
     def braking_angle(self, rate: float, dt: float) -> float:
         """Angle (rad) the platform still turns at ``rate`` (rad/s) before a soft stop started
@@ -216,6 +339,219 @@ class Supervisor:
         return ticket
 
     # ------------------------------------------------------------------ the cycle
+    def check(self, t: float, dt: float, q, est_status: int, qd, qdd, fk_ok: bool, roll: float,
+              pitch: float, roll_rate: float, pitch_rate: float, q_ref, qd_ref, tau,
+              force_n: float, wrench_stale: bool, wrench_saturated: bool, hw_estop: bool,
+              hand_stop: bool, drive_failed: bool, fz_n: float = math.nan,
+              failed_components: str | None = None) -> Reaction:
+        """Run every check; returns the latched reaction for this cycle. ``force_n`` is the
+        magnitude of the sensor's force, ``fz_n`` the platform's push along its z (N);
+        ``failed_components`` names the loop's components a fault put in error (None: none).
+
+        Takes any sequences (copied into arrays: this entry point is for tests and tools; the
+        loop's block calls :meth:`check_block`, which copies nothing)."""
+        self._failed_components = failed_components
+
+        def a(x) -> np.ndarray:
+            return np.array(x, dtype=np.float64).reshape(3)
+
+        new = sk.check(self._par, self._mem, float(t), float(dt), a(q), int(est_status), a(qd),
+                       a(qdd), bool(fk_ok), float(roll), float(pitch), float(roll_rate),
+                       float(pitch_rate), a(q_ref), a(qd_ref), a(tau), float(force_n),
+                       bool(wrench_stale), bool(wrench_saturated), bool(hw_estop),
+                       bool(hand_stop), bool(drive_failed), float(fz_n))
+        if new or self._python_side_pending():
+            self._after_checks(t, new)
+        return self.reaction
+
+    def check_block(self, t: float, dt: float, q: np.ndarray, est_status: np.ndarray,
+                    qd: np.ndarray, qdd: np.ndarray, state_buf: np.ndarray, fk_ok: np.ndarray,
+                    filled: bool, q_ref: np.ndarray, qd_ref: np.ndarray, tau: np.ndarray,
+                    wrench: np.ndarray, wrench_flags: np.ndarray, inputs: np.ndarray,
+                    drive_failed: np.ndarray, volts_per_n: float, volts: np.ndarray,
+                    enable: np.ndarray, mode: np.ndarray,
+                    failed_components: str | None = None) -> Reaction:
+        """The supervisor block's cycle on its port buffers (layouts in ``SupervisorBlock``):
+        the checks and the outputs ``volts`` (V), ``enable``, ``mode`` in one compiled call;
+        Python runs only when something new tripped or a request or reset is pending, or a
+        block of the loop is in error (``failed_components``)."""
+        self._failed_components = failed_components
+        new = sk.block_cycle(self._par, self._mem, t, dt, q, est_status, qd, qdd, state_buf,
+                             fk_ok, filled, q_ref, qd_ref, tau, wrench, wrench_flags, inputs,
+                             drive_failed, volts_per_n, volts, enable, mode)
+        if new or self._python_side_pending():
+            before = self.reaction
+            self._after_checks(t, new)
+            if self.reaction != before:
+                sk.outputs(self._par, int(self.reaction), tau, volts_per_n, volts, enable, mode)
+        return self.reaction
+
+    def _python_side_pending(self) -> bool:
+        return (self._estop_request is not None or self._stop_request
+                or bool(self._reset_tickets) or self._failed_components is not None
+                or (self.heartbeat_required and self.heartbeat_age is not None))
+
+    def _trip(self, t: float, cause: str, reaction: Reaction, message: str,
+              values: dict) -> None:
+        """A Python-side cause (client e-stop or stop, heartbeat): latched as the interpreted
+        check latches every cause."""
+        self._py_active.add(cause)
+        if self.causes.get(cause, Reaction.NONE) < reaction:
+            self._latch(t, cause, reaction, message, values)
+
+    def _latch(self, t: float, cause: str, reaction: Reaction, message: str,
+               values: dict) -> None:
+        self.causes[cause] = reaction
+        event = SafetyEvent(t, "fault", cause, reaction, message, values)
+        self.log.append(event)
+        self.latched_ids[cause] = event.id
+        self._latched_wall[cause] = event.wall
+
+    def _after_checks(self, t: float, new: int) -> None:
+        """The rare part of a cycle: name and log the kernel's new events in the interpreted
+        check's order, with the clients' requests and the heartbeat at their places; take a
+        reset ticket; update the latched reaction."""
+        mem = self._mem
+        self._py_active.clear()
+        if self._estop_request is not None:
+            src = self._estop_request
+            self._estop_request = None
+            self._trip(t, f"estop_{src}", Reaction.HARD_STOP, f"e-stop from the {src}", {})
+        for c in range(sk.N_CAUSES if new else 0):
+            if c == sk.C_DRIVE:
+                self._take_stop_request(t)
+            if mem[sk.M_NEW + c] == 0.0:
+                continue
+            reaction = Reaction(int(mem[sk.M_REACT + c]))
+            k = sk.M_VALS + sk.N_VALUES * c
+            message, values = _event_text(c, reaction, mem[k:k + sk.N_VALUES])
+            if reaction == Reaction.WARN:
+                self.log.append(SafetyEvent(t, "warn", CAUSES[c], reaction, message, values))
+            else:
+                self._latch(t, CAUSES[c], reaction, message, values)
+        self._take_stop_request(t)
+        if self._failed_components is not None:
+            # A sensor or law that stopped updating leaves stale values on its ports: nothing
+            # downstream of it can be trusted.
+            self._trip(t, "component_failed", Reaction.HARD_STOP,
+                       f"a block of the control loop failed ({self._failed_components})",
+                       {"components": self._failed_components})
+        if self.heartbeat_required and self.heartbeat_age is not None:
+            age = self.heartbeat_age()
+            if age > self._limits.heartbeat_timeout_s:
+                self._trip(t, "heartbeat_lost", Reaction.SOFT_STOP, "client heartbeat lost",
+                           {"age_s": age})
+        if self._reset_tickets:
+            active = {CAUSES[c] for c in range(sk.N_CAUSES) if mem[sk.M_REACT + c] != 0.0}
+            self._take_reset(t, self._reset_tickets.popleft(), active | self._py_active)
+        self._relatch(t)
+
+    def _take_stop_request(self, t: float) -> None:
+        if self._stop_request:
+            self._stop_request = False
+            self._trip(t, "stop_client", Reaction.SOFT_STOP, "stop requested by a client", {})
+
+    def _relatch(self, t: float) -> None:
+        previous = self.reaction
+        self.reaction = max(self.causes.values(), default=Reaction.NONE)
+        if previous >= Reaction.HARD_STOP and self.reaction < Reaction.HARD_STOP:
+            self._release_brakes_at(t + self.brake_release_s)   # drives back on, brakes closed
+        self._mem[sk.M_REACTION] = float(self.reaction)
+
+    def _release_brakes_at(self, t: float) -> None:
+        self._mem[sk.M_BRAKES_OPEN_AT] = t
+
+    def _forget(self, cleared: list[str]) -> None:
+        """Causes a reset cleared: the kernel's latch for them and every warning's report."""
+        mem = self._mem
+        for c in cleared:
+            k = _INDEX.get(c)
+            if k is not None:
+                mem[sk.M_LATCHED + k] = 0.0
+        mem[sk.M_REPORTED:sk.M_REPORTED + sk.N_CAUSES] = 0.0
+
+    def _take_reset(self, t: float, ticket: ResetTicket, active: set[str]) -> None:
+        """Clear the acknowledged latched causes unless one of them is still present."""
+        acked = sorted(c for c, i in self.latched_ids.items() if i in ticket.acknowledge)
+        persisting = [c for c in acked if c in active]
+        if persisting:
+            self.log.append(SafetyEvent(t, "reset_refused", ",".join(persisting), Reaction.NONE,
+                                        "reset refused: cause still present",
+                                        {"causes": persisting}))
+            ticket.refused = [{"id": self.latched_ids[c], "cause": c} for c in persisting]
+        elif acked:
+            ticket.cleared = [{"id": self.latched_ids[c], "cause": c} for c in acked]
+            for c in acked:
+                del self.causes[c]
+                del self.latched_ids[c]
+            self._forget(acked)
+            self.log.append(SafetyEvent(t, "reset", ",".join(acked), Reaction.NONE,
+                                        "faults reset", {"cleared": acked,
+                                                         "ids": [x["id"] for x in
+                                                                 ticket.cleared]}))
+        ticket.still_latched = [{"id": i, "cause": c} for c, i in self.latched_ids.items()]
+        ticket.done = True
+
+
+class InterpretedSupervisor(Supervisor):
+    """The checks in Python, as they were before they were compiled: the reference the
+    compiled :class:`Supervisor` is tested against (same events, same outputs)."""
+
+    compiled = False
+
+    def reset_state(self) -> None:
+        super().reset_state()
+        self._active: set[str] = set()             # causes true in the last cycle
+        self._reported: set[str] = set()           # warn causes already logged
+        self._frozen_time = [0.0, 0.0, 0.0]
+        self._impulse = [0.0, 0.0, 0.0]
+        self._impulse_time = [0.0, 0.0, 0.0]
+        self._last_q = [math.nan, math.nan, math.nan]
+        # Running estimate of the force that carries each axis while its count moves (N):
+        # NaN until the first cycle (then the first command: the loop starts holding still).
+        self._carry = [math.nan, math.nan, math.nan]
+        self._overruns = 0
+        self._pull_time = 0.0
+        self._brakes_open_at = self.brake_release_s      # drives enabled at t = 0
+
+    @property
+    def carry_force_n(self) -> list[float]:
+        return self._carry
+
+    def _release_brakes_at(self, t: float) -> None:
+        self._brakes_open_at = t
+
+    def _forget(self, cleared: list[str]) -> None:
+        self._reported.clear()
+
+    def _track_carry_force(self, i: int, tau: float, dt: float) -> None:
+        """Update axis ``i``'s carried-force estimate with this cycle's command (its count
+        moved, the brakes still hold it, or a contact holds the platform): first-order,
+        :data:`CARRY_TAU_S`."""
+        c = self._carry[i]
+        if math.isnan(c):
+            self._carry[i] = tau
+        else:
+            self._carry[i] = c + (tau - c) * dt / (CARRY_TAU_S + dt)
+
+    def _frozen_net_force(self, i: int, tau: float) -> float:
+        """The part of axis ``i``'s command that must accelerate it although its count has not
+        moved (N; ≤ 0: none).
+
+        A still axis is in static equilibrium: its command balances the load it carries (the
+        links', the platform's and any payload's weight — unknown to the supervisor, a
+        patient may stand on the platform) within the friction it can hold. The load is
+        estimated as the force that carried the axis while its count last moved
+        (``carry_force_n``), so a heavy payload is not read as a frozen encoder; a truly
+        frozen encoder makes the controller push ever further from that force (the reference
+        runs away from a count that does not move), and the excess beyond the friction band
+        (``holding_force_n``) must move the axis.
+        """
+        carry = self._carry[i]
+        if math.isnan(carry):
+            carry = 0.0
+        return abs(tau - carry) - self.holding_force_n
+
     def check(self, t: float, dt: float, q, est_status: int, qd, qdd, fk_ok: bool, roll: float,
               pitch: float, roll_rate: float, pitch_rate: float, q_ref, qd_ref, tau,
               force_n: float, wrench_stale: bool, wrench_saturated: bool, hw_estop: bool,
@@ -387,30 +723,5 @@ class Supervisor:
         # -- latch and reset
         if self._reset_tickets:
             self._take_reset(t, self._reset_tickets.popleft(), active)
-        previous = self.reaction
-        self.reaction = max(self.causes.values(), default=Reaction.NONE)
-        if previous >= Reaction.HARD_STOP and self.reaction < Reaction.HARD_STOP:
-            self._brakes_open_at = t + self.brake_release_s    # drives back on, brakes closed
+        self._relatch(t)
         return self.reaction
-
-    def _take_reset(self, t: float, ticket: ResetTicket, active: set[str]) -> None:
-        """Clear the acknowledged latched causes unless one of them is still present."""
-        acked = sorted(c for c, i in self.latched_ids.items() if i in ticket.acknowledge)
-        persisting = [c for c in acked if c in active]
-        if persisting:
-            self.log.append(SafetyEvent(t, "reset_refused", ",".join(persisting), Reaction.NONE,
-                                        "reset refused: cause still present",
-                                        {"causes": persisting}))
-            ticket.refused = [{"id": self.latched_ids[c], "cause": c} for c in persisting]
-        elif acked:
-            ticket.cleared = [{"id": self.latched_ids[c], "cause": c} for c in acked]
-            for c in acked:
-                del self.causes[c]
-                del self.latched_ids[c]
-            self._reported.clear()
-            self.log.append(SafetyEvent(t, "reset", ",".join(acked), Reaction.NONE,
-                                        "faults reset", {"cleared": acked,
-                                                         "ids": [x["id"] for x in
-                                                                 ticket.cleared]}))
-        ticket.still_latched = [{"id": i, "cause": c} for c, i in self.latched_ids.items()]
-        ticket.done = True

@@ -1,0 +1,335 @@
+"""The supervisor's numeric checks compiled with numba: one call per cycle, no Python objects.
+
+Division follows numpy's error model (no zero check in the cycle): every divisor is a validated
+positive physical constant (axis mass, braking deceleration, τ + dt).
+
+The kernel is the compiled twin of the checks in :meth:`rt.safety.supervisor.Supervisor.check`
+(the interpreted reference, ``Supervisor(..., compiled=False)``; ``tests/test_supervisor_
+compiled.py`` replays recorded cycle streams through both and requires the same events and
+outputs). It owns only numbers: which causes are present this cycle and with which reaction
+(``react``), the values that tripped them (``vals``), the latched reaction of each cause and
+whether a warning was already reported. Naming a cause, building its :class:`SafetyEvent`,
+latching it in the ``causes`` dict users read, the e-stop and stop requests of clients, the
+heartbeat callable and the reset tickets stay in Python: the kernel returns how many *new*
+events the cycle needs, so the steady-state cycle allocates nothing and Python does nothing.
+
+Cause indices follow the order in which the interpreted check tests them, so events of one
+cycle are logged in the same order (their ids are what a reset acknowledges).
+
+Buffers (float64, one each so the call takes few arguments; numba's dispatcher pays per array):
+
+* ``par`` — the effective limits and the supervisor's physics (layout ``P_*``), repacked by
+  the supervisor whenever one of them is assigned;
+* ``mem`` — the running state (``M_*``), the per-cause reaction of this cycle (``M_REACT``),
+  the latched reaction and reported flag per cause (``M_LATCHED``, ``M_REPORTED``), the cycle's
+  new-event flags (``M_NEW``) and the values per cause (``M_VALS``, ``N_VALUES`` each).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from rt.model.rigid_body import STATE_Q, STATE_QD, STATE_S
+
+# ------------------------------------------------------------------------- causes
+C_ESTOP_HW = 0
+C_HAND = 1
+C_DRIVE = 2
+C_FK = 3
+C_JUMP = 4
+C_AXIS = 5          # per axis i: C_AXIS + AXIS_SLOTS * i + one of the offsets below
+A_FROZEN, A_STROKE, A_MARGIN, A_SPEED, A_ACCEL, A_TRACKING, A_ACTUATOR = range(7)
+AXIS_SLOTS = 7
+C_ROM_ROLL = C_AXIS + 3 * AXIS_SLOTS          # 26
+C_ANG_ROLL = C_ROM_ROLL + 1
+C_ROM_PITCH = C_ROM_ROLL + 2
+C_ANG_PITCH = C_ROM_ROLL + 3
+C_FORCE_SAT = C_ROM_ROLL + 4                  # 30
+C_FORCE_STALE = C_FORCE_SAT + 1
+C_FORCE_IMPL = C_FORCE_SAT + 2
+C_FORCE_LIMIT = C_FORCE_SAT + 3
+C_PULL = C_FORCE_SAT + 4
+C_DEADLINE = C_FORCE_SAT + 5                  # 35
+N_CAUSES = C_DEADLINE + 1
+N_VALUES = 3
+
+# Reactions as the kernel's numbers (rt.safety.events.Reaction).
+R_NONE, R_WARN, R_SOFT, R_HARD = 0, 1, 2, 3
+JUMP_STATUS = -3
+CARRY_TAU_S = 0.02
+FROZEN_COUNTS = 4
+FORCE_CUSHION = 0.9
+
+# ------------------------------------------------------------------------- par layout
+(P_STROKE_LO, P_STROKE_HI, P_STROKE_MARGIN, P_MAX_SPEED, P_MAX_ACCEL, P_MAX_COMMAND_V,
+ P_MAX_ACTUATOR, P_MAX_TRACKING, P_MAX_FORCE, P_ROLL_MIN, P_ROLL_MAX, P_PITCH_MIN,
+ P_PITCH_MAX, P_MAX_ANGULAR, P_ROM_TOL, P_DEADLINE_OVERRUNS, P_FROZEN_S, P_FROZEN_MIN_REF,
+ P_MAX_PULL_S, P_PERIOD, P_ALPHA_STOP, P_JERK_TIME, P_AXIS_MASS, P_HOLDING, P_COUNT_M,
+ P_CONTACT, P_GRACE, P_FORCE_CONTROL) = range(28)
+PAR_SIZE = 28
+
+# ------------------------------------------------------------------------- mem layout
+M_FROZEN_TIME = 0
+M_IMPULSE = 3
+M_IMPULSE_TIME = 6
+M_LAST_Q = 9
+M_CARRY = 12
+M_OVERRUNS = 15
+M_PULL_TIME = 16
+M_BRAKES_OPEN_AT = 17
+M_REACTION = 18      # the latched reaction (Python's ``Supervisor.reaction``): the outputs' verdict
+M_REACT = 20
+M_LATCHED = M_REACT + N_CAUSES
+M_REPORTED = M_LATCHED + N_CAUSES
+M_NEW = M_REPORTED + N_CAUSES
+M_VALS = M_NEW + N_CAUSES
+MEM_SIZE = M_VALS + N_CAUSES * N_VALUES
+
+
+def new_mem() -> np.ndarray:
+    """A fresh running state (as ``Supervisor.reset_state`` leaves it, brakes aside)."""
+    mem = np.zeros(MEM_SIZE)
+    mem[M_LAST_Q:M_LAST_Q + 3] = math.nan
+    mem[M_CARRY:M_CARRY + 3] = math.nan
+    return mem
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _trip(mem, c, reaction, v0, v1, v2):
+    """Cause ``c`` is present with ``reaction``; flags a new event when it needs one (a warning
+    not yet reported; a fault above what is latched for it), latching it."""
+    mem[M_REACT + c] = reaction
+    if reaction == R_WARN:
+        if mem[M_REPORTED + c] == 0.0:
+            mem[M_REPORTED + c] = 1.0
+            mem[M_NEW + c] = 1.0
+        else:
+            return 0
+    elif mem[M_LATCHED + c] < reaction:
+        mem[M_LATCHED + c] = reaction
+        mem[M_NEW + c] = 1.0
+    else:
+        return 0
+    k = M_VALS + N_VALUES * c
+    mem[k] = v0
+    mem[k + 1] = v1
+    mem[k + 2] = v2
+    return 1
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _carry(mem, i, tau, dt):
+    c = mem[M_CARRY + i]
+    if math.isnan(c):
+        mem[M_CARRY + i] = tau
+    else:
+        mem[M_CARRY + i] = c + (tau - c) * dt / (CARRY_TAU_S + dt)
+
+
+@njit(cache=True, error_model="numpy")
+def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate, pitch_rate,
+          q_ref, qd_ref, tau, force_n, wrench_stale, wrench_saturated, hw_estop, hand_stop,
+          drive_failed, fz_n):
+    """Every numeric check of one cycle (the interpreted ``Supervisor.check``'s, same order,
+    same arithmetic). Writes ``mem``; returns the number of new events (0: nothing for Python
+    to do). Units as the interpreted check's: m, m/s, m/s², rad, rad/s, N, s."""
+    for c in range(N_CAUSES):
+        mem[M_REACT + c] = 0.0
+        mem[M_NEW + c] = 0.0
+    new = 0
+    nan = math.nan
+    force_control = par[P_FORCE_CONTROL] != 0.0
+    # -- stop inputs
+    if hw_estop:
+        new += _trip(mem, C_ESTOP_HW, R_HARD, nan, nan, nan)
+    if hand_stop:
+        new += _trip(mem, C_HAND, R_SOFT, nan, nan, nan)
+    if drive_failed:
+        new += _trip(mem, C_DRIVE, R_HARD, nan, nan, nan)
+    # -- sensors and kinematics
+    if not fk_ok:
+        new += _trip(mem, C_FK, R_HARD, nan, nan, nan)
+    if est_status == JUMP_STATUS:
+        new += _trip(mem, C_JUMP, R_HARD, q[0], q[1], q[2])
+    free = not (force_n > par[P_CONTACT])          # NaN (no sensor) counts as free
+    brakes_open = t >= mem[M_BRAKES_OPEN_AT]
+    for i in range(3):
+        qi = q[i]
+        base = C_AXIS + AXIS_SLOTS * i
+        if qi == mem[M_LAST_Q + i] and brakes_open:
+            if abs(qd_ref[i]) >= par[P_FROZEN_MIN_REF]:
+                mem[M_FROZEN_TIME + i] += dt
+            else:
+                mem[M_FROZEN_TIME + i] = 0.0
+            carry = mem[M_CARRY + i]
+            if math.isnan(carry):
+                carry = 0.0
+            net = abs(tau[i] - carry) - par[P_HOLDING]
+            if net > 0.0 and free:
+                mem[M_IMPULSE + i] += net * dt
+                mem[M_IMPULSE_TIME + i] += dt
+            else:
+                mem[M_IMPULSE + i] = 0.0
+                mem[M_IMPULSE_TIME + i] = 0.0
+            if not free:
+                _carry(mem, i, tau[i], dt)
+            moved = mem[M_IMPULSE + i] * mem[M_IMPULSE_TIME + i] / (2.0 * par[P_AXIS_MASS])
+            if moved >= FROZEN_COUNTS * par[P_COUNT_M] or \
+                    mem[M_FROZEN_TIME + i] >= par[P_FROZEN_S]:
+                new += _trip(mem, base + A_FROZEN, R_HARD, mem[M_FROZEN_TIME + i], moved,
+                             qd_ref[i])
+        else:
+            mem[M_FROZEN_TIME + i] = 0.0
+            mem[M_IMPULSE + i] = 0.0
+            mem[M_IMPULSE_TIME + i] = 0.0
+            _carry(mem, i, tau[i], dt)
+        mem[M_LAST_Q + i] = qi
+        # -- stroke, speed, acceleration, tracking, actuator force
+        if qi < par[P_STROKE_LO] or qi > par[P_STROKE_HI]:
+            new += _trip(mem, base + A_STROKE, R_HARD, qi, nan, nan)
+        elif qi < par[P_STROKE_LO] + par[P_STROKE_MARGIN] or \
+                qi > par[P_STROKE_HI] - par[P_STROKE_MARGIN]:
+            new += _trip(mem, base + A_MARGIN, R_SOFT, qi, nan, nan)
+        if abs(qd[i]) > par[P_MAX_SPEED]:
+            new += _trip(mem, base + A_SPEED, R_SOFT, qd[i], nan, nan)
+        if abs(qdd[i]) > par[P_MAX_ACCEL]:
+            new += _trip(mem, base + A_ACCEL, R_WARN, qdd[i], nan, nan)
+        err = 0.0 if force_control else abs(qi - q_ref[i])
+        if err > 3.0 * par[P_MAX_TRACKING]:
+            new += _trip(mem, base + A_TRACKING, R_HARD, err, nan, nan)
+        elif err > par[P_MAX_TRACKING]:
+            new += _trip(mem, base + A_TRACKING, R_SOFT, err, nan, nan)
+        if abs(tau[i]) > par[P_MAX_ACTUATOR]:
+            new += _trip(mem, base + A_ACTUATOR, R_WARN, tau[i], nan, nan)
+    # -- patient ROM with the braking cushion, angular speed
+    if fk_ok:
+        for axis in range(2):
+            if axis == 0:
+                angle, rate = roll, roll_rate
+                lo, hi = par[P_ROLL_MIN], par[P_ROLL_MAX]
+                c_rom, c_ang = C_ROM_ROLL, C_ANG_ROLL
+            else:
+                angle, rate = pitch, pitch_rate
+                lo, hi = par[P_PITCH_MIN], par[P_PITCH_MAX]
+                c_rom, c_ang = C_ROM_PITCH, C_ANG_PITCH
+            w = abs(rate)
+            # Supervisor.braking_angle
+            braking = 1.25 * (w * (dt + 0.5 * par[P_JERK_TIME])
+                              + w * w / (2.0 * par[P_ALPHA_STOP]))
+            tol = par[P_ROM_TOL]
+            if angle > hi + tol or angle < lo - tol:
+                new += _trip(mem, c_rom, R_HARD, angle, nan, nan)
+            elif (rate >= 0.0 and angle + braking >= hi) or \
+                    (rate <= 0.0 and angle - braking <= lo):
+                new += _trip(mem, c_rom, R_SOFT, angle, rate, nan)
+            if w > par[P_MAX_ANGULAR]:
+                new += _trip(mem, c_ang, R_SOFT, rate, nan, nan)
+    # -- force sensor
+    if wrench_saturated:
+        new += _trip(mem, C_FORCE_SAT, R_SOFT, nan, nan, nan)
+    if wrench_stale and t >= par[P_GRACE]:
+        new += _trip(mem, C_FORCE_STALE, R_SOFT if force_control else R_WARN, nan, nan, nan)
+    elif not wrench_saturated:
+        if math.isnan(force_n) and force_control:
+            new += _trip(mem, C_FORCE_IMPL, R_SOFT, nan, nan, nan)
+        elif force_n > par[P_MAX_FORCE]:
+            new += _trip(mem, C_FORCE_LIMIT, R_HARD, force_n, nan, nan)
+        elif force_n > FORCE_CUSHION * par[P_MAX_FORCE]:
+            new += _trip(mem, C_FORCE_LIMIT, R_SOFT, force_n, nan, nan)
+    if force_control and fz_n < 0.0:
+        mem[M_PULL_TIME] += dt
+        if mem[M_PULL_TIME] >= par[P_MAX_PULL_S]:
+            new += _trip(mem, C_PULL, R_SOFT, fz_n, mem[M_PULL_TIME], nan)
+    else:
+        mem[M_PULL_TIME] = 0.0
+    # -- timing
+    if dt > 1.5 * par[P_PERIOD]:
+        mem[M_OVERRUNS] += 1.0
+        if mem[M_OVERRUNS] >= par[P_DEADLINE_OVERRUNS]:
+            new += _trip(mem, C_DEADLINE, R_SOFT, mem[M_OVERRUNS], dt, nan)
+    else:
+        mem[M_OVERRUNS] = 0.0
+    return new
+
+
+@njit(cache=True, error_model="numpy")
+def outputs(par, reaction, tau, volts_per_n, volts, enable, mode):
+    """The supervisor block's outputs for a latched ``reaction``: hard stop → 0 V, drives
+    disabled; otherwise τ (N) times ``volts_per_n`` saturated at ± max_command_v, drives
+    enabled, the mode (:class:`SupervisorMode` value: soft stop 2, else run 0)."""
+    if reaction >= R_HARD:
+        volts[0] = 0.0
+        volts[1] = 0.0
+        volts[2] = 0.0
+        enable[0] = 0.0
+        mode[0] = float(R_HARD)
+        return
+    limit = par[P_MAX_COMMAND_V]
+    for i in range(3):
+        x = tau[i] * volts_per_n
+        # Spelled out as Python's max(x, -limit) behaves (numba's max may differ on NaN): a
+        # NaN command stays NaN (the drive refuses it).
+        volts[i] = limit if x > limit else (-limit if -limit > x else x)  # noqa: FURB136
+    enable[0] = 1.0
+    mode[0] = float(R_SOFT) if reaction == R_SOFT else 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def block_cycle(par, mem, t, dt, q, est_status, qd, qdd, stb, fk_ok_in, filled, q_ref, qd_ref,
+                tau, wrench, wrench_flags, inputs, drive_failed, volts_per_n, volts, enable, mode):
+    """The supervisor block's whole cycle on its port buffers: the pose and its rates from the
+    model state (``State.buf``: Q[11] roll, Q[10] pitch, rates through S), the force's
+    magnitude and the platform's push, every check, then the outputs for the latched reaction
+    in ``mem[M_REACTION]``. Returns the number of new events (Python then names and logs them
+    and recomputes the outputs if the latched reaction changed)."""
+    fk_ok = fk_ok_in[0] > 0.5 and filled
+    roll = 0.0
+    pitch = 0.0
+    roll_rate = 0.0
+    pitch_rate = 0.0
+    if fk_ok:
+        roll = stb[STATE_Q + 11]              # Q: ..., yaw, pitch, roll
+        pitch = stb[STATE_Q + 10]
+        s = STATE_S                           # S (12×3), row-major
+        v = STATE_QD
+        roll_rate = stb[s + 33] * stb[v] + stb[s + 34] * stb[v + 1] + stb[s + 35] * stb[v + 2]
+        pitch_rate = stb[s + 30] * stb[v] + stb[s + 31] * stb[v + 1] + stb[s + 32] * stb[v + 2]
+    force = math.sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1] + wrench[2] * wrench[2])
+    new = check(par, mem, t, dt, q, int(est_status[0]), qd, qdd, fk_ok, roll, pitch, roll_rate,
+                pitch_rate, q_ref, qd_ref, tau, force, wrench_flags[0] > 0.5,
+                wrench_flags[1] > 0.5, inputs[0] > 0.5, inputs[1] > 0.5, drive_failed[0] > 0.5,
+                -wrench[2])
+    outputs(par, int(mem[M_REACTION]), tau, volts_per_n, volts, enable, mode)
+    return new
+
+
+_warm = False
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the kernels now, never in a cycle: for the array
+    flavours they meet — the block's inputs are read-only port views, its outputs, the model
+    state and the supervisor's own buffers writable; ``Supervisor.check`` passes fresh arrays."""
+    global _warm
+    if _warm:
+        return
+    from rt.model.rigid_body import STATE_SIZE
+
+    par = np.ones(PAR_SIZE)
+    mem = new_mem()
+
+    def ro(n: int) -> np.ndarray:
+        a = np.zeros(n)
+        a.flags.writeable = False
+        return a
+
+    z3 = np.zeros(3)
+    check(par, mem, 0.0, 1e-3, z3, 0, z3, z3, True, 0.0, 0.0, 0.0, 0.0, z3, z3, z3, 0.0, False,
+          False, False, False, False, 0.0)
+    block_cycle(par, new_mem(), 0.0, 1e-3, ro(3), ro(1), ro(3), ro(3), np.zeros(STATE_SIZE),
+                ro(1), True, ro(3), ro(3), ro(3), ro(6), ro(2), ro(2), ro(1), 1.0, np.zeros(3),
+                np.zeros(1), np.zeros(1))
+    outputs(par, 0, ro(3), 1.0, np.zeros(3), np.zeros(1), np.zeros(1))
+    _warm = True

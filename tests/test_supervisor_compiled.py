@@ -1,0 +1,245 @@
+"""The compiled supervisor against its interpreted reference (issue 16).
+
+A cycle stream of the supervisor block's inputs is recorded from the position loop on the twin,
+then faults are spliced in — every cause the kernel checks, each held long enough to latch,
+with stop requests, a lost heartbeat and reset tickets (refused while the cause persists,
+taken once it is gone) — and the stream is replayed through a ``SupervisorBlock`` on the
+compiled :class:`Supervisor` and one on the :class:`InterpretedSupervisor`. Both must log the
+same events (kind, cause, reaction, message, values, time, id), latch the same causes, answer
+the same tickets and write the same outputs (volts, enable, mode) every cycle: bit for bit.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rt.components.safety_blocks import SupervisorBlock
+from rt.model import RobotModel
+from rt.model.dynamics import State
+from rt.position_loop import build_sim_position_loop
+from rt.safety.events import EventLog, Reaction
+from rt.safety.limits import PatientLimits, RobotLimits, effective
+from rt.safety.supervisor import InterpretedSupervisor, Supervisor, supervisor_physics
+
+DT = 1e-3
+CYCLES = 2400
+#: Inputs of the supervisor block: name → width.
+PORTS = {"q": 3, "est_status": 1, "qd": 3, "qdd": 3, "fk_ok": 1, "q_ref": 3, "qd_ref": 3,
+         "tau": 3, "wrench": 6, "wrench_flags": 2, "inputs": 2, "drive_failed": 1}
+ATTR = {"inputs": "stops"}
+
+
+@pytest.fixture(scope="module")
+def model() -> RobotModel:
+    return RobotModel.load()
+
+
+@pytest.fixture(scope="module")
+def recorded(model) -> dict[str, np.ndarray]:
+    """The supervisor block's inputs per cycle, from the loop on the twin (fast mode)."""
+    pl = build_sim_position_loop("paden_panja", duration_s=3.0, model=model)
+    blk = pl.graph.component("supervisor")
+    rows: dict[str, list] = {name: [] for name in PORTS}
+    rows["state"] = []
+    for _ in range(600):
+        pl.loop.run(cycles=1)
+        for name in PORTS:
+            rows[name].append(np.array(getattr(blk, ATTR.get(name, name)).data))
+        rows["state"].append(blk.state_in.data.buf.copy())
+    pl.graph.stop()
+    return {name: np.array(v) for name, v in rows.items()}
+
+
+def _stream(recorded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """CYCLES cycles: the recording played four times over, with every fault spliced in."""
+    reps = -(-CYCLES // len(recorded["q"]))
+    s = {name: np.concatenate([v] * reps)[:CYCLES].copy() for name, v in recorded.items()}
+    lim = effective((0.0, 0.4), RobotLimits(), PatientLimits())
+    q, q_ref, w = s["q"], s["q_ref"], s["wrench"]
+    s["dt"] = np.full(CYCLES, DT)
+    s["wrench"][:, :] = np.where(np.isnan(w), 0.0, w)
+    s["wrench_flags"][:] = 0.0
+    s["drive_failed"][:] = 0.0
+    s["fk_ok"][:] = 1.0
+    s["est_status"][:] = 0.0
+    q_ref[:] = q                                     # no tracking error unless spliced
+    s["qdd"][:] = np.clip(s["qdd"], -1.0, 1.0)
+    s["qd"][:] = np.clip(s["qd"], -0.1, 0.1)
+    s["tau"][:] = np.clip(s["tau"], -1500.0, 1500.0)
+    st = s["state"]
+    # Splices: (first cycle, last cycle) → a fault held over it.
+    q_ref[100:130, 0] += 1.5 * lim.max_tracking_error_m          # tracking soft …
+    q_ref[130:140, 0] += 4.0 * lim.max_tracking_error_m          # … escalating to hard
+    q[200:210, 1] = 0.003                                        # stroke margin
+    q_ref[200:210, 1] = 0.003
+    q[210:215, 1] = 0.401                                        # beyond the stroke
+    q_ref[210:215, 1] = 0.401
+    s["qd"][300:310, 2] = 0.25                                   # slider speed
+    s["qdd"][320:330, 0] = 6.0                                   # acceleration: warn
+    s["tau"][340:345, 1] = 2100.0                                # actuator force: warn
+    s["est_status"][400] = -3.0                                  # encoder jump
+    s["fk_ok"][420:425] = 0.0                                    # FK failed
+    st[500:530, 24:27] = 0.0                                     # still (rates 0) …
+    st[500:520, 11] = lim.roll_max + 0.5 * lim.rom_tolerance     # … roll at its ROM end
+    st[520:530, 11] = lim.roll_max + lim.rom_tolerance + 0.01    # beyond it
+    st[540:550, 24:27] = (0.5, -0.5, 0.0)                        # tilting fast: roll …
+    st[550:560, 24:27] = (0.5, 0.5, -1.0)                        # … and pitch rates
+    st[560:570, 10] = lim.pitch_min - lim.rom_tolerance - 0.01   # pitch beyond its ROM
+    w[600:610, 2] = -0.95 * lim.max_force_n                      # force reaching the limit
+    w[610:615, 2] = -1.05 * lim.max_force_n                      # beyond it
+    w[620:625, :] = math.nan                                     # implausible (force control)
+    s["wrench_flags"][640:650, 0] = 1.0                          # stale
+    s["wrench_flags"][660:670, 1] = 1.0                          # saturated
+    w[700:760, 2] = 5.0                                          # pulling (force control)
+    s["inputs"][800:805, 0] = 1.0                                # hardware e-stop
+    s["inputs"][820:825, 1] = 1.0                                # hand-held stop
+    s["drive_failed"][840:845] = 1.0                             # both DAC cards
+    s["dt"][900:910] = 3.0 * DT                                  # deadline overruns
+    # A frozen encoder: the count stands still under a command far from the carried force.
+    q[1000:1200, 2] = q[1000, 2]
+    s["tau"][1000:1200, 2] = np.linspace(0.0, 4000.0, 200)
+    s["qd_ref"][1000:1200, 2] = 0.01
+    return s
+
+
+#: Cycle → client action (before the cycle): estop/stop requests, resets, heartbeat on/off.
+ACTIONS = {150: "reset", 160: "reset", 205: "reset", 250: "reset", 450: "reset", 460: "estop",
+           470: "reset", 580: "reset", 615: "force_control_on", 680: "reset",
+           770: "force_control_off", 780: "reset", 810: "reset", 830: "reset", 850: "reset",
+           870: "stop", 880: "reset", 920: "heartbeat", 950: "reset", 960: "heartbeat_off",
+           970: "reset", 1100: "reset", 1250: "reset", 1300: "stop", 1301: "estop",
+           1310: "reset", 1500: "limits", 1510: "reset"}
+
+
+def _block(sup: Supervisor, stream: dict[str, np.ndarray]) -> tuple[SupervisorBlock, dict]:
+    """A supervisor block outside a graph: inputs are read-only views (as a graph binds them)
+    of buffers the replay fills; outputs its own."""
+    blk = SupervisorBlock("supervisor", sup, 80.0)
+    bufs = {}
+    for name, n in PORTS.items():
+        buf = np.zeros(n)
+        view = buf.view()
+        view.flags.writeable = False
+        getattr(blk, ATTR.get(name, name)).data = view
+        bufs[name] = buf
+    state = State()
+    blk.state_in.data = state
+    bufs["state"] = state
+    blk.volts.data = np.zeros(3)
+    blk.enable.data = np.ones(1)
+    blk.mode.data = np.zeros(1)
+    return blk, bufs
+
+
+def _event(e) -> tuple:
+    return (e.t, e.kind, e.cause, e.reaction, e.message, e.values, e.id)
+
+
+def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> None:
+    s = _stream(recorded)
+    phys = supervisor_physics(model.description)
+    lim = effective(model.description.limits.stroke, RobotLimits(), PatientLimits())
+    sups = [cls(lim, DT, EventLog(), **phys) for cls in (Supervisor, InterpretedSupervisor)]
+    assert sups[0].compiled and not sups[1].compiled
+    blocks = [_block(sup, s) for sup in sups]
+    age = [0.0]
+    tickets: list[list] = [[], []]
+    for k in range(CYCLES):
+        t = (k + 1) * DT
+        action = ACTIONS.get(k)
+        for j, sup in enumerate(sups):
+            if action == "reset":
+                tickets[j].append(sup.request_reset())
+            elif action == "estop":
+                sup.request_estop("gui")
+            elif action == "stop":
+                sup.request_stop()
+            elif action in ("force_control_on", "force_control_off"):
+                sup.force_control = action.endswith("on")
+            elif action == "heartbeat":
+                sup.heartbeat_required = True
+                sup.heartbeat_age = lambda: age[0]
+            elif action == "heartbeat_off":
+                sup.heartbeat_required = False
+            elif action == "limits":
+                sup.limits = effective(model.description.limits.stroke, RobotLimits(),
+                                       PatientLimits(max_force_n=100.0))
+        age[0] = 0.5 if 930 <= k < 940 else 0.01
+        for blk, bufs in blocks:
+            for name in PORTS:
+                bufs[name][:] = s[name][k]
+            st = bufs["state"]
+            st.buf[:] = s["state"][k]
+            st.buffer_filled()
+            blk.update(t, float(s["dt"][k]))
+        (bc, _), (bi, _) = blocks
+        for port in ("volts", "enable", "mode"):
+            a, b = getattr(bc, port).data, getattr(bi, port).data
+            assert np.array_equal(a, b, equal_nan=True), (k, port, a, b)
+        assert sups[0].reaction == sups[1].reaction, k
+        assert sups[0].causes == sups[1].causes, k
+        assert sups[0].latched_ids == sups[1].latched_ids, k
+        assert sups[0].carry_force_n == pytest.approx(sups[1].carry_force_n, nan_ok=True,
+                                                      rel=0.0, abs=0.0), k
+    events = [[_event(e) for e in sup.log.snapshot()] for sup in sups]
+    assert events[0] == events[1]
+    for tc, ti in zip(*tickets, strict=True):
+        assert tc.done and ti.done
+        assert (tc.cleared, tc.refused, tc.still_latched) == \
+            (ti.cleared, ti.refused, ti.still_latched)
+    # The stream exercised every cause the kernel checks, faults and warnings, and resets
+    # both refused and taken.
+    from rt.safety.supervisor import CAUSES
+    logged = {e[2] for e in events[0]}
+    axis_free = {c.rstrip("012") for c in CAUSES}
+    assert axis_free <= {c.rstrip("012") for c in logged}, axis_free - logged
+    assert {"estop_gui", "stop_client", "heartbeat_lost"} <= logged
+    kinds = {e[1] for e in events[0]}
+    assert kinds == {"fault", "warn", "reset", "reset_refused"}
+    # … at both reactions where a cause has two.
+    reactions = {(e[2], e[3]) for e in events[0]}
+    for cause in ("tracking_0", "rom_roll", "force_limit"):
+        assert {(cause, Reaction.SOFT_STOP), (cause, Reaction.HARD_STOP)} <= reactions, cause
+
+
+def test_steady_cycles_run_no_python_side(recorded, model, monkeypatch) -> None:
+    """Cycles in which nothing new trips and nothing is requested never reach the Python side
+    (naming, logging, latching): the compiled call is the whole cycle."""
+    s = _stream(recorded)
+    sup = Supervisor(effective(model.description.limits.stroke, RobotLimits(), PatientLimits()),
+                     DT, EventLog(), **supervisor_physics(model.description))
+    calls = []
+    original = sup._after_checks
+    monkeypatch.setattr(sup, "_after_checks", lambda *a: (calls.append(a), original(*a)))
+    blk, bufs = _block(sup, s)
+    for k in range(60):                              # the recording's first, healthy cycles
+        for name in PORTS:
+            bufs[name][:] = s[name][k]
+        bufs["state"].buf[:] = s["state"][k]
+        bufs["state"].buffer_filled()
+        blk.update((k + 1) * DT, DT)
+    assert calls == [] and sup.log.snapshot() == []
+    assert blk.enable.data[0] == 1.0 and blk.mode.data[0] == 0.0
+    assert np.array_equal(blk.volts.data, np.clip(s["tau"][59] * (1.0 / 80.0), -6.0, 6.0))
+    sup.request_stop()
+    blk.update(61 * DT, DT)
+    assert len(calls) == 1 and blk.mode.data[0] == 2.0 and "stop_client" in sup.causes
+
+
+def test_the_loop_runs_the_compiled_supervisor(model) -> None:
+    """The position loop's supervisor is the compiled one, and its block compiles nothing in
+    a cycle (the kernels were compiled for the port views' types at construction)."""
+    from rt.safety import supervisor_kernel as sk
+
+    pl = build_sim_position_loop("paden_panja", duration_s=1.0, model=model)
+    assert pl.supervisor.compiled
+    before = [len(k.signatures) for k in (sk.check, sk.block_cycle, sk.outputs)]
+    pl.loop.run(cycles=50)
+    pl.supervisor.request_estop("cli")
+    pl.loop.run(cycles=5)
+    pl.graph.stop()
+    assert "estop_cli" in pl.supervisor.causes
+    assert float(pl.graph.output("supervisor.enable")[0]) == 0.0
+    assert [len(k.signatures) for k in (sk.check, sk.block_cycle, sk.outputs)] == before
