@@ -15,6 +15,7 @@ from protocols.generators import make_generator
 from protocols.library import LIBRARY_DIR, load_protocol
 from protocols.output import GeneratorInput
 from protocols.schema import validate_protocol_data
+from rt.errors import WorkspaceError
 from rt.model import RobotModel
 from rt.model.ankle import AnkleSetup
 from rt.model.ik_kernels import (
@@ -70,10 +71,10 @@ def test_ik_pose_refuses_what_kinematics_ik_refuses() -> None:
     row = np.empty(IK_ROW)
     assert ik_pose(KIN.geom, math.nan, 0.0, 0.0, row) == IK_NONFINITE
     assert ik_pose(KIN.geom, 0.63, math.inf, 0.0, row) == IK_NONFINITE
-    # A platform far above the guides: no rod reaches (Kinematics.ik raises "unreachable").
-    with pytest.raises(Exception, match="unreachable"):
-        KIN.ik(0.63, 1.5, 0.0, check=False)
-    assert ik_pose(KIN.geom, 0.63, 1.5, 0.0, row) == IK_UNREACHABLE
+    # Turned over: a sphere lies farther from its guide than the rod (Kinematics.ik raises).
+    with pytest.raises(WorkspaceError, match="unreachable"):
+        KIN.ik(0.63, -3.1, -0.7, check=False)
+    assert ik_pose(KIN.geom, 0.63, -3.1, -0.7, row) == IK_UNREACHABLE
 
 
 def test_the_workspace_test_agrees_with_kinematics_on_both_sides_of_every_limit() -> None:
@@ -122,11 +123,12 @@ def test_playback_table_equals_the_interpreted_one(monkeypatch) -> None:
 
 
 def test_a_refused_path_is_worded_exactly_as_before(monkeypatch) -> None:
-    """Beyond the robot's pitch: the compiled path hands over, the sentence is the same."""
+    """Beyond the robot's ±25° pitch: the compiled path hands over, the sentence is the
+    same."""
     gen = make_generator(validate_protocol_data(
         {"schema_version": 1, "kind": "ankle_rom", "name": "too far", "pose": {"z_m": 0.63},
          "sequence": ["dorsi_plantar"],
-         "amplitude_deg": {"dorsiflexion": 40.0, "plantarflexion": 40.0},
+         "amplitude_deg": {"dorsiflexion": 28.0, "plantarflexion": 28.0},
          "speed_deg_s": 40.0, "hold_s": 0.1, "max_acceleration_deg_s2": 400.0,
          "max_jerk_deg_s3": 4000.0}), kinematics=KIN)
     fast = gen.validate()
@@ -153,8 +155,9 @@ def test_ankle_displacements_equal_the_per_sample_ankle_kinematics() -> None:
 def test_active_assist_references_are_the_ik_of_its_pose_and_path() -> None:
     """The online generator's compiled IK: q is ``Kinematics.ik`` of the emitted pose, q̇ and
     q̈ its central differences along the local path, whatever the patient's torque."""
-    gen = make_generator(load_protocol(LIBRARY_DIR / "active_assist.yaml"), kinematics=KIN,
-                         ankle=SETUP)
+    doc = load_protocol(LIBRARY_DIR / "active_assist.yaml").model_dump(mode="json")
+    doc["ankle_displacement_limit_mm"] = 45.0     # its +15° moves the centre 38.9 mm
+    gen = make_generator(validate_protocol_data(doc), kinematics=KIN, ankle=SETUP)
     assert gen.validate().ok
     out, inp = gen.new_output(), GeneratorInput()
     h = base.DERIVATIVE_STEP_S

@@ -35,17 +35,9 @@ import numpy as np
 from numba import njit
 
 from rt.model.kernels import (
-    IX_PITCH,
-    IX_ROLL,
-    IX_X,
-    IX_Y,
-    IX_YAW,
-    IX_Z,
     TREE_MAPS_WORK,
     assemble,
-    constraint_terms,
     fk_solve,
-    inv3,
     tree_maps_work,
 )
 
