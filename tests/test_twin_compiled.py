@@ -192,11 +192,12 @@ def test_twin_physics_takes_s_s_dot_and_the_twist_from_the_model_kernel(seed):
     plant = Twin.ideal().plant
     cfg = plant.kin.ik(rng.uniform(0.55, 0.75), rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2))
     q, qd, phi = np.array(cfg.q), rng.normal(0.0, 0.2, 3), np.array(cfg.phi)
-    rot = np.array(cfg.rotation, dtype=float).reshape(3, 3)
+    s, sd, tw = np.zeros((12, 3)), np.zeros((12, 3)), np.zeros((6, 3))
+    m, h, rot = np.zeros((3, 3)), np.zeros(3), np.zeros((3, 3))
+    physics.mass_and_bias(plant.geom, plant.bodies, q, qd, phi, rot, np.zeros(3), s, sd, tw, m,
+                          h)
+    # At the rotation the twin assembled from (q, φ) (within round-off of the IK's).
+    assert np.allclose(rot, np.reshape(cfg.rotation, (3, 3)), rtol=0.0, atol=1e-14)
     s_ref, sd_ref, tw_ref = np.zeros((12, 3)), np.zeros((12, 3)), np.zeros((6, 3))
     tree_maps(plant.geom, q, phi, rot, qd, s_ref, sd_ref, tw_ref)
-    s, sd, tw = np.zeros((12, 3)), np.zeros((12, 3)), np.zeros((6, 3))
-    m, h = np.zeros((3, 3)), np.zeros(3)
-    physics.mass_and_bias(plant.geom, plant.bodies, q, qd, phi, np.zeros((3, 3)), np.zeros(3),
-                          s, sd, tw, m, h)
     assert np.array_equal(s, s_ref) and np.array_equal(sd, sd_ref) and np.array_equal(tw, tw_ref)
