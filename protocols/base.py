@@ -5,7 +5,9 @@ Slider references from a pose path: q = ``kinematics.ik(z, roll, pitch)`` at eve
 the derivatives of q along the local quadratic path g(h) = ik(p + h ṗ + h²/2 p̈) by central
 differences, q̇ = (g(H) - g(-H))/2H and q̈ = (g(H) - 2 g(0) + g(-H))/H² with H = 1 ms
 (truncation ~1e-10 m/s, round-off ~1e-10 m/s² for these motions). Holds reuse the previous
-sample's solution.
+sample's solution. The tables are computed by the compiled kernels of
+``protocols.reference_kernels`` (milliseconds for a minute at 1 kHz); :func:`joint_references`
+is the interpreted reference implementation, and it words every refusal.
 
 Precomputed references are stored as one table: 136 B per sample in position mode (q, q̇, q̈,
 pose, pose rate, force target), 32 B in force mode (fz, ḟz, fx, fy); ``MAX_PRECOMPUTED_S``
