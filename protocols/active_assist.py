@@ -1,10 +1,9 @@
 """Active-assisted exercise: a reference computed online from the patient's torque.
 
-Unlike the precomputed kinds, ``update`` runs the admittance and three ``kinematics.ik`` calls
-each cycle (≈ 20 µs here). ``ik`` builds a ``Configuration`` and a few tuples that die within
-the call: no object outlives a cycle (tests/test_protocols.py measures it), but the cycle is not
-allocation-free in the strict sense; an allocation-free ``ik`` variant in ``rt.model`` would
-make it so.
+Unlike the precomputed kinds, ``update`` runs the admittance and three inverse kinematics each
+cycle: one compiled call (``rt.model.ik_kernels.ik_three``) on rows allocated at construction,
+the same arithmetic as ``kinematics.ik`` (which cost ≈ 20 µs per cycle interpreted and built a
+``Configuration`` per call). No object outlives a cycle (tests/test_protocols.py measures it).
 """
 from __future__ import annotations
 
@@ -32,6 +31,7 @@ from protocols.output import (
 from protocols.schema import ActiveAssist
 from rt.errors import KinematicsError
 from rt.model.ankle import AnkleSetup, sensor_to_ankle_S
+from rt.model.ik_kernels import IK_ROW, ik_three
 from rt.model.kinematics import Kinematics
 
 #: Largest sqrt(g·K/I)·dt and B·dt/I the semi-implicit Euler step is allowed (stable up to 2;
@@ -54,7 +54,7 @@ class ActiveAssistGenerator(Generator):
     ROM as a last resort (round-off only). An unused axis stays at neutral.
 
     ``update(out, inp)`` reads ``inp.tau_roll_nm``/``tau_pitch_nm`` (N·m; None = a passive
-    patient) and costs three ``kinematics.ik`` calls (≈ 20 µs). ``validate()`` reports
+    patient) and costs one compiled call for its three inverse kinematics. ``validate()`` reports
     worst-case bounds valid for any patient input (the ROM, the speed limit, slider speeds and
     accelerations over a 7×7 grid of the ROM at the extreme rates and accelerations), not one
     simulated run.
@@ -101,7 +101,23 @@ class ActiveAssistGenerator(Generator):
         self._r_imk = ((adm.roll.virtual_mass_kg_m2, adm.roll.damping_n_m_s_rad,
                         adm.roll.stiffness_n_m_rad) if adm.roll is not None else one)
         self._passive = GeneratorInput()
+        # ``update``'s IK inputs and rows (``rt.model.ik_kernels.ik_three``), allocated once.
+        self._ik_z, self._ik_roll, self._ik_pitch = np.zeros(3), np.zeros(3), np.zeros(3)
+        self._ik_rows = np.zeros((3, IK_ROW))
+        self._warm_up()
         self.reset()
+
+    def _warm_up(self) -> None:
+        """Compile (or load from numba's cache) ``update``'s kernel now, never inside a cycle:
+        at construction and where the generator is unpickled (the RT process receives it from
+        the pre-flight worker)."""
+        self._ik_z[:], self._ik_roll[:], self._ik_pitch[:] = self._z, self._r0, self._p0
+        ik_three(self.kinematics.geom, self._ik_z, self._ik_roll, self._ik_pitch,
+                 self._ik_rows)
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._warm_up()
 
     def reset(self) -> None:
         super().reset()
@@ -246,17 +262,20 @@ class ActiveAssistGenerator(Generator):
         hv = self._heave
         if hv is not None:
             z, zp_, zm_ = hv.z_for(r, pt), hv.z_for(rp_, pp_), hv.z_for(rm_, pm_)
-        try:
-            q = kin.ik(z, r, pt, check=False).q
-            gp_ = kin.ik(zp_, rp_, pp_, check=False).q
-            gm_ = kin.ik(zm_, rm_, pm_, check=False).q
-        except KinematicsError:
+        # The three IK (sample, and the two difference points) in one compiled call on
+        # preallocated rows: the interpreted ``kin.ik`` cost ≈ 20 µs per cycle.
+        zz, rr, pp, rows = self._ik_z, self._ik_roll, self._ik_pitch, self._ik_rows
+        zz[0], zz[1], zz[2] = z, zp_, zm_
+        rr[0], rr[1], rr[2] = r, rp_, rm_
+        pp[0], pp[1], pp[2] = pt, pp_, pm_
+        if ik_three(kin.geom, zz, rr, pp, rows) >= 0:
             return GeneratorStatus.ERROR_KINEMATICS
         b = out.buf
         for i in range(3):
-            b[i] = q[i]
-            b[3 + i] = (gp_[i] - gm_[i]) / (2.0 * h)
-            b[6 + i] = (gp_[i] - 2.0 * q[i] + gm_[i]) / (h * h)
+            qi, gp_i, gm_i = rows[0, i], rows[1, i], rows[2, i]
+            b[i] = qi
+            b[3 + i] = (gp_i - gm_i) / (2.0 * h)
+            b[6 + i] = (gp_i - 2.0 * qi + gm_i) / (h * h)
         b[9], b[10], b[11] = z, r, pt
         b[12], b[13], b[14] = (zp_ - zm_) / (2.0 * h), vr, vp
         b[FZ] = b[FZ_DOT] = math.nan

@@ -5,7 +5,9 @@ Slider references from a pose path: q = ``kinematics.ik(z, roll, pitch)`` at eve
 the derivatives of q along the local quadratic path g(h) = ik(p + h ṗ + h²/2 p̈) by central
 differences, q̇ = (g(H) - g(-H))/2H and q̈ = (g(H) - 2 g(0) + g(-H))/H² with H = 1 ms
 (truncation ~1e-10 m/s, round-off ~1e-10 m/s² for these motions). Holds reuse the previous
-sample's solution.
+sample's solution. The tables are computed by the compiled kernels of
+``protocols.reference_kernels`` (milliseconds for a minute at 1 kHz); :func:`joint_references`
+is the interpreted reference implementation, and it words every refusal.
 
 Precomputed references are stored as one table: 136 B per sample in position mode (q, q̇, q̈,
 pose, pose rate, force target), 32 B in force mode (fz, ḟz, fx, fy); ``MAX_PRECOMPUTED_S``
@@ -42,6 +44,7 @@ from protocols.output import (
     ValidationReport,
 )
 from protocols.profiles import PITCH, PITCH_D, ROLL, ROLL_D, TARGET
+from protocols.reference_kernels import HEAVE_PARAMS, ankle_horizontal, path_references
 from protocols.schema import ProtocolModel
 from rt.errors import KinematicsError, ProtocolValidationError
 from rt.model.ankle import (
@@ -112,6 +115,34 @@ def joint_references(kin: Kinematics, z: float, path: np.ndarray, dt: float,
         for i in range(3):
             qd[k, i] = (gp[i] - gm[i]) / (2.0 * h)
             qdd[k, i] = (gp[i] - 2.0 * c.q[i] + gm[i]) / (h * h)
+    return None
+
+
+def path_joint_references(kin: Kinematics, z: float, path: np.ndarray, dt: float,
+                          q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                          ankle: AnkleKinematics | None = None,
+                          z_out: np.ndarray | None = None) -> str | None:
+    """:func:`joint_references` compiled (``protocols.reference_kernels``): the same outputs
+    to round-off in milliseconds. A path with a problem is handed to :func:`joint_references`,
+    which words the refusal (or raises) exactly as before."""
+    n = path.shape[0]
+    heave = np.zeros(HEAVE_PARAMS)
+    if ankle is not None:
+        heave[0] = 1.0
+        heave[1] = ankle.start[2]
+        heave[2:5] = ankle.centre_P
+    # Contiguous buffers (callers pass column views of a table: one compiled signature),
+    # copied out on success.
+    zs = np.empty(n)
+    qq, qqd, qqdd = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    bad = path_references(kin.geom, kin.limits_array, float(z), heave,
+                          np.ascontiguousarray(path, dtype=np.float64), DERIVATIVE_STEP_S,
+                          qq, qqd, qqdd, zs)
+    if bad >= 0:
+        return joint_references(kin, z, path, dt, q, qd, qdd, ankle, z_out)
+    q[:], qd[:], qdd[:] = qq, qqd, qqdd
+    if z_out is not None:
+        z_out[:] = zs
     return None
 
 
@@ -361,6 +392,23 @@ class AnkleCentre:
         """The ankle kinematics when the heave follows the angles, else None."""
         return self.kinematics if self.compensate else None
 
+    def horizontal_displacements(self, rolls: np.ndarray, pitches: np.ndarray) -> np.ndarray:
+        """The ankle centre's horizontal displacement (m) at each platform angle (rad):
+        ``AnkleKinematics.pose_for_platform_angles(...).horizontal_m``, compiled (one IK per
+        sample; an unreachable angle takes the interpreted path, which raises as before)."""
+        ak = self.kinematics
+        assert ak is not None
+        rolls = np.ascontiguousarray(rolls, dtype=np.float64)
+        pitches = np.ascontiguousarray(pitches, dtype=np.float64)
+        d = np.empty(len(rolls))
+        kin = ak.kinematics
+        if ankle_horizontal(kin.geom, ak.neutral[0], np.asarray(ak.start),
+                            np.asarray(ak.centre_P), rolls, pitches, d) >= 0:
+            for k, (r, p) in enumerate(zip(rolls, pitches, strict=True)):
+                d[k] = ak.pose_for_platform_angles(float(r), float(p),
+                                                   self.compensate).horizontal_m
+        return d
+
     def check(self, report: ValidationReport, rolls: np.ndarray, pitches: np.ndarray,
               times: np.ndarray | None) -> None:
         """Peak and RMS horizontal displacement of the ankle centre over the angle samples
@@ -369,9 +417,7 @@ class AnkleCentre:
         ak = self.kinematics
         if ak is None:
             return
-        d = np.empty(len(rolls))
-        for k, (r, p) in enumerate(zip(rolls, pitches, strict=True)):
-            d[k] = ak.pose_for_platform_angles(float(r), float(p), self.compensate).horizontal_m
+        d = self.horizontal_displacements(rolls, pitches)
         report.ankle_peak_displacement_m = float(d.max()) if len(d) else math.nan
         report.ankle_rms_displacement_m = float(np.sqrt(np.mean(d ** 2))) if len(d) else \
             math.nan
@@ -428,8 +474,9 @@ class PositionGenerator(TableGenerator):
         n = path.shape[0]
         table = np.zeros((n, POSITION_BLOCK.stop))
         table[:, 9] = z
-        problem = joint_references(self.kinematics, z, path, self.dt, table[:, Q],
-                                   table[:, QD], table[:, QDD], self.ankle.heave, table[:, 9])
+        problem = path_joint_references(self.kinematics, z, path, self.dt, table[:, Q],
+                                        table[:, QD], table[:, QDD], self.ankle.heave,
+                                        table[:, 9])
         if problem is not None:
             report.violations.append(problem)
             return None

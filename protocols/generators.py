@@ -74,6 +74,7 @@ from protocols.output import (
     ValidationReport,
 )
 from protocols.profiles import AnglePath, cosine_ramp
+from protocols.reference_kernels import fk_path
 from protocols.schema import (
     ActiveAssist,
     AnkleRom,
@@ -85,7 +86,7 @@ from protocols.schema import (
 )
 from rt.errors import ConfigurationError, ConvergenceError, ProtocolValidationError, WorkspaceError
 from rt.model.ankle import AnkleSetup
-from rt.model.kinematics import Kinematics
+from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD, Kinematics
 from rt.references.playback import TrajectoryPlayback
 
 __all__ = ["FOOT_MOUNTING", "MAX_PRECOMPUTED_S", "ActiveAssistGenerator", "AnkleRomGenerator",
@@ -351,6 +352,20 @@ class PositionPlaybackGenerator(TableGenerator):
         pb, kin = self.playback, self.kinematics
         n = self.n_samples
         table = np.zeros((n, POSITION_BLOCK.stop))
+        # Compiled: every sample's forward kinematics in one call, warm-started from the last
+        # solution as ``kin.fk`` is; a sample it refuses takes the interpreted loop below,
+        # which words the refusal.
+        pos, vel, acc = pb.states()
+        q = np.ascontiguousarray(pos[:n], dtype=np.float64)
+        # Newton from the nominal rod angles, then from each sample's solution: the same
+        # solutions as ``kin.fk`` to its step tolerance (1e-12 rad) whatever its warm start.
+        phi = np.full(3, kin.phi_nominal)
+        pose = np.empty((n, 3))
+        if fk_path(kin.geom, kin.limits_array, q, phi, FK_STEP_TOL_RAD, FK_MAX_ITERATIONS,
+                   pose) < 0:
+            table[:, Q], table[:, QD], table[:, QDD] = q, vel[:n], acc[:n]
+            table[:, POSE] = pose
+            return self._finish_playback(table)
         for k in range(n):
             row = table[k]
             pb.state_at(k, row[Q], row[QD], row[QDD])
@@ -360,6 +375,10 @@ class PositionPlaybackGenerator(TableGenerator):
                 report.violations.append(f"t = {k * self.dt:.3f} s: {exc}")
                 return None
             row[9], row[10], row[11] = c.z, c.roll, c.pitch
+        return self._finish_playback(table)
+
+    def _finish_playback(self, table: np.ndarray) -> np.ndarray:
+        n = table.shape[0]
         if n >= 3:
             table[:, POSE_DOT] = np.gradient(table[:, POSE], self.dt, axis=0, edge_order=2)
         table[:, FZ] = table[:, FZ_DOT] = math.nan

@@ -2,8 +2,8 @@
 protocol document a client sent, build its generator, pre-flight it on the twin, and give the
 RT process what it needs to run, record and summarize it.
 
-All of that is CPU-heavy Python (a 60 s ROM exercise's references take 2 s to compute, its
-pre-flight several more): it runs in a worker *process* (spawned once, kept warm), never in a
+All of that is CPU-heavy (a 60 s protocol's pre-flight simulates it on the twin through the
+whole loop: tens of seconds of CPU; its references are compiled, milliseconds): it runs in a worker *process* (spawned once, kept warm), never in a
 thread of the RT process, whose loop would then share the GIL with it and miss its deadlines.
 The validated generator comes back pickled.
 
@@ -25,6 +25,7 @@ from typing import Any
 
 from protocols.generators import make_generator
 from protocols.library import LIBRARY_DIR, load_protocol
+from protocols.reference_kernels import warm_up
 from protocols.schema import GaitReplay, PositionPlayback, ProtocolModel, validate_protocol_data
 from protocols.session import (
     SessionFigures,
@@ -180,7 +181,9 @@ def _model_for(description: Any) -> RobotModel:
 
 
 def _warmed(description: Any) -> str:
-    _model_for(description)
+    model = _model_for(description)
+    # The compiled reference generation, loaded before the first protocol needs it.
+    warm_up(model.kin.geom, model.kin.limits_array)
     return "ready"
 
 

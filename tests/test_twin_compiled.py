@@ -185,20 +185,19 @@ def test_compiled_ati_model_gives_the_interpreted_samples(faults):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_drift_term_equals_the_model_kernels_s_dot_q_dot(seed):
-    """The twin's substep evaluates Ṡ q̇ once as H(q̇, q̇) (``physics.tree_maps_drift``); the
-    model's kernel gives the columns of Ṡ: Ṡ q̇ from both agree to round-off, and S and the
-    twist map are the model kernel's."""
+def test_twin_physics_takes_s_s_dot_and_the_twist_from_the_model_kernel(seed):
+    """One S/twist helper (issue 16): the twin's mass and bias fill S, Ṡ and the twist map
+    with the model's ``tree_maps_work``, bit for bit."""
     rng = np.random.default_rng(seed)
     plant = Twin.ideal().plant
     cfg = plant.kin.ik(rng.uniform(0.55, 0.75), rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2))
     q, qd, phi = np.array(cfg.q), rng.normal(0.0, 0.2, 3), np.array(cfg.phi)
-    rot = np.array(cfg.rotation, dtype=float).reshape(3, 3)
+    s, sd, tw = np.zeros((12, 3)), np.zeros((12, 3)), np.zeros((6, 3))
+    m, h, rot = np.zeros((3, 3)), np.zeros(3), np.zeros((3, 3))
+    physics.mass_and_bias(plant.geom, plant.bodies, q, qd, phi, rot, np.zeros(3), s, sd, tw, m,
+                          h)
+    # At the rotation the twin assembled from (q, φ) (within round-off of the IK's).
+    assert np.allclose(rot, np.reshape(cfg.rotation, (3, 3)), rtol=0.0, atol=1e-14)
     s_ref, sd_ref, tw_ref = np.zeros((12, 3)), np.zeros((12, 3)), np.zeros((6, 3))
     tree_maps(plant.geom, q, phi, rot, qd, s_ref, sd_ref, tw_ref)
-    s, sdq, tw = np.zeros((12, 3)), np.zeros(12), np.zeros((6, 3))
-    physics.tree_maps_drift(plant.geom, q, phi, rot, qd, s, sdq, tw,
-                            np.zeros(physics.TREE_MAPS_WORK))
-    assert np.array_equal(s, s_ref) and np.array_equal(tw, tw_ref)
-    expected = sd_ref @ qd
-    assert np.allclose(sdq, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+    assert np.array_equal(s, s_ref) and np.array_equal(sd, sd_ref) and np.array_equal(tw, tw_ref)

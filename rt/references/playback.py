@@ -375,6 +375,14 @@ class TrajectoryPlayback:
         """Make ``start_index`` the next sample emitted."""
         self.index = min(max(int(start_index), 0), max(self.n_samples - 1, 0))
 
+    def states(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every sample's position, velocity and acceleration (n×3 each, m, m/s, m/s²):
+        read-only views, for whole-path computations (``state_at`` copies one sample)."""
+        views = (self._pos.view(), self._vel.view(), self._acc.view())
+        for v in views:
+            v.flags.writeable = False
+        return views
+
     def state_at(self, index: int, pos: np.ndarray, vel: np.ndarray, acc: np.ndarray) -> None:
         """Write sample ``index``'s state (m, m/s, m/s²) into the arrays (-1 = the last)."""
         pos[:] = self._pos[index]

@@ -35,17 +35,10 @@ import numpy as np
 from numba import njit
 
 from rt.model.kernels import (
-    IX_PITCH,
-    IX_ROLL,
-    IX_X,
-    IX_Y,
-    IX_YAW,
-    IX_Z,
     TREE_MAPS_WORK,
     assemble,
-    constraint_terms,
     fk_solve,
-    inv3,
+    tree_maps_work,
 )
 
 ENV_FREE = 0.0
@@ -156,239 +149,6 @@ def end_stop_force(q, qd, bodies):
     return f
 
 
-@njit(cache=True)
-def tree_maps_drift(geom, q, phi, rot, qd, S, sdq, twist, work):
-    """``rt.model.kernels.tree_maps_work`` for the twin's substep, which needs Ṡ only through
-    the drift Ṡ q̇: that vector (12) goes to ``sdq``, evaluated once as the second-order term
-    H(q̇, q̇) instead of the three columns H(q̇, e_k) (H is bilinear: Ṡ q̇ = Σ_k q̇_k H(q̇, e_k),
-    equal to round-off; ``tests/test_twin_compiled.py`` checks it against Ṡ q̇). Fills S and
-    the twist map as the model's kernel does."""
-    rb = geom[0]
-    rp = geom[1]
-    ln = geom[2]
-    ct = geom[3:6]
-    st = geom[6:9]
-    cpair = geom[9:12]
-    sphi = work[0:3]
-    cphi = work[3:6]
-    rho = work[6:9]
-    h = work[9:12]
-    for i in range(3):
-        sphi[i] = math.sin(phi[i])
-        cphi[i] = math.cos(phi[i])
-        rho[i] = rb + ln * sphi[i]
-        h[i] = q[i] + ln * cphi[i]
-    # Constraint Jacobians of f_p = |B_i - B_j|² - 3 R_p² for the pairs p = (i, j).
-    _, _, _, a00, a01, a11, a12, a22, a20 = constraint_terms(geom, q, phi[0], phi[1], phi[2])
-    f_phi = work[12:21].reshape((3, 3))
-    f_phi[:, :] = 0.0
-    f_phi[0, 0] = a00
-    f_phi[0, 1] = a01
-    f_phi[1, 1] = a11
-    f_phi[1, 2] = a12
-    f_phi[2, 2] = a22
-    f_phi[2, 0] = a20
-    f_q = work[21:30].reshape((3, 3))
-    f_q[:, :] = 0.0
-    for p in range(3):
-        i = (0, 1, 2)[p]
-        j = (1, 2, 0)[p]
-        d = h[i] - h[j]
-        f_q[p, i] = 2.0 * d
-        f_q[p, j] = -2.0 * d
-    f_phi_inv = work[30:39].reshape((3, 3))
-    det = inv3(f_phi, f_phi_inv)
-    # Platform geometry: sphere offsets r_i = B_i - p (p is the centroid), normal n.
-    nx = rot[0, 2]
-    ny = rot[1, 2]
-    nz = rot[2, 2]
-    r = work[39:48].reshape((3, 3))
-    for i in range(3):
-        r[i, 0] = rot[0, 0] * ct[i] * rp + rot[0, 1] * st[i] * rp
-        r[i, 1] = rot[1, 0] * ct[i] * rp + rot[1, 1] * st[i] * rp
-        r[i, 2] = rot[2, 0] * ct[i] * rp + rot[2, 1] * st[i] * rp
-    sa = rot[1, 0]
-    ca = rot[0, 0]
-    nrm = math.hypot(ca, sa)
-    ca /= nrm
-    sa /= nrm
-    sb = -rot[2, 0]
-    cb = math.sqrt(max(0.0, 1.0 - sb * sb))
-    ginv = 2.0 / (3.0 * rp * rp)
-    half_p = 1.5 * rp * rp
-
-    # Velocity-level quantities for m = 4 velocity vectors: the three unit vectors e_k and qd.
-    m = 4
-    phid = work[48:60].reshape((m, 3))
-    rhod = work[60:72].reshape((m, 3))
-    hd = work[72:84].reshape((m, 3))
-    w = work[84:96].reshape((m, 3))
-    ang = work[96:108].reshape((m, 3))     # (yaw rate, pitch rate, roll rate)
-    for k in range(m):
-        for i in range(3):
-            acc = 0.0
-            for j in range(3):
-                u = qd[j] if k == 3 else (1.0 if j == k else 0.0)
-                for p in range(3):
-                    acc -= f_phi_inv[i, p] * f_q[p, j] * u
-            phid[k, i] = acc
-        for i in range(3):
-            u = qd[i] if k == 3 else (1.0 if i == k else 0.0)
-            rhod[k, i] = ln * cphi[i] * phid[k, i]
-            hd[k, i] = u - ln * sphi[i] * phid[k, i]
-        vx = 0.0
-        vy = 0.0
-        vz = 0.0
-        for i in range(3):
-            vx += rhod[k, i] * ct[i] / 3.0
-            vy += rhod[k, i] * st[i] / 3.0
-            vz += hd[k, i] / 3.0
-        mx = 0.0
-        my = 0.0
-        mz = 0.0
-        for i in range(3):
-            dx = rhod[k, i] * ct[i] - vx
-            dy = rhod[k, i] * st[i] - vy
-            dz = hd[k, i] - vz
-            mx += r[i, 1] * dz - r[i, 2] * dy
-            my += r[i, 2] * dx - r[i, 0] * dz
-            mz += r[i, 0] * dy - r[i, 1] * dx
-        nm = nx * mx + ny * my + nz * mz
-        wx = ginv * (mx - 0.5 * nx * nm)
-        wy = ginv * (my - 0.5 * ny * nm)
-        wz = ginv * (mz - 0.5 * nz * nm)
-        w[k, 0] = wx
-        w[k, 1] = wy
-        w[k, 2] = wz
-        roll_d = (wx * ca + wy * sa) / cb
-        pitch_d = -wx * sa + wy * ca
-        yaw_d = wz + roll_d * sb
-        ang[k, 0] = yaw_d
-        ang[k, 1] = pitch_d
-        ang[k, 2] = roll_d
-        if k < 3:
-            for i in range(3):
-                S[2 * i, k] = 1.0 if i == k else 0.0
-                S[2 * i + 1, k] = phid[k, i]
-            S[IX_X, k] = vx
-            S[IX_Y, k] = vy
-            S[IX_Z, k] = vz
-            S[IX_YAW, k] = yaw_d
-            S[IX_PITCH, k] = pitch_d
-            S[IX_ROLL, k] = roll_d
-            twist[0, k] = vx
-            twist[1, k] = vy
-            twist[2, k] = vz
-            twist[3, k] = wx
-            twist[4, k] = wy
-            twist[5, k] = wz
-
-    # Ṡ e_k = H(qd, e_k): the symmetric bilinear second-order term of Q(q) (q̈ = 0).
-    eb_x = -sa
-    eb_y = ca
-    eg_x = ca * cb
-    eg_y = sa * cb
-    eg_z = -sb
-    u_ = 3
-    kappa = work[108:111]
-    phidd = work[111:114]
-    for k in range(3, 4):
-        pp = work[114:117]
-        for i in range(3):
-            pp[i] = phid[u_, i] * phid[k, i]
-        for p in range(3):
-            i = (0, 1, 2)[p]
-            j = (1, 2, 0)[p]
-            c = cpair[p]
-            d = h[i] - h[j]
-            rho0_i = -ln * sphi[i] * pp[i]
-            rho0_j = -ln * sphi[j] * pp[j]
-            h0_i = -ln * cphi[i] * pp[i]
-            h0_j = -ln * cphi[j] * pp[j]
-            dd_u = hd[u_, i] - hd[u_, j]
-            dd_w = hd[k, i] - hd[k, j]
-            kappa[p] = (2.0 * rhod[u_, i] * rhod[k, i] + 2.0 * rho[i] * rho0_i
-                        + 2.0 * rhod[u_, j] * rhod[k, j] + 2.0 * rho[j] * rho0_j
-                        - 2.0 * c * (rho0_i * rho[j] + rhod[u_, i] * rhod[k, j]
-                                     + rhod[k, i] * rhod[u_, j] + rho[i] * rho0_j)
-                        + 2.0 * dd_u * dd_w + 2.0 * d * (h0_i - h0_j))
-        for i in range(3):
-            acc = 0.0
-            for p in range(3):
-                acc -= f_phi_inv[i, p] * kappa[p]
-            phidd[i] = acc
-        ax = 0.0
-        ay = 0.0
-        az = 0.0
-        rdd = work[117:120]
-        hdd = work[120:123]
-        for i in range(3):
-            rdd[i] = ln * cphi[i] * phidd[i] - ln * sphi[i] * pp[i]
-            hdd[i] = -ln * sphi[i] * phidd[i] - ln * cphi[i] * pp[i]
-            ax += rdd[i] * ct[i] / 3.0
-            ay += rdd[i] * st[i] / 3.0
-            az += hdd[i] / 3.0
-        mx = 0.0
-        my = 0.0
-        mz = 0.0
-        for i in range(3):
-            dx = rdd[i] * ct[i] - ax
-            dy = rdd[i] * st[i] - ay
-            dz = hdd[i] - az
-            mx += r[i, 1] * dz - r[i, 2] * dy
-            my += r[i, 2] * dx - r[i, 0] * dz
-            mz += r[i, 0] * dy - r[i, 1] * dx
-        # Subtract ½[(P ω_u) × ω_w + (P ω_w) × ω_u], P = (3 R_p²/2)(I - n nᵀ).
-        wu0, wu1, wu2 = w[u_, 0], w[u_, 1], w[u_, 2]
-        ww0, ww1, ww2 = w[k, 0], w[k, 1], w[k, 2]
-        nwu = nx * wu0 + ny * wu1 + nz * wu2
-        nww = nx * ww0 + ny * ww1 + nz * ww2
-        pu0 = half_p * (wu0 - nx * nwu)
-        pu1 = half_p * (wu1 - ny * nwu)
-        pu2 = half_p * (wu2 - nz * nwu)
-        pw0 = half_p * (ww0 - nx * nww)
-        pw1 = half_p * (ww1 - ny * nww)
-        pw2 = half_p * (ww2 - nz * nww)
-        mx -= 0.5 * ((pu1 * ww2 - pu2 * ww1) + (pw1 * wu2 - pw2 * wu1))
-        my -= 0.5 * ((pu2 * ww0 - pu0 * ww2) + (pw2 * wu0 - pw0 * wu2))
-        mz -= 0.5 * ((pu0 * ww1 - pu1 * ww0) + (pw0 * wu1 - pw1 * wu0))
-        nm = nx * mx + ny * my + nz * mz
-        dwx = ginv * (mx - 0.5 * nx * nm)
-        dwy = ginv * (my - 0.5 * ny * nm)
-        dwz = ginv * (mz - 0.5 * nz * nm)
-        # Remove the Euler-rate terms: β̇ ė_β + γ̇ ė_γ, symmetrised.
-        ya_u, pi_u, ro_u = ang[u_, 0], ang[u_, 1], ang[u_, 2]
-        ya_w, pi_w, ro_w = ang[k, 0], ang[k, 1], ang[k, 2]
-        cb_coef = 0.5 * (pi_u * ya_w + pi_w * ya_u)
-        # ẑ × e_β = (-e_β,y, e_β,x, 0)
-        tx = cb_coef * (-eb_y)
-        ty = cb_coef * eb_x
-        tz = 0.0
-        # ½[γ̇_u (α̇_w ẑ + β̇_w e_β) + γ̇_w (α̇_u ẑ + β̇_u e_β)] × e_γ
-        ox = 0.5 * (ro_u * pi_w + ro_w * pi_u) * eb_x
-        oy = 0.5 * (ro_u * pi_w + ro_w * pi_u) * eb_y
-        oz = 0.5 * (ro_u * ya_w + ro_w * ya_u)
-        tx += oy * eg_z - oz * eg_y
-        ty += oz * eg_x - ox * eg_z
-        tz += ox * eg_y - oy * eg_x
-        ex = dwx - tx
-        ey = dwy - ty
-        ez = dwz - tz
-        roll_dd = (ex * ca + ey * sa) / cb
-        pitch_dd = -ex * sa + ey * ca
-        yaw_dd = ez + roll_dd * sb
-        for i in range(3):
-            sdq[2 * i] = 0.0
-            sdq[2 * i + 1] = phidd[i]
-        sdq[IX_X] = ax
-        sdq[IX_Y] = ay
-        sdq[IX_Z] = az
-        sdq[IX_YAW] = yaw_dd
-        sdq[IX_PITCH] = pitch_dd
-        sdq[IX_ROLL] = roll_dd
-    return det
-
-
 WORK_SIZE = TREE_MAPS_WORK + 72
 
 
@@ -396,8 +156,7 @@ WORK_SIZE = TREE_MAPS_WORK + 72
 def mass_and_bias(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h):
     """Actuated mass matrix M (kg) and bias forces h = C q̇ + G (N) at (q, q̇).
 
-    ``phi`` must hold the solved rod angles; S and the twist map are filled here (``Sd`` is
-    not: the drift Ṡ q̇ comes from ``tree_maps_drift``).
+    ``phi`` must hold the solved rod angles; S, Ṡ and the twist map are filled here.
     """
     mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h,
                        np.empty(WORK_SIZE))
@@ -442,7 +201,11 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
     tmp = extra[45:54].reshape((3, 3))
     assemble(geom, q, phi, rot, pos, spheres)
     sdq = extra[54:66]
-    tree_maps_drift(geom, q, phi, rot, qd, S, sdq, twist, work)
+    # S, Ṡ and the twist map from the model's one kernel (``rt.model.kernels``); the drift
+    # Ṡ q̇ is what the bias needs.
+    tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work)
+    for r in range(12):
+        sdq[r] = Sd[r, 0] * qd[0] + Sd[r, 1] * qd[1] + Sd[r, 2] * qd[2]
     g = bodies[B_G]
     ms = bodies[B_M_SLIDER]
     for a in range(3):

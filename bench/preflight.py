@@ -1,0 +1,183 @@
+"""Pre-flight cost of a protocol: where the CPU goes (reference generation, twin, loop) for a
+60 s sine in force, the library's ankle ROM exercise and the gait replay (twin figures).
+
+Run:  .venv/bin/python bench/preflight.py [--repeats 3] [--only sine60,rom,gait] [--json]
+      [--no-preflight]   (reference generation only)
+Target (issue 16): a 60 s protocol's pre-flight ≤ 1.5 s.
+
+Per protocol, each the median of ``--repeats`` runs, interleaved (run r of every protocol
+before run r + 1 of any), in this thread's CPU time (``time.thread_time``: on a machine shared
+with other jobs the figure that does not depend on the load) and wall-clock time:
+
+* ``references``: ``make_generator`` + ``validate()`` (the whole reference computed), compiled
+  (``protocols.reference_kernels``, the default) and interpreted (``joint_references`` and
+  per-sample ``Kinematics.fk``, the reference implementation), side by side;
+* ``preflight``: ``protocols.session.preflight`` whole, split into the references, the twin
+  (every ``Twin.sync`` timed) and the loop (the rest: blocks, supervisor, drivers, tap);
+* ``per 60 s``: the pre-flight's CPU scaled to a 60 s protocol (pre-flight simulates the
+  protocol plus its approach and rest, so the scaling is by the protocol's duration).
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import statistics
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+from protocols import base, generators, session
+from protocols.generators import make_generator
+from protocols.library import load_protocol
+from rt.model import RobotModel
+from rt.twin.twin import Twin
+
+LIBRARY = Path(__file__).resolve().parent.parent / "protocols" / "library"
+PATIENT_KG = 70.0
+
+
+def protocols() -> dict[str, object]:
+    """The benchmark's protocols: a 60 s sine (the library's, 56 cycles), the ROM, the gait."""
+    sine = load_protocol(LIBRARY / "sine_fz.yaml")
+    sine60 = sine.model_copy(update={"cycles": 56, "name": "Sine Fz 60 s"})
+    return {"sine60": sine60, "rom": load_protocol(LIBRARY / "ankle_rom.yaml"),
+            "gait": load_protocol(LIBRARY / "gait_replay.yaml"),
+            "assist": load_protocol(LIBRARY / "active_assist.yaml")}
+
+
+@contextlib.contextmanager
+def interpreted_references() -> Iterator[None]:
+    """The generators' interpreted reference path (what the compiled one falls back to)."""
+    path_refs, fk_path = base.path_joint_references, generators.fk_path
+    base.path_joint_references = base.joint_references          # type: ignore[assignment]
+    generators.fk_path = lambda *args: 0                         # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        base.path_joint_references = path_refs                   # type: ignore[assignment]
+        generators.fk_path = fk_path                             # type: ignore[assignment]
+
+
+def references_time(protocol, model: RobotModel, compiled: bool) -> dict:
+    ctx = contextlib.nullcontext() if compiled else interpreted_references()
+    with ctx:
+        c0, t0 = time.thread_time(), time.perf_counter()
+        gen = make_generator(protocol, dt=1e-3, kinematics=model.kin,
+                             patient_weight_kg=PATIENT_KG, base_dir=LIBRARY)
+        report = gen.validate()
+        cpu, wall = time.thread_time() - c0, time.perf_counter() - t0
+    assert report.ok, report.violations
+    return {"cpu_s": cpu, "wall_s": wall, "duration_s": report.duration_s}
+
+
+def preflight_time(protocol, model: RobotModel) -> dict:
+    """``session.preflight`` whole, with the CPU of ``validate()`` and of ``Twin.sync``."""
+    spent = {"twin": 0.0, "references": 0.0}
+    sync = Twin.sync
+    validate = {cls: cls.validate for cls in (base.TableGenerator,
+                                              generators.ActiveAssistGenerator)}
+
+    def timed_sync(self, t=None):
+        c = time.thread_time()
+        try:
+            return sync(self, t)
+        finally:
+            spent["twin"] += time.thread_time() - c
+
+    def timed(fn):
+        def run(self):
+            c = time.thread_time()
+            try:
+                return fn(self)
+            finally:
+                spent["references"] += time.thread_time() - c
+        return run
+
+    Twin.sync = timed_sync                                       # type: ignore[method-assign]
+    for cls, fn in validate.items():
+        cls.validate = timed(fn)                                 # type: ignore[method-assign]
+    try:
+        setup = session.SessionSetup(protocol=protocol, base_dir=LIBRARY,
+                                     patient_weight_kg=PATIENT_KG)
+        c0, t0 = time.thread_time(), time.perf_counter()
+        result = session.preflight(setup, model)
+        cpu, wall = time.thread_time() - c0, time.perf_counter() - t0
+    finally:
+        Twin.sync = sync                                         # type: ignore[method-assign]
+        for cls, fn in validate.items():
+            cls.validate = fn                                    # type: ignore[method-assign]
+    duration = result["predicted"]["duration_s"]
+    return {"cpu_s": cpu, "wall_s": wall, "duration_s": duration,
+            "references_cpu_s": spent["references"], "twin_cpu_s": spent["twin"],
+            "loop_cpu_s": cpu - spent["twin"] - spent["references"],
+            "cpu_per_60s": cpu / duration * 60.0}
+
+
+def _median(runs: list[dict]) -> dict:
+    out = dict(runs[0])
+    for key, value in runs[0].items():
+        if isinstance(value, float):
+            out[key] = statistics.median(r[key] for r in runs)
+    out["repeats"] = len(runs)
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--only", default="sine60,rom,gait",
+                        help="comma-separated subset of sine60, rom, gait, assist")
+    parser.add_argument("--no-preflight", action="store_true",
+                        help="time the reference generation only")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error("--repeats must be at least 1")
+    library = protocols()
+    names = [n.strip() for n in args.only.split(",") if n.strip()]
+    unknown = [n for n in names if n not in library]
+    if unknown:
+        parser.error(f"unknown protocol(s) {unknown}; choose from {sorted(library)}")
+    model = RobotModel.load()
+    for name in names:                   # load (or compile) every kernel once, not timed
+        references_time(library[name], model, True)
+    refs: dict[str, dict[bool, list[dict]]] = {n: {True: [], False: []} for n in names}
+    pre: dict[str, list[dict]] = {n: [] for n in names}
+    if not args.no_preflight:
+        session.preflight(session.SessionSetup(protocol=library[names[0]], base_dir=LIBRARY,
+                                               patient_weight_kg=PATIENT_KG), model)
+    for _ in range(args.repeats):
+        for name in names:
+            for compiled in (False, True):
+                refs[name][compiled].append(references_time(library[name], model, compiled))
+            if not args.no_preflight:
+                pre[name].append(preflight_time(library[name], model))
+    result = {name: {"references_interpreted": _median(refs[name][False]),
+                     "references_compiled": _median(refs[name][True]),
+                     "preflight": _median(pre[name]) if pre[name] else None}
+              for name in names}
+    if args.json:
+        print(json.dumps(result))
+        return
+    print(f"pre-flight costs, median of {args.repeats} interleaved runs, CPU s (this thread) / "
+          "wall s (twin figures, this machine)")
+    for name, r in result.items():
+        ri, rc = r["references_interpreted"], r["references_compiled"]
+        print(f"{name} ({ri['duration_s']:g} s protocol)")
+        print(f"  references: interpreted {ri['cpu_s']:.3f} / {ri['wall_s']:.3f}, compiled "
+              f"{rc['cpu_s']:.3f} / {rc['wall_s']:.3f} "
+              f"(×{ri['cpu_s'] / max(rc['cpu_s'], 1e-9):.0f} CPU)")
+        p = r["preflight"]
+        if p is None:
+            continue
+        print(f"  pre-flight: {p['cpu_s']:.2f} / {p['wall_s']:.2f} — references "
+              f"{p['references_cpu_s']:.3f}, twin {p['twin_cpu_s']:.2f} "
+              f"({p['twin_cpu_s'] / p['cpu_s'] * 100:.0f} %), loop {p['loop_cpu_s']:.2f} "
+              f"({p['loop_cpu_s'] / p['cpu_s'] * 100:.0f} %); {p['cpu_per_60s']:.2f} s CPU per "
+              "60 s of protocol")
+
+
+if __name__ == "__main__":
+    main()
