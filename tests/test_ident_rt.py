@@ -65,7 +65,7 @@ def test_program_plays_the_table_and_holds_its_last_sample():
     for _ in range(prog.n_samples + 5):
         status = prog.update(out)
     assert status == 1 and out.done
-    q, qd, qdd = exc.evaluate(np.array([2.0]))
+    q, _qd, qdd = exc.evaluate(np.array([2.0]))
     np.testing.assert_allclose(out.q_ref, q[0], atol=1e-12)
     np.testing.assert_allclose(out.qdd_ref, qdd[0], atol=1e-12)
 
@@ -75,7 +75,7 @@ def test_trajectories_outside_the_limits_are_refused_naming_the_limit():
     lim = _limits(model)
     good = optimize_excitation(model, evaluations=30)
     check_trajectory(excitation_table(good, 10.0, DT), model.kin, lim, DT)   # accepted
-    lo, hi = model.description.limits.stroke
+    _lo, hi = model.description.limits.stroke
     # The whole excitation shifted to the stroke's end: ruckig would go there, we refuse.
     shifted = FourierExcitation(good.a, good.b, hi - 0.5 * MAX_EXCURSION_M, good.f0_hz)
     with pytest.raises(InputError, match="stroke"):
