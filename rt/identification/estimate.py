@@ -52,8 +52,12 @@ from rt.model.regressor import INERTIAL_NAMES, N_RIGID, STANDARD_NAMES, Regresso
 FILTER_HZ = 8.0
 #: Filter of the positions W is computed from (Hz): wide, so W's nonlinearity sees the states.
 STATE_FILTER_HZ = 40.0
-DECIMATE_TO_HZ = 100.0
+DECIMATE_TO_HZ = 20.0
 EDGE_S = 1.0
+#: Equations of an axis slower than this (m/s) are left out of the fit: 5 × the Stribeck
+#: velocity (4 mm/s), below which the real friction (stiction, the Stribeck dip from static to
+#: Coulomb level) is not the model's f_v q̇ + f_c tanh(q̇/v_s).
+MIN_SPEED_M_S = 0.02
 #: Weight of the prior toward the nominal description, relative to the data (dimensionless).
 PRIOR_WEIGHT = 1e-3
 
@@ -147,6 +151,21 @@ def _forces(data: IdentificationData) -> np.ndarray:
     return _parallel(data, data.tau).reshape(-1)
 
 
+def _sliding(data: IdentificationData) -> np.ndarray:
+    """Which equations (one per axis and kept sample, flattened like the rows) are fitted: the
+    axis slides at least ``MIN_SPEED_M_S`` (module docstring: the Stribeck region)."""
+    return (np.abs(_parallel(data, data.qd)) >= MIN_SPEED_M_S).reshape(-1)
+
+
+def _system(reg: Regressor, data: IdentificationData) -> tuple[np.ndarray, np.ndarray]:
+    """(W standard, τ) of the sliding equations, both through the parallel filter."""
+    keep = _sliding(data)
+    if keep.sum() < 2 * len(STANDARD_NAMES):
+        raise IdentificationError(f"only {int(keep.sum())} samples slide faster than "
+                                  f"{MIN_SPEED_M_S * 1e3:.0f} mm/s: the excitation is too slow")
+    return _standard_rows(reg, data)[keep], _forces(data)[keep]
+
+
 @dataclass
 class BaseEstimate:
     names: list[str]
@@ -157,8 +176,8 @@ class BaseEstimate:
 
 def estimate_base(reg: Regressor, data: IdentificationData) -> BaseEstimate:
     """OLS on the base parameters with their standard deviations."""
-    w = _standard_rows(reg, data)[:, reg.base.base_index]
-    y = _forces(data)
+    w_std, y = _system(reg, data)
+    w = w_std[:, reg.base.base_index]
     theta, *_ = np.linalg.lstsq(w, y, rcond=None)
     r = y - w @ theta
     dof = max(1, len(y) - len(theta))
@@ -197,8 +216,8 @@ def nominal_physical(description: RobotDescription) -> np.ndarray:
 def estimate_physical(reg: Regressor, data: IdentificationData,
                       nominal: RobotDescription) -> np.ndarray:
     """Bounded LS in the description's parameters with a weak prior (module docstring)."""
-    a = _physical_columns(_standard_rows(reg, data))
-    y = _forces(data)
+    w_std, y = _system(reg, data)
+    a = _physical_columns(w_std)
     p0 = nominal_physical(nominal)
     scale = np.maximum(np.abs(p0), 1e-3)
     scale[1:4] = max(scale[0], 0.1) * 0.05              # rod first moments: ~ kg × 5 cm
