@@ -12,13 +12,21 @@ force, which is proportional to q̇ near the reversal, while W's Coulomb column 
 sharply: least squares reads the ramp as *viscous* friction (fv over-estimated by tens of N s/m,
 fc under-estimated, the bias of issue 15). Now:
 
-1. positions pass a zero-phase Butterworth at ``STATE_FILTER_HZ`` (40 Hz: 5× the excitation's
-   band, enough against the 20 µm encoder quantum for q̇ and q̈ from central differences) —
-   only to compute W's arguments;
+1. positions pass a zero-phase Butterworth at ``STATE_FILTER_HZ`` (10 Hz: 25× the
+   excitation's highest harmonic, so the states are not distorted, while the 20 µm encoder
+   quantum's noise in q̇ stays ≪ the Coulomb term's 1 mm/s smoothing — at 40 Hz it biased fv
+   by −1…−6 % through the tanh) — only to compute W's arguments;
 2. W is evaluated at every sample from those states, then **the same** zero-phase low-pass
    (``FILTER_HZ``, 8 Hz) is applied to every column of W and to τ, and both are decimated to
    ``DECIMATE_TO_HZ``: F(W) θ = F(τ) holds exactly for the true θ whatever F is, so the filter
-   removes noise without biasing any parameter.
+   removes noise without biasing any parameter. Decimated to 20 Hz (2.5× the filter), the
+   residual is close to white, so Gautier's σ is not optimistic;
+3. equations of an axis sliding slower than ``MIN_SPEED_M_S`` are left out: below it the
+   twin's (and a rig's) friction is stiction and the Stribeck dip from the static to the
+   Coulomb level, which f_v q̇ + f_c tanh(q̇/v_s) does not describe. With the optimised
+   excitation's speeds (mostly < 50 mm/s) those samples are a large share, and least squares
+   bent the friction line through them: fv −31…−44 % (20 σ) on the twin with its effects off;
+   without them −0.5…+0.5 % (≤ 1.7 σ; ``bench/identification.py``).
 
 Two estimates from the same data:
 
@@ -50,8 +58,9 @@ from rt.model.regressor import INERTIAL_NAMES, N_RIGID, STANDARD_NAMES, Regresso
 
 #: Parallel filter (regressor columns and forces alike), Hz.
 FILTER_HZ = 8.0
-#: Filter of the positions W is computed from (Hz): wide, so W's nonlinearity sees the states.
-STATE_FILTER_HZ = 40.0
+#: Filter of the positions W is computed from (Hz): the states undistorted, the quantum's noise
+#: out of the Coulomb column.
+STATE_FILTER_HZ = 10.0
 DECIMATE_TO_HZ = 20.0
 EDGE_S = 1.0
 #: Equations of an axis slower than this (m/s) are left out of the fit: 5 × the Stribeck
@@ -153,7 +162,10 @@ def _forces(data: IdentificationData) -> np.ndarray:
 
 def _sliding(data: IdentificationData) -> np.ndarray:
     """Which equations (one per axis and kept sample, flattened like the rows) are fitted: the
-    axis slides at least ``MIN_SPEED_M_S`` (module docstring: the Stribeck region)."""
+    axis slides at least ``MIN_SPEED_M_S`` (module docstring: the Stribeck region). Data
+    without a rate (exact samples, used as they are) keep every equation."""
+    if data.rate_hz <= 0.0:
+        return np.ones(3 * len(data.q), dtype=bool)
     return (np.abs(_parallel(data, data.qd)) >= MIN_SPEED_M_S).reshape(-1)
 
 
