@@ -58,7 +58,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     f.set_defaults(func=_fit)
 
 
-def _write_description(desc, out: Path, force: bool, inputs: list[str] = ()) -> None:
+def _write_description(desc, out: Path, force: bool, inputs: tuple[str, ...] = ()) -> None:
     from rt.output_files import atomic_output
 
     text = ("# Robot description identified by `talus identify` (SI units).\n"
@@ -179,7 +179,7 @@ def _fit_recordings(recording: Path, validation: Path | None, nominal, out: Path
     ident, result = identify(rec.data(nominal),
                              None if val is None else val.data(nominal), nominal, rec.truth())
     _write_description(ident, out, force,
-                       [str(recording)] + ([str(validation)] if validation else []))
+                       (str(recording),) + ((str(validation),) if validation else ()))
     return {"out": str(out), "recordings": {"excitation": str(recording),
                                             "validation": None if val is None
                                             else str(validation)},

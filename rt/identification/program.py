@@ -210,8 +210,8 @@ def identify_excitation(params: dict[str, Any], service: RtService) -> Excitatio
                          f"{sorted(allowed)}")
     try:
         spec = ExcitationSpec.model_validate(params.get("excitation"))
-    except ValidationError as exc:
-        raise InputError(f"{PROGRAM_NAME}: excitation: {validation_summary(exc)}") from None
+    except ValidationError as err:
+        raise InputError(f"{PROGRAM_NAME}: excitation: {validation_summary(err)}") from None
     exc = spec.excitation()
     duration = params.get("duration_s")
     if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
