@@ -33,6 +33,7 @@ from rt.model.dynamics import Payload
 from rt.position_loop import build_sim_position_loop
 from rt.safety.limits import RobotLimits
 from rt.twin.environment import FreeMotion, PayloadStep
+from rt.twin.realism import RigImperfections
 from rt.twin.twin import Twin
 
 Q0_M = 0.20
@@ -115,11 +116,13 @@ def _change_controller_parameters(model: RobotModel, controller) -> None:
 def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
             rate_hz: float = 1000.0, truth: RobotDescription | None = None,
             robot: RobotDescription | None = None, ideal: bool = False, seed: int = 0,
-            gains: dict | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+            gains: dict | None = None, imperfections: RigImperfections | None = None
+            ) -> tuple[np.ndarray, np.ndarray, float]:
     """One controller through one experiment: (trajectory time s, error (n, 3) m, approach s).
 
     ``robot`` is the description the controllers believe (default the nominal one); ``truth``
-    the twin's (default: the realistic twin's truth; with ``ideal`` the model itself).
+    the twin's (default: the realistic twin's truth; with ``ideal`` the model itself);
+    ``imperfections`` the realistic twin's unmodelled effects (default: ``RigImperfections()``).
     """
     model = RobotModel.from_description(robot) if robot is not None else RobotModel.load()
     if gains is None:
@@ -129,7 +132,7 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
     if experiment == "payload-step":
         env = PayloadStep(mass_kg=PAYLOAD_KG, at_s=1e9, com_m=PAYLOAD_COM_M)  # timed below
     twin = (Twin.ideal(truth or model.description, environment=env, seed=seed) if ideal
-            else Twin(truth, environment=env, seed=seed))
+            else Twin(truth, environment=env, seed=seed, imperfections=imperfections))
     twin.place((Q0_M, Q0_M, Q0_M))
     pl = build_sim_position_loop(controller, gains, benchmark_reference(Q0_M), seconds,
                                  rate_hz=rate_hz, model=model, twin=twin,

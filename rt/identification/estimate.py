@@ -2,9 +2,31 @@
 
 Data: slider positions from the encoders and the actuator forces the drives were commanded
 (current-mode amplifiers: force = command V × force per volt), recorded at the loop rate.
-Positions and forces pass the same zero-phase low-pass filter (4th-order Butterworth, 8 Hz,
-forward-backward so no lag), velocities and accelerations are central differences of the
-filtered positions, and the data are decimated to 100 Hz.
+
+Filtering (Gautier's *parallel filtering*): the model is linear in the parameters, τ = W θ, but
+W is a nonlinear function of the states — the Coulomb column is sign(q̇) smoothed over
+1 mm/s. A low-pass filter F commutes with the linear map θ ↦ Wθ, not with that nonlinearity:
+filtering the forces at 8 Hz but computing W from positions filtered at the same 8 Hz (what this
+module did first) turns each Coulomb reversal, a step in τ, into a ~60 ms ramp in the filtered
+force, which is proportional to q̇ near the reversal, while W's Coulomb column still switches
+sharply: least squares reads the ramp as *viscous* friction (fv over-estimated by tens of N s/m,
+fc under-estimated, the bias of issue 15). Now:
+
+1. positions pass a zero-phase Butterworth at ``STATE_FILTER_HZ`` (10 Hz: 25× the
+   excitation's highest harmonic, so the states are not distorted, while the 20 µm encoder
+   quantum's noise in q̇ stays ≪ the Coulomb term's 1 mm/s smoothing — at 40 Hz it biased fv
+   by −1…−6 % through the tanh) — only to compute W's arguments;
+2. W is evaluated at every sample from those states, then **the same** zero-phase low-pass
+   (``FILTER_HZ``, 8 Hz) is applied to every column of W and to τ, and both are decimated to
+   ``DECIMATE_TO_HZ``: F(W) θ = F(τ) holds exactly for the true θ whatever F is, so the filter
+   removes noise without biasing any parameter. Decimated to 20 Hz (2.5× the filter), the
+   residual is close to white, so Gautier's σ is not optimistic;
+3. equations of an axis sliding slower than ``MIN_SPEED_M_S`` are left out: below it the
+   twin's (and a rig's) friction is stiction and the Stribeck dip from the static to the
+   Coulomb level, which f_v q̇ + f_c tanh(q̇/v_s) does not describe. With the optimised
+   excitation's speeds (mostly < 50 mm/s) those samples are a large share, and least squares
+   bent the friction line through them: fv −31…−44 % (20 σ) on the twin with its effects off;
+   without them −0.5…+0.5 % (≤ 1.7 σ; ``bench/identification.py``).
 
 Two estimates from the same data:
 
@@ -34,9 +56,17 @@ from rt.model import RobotModel
 from rt.model.description import RobotDescription, description_from_dict
 from rt.model.regressor import INERTIAL_NAMES, N_RIGID, STANDARD_NAMES, Regressor
 
+#: Parallel filter (regressor columns and forces alike), Hz.
 FILTER_HZ = 8.0
-DECIMATE_TO_HZ = 100.0
+#: Filter of the positions W is computed from (Hz): the states undistorted, the quantum's noise
+#: out of the Coulomb column.
+STATE_FILTER_HZ = 10.0
+DECIMATE_TO_HZ = 20.0
 EDGE_S = 1.0
+#: Equations of an axis slower than this (m/s) are left out of the fit: 5 × the Stribeck
+#: velocity (4 mm/s), below which the real friction (stiction, the Stribeck dip from static to
+#: Coulomb level) is not the model's f_v q̇ + f_c tanh(q̇/v_s).
+MIN_SPEED_M_S = 0.02
 #: Weight of the prior toward the nominal description, relative to the data (dimensionless).
 PRIOR_WEIGHT = 1e-3
 
@@ -52,18 +82,33 @@ class IdentificationError(TalusError):
 
 @dataclass
 class IdentificationData:
-    """Filtered, decimated samples: q, q̇, q̈ (m, m/s, m/s²) and τ (N), each (n, 3)."""
+    """Samples q, q̇, q̈ (m, m/s, m/s²) and τ (N), each (n, 3).
+
+    ``rate_hz`` = 0: the samples are used as they are (exact or already filtered data).
+    ``rate_hz`` > 0 (from :func:`prepare`): samples at that rate, to which the parallel filter
+    is still to be applied — to W's columns and τ alike — before decimation (module docstring).
+    """
 
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
     tau: np.ndarray
+    rate_hz: float = 0.0
 
 
-def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float) -> IdentificationData:
-    """Filter, differentiate and decimate a recording (see module docstring)."""
+#: How :func:`prepare` filters: ``parallel`` (the default, unbiased) or ``states`` (positions
+#: and forces both filtered at 8 Hz and W computed from the filtered positions: the first
+#: method, kept to measure the bias it caused).
+FILTERING = ("parallel", "states")
+
+
+def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float,
+            filtering: str = "parallel") -> IdentificationData:
+    """Filter and differentiate a recording (see module docstring)."""
     q = np.asarray(q, float)
     tau = np.asarray(tau, float)
+    if filtering not in FILTERING:
+        raise IdentificationError(f"filtering must be one of {FILTERING}, got {filtering!r}")
     if q.shape != tau.shape or q.ndim != 2 or q.shape[1] != 3:
         raise IdentificationError(f"q and tau must both be (n, 3); got {q.shape}, {tau.shape}")
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(tau))):
@@ -71,24 +116,66 @@ def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float) -> IdentificationDat
     edge = int(EDGE_S * rate_hz)
     if len(q) < 4 * edge + 100:
         raise IdentificationError(f"recording too short: {len(q) / rate_hz:.1f} s")
-    sos = scipy.signal.butter(4, FILTER_HZ, fs=rate_hz, output="sos")
-    qf = scipy.signal.sosfiltfilt(sos, q, axis=0)
-    tf = scipy.signal.sosfiltfilt(sos, tau, axis=0)
     dt = 1.0 / rate_hz
+    if filtering == "states":
+        sos = scipy.signal.butter(4, FILTER_HZ, fs=rate_hz, output="sos")
+        qf = scipy.signal.sosfiltfilt(sos, q, axis=0)
+        tf = scipy.signal.sosfiltfilt(sos, tau, axis=0)
+        qd = np.gradient(qf, dt, axis=0)
+        qdd = np.gradient(qd, dt, axis=0)
+        step = max(1, round(rate_hz / DECIMATE_TO_HZ))
+        sl = slice(edge, len(q) - edge, step)
+        return IdentificationData(qf[sl], qd[sl], qdd[sl], tf[sl])
+    sos = scipy.signal.butter(4, min(STATE_FILTER_HZ, 0.4 * rate_hz), fs=rate_hz, output="sos")
+    qf = scipy.signal.sosfiltfilt(sos, q, axis=0)
     qd = np.gradient(qf, dt, axis=0)
     qdd = np.gradient(qd, dt, axis=0)
-    step = max(1, round(rate_hz / DECIMATE_TO_HZ))
-    sl = slice(edge, len(q) - edge, step)
-    return IdentificationData(qf[sl], qd[sl], qdd[sl], tf[sl])
+    return IdentificationData(qf, qd, qdd, tau, float(rate_hz))
+
+
+def _parallel(data: IdentificationData, per_sample: np.ndarray) -> np.ndarray:
+    """The parallel filter and decimation of ``per_sample`` (n, 3, …) (module docstring);
+    nothing for data without a rate."""
+    if data.rate_hz <= 0.0:
+        return per_sample
+    rate = data.rate_hz
+    sos = scipy.signal.butter(4, FILTER_HZ, fs=rate, output="sos")
+    filtered = scipy.signal.sosfiltfilt(sos, per_sample, axis=0)
+    edge = int(EDGE_S * rate)
+    step = max(1, round(rate / DECIMATE_TO_HZ))
+    return filtered[edge:len(filtered) - edge:step]
 
 
 def _standard_rows(reg: Regressor, data: IdentificationData) -> np.ndarray:
-    rows = np.empty((3 * len(data.q), len(STANDARD_NAMES)))
+    rows = np.empty((len(data.q), 3, len(STANDARD_NAMES)))
     st = None
     for j in range(len(data.q)):
         st = reg.dyn.state(data.q[j], data.qd[j], out=st)
-        rows[3 * j:3 * j + 3] = reg.standard(st, data.qdd[j])
-    return rows
+        rows[j] = reg.standard(st, data.qdd[j])
+    return _parallel(data, rows).reshape(-1, len(STANDARD_NAMES))
+
+
+def _forces(data: IdentificationData) -> np.ndarray:
+    """τ through the same filter as W's columns, flattened like the rows."""
+    return _parallel(data, data.tau).reshape(-1)
+
+
+def _sliding(data: IdentificationData) -> np.ndarray:
+    """Which equations (one per axis and kept sample, flattened like the rows) are fitted: the
+    axis slides at least ``MIN_SPEED_M_S`` (module docstring: the Stribeck region). Data
+    without a rate (exact samples, used as they are) keep every equation."""
+    if data.rate_hz <= 0.0:
+        return np.ones(3 * len(data.q), dtype=bool)
+    return (np.abs(_parallel(data, data.qd)) >= MIN_SPEED_M_S).reshape(-1)
+
+
+def _system(reg: Regressor, data: IdentificationData) -> tuple[np.ndarray, np.ndarray]:
+    """(W standard, τ) of the sliding equations, both through the parallel filter."""
+    keep = _sliding(data)
+    if keep.sum() < 2 * len(STANDARD_NAMES):
+        raise IdentificationError(f"only {int(keep.sum())} samples slide faster than "
+                                  f"{MIN_SPEED_M_S * 1e3:.0f} mm/s: the excitation is too slow")
+    return _standard_rows(reg, data)[keep], _forces(data)[keep]
 
 
 @dataclass
@@ -101,8 +188,8 @@ class BaseEstimate:
 
 def estimate_base(reg: Regressor, data: IdentificationData) -> BaseEstimate:
     """OLS on the base parameters with their standard deviations."""
-    w = _standard_rows(reg, data)[:, reg.base.base_index]
-    y = data.tau.reshape(-1)
+    w_std, y = _system(reg, data)
+    w = w_std[:, reg.base.base_index]
     theta, *_ = np.linalg.lstsq(w, y, rcond=None)
     r = y - w @ theta
     dof = max(1, len(y) - len(theta))
@@ -141,8 +228,8 @@ def nominal_physical(description: RobotDescription) -> np.ndarray:
 def estimate_physical(reg: Regressor, data: IdentificationData,
                       nominal: RobotDescription) -> np.ndarray:
     """Bounded LS in the description's parameters with a weak prior (module docstring)."""
-    a = _physical_columns(_standard_rows(reg, data))
-    y = data.tau.reshape(-1)
+    w_std, y = _system(reg, data)
+    a = _physical_columns(w_std)
     p0 = nominal_physical(nominal)
     scale = np.maximum(np.abs(p0), 1e-3)
     scale[1:4] = max(scale[0], 0.1) * 0.05              # rod first moments: ~ kg × 5 cm
@@ -214,7 +301,10 @@ def force_prediction_error(description: RobotDescription, data: IdentificationDa
     for j in range(len(data.q)):
         st = model.dyn.state(data.q[j], data.qd[j], out=st)
         pred[j] = model.dyn.inverse_dynamics(st, data.qdd[j])
-    err = pred - data.tau
-    peak = float(np.abs(data.tau).max())
+    # Prediction and measurement through the same (parallel) filter.
+    pred = _parallel(data, pred)
+    tau = _parallel(data, data.tau)
+    err = pred - tau
+    peak = float(np.abs(tau).max())
     rms = float(np.sqrt(np.mean(err ** 2)))
     return {"rms_n": rms, "peak_n": peak, "rms_pct_of_peak": 100.0 * rms / peak}

@@ -121,3 +121,21 @@ def optimize_excitation(model: RobotModel | None = None, seed: int = 0,
     if not exc.within_limits():
         raise ConfigurationError("excitation optimisation left the robot's limits")
     return exc
+
+
+def benchmark_excitation(q0: float = Q0_M) -> FourierExcitation:
+    """The tracking benchmark's trajectory (``rt.control.experiment.benchmark_reference``:
+    0.030 m at 0.25 Hz plus 0.015 m at 0.6 Hz per slider, phases 0, 2π/3, 4π/3) as a Fourier
+    excitation of base frequency 0.05 Hz (harmonics 5 and 12): the validation trajectory, unlike
+    the optimised excitation, that the RT process plays as the same kind of program."""
+    f0 = 0.05
+    w = 2.0 * math.pi * f0
+    a = np.zeros((3, 12))
+    b = np.zeros((3, 12))
+    for i in range(3):
+        ph = 2.0 * math.pi * i / 3.0
+        for k, amp in ((5, 0.030), (12, 0.015)):
+            # amp sin(kωt + φ) = amp cos φ sin kωt + amp sin φ cos kωt
+            a[i, k - 1] = amp * math.cos(ph) * k * w
+            b[i, k - 1] = -amp * math.sin(ph) * k * w
+    return FourierExcitation(a, b, q0, f0)

@@ -125,6 +125,10 @@ class TwinPlant:
         self._delay_left = 0
         self._drives_on = False
         self._drives_changed_t = -1.0e9     # powered off since forever: brakes on
+        # Amplifier input offsets (V), added to the commands while the drives are enabled.
+        self.amp_offset_v = self.imperfections.amplifier_offsets_v()
+        self._with_offset = bool(np.any(self.amp_offset_v != 0.0))
+        self._volts_in = np.zeros(3)
         home = self.kin.ik(0.5 * sum(self.kin.stroke) + self._rise(), 0.0, 0.0)
         self._pack_real(home.z)
         self.set_state(home.q)
@@ -304,6 +308,9 @@ class TwinPlant:
     def advance(self, dt: float, volts) -> None:
         """Hold amplifier commands ``volts`` (V, after the DAC) for ``dt`` s and integrate."""
         n = max(1, round(dt * self.physics_rate_hz))
+        if self._with_offset and self._drives_on:
+            np.add(volts, self.amp_offset_v, out=self._volts_in)
+            volts = self._volts_in
         if self.compiled:
             if type(volts) is not np.ndarray:
                 volts = np.asarray(volts, dtype=np.float64)

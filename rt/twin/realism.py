@@ -44,7 +44,15 @@ Two things separate a real rig from the model its controllers use:
      turning with the platform's tilt (the product must bias the sensor before force work);
    * the ATI cable, hanging from the platform to a fixed point: its weight share and the
      stiffness of the loop it forms pull the platform down (``cable_weight_n`` 2 N at home,
-     ``cable_stiffness_n_per_m`` 30 N/m per metre of heave).
+     ``cable_stiffness_n_per_m`` 30 N/m per metre of heave);
+   * a constant offset at each amplifier's input (``amplifier_offset_v``, per axis drawn
+     uniformly in ± that amount with ``amplifier_offset_seed``), added while the drives are
+     enabled: the PCI-1720's zero-scale error (±1 LSB, 4.9 mV) plus the residual input offset
+     of an analog servo amplifier after its balance trim (≈ ±10 mV, drifting with
+     temperature) — ±15 mV, i.e. up to ±5 N at the slider (339 N/V). The same term stands for
+     a direction asymmetry of the screw's Coulomb friction while an axis slides (lifting vs
+     lowering the gravity share through a screw of forward/backward efficiency 0.9/0.8 differs
+     by ≈ 4 N): a constant force while moving either way is indistinguishable from it.
 
 ``RigImperfections.none()`` switches every effect off (an ideal twin: for tests of the ideal
 physics). Units: SI throughout.
@@ -95,6 +103,13 @@ class RigImperfections(BaseModel):
     ati_tool_com_m: Annotated[float, Field(ge=0.0, le=0.5)] = 0.03
     cable_weight_n: NonNeg = 2.0
     cable_stiffness_n_per_m: NonNeg = 30.0
+    amplifier_offset_v: Annotated[float, Field(ge=0.0, le=0.5, allow_inf_nan=False)] = 0.015
+    amplifier_offset_seed: int = 2012
+
+    def amplifier_offsets_v(self) -> np.ndarray:
+        """The per-axis amplifier input offsets (V): the seeded draw of the docstring."""
+        rng = np.random.default_rng(self.amplifier_offset_seed)
+        return self.amplifier_offset_v * rng.uniform(-1.0, 1.0, 3)
 
     @classmethod
     def none(cls) -> RigImperfections:
@@ -104,7 +119,7 @@ class RigImperfections(BaseModel):
                    viscous_per_k=0.0, coulomb_per_k=0.0, encoder_latency_s=0.0,
                    ati_filter_hz=0.0, brake_holding_force_n=0.0, ati_tool_mass_kg=0.0,
                    cable_weight_n=0.0,
-                   cable_stiffness_n_per_m=0.0)
+                   cable_stiffness_n_per_m=0.0, amplifier_offset_v=0.0)
 
     @property
     def ideal(self) -> bool:
