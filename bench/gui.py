@@ -73,7 +73,9 @@ def _without_gui(endpoint: str, doc: dict[str, Any]) -> dict[str, Any]:
             except InputError as exc:
                 if attempt == START_ATTEMPTS - 1:
                     raise
-                cleared.append(f"refused: {exc}")
+                failed = c.status().get("failed_blocks") or {}
+                cleared.append(f"refused: {exc}" + (f" (failed blocks: {failed})"
+                                                    if failed else ""))
         while c.session_status()["session"] == sid:
             time.sleep(0.2)
         after = c.status()
