@@ -42,6 +42,11 @@ from rt.sessions import PatientInfo, SessionContext
 
 #: Where a session_start's protocol is said to come from in messages.
 DOCUMENT_SOURCE = "session_start.protocol"
+#: The worker's nice value: it computes for seconds at 100 % of a core, and must never take a
+#: core from the RT process's threads (which run above ordinary processes anyway,
+#: ``rt.engine.rt_hygiene.gil_peer``) nor from a GUI on the same machine; at nice 10 it still
+#: gets a core that nothing else wants.
+WORKER_NICE = 10
 
 
 def _data_field(protocol: ProtocolModel) -> str | None:
@@ -112,9 +117,11 @@ class ProtocolSessions:
     """The RT process's session factory (``rt.sessions.SessionFactory``): each ``prepare``
     runs :func:`prepare_session` in the worker process."""
 
-    def __init__(self, base_dir: Path = LIBRARY_DIR, in_process: bool = False):
+    def __init__(self, base_dir: Path = LIBRARY_DIR, in_process: bool = False,
+                 worker_nice: int = WORKER_NICE):
         self.base_dir = base_dir
         self.in_process = in_process
+        self.worker_nice = int(worker_nice)
         self._pool: ProcessPoolExecutor | None = None
         self._lock = threading.Lock()
 
@@ -124,7 +131,7 @@ class ProtocolSessions:
                 # spawn: a fresh interpreter, nothing inherited from the RT process's threads.
                 self._pool = ProcessPoolExecutor(
                     max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                    initializer=_end_with_parent, initargs=(os.getpid(),))
+                    initializer=_worker_init, initargs=(os.getpid(), self.worker_nice))
             return self._pool
 
     def warm(self, description: Any) -> None:
@@ -151,6 +158,15 @@ class ProtocolSessions:
 
 #: How often the worker looks whether the RT process is still its parent (s).
 PARENT_POLL_S = 0.5
+
+
+def _worker_init(parent_pid: int, nice: int) -> None:
+    """The worker's initializer: an ordinary process at ``nice`` whatever it inherited, and
+    ended with its RT process (:func:`_end_with_parent`)."""
+    from rt.engine.rt_hygiene import ordinary_process_priority
+
+    ordinary_process_priority(nice)
+    _end_with_parent(parent_pid)
 
 
 def _end_with_parent(parent_pid: int) -> None:
