@@ -43,8 +43,10 @@ VARIANTS: dict[str, str] = {
     "json": "recording in JSON (before issue 16)",
     "no_recorder": "sessions not recorded (a recorder that drops every message)",
     "no_record_rows": "the pump does not feed the recorder's wrench/reference/ankle channels",
+    "no_figures": "the pump computes no session figures (SessionFigures.add skipped)",
     "no_telemetry": "telemetry published at 0.2 Hz instead of 60 Hz",
     "no_fifo": "the loop thread without SCHED_FIFO (plain CFS thread)",
+    "no_gil_hold": "one GIL switch interval (0.2 ms) during cycles too (Loop gil_hold_s=None)",
 }
 
 PATIENT = {"id": "BENCH", "weight_kg": 70.0}
@@ -59,7 +61,7 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
 
     tokens = set(variant.split("+")) - {"base"}
     if "shipped" in tokens:
-        tokens |= {"no_peer_prio", "worker_nice0", "f32"}
+        tokens |= {"no_peer_prio", "worker_nice0", "f32", "no_gil_hold"}
     real_build = service.build_rt_loop
 
     def build(cfg: Any) -> Any:
@@ -87,11 +89,19 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
         writer.SessionRecorder = NullRecorder  # type: ignore[misc,assignment]
     if "no_record_rows" in tokens:
         service.record_rows = lambda *a, **k: None  # type: ignore[assignment]
+    if "no_figures" in tokens:
+        import protocols.session as psession
+        psession.SessionFigures.add = lambda self, rows: None  # type: ignore[method-assign]
     if "no_telemetry" in tokens:
         config = config.model_copy(update={"telemetry_hz": 0.2})
+    loop_kw: dict[str, Any] = {}
     if "no_fifo" in tokens:
+        loop_kw["rt_priority"] = None
+    if "no_gil_hold" in tokens:
+        loop_kw["gil_hold_s"] = None
+    if loop_kw:
         import rt.position_loop as plmod
-        plmod.Loop = functools.partial(plmod.Loop, rt_priority=None)  # type: ignore[misc]
+        plmod.Loop = functools.partial(plmod.Loop, **loop_kw)  # type: ignore[misc]
     return config
 
 
