@@ -46,6 +46,7 @@ VARIANTS: dict[str, str] = {
     "no_figures": "the pump computes no session figures (SessionFigures.add skipped)",
     "no_telemetry": "telemetry published at 0.2 Hz instead of 60 Hz",
     "no_fifo": "the loop thread without SCHED_FIFO (plain CFS thread)",
+    "hold1": "the GIL switch interval during cycles 1 ms instead of 5 ms",
     "no_gil_hold": "one GIL switch interval (0.2 ms) during cycles too (Loop gil_hold_s=None)",
 }
 
@@ -56,8 +57,8 @@ PATIENT = {"id": "BENCH", "weight_kg": 70.0}
 def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any]) -> Any:
     import functools
 
-    import rt.recording.writer as writer
-    import rt.service as service
+    from rt import service
+    from rt.recording import writer
 
     tokens = set(variant.split("+")) - {"base"}
     if "shipped" in tokens:
@@ -99,6 +100,8 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
         loop_kw["rt_priority"] = None
     if "no_gil_hold" in tokens:
         loop_kw["gil_hold_s"] = None
+    elif "hold1" in tokens:
+        loop_kw["gil_hold_s"] = 0.001
     if loop_kw:
         import rt.position_loop as plmod
         plmod.Loop = functools.partial(plmod.Loop, **loop_kw)  # type: ignore[misc]
@@ -143,7 +146,7 @@ def _phase(lat: Any, cyc: Any, first: int, last: int, total: int, tol_ns: float)
     cseg = np.asarray(cyc[lo:hi], dtype=float)
     if not len(seg):
         return {"cycles": 0}
-    return {"cycles": int(len(seg)), "misses": int((seg > tol_ns).sum()),
+    return {"cycles": len(seg), "misses": int((seg > tol_ns).sum()),
             "misses_per_1000": round(1000.0 * float((seg > tol_ns).mean()), 2),
             "late_p99_us": round(float(np.percentile(seg, 99)) / 1e3, 1),
             "late_max_us": round(float(seg.max()) / 1e3, 1),

@@ -17,7 +17,6 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from rt.errors import InputError
 from rt.recording.channels import (
-    ANKLE,
     ANKLE_PROTO,
     CHANNELS,
     EVENTS,

@@ -297,8 +297,8 @@ def test_the_preflight_worker_ends_when_its_rt_process_is_killed(tmp_path):
 
 
 def _fifo_permitted() -> bool:
-    probe = subprocess.run([sys.executable, "-c", "import os; os.sched_setscheduler(0, "
-                            "os.SCHED_FIFO, os.sched_param(1))"], capture_output=True)
+    code = "import os; os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))"
+    probe = subprocess.run([sys.executable, "-c", code], capture_output=True, check=False)
     return probe.returncode == 0
 
 
@@ -312,7 +312,7 @@ def test_rt_process_threads_run_above_ordinary_processes_and_its_worker_below(tm
     from protocols.rt_session import WORKER_NICE
 
     reset = getattr(os, "SCHED_RESET_ON_FORK", 0)
-    proc, endpoint, pub = start_rt("--config", tolerant_config(tmp_path))
+    proc, endpoint, _pub = start_rt("--config", tolerant_config(tmp_path))
     try:
         with RtClient(endpoint, timeout_s=5.0) as c:
             assert c.status()["cycles"] > 0

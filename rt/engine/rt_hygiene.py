@@ -281,7 +281,7 @@ def gil_peer(priority: int | None, nice: int = -10) -> Iterator[str]:
             prio = max(os.sched_get_priority_min(os.SCHED_FIFO), int(priority))
             os.sched_setscheduler(0, os.SCHED_FIFO | reset, os.sched_param(prio))
             detail = f"SCHED_FIFO {prio}"
-            undo = lambda: restore_scheduler(prev)  # noqa: E731
+            undo = lambda: restore_scheduler(prev)
         except OSError:
             undo = None
     if undo is None:
@@ -290,7 +290,7 @@ def gil_peer(priority: int | None, nice: int = -10) -> Iterator[str]:
             prev_nice = os.getpriority(os.PRIO_PROCESS, tid)
             os.setpriority(os.PRIO_PROCESS, tid, nice)
             detail = f"nice {nice}"
-            undo = lambda: os.setpriority(os.PRIO_PROCESS, tid, prev_nice)  # noqa: E731
+            undo = lambda: os.setpriority(os.PRIO_PROCESS, tid, prev_nice)
         except (OSError, AttributeError):
             undo = None
     try:

@@ -178,7 +178,7 @@ def _per_unit(scale: float) -> float:
 
 def _from_count(v: int, f: ProtoField) -> float | None:
     """A fixed-point count → its SI value (None for the not-finite mark)."""
-    return None if v == NOT_FINITE[f.kind] else v / _per_unit(f.scale)  # type: ignore[arg-type]
+    return None if v == NOT_FINITE[f.kind] else v / _per_unit(f.scale)
 
 
 def _to_count(x: Any, f: ProtoField) -> int:
@@ -189,7 +189,7 @@ def _to_count(x: Any, f: ProtoField) -> int:
     v = float(x)
     if not math.isfinite(v):
         return NOT_FINITE[f.kind]
-    c = round(v * _per_unit(f.scale))  # type: ignore[arg-type]
+    c = round(v * _per_unit(f.scale))
     if abs(c) > _COUNT_LIMIT[f.kind]:
         raise ProtoCodecError(f"{f.name}: {v} is beyond what {f.kind.value} counts of "
                               f"{f.scale} hold")
@@ -199,7 +199,7 @@ def _to_count(x: Any, f: ProtoField) -> int:
 def _counts(values: np.ndarray, f: ProtoField) -> np.ndarray:
     """Vectorised :func:`_to_count` for a ring block: a value that is not finite or beyond
     the range gets the not-finite mark (a ring value cannot be refused)."""
-    c = np.rint(values * _per_unit(f.scale))  # type: ignore[arg-type]
+    c = np.rint(values * _per_unit(f.scale))
     bad = ~(np.abs(c) <= _COUNT_LIMIT[f.kind])           # NaN compares False: bad too
     c[bad] = 0.0
     out = c.astype(np.int64)
@@ -449,7 +449,7 @@ class ProtoMessage:
             parts.append(bytes((f.tag,)) + _varint(len(data)) + data)
         unknown = set(values) - {f.dict_key for f in self.fields if f.kind is Kind.STRING}
         if unknown:
-            raise ProtoCodecError(f"{self.name} has no string field {sorted(unknown)[0]!r}")
+            raise ProtoCodecError(f"{self.name} has no string field {min(unknown)!r}")
         return b"".join(parts)
 
     # ------------------------------------------------------------------ decoding

@@ -62,10 +62,10 @@ from rt.recording.channels import (
     METADATA_REQUIRED_FROM_CALLER,
     PROTOS,
     REFERENCE,
-    T_QUANTUM_S,
     SCHEMA_ENCODING,
     STATE,
     STATE_ROW_LAYOUT,
+    T_QUANTUM_S,
     WRENCH,
     ChannelSpec,
     Encoding,
@@ -322,9 +322,12 @@ class SessionRecorder:
         #: topic → protobuf message, for the channels written as protobuf: the standard
         #: channels' message of this encoding, an added channel's own.
         standard = PROTOS[self.encoding]
-        self._protos: dict[str, ProtoMessage] = {} if self.encoding is Encoding.JSON else {
-            topic: standard.get(topic, spec.proto) for topic, spec in self.channels.items()
-            if standard.get(topic, spec.proto) is not None}  # type: ignore[misc]
+        self._protos: dict[str, ProtoMessage] = {}
+        if self.encoding is not Encoding.JSON:
+            for topic, spec in self.channels.items():
+                proto = standard.get(topic, spec.proto)
+                if proto is not None:
+                    self._protos[topic] = proto
         # Fixed-point recordings keep loop times to the µs (their ``t_us``); the log times
         # follow, so a message's log time and its payload agree.
         self._t_quantum = T_QUANTUM_S if self.encoding is Encoding.PROTOBUF else None
