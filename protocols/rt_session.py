@@ -42,11 +42,13 @@ from rt.sessions import PatientInfo, SessionContext
 
 #: Where a session_start's protocol is said to come from in messages.
 DOCUMENT_SOURCE = "session_start.protocol"
-#: The worker's nice value: it computes for seconds at 100 % of a core, and must never take a
-#: core from the RT process's threads (which run above ordinary processes anyway,
-#: ``rt.engine.rt_hygiene.gil_peer``) nor from a GUI on the same machine; at nice 10 it still
-#: gets a core that nothing else wants.
-WORKER_NICE = 10
+#: The worker's nice value. 0: the RT process's threads run above every ordinary process
+#: (``rt.engine.rt_hygiene.gil_peer``), so the worker's seconds at 100 % of a core cannot
+#: delay them whatever its nice; a positive nice would only starve the pre-flight on a busy
+#: machine (measured: nice 10 at load 19 took a 12 s sine's pre-flight past 70 s and a
+#: session_start past its 120 s). Whatever the RT process's own policy, the worker starts as
+#: an ordinary process (SCHED_RESET_ON_FORK, ``ordinary_process_priority``).
+WORKER_NICE = 0
 
 
 def _data_field(protocol: ProtocolModel) -> str | None:

@@ -136,10 +136,12 @@ class Loop:
     interval, then forces its holder to drop it; with one short interval (0.2 ms) any busy
     thread took the GIL from the loop in the middle of a cycle, and the loop waited as long
     again to get it back: cycles stretched from 0.2 to 0.8 ms and 4 % of them started late
-    during a recorded session (bench/rt_deadlines.py). While a cycle runs the interval is long
-    (5 ms, longer than any cycle), so the others wait for the loop's sleep, which releases the
-    GIL; while the loop sleeps it is short again, so that the loop, waking 150 µs before its
-    deadline, takes the GIL back within it from whoever holds it.
+    during a recorded session (bench/rt_deadlines.py, loaded machine). While a cycle runs the
+    interval is long (1 ms, longer than a cycle's 0.2-0.4 ms), so the others wait for the
+    loop's sleep, which releases the GIL; while the loop sleeps it is short again, so that the
+    loop, waking 150 µs before its deadline, takes the GIL back within it from whoever holds
+    it. Not longer than 1 ms: a cycle that releases the GIL itself (a contended lock when a
+    safety event is published) waits up to one interval to get it back.
     """
 
     def __init__(self, graph: Graph, rate_hz: float = 1000.0, mode: str = "realtime",
@@ -149,7 +151,7 @@ class Loop:
                  max_behind_periods: float = 1.0,
                  rt_priority: int | None = 80, cpus: Iterable[int] | None = None,
                  lock_memory: bool = True, switch_interval_s: float | None = 0.0002,
-                 manage_gc: bool = True, gil_hold_s: float | None = 0.005,
+                 manage_gc: bool = True, gil_hold_s: float | None = 0.001,
                  command_capacity: int = 64,
                  stats_capacity: int = DEFAULT_CAPACITY) -> None:
         if not isinstance(graph, Graph):
