@@ -306,7 +306,7 @@ def test_rt_process_threads_run_above_ordinary_processes_and_its_worker_below(tm
     """Every thread of the RT process shares the GIL with the loop: the loop is SCHED_FIFO 80,
     the others SCHED_FIFO 1 (a GIL holder is never descheduled for an ordinary process, which
     would make the loop wait, rt_hygiene.gil_peer); the pre-flight worker it spawned is an
-    ordinary process at nice 10 (its seconds of computing never take a core from them)."""
+    ordinary process at WORKER_NICE (its initializer resets what it inherited)."""
     if not _fifo_permitted():
         pytest.skip("SCHED_FIFO not permitted here")
     from protocols.rt_session import WORKER_NICE
@@ -335,9 +335,15 @@ def test_rt_process_threads_run_above_ordinary_processes_and_its_worker_below(tm
                 try:
                     with open(f"/proc/{proc.pid}/task/{tid}/children") as f:
                         children += [int(x) for x in f.read().split()]
+                    # The pool's worker (multiprocessing's resource tracker, a child too,
+                    # sleeps: it keeps what it inherited).
+                    children = [ch for ch in children
+                                if b"spawn_main" in Path(f"/proc/{ch}/cmdline").read_bytes()]
                 except FileNotFoundError:
                     continue
+            # The worker starts with what it inherited; its initializer resets it.
             if children and all(os.getpriority(os.PRIO_PROCESS, ch) == WORKER_NICE
+                                and os.sched_getscheduler(ch) & ~reset == os.SCHED_OTHER
                                 for ch in children):
                 break
             time.sleep(0.1)

@@ -257,8 +257,8 @@ def realtime_thread(priority: int | None = 80, cpus: Iterable[int] | None = None
 def gil_peer(priority: int | None, nice: int = -10) -> Iterator[str]:
     """Raise the calling thread, which shares the GIL with a SCHED_FIFO loop thread of the same
     process, above ordinary processes for the duration of the ``with``: ``SCHED_FIFO`` at
-    ``priority`` (below the loop's) with ``SCHED_RESET_ON_FORK``, so that processes started
-    from it begin as ordinary ones; when FIFO is not permitted, a ``nice`` value instead;
+    ``priority`` (below the loop's), inherited by the threads it starts; when FIFO is not
+    permitted, a ``nice`` value instead;
     ``priority=None`` does nothing. Yields what was done; restores the thread on exit.
 
     Why: the GIL is a lock the loop shares with these threads, and CPython's GIL has no
@@ -274,12 +274,14 @@ def gil_peer(priority: int | None, nice: int = -10) -> Iterator[str]:
         return
     undo: Callable[[], None] | None = None
     detail = "not permitted"
-    reset = getattr(os, "SCHED_RESET_ON_FORK", 0)
     if hasattr(os, "sched_setscheduler"):
         try:
             prev = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
             prio = max(os.sched_get_priority_min(os.SCHED_FIFO), int(priority))
-            os.sched_setscheduler(0, os.SCHED_FIFO | reset, os.sched_param(prio))
+            # No SCHED_RESET_ON_FORK: it applies to threads too (clone), and the threads are
+            # what must inherit. A process started from here inherits FIFO until it resets
+            # itself (the pre-flight worker's initializer: ordinary_process_priority).
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
             detail = f"SCHED_FIFO {prio}"
             undo = lambda: restore_scheduler(prev)
         except OSError:
