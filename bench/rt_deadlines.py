@@ -46,7 +46,9 @@ VARIANTS: dict[str, str] = {
     "no_figures": "the pump computes no session figures (SessionFigures.add skipped)",
     "no_telemetry": "telemetry published at 0.2 Hz instead of 60 Hz",
     "no_fifo": "the loop thread without SCHED_FIFO (plain CFS thread)",
-    "hold5": "the GIL switch interval during cycles 5 ms instead of 1 ms",
+    "peer_prio": "the RT process's other threads at SCHED_FIFO 1 (RtConfig.service_priority)",
+    "hold1": "the loop holds the GIL for its cycle (Loop gil_hold_s=0.001)",
+    "hold5": "as hold1 with 5 ms",
     "no_gil_hold": "one GIL switch interval (0.2 ms) during cycles too (Loop gil_hold_s=None)",
 }
 
@@ -72,6 +74,8 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
     service.build_rt_loop = build
     if "no_peer_prio" in tokens:
         config = config.model_copy(update={"service_priority": None})
+    elif "peer_prio" in tokens:
+        config = config.model_copy(update={"service_priority": 1})
     if "worker_nice10" in tokens:
         ext["sessions"].worker_nice = 10
     if "f32" in tokens or "json" in tokens:
@@ -102,6 +106,8 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
         loop_kw["gil_hold_s"] = None
     elif "hold5" in tokens:
         loop_kw["gil_hold_s"] = 0.005
+    elif "hold1" in tokens:
+        loop_kw["gil_hold_s"] = 0.001
     if loop_kw:
         import rt.position_loop as plmod
         plmod.Loop = functools.partial(plmod.Loop, **loop_kw)  # type: ignore[misc]

@@ -137,9 +137,10 @@ class RtConfig(BaseModel):
     recordings_dir: str | None = None
     #: SCHED_FIFO priority of the RT process's other threads (IPC, telemetry, sessions, the
     #: recorder), below the loop's 80: they share the GIL with the loop, and one of them
-    #: descheduled while holding it makes the loop late (``rt_hygiene.gil_peer``). None leaves
-    #: them ordinary threads.
-    service_priority: int | None = Field(default=1, ge=1, le=79)
+    #: descheduled while holding it makes the loop late (``rt_hygiene.gil_peer``). None (the
+    #: default until a quiet machine shows it helps) leaves them ordinary threads; 1 is the
+    #: value studied.
+    service_priority: int | None = Field(default=None, ge=1, le=79)
 
     def limits_of_robot(self) -> RobotLimits:
         return self.robot_limits.model_copy(

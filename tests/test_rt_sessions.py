@@ -312,7 +312,10 @@ def test_rt_process_threads_run_above_ordinary_processes_and_its_worker_below(tm
     from protocols.rt_session import WORKER_NICE
 
     reset = getattr(os, "SCHED_RESET_ON_FORK", 0)
-    proc, endpoint, _pub = start_rt("--config", tolerant_config(tmp_path))
+    config = tolerant_config(tmp_path)
+    with open(config, "a") as f:
+        f.write("service_priority: 1\n")
+    proc, endpoint, _pub = start_rt("--config", config)
     try:
         with RtClient(endpoint, timeout_s=5.0) as c:
             assert c.status()["cycles"] > 0

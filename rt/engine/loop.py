@@ -128,8 +128,10 @@ class Loop:
       tried in realtime mode (:func:`rt_hygiene.realtime_thread`); None/False skips one.
     * ``manage_gc`` — freeze and disable gc while running (both modes; the collection before
       freezing is only done in realtime mode, where its tens of ms at start-up do not matter).
-    * ``gil_hold_s`` — realtime mode: the GIL switch interval while a cycle runs (``None``:
-      unchanged). Between cycles the interval is ``switch_interval_s``.
+    * ``gil_hold_s`` — realtime mode: the GIL switch interval while a cycle runs (``None``, the
+      default: unchanged; 0.001 is the value studied). Between cycles the interval is
+      ``switch_interval_s``. Off by default until a quiet machine shows it helps: on a loaded
+      one single runs were inconclusive (closing note of branch rtsession).
 
     Why the two intervals: the loop shares the GIL with the process's other threads (IPC,
     telemetry, sessions, the recorder). A thread that asks for the GIL waits one switch
@@ -151,7 +153,7 @@ class Loop:
                  max_behind_periods: float = 1.0,
                  rt_priority: int | None = 80, cpus: Iterable[int] | None = None,
                  lock_memory: bool = True, switch_interval_s: float | None = 0.0002,
-                 manage_gc: bool = True, gil_hold_s: float | None = 0.001,
+                 manage_gc: bool = True, gil_hold_s: float | None = None,
                  command_capacity: int = 64,
                  stats_capacity: int = DEFAULT_CAPACITY) -> None:
         if not isinstance(graph, Graph):
