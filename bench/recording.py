@@ -5,8 +5,9 @@ Run:  .venv/bin/python bench/recording.py [--seconds 10] [--from RECORDING.mcap]
 The stream is either a recording's own 1 kHz channels (``--from``: e.g. a twin session's file,
 read back and re-recorded) or the session-like generated stream of the tests
 (``tests/test_recording_encoding.session_signals``: encoder-quantized positions, noisy velocity,
-forces with noise). For each encoding (``json``: recordings before issue 16; ``protobuf``:
-today's) it prints one JSON line:
+forces with noise). For each encoding (``json``: recordings before issue 16; ``protobuf-f32``:
+float32 protobuf, issue 16's first round; ``protobuf``: today's fixed-point protobuf) it prints
+one JSON line:
 
 * ``encode_us`` — the encoding cost per message, median and p99, as the recorder pays it:
   state, one drained block of 20 ring rows (the 20 ms drain period at 1 kHz) divided by its
@@ -63,12 +64,13 @@ def _percentiles(us: list[float]) -> dict[str, float]:
 
 def encode_costs(encoding: str, sig: dict[str, np.ndarray]) -> dict[str, dict[str, float]]:
     """µs per message of the writer thread's encoding step, per channel."""
-    from rt.recording.channels import REFERENCE_PROTO, STATE_PROTO, WRENCH_PROTO
+    from rt.recording.channels import PROTOS, REFERENCE, STATE, WRENCH, Encoding
     from rt.recording.writer import STATE_LAYOUT, encode_json
 
+    protos = PROTOS[Encoding(encoding)]
     state, wrench, fz_ref = sig["state"], sig["wrench"], sig["fz_ref"]
     encode_rows: Callable[[np.ndarray], list[bytes]] = (
-        STATE_LAYOUT.encode if encoding == "json" else STATE_PROTO.encode_rows)
+        STATE_LAYOUT.encode if encoding == "json" else protos[STATE].encode_rows)
     block = 20
     out: dict[str, list[float]] = {"state": [], "wrench": [], "reference": []}
     for k in range(0, len(state) - block, block):
@@ -78,7 +80,7 @@ def encode_costs(encoding: str, sig: dict[str, np.ndarray]) -> dict[str, dict[st
         out["state"].append((time.perf_counter_ns() - t0) / 1e3 / block)
     one = encode_json if encoding == "json" else None
     if one is None:
-        wrench_rows = WRENCH_PROTO.row_encoder([(n, 1) for n in (
+        wrench_rows = protos[WRENCH].row_encoder([(n, 1) for n in (
             "t", "fx", "fy", "fz", "tx", "ty", "tz", "stale", "saturated")])
         for k in range(0, len(wrench) - block, block):
             queued = [(float(w[0]), *map(float, w[1:]), False, False)
@@ -97,7 +99,7 @@ def encode_costs(encoding: str, sig: dict[str, np.ndarray]) -> dict[str, dict[st
         if one is not None:
             one(msg)
         t1 = time.perf_counter_ns()
-        (one or REFERENCE_PROTO.encode)(ref)
+        (one or protos[REFERENCE].encode)(ref)
         t2 = time.perf_counter_ns()
         if one is not None:
             out["wrench"].append((t1 - t0) / 1e3)
@@ -122,7 +124,7 @@ def main() -> int:
         sig, source = session_signals(args.seconds), f"generated {args.seconds:g} s"
     duration = float(sig["state"][-1, 0] - sig["state"][0, 0]) + 1e-3
     tmp = Path(tempfile.mkdtemp(prefix="talus-bench-recording-"))
-    for encoding in ("json", "protobuf"):
+    for encoding in ("json", "protobuf-f32", "protobuf"):
         summary = record(tmp / f"{encoding}.mcap", sig, encoding, events=False)
         n = sum(summary["messages"].values())
         print(json.dumps({

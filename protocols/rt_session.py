@@ -43,6 +43,13 @@ from rt.sessions import PatientInfo, SessionContext
 
 #: Where a session_start's protocol is said to come from in messages.
 DOCUMENT_SOURCE = "session_start.protocol"
+#: The worker's nice value. 0: the RT process's threads run above every ordinary process
+#: (``rt.engine.rt_hygiene.gil_peer``), so the worker's seconds at 100 % of a core cannot
+#: delay them whatever its nice; a positive nice would only starve the pre-flight on a busy
+#: machine (measured: nice 10 at load 19 took a 12 s sine's pre-flight past 70 s and a
+#: session_start past its 120 s). Whatever the RT process's own policy, the worker starts as
+#: an ordinary process (SCHED_RESET_ON_FORK, ``ordinary_process_priority``).
+WORKER_NICE = 0
 
 
 def _data_field(protocol: ProtocolModel) -> str | None:
@@ -113,9 +120,11 @@ class ProtocolSessions:
     """The RT process's session factory (``rt.sessions.SessionFactory``): each ``prepare``
     runs :func:`prepare_session` in the worker process."""
 
-    def __init__(self, base_dir: Path = LIBRARY_DIR, in_process: bool = False):
+    def __init__(self, base_dir: Path = LIBRARY_DIR, in_process: bool = False,
+                 worker_nice: int = WORKER_NICE):
         self.base_dir = base_dir
         self.in_process = in_process
+        self.worker_nice = int(worker_nice)
         self._pool: ProcessPoolExecutor | None = None
         self._lock = threading.Lock()
 
@@ -125,7 +134,7 @@ class ProtocolSessions:
                 # spawn: a fresh interpreter, nothing inherited from the RT process's threads.
                 self._pool = ProcessPoolExecutor(
                     max_workers=1, mp_context=multiprocessing.get_context("spawn"),
-                    initializer=_end_with_parent, initargs=(os.getpid(),))
+                    initializer=_worker_init, initargs=(os.getpid(), self.worker_nice))
             return self._pool
 
     def warm(self, description: Any) -> None:
@@ -152,6 +161,15 @@ class ProtocolSessions:
 
 #: How often the worker looks whether the RT process is still its parent (s).
 PARENT_POLL_S = 0.5
+
+
+def _worker_init(parent_pid: int, nice: int) -> None:
+    """The worker's initializer: an ordinary process at ``nice`` whatever it inherited, and
+    ended with its RT process (:func:`_end_with_parent`)."""
+    from rt.engine.rt_hygiene import ordinary_process_priority
+
+    ordinary_process_priority(nice)
+    _end_with_parent(parent_pid)
 
 
 def _end_with_parent(parent_pid: int) -> None:

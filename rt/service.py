@@ -135,6 +135,12 @@ class RtConfig(BaseModel):
     #: Where sessions are recorded unless the client names a directory (default:
     #: :func:`default_recordings_dir`).
     recordings_dir: str | None = None
+    #: SCHED_FIFO priority of the RT process's other threads (IPC, telemetry, sessions, the
+    #: recorder), below the loop's 80: they share the GIL with the loop, and one of them
+    #: descheduled while holding it makes the loop late (``rt_hygiene.gil_peer``). None (the
+    #: default until a quiet machine shows it helps) leaves them ordinary threads; 1 is the
+    #: value studied.
+    service_priority: int | None = Field(default=None, ge=1, le=79)
 
     def limits_of_robot(self) -> RobotLimits:
         return self.robot_limits.model_copy(
@@ -820,6 +826,17 @@ def serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None 
           ) -> dict:
     """Run the RT process until ``stop_event`` is set; returns a summary. ``sessions`` and
     ``programs`` are what the entry point composes in (``talus.composition``)."""
+    from rt.engine.rt_hygiene import gil_peer
+
+    # Entered before any thread starts, so every thread of the RT process inherits it.
+    with gil_peer(config.service_priority if config.loop_mode == "realtime" else None) as how:
+        log.info("RT process threads: %s", how)
+        return _serve(config, stop_event, ready, sessions, programs)
+
+
+def _serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None,
+           sessions: SessionFactory | None,
+           programs: dict[str, Callable[[dict[str, Any], RtService], Program]] | None) -> dict:
     import sys
 
     from rt.ipc.server import RtServer

@@ -270,3 +270,41 @@ def test_hygiene_reports_and_restores_affinity():
     loop2 = Loop(g2, mode="realtime", cpus=[4095])
     assert loop2.run(cycles=3) == 3
     assert loop2.hygiene.affinity is None and "refused" in loop2.hygiene.affinity_detail
+
+
+def test_the_loop_holds_the_gil_for_its_cycle_and_takes_it_back_quickly_when_waking():
+    """While a cycle runs, the GIL switch interval is ``gil_hold_s`` (another thread cannot
+    force the loop off the GIL mid-cycle); while the loop sleeps it is the short one (so the
+    loop, waking, gets the GIL back within it); the process's interval is restored after."""
+    import sys
+
+    clock = FakeClock()
+    seen_sleeping: list[float] = []
+
+    def sleep(s: float) -> None:
+        seen_sleeping.append(sys.getswitchinterval())
+        clock.sleep(s)
+
+    seen_cycling: list[float] = []
+
+    class IntervalProbe(Component):
+        def update(self, t: float, dt: float) -> int:
+            seen_cycling.append(sys.getswitchinterval())
+            return 0
+    b = GraphBuilder()
+    b.add(IntervalProbe("interval"))
+    g = b.build()
+    before = sys.getswitchinterval()
+    try:
+        sys.setswitchinterval(0.0002)
+        loop = Loop(g, rate_hz=1000.0, mode="realtime", clock=clock, sleep=sleep,
+                    gil_hold_s=0.005, **NO_RT)
+        loop.run(cycles=20)
+        assert sys.getswitchinterval() == pytest.approx(0.0002, abs=2e-6)
+    finally:
+        sys.setswitchinterval(before)
+    assert len(seen_cycling) == 20 and len(seen_sleeping) >= 18
+    assert all(x == pytest.approx(0.005, abs=2e-6) for x in seen_cycling)
+    assert all(x == pytest.approx(0.0002, abs=2e-6) for x in seen_sleeping)
+    with pytest.raises(ConfigurationError, match="gil_hold_s"):
+        Loop(g, rate_hz=1000.0, gil_hold_s=0.0, **NO_RT)

@@ -54,9 +54,16 @@ def synthetic_row(k: int) -> list[float]:
     return row
 
 
-def f32(values: list[float]) -> list[float]:
-    """What a float32 field reads back: the nearest float32 (exact, not a tolerance)."""
-    return [float(np.float32(v)) for v in values]
+#: Fixed-point quanta of today's encoding (rt.recording.channels): positions and speeds in
+#: µm and µm/s, forces and volts in mN and mV, torques in mN·m.
+UM, MN = 1e-6, 1e-3
+
+
+def fixed(values: list[float], quantum: float) -> list[float]:
+    """What a fixed-point field reads back: the nearest count of ``quantum`` as the decimal
+    double (exact, not a tolerance)."""
+    per = round(1 / quantum)
+    return [float(np.rint(v * per)) / per for v in values]
 
 
 def bound_tap(capacity: int = 65536) -> tuple[RecorderTap, list[np.ndarray]]:
@@ -122,22 +129,21 @@ def test_round_trip_counts_and_exact_values(session: dict) -> None:
     for k in (0, 1, 1234, N_ROWS - 1):
         row = synthetic_row(k)
         m = data[STATE][k]
-        assert m["t"] == row[0]                   # double: exact
-        # float32 fields: the nearest float32 of what the loop had (channels.py says why
-        # float32 resolves every field far below its sensor's or actuator's resolution).
-        assert m["q"] == f32(row[1:4]) and m["qd"] == f32(row[4:7])
-        assert m["q_ref"] == f32(row[7:10])
-        assert m["tau"] == f32(row[10:13]) and m["volts"] == f32(row[13:16])
+        assert m["t"] == row[0]                   # whole µs: exact
+        # Fixed point: the nearest count of each field's quantum (channels.py says why each
+        # quantum is below its sensor's or actuator's resolution).
+        assert m["q"] == fixed(row[1:4], UM) and m["qd"] == fixed(row[4:7], UM)
+        assert m["q_ref"] == fixed(row[7:10], UM)
+        assert m["tau"] == fixed(row[10:13], MN) and m["volts"] == fixed(row[13:16], MN)
         assert "qd_ref" not in m                  # optional, not recorded
     assert [m["t"] for m in data[STATE]] == [k / RATE_HZ for k in range(N_ROWS)]
     assert len(data[WRENCH]) == N_ROWS
-    fx, tx, ty, tz = f32([1.01, 0.1, -0.2, 0.3])
-    assert data[WRENCH][10] == {"t": 0.01, "fx": fx, "fy": -2.0, "fz": 6.0, "tx": tx,
-                                "ty": ty, "tz": tz, "stale": True, "saturated": False}
+    assert data[WRENCH][10] == {"t": 0.01, "fx": 1.01, "fy": -2.0, "fz": 6.0, "tx": 0.1,
+                                "ty": -0.2, "tz": 0.3, "stale": True, "saturated": False}
     assert data[EVENTS] == [{**e, "values": e["values"]} for e in session["events"]]
     assert len(data[EVENTS]) == 5 and data[EVENTS][0]["reaction"] == "warn"
     assert len(data[REFERENCE]) == N_ROWS // 100
-    assert data[REFERENCE][3] == {"t": 0.3, "force": f32([0.0, 0.0, 30.0])}
+    assert data[REFERENCE][3] == {"t": 0.3, "force": [0.0, 0.0, 30.0]}
     (meta,) = data[METADATA]
     for key, value in METADATA_IN.items():
         assert meta[key] == value
@@ -437,8 +443,8 @@ def test_sigkilled_recording_is_recovered_up_to_the_last_chunk(tmp_path: Path,
     # An exact prefix of what the loop produced: every row, in order, no gap, exact values.
     assert [m["t"] for m in state] == [k / RATE_HZ for k in range(n)]
     for k in (0, n // 2, n - 1):
-        assert state[k]["q"] == f32(synthetic_row(k)[1:4])
-        assert state[k]["volts"] == f32(synthetic_row(k)[13:16])
+        assert state[k]["q"] == fixed(synthetic_row(k)[1:4], UM)
+        assert state[k]["volts"] == fixed(synthetic_row(k)[13:16], MN)
     assert messages[METADATA][0]["patient_id"] == METADATA_IN["patient_id"]
     loss_s = (produced - n) / RATE_HZ
     print(f"\nSIGKILL after {produced} rows: recovered {n} in {info['chunks']} chunks, "
@@ -501,8 +507,8 @@ def test_csv_export_of_state(session: dict, tmp_path: Path) -> None:
     for k in (0, 777, N_ROWS - 1):
         r, expected = rows[k + 1], synthetic_row(k)
         assert float(r[col["t"]]) == expected[0]
-        assert [float(r[col[f"q{i}"]]) for i in range(3)] == f32(expected[1:4])
-        assert [float(r[col[f"tau{i}"]]) for i in range(3)] == f32(expected[10:13])
+        assert [float(r[col[f"q{i}"]]) for i in range(3)] == fixed(expected[1:4], UM)
+        assert [float(r[col[f"tau{i}"]]) for i in range(3)] == fixed(expected[10:13], MN)
         assert r[col["qd_ref0"]] == ""           # optional field, not recorded
         assert int(r[col["log_time_ns"]]) == log_time_ns(expected[0], START_WALL_NS)
 

@@ -1,6 +1,7 @@
-"""Recording encodings (issue 16): protobuf 1 kHz channels round trip, read by the official
-mcap reader with ``mcap_protobuf``; JSON recordings (before issue 16) still read everywhere;
-the size per hour of a generated 10 s recording."""
+"""Recording encodings (issue 16): fixed-point protobuf 1 kHz channels round trip within half
+a quantum, read by the official mcap reader with ``mcap_protobuf``; recordings of the previous
+encodings (float32 protobuf, JSON before issue 16) still read everywhere; the size per hour of
+a generated 10 s recording."""
 from __future__ import annotations
 
 import json
@@ -16,14 +17,17 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from rt.errors import InputError
 from rt.recording.channels import (
+    ANKLE_PROTO,
     CHANNELS,
     EVENTS,
     JSONSCHEMA_METADATA_KEY,
     METADATA,
     REFERENCE,
     REFERENCE_PROTO,
+    REFERENCE_PROTO_F32,
     STATE,
     STATE_PROTO,
+    STATE_PROTO_F32,
     WRENCH,
     WRENCH_PROTO,
 )
@@ -104,13 +108,26 @@ def f32(x: float) -> float:
     return float(np.float32(x))
 
 
+#: Quanta of the fixed-point state fields (rt.recording.channels), SI units per count.
+STATE_QUANTA = {"t": 1e-6, "q": 1e-6, "qd": 1e-6, "q_ref": 1e-6, "tau": 1e-3, "volts": 1e-3}
+WRENCH_QUANTA = {"t": 1e-6, "fx": 1e-3, "fy": 1e-3, "fz": 1e-3, "tx": 1e-3, "ty": 1e-3,
+                 "tz": 1e-3}
+
+
+def fixed(x: float, quantum: float) -> float:
+    """What a fixed-point field reads back: the nearest count, as the decimal double."""
+    per = round(1.0 / quantum)
+    return float(np.rint(x * per)) / per
+
+
 @pytest.fixture(scope="module")
 def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    """The same 2 s session recorded in both encodings."""
+    """The same 2 s session recorded in every encoding: fixed-point protobuf (today's),
+    float32 protobuf and JSON (the previous ones)."""
     d = tmp_path_factory.mktemp("enc")
     sig = session_signals(2.0)
     out = {"sig": sig}
-    for enc in ("protobuf", "json"):
+    for enc in ("protobuf", "protobuf-f32", "json"):
         out[enc] = d / f"{enc}.mcap"
         out[enc + "_summary"] = record(out[enc], sig, enc)
     return out
@@ -118,10 +135,44 @@ def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
 
 # ------------------------------------------------------------------ round trip, every channel
 
-def test_every_channel_round_trips_through_protobuf(pair: dict) -> None:
+def test_every_channel_round_trips_through_fixed_point_protobuf(pair: dict) -> None:
+    """Each value is its nearest count of the field's quantum: within half a quantum (0.5 µm,
+    0.5 µm/s, 0.5 mN, 0.5 mV, 0.5 mN·m, 0.5 µs), bools exact; encoder positions (multiples
+    of 20 µm) exactly."""
     sig = pair["sig"]
     data = read_recording(pair["protobuf"])
     assert pair["protobuf_summary"]["encoding"] == "protobuf"
+    n = len(sig["state"])
+    assert len(data[STATE]) == len(data[WRENCH]) == len(data[REFERENCE]) == n
+    for k in range(0, n, 37):
+        row = sig["state"][k]
+        m = data[STATE][k]
+        for name, cols in (("t", 0), ("q", 1), ("qd", 4), ("q_ref", 7), ("tau", 10),
+                           ("volts", 13)):
+            quantum = STATE_QUANTA[name]
+            values = row[cols:cols + (1 if name == "t" else 3)]
+            got = np.atleast_1d(np.array(m[name], dtype=float))
+            assert got.tolist() == [fixed(v, quantum) for v in values], name
+            assert np.all(np.abs(got - values) <= quantum / 2 * (1 + 1e-9)), name
+        assert m["q"] == pytest.approx(row[1:4], abs=1e-12)     # encoder counts: exact
+        w = sig["wrench"][k]
+        assert data[WRENCH][k] == {
+            **{key: fixed(w[i], WRENCH_QUANTA[key]) for i, key in enumerate(WRENCH_QUANTA)},
+            "stale": k % 7 == 0, "saturated": k % 11 == 0}
+        assert data[REFERENCE][k] == {"t": fixed(w[0], 1e-6),
+                                      "force": [0.0, 0.0, fixed(sig["fz_ref"][k], 1e-3)],
+                                      "phase": "play" if k > 100 else "approach"}
+    # The rare channels stay JSON, exact.
+    assert len(data[EVENTS]) == n // 1000 and data[EVENTS][0]["values"] == {
+        "fz_n": float(sig["wrench"][999][3])}
+    assert data[METADATA][0]["parameters"] == META["parameters"]
+
+
+def test_every_channel_round_trips_through_float32_protobuf(pair: dict) -> None:
+    """The previous encoding (float32, t double) is still written on request and read."""
+    sig = pair["sig"]
+    data = read_recording(pair["protobuf-f32"])
+    assert pair["protobuf-f32_summary"]["encoding"] == "protobuf-f32"
     n = len(sig["state"])
     assert len(data[STATE]) == len(data[WRENCH]) == len(data[REFERENCE]) == n
     for k in range(0, n, 37):
@@ -147,7 +198,8 @@ def test_every_channel_round_trips_through_protobuf(pair: dict) -> None:
 
 
 def test_the_json_encoding_is_exact_and_reads_as_the_same_dicts(pair: dict) -> None:
-    pb, js = read_recording(pair["protobuf"]), read_recording(pair["json"])
+    pb, js = read_recording(pair["protobuf-f32"]), read_recording(pair["json"])
+    fx = read_recording(pair["protobuf"])
     assert pair["json_summary"]["encoding"] == "json"
     assert set(pb) == set(js)
     for topic in (STATE, WRENCH, REFERENCE):
@@ -162,8 +214,18 @@ def test_the_json_encoding_is_exact_and_reads_as_the_same_dicts(pair: dict) -> N
                     assert va == f32(vb), key
                 else:
                     assert va == vb, key
+        # Fixed point: the same keys, every number within half its quantum of JSON's.
+        for a, b in zip(fx[topic][::101], js[topic][::101]):
+            assert a.keys() == b.keys()
+            for key, vb in b.items():
+                va = a[key]
+                if isinstance(vb, (float, list)):
+                    assert np.allclose(va, vb, rtol=0, atol=5e-4 + 1e-12), (topic, key)
+                else:
+                    assert va == vb, key
     # Events carry the host wall clock of their creation (each recording made its own).
     assert [{**e, "wall": 0} for e in pb[EVENTS]] == [{**e, "wall": 0} for e in js[EVENTS]]
+    assert [{**e, "wall": 0} for e in fx[EVENTS]] == [{**e, "wall": 0} for e in js[EVENTS]]
 
 
 def test_every_field_of_the_protobuf_messages_round_trips() -> None:
@@ -171,43 +233,72 @@ def test_every_field_of_the_protobuf_messages_round_trips() -> None:
     the JSON recordings' nulls."""
     ref = {"t": 12.345, "force": [1.5, -2.25, 300.0], "position": [0.2, 0.21, 0.22],
            "phase": "hold", "mode": "force"}
-    got = REFERENCE_PROTO.decode(REFERENCE_PROTO.encode(ref))
+    got = REFERENCE_PROTO_F32.decode(REFERENCE_PROTO_F32.encode(ref))
     assert got == {**ref, "force": [1.5, -2.25, 300.0], "position": [f32(0.2), f32(0.21),
                                                                      f32(0.22)]}
+    # Fixed point: decimal values on the quantum come back as the same doubles.
+    assert REFERENCE_PROTO.decode(REFERENCE_PROTO.encode(ref)) == ref
+    assert REFERENCE_PROTO.decode(REFERENCE_PROTO.encode(
+        {"t": 1.0, "force": [0.0001, 0.0006, -2.0004]})) == {"t": 1.0,
+                                                              "force": [0.0, 0.001, -2.0]}
     assert REFERENCE_PROTO.decode(REFERENCE_PROTO.encode({"t": 1.0})) == {"t": 1.0}
-    state = {"t": 0.001, "q": [0.1, 0.2, math.nan], "qd": [0.0, 0.0, math.inf],
-             "q_ref": [0.1, 0.2, 0.3], "tau": [1.0, 2.0, 3.0], "volts": [-1.0, 0.0, 1.0],
-             "qd_ref": [0.5, 0.5, 0.5]}
-    got = STATE_PROTO.decode(STATE_PROTO.encode(state))
-    assert got["q"] == [f32(0.1), f32(0.2), None] and got["qd"] == [0.0, 0.0, None]
-    assert got["qd_ref"] == [0.5, 0.5, 0.5] and got["t"] == 0.001
+    for proto in (STATE_PROTO, STATE_PROTO_F32):
+        state = {"t": 0.001, "q": [0.1, 0.2, math.nan], "qd": [0.0, 0.0, math.inf],
+                 "q_ref": [0.1, 0.2, 0.3], "tau": [1.0, 2.0, 3.0], "volts": [-1.0, 0.0, 1.0],
+                 "qd_ref": [0.5, 0.5, 0.5]}
+        got = proto.decode(proto.encode(state))
+        cast = f32 if proto is STATE_PROTO_F32 else float
+        assert got["q"] == [cast(0.1), cast(0.2), None] and got["qd"] == [0.0, 0.0, None]
+        assert got["qd_ref"] == [0.5, 0.5, 0.5] and got["t"] == 0.001
     w = {"t": 2.0, "fx": 1.0, "fy": 2.0, "fz": -300.0, "tx": 0.0, "ty": 0.0, "tz": 0.0,
          "stale": False, "saturated": True}
     assert WRENCH_PROTO.decode(WRENCH_PROTO.encode(w)) == w
+    # A value beyond the type's range is refused naming the field (a ring's is marked as
+    # not finite: the writer cannot refuse it).
+    with pytest.raises(ProtoCodecError, match="tau_mn"):
+        STATE_PROTO.encode({**state, "tau": [1e7, 0.0, 0.0]})
+    rows = np.zeros((1, 16))
+    rows[0, 10] = 1e7
+    assert STATE_PROTO.decode(STATE_PROTO.encode_rows(rows)[0])["tau"] == [None, 0.0, 0.0]
+    ankle = {"t": 0.01, "plantarflexion_deg": 12.5, "inversion_deg": -3.25,
+             "abduction_deg": 0.5, "plantarflexion_torque_nm": 20.0,
+             "inversion_torque_nm": -1.5, "abduction_torque_nm": 0.25,
+             "centre_displacement_mm": [1.0, -0.5, 0.125], "platform_roll_deg": 2.0,
+             "platform_pitch_deg": -8.0}
+    assert ANKLE_PROTO.decode(ANKLE_PROTO.encode(ankle)) == ankle      # exact in float32
 
 
 def test_the_protobuf_library_reads_our_bytes_and_we_read_its() -> None:
     """Our hand-made wire bytes are protobuf: the field library parses them to the same
-    values, and what it serializes (defaults omitted, another field order) we decode."""
+    values (fixed point: the counts, under the wire names with units), and what it
+    serializes (defaults omitted, another field order) we decode."""
     factory = DecoderFactory()
     from mcap.records import Schema
 
-    for schema_id, (proto, msg) in enumerate(((STATE_PROTO, {"t": 0.0, "q": [0.1, 0.2, 0.3], "qd": [0.0] * 3,
-                                      "q_ref": [0.1, 0.2, 0.3], "tau": [0.0, 5.0, 0.0],
-                                      "volts": [0.0] * 3}),
-                       (REFERENCE_PROTO, {"t": 0.5, "position": [0.1, 0.2, 0.3],
-                                          "mode": "position"})), start=1):
+    state = {"t": 0.0, "q": [0.1, 0.2, 0.3], "qd": [0.0] * 3, "q_ref": [0.1, 0.2, 0.3],
+             "tau": [0.0, 5.0, 0.0], "volts": [0.0] * 3}
+    ref = {"t": 0.5, "position": [0.1, 0.2, 0.3], "mode": "position"}
+    cases = ((STATE_PROTO_F32, state), (REFERENCE_PROTO_F32, ref), (STATE_PROTO, state),
+             (REFERENCE_PROTO, ref))
+    for schema_id, (proto, msg) in enumerate(cases, start=1):
         schema = Schema(id=schema_id, name=proto.name, encoding="protobuf",
                         data=proto.file_descriptor_set)
         decode = factory.decoder_for("protobuf", schema)
         assert decode is not None
         parsed = decode(proto.encode(msg))
         for key, value in msg.items():
-            got = getattr(parsed, key)
-            assert (list(got) if isinstance(value, list) else got) == (
-                [f32(v) for v in value] if isinstance(value, list) else value), key
+            field = next(f for f in proto.fields if f.dict_key == key)
+            got = getattr(parsed, field.name)
+            got = list(got) if isinstance(value, list) else got
+            if field.scale is not None:           # counts of the quantum
+                per = round(1 / field.scale)
+                want = [round(v * per) for v in value] if isinstance(value, list) \
+                    else round(value * per)
+            else:
+                want = [f32(v) for v in value] if isinstance(value, list) else value
+            assert got == want, (proto.name, key)
         theirs = parsed.SerializeToString()      # t = 0 omitted: not our fixed layout
-        if proto is STATE_PROTO:
+        if proto in (STATE_PROTO, STATE_PROTO_F32):
             assert theirs != proto.encode(msg)
         assert proto.decode(theirs) == proto.decode(proto.encode(msg))
 
@@ -248,6 +339,7 @@ def test_channels_use_the_well_known_encodings_and_mcap_protobuf_decodes_them(
             assert ch.message_encoding == MessageEncoding.Protobuf == "protobuf"
             assert schema.encoding == SchemaEncoding.Protobuf == "protobuf"
             assert schema.name == CHANNELS[topic].proto.name     # type: ignore[union-attr]
+            assert schema.name.startswith("talus.v2.")
             assert json.loads(ch.metadata[JSONSCHEMA_METADATA_KEY]) == CHANNELS[topic].schema
         for topic in (EVENTS, METADATA):
             assert by_topic[topic].message_encoding == "json"
@@ -259,13 +351,14 @@ def test_channels_use_the_well_known_encodings_and_mcap_protobuf_decodes_them(
             seen[channel.topic] += 1
             if k % 250:
                 continue
-            assert proto.t == sig["state"][k][0]
+            # Counts of µs, µm, mN (the units in the wire names).
+            assert proto.t_us == round(sig["state"][k][0] * 1e6)
             if channel.topic == STATE:
-                assert list(proto.q) == [f32(v) for v in sig["state"][k][1:4]]
+                assert list(proto.q_um) == [round(v * 1e6) for v in sig["state"][k][1:4]]
             elif channel.topic == WRENCH:
-                assert proto.fz == f32(sig["wrench"][k][3])
+                assert proto.fz_mn == round(sig["wrench"][k][3] * 1e3)
             else:
-                assert list(proto.force) == [0.0, 0.0, f32(sig["fz_ref"][k])]
+                assert list(proto.force_mn) == [0, 0, round(sig["fz_ref"][k] * 1e3)]
         assert all(v == len(sig["state"]) for v in seen.values())
 
 
@@ -273,7 +366,7 @@ def test_channels_use_the_well_known_encodings_and_mcap_protobuf_decodes_them(
 
 def test_json_recordings_still_read_by_info_export_recover(pair: dict, tmp_path: Path,
                                                             capsys) -> None:
-    for enc in ("json", "protobuf"):
+    for enc in ("json", "protobuf-f32", "protobuf"):
         path = pair[enc]
         assert talus_main(["record", "info", str(path)]) == 0
         info = json.loads(capsys.readouterr().out)
@@ -284,10 +377,10 @@ def test_json_recordings_still_read_by_info_export_recover(pair: dict, tmp_path:
         out = tmp_path / f"{enc}_state.csv"
         assert talus_main(["record", "export", str(path), "--out", str(out)]) == 0
         assert json.loads(capsys.readouterr().out)["rows"] == len(pair["sig"]["state"])
-    # The same CSV columns from both encodings (the protobuf channel's JSON Schema says them).
-    header = [(tmp_path / f"{e}_state.csv").read_text().splitlines()[0] for e in ("json",
-                                                                               "protobuf")]
-    assert header[0] == header[1] and "qd_ref0" in header[0]
+    # The same CSV columns from every encoding (the protobuf channel's JSON Schema says them).
+    header = [(tmp_path / f"{e}_state.csv").read_text().splitlines()[0]
+              for e in ("json", "protobuf-f32", "protobuf")]
+    assert header[0] == header[1] == header[2] and "qd_ref0" in header[0]
     wrench = export_csv(pair["json"], WRENCH, tmp_path / "w.csv")
     assert wrench["rows"] == len(pair["sig"]["state"])
 
@@ -296,25 +389,30 @@ def test_report_reader_gives_the_same_figures_from_both_encodings(pair: dict) ->
     from reports.session_data import session_input_from_recording
 
     a = session_input_from_recording(pair["json"])
-    b = session_input_from_recording(pair["protobuf"])
-    assert a.figures is not None and b.figures is not None
-    assert a.figures["samples"] == b.figures["samples"] == len(pair["sig"]["state"])
-    _close(a.figures, b.figures, "figures")
+    for enc in ("protobuf-f32", "protobuf"):
+        b = session_input_from_recording(pair[enc])
+        assert a.figures is not None and b.figures is not None
+        assert a.figures["samples"] == b.figures["samples"] == len(pair["sig"]["state"])
+        # A figure of a difference (force error = reference - measured) moves by up to one
+        # quantum with fixed point (half a quantum each): 1 mN, the largest quantum.
+        _close(a.figures, b.figures, f"{enc} figures", 1e-6 if enc == "protobuf-f32" else 1e-3)
 
 
-def _close(a: object, b: object, where: str) -> None:
-    """Equal, floats within what float32 inputs move them: relative 6e-8 per value, the
-    figures are sums, extremes and angles of them (1e-5 relative leaves a wide margin)."""
+def _close(a: object, b: object, where: str, abs_tol: float = 1e-6) -> None:
+    """Equal, floats within what the encodings move them: float32, relative 6e-8 per value;
+    fixed point, half a quantum (0.5 mN on a 300 N force, 2e-6 relative; 0.5 µm on a 0.2 m
+    stroke). The figures are sums, extremes and angles of them: 1e-5 relative or 1e-6
+    absolute (a figure near 0) leaves a wide margin."""
     if isinstance(a, dict) and isinstance(b, dict):
         assert a.keys() == b.keys(), where
         for key in a:
-            _close(a[key], b[key], f"{where}.{key}")
+            _close(a[key], b[key], f"{where}.{key}", abs_tol)
     elif isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
         assert len(a) == len(b), where
         for i, (x, y) in enumerate(zip(a, b)):
-            _close(x, y, f"{where}[{i}]")
+            _close(x, y, f"{where}[{i}]", abs_tol)
     elif isinstance(a, float) and isinstance(b, float) and math.isfinite(a):
-        assert b == pytest.approx(a, rel=1e-5, abs=1e-6), where
+        assert b == pytest.approx(a, rel=1e-5, abs=abs_tol), where
     else:
         assert a == b or (isinstance(a, float) and math.isnan(a) and math.isnan(b)), where
 
@@ -332,7 +430,7 @@ def test_a_killed_protobuf_recording_is_recovered(tmp_path: Path) -> None:
     assert not info["complete"]
     n = len(messages[STATE])
     assert 0 < n < len(sig["state"])
-    assert [m["t"] for m in messages[STATE]] == sig["state"][:n, 0].tolist()
+    assert [m["t"] for m in messages[STATE]] == [fixed(t, 1e-6) for t in sig["state"][:n, 0]]
 
 
 # ------------------------------------------------------------------ size per hour
@@ -370,4 +468,27 @@ def test_row_encoder_is_the_per_message_encoder() -> None:
             msg[name] = row[1 + 3 * i:4 + 3 * i].tolist()
         assert data == STATE_PROTO.encode(msg)
         assert len(data) == STATE_PROTO.fixed_size == 9 + 5 * (2 + 12)
-    assert struct.unpack_from("<Bd", enc[0]) == (0x09, rows[0][0])
+    assert struct.unpack_from("<Bq", enc[0]) == (0x09, round(rows[0][0] * 1e6))
+
+
+#: A recording written by the float32 protobuf writer as it was on 2026-11-25 (main at
+#: 3c13f86, ``tests.test_recording_encoding.record(path, session_signals(0.3, seed=7),
+#: "protobuf", events=True)``): the previous encoding, made by the previous code.
+PREVIOUS = Path(__file__).parent / "data" / "recording_protobuf_float32_2026-11-25.mcap"
+
+
+def test_a_recording_of_the_previous_writer_still_reads(tmp_path: Path, capsys) -> None:
+    sig = session_signals(0.3, seed=7)
+    assert talus_main(["record", "info", str(PREVIOUS)]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["complete"] and not info["corrupt"] and info["messages"][STATE] == 300
+    data = read_recording(PREVIOUS)
+    for k in (0, 150, 299):
+        row = sig["state"][k]
+        assert data[STATE][k]["t"] == row[0]
+        assert data[STATE][k]["tau"] == [f32(v) for v in row[10:13]]
+        assert data[WRENCH][k]["fz"] == f32(sig["wrench"][k][3])
+    out = tmp_path / "state.csv"
+    assert talus_main(["record", "export", str(PREVIOUS), "--out", str(out)]) == 0
+    assert json.loads(capsys.readouterr().out)["rows"] == 300
+    assert "qd_ref0" in out.read_text().splitlines()[0]

@@ -52,9 +52,10 @@ DEMO_PROGRESS = DATA / "demo_progress.json"
 CAL_RECORD = DATA / "example_calibration_record.json"
 T0 = datetime(2026, 11, 23, 17, 0, tzinfo=UTC)
 #: Figures from a recording against the session's own (float64) summary. The recording's
-#: 1 kHz channels are float32 (rt.recording.channels): a force of 400 N is stored within
-#: 2.4e-5 N, a slider position within 3e-8 m; a 2 % RMS error of a 100 N amplitude (2 N) then
-#: moves by ~1e-5 relative, a ROM angle of a few degrees by ~1e-6. 1e-4 leaves a margin.
+#: 1 kHz channels are fixed point (rt.recording.channels): a force is stored within 0.5 mN,
+#: a measured slider position exactly (whole encoder counts); a 2 % RMS error of a 100 N
+#: amplitude (2 N) then moves by ~1e-5 relative (the quantisation errors average out over the
+#: samples), a ROM angle not at all. 1e-4 leaves a margin.
 REL = 1e-4
 
 pytestmark = pytest.mark.skipif(shutil.which("pdftotext") is None,

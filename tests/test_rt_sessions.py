@@ -294,3 +294,65 @@ def test_the_preflight_worker_ends_when_its_rt_process_is_killed(tmp_path):
         time.sleep(0.1)
     os.kill(worker_pid, signal.SIGKILL)
     raise AssertionError(f"pre-flight worker {worker_pid} outlived its killed RT process")
+
+
+def _fifo_permitted() -> bool:
+    code = "import os; os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))"
+    probe = subprocess.run([sys.executable, "-c", code], capture_output=True, check=False)
+    return probe.returncode == 0
+
+
+def test_rt_process_threads_run_above_ordinary_processes_and_its_worker_below(tmp_path):
+    """Every thread of the RT process shares the GIL with the loop: the loop is SCHED_FIFO 80,
+    the others SCHED_FIFO 1 (a GIL holder is never descheduled for an ordinary process, which
+    would make the loop wait, rt_hygiene.gil_peer); the pre-flight worker it spawned is an
+    ordinary process at WORKER_NICE (its initializer resets what it inherited)."""
+    if not _fifo_permitted():
+        pytest.skip("SCHED_FIFO not permitted here")
+    from protocols.rt_session import WORKER_NICE
+
+    reset = getattr(os, "SCHED_RESET_ON_FORK", 0)
+    config = tolerant_config(tmp_path)
+    with open(config, "a") as f:
+        f.write("service_priority: 1\n")
+    proc, endpoint, _pub = start_rt("--config", config)
+    try:
+        with RtClient(endpoint, timeout_s=5.0) as c:
+            assert c.status()["cycles"] > 0
+        policies = {}
+        for tid in map(int, os.listdir(f"/proc/{proc.pid}/task")):
+            try:
+                policies[tid] = (os.sched_getscheduler(tid) & ~reset,
+                                 os.sched_getparam(tid).sched_priority)
+            except ProcessLookupError:
+                continue                       # a thread that ended meanwhile
+        assert sorted(policies.values()).count((os.SCHED_FIFO, 80)) == 1   # the loop
+        assert policies[proc.pid] == (os.SCHED_FIFO, 1)                     # main: telemetry
+        fifo1 = [t for t, p in policies.items() if p == (os.SCHED_FIFO, 1)]
+        assert len(fifo1) >= 2          # main, IPC server (and ZeroMQ's, the pool's ...)
+        children: list[int] = []
+        end = time.monotonic() + 60.0
+        while time.monotonic() < end:
+            children = []
+            for tid in os.listdir(f"/proc/{proc.pid}/task"):
+                try:
+                    with open(f"/proc/{proc.pid}/task/{tid}/children") as f:
+                        children += [int(x) for x in f.read().split()]
+                    # The pool's worker (multiprocessing's resource tracker, a child too,
+                    # sleeps: it keeps what it inherited).
+                    children = [ch for ch in children
+                                if b"spawn_main" in Path(f"/proc/{ch}/cmdline").read_bytes()]
+                except FileNotFoundError:
+                    continue
+            # The worker starts with what it inherited; its initializer resets it.
+            if children and all(os.getpriority(os.PRIO_PROCESS, ch) == WORKER_NICE
+                                and os.sched_getscheduler(ch) & ~reset == os.SCHED_OTHER
+                                for ch in children):
+                break
+            time.sleep(0.1)
+        assert children, "no pre-flight worker"
+        for ch in children:
+            assert os.sched_getscheduler(ch) & ~reset == os.SCHED_OTHER
+            assert os.getpriority(os.PRIO_PROCESS, ch) == WORKER_NICE
+    finally:
+        stop_rt(proc)

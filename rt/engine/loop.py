@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -127,6 +128,22 @@ class Loop:
       tried in realtime mode (:func:`rt_hygiene.realtime_thread`); None/False skips one.
     * ``manage_gc`` — freeze and disable gc while running (both modes; the collection before
       freezing is only done in realtime mode, where its tens of ms at start-up do not matter).
+    * ``gil_hold_s`` — realtime mode: the GIL switch interval while a cycle runs (``None``, the
+      default: unchanged; 0.001 is the value studied). Between cycles the interval is
+      ``switch_interval_s``. Off by default until a quiet machine shows it helps: on a loaded
+      one single runs were inconclusive (closing note of branch rtsession).
+
+    Why the two intervals: the loop shares the GIL with the process's other threads (IPC,
+    telemetry, sessions, the recorder). A thread that asks for the GIL waits one switch
+    interval, then forces its holder to drop it; with one short interval (0.2 ms) any busy
+    thread took the GIL from the loop in the middle of a cycle, and the loop waited as long
+    again to get it back: cycles stretched from 0.2 to 0.8 ms and 4 % of them started late
+    during a recorded session (bench/rt_deadlines.py, loaded machine). While a cycle runs the
+    interval is long (1 ms, longer than a cycle's 0.2-0.4 ms), so the others wait for the
+    loop's sleep, which releases the GIL; while the loop sleeps it is short again, so that the
+    loop, waking 150 µs before its deadline, takes the GIL back within it from whoever holds
+    it. Not longer than 1 ms: a cycle that releases the GIL itself (a contended lock when a
+    safety event is published) waits up to one interval to get it back.
     """
 
     def __init__(self, graph: Graph, rate_hz: float = 1000.0, mode: str = "realtime",
@@ -136,7 +153,8 @@ class Loop:
                  max_behind_periods: float = 1.0,
                  rt_priority: int | None = 80, cpus: Iterable[int] | None = None,
                  lock_memory: bool = True, switch_interval_s: float | None = 0.0002,
-                 manage_gc: bool = True, command_capacity: int = 64,
+                 manage_gc: bool = True, gil_hold_s: float | None = None,
+                 command_capacity: int = 64,
                  stats_capacity: int = DEFAULT_CAPACITY) -> None:
         if not isinstance(graph, Graph):
             raise ConfigurationError(f"Loop needs a built Graph, got {graph!r}")
@@ -162,6 +180,9 @@ class Loop:
             rt_hygiene.realtime_thread, priority=rt_priority, cpus=cpu_list,
             lock_memory=lock_memory, switch_interval_s=switch_interval_s)
         self._manage_gc = manage_gc
+        if gil_hold_s is not None and not (0.0 < gil_hold_s <= 0.1):
+            raise ConfigurationError(f"gil_hold_s must be in (0, 0.1] s, got {gil_hold_s!r}")
+        self._gil_hold_s = gil_hold_s
         self._queue = CommandQueue(command_capacity)
         self._capacity = check_capacity(stats_capacity)
         self._lat_ring = new_ring(self._capacity)
@@ -359,7 +380,21 @@ class Loop:
             k += 1
 
     def _run_realtime(self, cycles: int | None, seconds: float | None) -> None:
+        hold = self._gil_hold_s
+        if hold is None:
+            self._realtime_cycles(cycles, seconds, None, None)
+            return
+        between = sys.getswitchinterval()      # the hygiene's (0.2 ms), or the process's
+        sys.setswitchinterval(hold)
+        try:
+            self._realtime_cycles(cycles, seconds, hold, between)
+        finally:
+            sys.setswitchinterval(between)
+
+    def _realtime_cycles(self, cycles: int | None, seconds: float | None,
+                         hold: float | None, between: float | None) -> None:
         clock, sleep = self._clock, self._sleep
+        set_interval = sys.setswitchinterval
         step = self.graph.step
         queue = self._queue
         pending = queue._dq
@@ -379,7 +414,11 @@ class Loop:
                 break
             now = clock()
             if deadline - now > spin_ns:
+                if between is not None:
+                    set_interval(between)     # sleeping: take the GIL back quickly on waking
                 sleep((deadline - now - spin_ns) * 1e-9)
+                if hold is not None:
+                    set_interval(hold)        # awake: keep it until the next sleep
                 now = clock()
             while now < deadline:
                 now = clock()

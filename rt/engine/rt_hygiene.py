@@ -27,7 +27,7 @@ import os
 import platform
 import sys
 import threading
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
 # Linux values on x86, x86-64, ARM and RISC-V (alpha, powerpc and sparc differ).
@@ -250,3 +250,75 @@ def realtime_thread(priority: int | None = 80, cpus: Iterable[int] | None = None
         for fn in reversed(undo):
             with contextlib.suppress(Exception):
                 fn()
+
+
+# ---------------------------------------------------------------------- threads sharing the GIL
+@contextlib.contextmanager
+def gil_peer(priority: int | None, nice: int = -10) -> Iterator[str]:
+    """Raise the calling thread, which shares the GIL with a SCHED_FIFO loop thread of the same
+    process, above ordinary processes for the duration of the ``with``: ``SCHED_FIFO`` at
+    ``priority`` (below the loop's), inherited by the threads it starts; when FIFO is not
+    permitted, a ``nice`` value instead;
+    ``priority=None`` does nothing. Yields what was done; restores the thread on exit.
+
+    Why: the GIL is a lock the loop shares with these threads, and CPython's GIL has no
+    priority inheritance. A thread that holds the GIL while the scheduler runs an ordinary
+    process (a pre-flight worker, a GUI, a compiler) in its place keeps the loop waiting for
+    milliseconds: the loop is late although it is SCHED_FIFO. Running every GIL holder above
+    ordinary processes (a priority ceiling) bounds the loop's wait to the GIL's switch interval.
+    Threads created inside inherit the policy (pthreads' default): entered in the RT process's
+    main thread before it starts any, it covers IPC, telemetry, sessions and the recorder.
+    """
+    if priority is None:
+        yield "unchanged"
+        return
+    undo: Callable[[], None] | None = None
+    detail = "not permitted"
+    if hasattr(os, "sched_setscheduler"):
+        try:
+            prev = (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority)
+            prio = max(os.sched_get_priority_min(os.SCHED_FIFO), int(priority))
+            # No SCHED_RESET_ON_FORK: it applies to threads too (clone), and the threads are
+            # what must inherit. A process started from here inherits FIFO until it resets
+            # itself (the pre-flight worker's initializer: ordinary_process_priority).
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+            detail = f"SCHED_FIFO {prio}"
+            undo = lambda: restore_scheduler(prev)
+        except OSError:
+            undo = None
+    if undo is None:
+        try:
+            tid = threading.get_native_id()      # setpriority acts on one thread on Linux
+            prev_nice = os.getpriority(os.PRIO_PROCESS, tid)
+            os.setpriority(os.PRIO_PROCESS, tid, nice)
+            detail = f"nice {nice}"
+            undo = lambda: os.setpriority(os.PRIO_PROCESS, tid, prev_nice)
+        except (OSError, AttributeError):
+            undo = None
+    try:
+        yield detail
+    finally:
+        if undo is not None:
+            with contextlib.suppress(OSError):
+                undo()
+
+
+def ordinary_process_priority(nice: int) -> str:
+    """For a process started by the RT process to do background work (the pre-flight worker):
+    an ordinary scheduling policy (whatever it inherited) at ``nice``, so that it never takes a
+    core from the RT process's threads. Returns what was done."""
+    done = []
+    if hasattr(os, "sched_setscheduler"):
+        try:
+            if os.sched_getscheduler(0) != os.SCHED_OTHER:
+                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+                done.append("SCHED_OTHER")
+        except OSError:
+            pass
+    try:
+        now = os.getpriority(os.PRIO_PROCESS, 0)
+        os.setpriority(os.PRIO_PROCESS, 0, max(now, nice))
+        done.append(f"nice {max(now, nice)}")
+    except OSError:
+        pass
+    return ", ".join(done) or "unchanged"

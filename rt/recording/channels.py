@@ -1,33 +1,51 @@
 """The channels of a session recording: topic → JSON Schema and protobuf message (DESIGN 9).
 
-Two encodings, both MCAP well-known ones that Foxglove opens and plots without plugins:
+Encodings, all MCAP well-known ones that Foxglove opens and plots without plugins:
 
-* **protobuf** (the default since issue 16): the 1 kHz channels (``/robot/state``,
-  ``/robot/wrench``, ``/protocol/reference``) as ``message_encoding="protobuf"`` with a
-  ``protobuf`` schema (a ``FileDescriptorSet``, :mod:`rt.recording.protobuf_codec`), numbers
-  as float32 where the resolution allows (below) and ``t`` as double. The JSON Schema of each
-  channel goes into the MCAP channel metadata (``talus.jsonschema``): units and descriptions
-  travel with the file, and the decoded dicts are the JSON channels' dicts. The rare channels
-  (``/safety/events``, ``/protocol/metadata``, added ones) stay JSON: a handful of messages per
-  session whose ``values``/``parameters`` are free-form objects a fixed schema would not hold.
-* **json** (every recording before issue 16, and ``SessionRecorder(encoding="json")``):
+* **protobuf, fixed point** (the default, :attr:`Encoding.PROTOBUF`): the 1 kHz channels
+  (``/robot/state``, ``/robot/wrench``, ``/protocol/reference``) and ``/ankle/state`` as
+  ``message_encoding="protobuf"`` with a ``protobuf`` schema (a ``FileDescriptorSet``,
+  :mod:`rt.recording.protobuf_codec`, package ``talus.v2``). Every number of the 1 kHz
+  channels is an ``sfixed32``/``sfixed64`` count of a stated quantum, the unit in the wire
+  name (``q_um``, ``tau_mn``, ``t_us``); decoded, they are the JSON channels' SI dicts
+  (``q`` in m ...). A value that was not finite reads back as ``None``.
+* **protobuf, float32** (:attr:`Encoding.PROTOBUF_F32`, package ``talus``): the recordings
+  made with issue 16's first round, floats as float32 and ``t`` as a double; read always.
+* **json** (every recording before issue 16, :attr:`Encoding.JSON`):
   ``message_encoding="json"`` with a ``jsonschema`` schema whose root is an object.
 
-Float32 (24-bit mantissa, relative step 6e-8) against what each field can resolve:
+The rare channels (``/safety/events``, ``/protocol/metadata``, added ones such as
+``/session/summary``) are JSON in every encoding: a handful of messages per session whose
+``values``/``parameters`` are free-form objects a fixed schema would not hold. Protobuf
+channels carry their JSON Schema in the MCAP channel metadata (``talus.jsonschema``): units
+and descriptions travel with the file, and CSV columns are the same for every encoding.
 
-* ``q``, ``q_ref``, ``position`` (m, at most 0.5 m of stroke): step ≤ 3e-8 m, against the
-  encoder's 20 µm per count (robot description ``encoder.m_per_count``): 600x finer.
-* ``qd`` (m/s, < 1 m/s): step ≤ 6e-8 m/s; the estimate's own quantum is a count per cycle,
-  0.02 m/s at 1 kHz.
-* ``tau`` (N, < 10 kN): step ≤ 1e-3 N; what reaches the motors is resolved by the DAC's
-  4.88 mV LSB (``volts``), far coarser.
-* ``volts`` (V, ±10 V): step ≤ 1e-6 V, against the PCI-1720's 4.88 mV LSB.
-* wrench ``fx..fz`` (N, < 2.5 kN) step ≤ 2.4e-4 N and ``tx..tz`` (N·m, < 200) step ≤ 1.5e-5,
-  against the Delta SI-660-60's 1/8 N (1/4 N on z) and 7.5 mN·m.
-* reference ``force`` (N): as the wrench.
+Why fixed point (size, issue 16's ≤ 150 MB per hour at 1 kHz). A float32 keeps 24 bits of
+mantissa whatever the signal resolves, and the low bytes of a noisy signal (qd, tau, volts,
+the wrench) are random: zstd cannot compress them, and they were most of the 340 MB/h of the
+float32 files. A count of the finest quantum the hardware can resolve (or finer) holds only the
+bits that mean something, its high bytes constant, and zstd removes those. The quanta, each at
+or below what the robot resolves (so nothing measured is lost):
 
-``t`` (loop time, s) stays double: float32 would step by 0.24 ms after an hour, a quarter of a
-1 kHz period.
+* ``t`` → µs (``t_us``, sfixed64): the loop's period is 1000 µs and its lateness is reported
+  by the loop itself; a double's ns-level jitter digits cost ≈ 5 bytes per message and mean
+  nothing. The messages' MCAP log times use the same µs-rounded time.
+* ``q``, ``q_ref``, ``position`` → µm: the encoders count 20 µm (robot description
+  ``encoder.m_per_count``), 20x coarser; a measured ``q`` is an exact number of µm.
+* ``qd``, ``qd_ref`` → µm/s: the estimate's own quantum is a count per cycle, 20 000 µm/s.
+* ``tau``, forces ``fx..fz``, reference ``force`` → mN: what reaches a motor is resolved by
+  the DAC's 4.88 mV LSB times ``drive.force_per_volt_n`` (newtons per LSB), the ATI SI-660-60
+  resolves 1/8 N (1/4 N on z).
+* ``volts`` → mV: the PCI-1720's LSB is 4.88 mV.
+* torques ``tx..tz`` → mN·m: the ATI resolves 7.5 mN·m.
+
+Quantisation error is at most half a quantum (0.5 µm, 0.5 mN ...), below the resolution of the
+instrument that produced the value. Ranges: sfixed32 holds ±2.1 km, ±2.1 km/s, ±2.1 MN,
+±2.1 MV; a value beyond its type's range is written as not finite.
+
+The float32 encoding's resolutions, for reading older files: ``q``, ``q_ref``, ``position``
+step ≤ 3e-8 m; ``qd`` ≤ 6e-8 m/s; ``tau`` ≤ 1e-3 N; ``volts`` ≤ 1e-6 V; wrench ≤ 2.4e-4 N /
+1.5e-5 N·m; ``t`` a double.
 
 Conventions, shared by all channels:
 
@@ -64,9 +82,15 @@ JSONSCHEMA_METADATA_KEY = "talus.jsonschema"
 
 
 class Encoding(enum.Enum):
-    """How a recording encodes its channels that have a protobuf message."""
+    """How a recording encodes its channels that have a protobuf message.
+
+    ``PROTOBUF``: fixed-point integers (``talus.v2`` messages, the default); ``PROTOBUF_F32``:
+    float32 (``talus`` messages, recordings of November 2026 before the fixed-point change,
+    still written for comparison and compatibility tests); ``JSON``: every channel JSON, as
+    recordings were before issue 16."""
 
     PROTOBUF = "protobuf"
+    PROTOBUF_F32 = "protobuf-f32"
     JSON = "json"
 
 STATE = "/robot/state"
@@ -192,18 +216,67 @@ _REFERENCE = _object(
     ["t"])
 
 _D, _F, _B, _S = Kind.DOUBLE, Kind.FLOAT, Kind.BOOL, Kind.STRING
+_I32, _I64 = Kind.SFIXED32, Kind.SFIXED64
+#: Fixed-point quanta (SI units per count) of the ``talus.v2`` messages; why each is enough is
+#: in the module docstring.
+T_QUANTUM_S = 1e-6
+POSITION_QUANTUM_M = 1e-6
+SPEED_QUANTUM_M_S = 1e-6
+FORCE_QUANTUM_N = 1e-3
+VOLTS_QUANTUM_V = 1e-3
+TORQUE_QUANTUM_NM = 1e-3
 
-#: Protobuf messages of the 1 kHz channels: the JSON Schemas' fields, same names; numbers
-#: are never reused (a removed field keeps its number retired).
-STATE_PROTO = ProtoMessage("talus.RobotState", [
+
+def _fx(name: str, number: int, kind: Kind, scale: float, key: str,
+        width: int = 0) -> ProtoField:
+    return ProtoField(name, number, kind, width, scale=scale, key=key)
+
+
+#: The 1 kHz channels as fixed-point integers (the default encoding): wire names carry the
+#: unit (``q_um``), decoded dicts the JSON channels' SI keys (``q``).
+STATE_PROTO = ProtoMessage("talus.v2.RobotState", [
+    _fx("t_us", 1, _I64, T_QUANTUM_S, "t"),
+    _fx("q_um", 2, _I32, POSITION_QUANTUM_M, "q", 3),
+    _fx("qd_um_s", 3, _I32, SPEED_QUANTUM_M_S, "qd", 3),
+    _fx("q_ref_um", 4, _I32, POSITION_QUANTUM_M, "q_ref", 3),
+    _fx("tau_mn", 5, _I32, FORCE_QUANTUM_N, "tau", 3),
+    _fx("volts_mv", 6, _I32, VOLTS_QUANTUM_V, "volts", 3),
+    _fx("qd_ref_um_s", 7, _I32, SPEED_QUANTUM_M_S, "qd_ref", VARIABLE)])
+WRENCH_PROTO = ProtoMessage("talus.v2.Wrench", [
+    _fx("t_us", 1, _I64, T_QUANTUM_S, "t"),
+    _fx("fx_mn", 2, _I32, FORCE_QUANTUM_N, "fx"), _fx("fy_mn", 3, _I32, FORCE_QUANTUM_N, "fy"),
+    _fx("fz_mn", 4, _I32, FORCE_QUANTUM_N, "fz"),
+    _fx("tx_mnm", 5, _I32, TORQUE_QUANTUM_NM, "tx"),
+    _fx("ty_mnm", 6, _I32, TORQUE_QUANTUM_NM, "ty"),
+    _fx("tz_mnm", 7, _I32, TORQUE_QUANTUM_NM, "tz"),
+    ProtoField("stale", 8, _B), ProtoField("saturated", 9, _B)])
+REFERENCE_PROTO = ProtoMessage("talus.v2.ProtocolReference", [
+    _fx("t_us", 1, _I64, T_QUANTUM_S, "t"),
+    _fx("force_mn", 2, _I32, FORCE_QUANTUM_N, "force", VARIABLE),
+    _fx("position_um", 3, _I32, POSITION_QUANTUM_M, "position", VARIABLE),
+    ProtoField("phase", 4, _S), ProtoField("mode", 5, _S)])
+#: /ankle/state (100 Hz): float32 angles and torques (0.01° and 1 mN·m need no more than
+#: float32's 7 digits), the time as the other channels'.
+ANKLE_PROTO = ProtoMessage("talus.v2.AnkleState", [
+    _fx("t_us", 1, _I64, T_QUANTUM_S, "t"),
+    ProtoField("plantarflexion_deg", 2, _F), ProtoField("inversion_deg", 3, _F),
+    ProtoField("abduction_deg", 4, _F), ProtoField("plantarflexion_torque_nm", 5, _F),
+    ProtoField("inversion_torque_nm", 6, _F), ProtoField("abduction_torque_nm", 7, _F),
+    ProtoField("centre_displacement_mm", 8, _F, 3), ProtoField("platform_roll_deg", 9, _F),
+    ProtoField("platform_pitch_deg", 10, _F)])
+
+#: The float32 messages of the recordings made between issue 16's first round and the
+#: fixed-point change (read always; written with ``Encoding.PROTOBUF_F32``). Numbers are never
+#: reused (a removed field keeps its number retired).
+STATE_PROTO_F32 = ProtoMessage("talus.RobotState", [
     ProtoField("t", 1, _D), ProtoField("q", 2, _F, 3), ProtoField("qd", 3, _F, 3),
     ProtoField("q_ref", 4, _F, 3), ProtoField("tau", 5, _F, 3), ProtoField("volts", 6, _F, 3),
     ProtoField("qd_ref", 7, _F, VARIABLE)])
-WRENCH_PROTO = ProtoMessage("talus.Wrench", [
+WRENCH_PROTO_F32 = ProtoMessage("talus.Wrench", [
     ProtoField("t", 1, _D), ProtoField("fx", 2, _F), ProtoField("fy", 3, _F),
     ProtoField("fz", 4, _F), ProtoField("tx", 5, _F), ProtoField("ty", 6, _F),
     ProtoField("tz", 7, _F), ProtoField("stale", 8, _B), ProtoField("saturated", 9, _B)])
-REFERENCE_PROTO = ProtoMessage("talus.ProtocolReference", [
+REFERENCE_PROTO_F32 = ProtoMessage("talus.ProtocolReference", [
     ProtoField("t", 1, _D), ProtoField("force", 2, _F, VARIABLE),
     ProtoField("position", 3, _F, VARIABLE), ProtoField("phase", 4, _S),
     ProtoField("mode", 5, _S)])
@@ -241,12 +314,23 @@ CHANNELS: dict[str, ChannelSpec] = {
     METADATA: ChannelSpec(METADATA, "talus.SessionMetadata", _METADATA),
     REFERENCE: ChannelSpec(REFERENCE, "talus.ProtocolReference", _REFERENCE,
                            proto=REFERENCE_PROTO),
-    ANKLE: ChannelSpec(ANKLE, "talus.AnkleState", _ANKLE, {"rate_hz": "100"}),
+    ANKLE: ChannelSpec(ANKLE, "talus.AnkleState", _ANKLE, {"rate_hz": "100"}, ANKLE_PROTO),
 }
 
-#: Protobuf messages talus writes, by full name: the reader's fast decoders.
+#: The standard channels' protobuf message per protobuf encoding (added channels use their
+#: spec's ``proto``).
+PROTOS: dict[Encoding, dict[str, ProtoMessage]] = {
+    Encoding.PROTOBUF: {STATE: STATE_PROTO, WRENCH: WRENCH_PROTO, REFERENCE: REFERENCE_PROTO,
+                        ANKLE: ANKLE_PROTO},
+    Encoding.PROTOBUF_F32: {STATE: STATE_PROTO_F32, WRENCH: WRENCH_PROTO_F32,
+                            REFERENCE: REFERENCE_PROTO_F32},
+    Encoding.JSON: {},
+}
+
+#: Protobuf messages talus writes or wrote, by full name: the reader's fast decoders.
 PROTO_MESSAGES: dict[str, ProtoMessage] = {
-    m.name: m for m in (STATE_PROTO, WRENCH_PROTO, REFERENCE_PROTO)}
+    m.name: m for m in (STATE_PROTO, WRENCH_PROTO, REFERENCE_PROTO, ANKLE_PROTO,
+                        STATE_PROTO_F32, WRENCH_PROTO_F32, REFERENCE_PROTO_F32)}
 
 #: Column layout of a ``RecorderTap`` row (rt.components.blocks): field name → width.
 STATE_ROW_LAYOUT: tuple[tuple[str, int], ...] = (

@@ -47,21 +47,30 @@ PACKAGE = "talus"
 
 
 class Kind(enum.Enum):
-    """A field's protobuf scalar type."""
+    """A field's protobuf scalar type. ``SFIXED32``/``SFIXED64`` carry a fixed-point number:
+    an integer count of the field's ``scale`` (its SI value = count × scale)."""
 
     DOUBLE = "double"
     FLOAT = "float"
     BOOL = "bool"
     STRING = "string"
+    SFIXED32 = "sfixed32"
+    SFIXED64 = "sfixed64"
 
 
 #: Variable-length repeated field (an optional array): ``ProtoField.width``.
 VARIABLE = -1
 
-_WIRE_TYPE = {Kind.DOUBLE: 1, Kind.FLOAT: 5, Kind.BOOL: 0}
-_NUMPY = {Kind.DOUBLE: "<f8", Kind.FLOAT: "<f4", Kind.BOOL: "u1"}
-_STRUCT = {Kind.DOUBLE: "d", Kind.FLOAT: "f", Kind.BOOL: "?"}
-_SIZE = {Kind.DOUBLE: 8, Kind.FLOAT: 4, Kind.BOOL: 1}
+_WIRE_TYPE = {Kind.DOUBLE: 1, Kind.FLOAT: 5, Kind.BOOL: 0, Kind.SFIXED32: 5, Kind.SFIXED64: 1}
+_NUMPY = {Kind.DOUBLE: "<f8", Kind.FLOAT: "<f4", Kind.BOOL: "u1", Kind.SFIXED32: "<i4",
+          Kind.SFIXED64: "<i8"}
+_STRUCT = {Kind.DOUBLE: "d", Kind.FLOAT: "f", Kind.BOOL: "?", Kind.SFIXED32: "i",
+           Kind.SFIXED64: "q"}
+_SIZE = {Kind.DOUBLE: 8, Kind.FLOAT: 4, Kind.BOOL: 1, Kind.SFIXED32: 4, Kind.SFIXED64: 8}
+#: A fixed-point field's count that means "not finite when recorded" (or beyond the type's
+#: range): the most negative integer, which no in-range value rounds to.
+NOT_FINITE = {Kind.SFIXED32: -(1 << 31), Kind.SFIXED64: -(1 << 63)}
+_INT_MAX = {Kind.SFIXED32: (1 << 31) - 1, Kind.SFIXED64: (1 << 63) - 1}
 
 
 class ProtoCodecError(ValueError):
@@ -81,8 +90,18 @@ class ProtoField:
     number: int
     kind: Kind
     width: int = 0
+    #: Fixed-point fields: SI units per count (e.g. 1e-6 for a field in µm holding metres).
+    scale: float | None = None
+    #: The decoded dict's key when it differs from the wire name (``q`` for ``q_um``): the
+    #: dicts stay those of the JSON channels, in SI units, whatever the encoding.
+    key: str | None = None
 
     def __post_init__(self) -> None:
+        if (self.kind in NOT_FINITE) != (self.scale is not None):
+            raise ValueError(f"field {self.name}: a scale is for fixed-point fields, and they "
+                             "need one")
+        if self.scale is not None and not (math.isfinite(self.scale) and self.scale > 0):
+            raise ValueError(f"field {self.name}: scale {self.scale}")
         if not 1 <= self.number <= 15:
             raise ValueError(f"field {self.name}: number {self.number} outside 1..15 (one-byte "
                              "tags)")
@@ -90,6 +109,10 @@ class ProtoField:
             raise ValueError(f"field {self.name}: repeated {self.kind.value} is not supported")
         if self.width < VARIABLE:
             raise ValueError(f"field {self.name}: width {self.width}")
+
+    @property
+    def dict_key(self) -> str:
+        return self.key or self.name
 
     @property
     def fixed(self) -> bool:
@@ -140,6 +163,50 @@ def _finite(v: float) -> float | None:
     return v if math.isfinite(v) else None
 
 
+#: Largest fixed-point count used (beyond it a value is not representable): the type's
+#: range, and 2**53 for 64-bit counts so that a float64 count converts exactly.
+_COUNT_LIMIT = {Kind.SFIXED32: float(_INT_MAX[Kind.SFIXED32]), Kind.SFIXED64: float(1 << 53)}
+
+
+@functools.lru_cache(maxsize=64)
+def _per_unit(scale: float) -> float:
+    """Counts per SI unit: an integer when the scale is 10^-n, so that a count divided by it is
+    the double nearest to the decimal value (12 µm → 1.2e-05 m, not 1.2000000000000002e-05)."""
+    inv = 1.0 / scale
+    return float(round(inv)) if abs(inv - round(inv)) <= 1e-9 * inv else inv
+
+
+def _from_count(v: int, f: ProtoField) -> float | None:
+    """A fixed-point count → its SI value (None for the not-finite mark)."""
+    return None if v == NOT_FINITE[f.kind] else v / _per_unit(f.scale)
+
+
+def _to_count(x: Any, f: ProtoField) -> int:
+    """An SI value → the nearest count of ``f.scale`` (the not-finite mark for None, NaN,
+    inf); ProtoCodecError beyond the type's range (names the field)."""
+    if x is None:
+        return NOT_FINITE[f.kind]
+    v = float(x)
+    if not math.isfinite(v):
+        return NOT_FINITE[f.kind]
+    c = round(v * _per_unit(f.scale))
+    if abs(c) > _COUNT_LIMIT[f.kind]:
+        raise ProtoCodecError(f"{f.name}: {v} is beyond what {f.kind.value} counts of "
+                              f"{f.scale} hold")
+    return c
+
+
+def _counts(values: np.ndarray, f: ProtoField) -> np.ndarray:
+    """Vectorised :func:`_to_count` for a ring block: a value that is not finite or beyond
+    the range gets the not-finite mark (a ring value cannot be refused)."""
+    c = np.rint(values * _per_unit(f.scale))
+    bad = ~(np.abs(c) <= _COUNT_LIMIT[f.kind])           # NaN compares False: bad too
+    c[bad] = 0.0
+    out = c.astype(np.int64)
+    out[bad] = NOT_FINITE[f.kind]
+    return out
+
+
 class ProtoMessage:
     """A protobuf message type of the recording: its descriptor, encoders, decoders."""
 
@@ -148,12 +215,17 @@ class ProtoMessage:
         self.fields = tuple(fields)
         numbers = [f.number for f in self.fields]
         names = [f.name for f in self.fields]
-        if len(set(numbers)) != len(numbers) or len(set(names)) != len(names):
-            raise ValueError(f"{name}: duplicate field names or numbers")
+        keys = [f.dict_key for f in self.fields]
+        if len(set(numbers)) != len(numbers) or len(set(names)) != len(names) \
+                or len(set(keys)) != len(keys):
+            raise ValueError(f"{name}: duplicate field names, keys or numbers")
         if not name.startswith(PACKAGE + "."):
-            raise ValueError(f"{name}: message names are {PACKAGE}.Name")
+            raise ValueError(f"{name}: message names are {PACKAGE}[.version].Name")
+        #: The protobuf package (``talus``, ``talus.v2`` ...) and the message's short name.
+        self.package, self.short_name = name.rsplit(".", 1)
         self._by_number = {f.number: f for f in self.fields}
         self._by_name = {f.name: f for f in self.fields}
+        self._by_key = {f.dict_key: f for f in self.fields}
         fixed = [f for f in self.fields if f.fixed]
         # The fixed part, in field order, as one struct: pack or unpack one message at once.
         fmt = ["<"]
@@ -168,12 +240,14 @@ class ProtoMessage:
                 fmt.append(_STRUCT[f.kind])
         self._fixed = tuple(fixed)
         self._struct = struct.Struct("".join(fmt))
-        # What encode() walks per message, computed once: (name, tag, width, bytes, bool).
-        self._fixed_plan = tuple((f.name, f.tag, f.width, f.width * _SIZE[f.kind],
-                                  f.kind is Kind.BOOL) for f in fixed)
-        #: (name, tag byte, struct code or None for a string) of the optional fields.
+        # What encode() walks per message, computed once: (field, dict key, tag, width,
+        # bytes, bool, fixed-point).
+        self._fixed_plan = tuple((f, f.dict_key, f.tag, f.width, f.width * _SIZE[f.kind],
+                                  f.kind is Kind.BOOL, f.scale is not None) for f in fixed)
+        #: (field, dict key, tag byte, struct code or None for a string) of the optional
+        #: fields.
         self._optional_plan = tuple(
-            (f.name, bytes((f.tag,)), None if f.kind is Kind.STRING else _STRUCT[f.kind])
+            (f, f.dict_key, bytes((f.tag,)), None if f.kind is Kind.STRING else _STRUCT[f.kind])
             for f in self.fields if not f.fixed)
         # Where the struct's values hold tags and array lengths, and what they must be: a
         # message of another layout is recognised in one tuple comparison.
@@ -199,8 +273,8 @@ class ProtoMessage:
 
     @property
     def fixed_layout(self) -> tuple[tuple[str, int], ...]:
-        """The fixed fields as a ring row layout ``((name, width), ...)`` (scalars width 1)."""
-        return tuple((f.name, max(f.width, 1)) for f in self._fixed)
+        """The fixed fields as a ring row layout ``((key, width), ...)`` (scalars width 1)."""
+        return tuple((f.dict_key, max(f.width, 1)) for f in self._fixed)
 
     # ------------------------------------------------------------------ schema
 
@@ -213,10 +287,12 @@ class ProtoMessage:
         types = {Kind.DOUBLE: d.FieldDescriptorProto.TYPE_DOUBLE,
                  Kind.FLOAT: d.FieldDescriptorProto.TYPE_FLOAT,
                  Kind.BOOL: d.FieldDescriptorProto.TYPE_BOOL,
-                 Kind.STRING: d.FieldDescriptorProto.TYPE_STRING}
-        short = self.name.split(".", 1)[1]
-        fdp = d.FileDescriptorProto(name=f"{PACKAGE}/{short}.proto", package=PACKAGE,
-                                    syntax="proto3")
+                 Kind.STRING: d.FieldDescriptorProto.TYPE_STRING,
+                 Kind.SFIXED32: d.FieldDescriptorProto.TYPE_SFIXED32,
+                 Kind.SFIXED64: d.FieldDescriptorProto.TYPE_SFIXED64}
+        short = self.short_name
+        fdp = d.FileDescriptorProto(name=f"{self.package.replace('.', '/')}/{short}.proto",
+                                    package=self.package, syntax="proto3")
         msg = fdp.message_type.add(name=short)
         for f in self.fields:
             msg.field.add(
@@ -253,18 +329,18 @@ class ProtoMessage:
             columns[name] = (k, int(width))
             k += int(width)
         total = k
-        unknown = [n for n in columns if n not in self._by_name]
+        unknown = [n for n in columns if n not in self._by_key]
         if unknown:
             raise ProtoCodecError(f"{self.name} has no field {unknown[0]!r}")
         plan: list[tuple[ProtoField, int, int]] = []      # field, first column, width
         np_fields: list[tuple[Any, ...]] = []
         consts: list[tuple[str, int]] = []
         for f in self.fields:          # field-number order: the fast decoder's order
-            if f.name not in columns:
+            if f.dict_key not in columns:
                 if f.fixed:
                     raise ProtoCodecError(f"{self.name}.{f.name} missing from the row layout")
                 continue
-            col, width = columns[f.name]
+            col, width = columns[f.dict_key]
             if f.kind is Kind.STRING:
                 raise ProtoCodecError(f"{self.name}.{f.name} is a string: not from a ring")
             if f.fixed and width != max(f.width, 1):
@@ -297,7 +373,8 @@ class ProtoMessage:
                 block[key] = value
             for f, col, width in plan:
                 cols = rows[:, col] if f.width == 0 else rows[:, col:col + width]
-                block[f.name] = (cols != 0) if f.kind is Kind.BOOL else cols
+                block[f.name] = (cols != 0) if f.kind is Kind.BOOL else \
+                    _counts(cols, f) if f.scale is not None else cols
             buf = block.tobytes()
             return [buf[i:i + size] for i in range(0, len(buf), size)]
 
@@ -310,7 +387,7 @@ class ProtoMessage:
         values: list[Any] = []
         name = ""
         try:
-            for name, tag, width, nbytes, is_bool in self._fixed_plan:
+            for f, name, tag, width, nbytes, is_bool, scaled in self._fixed_plan:
                 v = message[name]
                 values.append(tag)
                 if width:
@@ -318,9 +395,12 @@ class ProtoMessage:
                         raise ProtoCodecError(f"{self.name}.{name}: {width} values expected, "
                                               f"got {len(v)}")
                     values.append(nbytes)
-                    values.extend([math.nan if x is None else float(x) for x in v])
+                    values.extend([_to_count(x, f) for x in v] if scaled else
+                                  [math.nan if x is None else float(x) for x in v])
                 elif is_bool:
                     values.append(bool(v))
+                elif scaled:
+                    values.append(_to_count(v, f))
                 else:
                     values.append(math.nan if v is None else float(v))
             head = self._struct.pack(*values)
@@ -333,7 +413,7 @@ class ProtoMessage:
         if self.all_fixed:
             return head
         parts = [head]
-        for name, tag_byte, code in self._optional_plan:
+        for f, name, tag_byte, code in self._optional_plan:
             v = message.get(name)
             if v is None:
                 continue
@@ -344,13 +424,32 @@ class ProtoMessage:
                 data = v.encode()
             else:
                 try:
-                    floats = [math.nan if x is None else float(x) for x in v]
+                    floats = [_to_count(x, f) for x in v] if f.scale is not None else \
+                        [math.nan if x is None else float(x) for x in v]
                 except (TypeError, ValueError) as exc:
+                    if isinstance(exc, ProtoCodecError):
+                        raise ProtoCodecError(f"{self.name}.{exc}") from None
                     raise ProtoCodecError(f"{self.name}.{name}: {exc}") from None
                 data = _packed(code, len(floats)).pack(*floats)
             if data:
                 n = len(data)
                 parts.append(tag_byte + (bytes((n,)) if n < 0x80 else _varint(n)) + data)
+        return b"".join(parts)
+
+    def encode_strings(self, values: dict[str, str]) -> bytes:
+        """The string fields named in ``values`` (dict keys), in field-number order: appended
+        to a :meth:`row_encoder` message whose fields all come before them, they complete it
+        (a run of messages with the same strings shares these bytes)."""
+        parts = []
+        for f in self.fields:
+            v = values.get(f.dict_key)
+            if f.kind is not Kind.STRING or not v:
+                continue
+            data = v.encode()
+            parts.append(bytes((f.tag,)) + _varint(len(data)) + data)
+        unknown = set(values) - {f.dict_key for f in self.fields if f.kind is Kind.STRING}
+        if unknown:
+            raise ProtoCodecError(f"{self.name} has no string field {min(unknown)!r}")
         return b"".join(parts)
 
     # ------------------------------------------------------------------ decoding
@@ -379,11 +478,13 @@ class ProtoMessage:
         for f in self._fixed:
             k += 2 if f.width else 1
             if f.width:
-                out[f.name] = [_finite(x) for x in vals[k:k + f.width]]
+                out[f.dict_key] = [_from_count(x, f) for x in vals[k:k + f.width]] \
+                    if f.scale is not None else [_finite(x) for x in vals[k:k + f.width]]
                 k += f.width
             else:
                 v = vals[k]
-                out[f.name] = v if f.kind is Kind.BOOL else _finite(v)
+                out[f.dict_key] = v if f.kind is Kind.BOOL else \
+                    _from_count(v, f) if f.scale is not None else _finite(v)
                 k += 1
         return out
 
@@ -426,22 +527,26 @@ class ProtoMessage:
             if optional_only and f.fixed:
                 continue
             v = values.get(f.name)
+            key = f.dict_key
+
+            def number(x: Any, f: ProtoField = f) -> float | None:
+                return _from_count(x, f) if f.scale is not None else _finite(x)
             if f.kind is Kind.STRING:
                 if v:
-                    out[f.name] = v
+                    out[key] = v
             elif f.width == VARIABLE:
                 if v:
-                    out[f.name] = [_finite(x) for x in v]
+                    out[key] = [number(x) for x in v]
             elif f.width:
                 v = v or []
                 if len(v) != f.width:
                     raise ProtoCodecError(f"{self.name}.{f.name}: {f.width} values expected, "
                                           f"got {len(v)}")
-                out[f.name] = [_finite(x) for x in v]
+                out[key] = [number(x) for x in v]
             elif f.kind is Kind.BOOL:
-                out[f.name] = bool(v)
+                out[key] = bool(v)
             else:
-                out[f.name] = 0.0 if v is None else _finite(v)
+                out[key] = 0.0 if v is None else number(v)
 
 
 def _merge(f: ProtoField, old: Any, wire: int, raw: Any, where: str) -> Any:

@@ -41,7 +41,7 @@ import numbers
 import os
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -60,10 +60,12 @@ from rt.recording.channels import (
     MESSAGE_ENCODING,
     METADATA,
     METADATA_REQUIRED_FROM_CALLER,
+    PROTOS,
     REFERENCE,
     SCHEMA_ENCODING,
     STATE,
     STATE_ROW_LAYOUT,
+    T_QUANTUM_S,
     WRENCH,
     ChannelSpec,
     Encoding,
@@ -231,6 +233,17 @@ class _HashingStream:
 
 
 @dataclass
+class _Block:
+    """A queued block of one channel's messages (rows of numbers, and per-row strings)."""
+
+    rows: np.ndarray
+    strings: tuple[tuple[str, ...], ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+
+@dataclass
 class _RingTap:
     topic: str
     channel_id: int
@@ -306,15 +319,24 @@ class SessionRecorder:
             if topic != spec.topic or spec.schema.get("type") != "object":
                 raise InputError(f"channel {topic!r}: the key must be the spec's topic and "
                                  "the schema an object")
-        #: topic → protobuf message, for the channels written as protobuf.
-        self._protos: dict[str, ProtoMessage] = {
-            topic: spec.proto for topic, spec in self.channels.items()
-            if spec.proto is not None and self.encoding is Encoding.PROTOBUF}
+        #: topic → protobuf message, for the channels written as protobuf: the standard
+        #: channels' message of this encoding, an added channel's own.
+        standard = PROTOS[self.encoding]
+        self._protos: dict[str, ProtoMessage] = {}
+        if self.encoding is not Encoding.JSON:
+            for topic, spec in self.channels.items():
+                proto = standard.get(topic, spec.proto)
+                if proto is not None:
+                    self._protos[topic] = proto
+        # Fixed-point recordings keep loop times to the µs (their ``t_us``); the log times
+        # follow, so a message's log time and its payload agree.
+        self._t_quantum = T_QUANTUM_S if self.encoding is Encoding.PROTOBUF else None
         # The queued wrench samples (t, fx..tz, stale, saturated) as protobuf rows.
         wrench_proto = self._protos.get(WRENCH)
         self._wrench_rows = None if wrench_proto is None else wrench_proto.row_encoder(
             [("t", 1), ("fx", 1), ("fy", 1), ("fz", 1), ("tx", 1), ("ty", 1), ("tz", 1),
              ("stale", 1), ("saturated", 1)])
+        self._reference_rows: Callable[[np.ndarray], list[bytes]] | None = None
         self.loop_t0 = float(loop_t0)
         self.start_wall_ns = time.time_ns() if start_wall_ns is None else int(start_wall_ns)
         self.flush_interval_s = float(flush_interval_s)
@@ -436,6 +458,35 @@ class SessionRecorder:
         """Enqueue one wrench sample (N, N·m) at loop time ``t`` (s). False when dropped."""
         return self._enqueue(WRENCH, t, (fx, fy, fz, tx, ty, tz, stale, saturated))
 
+    def wrench_rows(self, rows: np.ndarray) -> bool:
+        """Enqueue a block of wrench samples at once: rows of (t s, fx, fy, fz N, tx, ty, tz
+        N·m, stale, saturated) (a copy is kept; flags > 0.5 are true). One queue entry, encoded
+        as one numpy block by the writer: the non-real-time producer (the session pump) spends
+        no Python per sample. False when dropped (every row counted)."""
+        block = np.array(rows, dtype=float, ndmin=2)
+        if block.shape[1] != 9:
+            raise InputError(f"wrench rows have 9 columns (t, fx..tz, stale, saturated), got "
+                             f"{block.shape[1]}")
+        if not len(block):
+            return True
+        return self._enqueue(WRENCH, float(block[0, 0]), _Block(block), len(block))
+
+    def reference_rows(self, t: np.ndarray, force: np.ndarray, phase: Sequence[str],
+                       mode: Sequence[str]) -> bool:
+        """Enqueue a block of ``/protocol/reference`` messages: loop times ``t`` (s), forces
+        (n × 3, N), and per row the phase and mode names. One queue entry, encoded by the
+        writer as numpy blocks of equal (phase, mode). False when dropped (rows counted)."""
+        tt = np.array(t, dtype=float, ndmin=1)
+        ff = np.array(force, dtype=float, ndmin=2)
+        if ff.shape != (len(tt), 3) or len(phase) != len(tt) or len(mode) != len(tt):
+            raise InputError(f"reference rows: {len(tt)} times need {len(tt)} × 3 forces and "
+                             f"as many phases and modes (got {ff.shape}, {len(phase)}, "
+                             f"{len(mode)})")
+        if not len(tt):
+            return True
+        block = _Block(np.column_stack([tt, ff]), (tuple(phase), tuple(mode)))
+        return self._enqueue(REFERENCE, float(tt[0]), block, len(tt))
+
     def publish(self, topic: str, message: dict[str, Any]) -> bool:
         """Enqueue a message (with ``t``, loop time in s) on any registered channel, e.g.
         ``/protocol/reference``. False when dropped.
@@ -468,12 +519,12 @@ class SessionRecorder:
             msg["phase"] = phase
         return self.publish(REFERENCE, msg)
 
-    def _enqueue(self, topic: str, t: float, payload: Any) -> bool:
+    def _enqueue(self, topic: str, t: float, payload: Any, count: int = 1) -> bool:
         q = self._queue
         if self._closed or len(q) >= self.queue_capacity:
             # Unlocked increment: two producers dropping at the same instant may lose a count;
             # the alternative, a lock, could make the loop wait on the writer thread.
-            self._dropped[topic] += 1
+            self._dropped[topic] += count
             return False
         q.append((topic, t, payload))
         return True
@@ -528,8 +579,8 @@ class SessionRecorder:
             dropped = self.dropped()
             # Whatever is still queued was never written: enqueued after the thread's last
             # pump, or left behind by a thread that died.
-            for topic, _, _ in list(self._queue):
-                dropped[topic] += 1
+            for topic, _, payload in list(self._queue):
+                dropped[topic] += len(payload) if isinstance(payload, _Block) else 1
             if self._error is not None:
                 for tap in self._taps:
                     dropped[tap.topic] += max(0, tap.source.written - tap.start)
@@ -580,6 +631,8 @@ class SessionRecorder:
         return out
 
     def _log_time(self, t: float) -> int:
+        if self._t_quantum is not None:
+            t = round(t / self._t_quantum) * self._t_quantum
         return self.start_wall_ns + round((t - self.loop_t0) * 1e9)
 
     def _write(self, topic: str, t: float, data: bytes) -> None:
@@ -636,6 +689,12 @@ class SessionRecorder:
         k = 0
         try:
             for k, (topic, t, payload) in enumerate(items):
+                if isinstance(payload, _Block):
+                    for t_row, data in self._encode_block(topic, payload):
+                        self._write(topic, t_row, data)
+                        written += 1
+                    time.sleep(0)
+                    continue
                 if isinstance(payload, bytes):      # encoded by publish()
                     data = payload
                 elif topic == WRENCH:
@@ -662,9 +721,46 @@ class SessionRecorder:
                 if written % _YIELD_EVERY == 0:
                     time.sleep(0)
         except BaseException:
-            for topic, _, _ in items[k:]:       # taken from the queue, never written
-                self._dropped[topic] += 1
+            for topic, _, payload in items[k:]:       # taken from the queue, never written
+                self._dropped[topic] += len(payload) if isinstance(payload, _Block) else 1
             raise
+
+    def _encode_block(self, topic: str, block: _Block) -> list[tuple[float, bytes]]:
+        """(t, bytes) of each message of a queued block (:meth:`wrench_rows`,
+        :meth:`reference_rows`)."""
+        rows = block.rows
+        if topic == WRENCH:
+            finite = np.isfinite(rows[:, 1:7]).all(axis=1)
+            self._wrench_without_sample += int(len(rows) - finite.sum())
+            rows = rows[finite]
+            ts = rows[:, 0].tolist()
+            if self._wrench_rows is not None:
+                return list(zip(ts, self._wrench_rows(rows)))
+            names = ("fx", "fy", "fz", "tx", "ty", "tz")
+            return [(t, encode_json({"t": t, **dict(zip(names, r[1:7])),
+                                     "stale": bool(r[7] > 0.5), "saturated": bool(r[8] > 0.5)}))
+                    for t, r in zip(ts, rows.tolist())]
+        phase, mode = block.strings
+        ts = rows[:, 0].tolist()
+        proto = self._protos.get(topic)
+        if proto is None:
+            return [(t, encode_json({"t": t, "force": r[1:4], "phase": p, "mode": m}))
+                    for t, r, p, m in zip(ts, rows.tolist(), phase, mode)]
+        encode = self._reference_rows
+        if encode is None:
+            encode = self._reference_rows = proto.row_encoder([("t", 1), ("force", 3)])
+        numeric = encode(rows)
+        out: list[tuple[float, bytes]] = []
+        start = 0
+        n = len(ts)
+        while start < n:               # runs of one (phase, mode): one suffix each
+            end = start + 1
+            while end < n and phase[end] == phase[start] and mode[end] == mode[start]:
+                end += 1
+            suffix = proto.encode_strings({"phase": phase[start], "mode": mode[start]})
+            out.extend((ts[i], numeric[i] + suffix) for i in range(start, end))
+            start = end
+        return out
 
     def _encode_wrenches(self, items: list[tuple[str, float, Any]]) -> dict[int, bytes] | None:
         """Protobuf bytes of the queued wrench samples of ``items`` (by index), encoded as one
@@ -673,7 +769,7 @@ class SessionRecorder:
         if self._wrench_rows is None:
             return None
         index = [i for i, (topic, _, payload) in enumerate(items)
-                 if topic == WRENCH and not isinstance(payload, bytes)]
+                 if topic == WRENCH and not isinstance(payload, (bytes, _Block))]
         if not index:
             return {}
         rows = np.array([(items[i][1], *items[i][2]) for i in index], dtype=float)
