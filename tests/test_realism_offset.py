@@ -35,4 +35,6 @@ def test_offset_drives_current_with_a_zero_command_only_while_enabled():
 def test_the_ideal_twin_has_no_offset():
     assert RigImperfections.none().ideal
     assert np.all(RigImperfections.none().amplifier_offsets_v() == 0.0)
-    assert np.any(RigImperfections().amplifier_offsets_v() != 0.0)
+    # Off by default until the supervisor's contact-onset judgement is fixed (realism.py).
+    assert np.all(RigImperfections().amplifier_offsets_v() == 0.0)
+    assert np.any(RigImperfections(amplifier_offset_v=0.015).amplifier_offsets_v() != 0.0)

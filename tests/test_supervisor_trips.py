@@ -89,3 +89,25 @@ def test_excursion_is_unknown_not_zero_when_fk_fails():
     rows[:, 10] = 0.0
     ex = _excursions(rows, Scenario("x", lambda pl, t: None), model, 0.0)
     assert ex["rom_deg"] is None and ex["fk_failed_samples"] == 10
+
+
+@pytest.mark.parametrize("sup_class", ["compiled", "interpreted"])
+def test_no_frozen_encoder_is_judged_while_a_hard_stop_holds_the_drives_off(sup_class):
+    """In a hard stop the drives are off and the brakes hold: a still count with a moving
+    reference (or the law's unapplied force) is expected, not a frozen encoder — judged anyway,
+    it latched a cause no reset could clear (the calibration's RT tests under load). The same
+    inputs without the hard stop do trip it."""
+    from rt.safety.supervisor import InterpretedSupervisor
+
+    cls = Supervisor if sup_class == "compiled" else InterpretedSupervisor
+    moving = {"qd_ref": [0.02, 0.02, 0.02], "tau": [600.0, 600.0, 600.0]}
+    held = cls(LIM, DT)
+    held.request_estop("client")
+    for k in range(300):
+        _check(held, t=1.0 + k * DT, **moving)
+    assert held.reaction == Reaction.HARD_STOP
+    assert not any(c.startswith("encoder_frozen") for c in held.causes), held.causes
+    free = cls(LIM, DT)
+    for k in range(300):
+        _check(free, t=1.0 + k * DT, **moving)
+    assert any(c.startswith("encoder_frozen") for c in free.causes), free.causes

@@ -605,7 +605,9 @@ class InterpretedSupervisor(Supervisor):
             trip("encoder_jump", Reaction.HARD_STOP, "encoder reading jumped beyond physics",
                  q=list(q))
         free = not (force_n > self.contact_force_n)         # NaN (no sensor) counts as free
-        brakes_open = t >= self._brakes_open_at
+        # In a hard stop the drives are off and the brakes hold: a still count is expected, and
+        # judging it against the law's (unapplied) force would latch a cause no reset clears.
+        brakes_open = t >= self._brakes_open_at and self.reaction < Reaction.HARD_STOP
         for i in range(3):
             qi = q[i]
             if qi == self._last_q[i] and brakes_open:

@@ -154,7 +154,8 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
     if est_status == JUMP_STATUS:
         new += _trip(mem, C_JUMP, R_HARD, q[0], q[1], q[2])
     free = not (force_n > par[P_CONTACT])          # NaN (no sensor) counts as free
-    brakes_open = t >= mem[M_BRAKES_OPEN_AT]
+    # Drives off in a hard stop: no frozen-encoder judgement (as the interpreted check).
+    brakes_open = t >= mem[M_BRAKES_OPEN_AT] and mem[M_REACTION] < R_HARD
     for i in range(3):
         qi = q[i]
         base = C_AXIS + AXIS_SLOTS * i
