@@ -290,8 +290,15 @@ def test_rt_process_killed_drives_drop_within_50_ms():
     the drive outputs within 50 ms (the fault matrix's rt_process_loss row, run for real)."""
     from rt.safety.fault_matrix import run_rt_process_loss
 
-    r = run_rt_process_loss()
-    assert r["detected"] and r["reaction"] == "hard_stop", r
+    # A run whose watchdog tripped before the kill (a stall on a loaded machine) measured
+    # nothing: it is run again, at most three times in all.
+    runs = []
+    for _ in range(3):
+        r = run_rt_process_loss()
+        runs.append(r)
+        if not r.get("tripped_before_kill"):
+            break
+    assert r["detected"] and r["reaction"] == "hard_stop", runs
     print(f"\nRT process killed → drives at 0 V: {r['time_to_zero_output_ms']:.1f} ms (target 50)")
     # The target is 50 ms (the rig's watchdog period); the slack is the scheduling of a
     # loaded machine, where the rig process itself may wait for a core.

@@ -348,7 +348,11 @@ def run_rt_process_loss(timeout_s: float = 10.0) -> dict:
                 time.sleep(0.01)
             time.sleep(0.5)
             client.stop_heartbeat()
-            trips_before = handle.amplifier_state().trips   # a trip before the kill is not it
+            before = handle.amplifier_state()           # a trip before the kill is not it
+            trips_before = before.trips
+            # A loop stall during the hold (a loaded machine) may have tripped the watchdog
+            # already: this run then measures nothing, and says so.
+            result["tripped_before_kill"] = before.tripped
             killed = time.monotonic()
             os.kill(rt.pid, signal.SIGKILL)
             rt.wait()
