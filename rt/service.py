@@ -221,6 +221,9 @@ class RtService:
         self.pl = pl
         self.config = config
         self.tap = tap
+        # What the twin's platform touches between sessions (config.environment): a session's
+        # foot replaces it (patient_foot) and the next session's start restores it first.
+        self._between_sessions = None if pl.twin is None else pl.twin.environment
         self.sessions = sessions
         self.server: Any = None      # set by serve() once the server exists
         self.endpoint = config.endpoint
@@ -592,16 +595,18 @@ class RtService:
         self._tap_start = self.tap.written
         recorder.attach_state_ring(pl.recorder, start=pl.recorder.written)
         pl.events.listener = self._event_listener(recorder)
-        env = None
+        strap = None
         if pl.twin is not None and self.config.session_environment == "patient_foot":
-            from rt.twin.environment import patient_foot
-            z, roll, pitch = prep.start_pose
-            env = patient_foot(pl.model.kin, z, roll, pitch, s.patient.ankle)
+            strap = _foot_strap(pl.model.kin, prep.start_pose, s.patient.ankle)
+        between = self._between_sessions
 
         def begin(loop: Any) -> float:
             pl.supervisor.limits = limits
-            if env is not None and pl.twin is not None:
-                pl.twin.set_environment(env)
+            if strap is not None and pl.twin is not None:
+                # The previous session's foot is unstrapped; this one's is strapped once the
+                # approach has brought the platform to the protocol's start.
+                pl.twin.set_environment(between)
+                pl.twin.set_environment_on_arrival(*strap)
             pl.reference.request(prep.program)
             return float(loop.t)
         epoch = pl.reference.epoch
@@ -892,6 +897,21 @@ def _serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None
     stats = pl.loop.stats()
     return {"cycles": stats.cycles, "deadline_misses": stats.misses,
             "events": [e.as_dict() for e in pl.events.snapshot()]}
+
+
+def _foot_strap(kin: Any, start_pose: tuple[float, float, float], ankle: Any
+                ) -> tuple[Callable[[Any], Any], tuple[float, float, float]]:
+    """The twin's patient foot for a session: where the sliders stand at the protocol's start,
+    and the foot built unloaded at the sliders' actual positions when they get there."""
+    from rt.twin.environment import patient_foot
+
+    z, roll, pitch = start_pose
+    q_start = kin.ik(z, roll, pitch, check=False).q
+
+    def make(q: Any) -> Any:
+        c = kin.fk(q, check=False)
+        return patient_foot(kin, c.z, c.roll, c.pitch, ankle)
+    return make, q_start
 
 
 def telemetry(service: RtService) -> dict[str, Any]:

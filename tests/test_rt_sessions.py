@@ -88,6 +88,15 @@ def test_session_round_trip_recorded_by_the_rt_process(fast_rt, tmp_path):
     meta = read_recording(rec, ["/protocol/metadata"])["/protocol/metadata"][0]
     assert meta["rt"]["pid"] == proc.pid and meta["patient_id"] == "P-007"
     assert meta["session_id"] == sid and meta["limits"]["max_force_n"] == 800.0
+    # The approach (from rest at q = 0.2 m to the protocol's start, ~4 mm lower) runs before
+    # the twin's patient foot is strapped: it loads nothing. Placed at the start pose while the
+    # platform still stood at rest, the foot's heel pad (1e5 N/m) pressed ~360 N here.
+    got_rows = read_recording(rec, ["/robot/wrench", "/protocol/reference"])
+    approach = {round(r["t"], 6) for r in got_rows["/protocol/reference"]
+                if r["phase"] == "approach"}
+    fz_approach = [w["fz"] for w in got_rows["/robot/wrench"] if round(w["t"], 6) in approach]
+    assert len(fz_approach) > 50
+    assert max(abs(f) for f in fz_approach) < 30.0
     # The published end event carries the same summary; telemetry flowed meanwhile.
     got = {"telemetry": 0, "end": None}
     end = time.monotonic() + 5.0

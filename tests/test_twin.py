@@ -195,6 +195,43 @@ def test_compliant_ankle_pushes_back():
     assert twin.plant.wrench_s[2] == pytest.approx(-2000.0, rel=0.02)
 
 
+def test_a_foot_strapped_on_arrival_waits_for_the_platform_and_loads_nothing():
+    # The session's foot: strapped once the sliders stand at the protocol's start (within
+    # 1 mm, slower than 2 mm/s), unloaded where they actually are. Placed at the start pose
+    # while the platform still stood 4 mm higher at rest, it pressed ~400 N (1e5 N/m).
+    clock, twin, _enc, _card0, _, ati = _rig()
+    kin = twin.plant.kin
+    start = kin.ik(0.630, 0.0, 0.0).q
+    made = []
+
+    def make(q):
+        made.append(np.array(q))
+        c = kin.fk(q, check=False)
+        return CompliantAnkle.at_pose(kin, c.z, c.roll, c.pitch, limb_weight_n=0.0)
+
+    twin.place(np.array(start) + 4e-3)           # at rest, 4 mm above the start
+    twin.set_environment_on_arrival(make, start)
+    clock.t += 0.002
+    twin.sync()
+    assert made == [] and twin.environment.kind == "free"
+    twin.place(np.array(start) + 0.5e-3, qd=(0.05, 0.0, 0.0))    # there, but still moving
+    clock.t += 0.001
+    twin.sync()
+    assert made == []
+    twin.place(np.array(start) + 0.5e-3)        # arrived, 0.5 mm off the exact start
+    clock.t += 0.001
+    twin.sync()
+    assert len(made) == 1 and np.allclose(made[0], np.array(start) + 0.5e-3, atol=1e-5)
+    assert twin.environment.kind == "ankle"
+    clock.t += 0.001
+    ati.read(Wrench())
+    # Unloaded where it was strapped: the heel pad's spring carries (almost) nothing; gravity
+    # sag over one period is microns (< 1 N at 1e5 N/m).
+    assert abs(twin.plant.wrench_s[2]) < 5.0
+    with pytest.raises(InputError, match="arrival target"):
+        twin.set_environment_on_arrival(make, (0.2, float("nan"), 0.2))
+
+
 def test_same_seed_same_run():
     def run(seed):
         clock, twin, enc, card0, _, ati = _rig(seed=seed, environment=ForcePlateContact(

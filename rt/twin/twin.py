@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -80,6 +81,21 @@ def _check_reachable(environment: object, plant: TwinPlant) -> None:
                          f"tip's reach ({lo:.3f} .. {hi:.3f} m, level platform)")
 
 
+#: A session's foot is strapped once every slider is this close to the protocol's start (m) ...
+ARRIVAL_TOLERANCE_M = 1.0e-3
+#: ... and slower than this (m/s): the approach has ended (its residual error loads nothing,
+#: the environment being built at the actual positions).
+ARRIVAL_SPEED_M_S = 2.0e-3
+
+
+@dataclass(frozen=True)
+class _Arrival:
+    make: Callable[[np.ndarray], object]
+    q_target: np.ndarray
+    tolerance_m: float
+    speed_m_s: float
+
+
 class Twin:
     """The robot, its sensors and environment in one object (see module docstring)."""
 
@@ -123,6 +139,7 @@ class Twin:
         self.ati_sample: AtiSample | None = None
         self.inputs = DigitalInputState()
         self._payload_applied = False
+        self._arrival: _Arrival | None = None
         self._jumps_done: set[int] = set()
         # Delayed sensor history for the latency fault: (t, positions, ATI sample).
         self._history: deque = deque(maxlen=512)
@@ -150,6 +167,35 @@ class Twin:
         self.environment = environment
         self.plant.set_environment(environment)
         self._payload_applied = False
+        self._arrival = None
+
+    def set_environment_on_arrival(self, make: Callable[[np.ndarray], object], q_target,
+                                   tolerance_m: float = ARRIVAL_TOLERANCE_M,
+                                   speed_m_s: float = ARRIVAL_SPEED_M_S) -> None:
+        """Put ``make(q)`` in place once the sliders are within ``tolerance_m`` of ``q_target``
+        (m) and slower than ``speed_m_s``, ``q`` being where they then are.
+
+        A session's foot: the clinician straps the patient's foot once the platform has reached
+        the protocol's start, not while it travels there from rest (a foot placed at the start
+        pose while the platform still stood at rest, a few mm away, took the heel pad's 1e5 N/m
+        as a spike of hundreds of N at every session's start). ``make`` builds the environment
+        unloaded at the sliders' actual positions, so a residual position error loads nothing.
+        Until then the platform touches what it touched (call :meth:`set_environment` first to
+        clear it). Replaced by the next call of either method."""
+        target = np.asarray(q_target, dtype=float)
+        if target.shape != (3,) or not np.all(np.isfinite(target)):
+            raise InputError(f"arrival target must be 3 finite slider positions (m), got {q_target!r}")
+        if not (tolerance_m > 0.0 and speed_m_s > 0.0):
+            raise InputError("arrival tolerance and speed must be positive")
+        self._arrival = _Arrival(make, target, float(tolerance_m), float(speed_m_s))
+
+    def _arrive_if_there(self) -> None:
+        a = self._arrival
+        assert a is not None
+        q, qd = self.plant.q, self.plant.qd
+        if (np.max(np.abs(q - a.q_target)) <= a.tolerance_m
+                and np.max(np.abs(qd)) <= a.speed_m_s):
+            self.set_environment(a.make(q.copy()))      # clears self._arrival
 
     def home_encoders(self) -> None:
         """Preset the counters so the decoded positions are absolute (the rig's homing)."""
@@ -170,6 +216,8 @@ class Twin:
             t = self.clock()
         while t - self.plant.t > 1e-12:
             chunk = min(_MAX_CHUNK_S, t - self.plant.t)
+            if self._arrival is not None:
+                self._arrive_if_there()
             env = self.environment
             if isinstance(env, PayloadStep) and not self._payload_applied:
                 remaining = env.at_s - self.plant.t
