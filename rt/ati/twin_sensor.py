@@ -315,7 +315,9 @@ class TwinAtiSensorModel:
         if st.block_pos >= len(st.block):
             st.block = st.rng.standard_normal((_BLOCK, 12))
             st.block_pos = 0
-        return st.block, st.block_pos
+        block = st.block
+        assert isinstance(block, np.ndarray)        # the compiled state holds an array
+        return block, st.block_pos
 
     def _dt_to(self, t: float) -> float:
         """The drift's time step for a sample at ``t`` (s)."""
