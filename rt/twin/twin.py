@@ -221,11 +221,11 @@ class Twin:
             bits = plant.advance_sensed(chunk, self.amp_volts, pp, block, row, ati._kparams,
                                         ati._state.drift, ati._out, ati._dt_to(t_end),
                                         _ATI_OVERLOAD)
+            new = pp[kernels.PORT_INDEX:].tolist()          # floats holding integers
             for axis in range(3):
-                new = int(pp[kernels.PORT_INDEX + axis])
-                delta = new - index[axis]
+                delta = int(new[axis]) - index[axis]
                 if delta:
-                    index[axis] = new
+                    index[axis] += delta
                     port.move_counts(axis, delta)
             self.ati_sample = ati._commit_compiled(bits, plant.t)
 
