@@ -15,6 +15,7 @@ from rt.drivers.pci1720 import volts_to_code
 from rt.model.kernels import tree_maps
 from rt.twin import kernels, physics
 from rt.twin.environment import CompliantAnkle, FreeMotion, PayloadStep, parse_environment
+from rt.twin.realism import RigImperfections
 from rt.twin.serve import holding_volts
 from rt.twin.twin import Twin
 
@@ -203,15 +204,19 @@ def test_twin_physics_takes_s_s_dot_and_the_twist_from_the_model_kernel(seed):
     assert np.array_equal(s, s_ref) and np.array_equal(sd, sd_ref) and np.array_equal(tw, tw_ref)
 
 
-@pytest.mark.parametrize("env", ["free", "plate:0.7128", "ankle"])
-def test_fused_period_equals_the_general_compiled_path_bit_for_bit(env):
+@pytest.mark.parametrize("env,offset_v", [("free", 0.0), ("plate:0.7128", 0.0),
+                                           ("ankle", 0.0), ("ankle", 0.015)])
+def test_fused_period_equals_the_general_compiled_path_bit_for_bit(env, offset_v):
     """``Twin._sync_fused`` (the physics, encoder index and ATI sample in one compiled call)
     against the general compiled path (``plant.advance`` then ``_update_sensors``): the same
-    state, counters and samples exactly, every period, with a drive switch-off."""
+    state, counters and samples exactly, every period, with a drive switch-off; also with
+    the amplifiers' input offsets on (issue 15 turns them on by default)."""
     stream = _record(env, ideal=False, seconds=0.6)
-    general = Twin(environment=parse_environment(env), seed=3)
+    imp = RigImperfections(amplifier_offset_v=offset_v)
+    general = Twin(environment=parse_environment(env), seed=3, imperfections=imp)
     general.fused_period = False
-    fused = Twin(environment=parse_environment(env), seed=3)
+    fused = Twin(environment=parse_environment(env), seed=3, imperfections=imp)
+    assert fused.plant._with_offset == (offset_v > 0.0)
     assert fused.fused_period
     for k, (t, codes, enabled) in enumerate(stream):
         for twin in (general, fused):
