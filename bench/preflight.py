@@ -3,6 +3,8 @@
 
 Run:  .venv/bin/python bench/preflight.py [--repeats 3] [--only sine60,rom,gait] [--json]
       [--no-preflight]   (reference generation only)
+      [--twin-ab]        (also the twin's general period, interleaved: before/after)
+      [--blocks]         (the loop's per-block times: where the loop's CPU goes)
 Target (issue 16): a 60 s protocol's pre-flight ≤ 1.5 s.
 
 Per protocol, each the median of ``--repeats`` runs, interleaved (run r of every protocol
@@ -71,9 +73,22 @@ def references_time(protocol, model: RobotModel, compiled: bool) -> dict:
     return {"cpu_s": cpu, "wall_s": wall, "duration_s": report.duration_s}
 
 
-def preflight_time(protocol, model: RobotModel) -> dict:
-    """``session.preflight`` whole, with the CPU of ``validate()`` and of ``Twin.sync``."""
+def preflight_time(protocol, model: RobotModel, fused: bool = True,
+                   blocks: dict | None = None) -> dict:
+    """``session.preflight`` whole, with the CPU of ``validate()`` and of ``Twin.sync``.
+
+    ``fused``: the twin's fault-free period as one compiled call (``Twin.fused_period``, the
+    default) or the general path, for a before/after in one process. ``blocks``: filled with
+    the loop's per-block execution times (``Graph.stats()``: where the loop's CPU goes).
+    """
     spent = {"twin": 0.0, "references": 0.0}
+    build = session.build_twin_session
+
+    def capture(*args, **kwargs):
+        out = build(*args, **kwargs)
+        if blocks is not None:
+            blocks["pl"] = out[3]
+        return out
     sync = Twin.sync
     validate = {cls: cls.validate for cls in (base.TableGenerator,
                                               generators.ActiveAssistGenerator)}
@@ -95,6 +110,8 @@ def preflight_time(protocol, model: RobotModel) -> dict:
         return run
 
     Twin.sync = timed_sync                                       # type: ignore[method-assign]
+    Twin.fused_period = fused
+    session.build_twin_session = capture                         # type: ignore[assignment]
     for cls, fn in validate.items():
         cls.validate = timed(fn)                                 # type: ignore[method-assign]
     try:
@@ -105,9 +122,17 @@ def preflight_time(protocol, model: RobotModel) -> dict:
         cpu, wall = time.thread_time() - c0, time.perf_counter() - t0
     finally:
         Twin.sync = sync                                         # type: ignore[method-assign]
+        Twin.fused_period = True
+        session.build_twin_session = build                       # type: ignore[assignment]
         for cls, fn in validate.items():
             cls.validate = fn                                    # type: ignore[method-assign]
     duration = result["predicted"]["duration_s"]
+    if blocks is not None:
+        stats = blocks.pop("pl").graph.stats()
+        blocks.update({slot: {"p50_us": c.p50_us, "mean_us": c.mean_us, "count": c.count}
+                       for slot, c in stats.components.items()})
+        blocks["(whole cycle)"] = {"p50_us": stats.cycle.p50_us, "mean_us": stats.cycle.mean_us,
+                                   "count": stats.cycle.count}
     return {"cpu_s": cpu, "wall_s": wall, "duration_s": duration,
             "references_cpu_s": spent["references"], "twin_cpu_s": spent["twin"],
             "loop_cpu_s": cpu - spent["twin"] - spent["references"],
@@ -131,6 +156,12 @@ def main() -> None:
                         help="comma-separated subset of sine60, rom, gait, assist")
     parser.add_argument("--no-preflight", action="store_true",
                         help="time the reference generation only")
+    parser.add_argument("--twin-ab", action="store_true",
+                        help="also run every pre-flight with the twin's general (unfused) "
+                             "period, interleaved: the fused period's before/after")
+    parser.add_argument("--blocks", action="store_true",
+                        help="print the loop's per-block times (µs) of each protocol's last "
+                             "pre-flight")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.repeats < 1:
@@ -145,6 +176,8 @@ def main() -> None:
         references_time(library[name], model, True)
     refs: dict[str, dict[bool, list[dict]]] = {n: {True: [], False: []} for n in names}
     pre: dict[str, list[dict]] = {n: [] for n in names}
+    unfused: dict[str, list[dict]] = {n: [] for n in names}
+    blocks: dict[str, dict] = {n: {} for n in names}
     if not args.no_preflight:
         session.preflight(session.SessionSetup(protocol=library[names[0]], base_dir=LIBRARY,
                                                patient_weight_kg=PATIENT_KG), model)
@@ -153,10 +186,15 @@ def main() -> None:
             for compiled in (False, True):
                 refs[name][compiled].append(references_time(library[name], model, compiled))
             if not args.no_preflight:
-                pre[name].append(preflight_time(library[name], model))
+                if args.twin_ab:
+                    unfused[name].append(preflight_time(library[name], model, fused=False))
+                pre[name].append(preflight_time(library[name], model,
+                                                blocks=blocks[name] if args.blocks else None))
     result = {name: {"references_interpreted": _median(refs[name][False]),
                      "references_compiled": _median(refs[name][True]),
-                     "preflight": _median(pre[name]) if pre[name] else None}
+                     "preflight": _median(pre[name]) if pre[name] else None,
+                     "preflight_unfused_twin": _median(unfused[name]) if unfused[name] else None,
+                     "blocks": blocks[name] or None}
               for name in names}
     if args.json:
         print(json.dumps(result))
@@ -169,14 +207,22 @@ def main() -> None:
         print(f"  references: interpreted {ri['cpu_s']:.3f} / {ri['wall_s']:.3f}, compiled "
               f"{rc['cpu_s']:.3f} / {rc['wall_s']:.3f} "
               f"(×{ri['cpu_s'] / max(rc['cpu_s'], 1e-9):.0f} CPU)")
-        p = r["preflight"]
-        if p is None:
-            continue
-        print(f"  pre-flight: {p['cpu_s']:.2f} / {p['wall_s']:.2f} — references "
-              f"{p['references_cpu_s']:.3f}, twin {p['twin_cpu_s']:.2f} "
-              f"({p['twin_cpu_s'] / p['cpu_s'] * 100:.0f} %), loop {p['loop_cpu_s']:.2f} "
-              f"({p['loop_cpu_s'] / p['cpu_s'] * 100:.0f} %); {p['cpu_per_60s']:.2f} s CPU per "
-              "60 s of protocol")
+        for label, key in (("pre-flight", "preflight"),
+                           ("pre-flight, twin's general period", "preflight_unfused_twin")):
+            p = r[key]
+            if p is None:
+                continue
+            print(f"  {label}: {p['cpu_s']:.2f} / {p['wall_s']:.2f} — references "
+                  f"{p['references_cpu_s']:.3f}, twin {p['twin_cpu_s']:.2f} "
+                  f"({p['twin_cpu_s'] / p['cpu_s'] * 100:.0f} %), loop {p['loop_cpu_s']:.2f} "
+                  f"({p['loop_cpu_s'] / p['cpu_s'] * 100:.0f} %); {p['cpu_per_60s']:.2f} s CPU "
+                  "per 60 s of protocol")
+        if r["blocks"]:
+            print("  loop blocks, µs per cycle (median / mean, last run; the timing's own "
+                  "overhead included):")
+            for slot, b in r["blocks"].items():
+                print(f"    {slot:<18} {b['p50_us']:8.1f} / {b['mean_us']:8.1f}  "
+                      f"({b['count']} cycles)")
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@
 loop.
 
 Run:  .venv/bin/python bench/twin.py [--seconds S] [--repeats N] [--no-preflight] [--json]
+      .venv/bin/python bench/twin.py --fused-ab [--seconds S] [--repeats N]
 Target (issue 16): ≥ 60× real time; a 60 s protocol's pre-flight ≤ 1.5 s. Twin figures:
 measured on the twin, this machine.
 
@@ -49,9 +50,10 @@ def _make(env: str, integrator: str, ideal: bool, compiled: bool, clock: SimCloc
 
 
 def run(seconds: float, env: str, integrator: str, ideal: bool, compiled: bool = True,
-        devices: bool = False, rate_hz: float = 1000.0) -> dict:
+        devices: bool = False, rate_hz: float = 1000.0, fused: bool = True) -> dict:
     clock = SimClock()
     twin = _make(env, integrator, ideal, compiled, clock)
+    twin.fused_period = fused
     hold = holding_volts(twin)
     q = np.zeros(3)
     w = Wrench()
@@ -156,6 +158,34 @@ def compile_cost() -> float:
     return float(out.stdout.strip().splitlines()[-1])
 
 
+def fused_ab(seconds: float, repeats: int, as_json: bool) -> None:
+    """The compiled twin's period, general path (``plant.advance`` then the sensors in Python)
+    against the fused one (``kernels.advance_sensed``), interleaved run by run; CPU µs per
+    period, medians."""
+    rows = []
+    for env, integ, ideal in CONFIGS:
+        for fused in (False, True):
+            run(0.2, env, integ, ideal, fused=fused)               # warm both paths
+        cpu: dict[bool, list[float]] = {False: [], True: []}
+        for _ in range(repeats):
+            for fused in (False, True):
+                r = run(seconds, env, integ, ideal, fused=fused)
+                cpu[fused].append(r["cpu_s"] / (seconds * 1000.0) * 1e6)
+        old, new = statistics.median(cpu[False]), statistics.median(cpu[True])
+        rows.append({"env": env, "integrator": integ, "twin": "ideal" if ideal else "realistic",
+                     "general_us": old, "fused_us": new, "ratio": new / old,
+                     "speed_factor_cpu_fused": 1000.0 / new})
+    if as_json:
+        print(json.dumps(rows))
+        return
+    print(f"compiled twin, CPU µs per 1 ms period, median of {repeats} interleaved runs of "
+          f"{seconds:g} s (twin figures, this machine)")
+    for r in rows:
+        print(f"  {r['twin']:9s} {r['env']:11s} {r['integrator']:16s} general "
+              f"{r['general_us']:6.1f}  fused {r['fused_us']:6.1f}  ratio {r['ratio']:.2f}  "
+              f"→ {r['speed_factor_cpu_fused']:.0f}× real time (CPU)")
+
+
 CONFIGS = (("free", "symplectic_euler", False), ("plate:0.75", "symplectic_euler", False),
            ("ankle", "symplectic_euler", False), ("free", "symplectic_euler", True),
            ("free", "rk4", True))
@@ -168,8 +198,14 @@ def main() -> None:
     parser.add_argument("--protocol", default="active_assist.yaml",
                         help="library protocol whose pre-flight is timed (60 s by default)")
     parser.add_argument("--no-preflight", action="store_true")
+    parser.add_argument("--fused-ab", action="store_true",
+                        help="only the compiled twin's fused period (one call with its sensor "
+                             "readings, the default) against its general path, interleaved")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    if args.fused_ab:
+        fused_ab(args.seconds, args.repeats, args.json)
+        return
     first_call = compile_cost()
     for compiled in (False, True):                    # warm the compiled kernels
         run(0.2, "free", "symplectic_euler", False, compiled)

@@ -15,6 +15,7 @@ from rt.drivers.pci1720 import volts_to_code
 from rt.model.kernels import tree_maps
 from rt.twin import kernels, physics
 from rt.twin.environment import CompliantAnkle, FreeMotion, PayloadStep, parse_environment
+from rt.twin.realism import RigImperfections
 from rt.twin.serve import holding_volts
 from rt.twin.twin import Twin
 
@@ -201,3 +202,41 @@ def test_twin_physics_takes_s_s_dot_and_the_twist_from_the_model_kernel(seed):
     s_ref, sd_ref, tw_ref = np.zeros((12, 3)), np.zeros((12, 3)), np.zeros((6, 3))
     tree_maps(plant.geom, q, phi, rot, qd, s_ref, sd_ref, tw_ref)
     assert np.array_equal(s, s_ref) and np.array_equal(sd, sd_ref) and np.array_equal(tw, tw_ref)
+
+
+@pytest.mark.parametrize("env,offset_v", [("free", 0.0), ("plate:0.7128", 0.0),
+                                           ("ankle", 0.0), ("ankle", 0.015)])
+def test_fused_period_equals_the_general_compiled_path_bit_for_bit(env, offset_v):
+    """``Twin._sync_fused`` (the physics, encoder index and ATI sample in one compiled call)
+    against the general compiled path (``plant.advance`` then ``_update_sensors``): the same
+    state, counters and samples exactly, every period, with a drive switch-off; also with
+    the amplifiers' input offsets on (issue 15 turns them on by default)."""
+    stream = _record(env, ideal=False, seconds=0.6)
+    imp = RigImperfections(amplifier_offset_v=offset_v)
+    general = Twin(environment=parse_environment(env), seed=3, imperfections=imp)
+    general.fused_period = False
+    fused = Twin(environment=parse_environment(env), seed=3, imperfections=imp)
+    assert fused.plant._with_offset == (offset_v > 0.0)
+    assert fused.fused_period
+    for k, (t, codes, enabled) in enumerate(stream):
+        for twin in (general, fused):
+            _apply(twin, codes, enabled)
+            twin.sync(t)
+        assert general.plant.S.tolist() == fused.plant.S.tolist(), f"period {k}"
+        assert general.plant.t == fused.plant.t
+        assert general.encoder_port._count == fused.encoder_port._count, f"period {k}"
+        assert general.encoder_port._encoder_index == fused.encoder_port._encoder_index
+        assert general.ati_sample == fused.ati_sample, f"period {k}"
+
+
+def test_a_fault_plan_takes_the_general_path():
+    """With a fault scheduled the twin runs the general path (the fused period models none)."""
+    twin = Twin()
+    twin.set_card_enabled(0, True)
+    called = []
+    twin._sync_fused = lambda t: called.append(t)      # type: ignore[method-assign]
+    twin.sync(0.001)
+    assert called == [0.001]
+    twin.faults.schedule("encoder_freeze", 0.5, axis=0)
+    twin.sync(0.002)
+    assert called == [0.001] and twin.plant.t == pytest.approx(0.002)

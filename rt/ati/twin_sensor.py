@@ -298,22 +298,42 @@ class TwinAtiSensorModel:
 
     def _measure_compiled(self, true_wrench: Sequence[float] | np.ndarray, t: float,
                           dt: float) -> AtiSample:
+        block, row = self._next_block_row()
+        w = true_wrench if type(true_wrench) is np.ndarray else np.asarray(true_wrench,
+                                                                            dtype=np.float64)
+        status = int(_measure_kernel(w, block, row, self._kparams, self._state.drift,
+                                     self._out, dt, STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE))
+        return self._commit_compiled(status, t)
+
+    # The compiled sample in two halves around the kernel, so the twin can run the kernel
+    # inside its own compiled period (``rt.twin.kernels.advance_sensed``): one bookkeeping for
+    # both callers.
+    def _next_block_row(self) -> tuple[np.ndarray, int]:
+        """The random block and row the next compiled sample draws from (refilled when used
+        up: the same draws, in the same order, as the interpreted path)."""
         st = self._state
         if st.block_pos >= len(st.block):
             st.block = st.rng.standard_normal((_BLOCK, 12))
             st.block_pos = 0
-        w = true_wrench if type(true_wrench) is np.ndarray else np.asarray(true_wrench,
-                                                                            dtype=np.float64)
-        m = self._out
-        status = int(_measure_kernel(w, st.block, st.block_pos, self._kparams, st.drift, m, dt,
-                                     STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE))
+        block = st.block
+        assert isinstance(block, np.ndarray)        # the compiled state holds an array
+        return block, st.block_pos
+
+    def _dt_to(self, t: float) -> float:
+        """The drift's time step for a sample at ``t`` (s)."""
+        t_last = self._state.t_last
+        return 0.0 if t_last is None else t - t_last
+
+    def _commit_compiled(self, status: int, t: float) -> AtiSample:
+        """The sample the kernel wrote into ``_out`` with overload bits ``status``, at ``t``."""
+        st = self._state
         st.block_pos += 1
         if st.t_last is None or t > st.t_last:
             st.t_last = t
         if self._faults_possible and self.fault_active("saturate", t):
             status |= STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE
         st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
-        v = m.tolist()
+        v = self._out.tolist()
         sample = AtiSample((v[0], v[1], v[2], v[3], v[4], v[5]), status, st.ft_sequence)
         st.last = sample
         return sample

@@ -28,6 +28,7 @@ import math
 import numpy as np
 from numba import njit
 
+from rt.ati.twin_sensor import _measure_kernel
 from rt.twin import physics
 from rt.twin.physics import (
     B_F_PER_A,
@@ -250,6 +251,37 @@ def advance(geom, P, env, S, W, volts, dt, n, t, realistic, integrator):
     if status == STATUS_OK:
         _sensors(P, S, dt)
     return status
+
+
+#: ``port`` layout of :func:`advance_sensed`: the encoder card's count direction and scale per
+#: axis (``FakePcl833Port.sign``, ``.m_per_count``), then the new encoder index it writes.
+PORT_SIGN, PORT_MPC, PORT_INDEX, PORT_SIZE = 0, 3, 6, 9
+
+
+@njit(cache=True)
+def advance_sensed(geom, P, env, S, W, volts, dt, n, t, realistic, integrator, port,
+                   ati_block, ati_row, ati_params, ati_drift, ati_out, ati_dt, overload_bits):
+    """:func:`advance`, then the two readings the twin takes every period, in the same
+    dispatch (issue 16: each dispatch and its Python cost as much as a physics substep):
+
+    * the encoder card's index per axis, ``floor(sign·x/mpc + 0.5)`` of the encoder reading
+      (``FakePcl833Port.set_positions_m``'s arithmetic), into ``port[PORT_INDEX:]``; the
+      caller feeds the change to the card's counters;
+    * the ATI sample (``rt.ati.twin_sensor._measure_kernel`` on the filtered wrench) into
+      ``ati_out``, from row ``ati_row`` of the random block.
+
+    Returns (physics status, ATI overload bits); on a physics failure nothing is read, as
+    when the interpreted path raises before its sensors.
+    """
+    status = advance(geom, P, env, S, W, volts, dt, n, t, realistic, integrator)
+    if status != STATUS_OK:
+        return status, 0
+    for i in range(3):
+        port[PORT_INDEX + i] = math.floor(port[PORT_SIGN + i] * S[S_ENC + i]
+                                          / port[PORT_MPC + i] + 0.5)
+    bits = _measure_kernel(S[S_W_MEAS:S_W_MEAS + 6], ati_block, ati_row, ati_params,
+                           ati_drift, ati_out, ati_dt, overload_bits)
+    return status, bits
 
 
 @njit(cache=True)

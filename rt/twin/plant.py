@@ -305,12 +305,38 @@ class TwinPlant:
             on = True
         self.real[physics.R_BRAKE_ON] = 1.0 if on else 0.0
 
+    def _held_input(self, volts):
+        """The amplifier input held over the next period: the commands plus the input offset
+        while the drives are on (``RigImperfections.amp_offset_v``)."""
+        if self._with_offset and self._drives_on:
+            np.add(volts, self.amp_offset_v, out=self._volts_in)
+            return self._volts_in
+        return volts
+
+    def _fk_failed(self) -> KinematicsError:
+        return KinematicsError(f"twin: forward kinematics failed at q = {self.q.tolist()} m "
+                               f"(t = {self.t:.4f} s); the mechanism left its assembly range")
+
+    def advance_sensed(self, dt: float, volts: np.ndarray, port: np.ndarray, ati_block,
+                       ati_row: int, ati_params, ati_drift, ati_out, ati_dt: float,
+                       overload_bits: int) -> int:
+        """``advance(dt, volts)`` on the compiled path with the encoder index and the ATI
+        sample computed in the same dispatch (``kernels.advance_sensed``: the twin's period
+        without faults); returns the ATI overload bits."""
+        n = max(1, round(dt * self.physics_rate_hz))
+        status, bits = kernels.advance_sensed(
+            self.geom, self.P, self.env, self.S, self.W, self._held_input(volts), dt, n,
+            self.t, self.realistic, self.integrator, port, ati_block, ati_row, ati_params,
+            ati_drift, ati_out, ati_dt, overload_bits)
+        if status != physics.STATUS_OK:
+            raise self._fk_failed()
+        self.t += dt
+        return int(bits)
+
     def advance(self, dt: float, volts) -> None:
         """Hold amplifier commands ``volts`` (V, after the DAC) for ``dt`` s and integrate."""
         n = max(1, round(dt * self.physics_rate_hz))
-        if self._with_offset and self._drives_on:
-            np.add(volts, self.amp_offset_v, out=self._volts_in)
-            volts = self._volts_in
+        volts = self._held_input(volts)
         if self.compiled:
             if type(volts) is not np.ndarray:
                 volts = np.asarray(volts, dtype=np.float64)
@@ -339,8 +365,7 @@ class TwinPlant:
             self._delay_left = max(0, self._delay_left - n)
             self._heat(dt)
         if status != physics.STATUS_OK:
-            raise KinematicsError(f"twin: forward kinematics failed at q = {self.q.tolist()} m "
-                                  f"(t = {self.t:.4f} s); the mechanism left its assembly range")
+            raise self._fk_failed()
         self.t += dt
 
     def _heat(self, dt: float) -> None:

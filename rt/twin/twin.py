@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rt.ati.rdt import STATUS_ANY_ERROR, STATUS_FT_OUT_OF_RANGE
 from rt.ati.twin_sensor import AtiSample, AtiSensorParams, TwinAtiSensorModel
 from rt.devices.interfaces import DigitalInputState
 from rt.drivers.fake_comedi import FakeComedi
@@ -47,6 +48,7 @@ from rt.drivers.pcl833 import encode_position
 from rt.errors import InputError
 from rt.model.description import RobotDescription, load_description
 from rt.model.dynamics import Payload
+from rt.twin import kernels
 from rt.twin.environment import ForcePlateContact, FreeMotion, PayloadStep
 from rt.twin.faults import FaultPlan
 from rt.twin.plant import TwinPlant
@@ -54,6 +56,8 @@ from rt.twin.realism import RigImperfections, default_truth
 
 #: Longest stretch integrated with one held command and one fault/schedule check (s).
 _MAX_CHUNK_S = 0.001
+#: The ATI's status bits for an overloaded axis (``TwinAtiSensorModel``'s compiled sample).
+_ATI_OVERLOAD = STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE
 
 
 class SimClock:
@@ -99,6 +103,10 @@ class _Arrival:
 class Twin:
     """The robot, its sensors and environment in one object (see module docstring)."""
 
+    #: Run a fault-free period as one compiled call with its sensor readings
+    #: (``_sync_fused``); False takes the general path (``bench/twin.py`` compares the two).
+    fused_period: bool = True
+
     def __init__(self, description: RobotDescription | None = None, environment=None,
                  seed: int = 0, physics_rate_hz: float = 5000.0,
                  integrator: str = "symplectic_euler", frictionless: bool = False,
@@ -143,6 +151,10 @@ class Twin:
         self._jumps_done: set[int] = set()
         # Delayed sensor history for the latency fault: (t, positions, ATI sample).
         self._history: deque = deque(maxlen=512)
+        # The encoder card's sign and scale per axis for the fused period (built on first use,
+        # rebuilt if the port is replaced).
+        self._port_params = np.zeros(kernels.PORT_SIZE)
+        self._port_params_of: FakePcl833Port | None = None
         self.plant.set_payload(None)
 
     # ------------------------------------------------------------------ setup
@@ -214,6 +226,11 @@ class Twin:
             if self.clock is None:
                 return
             t = self.clock()
+        if (self.fused_period and self.compiled and not self.faults.faults
+                and not self.ati._faults_possible
+                and (self._payload_applied or not isinstance(self.environment, PayloadStep))):
+            self._sync_fused(t)
+            return
         while t - self.plant.t > 1e-12:
             chunk = min(_MAX_CHUNK_S, t - self.plant.t)
             if self._arrival is not None:
@@ -229,6 +246,36 @@ class Twin:
             self._update_amplifier_input()
             self.plant.advance(chunk, self.amp_volts)
             self._update_sensors(chunk)
+
+    def _sync_fused(self, t: float) -> None:
+        """``sync`` without faults or a pending payload change (pre-flight's case): each held
+        command is one compiled call that also reads the encoders and the ATI
+        (``kernels.advance_sensed``); the same arithmetic and order as the general path, which
+        runs ``plant.advance`` and then ``_update_sensors``."""
+        plant = self.plant
+        port = self.encoder_port
+        ati = self.ati
+        pp = self._port_params
+        if self._port_params_of is not port:
+            pp = self._port_params = np.array([*port.sign, *port.m_per_count, 0.0, 0.0, 0.0],
+                                              dtype=np.float64)
+            self._port_params_of = port
+        index = port._encoder_index
+        while t - plant.t > 1e-12:
+            chunk = min(_MAX_CHUNK_S, t - plant.t)
+            self._update_amplifier_input()
+            t_end = plant.t + chunk                 # what plant.t is after the period
+            block, row = ati._next_block_row()
+            bits = plant.advance_sensed(chunk, self.amp_volts, pp, block, row, ati._kparams,
+                                        ati._state.drift, ati._out, ati._dt_to(t_end),
+                                        _ATI_OVERLOAD)
+            new = pp[kernels.PORT_INDEX:].tolist()          # floats holding integers
+            for axis in range(3):
+                delta = int(new[axis]) - index[axis]
+                if delta:
+                    index[axis] += delta
+                    port.move_counts(axis, delta)
+            self.ati_sample = ati._commit_compiled(bits, plant.t)
 
     def _update_amplifier_input(self) -> None:
         t = self.plant.t
