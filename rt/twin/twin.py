@@ -227,7 +227,7 @@ class Twin:
                 return
             t = self.clock()
         if (self.fused_period and self.compiled and not self.faults.faults
-                and not self.ati._faults_possible
+                and not self.ati._faults_possible and self._arrival is None
                 and (self._payload_applied or not isinstance(self.environment, PayloadStep))):
             self._sync_fused(t)
             return
