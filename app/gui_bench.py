@@ -18,7 +18,6 @@ import time
 from typing import Any
 
 import numpy as np
-from PySide6.QtCore import QTimer
 
 from app.launch import application
 from app.main_window import MainWindow
@@ -26,6 +25,7 @@ from app.patient_context import PatientContext
 from app.rt_link import RtLink
 from app.screenshots import settle, wait_until
 from app.settings import GuiSettings
+from app.stall_tracer import StallTracer
 from rt.ipc.client import Subscriber
 
 #: Attempts at starting the measured session (bench/gui.py's START_ATTEMPTS).
@@ -85,17 +85,9 @@ def gui_session_figures(endpoint: str, doc: dict[str, Any], pub: Subscriber,
         raise
     settle(1.0)
 
-    gaps: list[float] = []
-    last = [time.monotonic()]
-
-    def probe() -> None:          # a 5 ms timer: the gaps between its runs are the stalls
-        now = time.monotonic()
-        gaps.append(now - last[0])
-        last[0] = now
-
-    timer = QTimer()
-    timer.setInterval(5)
-    timer.timeout.connect(probe)
+    # A 5 ms timer: the gaps between its runs are the stalls; each stall over 25 ms is
+    # attributed (app.stall_tracer).
+    tracer = StallTracer(threshold_s=0.025)
     first_motion: list[float] = []
     cleared: list[str] = []
     before, click = _start(window, cleared)
@@ -109,10 +101,10 @@ def gui_session_figures(endpoint: str, doc: dict[str, Any], pub: Subscriber,
     frames0, thread_cpu0, proc_cpu0, wall0 = (window.run.frames, time.thread_time(),
                                               time.process_time(), time.monotonic())
     window.run.frame_log.clear()
-    last[0] = time.monotonic()
-    timer.start()
+    tracer.start()
     wait_until(lambda: window.run.session_id is None, 600.0, "the end of the session")
-    timer.stop()
+    tracer.stop()
+    gaps = list(tracer.gaps)
     wall = time.monotonic() - wall0
     frames = window.run.frames - frames0
     thread_cpu = time.thread_time() - thread_cpu0
@@ -165,6 +157,7 @@ def gui_session_figures(endpoint: str, doc: dict[str, Any], pub: Subscriber,
         "reply_to_motion_ms": round(1000 * (first_motion[0] - replied), 1),
         "stop_click_to_soft_stop_ms": None if event is None
         else round(1000 * (event["wall"] - clicked_wall), 1),
+        "stall_trace": tracer.report(),
     }
 
 
