@@ -36,19 +36,36 @@ DEMO_PROTOCOL = ("sine_fz", {"cycles": "4", "ramp_in_s": "1", "ramp_out_s": "1"}
 
 
 def wait_until(predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
-    """Process Qt events until ``predicate()`` or ``timeout_s``.
+    """Run the Qt event loop until ``predicate()`` or ``timeout_s``.
+
+    A real event loop (``QEventLoop``) as ``app.exec()`` runs it, the predicate checked by a
+    10 ms timer: the GUI thread sleeps in the loop's poll and wakes for every event, as in the
+    product. (Polling ``processEvents`` with a 10 ms sleep in between left every event waiting
+    up to the sleep and made the stalls bench/gui.py measured partly the harness's.)
 
     Raises:
         HardwareError: it did not happen in time (``what`` says what was awaited).
     """
-    from PySide6.QtWidgets import QApplication
+    from PySide6.QtCore import QEventLoop, QTimer
 
+    if predicate():
+        return
     end = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > end:
-            raise HardwareError(f"GUI: {what} did not happen within {timeout_s:g} s")
-        QApplication.processEvents()
-        time.sleep(0.01)
+    loop = QEventLoop()
+    timer = QTimer()
+    timer.setInterval(10)
+
+    def check() -> None:
+        if time.monotonic() > end or predicate():
+            loop.quit()
+    timer.timeout.connect(check)
+    timer.start()
+    try:
+        loop.exec()
+    finally:
+        timer.stop()
+    if not predicate():
+        raise HardwareError(f"GUI: {what} did not happen within {timeout_s:g} s")
 
 
 def settle(seconds: float) -> None:

@@ -100,6 +100,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=60.0, help="session length, s")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--endpoint", default="tcp://127.0.0.1:1",
+                    help="an RT process already serving (`talus rt serve --backend sim "
+                         "--heartbeat-timeout 1`); default: an embedded one is started")
     ap.add_argument("--gui-only", action="store_true",
                     help="skip the session without the GUI (no deadline-miss comparison)")
     ap.add_argument("--trace", type=int, metavar="N", default=5,
@@ -123,7 +126,7 @@ def main() -> None:
         return
     doc = _sine(args.duration)
     rec = Path(tempfile.mkdtemp(prefix="talus-bench-gui-"))
-    with rt_process("tcp://127.0.0.1:1", recordings_dir=str(rec),
+    with rt_process(args.endpoint, recordings_dir=str(rec),
                     heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S) as endpoint:
         with RtClient(endpoint, timeout_s=5.0) as c:
             pub = Subscriber(c.subscribe_info()["pub_endpoint"], ["event"])
