@@ -16,6 +16,7 @@ with the GUI). Figures vary ±30 % run to run here.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -100,9 +101,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=60.0, help="session length, s")
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--endpoint", default="tcp://127.0.0.1:1",
+    ap.add_argument("--endpoint", default=None,
                     help="an RT process already serving (`talus rt serve --backend sim "
                          "--heartbeat-timeout 1`); default: an embedded one is started")
+    ap.add_argument("--save", type=Path, default=None, help="also write the figures (JSON)")
     ap.add_argument("--gui-only", action="store_true",
                     help="skip the session without the GUI (no deadline-miss comparison)")
     ap.add_argument("--trace", type=int, metavar="N", default=5,
@@ -110,7 +112,22 @@ def main() -> None:
     ap.add_argument("--frame-cost", type=int, metavar="FRAMES", default=0,
                     help="only the Run page's GUI-thread cost per frame (redraw + paint) on "
                          "synthetic 60 Hz telemetry, FRAMES frames, no RT process")
+    ap.add_argument("--synthetic", type=float, metavar="SECONDS", default=0.0,
+                    help="only the GUI thread's stalls: the main window on the Run page fed "
+                         "60 Hz synthetic telemetry for SECONDS, no RT process (a loaded "
+                         "machine's RT loop may not run a session at all)")
     args = ap.parse_args()
+    if args.synthetic:
+        from app.gui_bench import synthetic_stalls  # Qt lives in app/
+        r = synthetic_stalls(args.synthetic)
+        if args.save:
+            args.save.write_text(json.dumps(r, indent=2))
+        print(f"GUI thread, Run page fed synthetic 60 Hz telemetry for {r['seconds']} s, "
+              "offscreen Qt, no RT process")
+        print(f"  longest stall {r['gui_longest_stall_ms']} ms, p99 {r['gui_stall_p99_ms']} ms;"
+              f" {r['frames_per_s']} frames/s; GUI thread CPU {r['gui_thread_cpu_pct']} %")
+        _print_trace(r["stall_trace"], args.trace)
+        return
     if args.frame_cost:
         from app.gui_bench import frame_cost  # Qt lives in app/
         r = frame_cost(args.frame_cost)
@@ -126,8 +143,11 @@ def main() -> None:
         return
     doc = _sine(args.duration)
     rec = Path(tempfile.mkdtemp(prefix="talus-bench-gui-"))
-    with rt_process(args.endpoint, recordings_dir=str(rec),
-                    heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S) as endpoint:
+    # An RT process given is used as it is (a loaded machine may answer the embedded
+    # helper's 0.5 s probe too late); else one is started here.
+    serving = contextlib.nullcontext(args.endpoint) if args.endpoint else rt_process(
+        "tcp://127.0.0.1:1", recordings_dir=str(rec), heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S)
+    with serving as endpoint:
         with RtClient(endpoint, timeout_s=5.0) as c:
             pub = Subscriber(c.subscribe_info()["pub_endpoint"], ["event"])
         out: dict[str, Any] = {}
@@ -136,6 +156,8 @@ def main() -> None:
             print(json.dumps(out), flush=True)
         out["with_gui"] = _with_gui(endpoint, doc, pub)
         pub.close()
+    if args.save:
+        args.save.write_text(json.dumps(out, indent=2))
     if args.json:
         print(json.dumps(out, indent=2))
         return
@@ -164,7 +186,9 @@ def main() -> None:
     print(f"  Start click → reply        {g['start_click_to_reply_s']} s (pre-flight included)")
     print(f"  Start click → motion       {g['start_click_to_motion_s']} s "
           f"(reply → first running sample {g['reply_to_motion_ms']} ms)")
-    print(f"  STOP click → soft stop     {g['stop_click_to_soft_stop_ms']} ms")
+    print(f"  STOP click → soft stop     {g['stop_click_to_soft_stop_ms']} ms"
+          + (f" (not measured: {g['stop_measurement_error']})"
+             if g.get("stop_measurement_error") else ""))
     _print_trace(g["stall_trace"], args.trace)
 
 

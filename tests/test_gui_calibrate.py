@@ -93,7 +93,7 @@ def test_engineer_calibrates_a_plate_through_the_wizard(qtbot, tmp_path):
             lambda block: arrivals.append((block, len(page.live_series))))
         drawn: list[int] = []
         page.progress_signal.samples.connect(
-            lambda _b: drawn.append(len(page.running_curves["ati"].getData()[0])))
+            lambda _b: drawn.append(len(page.running_curves["ati"].xData)))
         click("run")
         assert page.progress.value() == page.progress.maximum() > 0
         assert not page.plate_file.isEnabled()             # the campaign is fixed now
@@ -101,7 +101,7 @@ def test_engineer_calibrates_a_plate_through_the_wizard(qtbot, tmp_path):
         assert flow is not None
         _check_live_plot(page, flow)
         _check_live_samples(flow, arrivals, drawn)
-        x_running, _ = page.running_curves["ati"].getData()
+        x_running = page.running_curves["ati"].xData
         assert x_running is None or len(x_running) == 0   # the last trial's file took over
         click("fit")
         assert flow.record is not None
@@ -161,8 +161,9 @@ def _check_live_plot(page: CalibratePage, flow: CalibrationFlow) -> None:
     ids = [e["id"] for e in index["trials"]]
     assert [s.trial_id for s in page.live_series] == ids
     assert [s.index for s in page.live_series] == list(range(len(ids)))
-    x, y = page.live_curves["ati"].getData()
-    xp, _yp = page.live_curves["plate"].getData()
+    # The data given (getData() is what is drawn: clipped to the view, downsampled).
+    x, y = page.live_curves["ati"].xData, page.live_curves["ati"].yData
+    xp = page.live_curves["plate"].xData
     assert x is not None and xp is not None and len(x) > 20 * len(ids)
     assert np.isnan(x).sum() == len(ids) == np.isnan(xp).sum()     # one gap after each trial
     for s in page.live_series:
@@ -213,7 +214,7 @@ def test_twin_runner_publishes_its_samples_while_the_trial_runs():
     """The robot twin's trial hands its samples over every 0.5 s of the loop, from the ATI's
     first reading, on the trial file's clock: together they are the trial's recording
     (time, commanded force, the ATI's load along the tool), sample for sample."""
-    from calibration.plan import ProfileKind, Trial, default_plan
+    from calibration.plan import ProfileKind, Trial, default_plan, force_profile
     from calibration.plate import TWIN_PLATE_FILE, load_plate
     from calibration.twin_plate import TruthSettings, TwinPlate, draw_truth
     from calibration.twin_runner import TwinTrialRunner
@@ -226,9 +227,7 @@ def test_twin_runner_publishes_its_samples_while_the_trial_runs():
     plan = default_plan()
     trial = Trial(id="push", site="S", site_xy_m=(0.0, 0.0), profile=ProfileKind.STEPS,
                   held_out=False, load_n=300.0)
-    # A short push (ramp, hold, release: 1.5 s) keeps the test quick.
-    profile = np.r_[np.linspace(0.0, 300.0, 500), np.full(500, 300.0),
-                    np.linspace(300.0, 0.0, 500)]
+    profile = force_profile(plan, trial, 1e-3)
     d = runner.run("push", trial.site_xy_m, (plan.pose_z_m, 0.0, 0.0), profile, 1e-3)
     assert len(blocks) > 2 and all(b.trial_id == "push" for b in blocks)
     assert max(len(b.t_robot) for b in blocks) <= 500 + 1          # 0.5 s at 1 kHz
