@@ -83,7 +83,7 @@ class Stall:
 
 
 def _stack(frame: FrameType | None) -> str:
-    parts = []
+    parts: list[str] = []
     while frame is not None and len(parts) < STACK_DEPTH:
         code = frame.f_code
         module = frame.f_globals.get("__name__", "?")
@@ -212,7 +212,13 @@ class StallTracer:
         for s in self.stalls:
             by_cause[s.cause()].append(s.gap_s)
         longest = sorted(self.stalls, key=lambda s: s.gap_s, reverse=True)[:top]
+        cpu = [s.cpu_s for s in self.stalls if s.cpu_s == s.cpu_s]
         return {"stalls_over_threshold": len(self.stalls),
+                # The GUI thread's own work in a stall (its CPU time), which a quiet machine
+                # would not hide: the longest, and how many stalls had more than the
+                # threshold of it (the rest of a long gap is waiting for a core or the GIL).
+                "max_gui_cpu_in_a_stall_ms": round(1e3 * max(cpu, default=0.0), 1),
+                "stalls_with_gui_cpu_over_threshold": sum(c > self.threshold_s for c in cpu),
                 "threshold_ms": round(1e3 * self.threshold_s, 1),
                 "causes": sorted(([c, len(v), round(1e3 * max(v), 1), round(1e3 * sum(v), 1)]
                                   for c, v in by_cause.items()),

@@ -195,7 +195,10 @@ def main() -> None:
 def _print_trace(trace: dict[str, Any], top: int) -> None:
     """The stall tracer's findings (app.stall_tracer): causes, then the longest stalls."""
     print(f"  GUI stalls over {trace['threshold_ms']} ms: {trace['stalls_over_threshold']}; "
-          "by cause (count, longest ms, total ms):")
+          f"the GUI thread's own CPU in a stall: at most "
+          f"{trace.get('max_gui_cpu_in_a_stall_ms')} ms, over {trace['threshold_ms']} ms in "
+          f"{trace.get('stalls_with_gui_cpu_over_threshold')}; by cause (count, longest ms, "
+          "total ms):")
     for cause, n, longest, total in trace["causes"]:
         print(f"    {n:4d} {longest:7.1f} {total:8.1f}  {cause}")
     for s in trace["longest"][:top]:
