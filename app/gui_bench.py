@@ -251,7 +251,7 @@ def synthetic_stalls(seconds: float = 30.0, telemetry_hz: float = 60.0,
         "pitch_max_deg": 15.0, "max_force_n": 600.0, "max_angular_speed_deg_s": 30.0}))
     window.show_page("run")
     quit_ = threading.Event()
-    status = {"state": "run", "causes": [], "latched": [], "session": "BENCH", "owner": None,
+    status: dict[str, Any] = {"state": "run", "causes": [], "latched": [], "session": "BENCH", "owner": None,
               "phase_name": "play", "cycles": 0, "deadline_misses": 0}
 
     def feed() -> None:
