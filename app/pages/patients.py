@@ -481,7 +481,9 @@ class PatientsPage(QWidget):
             tr("Body mass: %1 kg").replace("%1", "—" if mass is None else f"{mass:g}"),
             tr("Height: %1 cm").replace("%1", "—" if p.get("height_m") is None
                                          else f"{100 * float(p['height_m']):.0f}"),
-            tr("Affected side: %1").replace("%1", str(p.get("affected_side") or "—")),
+            # The side in the installed language (the record stores right/left/both).
+            tr("Affected side: %1").replace("%1", tr(str(p["affected_side"]))
+                                            if p.get("affected_side") else "—"),
             tr("Diagnosis: %1").replace("%1", str(p.get("diagnosis") or "—")),
             tr("Notes: %1").replace("%1", str(p.get("notes") or "—"))]))
         self.edit_mass.setText("" if mass is None else f"{mass:g}")
