@@ -1,8 +1,9 @@
 """Calibrate (calibration engineer): a wizard over the calibration workflow — plate file and
 work folder → plan (the sites drawn on the plate) → register the plate with the camera (the
 camera's image with the detected ArUco markers and the registered plate outline drawn) → run
-the trials on the twin (live plot of the vertical force as the ATI reference and the plate
-measured it, trial by trial, with the progress) → fit (PASS/FAIL, the COP error map
+the trials on the twin (live plot: the running trial's commanded force and ATI load sample by
+sample, then each trial's vertical force as the ATI reference and the plate recorded it, with
+the progress) → fit (PASS/FAIL, the COP error map
 before/after drawn on the plate) → verify at check sites → certificate (PDF where the engineer
 chooses, never over a file; stored in the clinical record when there is one). Each step is
 enabled once the one before it is done; every step runs on a worker
