@@ -27,6 +27,9 @@ from rt.errors import InputError
 Progress = Callable[[int, int, str], None]
 #: Live plots: one trial's forces (:class:`TrialSeries`) as soon as its file is written.
 TrialDone = Callable[["TrialSeries"], None]
+#: Live plots: the running trial's samples as the robot measures them, block by block
+#: (``calibration.trial.LiveSamples``, decimated to :data:`PLOT_RATE_HZ`).
+SamplesLive = Callable[[Any], None]
 #: The live plot keeps about this many points per second of trial (the trials are recorded at
 #: 1 kHz; 50 Hz shows a step or a 1 Hz sine faithfully and keeps a 6-minute campaign at
 #: ~20 000 points per curve).
@@ -115,6 +118,31 @@ def trial_series(campaign: Path, trial_id: str, index: int, count: int,
     t_a, fz_a = _decimate(d.t_robot, w[:, 2], rate_hz)
     t_p, fz_p = _decimate(d.t_plate - lag, plate_fz, rate_hz)
     return TrialSeries(trial_id, index, count, t_a, fz_a, t_p, fz_p, aligned)
+
+
+class LiveDecimator:
+    """Every k-th sample of a trial's blocks for about ``rate_hz`` points a second, the stride
+    kept across blocks (a block's length need not be a multiple of k); a new trial starts
+    with its first sample."""
+
+    def __init__(self, sink: SamplesLive, rate_hz: float = PLOT_RATE_HZ,
+                 dt_s: float = 1e-3) -> None:
+        self.sink = sink
+        self.k = max(1, round(1.0 / (rate_hz * dt_s)))
+        self._trial = ""
+        self._seen = 0
+
+    def __call__(self, block: Any) -> None:
+        from calibration.trial import LiveSamples
+
+        if block.trial_id != self._trial:
+            self._trial, self._seen = block.trial_id, 0
+        n = len(block.t_robot)
+        keep = (self._seen + np.arange(n)) % self.k == 0
+        self._seen += n
+        if keep.any():
+            self.sink(LiveSamples(block.trial_id, block.t_robot[keep], block.force_ref[keep],
+                                  block.ati_load[keep]))
 
 
 @dataclass
@@ -251,9 +279,12 @@ class CalibrationFlow:
         return p_BS + TOOL_LENGTH_M * R[:, 2]
 
     def run(self, progress: Progress | None = None,
-            trial_done: TrialDone | None = None) -> dict[str, Any]:
-        """Step 3: run every trial on the backend into ``folder/campaign``; ``trial_done``
-        gets each trial's forces (:func:`trial_series`) once its file is written."""
+            trial_done: TrialDone | None = None,
+            samples: SamplesLive | None = None) -> dict[str, Any]:
+        """Step 3: run every trial on the backend into ``folder/campaign``; ``samples`` gets
+        the running trial's samples while it runs (commanded force and the ATI's load,
+        decimated: :class:`LiveDecimator`), ``trial_done`` each trial's forces
+        (:func:`trial_series`) once its file is written."""
         from calibration.campaign import run_campaign
         from calibration.plate import load_plate
         from calibration.twin_runner import make_runner
@@ -274,7 +305,8 @@ class CalibrationFlow:
             if progress is not None:
                 progress(k, n, trial_id)
 
-        index = run_campaign(self.plan, self.plate_file, runner, self.campaign, truth, each)
+        index = run_campaign(self.plan, self.plate_file, runner, self.campaign, truth, each,
+                             samples=None if samples is None else LiveDecimator(samples))
         if trial_done is not None and previous:
             trial_done(trial_series(self.campaign, previous[-1][2], *previous[-1][:2]))
         return {"trials": len(index["trials"]), "robot_time_s": index["robot_time_s"]}

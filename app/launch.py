@@ -19,6 +19,12 @@ def recordings_dir(settings: GuiSettings) -> Path:
     return default_recordings_dir()
 
 
+#: How long the configured RT process may take to answer before an embedded one is started
+#: (s): a loaded machine answered a live one's status after more than the 0.5 s default, and
+#: the GUI then started a second RT process beside it.
+PROBE_TIMEOUT_S = 3.0
+
+
 @contextlib.contextmanager
 def robot(settings: GuiSettings, fast: bool = False,
           heartbeat_timeout_s: float | None = None) -> Iterator[str]:
@@ -28,7 +34,7 @@ def robot(settings: GuiSettings, fast: bool = False,
 
     rec = recordings_dir(settings)
     rec.mkdir(parents=True, exist_ok=True)
-    with rt_process(settings.rt_endpoint, fast=fast, recordings_dir=str(rec),
+    with rt_process(settings.rt_endpoint, PROBE_TIMEOUT_S, fast=fast, recordings_dir=str(rec),
                     heartbeat_timeout_s=heartbeat_timeout_s) as endpoint:
         yield endpoint
 

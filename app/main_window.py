@@ -147,6 +147,7 @@ class MainWindow(QMainWindow):
         self.show_page(next(iter(self.pages)))
         if record is not None:
             self._apply_role()
+        self.gc.freeze_built()
 
     # ------------------------------------------------------------------ users
 

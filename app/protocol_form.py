@@ -27,6 +27,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.field_labels import field_label
+from app.form_rows import ERROR_STYLE, error_label, field_cell
 from app.i18n import tr
 from app.style import TARGET_PX
 from protocols.schema import KINDS, validate_protocol_data
@@ -137,7 +138,7 @@ class ProtocolForm(QWidget):
         self._layout = QVBoxLayout(self)
         self.general_error = QLabel()
         self.general_error.setWordWrap(True)
-        self.general_error.setStyleSheet("color: #c0262d;")
+        self.general_error.setStyleSheet(ERROR_STYLE)
 
     # ------------------------------------------------------------------ building
 
@@ -191,16 +192,8 @@ class ProtocolForm(QWidget):
                 form.addRow(field_label(name), shown)
                 continue
             widget = self._editor(kind, prop, value)
-            error = QLabel()
-            error.setObjectName(f"error:{path}")
-            error.setWordWrap(True)
-            error.setStyleSheet("color: #c0262d;")
-            error.hide()
-            cell = QWidget()
-            col = QVBoxLayout(cell)
-            col.setContentsMargins(0, 0, 0, 0)
-            col.addWidget(widget)
-            col.addWidget(error)
+            error = error_label(f"error:{path}")
+            cell = field_cell(widget, error)
             widget.setObjectName(f"field:{path}")
             unit = prop.get("description", "")
             if unit:

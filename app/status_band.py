@@ -13,6 +13,17 @@ from app.style import TARGET_PX
 from app.words import STATE_COLOURS, cause_words, display_state, state_words
 
 
+def _set_text(label: QLabel, text: str) -> None:
+    """Set ``text`` unless the label shows it already (no relayout for nothing)."""
+    if label.text() != text:
+        label.setText(text)
+
+
+def _set_visible(widget: QWidget, visible: bool) -> None:
+    if widget.isHidden() == visible:
+        widget.setVisible(visible)
+
+
 class StatusBand(QWidget):
     """Shows the latest ``status`` and connection; emits ``reset_confirmed(ids)`` once the
     user acknowledged exactly the faults listed."""
@@ -21,6 +32,7 @@ class StatusBand(QWidget):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
+        self._colour = ""        # the band's colour now (its style sheet is set on a change)
         self.setObjectName("statusBand")
         self.setAttribute(Qt.WidgetAttribute.WA_StyledBackground, True)
         self.state = "disconnected"
@@ -86,27 +98,32 @@ class StatusBand(QWidget):
 
     def update_status(self, status: dict[str, Any] | None, connected: bool,
                       reason: str = "") -> None:
+        """Show a ``status`` reply (four a second while connected). Only what changed is
+        touched: a style sheet set again re-polishes the band and every label in it, and a
+        label's text set again asks the window for a new layout — the GUI thread's stalls
+        traced to this on the Run page (bench/gui.py --synthetic)."""
         self.state = display_state(status, connected)
         colour = STATE_COLOURS[self.state]
-        self.setStyleSheet(f"#statusBand {{ background: {colour}; }} "
-                           f"#statusBand QLabel {{ color: white; font-size: 12pt; }}")
-        self.state_label.setText(state_words(self.state))
-        if connected:
-            self.connection_label.setText(tr("Robot connected"))
-        else:
-            self.connection_label.setText(tr("Robot NOT connected: %1").replace("%1", reason))
+        if colour != self._colour:
+            self._colour = colour
+            self.setStyleSheet(f"#statusBand {{ background: {colour}; }} "
+                               f"#statusBand QLabel {{ color: white; font-size: 12pt; }}")
+        _set_text(self.state_label, state_words(self.state))
+        _set_text(self.connection_label, tr("Robot connected") if connected
+                  else tr("Robot NOT connected: %1").replace("%1", reason))
         owner = (status or {}).get("owner")
-        self.owner_label.setText(tr("Controlled by: %1").replace("%1", owner["name"])
-                                 if isinstance(owner, dict) else tr("Nobody controls the robot"))
+        _set_text(self.owner_label, tr("Controlled by: %1").replace("%1", owner["name"])
+                  if isinstance(owner, dict) else tr("Nobody controls the robot"))
         self.latched = list((status or {}).get("latched") or [])
         if self.latched:
-            self.detail_label.setText(tr("Why: %1").replace("%1", "; ".join(
+            _set_text(self.detail_label, tr("Why: %1").replace("%1", "; ".join(
                 self._fault_text(f) for f in self.latched)))
         else:
-            self.detail_label.setText("")
-            self._hide_acknowledge()
-        self.detail_label.setVisible(bool(self.latched))
-        self.reset_button.setVisible(bool(self.latched) and connected)
+            _set_text(self.detail_label, "")
+            if not self.ack_button.isHidden():
+                self._hide_acknowledge()
+        _set_visible(self.detail_label, bool(self.latched))
+        _set_visible(self.reset_button, bool(self.latched) and connected)
         if not self.ack_button.isHidden() and [int(f["id"]) for f in self.latched] != \
                 getattr(self, "_pending", []):
             self._ask_acknowledge()   # what Reset clears changed: show the new list

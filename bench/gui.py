@@ -16,6 +16,7 @@ with the GUI). Figures vary ±30 % run to run here.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -100,10 +101,33 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=60.0, help="session length, s")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--endpoint", default=None,
+                    help="an RT process already serving (`talus rt serve --backend sim "
+                         "--heartbeat-timeout 1`); default: an embedded one is started")
+    ap.add_argument("--save", type=Path, default=None, help="also write the figures (JSON)")
+    ap.add_argument("--gui-only", action="store_true",
+                    help="skip the session without the GUI (no deadline-miss comparison)")
+    ap.add_argument("--trace", type=int, metavar="N", default=5,
+                    help="print the N longest GUI stalls with what ran during them")
     ap.add_argument("--frame-cost", type=int, metavar="FRAMES", default=0,
                     help="only the Run page's GUI-thread cost per frame (redraw + paint) on "
                          "synthetic 60 Hz telemetry, FRAMES frames, no RT process")
+    ap.add_argument("--synthetic", type=float, metavar="SECONDS", default=0.0,
+                    help="only the GUI thread's stalls: the main window on the Run page fed "
+                         "60 Hz synthetic telemetry for SECONDS, no RT process (a loaded "
+                         "machine's RT loop may not run a session at all)")
     args = ap.parse_args()
+    if args.synthetic:
+        from app.gui_bench import synthetic_stalls  # Qt lives in app/
+        r = synthetic_stalls(args.synthetic)
+        if args.save:
+            args.save.write_text(json.dumps(r, indent=2))
+        print(f"GUI thread, Run page fed synthetic 60 Hz telemetry for {r['seconds']} s, "
+              "offscreen Qt, no RT process")
+        print(f"  longest stall {r['gui_longest_stall_ms']} ms, p99 {r['gui_stall_p99_ms']} ms;"
+              f" {r['frames_per_s']} frames/s; GUI thread CPU {r['gui_thread_cpu_pct']} %")
+        _print_trace(r["stall_trace"], args.trace)
+        return
     if args.frame_cost:
         from app.gui_bench import frame_cost  # Qt lives in app/
         r = frame_cost(args.frame_cost)
@@ -119,18 +143,27 @@ def main() -> None:
         return
     doc = _sine(args.duration)
     rec = Path(tempfile.mkdtemp(prefix="talus-bench-gui-"))
-    with rt_process("tcp://127.0.0.1:1", recordings_dir=str(rec),
-                    heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S) as endpoint:
+    # An RT process given is used as it is (a loaded machine may answer the embedded
+    # helper's 0.5 s probe too late); else one is started here.
+    serving = contextlib.nullcontext(args.endpoint) if args.endpoint else rt_process(
+        "tcp://127.0.0.1:1", recordings_dir=str(rec), heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S)
+    with serving as endpoint:
         with RtClient(endpoint, timeout_s=5.0) as c:
             pub = Subscriber(c.subscribe_info()["pub_endpoint"], ["event"])
-        out = {"without_gui": _without_gui(endpoint, doc)}
-        print(json.dumps(out), flush=True)
+        out: dict[str, Any] = {}
+        if not args.gui_only:
+            out["without_gui"] = _without_gui(endpoint, doc)
+            print(json.dumps(out), flush=True)
         out["with_gui"] = _with_gui(endpoint, doc, pub)
         pub.close()
+    if args.save:
+        args.save.write_text(json.dumps(out, indent=2))
     if args.json:
         print(json.dumps(out, indent=2))
         return
-    a, g = out["without_gui"], out["with_gui"]
+    g = out["with_gui"]
+    a = out.get("without_gui") or {"deadline_misses": 0, "cycles": 0, "misses_per_1000": 0.0,
+                                   "stops": ["not run (--gui-only)"]}
     print(f"GUI figures, sine Fz session of {g['session_s']} s, twin in real time, offscreen Qt")
     print(f"  GUI thread longest stall   {g['gui_longest_stall_ms']} ms "
           f"(p99 {g['gui_stall_p99_ms']} ms; target ≤ 50 ms)")
@@ -153,7 +186,27 @@ def main() -> None:
     print(f"  Start click → reply        {g['start_click_to_reply_s']} s (pre-flight included)")
     print(f"  Start click → motion       {g['start_click_to_motion_s']} s "
           f"(reply → first running sample {g['reply_to_motion_ms']} ms)")
-    print(f"  STOP click → soft stop     {g['stop_click_to_soft_stop_ms']} ms")
+    print(f"  STOP click → soft stop     {g['stop_click_to_soft_stop_ms']} ms"
+          + (f" (not measured: {g['stop_measurement_error']})"
+             if g.get("stop_measurement_error") else ""))
+    _print_trace(g["stall_trace"], args.trace)
+
+
+def _print_trace(trace: dict[str, Any], top: int) -> None:
+    """The stall tracer's findings (app.stall_tracer): causes, then the longest stalls."""
+    print(f"  GUI stalls over {trace['threshold_ms']} ms: {trace['stalls_over_threshold']}; "
+          f"the GUI thread's own CPU in a stall: at most "
+          f"{trace.get('max_gui_cpu_in_a_stall_ms')} ms, over {trace['threshold_ms']} ms in "
+          f"{trace.get('stalls_with_gui_cpu_over_threshold')}; by cause (count, longest ms, "
+          "total ms):")
+    for cause, n, longest, total in trace["causes"]:
+        print(f"    {n:4d} {longest:7.1f} {total:8.1f}  {cause}")
+    for s in trace["longest"][:top]:
+        print(f"  stall {s['gap_ms']} ms at {s['at_s']} (GUI CPU {s['gui_cpu_ms']} ms, "
+              f"gc {s['gc_ms']} ms {s['gc_runs']}): {s['cause']}")
+        for stack, k in s["stacks"][:3]:
+            print(f"      {k:3d}x {stack}")
+        print(f"      events: {'; '.join(f'{t}:{w}' for t, w in s['events'][:14])}")
 
 
 if __name__ == "__main__":

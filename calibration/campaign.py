@@ -23,6 +23,7 @@ from calibration.trial import (
     CAMPAIGN_FILE,
     CAMPAIGN_KIND,
     TRIALS_DIR,
+    SampleSink,
     TrialData,
     TrialRunner,
     read_campaign,
@@ -74,9 +75,11 @@ def software_version() -> str:
 def run_campaign(plan: Plan, plate_file: Path, runner: TrialRunner, out: Path,
                  truth: PlateTruth | None = None,
                  progress: Callable[[int, int, str], None] | None = None,
-                 only: list[str] | None = None, trials: list[Trial] | None = None) -> dict:
+                 only: list[str] | None = None, trials: list[Trial] | None = None,
+                 samples: SampleSink | None = None) -> dict:
     """Run every trial of ``plan`` (or the ids in ``only``, or the explicit ``trials``) into the
-    new folder ``out``."""
+    new folder ``out``; ``samples`` receives each trial's samples while it runs (the runner's
+    :attr:`~calibration.trial.TrialRunner.samples`)."""
     plate = load_plate(plate_file)
     if out.exists() and any(out.iterdir()):
         raise InputError(f"{out} exists and is not empty; choose a new campaign folder")
@@ -87,6 +90,8 @@ def run_campaign(plan: Plan, plate_file: Path, runner: TrialRunner, out: Path,
             raise InputError(f"unknown trial id(s) {', '.join(unknown)}")
         trials = [t for t in trials if t.id in only]
     (out / TRIALS_DIR).mkdir(parents=True, exist_ok=True)
+    if samples is not None:
+        runner.samples = samples
     shutil.copyfile(plate_file, out / PLATE_COPY)
     entries = []
     t0 = time.perf_counter()

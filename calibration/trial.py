@@ -20,6 +20,7 @@ import hashlib
 import json
 import os
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -100,6 +101,28 @@ class TrialData:
                 raise ConfigurationError(f"{where}: {name} hold NaN or infinite values")
 
 
+@dataclass(frozen=True)
+class LiveSamples:
+    """A block of a running trial's samples as the robot's side measures them, published
+    while the trial runs (live plots; the trial's file, written at its end, is the record).
+
+    ``t_robot`` is on the campaign's robot clock exactly as the trial's file will have it
+    (:attr:`TrialData.t_robot`: from the ATI's first reading, the trial's offset added);
+    ``force_ref`` the commanded force along the platform's z (N, :attr:`TrialData.force_ref`);
+    ``ati_load`` the load the reference sensor measures along S's z (N: ``-ati[:, 2]``, the
+    push the tool applies)."""
+
+    trial_id: str
+    t_robot: np.ndarray       # (k,) s
+    force_ref: np.ndarray     # (k,) N
+    ati_load: np.ndarray      # (k,) N
+
+
+#: Receives a running trial's samples block by block, on the thread that runs the trial; it
+#: must return quickly (a GUI posts them to its own thread) and must not raise.
+SampleSink = Callable[[LiveSamples], None]
+
+
 class TrialRunner(abc.ABC):
     """Runs one trial: the robot presses ``profile_n`` (N, every ``dt`` s, along the platform's z)
     at a site with the platform at ``pose`` (z m, roll, pitch rad), and returns the recording.
@@ -112,6 +135,17 @@ class TrialRunner(abc.ABC):
 
     #: Robot time spent in trials so far (s), for the campaign's length figure.
     robot_time_s: float = 0.0
+    #: Where the running trial's samples go while it runs (:class:`LiveSamples`; None:
+    #: nowhere). Runners that record in this process publish them; the others publish none.
+    samples: SampleSink | None = None
+
+    def publish(self, trial_id: str, t_robot: np.ndarray, force_ref: np.ndarray,
+                ati_fz: np.ndarray) -> None:
+        """Hand a block of samples (``ati_fz``: the ATI's S-axis z, N) to :attr:`samples`."""
+        sink = self.samples
+        if sink is not None and len(t_robot):
+            sink(LiveSamples(trial_id, np.array(t_robot, float), np.array(force_ref, float),
+                             -np.asarray(ati_fz, float)))
 
     @abc.abstractmethod
     def run(self, trial_id: str, site_xy_m: tuple[float, float], pose: tuple[float, float, float],

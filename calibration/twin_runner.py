@@ -212,11 +212,30 @@ class TwinTrialRunner(TrialRunner):
                                                     ("reference.force", "cal.force"),
                                                     ("reference.phase", "cal.phase"),
                                                     ("encoders.q", "truth.q")])
+        published = 0                 # tap rows handed to ``samples`` so far
+        t_first: float | None = None  # the ATI's first reading: the trial file's t = 0
+
+        def live() -> None:
+            """The rows written since the last call, on the trial file's clock."""
+            nonlocal published, t_first
+            if self.samples is None:
+                return
+            new = tap.ring[published:tap.written]
+            published = tap.written
+            if t_first is None:          # as trial_from_rows: from the first finite reading
+                finite = np.isfinite(new[:, 1:7]).all(axis=1)
+                if not finite.any():
+                    return
+                new = new[int(np.argmax(finite)):]
+                t_first = float(new[0, 0])
+            self.publish(trial_id, new[:, 0] - t_first + self._t_offset, new[:, 10], new[:, 3])
+
         try:
             t = 0.0
             while t < report.duration_s + 8.0:
                 pl.loop.run(seconds=0.5)
                 t += 0.5
+                live()
                 if pl.supervisor.reaction >= Reaction.SOFT_STOP:
                     ev = [e for e in pl.events.snapshot() if e.reaction >= Reaction.SOFT_STOP]
                     cause = f"{ev[0].cause}: {ev[0].message} at t = {ev[0].t:.3f} s {getattr(ev[0], 'data', '')}" if ev else "stopped"
@@ -313,6 +332,11 @@ class DirectTrialRunner(TrialRunner):
         ati = np.hstack([f_S, m_S]) + self.rng.normal(0.0, 1.0, (n, 6)) * self.ati_noise
         point_F = np.tile([site_xy_m[0], site_xy_m[1], 0.0], (n, 1))
         t_plate, channels = self.twin_plate.sample(t_robot, force_true_B, point_F)
+        # Computed at once (no robot to wait for); handed over in the twin's 0.5 s blocks.
+        block = max(1, round(0.5 / dt))
+        for i in range(0, n, block):
+            self.publish(trial_id, t_robot[i:i + block], profile_n[i:i + block],
+                         ati[i:i + block, 2])
         self.robot_time_s += n * dt
         self._t_offset = float(t_robot[-1]) + 2.0
         return TrialData(trial_id, t_robot, ati, np.tile(p_BS, (n, 1)),

@@ -6,6 +6,7 @@ in the clinical record for the engineer); steps refuse to run out of order; the 
 calibration engineer's."""
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import shutil
@@ -86,12 +87,22 @@ def test_engineer_calibrates_a_plate_through_the_wizard(qtbot, tmp_path):
         click("register")                                  # this plan: nominal, no camera
         assert page.camera_view is None and "no camera" in page.camera_caption.text()
         assert not page.buttons["fit"].isEnabled()         # run first
+        # What the running trial's curves were given, and which trials had finished then.
+        arrivals: list[tuple[object, int]] = []
+        page.progress_signal.samples.connect(
+            lambda block: arrivals.append((block, len(page.live_series))))
+        drawn: list[int] = []
+        page.progress_signal.samples.connect(
+            lambda _b: drawn.append(len(page.running_curves["ati"].xData)))
         click("run")
         assert page.progress.value() == page.progress.maximum() > 0
         assert not page.plate_file.isEnabled()             # the campaign is fixed now
         flow = page.flow
         assert flow is not None
         _check_live_plot(page, flow)
+        _check_live_samples(flow, arrivals, drawn)
+        x_running = page.running_curves["ati"].xData
+        assert x_running is None or len(x_running) == 0   # the last trial's file took over
         click("fit")
         assert flow.record is not None
         _check_cop_map(page, flow.record)
@@ -150,8 +161,9 @@ def _check_live_plot(page: CalibratePage, flow: CalibrationFlow) -> None:
     ids = [e["id"] for e in index["trials"]]
     assert [s.trial_id for s in page.live_series] == ids
     assert [s.index for s in page.live_series] == list(range(len(ids)))
-    x, y = page.live_curves["ati"].getData()
-    xp, _yp = page.live_curves["plate"].getData()
+    # The data given (getData() is what is drawn: clipped to the view, downsampled).
+    x, y = page.live_curves["ati"].xData, page.live_curves["ati"].yData
+    xp = page.live_curves["plate"].xData
     assert x is not None and xp is not None and len(x) > 20 * len(ids)
     assert np.isnan(x).sum() == len(ids) == np.isnan(xp).sum()     # one gap after each trial
     for s in page.live_series:
@@ -168,6 +180,65 @@ def _check_live_plot(page: CalibratePage, flow: CalibrationFlow) -> None:
     finite = np.isfinite(y)
     assert float(y[finite].max()) == pytest.approx(
         max(float(s.ati_fz_n.max()) for s in page.live_series))
+
+
+def _check_live_samples(flow: CalibrationFlow, arrivals: list[tuple[object, int]],
+                        drawn: list[int]) -> None:
+    """While each trial ran, its samples reached the page before its file's forces did
+    (per sample, not per trial), and they are the trial file's own samples: every
+    ``k``-th one (50 Hz of the 1 kHz recording), on the file's clock, the commanded force and
+    the ATI's load along the tool (``-ati[:, 2]``) exactly; the running curve grew block by
+    block."""
+    from app.calibration_flow import PLOT_RATE_HZ
+
+    index = json.loads((flow.campaign / "campaign.json").read_text())
+    ids = [e["id"] for e in index["trials"]]
+    k = round(1.0 / (PLOT_RATE_HZ * 1e-3))
+    assert next(b.trial_id for b, _ in arrivals) == ids[0]
+    for n, trial_id in enumerate(ids):
+        mine = [(b, done) for b, done in arrivals if b.trial_id == trial_id]
+        assert mine, trial_id
+        assert all(done == n for _, done in mine)    # before the trial's own file's forces
+        d = TrialData.load(flow.campaign / TRIALS_DIR / f"{trial_id}.npz")
+        t = np.concatenate([b.t_robot for b, _ in mine])
+        np.testing.assert_array_equal(t, d.t_robot[::k])
+        np.testing.assert_array_equal(np.concatenate([b.force_ref for b, _ in mine]),
+                                      d.force_ref[::k])
+        np.testing.assert_array_equal(np.concatenate([b.ati_load for b, _ in mine]),
+                                      -d.ati[::k, 2])
+        assert len(mine) > 1                         # several blocks: it grew while running
+    assert max(drawn) > 0 and any(b > a for a, b in itertools.pairwise(drawn))
+
+
+def test_twin_runner_publishes_its_samples_while_the_trial_runs():
+    """The robot twin's trial hands its samples over every 0.5 s of the loop, from the ATI's
+    first reading, on the trial file's clock: together they are the trial's recording
+    (time, commanded force, the ATI's load along the tool), sample for sample."""
+    from calibration.plan import ProfileKind, Trial, default_plan, force_profile
+    from calibration.plate import TWIN_PLATE_FILE, load_plate
+    from calibration.twin_plate import TruthSettings, TwinPlate, draw_truth
+    from calibration.twin_runner import TwinTrialRunner
+
+    plate = load_plate(TWIN_PLATE_FILE)
+    truth = draw_truth(plate, TruthSettings.ideal(clock_offset_s=0.1, clock_drift_ppm=0.0))
+    runner = TwinTrialRunner(plate, TwinPlate(plate, truth), registration="nominal", seed=3)
+    blocks: list = []
+    runner.samples = blocks.append
+    plan = default_plan()
+    trial = Trial(id="push", site="S", site_xy_m=(0.0, 0.0), profile=ProfileKind.STEPS,
+                  held_out=False, load_n=300.0)
+    profile = force_profile(plan, trial, 1e-3)
+    d = runner.run("push", trial.site_xy_m, (plan.pose_z_m, 0.0, 0.0), profile, 1e-3)
+    assert len(blocks) > 2 and all(b.trial_id == "push" for b in blocks)
+    assert max(len(b.t_robot) for b in blocks) <= 500 + 1          # 0.5 s at 1 kHz
+    t = np.concatenate([b.t_robot for b in blocks])
+    n = len(d.t_robot)
+    np.testing.assert_array_equal(t[:n], d.t_robot)
+    np.testing.assert_array_equal(np.concatenate([b.force_ref for b in blocks])[:n],
+                                  d.force_ref)
+    np.testing.assert_array_equal(np.concatenate([b.ati_load for b in blocks])[:n],
+                                  -d.ati[:, 2])
+    assert len(t) - n <= 1          # at most the one row the contact tap had not written
 
 
 def _check_cop_map(page: CalibratePage, record: dict) -> None:

@@ -1,8 +1,9 @@
 """Calibrate (calibration engineer): a wizard over the calibration workflow — plate file and
 work folder → plan (the sites drawn on the plate) → register the plate with the camera (the
 camera's image with the detected ArUco markers and the registered plate outline drawn) → run
-the trials on the twin (live plot of the vertical force as the ATI reference and the plate
-measured it, trial by trial, with the progress) → fit (PASS/FAIL, the COP error map
+the trials on the twin (live plot: the running trial's commanded force and ATI load sample by
+sample, then each trial's vertical force as the ATI reference and the plate recorded it, with
+the progress) → fit (PASS/FAIL, the COP error map
 before/after drawn on the plate) → verify at check sites → certificate (PDF where the engineer
 chooses, never over a file; stored in the clinical record when there is one). Each step is
 enabled once the one before it is done; every step runs on a worker
@@ -59,6 +60,7 @@ class _Progress(QObject):
 
     changed = Signal(int, int, str)
     trial = Signal(object)
+    samples = Signal(object)
 
 
 def qimage_from_bgr(image: np.ndarray) -> QImage:
@@ -127,6 +129,7 @@ class CalibratePage(QWidget):
         self.progress_signal = _Progress(self)
         self.progress_signal.changed.connect(self._progress)
         self.progress_signal.trial.connect(self._trial)
+        self.progress_signal.samples.connect(self._samples)
 
         self.plate_file = QLineEdit(str(TWIN_PLATE_FILE))
         self.work_folder = QLineEdit(str(default_work_folder()))
@@ -194,8 +197,22 @@ class CalibratePage(QWidget):
             "plate": self.live.plot(pen=pg.mkPen("#c0262d", width=1,
                                                  style=Qt.PenStyle.DashLine),
                                     name=tr("plate (nominal matrix)"))}
+        #: the running trial, sample by sample while it runs (calibration's LiveSamples
+        #: blocks): the commanded force and the load the ATI measures along the tool
+        self.running_curves = {
+            "commanded": self.live.plot(pen=pg.mkPen("#555555", width=1,
+                                                     style=Qt.PenStyle.DashLine),
+                                        name=tr("commanded")),
+            "ati": self.live.plot(pen=pg.mkPen("#7fa8e0", width=2),
+                                  name=tr("reference (ATI), trial running"))}
+        #: the running trial's blocks (cleared when its file's forces arrive)
+        self.running_blocks: list[Any] = []
         #: the live plot's data: per curve, the trials' segments (x, y) in arrival order
         self.live_series: list[TrialSeries] = []
+        for p in (self.live,):
+            # Only what is visible, about a point per pixel (a campaign is minutes long).
+            p.setClipToView(True)
+            p.setDownsampling(auto=True, mode="peak")
 
         self.tabs = QTabWidget()
         self.tabs.setObjectName("calibrate:views")
@@ -270,7 +287,8 @@ class CalibratePage(QWidget):
             self._clear_live()
             self.tabs.setCurrentIndex(TABS.index("trials"))
             job = lambda: flow.run(self.progress_signal.changed.emit,
-                                   self.progress_signal.trial.emit)
+                                   self.progress_signal.trial.emit,
+                                   self.progress_signal.samples.emit)
         elif key == "fit":
             job = flow.fit
         elif key == "verify":
@@ -361,8 +379,24 @@ class CalibratePage(QWidget):
 
     def _clear_live(self) -> None:
         self.live_series = []
-        for curve in self.live_curves.values():
+        self.running_blocks = []
+        for curve in (*self.live_curves.values(), *self.running_curves.values()):
             curve.setData([], [])
+
+    def _samples(self, block: Any) -> None:
+        """A block of the running trial's samples (``calibration.trial.LiveSamples``, already
+        decimated): appended to the running trial's curves."""
+        if self.running_blocks and self.running_blocks[-1].trial_id != block.trial_id:
+            self.running_blocks = []
+        self.running_blocks.append(block)
+        t = np.concatenate([b.t_robot for b in self.running_blocks])
+        self.running_curves["commanded"].setData(
+            t, np.concatenate([b.force_ref for b in self.running_blocks]))
+        self.running_curves["ati"].setData(
+            t, np.concatenate([b.ati_load for b in self.running_blocks]))
+        if len(self.running_blocks) == 1:
+            self.live.setTitle(tr("Vertical force on the plate — trial running: %1")
+                               .replace("%1", block.trial_id))
 
     def _show_camera(self, view: CameraView | None) -> None:
         """The registration step's frame and what it found, in words."""
@@ -386,8 +420,13 @@ class CalibratePage(QWidget):
         self.status.setText(text)
 
     def _trial(self, series: TrialSeries) -> None:
-        """A finished trial's forces appended to the live plot (one gap between trials)."""
+        """A finished trial's forces appended to the live plot (one gap between trials); its
+        running curves give way to them (what the campaign recorded, zeroed and aligned)."""
         self.live_series.append(series)
+        if self.running_blocks and self.running_blocks[-1].trial_id == series.trial_id:
+            self.running_blocks = []
+            for curve in self.running_curves.values():
+                curve.setData([], [])
         gap = np.array([np.nan])
         for key, curve in self.live_curves.items():
             xs: list[np.ndarray] = []

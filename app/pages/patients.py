@@ -16,7 +16,6 @@ from typing import Any
 
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
-    QComboBox,
     QFormLayout,
     QGroupBox,
     QHBoxLayout,
@@ -31,6 +30,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.background import Background
+from app.form_rows import FormRows
 from app.i18n import tr
 from app.patient_context import PatientContext
 from app.report_action import ReportAction
@@ -45,14 +45,34 @@ _ANKLE_MM = ("height_above_sole_m", "offset_x_m", "offset_y_m", "sole_above_sens
 _ROM = ("dorsiflexion_deg", "plantarflexion_deg", "inversion_deg", "eversion_deg")
 
 
-def _number(text: str, what: str) -> float | None:
+def _number(text: str) -> float | None:
+    """The number typed (a decimal comma is fine); None when empty.
+
+    Raises:
+        ValueError: not a number.
+    """
     text = text.strip().replace(",", ".")
-    if not text:
+    return float(text) if text else None
+
+
+def read_numbers(rows: FormRows, keys: tuple[str, ...],
+                 message: QLabel) -> dict[str, float | None] | None:
+    """The numbers typed in ``rows``' fields ``keys`` (None: empty); None when one is not a
+    number: "a number is needed" under each such field and on the message line with the
+    fields' names, and nothing else happens."""
+    values: dict[str, float | None] = {}
+    problems: dict[str, str] = {}
+    for key in keys:
+        try:
+            values[key] = _number(rows.lines()[key].text())
+        except ValueError:
+            problems[key] = tr("a number is needed")
+    rows.set_errors(problems)
+    if problems:
+        message.setText(tr("%1: a number is needed").replace(
+            "%1", ", ".join(rows.labels[k] for k in problems)))
         return None
-    try:
-        return float(text)
-    except ValueError:
-        raise ValueError(tr("%1: a number is needed").replace("%1", what)) from None
+    return values
 
 
 class PatientsPage(QWidget):
@@ -82,23 +102,15 @@ class PatientsPage(QWidget):
         self.list = QListWidget()
         self.list.setStyleSheet("QListWidget::item { min-height: 40px; }")
         self.list.currentItemChanged.connect(self._selected)
-        self.new_code = QLineEdit()
-        self.new_code.setPlaceholderText(tr("automatic when empty"))
-        self.new_mass = QLineEdit()
-        self.new_side = QComboBox()
-        self.new_side.addItem(tr("right"), "right")
-        self.new_side.addItem(tr("left"), "left")
-        self.new_side.addItem(tr("both"), "both")
-        self.new_diagnosis = QLineEdit()
-        self.create_button = QPushButton(tr("Register patient"))
-        self.create_button.clicked.connect(self.create_patient)
+        sides = [(tr("right"), "right"), (tr("left"), "left"), (tr("both"), "both")]
         new_box = QGroupBox(tr("New patient"))
-        new_form = QFormLayout(new_box)
-        new_form.addRow(tr("Code"), self.new_code)
-        new_form.addRow(tr("Body mass (kg)"), self.new_mass)
-        new_form.addRow(tr("Affected side"), self.new_side)
-        new_form.addRow(tr("Diagnosis (no names)"), self.new_diagnosis)
-        new_form.addRow(self.create_button)
+        self.new_rows = FormRows(QFormLayout(new_box), "new:")
+        self.new_code = self.new_rows.line("code", tr("Code"), tr("automatic when empty"))
+        self.new_mass = self.new_rows.line("body_mass_kg", tr("Body mass (kg)"))
+        self.new_side = self.new_rows.combo("affected_side", tr("Affected side"), sides)
+        self.new_diagnosis = self.new_rows.line("diagnosis", tr("Diagnosis (no names)"))
+        self.create_button = self.new_rows.button(tr("Register patient"))
+        self.create_button.clicked.connect(self.create_patient)
         left = QVBoxLayout()
         left.addWidget(self.search)
         left.addWidget(self.list, 1)
@@ -110,51 +122,38 @@ class PatientsPage(QWidget):
         self.card.setTextFormat(Qt.TextFormat.PlainText)
         self.limits_label = QLabel()
         self.limits_label.setWordWrap(True)
-        self.limit_edits: dict[str, QLineEdit] = {}
         limits_box = QGroupBox(tr("Prescribe limits"))
-        limits_form = QFormLayout(limits_box)
-        labels = {"dorsiflexion_deg": tr("Dorsiflexion (°)"),
-                  "plantarflexion_deg": tr("Plantarflexion (°)"),
-                  "inversion_deg": tr("Inversion (°)"), "eversion_deg": tr("Eversion (°)"),
-                  "max_force_n": tr("Maximum force (N)"),
-                  "max_angular_speed_deg_s": tr("Maximum angular speed (°/s)"),
-                  "reason": tr("Reason")}
-        for key, label in labels.items():
-            edit = QLineEdit()
-            edit.setObjectName(f"limit:{key}")
-            self.limit_edits[key] = edit
-            limits_form.addRow(label, edit)
-        self.limits_button = QPushButton(tr("Save the new limits"))
+        self.limit_rows = FormRows(QFormLayout(limits_box), "limit:")
+        for key, label in (("dorsiflexion_deg", tr("Dorsiflexion (°)")),
+                           ("plantarflexion_deg", tr("Plantarflexion (°)")),
+                           ("inversion_deg", tr("Inversion (°)")),
+                           ("eversion_deg", tr("Eversion (°)")),
+                           ("max_force_n", tr("Maximum force (N)")),
+                           ("max_angular_speed_deg_s", tr("Maximum angular speed (°/s)")),
+                           ("reason", tr("Reason"))):
+            self.limit_rows.line(key, label)
+        self.limit_edits = self.limit_rows.lines()
+        self.limits_button = self.limit_rows.button(tr("Save the new limits"))
         self.limits_button.clicked.connect(self.save_limits)
-        limits_form.addRow(self.limits_button)
 
         # where the ankle centre sits on the platform (the exercises turn the foot about it)
         self.ankle_label = QLabel()
         self.ankle_label.setObjectName("ankleInForce")
         self.ankle_label.setWordWrap(True)
         self.ankle_label.setTextFormat(Qt.TextFormat.PlainText)
-        self.ankle_side = QComboBox()
-        self.ankle_side.addItem(tr("right"), "right")
-        self.ankle_side.addItem(tr("left"), "left")
-        self.ankle_edits: dict[str, QLineEdit] = {}
         ankle_box = QGroupBox(tr("Ankle centre on the platform"))
-        ankle_form = QFormLayout(ankle_box)
-        ankle_form.addRow(tr("Foot on the platform"), self.ankle_side)
-        ankle_labels = {
-            "height_above_sole_m": tr("Ankle centre above the sole (mm, malleoli)"),
-            "offset_x_m": tr("Offset along the foot (mm, toes +)"),
-            "offset_y_m": tr("Offset across the foot (mm)"),
-            "sole_above_sensor_m": tr("Foot plate thickness (mm)"),
-            "reason": tr("Reason")}
-        for key, label in ankle_labels.items():
-            edit = QLineEdit()
-            edit.setObjectName(f"ankle:{key}")
-            self.ankle_edits[key] = edit
-            ankle_form.addRow(label, edit)
-        self.ankle_button = QPushButton(tr("Save the ankle setup"))
-        self.ankle_button.setObjectName("saveAnkle")
+        self.ankle_rows = FormRows(QFormLayout(ankle_box), "ankle:")
+        self.ankle_side = self.ankle_rows.combo("side", tr("Foot on the platform"), sides[:2])
+        for key, label in (
+                ("height_above_sole_m", tr("Ankle centre above the sole (mm, malleoli)")),
+                ("offset_x_m", tr("Offset along the foot (mm, toes +)")),
+                ("offset_y_m", tr("Offset across the foot (mm)")),
+                ("sole_above_sensor_m", tr("Foot plate thickness (mm)")),
+                ("reason", tr("Reason"))):
+            self.ankle_rows.line(key, label)
+        self.ankle_edits = self.ankle_rows.lines()
+        self.ankle_button = self.ankle_rows.button(tr("Save the ankle setup"), "saveAnkle")
         self.ankle_button.clicked.connect(self.save_ankle)
-        ankle_form.addRow(self.ankle_button)
         self.sessions = QListWidget()
         self.sessions.setStyleSheet("QListWidget::item { min-height: 32px; }")
         self.report_button = QPushButton(tr("Progress report (PDF)"))
@@ -163,25 +162,16 @@ class PatientsPage(QWidget):
         self.open_report_button = self.report.open_button
 
         # the clinical data, editable by the roles allowed to (patient.update)
-        self.edit_mass = QLineEdit()
-        self.edit_height = QLineEdit()
-        self.edit_side = QComboBox()
-        for label, value in ((tr("right"), "right"), (tr("left"), "left"),
-                             (tr("both"), "both")):
-            self.edit_side.addItem(label, value)
-        self.edit_diagnosis = QLineEdit()
-        self.edit_notes = QLineEdit()
-        self.clinical_button = QPushButton(tr("Save clinical data"))
-        self.clinical_button.setObjectName("saveClinical")
-        self.clinical_button.clicked.connect(self.save_clinical)
         clinical_box = QGroupBox(tr("Clinical data"))
-        clinical_form = QFormLayout(clinical_box)
-        clinical_form.addRow(tr("Body mass (kg)"), self.edit_mass)
-        clinical_form.addRow(tr("Height (cm)"), self.edit_height)
-        clinical_form.addRow(tr("Affected side"), self.edit_side)
-        clinical_form.addRow(tr("Diagnosis (no names)"), self.edit_diagnosis)
-        clinical_form.addRow(tr("Notes (no names)"), self.edit_notes)
-        clinical_form.addRow(self.clinical_button)
+        self.clinical_rows = FormRows(QFormLayout(clinical_box), "clinical:")
+        self.edit_mass = self.clinical_rows.line("body_mass_kg", tr("Body mass (kg)"))
+        self.edit_height = self.clinical_rows.line("height_cm", tr("Height (cm)"))
+        self.edit_side = self.clinical_rows.combo("affected_side", tr("Affected side"), sides)
+        self.edit_diagnosis = self.clinical_rows.line("diagnosis", tr("Diagnosis (no names)"))
+        self.edit_notes = self.clinical_rows.line("notes", tr("Notes (no names)"))
+        self.clinical_button = self.clinical_rows.button(tr("Save clinical data"),
+                                                         "saveClinical")
+        self.clinical_button.clicked.connect(self.save_clinical)
         self.clinical_edits: tuple[QWidget, ...] = (
             self.edit_mass, self.edit_height, self.edit_side, self.edit_diagnosis,
             self.edit_notes)
@@ -195,12 +185,9 @@ class PatientsPage(QWidget):
         self.use_button.clicked.connect(self.use)
         self.message = QLabel()
         self.message.setWordWrap(True)
-        for w in (self.search, self.new_code, self.new_mass, self.new_side, self.new_diagnosis,
-                  self.create_button, self.limits_button, self.identity_button,
-                  self.use_button, self.report_button, self.open_report_button,
-                  self.clinical_button, self.ankle_button, self.ankle_side,
-                  *self.clinical_edits, *self.limit_edits.values(),
-                  *self.ankle_edits.values()):
+        # (the form rows' fields and buttons have the touch height already: FormRows)
+        for w in (self.search, self.identity_button, self.use_button, self.report_button,
+                  self.open_report_button):
             w.setMinimumHeight(TARGET_PX)
         card_widget = QWidget()
         right = QVBoxLayout(card_widget)
@@ -300,11 +287,10 @@ class PatientsPage(QWidget):
         self.worker.call("open", load)
 
     def create_patient(self) -> None:
-        try:
-            mass = _number(self.new_mass.text(), tr("Body mass (kg)"))
-        except ValueError as exc:
-            self.message.setText(str(exc))
+        numbers = read_numbers(self.new_rows, ("body_mass_kg",), self.message)
+        if numbers is None:
             return
+        mass = numbers["body_mass_kg"]
         actor, record = self.actor, self.record
         code = self.new_code.text().strip().upper() or None
         values = {"body_mass_kg": mass, "affected_side": self.new_side.currentData(),
@@ -316,13 +302,12 @@ class PatientsPage(QWidget):
             return
         from patients.anatomy import ClinicalRom, to_robot
 
-        try:
-            rom = {k: _number(self.limit_edits[k].text(), k) for k in _ROM}
-            extra = {k: _number(self.limit_edits[k].text(), k)
-                     for k in ("max_force_n", "max_angular_speed_deg_s")}
-        except ValueError as exc:
-            self.message.setText(str(exc))
+        extra_keys = ("max_force_n", "max_angular_speed_deg_s")
+        numbers = read_numbers(self.limit_rows, (*_ROM, *extra_keys), self.message)
+        if numbers is None:
             return
+        rom = {k: numbers[k] for k in _ROM}
+        extra = {k: numbers[k] for k in extra_keys}
         missing = [k for k, v in rom.items() if v is None]
         if missing:
             self.message.setText(tr("Give the four ranges of motion."))
@@ -344,10 +329,8 @@ class PatientsPage(QWidget):
         nothing is saved."""
         if self.current is None:
             return
-        try:
-            mm = {k: _number(self.ankle_edits[k].text(), k) for k in _ANKLE_MM}
-        except ValueError as exc:
-            self.message.setText(str(exc))
+        mm = read_numbers(self.ankle_rows, _ANKLE_MM, self.message)
+        if mm is None:
             return
         fields: dict[str, Any] = {k: v / 1000.0 for k, v in mm.items() if v is not None}
         fields["side"] = self.ankle_side.currentData()
@@ -362,12 +345,10 @@ class PatientsPage(QWidget):
         was shown: ``expected_version``). Empty mass or height leaves them as they were."""
         if self.current is None:
             return
-        try:
-            mass = _number(self.edit_mass.text(), tr("Body mass (kg)"))
-            height_cm = _number(self.edit_height.text(), tr("Height (cm)"))
-        except ValueError as exc:
-            self.message.setText(str(exc))
+        numbers = read_numbers(self.clinical_rows, ("body_mass_kg", "height_cm"), self.message)
+        if numbers is None:
             return
+        mass, height_cm = numbers["body_mass_kg"], numbers["height_cm"]
         changes = {"body_mass_kg": mass,
                    "height_m": None if height_cm is None else height_cm / 100.0,
                    "affected_side": self.edit_side.currentData(),
@@ -500,7 +481,9 @@ class PatientsPage(QWidget):
             tr("Body mass: %1 kg").replace("%1", "—" if mass is None else f"{mass:g}"),
             tr("Height: %1 cm").replace("%1", "—" if p.get("height_m") is None
                                          else f"{100 * float(p['height_m']):.0f}"),
-            tr("Affected side: %1").replace("%1", str(p.get("affected_side") or "—")),
+            # The side in the installed language (the record stores right/left/both).
+            tr("Affected side: %1").replace("%1", tr(str(p["affected_side"]))
+                                            if p.get("affected_side") else "—"),
             tr("Diagnosis: %1").replace("%1", str(p.get("diagnosis") or "—")),
             tr("Notes: %1").replace("%1", str(p.get("notes") or "—"))]))
         self.edit_mass.setText("" if mass is None else f"{mass:g}")

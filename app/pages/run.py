@@ -24,7 +24,9 @@ from typing import Any
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, QTimer, Signal
+from PySide6.QtGui import QBrush, QColor, QPen
 from PySide6.QtWidgets import (
+    QGraphicsRectItem,
     QGridLayout,
     QHBoxLayout,
     QLabel,
@@ -53,6 +55,27 @@ WINDOW_S = 20.0
 #: The angle curves of the ankle view (from neutral) and of the platform (absolute).
 ANKLE_CURVES = ("ankle_dfpf_ref", "ankle_dfpf", "ankle_inev_ref", "ankle_inev")
 PLATFORM_CURVES = ("pitch_ref", "pitch", "roll_ref", "roll")
+
+
+class RomBand(QGraphicsRectItem):
+    """A patient's range of motion on the angle plot: a shaded band across the fixed time
+    axis. A plain rectangle, painted by Qt in C++: pyqtgraph's LinearRegionItem rebuilt its
+    pens and bounds in Python at every frame and was the Run page's longest GUI stalls
+    (bench/gui.py --synthetic, the stall tracer)."""
+
+    def __init__(self, colour: QColor) -> None:
+        super().__init__(-WINDOW_S, 0.0, WINDOW_S, 0.0)
+        self.setBrush(QBrush(colour))
+        self.setPen(QPen(Qt.PenStyle.NoPen))
+        self.setZValue(-10)               # behind the curves
+
+    def setRegion(self, region: tuple[float, float]) -> None:
+        lo, hi = sorted(float(v) for v in region)
+        self.setRect(-WINDOW_S, lo, WINDOW_S, hi - lo)
+
+    def getRegion(self) -> tuple[float, float]:
+        r = self.rect()
+        return r.top(), r.bottom()
 
 
 def _direction_words() -> dict[str, str]:
@@ -171,8 +194,7 @@ class RunPage(QWidget):
         self.ankle_mode = False
         self.angle_plot.getViewBox().setLimits(minYRange=10.0)
         self.rom_bands = {
-            axis: pg.LinearRegionItem(orientation="horizontal", movable=False,
-                                      brush=pg.mkBrush(colour))
+            axis: RomBand(QColor(*colour))
             for axis, colour in (("pitch", (31, 95, 191, 35)), ("roll", (191, 95, 31, 35)))}
         for band in self.rom_bands.values():
             self.angle_plot.addItem(band)
