@@ -103,3 +103,19 @@ def event_words(event: dict[str, Any]) -> str:
         elif key in ("force_n", "fz_n", "limit_n") or key.endswith("_n"):
             parts.append(f"{value:.0f} N")
     return text if not parts else f"{text} ({', '.join(parts)})"
+
+
+def local_time(iso: object) -> str:
+    """An ISO-8601 instant of the clinical record (UTC) as the clinic reads it: local time,
+    ``YYYY-MM-DD HH:MM``; what cannot be read is shown as it is (never hidden)."""
+    import datetime as dt
+
+    if not isinstance(iso, str) or not iso:
+        return "—"
+    try:
+        when = dt.datetime.fromisoformat(iso)
+    except ValueError:
+        return iso
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=dt.UTC)         # the record stores UTC
+    return f"{when.astimezone():%Y-%m-%d %H:%M}"

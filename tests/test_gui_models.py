@@ -74,3 +74,21 @@ def test_preview_of_the_sine_is_the_prescribed_force():
     doc["amplitude_n"] = 400.0            # pulls below zero: the schema refuses it
     with pytest.raises(ProtocolValidationError, match="amplitude_n"):
         compute_preview(doc)
+
+
+def test_record_instants_read_in_local_time(monkeypatch):
+    import time
+
+    from app.words import local_time
+
+    monkeypatch.setenv("TZ", "Europe/Madrid")
+    time.tzset()
+    try:
+        # The clinical record stores UTC; a Madrid clinic reads 21:57 UTC in November as 22:57.
+        assert local_time("2026-11-25T21:57:03.123456+00:00") == "2026-11-25 22:57"
+        assert local_time("2026-11-25T21:57:03") == "2026-11-25 22:57"   # naive = UTC
+        assert local_time("2026-07-01T10:00:00+00:00") == "2026-07-01 12:00"   # summer time
+        assert local_time("not a date") == "not a date" and local_time(None) == "—"
+    finally:
+        monkeypatch.undo()
+        time.tzset()

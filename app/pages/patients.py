@@ -37,6 +37,7 @@ from app.report_action import ReportAction
 from app.report_export import write_progress_report
 from app.settings import GuiSettings
 from app.style import TARGET_PX
+from app.words import local_time
 
 #: Ankle-setup lengths entered here, in mm (``AnkleSetup`` stores m).
 _ANKLE_MM = ("height_above_sole_m", "offset_x_m", "offset_y_m", "sole_above_sensor_m")
@@ -391,7 +392,7 @@ class PatientsPage(QWidget):
         ankle = p.get("ankle")
         self.patient_chosen.emit(PatientContext(
             p["code"], p.get("body_mass_kg"), fields,
-            f"{lim.get('set_by')} {lim.get('set_at', '')[:16]}", side,
+            f"{lim.get('set_by')} {local_time(lim.get('set_at'))}", side,
             None if ankle is None else dict(ankle)))
 
     # ------------------------------------------------------------------ results
@@ -507,7 +508,7 @@ class PatientsPage(QWidget):
                 tr("Limits in force: %1; force ≤ %2 N; speed ≤ %3 °/s — set by %4 on %5")
                 .replace("%1", rom or "—").replace("%2", f"{lim['max_force_n']:g}")
                 .replace("%3", f"{lim['max_angular_speed_deg_s']:g}")
-                .replace("%4", str(lim.get("set_by"))).replace("%5", str(lim.get("set_at"))[:16]))
+                .replace("%4", str(lim.get("set_by"))).replace("%5", local_time(lim.get("set_at"))))
             for key in _ROM:
                 if key in c:
                     self.limit_edits[key].setText(f"{c[key]:g}")
@@ -516,7 +517,7 @@ class PatientsPage(QWidget):
                 f"{lim['max_angular_speed_deg_s']:g}")
         self.sessions.clear()
         for s in sessions:
-            self.sessions.addItem(f"{str(s.get('started_at'))[:16]}  {s.get('protocol_name')}"
+            self.sessions.addItem(f"{local_time(s.get('started_at'))}  {s.get('protocol_name')}"
                                   f" — {s.get('outcome')}")
         if not sessions:
             self.sessions.addItem(tr("No sessions yet."))

@@ -376,7 +376,11 @@ class RunPage(QWidget):
                 "%1", str(self.last_summary.get("outcome", event.get("cause", "")))))
             self.session_ended.emit(self.last_summary)
         elif event.get("kind") == "fault":
-            self.events_label.setText(tr("Stopped: %1").replace("%1", event_words(event)))
+            words = event_words(event)
+            self.events_label.setText(tr("Stopped: %1").replace("%1", words))
+            if self.session_id is not None:
+                # Not "Session running." until the session's end arrives: it is stopping.
+                self.message.setText(tr("Session stopping: %1").replace("%1", words))
         self.update_buttons()
 
     def _journaled(self, tag: str, _result: object, error: str) -> None:
