@@ -110,6 +110,7 @@ class _Act:
     def __init__(self, record: ClinicalRecord, db: Session, actor: Actor, user: User) -> None:
         self.db = db
         self.user = user
+        self.username = actor.username
         self.audited = 0
         self._record = record
         self._actor = actor
@@ -501,13 +502,21 @@ class ClinicalRecord:
                 checked = PatientLimits(**merged).model_dump()
             except ValidationError as exc:
                 raise InputError(f"limits for {code} refused: {_pydantic_reason(exc)}") from None
-            row = PatientLimitsRow(patient_id=patient.id, set_by=actor.username,
-                                   set_at=self.clock(), reason=reason, **checked)
-            act.db.add(row)
-            act.audit("limits.set", "patient", code,
-                      before=_limits_dict(current) if current else None, after=checked)
-            act.db.flush()
+            row = self._prescribe(act, PatientLimitsRow, patient, checked, reason, "limits.set",
+                                  _limits_dict(current) if current else None)
             return _limits_record(row, patient.affected_side)
+
+    def _prescribe(self, act: _Act, table: type[_Prescription], patient: Patient,
+                   checked: dict[str, Any], reason: str | None, action: str,
+                   before: dict[str, Any] | None) -> _Prescription:
+        """A new prescription row (limits or ankle setup: the newest is in force), by the
+        actor, now, audited against the one it replaces (``before``)."""
+        row = table(patient_id=patient.id, set_by=act.username, set_at=self.clock(),
+                    reason=reason, **checked)
+        act.db.add(row)
+        act.audit(action, "patient", patient.code, before=before, after=checked)
+        act.db.flush()
+        return row
 
     def limits_in_force(self, actor: Actor, code: str) -> dict[str, Any]:
         """What the RT process needs: ``PatientLimits``' fields plus ``body_mass_kg`` (kg).
@@ -554,12 +563,8 @@ class ClinicalRecord:
                 checked = parse_ankle_setup(merged, 1.0).model_dump()
             except RtInputError as exc:
                 raise InputError(f"ankle setup for {code} refused: {exc}") from None
-            row = PatientAnkleRow(patient_id=patient.id, set_by=actor.username,
-                                  set_at=self.clock(), reason=reason, **checked)
-            act.db.add(row)
-            act.audit("ankle.set", "patient", code,
-                      before=_ankle_dict(current) if current else None, after=checked)
-            act.db.flush()
+            row = self._prescribe(act, PatientAnkleRow, patient, checked, reason, "ankle.set",
+                                  _ankle_dict(current) if current else None)
             return {**checked, "set_by": row.set_by, "set_at": _iso(row.set_at),
                     "reason": reason}
 
