@@ -3,12 +3,11 @@
 * Nominal: from the plan — the plate placed so that the tool tip, at the trial's pose, lands
   on the site; the uncertainty is the operator's placement tolerance.
 * Camera: two ArUco boards, one fixed on the robot's frame at a known ``T_B_R`` and one on the
-  plate at a known ``T_F_P``, seen in the same image. Each board's pose in the camera comes
-  from ``solvePnP``: ``SOLVEPNP_IPPE_SQUARE`` per marker gives the start, then all of the
-  board's corners refine it (Levenberg-Marquardt). Its covariance is ``s² (JᵀJ)⁻¹`` with J the
-  projection Jacobian and s² the reprojection residual variance (floored at the corner
-  detector's ~0.05 px). ``T_BF = T_B_R T_C_R⁻¹ T_C_P T_F_P⁻¹``; its uncertainty is propagated
-  by sampling the two board poses (Monte Carlo, fixed seed).
+  plate at a known ``T_F_P``, seen in the same image. Each board's pose in the camera and
+  its covariance come from ``rt.vision.pnp.solve_marker_board`` (one marker's square
+  solution for a start, all the board's corners refine it; the residual variance floored at
+  the corner detector's ~0.05 px). ``T_BF = T_B_R T_C_R⁻¹ T_C_P T_F_P⁻¹``; its uncertainty is
+  propagated by sampling the two board poses (Monte Carlo, fixed seed).
 
 On the twin the camera is :mod:`rt.drivers.synthetic_frames` (both boards rendered into one
 frame); a real camera gives frames through ``rt.drivers.camera_cv`` and the same estimator.
@@ -23,23 +22,15 @@ import numpy as np
 
 from rt.drivers.synthetic_frames import MarkerBoard, PinholeCamera, render_board
 from rt.errors import HardwareError
+from rt.vision.aruco import detect_markers
+from rt.vision.pnp import PnpPose, solve_marker_board
+from rt.vision.transforms import from_rvec, inverse, transform
 
 #: The operator's placement tolerance when the plate is placed by hand to marks (1 σ).
 NOMINAL_SIGMA_TRANSLATION_M = 2.0e-3
 NOMINAL_SIGMA_ROTATION_RAD = math.radians(0.3)
 #: Corner localization floor (px, 1 σ) when the residuals are smaller than that.
 CORNER_SIGMA_FLOOR_PX = 0.05
-
-
-def transform(R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, p
-    return T
-
-
-def inverse(T: np.ndarray) -> np.ndarray:
-    R, p = T[:3, :3], T[:3, 3]
-    return transform(R.T, -R.T @ p)
 
 
 def rot_z(a: float) -> np.ndarray:
@@ -120,63 +111,37 @@ class MarkerRig:
         return inverse(transform(np.eye(3), centre))
 
 
-def _board_pose(frame: np.ndarray, board: MarkerBoard, camera: PinholeCamera
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(rvec, tvec, 6×6 covariance) of a board in the camera from one frame."""
-    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(board.dictionary),
-                                       cv2.aruco.DetectorParameters())
-    grey = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-    corners, ids, _ = detector.detectMarkers(grey)
-    if ids is None:
+def _board_pose(frame: np.ndarray, board: MarkerBoard, camera: PinholeCamera) -> PnpPose:
+    """A board's pose in the camera, with its covariance, from one frame."""
+    seen = detect_markers(frame, board.dictionary)
+    if not seen:
         raise HardwareError("camera registration: no ArUco marker seen")
-    obj, img = [], []
-    first: tuple[np.ndarray, np.ndarray] | None = None
-    for c, i in zip(corners, ids.ravel()):
-        if int(i) not in board.ids:
-            continue
-        o = board.marker_corners_B(int(i))
-        px = c.reshape(4, 2).astype(np.float64)
-        if first is None:
-            ok, rvec, tvec = cv2.solvePnP(o, px, camera.K, camera.dist_coeffs,
-                                          flags=cv2.SOLVEPNP_IPPE_SQUARE)
-            if ok:
-                first = (rvec, tvec)
-        obj.append(o)
-        img.append(px)
-    if first is None or len(obj) < 3:
+    markers = [(board.marker_corners_B(i), px) for i, px in seen if i in board.ids]
+    if len(markers) < 3:
         raise HardwareError(f"camera registration: board with ids {board.ids[0]}-"
-                            f"{board.ids[-1]}: {len(obj)} markers seen, need at least 3")
-    o_all, i_all = np.concatenate(obj), np.concatenate(img)
-    ok, rvec, tvec = cv2.solvePnP(o_all, i_all, camera.K, camera.dist_coeffs,
-                                  rvec=first[0].copy(), tvec=first[1].copy(),
-                                  useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
-    if not ok:
+                            f"{board.ids[-1]}: {len(markers)} markers seen, need at least 3")
+    pose = solve_marker_board(markers, camera.K, camera.dist_coeffs,
+                              sigma_floor_px=CORNER_SIGMA_FLOOR_PX)
+    if pose is None:
         raise HardwareError("camera registration: solvePnP failed")
-    proj, jac = cv2.projectPoints(o_all, rvec, tvec, camera.K, camera.dist_coeffs)
-    resid = (proj.reshape(-1, 2) - i_all).ravel()
-    dof = max(resid.size - 6, 1)
-    s2 = max(float(resid @ resid) / dof, CORNER_SIGMA_FLOOR_PX ** 2)
-    J = jac[:, :6]
-    cov = s2 * np.linalg.inv(J.T @ J)
-    return rvec.reshape(3), tvec.reshape(3), cov
-
-
-def _T(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
-    return transform(small_rotation(rvec), tvec)
+    return pose
 
 
 def camera_registration(frame: np.ndarray, rig: MarkerRig, T_B_R: np.ndarray,
                         samples: int = 300, seed: int = 0) -> Registration:
     """Estimate T_BF from one frame showing both boards (module docstring)."""
-    r_p, t_p, cov_p = _board_pose(frame, rig.plate_board, rig.camera)
-    r_r, t_r, cov_r = _board_pose(frame, rig.robot_board, rig.camera)
-    T_BF = T_B_R @ inverse(_T(r_r, t_r)) @ _T(r_p, t_p) @ inverse(rig.T_F_P())
+    plate = _board_pose(frame, rig.plate_board, rig.camera)
+    robot = _board_pose(frame, rig.robot_board, rig.camera)
+    r_p, t_p, cov_p = plate.rvec, plate.tvec, plate.covariance
+    r_r, t_r, cov_r = robot.rvec, robot.tvec, robot.covariance
+    T_BF = T_B_R @ inverse(from_rvec(r_r, t_r)) @ from_rvec(r_p, t_p) @ inverse(rig.T_F_P())
     rng = np.random.default_rng(seed)
     dp, da = [], []
     for _ in range(samples):
         xp = rng.multivariate_normal(np.r_[r_p, t_p], cov_p)
         xr = rng.multivariate_normal(np.r_[r_r, t_r], cov_r)
-        T = T_B_R @ inverse(_T(xr[:3], xr[3:])) @ _T(xp[:3], xp[3:]) @ inverse(rig.T_F_P())
+        T = (T_B_R @ inverse(from_rvec(xr[:3], xr[3:])) @ from_rvec(xp[:3], xp[3:])
+             @ inverse(rig.T_F_P()))
         dp.append(T[:3, 3] - T_BF[:3, 3])
         dR = T[:3, :3] @ T_BF[:3, :3].T
         a, _ = cv2.Rodrigues(dR)

@@ -6,8 +6,9 @@ the camera to P); one square marker on a clip on each malleolus, printed face to
 camera, its centre on the malleolus's most prominent point. From one frame:
 
 1. the board's pose in the camera, ``T_C_R``: ``SOLVEPNP_IPPE_SQUARE`` on one marker for a
-   start, then every corner of the board's markers refines it (Levenberg-Marquardt), as
-   ``calibration.registration`` registers a force plate; the camera in P is
+   start, then every corner of the board's markers refines it (Levenberg-Marquardt:
+   ``rt.vision.pnp``, the estimator ``calibration.registration`` registers a force plate
+   with); the camera in P is
    ``T_P_C = T_P_R T_C_R⁻¹``;
 2. each malleolus marker's pose by ``SOLVEPNP_IPPE_SQUARE`` on its four corners: its centre in
    C, then in P;
@@ -38,6 +39,9 @@ import numpy as np
 from rt.drivers.synthetic_frames import MarkerBoard, PinholeCamera, render_board
 from rt.errors import InputError
 from rt.model.ankle import AnkleSetup, sensor_to_ankle_S, setup_from_malleoli
+from rt.vision.aruco import detect_markers
+from rt.vision.pnp import PnpPose, solve_marker_board, solve_pnp
+from rt.vision.transforms import from_rvec, inverse, transform
 
 #: Corner localization floor (px, 1 σ) when the residuals are smaller than that: the board's
 #: many corners (as the force-plate registration); a lone malleolus marker's four corners
@@ -51,22 +55,6 @@ MARKER_CORNER_SIGMA_FLOOR_PX = 0.15
 #: sits a little lower and further back than the medial one.
 TWIN_HALF_WIDTH_M = 0.035
 TWIN_LATERAL_OFFSET_M = (-0.006, -0.006)    # (along the foot, vertical), medial: the opposite
-
-
-def _transform(R: np.ndarray, p: Sequence[float] | np.ndarray) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, np.asarray(p, float)
-    return T
-
-
-def _inverse(T: np.ndarray) -> np.ndarray:
-    R, p = T[:3, :3], T[:3, 3]
-    return _transform(R.T, -R.T @ p)
-
-
-def _pose_T(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
-    R, _ = cv2.Rodrigues(np.asarray(rvec, float).reshape(3, 1))
-    return _transform(R, np.asarray(tvec, float).reshape(3))
 
 
 #: Rotation of a marker or board facing a camera that looks along -x of P: its X along +y_P
@@ -101,7 +89,7 @@ class MalleoliRig:
 
     def T_P_R(self) -> np.ndarray:
         """The board's pose in P (4 × 4)."""
-        return _transform(R_P_FACING, self.board_centre_P)
+        return transform(R_P_FACING, self.board_centre_P)
 
     def marker(self, marker_id: int) -> MarkerBoard:
         """A malleolus marker as a one-marker board (centred on its origin)."""
@@ -117,7 +105,7 @@ class MalleoliRig:
         x = np.cross(z, [0.0, 0.0, 1.0])
         x /= np.linalg.norm(x)
         y = np.cross(z, x)
-        return _transform(np.column_stack((x, y, z)), c)
+        return transform(np.column_stack((x, y, z)), c)
 
 
 @dataclass(frozen=True)
@@ -144,40 +132,14 @@ class MalleoliMeasurement:
                 "reprojection_rms_px": self.reprojection_rms_px}
 
 
-def _detect(frame: np.ndarray, dictionary: int) -> dict[int, np.ndarray]:
-    if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
-        raise InputError(f"camera frame: expected a BGR uint8 image (H × W × 3), got "
-                         f"{frame.dtype} {frame.shape}")
-    params = cv2.aruco.DetectorParameters()
-    # Sub-pixel corners: a lone malleolus marker has only its four corners to give its depth
-    # (without refinement its centre was off by 5-9 mm along the optical axis on the twin).
-    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(dictionary), params)
-    corners, ids, _ = detector.detectMarkers(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
-    if ids is None:
-        return {}
-    return {int(i): c.reshape(4, 2).astype(np.float64) for c, i in zip(corners, ids.ravel())}
-
-
-def _pose(obj: np.ndarray, img: np.ndarray, camera: PinholeCamera, first: tuple | None = None,
-          floor_px: float = CORNER_SIGMA_FLOOR_PX
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(rvec, tvec, 6 × 6 covariance, residuals px) of object points seen at ``img``."""
-    if first is None:
-        ok, rvec, tvec = cv2.solvePnP(obj, img, camera.K, camera.dist_coeffs,
-                                      flags=cv2.SOLVEPNP_IPPE_SQUARE)
-    else:
-        ok, rvec, tvec = cv2.solvePnP(obj, img, camera.K, camera.dist_coeffs,
-                                      rvec=first[0].copy(), tvec=first[1].copy(),
-                                      useExtrinsicGuess=True, flags=cv2.SOLVEPNP_ITERATIVE)
-    if not ok:
+def _marker_pose(corners_obj: np.ndarray, corners_px: np.ndarray, camera: PinholeCamera
+                 ) -> PnpPose:
+    """A lone malleolus marker's pose (its four corners, IPPE), with its covariance."""
+    pose = solve_pnp(corners_obj, corners_px, camera.K, camera.dist_coeffs,
+                     sigma_floor_px=MARKER_CORNER_SIGMA_FLOOR_PX)
+    if pose is None:
         raise InputError("camera frame: solvePnP failed on the markers seen")
-    proj, jac = cv2.projectPoints(obj, rvec, tvec, camera.K, camera.dist_coeffs)
-    resid = (proj.reshape(-1, 2) - img).ravel()
-    dof = max(resid.size - 6, 1)
-    s2 = max(float(resid @ resid) / dof, floor_px ** 2)
-    J = jac[:, :6]
-    return rvec.reshape(3), tvec.reshape(3), s2 * np.linalg.inv(J.T @ J), resid
+    return pose
 
 
 def measure_malleoli(frame: np.ndarray, rig: MalleoliRig, side: str,
@@ -191,7 +153,9 @@ def measure_malleoli(frame: np.ndarray, rig: MalleoliRig, side: str,
     """
     if side not in ("left", "right"):
         raise InputError(f"side must be 'left' or 'right' (got {side!r})")
-    seen = _detect(frame, rig.board.dictionary)
+    # Sub-pixel corners: a lone malleolus marker has only its four corners to give its depth
+    # (without refinement its centre was off by 5-9 mm along the optical axis on the twin).
+    seen = dict(detect_markers(frame, rig.board.dictionary, subpixel=True))
     board_ids = [i for i in rig.board.ids if i in seen]
     missing = []
     if len(board_ids) < 3:
@@ -203,22 +167,23 @@ def measure_malleoli(frame: np.ndarray, rig: MalleoliRig, side: str,
     if missing:
         raise InputError("camera frame refused: not seen: " + "; ".join(missing)
                          + ": put both malleolus markers and the platform's board in view")
-    obj = np.concatenate([rig.board.marker_corners_B(i) for i in board_ids])
-    img = np.concatenate([seen[i] for i in board_ids])
-    start = _pose(rig.board.marker_corners_B(board_ids[0]), seen[board_ids[0]], rig.camera)
-    r_b, t_b, cov_b, res_b = _pose(obj, img, rig.camera, (start[0], start[1]))
+    board = solve_marker_board([(rig.board.marker_corners_B(i), seen[i]) for i in board_ids],
+                               rig.camera.K, rig.camera.dist_coeffs,
+                               sigma_floor_px=CORNER_SIGMA_FLOOR_PX)
+    if board is None:
+        raise InputError("camera frame: solvePnP failed on the markers seen")
+    r_b, t_b, cov_b = board.rvec, board.tvec, board.covariance
     markers = []
-    residuals = [res_b]
+    residuals = [board.residuals_px]
     for marker_id in (rig.lateral_id, rig.medial_id):
-        corners = rig.marker(marker_id).marker_corners_B(marker_id)
-        _, t_m, cov_m, res_m = _pose(corners, seen[marker_id], rig.camera,
-                                     floor_px=MARKER_CORNER_SIGMA_FLOOR_PX)
-        markers.append((t_m, cov_m))
-        residuals.append(res_m)
+        m = _marker_pose(rig.marker(marker_id).marker_corners_B(marker_id), seen[marker_id],
+                         rig.camera)
+        markers.append((m.tvec, m.covariance))
+        residuals.append(m.residuals_px)
     T_P_R = rig.T_P_R()
 
     def to_P(rb: np.ndarray, tb: np.ndarray, centre_C: np.ndarray) -> np.ndarray:
-        T_P_C = T_P_R @ _inverse(_pose_T(rb, tb))
+        T_P_C = T_P_R @ inverse(from_rvec(rb, tb))
         return T_P_C[:3, :3] @ centre_C + T_P_C[:3, 3]
 
     lateral = to_P(r_b, t_b, markers[0][0])
@@ -265,13 +230,13 @@ def render_malleoli(rig: MalleoliRig, lateral_P: Sequence[float] | np.ndarray | 
     """The twin camera's frame (BGR uint8): the platform's board and the malleolus markers
     (None: that marker is not in view) at their poses in P, facing the camera's way
     (:data:`R_P_FACING`), with the rig's sensor noise."""
-    T_C_P = _inverse(rig.T_P_C())
+    T_C_P = inverse(rig.T_P_C())
     items: list[tuple[MarkerBoard, np.ndarray]] = []
     if show_board:
         items.append((rig.board, rig.T_P_R()))
     for marker_id, where in ((rig.lateral_id, lateral_P), (rig.medial_id, medial_P)):
         if where is not None:
-            items.append((rig.marker(marker_id), _transform(R_P_FACING, where)))
+            items.append((rig.marker(marker_id), transform(R_P_FACING, where)))
     grey = np.full((rig.camera.height, rig.camera.width), 255.0, np.float32)
     for board, T_P_board in items:
         T_C_board = T_C_P @ T_P_board

@@ -23,7 +23,7 @@ import uuid
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any, Self
+from typing import Any, Self, TypeVar
 
 import sqlalchemy as sa
 from argon2 import PasswordHasher
@@ -60,6 +60,8 @@ from patients.roles import Action, Role, require
 from rt.safety.limits import PatientLimits
 
 Clock = Callable[[], dt.datetime]
+_Row = TypeVar("_Row")
+_Prescription = TypeVar("_Prescription", PatientLimitsRow, PatientAnkleRow)
 
 #: Fields of ``rt.safety.limits.PatientLimits``, in its order.
 LIMIT_FIELDS = tuple(PatientLimits.model_fields)
@@ -98,6 +100,34 @@ class Identity:
     birth_date: dt.date | None = None
     national_id: str | None = None
     contact: str | None = None
+
+
+class _Act:
+    """One request of a logged-in actor inside its transaction (``ClinicalRecord._acting``):
+    the session ``db``, the actor's re-read ``user`` row, and the queries and audit rows
+    bound to them; ``audited`` counts the rows written."""
+
+    def __init__(self, record: ClinicalRecord, db: Session, actor: Actor, user: User) -> None:
+        self.db = db
+        self.user = user
+        self.username = actor.username
+        self.audited = 0
+        self._record = record
+        self._actor = actor
+
+    def require(self, action: Action) -> None:
+        """A further permission the request needs (e.g. identifying data on top of a read)."""
+        self._record._require(self.db, self._actor, action)
+
+    def patient(self, code: str, lock: bool = False) -> Patient:
+        """The patient with ``code`` (``NotFound`` otherwise), locked for update with ``lock``."""
+        return self._record._patient(self.db, code, lock)
+
+    def audit(self, action: str, entity: str, key: str | None = None, before: Any = None,
+              after: Any = None) -> None:
+        """One audit row by this actor, in this transaction (kept only if it commits)."""
+        self._record._audit(self.db, self._actor, action, entity, key, before, after)
+        self.audited += 1
 
 
 class ClinicalRecord:
@@ -166,6 +196,23 @@ class ClinicalRecord:
         name = actor.username if isinstance(actor, Actor) else actor
         audit.append(db, self.clock(), name, action, entity, key, before, after)
 
+    @contextmanager
+    def _acting(self, actor: Actor, action: Action | None, *, writes: bool = False
+                ) -> Iterator[_Act]:
+        """One request of a logged-in ``actor``: a transaction (``_tx``) in which the actor is
+        re-read and checked for ``action`` before anything else, handing out the queries and
+        the audit trail bound to it (:class:`_Act`).
+
+        ``writes``: the request changes the record, so it must leave at least one audit row;
+        a block that ends normally without one is a bug, refused and rolled back rather than
+        committed unaudited."""
+        with self._tx() as db:
+            act = _Act(self, db, actor, self._require(db, actor, action))
+            yield act
+            if writes and act.audited == 0:
+                raise RecordError(f"internal error: a change by {actor.username!r} wrote no "
+                                  "audit row; nothing was saved")
+
     def _require(self, db: Session, actor: Actor, action: Action | None) -> User:
         """The acting user, re-read: a disabled account or changed role takes effect at once.
         ``action`` None: any role (e.g. changing one's own password)."""
@@ -181,13 +228,8 @@ class ClinicalRecord:
 
     @staticmethod
     def _patient(db: Session, code: str, lock: bool = False) -> Patient:
-        stmt = sa.select(Patient).where(Patient.code == code)
-        if lock:
-            stmt = stmt.with_for_update()
-        patient = db.execute(stmt).scalar_one_or_none()
-        if patient is None:
-            raise NotFound(f"no patient with code {code!r}")
-        return patient
+        return _one(db, sa.select(Patient).where(Patient.code == code),
+                    f"no patient with code {code!r}", lock)
 
     # ------------------------------------------------------------ users
     def has_users(self) -> bool:
@@ -264,50 +306,48 @@ class ClinicalRecord:
         _check_username(username)
         role_: Role = _enum(Role, role, "role")
         passwords.check_new_password(username, password)
-        with self._tx() as db:
-            self._require(db, actor, Action.USERS_MANAGE)
-            if db.execute(sa.select(User.id).where(User.username == username)).first():
+        with self._acting(actor, Action.USERS_MANAGE, writes=True) as act:
+            if act.db.execute(sa.select(User.id).where(User.username == username)).first():
                 raise AlreadyExists(f"user {username!r} exists")
             user = User(username=username, role=role_.value,
                         password_hash=self.hasher.hash(password), created_at=self.clock(),
                         created_by=actor.username)
-            db.add(user)
-            self._audit(db, actor, "user.create", "user", username, after={"role": role_.value})
-            db.flush()
+            act.db.add(user)
+            act.audit("user.create", "user", username, after={"role": role_.value})
+            act.db.flush()
             return _user_dict(user)
 
     def set_password(self, actor: Actor, username: str, new_password: str,
                      old_password: str | None = None) -> None:
         """An admin sets anyone's password (and unlocks); others change their own with the old."""
         passwords.check_new_password(username, new_password)
-        with self._tx() as db:
-            if username == actor.username and old_password is not None:
-                me = self._require(db, actor, None)
-                if not passwords.verify(self.hasher, me.password_hash, old_password):
+        # One's own password with the current one: any role; anything else: an admin's act.
+        own_old = old_password if username == actor.username else None
+        with self._acting(actor, None if own_old is not None else Action.USERS_MANAGE,
+                          writes=True) as act:
+            if own_old is not None:
+                if not passwords.verify(self.hasher, act.user.password_hash, own_old):
                     raise AuthenticationFailed("the current password is wrong")
-                user = me
+                user = act.user
             else:
-                self._require(db, actor, Action.USERS_MANAGE)
-                user = _user(db, username)
+                user = _user(act.db, username)
             user.password_hash = self.hasher.hash(new_password)
             user.failed_logins, user.locked_until = 0, None
-            self._audit(db, actor, "user.passwd", "user", username)
+            act.audit("user.passwd", "user", username)
 
     def set_user_disabled(self, actor: Actor, username: str, disabled: bool) -> None:
-        with self._tx() as db:
-            self._require(db, actor, Action.USERS_MANAGE)
+        with self._acting(actor, Action.USERS_MANAGE, writes=True) as act:
             if username == actor.username:
                 raise InputError("an admin cannot disable their own account")
-            user = _user(db, username)
+            user = _user(act.db, username)
             before = user.disabled
             user.disabled = disabled
-            self._audit(db, actor, "user.disable" if disabled else "user.enable", "user",
-                        username, before={"disabled": before}, after={"disabled": disabled})
+            act.audit("user.disable" if disabled else "user.enable", "user",
+                      username, before={"disabled": before}, after={"disabled": disabled})
 
     def list_users(self, actor: Actor) -> list[dict[str, Any]]:
-        with self._tx() as db:
-            self._require(db, actor, Action.USERS_MANAGE)
-            return [_user_dict(u) for u in db.execute(sa.select(User).order_by(User.username))
+        with self._acting(actor, Action.USERS_MANAGE) as act:
+            return [_user_dict(u) for u in act.db.execute(sa.select(User).order_by(User.username))
                     .scalars()]
 
     # ------------------------------------------------------------ patients
@@ -315,23 +355,22 @@ class ClinicalRecord:
                     identity: Identity | None = None, **clinical: Any) -> dict[str, Any]:
         """Register a patient; ``code`` is generated when not given. Returns ``show``'s dict."""
         values = _clinical(clinical)
-        with self._tx() as db:
-            self._require(db, actor, Action.PATIENT_CREATE)
+        with self._acting(actor, Action.PATIENT_CREATE, writes=True) as act:
             if identity is not None:
-                self._require(db, actor, Action.IDENTITY_WRITE)
-            code = _check_code(code) if code else self._new_code(db)
-            if db.execute(sa.select(Patient.id).where(Patient.code == code)).first():
+                act.require(Action.IDENTITY_WRITE)
+            code = _check_code(code) if code else self._new_code(act.db)
+            if act.db.execute(sa.select(Patient.id).where(Patient.code == code)).first():
                 raise AlreadyExists(f"patient code {code!r} is taken")
             patient = Patient(code=code, created_at=self.clock(), created_by=actor.username,
                               **values)
-            db.add(patient)
-            self._audit(db, actor, "patient.create", "patient", code, after=values)
+            act.db.add(patient)
+            act.audit("patient.create", "patient", code, after=values)
             if identity is not None:
                 patient.identity = _identity_row(identity)
-                self._audit(db, actor, "identity.create", "patient", code,
-                            after={"fields": _present(identity)})
-            db.flush()
-            return _patient_dict(patient, self._limits_row(db, patient))
+                act.audit("identity.create", "patient", code,
+                          after={"fields": _present(identity)})
+            act.db.flush()
+            return _patient_dict(patient, self._limits_row(act.db, patient))
 
     @staticmethod
     def _new_code(db: Session) -> str:
@@ -341,32 +380,30 @@ class ClinicalRecord:
                 return code
 
     def list_patients(self, actor: Actor, include_identity: bool = False) -> list[dict[str, Any]]:
-        with self._tx() as db:
-            self._require(db, actor, Action.PATIENT_READ)
+        with self._acting(actor, Action.PATIENT_READ) as act:
             if include_identity:
-                self._require(db, actor, Action.IDENTITY_READ)
+                act.require(Action.IDENTITY_READ)
             out = []
-            for p in db.execute(sa.select(Patient).order_by(Patient.code)).scalars():
+            for p in act.db.execute(sa.select(Patient).order_by(Patient.code)).scalars():
                 d = _patient_dict(p, None)
                 if include_identity:
                     d["identity"] = _identity_dict(p.identity)
                 out.append(d)
             if include_identity:
-                self._audit(db, actor, "identity.read", "patient", None,
-                            after={"codes": [d["code"] for d in out],
-                                   "fields": list(IDENTITY_FIELDS)})
+                act.audit("identity.read", "patient", None,
+                          after={"codes": [d["code"] for d in out],
+                                 "fields": list(IDENTITY_FIELDS)})
             return out
 
     def get_patient(self, actor: Actor, code: str, include_identity: bool = False) -> dict[str, Any]:
-        with self._tx() as db:
-            self._require(db, actor, Action.PATIENT_READ)
-            patient = self._patient(db, code)
-            d = _patient_dict(patient, self._limits_row(db, patient))
+        with self._acting(actor, Action.PATIENT_READ) as act:
+            patient = act.patient(code)
+            d = _patient_dict(patient, self._limits_row(act.db, patient))
             if include_identity:
-                self._require(db, actor, Action.IDENTITY_READ)
+                act.require(Action.IDENTITY_READ)
                 d["identity"] = _identity_dict(patient.identity)
-                self._audit(db, actor, "identity.read", "patient", code,
-                            after={"fields": list(IDENTITY_FIELDS)})
+                act.audit("identity.read", "patient", code,
+                          after={"fields": list(IDENTITY_FIELDS)})
             return d
 
     def update_patient(self, actor: Actor, code: str, expected_version: int | None = None,
@@ -374,9 +411,8 @@ class ClinicalRecord:
         """Change clinical data. ``expected_version`` (the ``version`` the caller showed the
         user) refuses the change if someone else saved in between: no lost update."""
         values = _clinical(changes)
-        with self._tx() as db:
-            self._require(db, actor, Action.PATIENT_UPDATE)
-            patient = self._patient(db, code)
+        with self._acting(actor, Action.PATIENT_UPDATE, writes=True) as act:
+            patient = act.patient(code)
             if expected_version is not None and patient.version != expected_version:
                 raise ConcurrentUpdate(
                     f"patient {code} was changed by someone else (version {patient.version}, "
@@ -385,14 +421,13 @@ class ClinicalRecord:
             before = {k: getattr(patient, k) for k in values}
             for k, v in values.items():
                 setattr(patient, k, v)
-            db.flush()  # UPDATE ... WHERE version = read version (StaleDataError otherwise)
-            self._audit(db, actor, "patient.update", "patient", code, before=before, after=values)
-            return _patient_dict(patient, self._limits_row(db, patient))
+            act.db.flush()  # UPDATE ... WHERE version = read version (StaleDataError otherwise)
+            act.audit("patient.update", "patient", code, before=before, after=values)
+            return _patient_dict(patient, self._limits_row(act.db, patient))
 
     def set_identity(self, actor: Actor, code: str, identity: Identity) -> None:
-        with self._tx() as db:
-            self._require(db, actor, Action.IDENTITY_WRITE)
-            patient = self._patient(db, code)
+        with self._acting(actor, Action.IDENTITY_WRITE, writes=True) as act:
+            patient = act.patient(code)
             if patient.forgotten_at is not None:
                 raise InputError(f"patient {code} was forgotten (GDPR erasure); identifying "
                                  "data cannot be attached again")
@@ -403,7 +438,7 @@ class ClinicalRecord:
             else:
                 for k in IDENTITY_FIELDS:
                     setattr(patient.identity, k, getattr(row, k))
-            self._audit(db, actor, action, "patient", code, after={"fields": _present(identity)})
+            act.audit(action, "patient", code, after={"fields": _present(identity)})
 
     def forget_patient(self, actor: Actor, code: str) -> dict[str, Any]:
         """Erase the identifying data; the pseudonymous clinical history stays (GDPR art. 17).
@@ -413,16 +448,15 @@ class ClinicalRecord:
         deleted and the table vacuumed; no dump holds it. Backups taken before still do: they
         follow the clinic's retention policy.
         """
-        with self._tx() as db:
-            self._require(db, actor, Action.PATIENT_FORGET)
-            patient = self._patient(db, code, lock=True)
+        with self._acting(actor, Action.PATIENT_FORGET, writes=True) as act:
+            patient = act.patient(code, lock=True)
             had = patient.identity is not None
             if patient.identity is not None:
-                db.delete(patient.identity)
+                act.db.delete(patient.identity)
                 patient.identity = None
             patient.forgotten_at = self.clock()
-            self._audit(db, actor, "patient.forget", "patient", code,
-                        after={"identity_erased": had})
+            act.audit("patient.forget", "patient", code,
+                      after={"identity_erased": had})
         return {"code": code, "identity_erased": had, "storage_scrubbed": self._scrub()}
 
     def _scrub(self) -> bool:
@@ -450,18 +484,15 @@ class ClinicalRecord:
     # ------------------------------------------------------------ limits and plans
     @staticmethod
     def _limits_row(db: Session, patient: Patient) -> PatientLimitsRow | None:
-        return db.execute(sa.select(PatientLimitsRow)
-                          .where(PatientLimitsRow.patient_id == patient.id)
-                          .order_by(PatientLimitsRow.id.desc()).limit(1)).scalar_one_or_none()
+        return _latest(db, PatientLimitsRow, patient)
 
     def set_limits(self, actor: Actor, code: str, reason: str | None = None,
                    **limits: float) -> dict[str, Any]:
         """Prescribe new limits (``PatientLimits`` fields, deg, N, deg/s); unset fields keep the
         values in force (or PatientLimits' defaults for the first prescription)."""
-        with self._tx() as db:
-            self._require(db, actor, Action.LIMITS_SET)
-            patient = self._patient(db, code, lock=True)
-            current = self._limits_row(db, patient)
+        with self._acting(actor, Action.LIMITS_SET, writes=True) as act:
+            patient = act.patient(code, lock=True)
+            current = self._limits_row(act.db, patient)
             base = _limits_dict(current) if current else PatientLimits().model_dump()
             unknown = set(limits) - set(LIMIT_FIELDS)
             if unknown:
@@ -471,13 +502,21 @@ class ClinicalRecord:
                 checked = PatientLimits(**merged).model_dump()
             except ValidationError as exc:
                 raise InputError(f"limits for {code} refused: {_pydantic_reason(exc)}") from None
-            row = PatientLimitsRow(patient_id=patient.id, set_by=actor.username,
-                                   set_at=self.clock(), reason=reason, **checked)
-            db.add(row)
-            self._audit(db, actor, "limits.set", "patient", code,
-                        before=_limits_dict(current) if current else None, after=checked)
-            db.flush()
+            row = self._prescribe(act, PatientLimitsRow, patient, checked, reason, "limits.set",
+                                  _limits_dict(current) if current else None)
             return _limits_record(row, patient.affected_side)
+
+    def _prescribe(self, act: _Act, table: type[_Prescription], patient: Patient,
+                   checked: dict[str, Any], reason: str | None, action: str,
+                   before: dict[str, Any] | None) -> _Prescription:
+        """A new prescription row (limits or ankle setup: the newest is in force), by the
+        actor, now, audited against the one it replaces (``before``)."""
+        row = table(patient_id=patient.id, set_by=act.username, set_at=self.clock(),
+                    reason=reason, **checked)
+        act.db.add(row)
+        act.audit(action, "patient", patient.code, before=before, after=checked)
+        act.db.flush()
+        return row
 
     def limits_in_force(self, actor: Actor, code: str) -> dict[str, Any]:
         """What the RT process needs: ``PatientLimits``' fields plus ``body_mass_kg`` (kg).
@@ -485,10 +524,9 @@ class ClinicalRecord:
         Raises NotFound when no limits were ever prescribed: a session needs a clinician's
         prescription, never silent defaults.
         """
-        with self._tx() as db:
-            self._require(db, actor, Action.PATIENT_READ)
-            patient = self._patient(db, code)
-            row = self._limits_row(db, patient)
+        with self._acting(actor, Action.PATIENT_READ) as act:
+            patient = act.patient(code)
+            row = self._limits_row(act.db, patient)
             if row is None:
                 raise NotFound(f"patient {code} has no limits prescribed: a clinician sets them "
                                f"with `talus patients limits {code} ...`")
@@ -497,9 +535,7 @@ class ClinicalRecord:
     # ------------------------------------------------------------ ankle setup
     @staticmethod
     def _ankle_row(db: Session, patient: Patient) -> PatientAnkleRow | None:
-        return db.execute(sa.select(PatientAnkleRow)
-                          .where(PatientAnkleRow.patient_id == patient.id)
-                          .order_by(PatientAnkleRow.id.desc()).limit(1)).scalar_one_or_none()
+        return _latest(db, PatientAnkleRow, patient)
 
     def set_ankle(self, actor: Actor, code: str, reason: str | None = None,
                   **fields: Any) -> dict[str, Any]:
@@ -511,10 +547,9 @@ class ClinicalRecord:
         platform."""
         from rt.errors import InputError as RtInputError
         from rt.model.ankle import AnkleSetup, parse_ankle_setup
-        with self._tx() as db:
-            self._require(db, actor, Action.LIMITS_SET)
-            patient = self._patient(db, code, lock=True)
-            current = self._ankle_row(db, patient)
+        with self._acting(actor, Action.LIMITS_SET, writes=True) as act:
+            patient = act.patient(code, lock=True)
+            current = self._ankle_row(act.db, patient)
             base: dict[str, Any] = _ankle_dict(current) if current else {
                 "side": patient.affected_side}
             unknown = set(fields) - set(AnkleSetup.model_fields)
@@ -528,66 +563,57 @@ class ClinicalRecord:
                 checked = parse_ankle_setup(merged, 1.0).model_dump()
             except RtInputError as exc:
                 raise InputError(f"ankle setup for {code} refused: {exc}") from None
-            row = PatientAnkleRow(patient_id=patient.id, set_by=actor.username,
-                                  set_at=self.clock(), reason=reason, **checked)
-            db.add(row)
-            self._audit(db, actor, "ankle.set", "patient", code,
-                        before=_ankle_dict(current) if current else None, after=checked)
-            db.flush()
+            row = self._prescribe(act, PatientAnkleRow, patient, checked, reason, "ankle.set",
+                                  _ankle_dict(current) if current else None)
             return {**checked, "set_by": row.set_by, "set_at": _iso(row.set_at),
                     "reason": reason}
 
     def ankle_in_force(self, actor: Actor, code: str) -> dict[str, Any] | None:
         """The ankle setup in force (``AnkleSetup`` fields), None when none was entered."""
-        with self._tx() as db:
-            self._require(db, actor, Action.PATIENT_READ)
-            row = self._ankle_row(db, self._patient(db, code))
+        with self._acting(actor, Action.PATIENT_READ) as act:
+            row = self._ankle_row(act.db, act.patient(code))
             return _ankle_dict(row) if row is not None else None
 
     def limits_history(self, actor: Actor, code: str) -> list[dict[str, Any]]:
-        with self._tx() as db:
-            self._require(db, actor, Action.PATIENT_READ)
-            patient = self._patient(db, code)
+        with self._acting(actor, Action.PATIENT_READ) as act:
+            patient = act.patient(code)
             return [_limits_record(r, patient.affected_side) for r in patient.limits]
 
     def assign_plan(self, actor: Actor, code: str, protocol_yaml: str,
                     parameters: dict[str, Any] | None = None) -> dict[str, Any]:
         """Assign a protocol (its YAML text, validated) to a patient."""
         protocol = _validate_protocol(protocol_yaml)
-        with self._tx() as db:
-            self._require(db, actor, Action.PLAN_ASSIGN)
-            patient = self._patient(db, code)
+        with self._acting(actor, Action.PLAN_ASSIGN, writes=True) as act:
+            patient = act.patient(code)
             plan = Plan(patient_id=patient.id, protocol_name=protocol.name,
                         protocol_kind=protocol.kind, protocol_yaml=protocol_yaml,
                         protocol_sha256=sha256_text(protocol_yaml), parameters=parameters or {},
                         assigned_by=actor.username, assigned_at=self.clock(), active=True)
-            db.add(plan)
-            db.flush()
-            self._audit(db, actor, "plan.assign", "patient", code,
-                        after={"plan": plan.id, "protocol": plan.protocol_name,
-                               "sha256": plan.protocol_sha256})
+            act.db.add(plan)
+            act.db.flush()
+            act.audit("plan.assign", "patient", code,
+                      after={"plan": plan.id, "protocol": plan.protocol_name,
+                             "sha256": plan.protocol_sha256})
             return _plan_dict(plan)
 
     def end_plan(self, actor: Actor, code: str, plan_id: int) -> dict[str, Any]:
         """Mark a plan finished (kept, with the sessions that used it)."""
-        with self._tx() as db:
-            self._require(db, actor, Action.PLAN_ASSIGN)
-            patient = self._patient(db, code)
-            plan = db.get(Plan, plan_id)
+        with self._acting(actor, Action.PLAN_ASSIGN, writes=True) as act:
+            patient = act.patient(code)
+            plan = act.db.get(Plan, plan_id)
             if plan is None or plan.patient_id != patient.id:
                 raise NotFound(f"patient {code} has no plan {plan_id}")
             if not plan.active:
                 raise InputError(f"plan {plan_id} of {code} has already ended")
             plan.active = False
-            self._audit(db, actor, "plan.end", "patient", code, before={"plan": plan_id,
-                        "active": True}, after={"plan": plan_id, "active": False})
+            act.audit("plan.end", "patient", code, before={"plan": plan_id,
+                      "active": True}, after={"plan": plan_id, "active": False})
             return _plan_dict(plan)
 
     def plans(self, actor: Actor, code: str) -> list[dict[str, Any]]:
-        with self._tx() as db:
-            self._require(db, actor, Action.PATIENT_READ)
-            patient = self._patient(db, code)
-            return [_plan_dict(p) for p in db.execute(
+        with self._acting(actor, Action.PATIENT_READ) as act:
+            patient = act.patient(code)
+            return [_plan_dict(p) for p in act.db.execute(
                 sa.select(Plan).where(Plan.patient_id == patient.id).order_by(Plan.id)).scalars()]
 
     # ------------------------------------------------------------ sessions
@@ -600,16 +626,15 @@ class ClinicalRecord:
         process. The recording's metadata gets ``patient`` (the code), never identifying data.
         """
         protocol = _validate_protocol(protocol_yaml)
-        with self._tx() as db:
-            self._require(db, actor, Action.SESSION_RUN)
-            patient = self._patient(db, code)
+        with self._acting(actor, Action.SESSION_RUN, writes=True) as act:
+            patient = act.patient(code)
             if plan_id is not None:
-                plan = db.get(Plan, plan_id)
+                plan = act.db.get(Plan, plan_id)
                 if plan is None or plan.patient_id != patient.id:
                     raise NotFound(f"patient {code} has no plan {plan_id}")
                 if not plan.active:
                     raise InputError(f"plan {plan_id} of {code} has ended: assign a new one")
-            row = self._limits_row(db, patient)
+            row = self._limits_row(act.db, patient)
             if row is None:
                 raise NotFound(f"patient {code} has no limits prescribed: a clinician sets them "
                                f"with `talus patients limits {code} ...` before a session")
@@ -619,11 +644,11 @@ class ClinicalRecord:
                                protocol_sha256=sha256_text(protocol_yaml),
                                limits=_limits_dict(row), body_mass_kg=patient.body_mass_kg,
                                started_at=self.clock(), outcome=Outcome.RUNNING.value)
-            db.add(s)
-            self._audit(db, actor, "session.start", "session", s.uid,
-                        after={"patient": code, "protocol": s.protocol_name,
-                               "sha256": s.protocol_sha256})
-            ankle = self._ankle_row(db, patient)
+            act.db.add(s)
+            act.audit("session.start", "session", s.uid,
+                      after={"patient": code, "protocol": s.protocol_name,
+                             "sha256": s.protocol_sha256})
+            ankle = self._ankle_row(act.db, patient)
             return {"uid": s.uid, "patient": code, "limits": dict(s.limits),
                     "body_mass_kg": s.body_mass_kg, "protocol_sha256": s.protocol_sha256,
                     "started_at": s.started_at.isoformat(),
@@ -643,26 +668,24 @@ class ClinicalRecord:
             raise InputError(f"outcome {end.value} needs stopped_by (who, or which fault)")
         if recording_sha256 is not None and not re.fullmatch(r"[0-9a-f]{64}", recording_sha256):
             raise InputError("recording_sha256 must be 64 lower-case hex digits")
-        with self._tx() as db:
-            self._require(db, actor, Action.SESSION_RUN)
-            s = _session(db, uid, lock=True)
+        with self._acting(actor, Action.SESSION_RUN, writes=True) as act:
+            s = _session(act.db, uid, lock=True)
             if s.outcome != Outcome.RUNNING.value:
                 raise InputError(f"session {uid} already finished ({s.outcome})")
             s.ended_at, s.outcome, s.stopped_by = self.clock(), end.value, stopped_by
             s.summary = summary
             s.recording_path, s.recording_sha256 = recording_path, recording_sha256
-            self._audit(db, actor, "session.finish", "session", uid,
-                        after={"outcome": end.value, "stopped_by": stopped_by,
-                               "recording_sha256": recording_sha256})
-            return _session_dict(s, _code_of(db, s.patient_id), full=True)
+            act.audit("session.finish", "session", uid,
+                      after={"outcome": end.value, "stopped_by": stopped_by,
+                             "recording_sha256": recording_sha256})
+            return _session_dict(s, _code_of(act.db, s.patient_id), full=True)
 
     def list_sessions(self, actor: Actor, code: str | None = None,
                       since: dt.datetime | None = None, until: dt.datetime | None = None,
                       full: bool = False) -> list[dict[str, Any]]:
         """Sessions, oldest first, optionally of one patient and started in [since, until).
         ``full`` adds the summary and the limits snapshot (what reports need)."""
-        with self._tx() as db:
-            self._require(db, actor, Action.SESSION_READ)
+        with self._acting(actor, Action.SESSION_READ) as act:
             # Plain columns, not ORM objects: listing 10 000 sessions is a report's daily
             # bread (bench/patients.py).
             t = TherapySession
@@ -673,7 +696,7 @@ class ClinicalRecord:
                 columns += [t.limits, t.body_mass_kg, t.summary]
             stmt = sa.select(*columns).join(Patient, Patient.id == t.patient_id)
             if code is not None:
-                stmt = stmt.where(t.patient_id == self._patient(db, code).id)
+                stmt = stmt.where(t.patient_id == act.patient(code).id)
             if since is not None:
                 stmt = stmt.where(t.started_at >= since)
             if until is not None:
@@ -681,27 +704,25 @@ class ClinicalRecord:
             stmt = stmt.order_by(t.started_at, t.id)
             return [{**row, "started_at": _iso(row["started_at"]),
                      "ended_at": _iso(row["ended_at"])}
-                    for row in db.execute(stmt).mappings()]
+                    for row in act.db.execute(stmt).mappings()]
 
     def get_session(self, actor: Actor, uid: str) -> dict[str, Any]:
-        with self._tx() as db:
-            self._require(db, actor, Action.SESSION_READ)
-            s = _session(db, uid)
-            d = _session_dict(s, _code_of(db, s.patient_id), full=True)
+        with self._acting(actor, Action.SESSION_READ) as act:
+            s = _session(act.db, uid)
+            d = _session_dict(s, _code_of(act.db, s.patient_id), full=True)
             d["protocol_yaml"] = s.protocol_yaml
             return d
 
     # ------------------------------------------------------------ export / import
     def export_patient(self, actor: Actor, code: str) -> dict[str, Any]:
         """The patient's pseudonymous record (patients.transfer), JSON-ready."""
-        with self._tx() as db:
-            self._require(db, actor, Action.RECORD_EXPORT)
-            p = self._patient(db, code)
-            sessions = db.execute(sa.select(TherapySession)
-                                  .where(TherapySession.patient_id == p.id)
-                                  .order_by(TherapySession.started_at, TherapySession.id)).scalars().all()
-            plans = db.execute(sa.select(Plan).where(Plan.patient_id == p.id)
-                               .order_by(Plan.id)).scalars().all()
+        with self._acting(actor, Action.RECORD_EXPORT) as act:
+            p = act.patient(code)
+            sessions = act.db.execute(
+                sa.select(TherapySession).where(TherapySession.patient_id == p.id)
+                .order_by(TherapySession.started_at, TherapySession.id)).scalars().all()
+            plans = act.db.execute(sa.select(Plan).where(Plan.patient_id == p.id)
+                                   .order_by(Plan.id)).scalars().all()
             doc = {
                 "kind": transfer.KIND, "schema_version": transfer.SCHEMA_VERSION,
                 "exported_at": _iso(self.clock()), "exported_by": actor.username,
@@ -716,8 +737,8 @@ class ClinicalRecord:
                                 "sha256": s.recording_sha256}
                                for s in sessions if s.recording_path],
             }
-            self._audit(db, actor, "record.export", "patient", code,
-                        after={"sessions": len(sessions)})
+            act.audit("record.export", "patient", code,
+                      after={"sessions": len(sessions)})
             return doc
 
     def import_patient(self, actor: Actor, document: Any) -> dict[str, Any]:
@@ -725,13 +746,12 @@ class ClinicalRecord:
         or a session uid exists here). Returns ``show``'s dict."""
         rec = transfer.parse(document)
         code = _check_code(rec.patient.code)
-        with self._tx() as db:
-            self._require(db, actor, Action.RECORD_IMPORT)
-            if db.execute(sa.select(Patient.id).where(Patient.code == code)).first():
+        with self._acting(actor, Action.RECORD_IMPORT, writes=True) as act:
+            if act.db.execute(sa.select(Patient.id).where(Patient.code == code)).first():
                 raise AlreadyExists(f"patient code {code!r} exists in this database")
             uids = [s.uid for s in rec.sessions]
-            clash = db.execute(sa.select(TherapySession.uid)
-                               .where(TherapySession.uid.in_(uids))).scalars().first() \
+            clash = act.db.execute(sa.select(TherapySession.uid)
+                                   .where(TherapySession.uid.in_(uids))).scalars().first() \
                 if uids else None
             if clash:
                 raise AlreadyExists(f"session {clash} exists in this database")
@@ -739,28 +759,28 @@ class ClinicalRecord:
             clinical = _clinical({k: data[k] for k in CLINICAL_FIELDS})
             p = Patient(code=code, created_at=data["created_at"], created_by=data["created_by"],
                         forgotten_at=data["forgotten_at"], **clinical)
-            db.add(p)
-            db.flush()
+            act.db.add(p)
+            act.db.flush()
             for lim in rec.limits:
-                db.add(PatientLimitsRow(patient_id=p.id, **lim.model_dump()))
+                act.db.add(PatientLimitsRow(patient_id=p.id, **lim.model_dump()))
             plan_ids: dict[int, int] = {}
             for plan in rec.plans:
                 fields = plan.model_dump()
                 old_id = fields.pop("id")
                 row = Plan(patient_id=p.id, **fields)
-                db.add(row)
-                db.flush()
+                act.db.add(row)
+                act.db.flush()
                 plan_ids[old_id] = row.id
             for s in rec.sessions:
                 fields = s.model_dump()
                 fields["plan_id"] = plan_ids.get(fields["plan_id"]) if fields["plan_id"] else None
                 _enum(Outcome, fields["outcome"], "outcome")
-                db.add(TherapySession(patient_id=p.id, **fields))
-            self._audit(db, actor, "record.import", "patient", code,
-                        after={"sessions": len(rec.sessions), "limits": len(rec.limits),
-                               "plans": len(rec.plans), "exported_at": rec.exported_at})
-            db.flush()
-            return _patient_dict(p, self._limits_row(db, p))
+                act.db.add(TherapySession(patient_id=p.id, **fields))
+            act.audit("record.import", "patient", code,
+                      after={"sessions": len(rec.sessions), "limits": len(rec.limits),
+                             "plans": len(rec.plans), "exported_at": rec.exported_at})
+            act.db.flush()
+            return _patient_dict(p, self._limits_row(act.db, p))
 
     # ------------------------------------------------------------ calibrations
     def add_calibration(self, actor: Actor, record: dict[str, Any],
@@ -770,21 +790,20 @@ class ClinicalRecord:
         headline figures as columns (:func:`calibration_figures`); audited."""
         fields = _calibration_fields(record)
         _check_certificate(certificate_path, certificate_sha256)
-        with self._tx() as db:
-            self._require(db, actor, Action.CALIBRATION_WRITE)
-            if db.execute(sa.select(Calibration.id)
-                          .where(Calibration.record_id == fields["record_id"])).first():
+        with self._acting(actor, Action.CALIBRATION_WRITE, writes=True) as act:
+            if act.db.execute(sa.select(Calibration.id)
+                              .where(Calibration.record_id == fields["record_id"])).first():
                 raise AlreadyExists(f"calibration {fields['record_id']} is already stored")
             cal = Calibration(**fields, certificate_path=certificate_path,
                               certificate_sha256=certificate_sha256,
                               added_by=actor.username, added_at=self.clock())
-            db.add(cal)
-            self._audit(db, actor, "calibration.add", "calibration", cal.record_id,
-                        after={"plate": cal.plate_name, "serial": cal.plate_serial,
-                               "sha256": cal.record_sha256, "passed": cal.passed,
-                               "cop_rms_mm": cal.cop_rms_mm, "force_pct_fs": cal.force_pct_fs,
-                               "certificate": certificate_path,
-                               "certificate_sha256": certificate_sha256})
+            act.db.add(cal)
+            act.audit("calibration.add", "calibration", cal.record_id,
+                      after={"plate": cal.plate_name, "serial": cal.plate_serial,
+                             "sha256": cal.record_sha256, "passed": cal.passed,
+                             "cop_rms_mm": cal.cop_rms_mm, "force_pct_fs": cal.force_pct_fs,
+                             "certificate": certificate_path,
+                             "certificate_sha256": certificate_sha256})
             return _calibration_dict(cal, full=False)
 
     def attach_calibration_certificate(self, actor: Actor, record_id: str, path: str,
@@ -792,58 +811,46 @@ class ClinicalRecord:
         """Name the certificate (PDF) of a stored calibration, once: a certificate already
         attached is never replaced (a new calibration gets a new record). Audited."""
         _check_certificate(path, sha256)
-        with self._tx() as db:
-            self._require(db, actor, Action.CALIBRATION_WRITE)
-            cal = db.execute(sa.select(Calibration).where(Calibration.record_id == record_id)) \
-                .scalar_one_or_none()
-            if cal is None:
-                raise NotFound(f"no calibration {record_id!r}")
+        with self._acting(actor, Action.CALIBRATION_WRITE, writes=True) as act:
+            cal = _calibration(act.db, record_id)
             if cal.certificate_path is not None:
                 raise AlreadyExists(f"calibration {record_id} already has its certificate "
                                     f"({cal.certificate_path}); it is never replaced")
             cal.certificate_path, cal.certificate_sha256 = path, sha256
-            self._audit(db, actor, "calibration.certify", "calibration", record_id,
-                        before={"certificate": None},
-                        after={"certificate": path, "certificate_sha256": sha256})
+            act.audit("calibration.certify", "calibration", record_id,
+                      before={"certificate": None},
+                      after={"certificate": path, "certificate_sha256": sha256})
             return _calibration_dict(cal, full=False)
 
     def list_calibrations(self, actor: Actor, plate_serial: str | None = None) -> list[dict[str, Any]]:
-        with self._tx() as db:
-            self._require(db, actor, Action.CALIBRATION_READ)
+        with self._acting(actor, Action.CALIBRATION_READ) as act:
             stmt = sa.select(Calibration).order_by(Calibration.created_at)
             if plate_serial is not None:
                 stmt = stmt.where(Calibration.plate_serial == plate_serial)
-            return [_calibration_dict(c, full=False) for c in db.execute(stmt).scalars()]
+            return [_calibration_dict(c, full=False) for c in act.db.execute(stmt).scalars()]
 
     def get_calibration(self, actor: Actor, record_id: str) -> dict[str, Any]:
-        with self._tx() as db:
-            self._require(db, actor, Action.CALIBRATION_READ)
-            cal = db.execute(sa.select(Calibration).where(Calibration.record_id == record_id)) \
-                .scalar_one_or_none()
-            if cal is None:
-                raise NotFound(f"no calibration {record_id!r}")
+        with self._acting(actor, Action.CALIBRATION_READ) as act:
+            cal = _calibration(act.db, record_id)
             return _calibration_dict(cal, full=True)
 
     # ------------------------------------------------------------ audit
     def verify_audit(self, actor: Actor, anchor: str | None = None) -> audit.Verification:
         """Check the chain; ``anchor`` "SEQ:HASH" is a head noted outside earlier."""
         point = audit.parse_anchor(anchor) if anchor else None
-        with self._tx() as db:
-            self._require(db, actor, Action.AUDIT_READ)
-            return audit.verify(db, point)
+        with self._acting(actor, Action.AUDIT_READ) as act:
+            return audit.verify(act.db, point)
 
     def export_audit(self, actor: Actor) -> list[dict[str, Any]]:
-        with self._tx() as db:
-            self._require(db, actor, Action.AUDIT_READ)
-            entries = list(audit.export(db))
-            self._audit(db, actor, "audit.export", "audit", None, after={"entries": len(entries)})
+        with self._acting(actor, Action.AUDIT_READ) as act:
+            entries = list(audit.export(act.db))
+            act.audit("audit.export", "audit", None, after={"entries": len(entries)})
             return entries
 
     def note_database_action(self, actor: Actor, action: str, detail: dict[str, Any]) -> None:
         """Check DATABASE_ADMIN and log a backup/restore in the audit chain."""
-        with self._tx() as db:
-            self._require(db, actor, Action.DATABASE_ADMIN)
-            self._audit(db, actor, action, "database", None, after=detail)
+        with self._acting(actor, Action.DATABASE_ADMIN, writes=True) as act:
+            act.audit(action, "database", None, after=detail)
 
 
 # ---------------------------------------------------------------- helpers (pure)
@@ -909,11 +916,17 @@ def _iso(t: dt.datetime | None) -> str | None:
     return t.isoformat() if t is not None else None
 
 
+def _one(db: Session, stmt: sa.Select[tuple[_Row]], missing: str, lock: bool = False) -> _Row:
+    """The one row ``stmt`` selects (locked for update with ``lock``); ``NotFound(missing)``
+    when there is none."""
+    row = db.execute(stmt.with_for_update() if lock else stmt).scalar_one_or_none()
+    if row is None:
+        raise NotFound(missing)
+    return row
+
+
 def _user(db: Session, username: str) -> User:
-    user = db.execute(sa.select(User).where(User.username == username)).scalar_one_or_none()
-    if user is None:
-        raise NotFound(f"no user {username!r}")
-    return user
+    return _one(db, sa.select(User).where(User.username == username), f"no user {username!r}")
 
 
 def _user_dict(u: User) -> dict[str, Any]:
@@ -958,13 +971,19 @@ def _plan_dict(p: Plan) -> dict[str, Any]:
 
 
 def _session(db: Session, uid: str, lock: bool = False) -> TherapySession:
-    stmt = sa.select(TherapySession).where(TherapySession.uid == uid)
-    if lock:
-        stmt = stmt.with_for_update()
-    s = db.execute(stmt).scalar_one_or_none()
-    if s is None:
-        raise NotFound(f"no session {uid!r}")
-    return s
+    return _one(db, sa.select(TherapySession).where(TherapySession.uid == uid),
+                f"no session {uid!r}", lock)
+
+
+def _calibration(db: Session, record_id: str) -> Calibration:
+    return _one(db, sa.select(Calibration).where(Calibration.record_id == record_id),
+                f"no calibration {record_id!r}")
+
+
+def _latest(db: Session, table: type[_Prescription], patient: Patient) -> _Prescription | None:
+    """The patient's newest row of a prescription table (the one in force), None if none."""
+    return db.execute(sa.select(table).where(table.patient_id == patient.id)
+                      .order_by(table.id.desc()).limit(1)).scalar_one_or_none()
 
 
 def _code_of(db: Session, patient_id: int) -> str:

@@ -21,6 +21,8 @@ from rt.model.ik_kernels import (
     COL_PHI,
     COL_Q,
     COL_ROT,
+    COL_X,
+    COL_Y,
     IK_OK,
     IK_ROW,
     ik_pose,
@@ -28,6 +30,7 @@ from rt.model.ik_kernels import (
     in_workspace,
 )
 from rt.model.kernels import assemble, fk_solve
+from rt.model.small_linalg import dot3, roll_pitch
 
 #: ``path_references`` packs the ankle's heave law as [on (0/1), A0_z, a_x, a_y, a_z].
 HEAVE_PARAMS = 5
@@ -103,10 +106,10 @@ def ankle_horizontal(geom, z_neutral, start, centre, roll, pitch, out):
     for k in range(roll.shape[0]):
         if ik_pose(geom, z_neutral, roll[k], pitch[k], row) != IK_OK:
             return k
-        rx = row[9] * ax + row[10] * ay + row[11] * az
-        ry = row[12] * ax + row[13] * ay + row[14] * az
-        dx = row[6] + rx - start[0]
-        dy = row[7] + ry - start[1]
+        rx = dot3(row[COL_ROT], row[COL_ROT + 1], row[COL_ROT + 2], ax, ay, az)
+        ry = dot3(row[COL_ROT + 3], row[COL_ROT + 4], row[COL_ROT + 5], ax, ay, az)
+        dx = row[COL_X] + rx - start[0]
+        dy = row[COL_Y] + ry - start[1]
         out[k] = math.hypot(dx, dy)
     return -1
 
@@ -133,8 +136,7 @@ def fk_path(geom, limits, q, phi, step_tol, max_iterations, pose):
         if fk_solve(geom, qk, work, step_tol, max_iterations) < 0:
             return k
         assemble(geom, qk, work, rot, pos, spheres)
-        roll = math.atan2(rot[2, 1], rot[2, 2])
-        pitch = math.atan2(-rot[2, 0], math.hypot(rot[2, 1], rot[2, 2]))
+        roll, pitch = roll_pitch(rot)
         for i in range(3):
             row[COL_Q + i] = qk[i]
             row[COL_PHI + i] = work[i]

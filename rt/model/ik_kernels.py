@@ -24,6 +24,7 @@ from rt.model.kernels import (
     LIMIT_ROLL,
     LIMIT_STROKE_HI,
     LIMIT_STROKE_LO,
+    rod_cone_angle,
 )
 
 IK_ROW = 18
@@ -115,10 +116,7 @@ def in_workspace(geom, limits, roll, pitch, row):
         phi = row[COL_PHI + i]
         if abs(phi) > limits[LIMIT_ROD]:
             return False
-        s, c = math.sin(phi), math.cos(phi)
-        dot = s * (geom[3 + i] * nx + geom[6 + i] * ny) + c * nz
-        cone = math.acos(max(-1.0, min(1.0, dot)))
-        if cone > limits[LIMIT_CONE]:
+        if rod_cone_angle(geom, i, math.sin(phi), math.cos(phi), nx, ny, nz) > limits[LIMIT_CONE]:
             return False
     return abs(roll) <= limits[LIMIT_ROLL] and abs(pitch) <= limits[LIMIT_PITCH]
 

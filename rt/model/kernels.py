@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from rt.model import rigid_body as rb
+from rt.model.small_linalg import cross3, dot3, roll_pitch, unit3
 
 TREE_DOF = 12
 IX_X, IX_Y, IX_Z, IX_YAW, IX_PITCH, IX_ROLL = 6, 7, 8, 9, 10, 11
@@ -89,6 +90,54 @@ def inv3(a, out):
     out[1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) / det
     out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) / det
     return det
+
+
+@njit(cache=True, inline="always")
+def _centroid_and_moment(r, ct, st, rho_d, h_d):
+    """The centroid's rate (x, y, z) of the spheres moving radially at ``rho_d`` and
+    vertically at ``h_d`` (leg i along (cos θ_i, sin θ_i, 0), m/s or m/s²), and the moment
+    Σ r_i × (d_i − centroid) of their rates about it (``r``: sphere offsets, one per row)."""
+    cx = 0.0
+    cy = 0.0
+    cz = 0.0
+    for i in range(3):
+        cx += rho_d[i] * ct[i] / 3.0
+        cy += rho_d[i] * st[i] / 3.0
+        cz += h_d[i] / 3.0
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    for i in range(3):
+        m0, m1, m2 = cross3(r[i, 0], r[i, 1], r[i, 2], rho_d[i] * ct[i] - cx,
+                            rho_d[i] * st[i] - cy, h_d[i] - cz)
+        mx += m0
+        my += m1
+        mz += m2
+    return cx, cy, cz, mx, my, mz
+
+
+@njit(cache=True, inline="always")
+def _from_moment(ginv, nx, ny, nz, mx, my, mz):
+    """The platform's angular rate from the moment of its spheres' rates: G⁻¹ m with
+    G = (3 R_p²/2)(I + n nᵀ) (``ginv`` = 2 / (3 R_p²)), i.e. ginv (m − ½ n (n · m))."""
+    nm = dot3(nx, ny, nz, mx, my, mz)
+    return ginv * (mx - 0.5 * nx * nm), ginv * (my - 0.5 * ny * nm), ginv * (mz - 0.5 * nz * nm)
+
+
+@njit(cache=True, inline="always")
+def _euler_rates(wx, wy, wz, ca, sa, cb, sb):
+    """(yaw, pitch, roll) rates of the ZYX angles for the angular rate ω (base frame), at
+    yaw cos/sin (ca, sa) and pitch cos/sin (cb, sb)."""
+    roll_d = (wx * ca + wy * sa) / cb
+    return wz + roll_d * sb, -wx * sa + wy * ca, roll_d
+
+
+@njit(cache=True)
+def rod_cone_angle(geom, i, sin_phi, cos_phi, nx, ny, nz):
+    """The angle (rad) between leg i's rod, at rod angle φ (its sine and cosine), and the
+    platform normal n: what the spherical joint's cone limit bounds."""
+    dot = sin_phi * (geom[3 + i] * nx + geom[6 + i] * ny) + cos_phi * nz
+    return math.acos(max(-1.0, min(1.0, dot)))
 
 
 TREE_MAPS_WORK = 160
@@ -182,33 +231,12 @@ def tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work):
             u = qd[i] if k == 3 else (1.0 if i == k else 0.0)
             rhod[k, i] = ln * cphi[i] * phid[k, i]
             hd[k, i] = u - ln * sphi[i] * phid[k, i]
-        vx = 0.0
-        vy = 0.0
-        vz = 0.0
-        for i in range(3):
-            vx += rhod[k, i] * ct[i] / 3.0
-            vy += rhod[k, i] * st[i] / 3.0
-            vz += hd[k, i] / 3.0
-        mx = 0.0
-        my = 0.0
-        mz = 0.0
-        for i in range(3):
-            dx = rhod[k, i] * ct[i] - vx
-            dy = rhod[k, i] * st[i] - vy
-            dz = hd[k, i] - vz
-            mx += r[i, 1] * dz - r[i, 2] * dy
-            my += r[i, 2] * dx - r[i, 0] * dz
-            mz += r[i, 0] * dy - r[i, 1] * dx
-        nm = nx * mx + ny * my + nz * mz
-        wx = ginv * (mx - 0.5 * nx * nm)
-        wy = ginv * (my - 0.5 * ny * nm)
-        wz = ginv * (mz - 0.5 * nz * nm)
+        vx, vy, vz, mx, my, mz = _centroid_and_moment(r, ct, st, rhod[k], hd[k])
+        wx, wy, wz = _from_moment(ginv, nx, ny, nz, mx, my, mz)
         w[k, 0] = wx
         w[k, 1] = wy
         w[k, 2] = wz
-        roll_d = (wx * ca + wy * sa) / cb
-        pitch_d = -wx * sa + wy * ca
-        yaw_d = wz + roll_d * sb
+        yaw_d, pitch_d, roll_d = _euler_rates(wx, wy, wz, ca, sa, cb, sb)
         ang[k, 0] = yaw_d
         ang[k, 1] = pitch_d
         ang[k, 2] = roll_d
@@ -263,45 +291,29 @@ def tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work):
             for p in range(3):
                 acc -= f_phi_inv[i, p] * kappa[p]
             phidd[i] = acc
-        ax = 0.0
-        ay = 0.0
-        az = 0.0
         rdd = work[117:120]
         hdd = work[120:123]
         for i in range(3):
             rdd[i] = ln * cphi[i] * phidd[i] - ln * sphi[i] * pp[i]
             hdd[i] = -ln * sphi[i] * phidd[i] - ln * cphi[i] * pp[i]
-            ax += rdd[i] * ct[i] / 3.0
-            ay += rdd[i] * st[i] / 3.0
-            az += hdd[i] / 3.0
-        mx = 0.0
-        my = 0.0
-        mz = 0.0
-        for i in range(3):
-            dx = rdd[i] * ct[i] - ax
-            dy = rdd[i] * st[i] - ay
-            dz = hdd[i] - az
-            mx += r[i, 1] * dz - r[i, 2] * dy
-            my += r[i, 2] * dx - r[i, 0] * dz
-            mz += r[i, 0] * dy - r[i, 1] * dx
+        ax, ay, az, mx, my, mz = _centroid_and_moment(r, ct, st, rdd, hdd)
         # Subtract ½[(P ω_u) × ω_w + (P ω_w) × ω_u], P = (3 R_p²/2)(I - n nᵀ).
         wu0, wu1, wu2 = w[u_, 0], w[u_, 1], w[u_, 2]
         ww0, ww1, ww2 = w[k, 0], w[k, 1], w[k, 2]
-        nwu = nx * wu0 + ny * wu1 + nz * wu2
-        nww = nx * ww0 + ny * ww1 + nz * ww2
+        nwu = dot3(nx, ny, nz, wu0, wu1, wu2)
+        nww = dot3(nx, ny, nz, ww0, ww1, ww2)
         pu0 = half_p * (wu0 - nx * nwu)
         pu1 = half_p * (wu1 - ny * nwu)
         pu2 = half_p * (wu2 - nz * nwu)
         pw0 = half_p * (ww0 - nx * nww)
         pw1 = half_p * (ww1 - ny * nww)
         pw2 = half_p * (ww2 - nz * nww)
-        mx -= 0.5 * ((pu1 * ww2 - pu2 * ww1) + (pw1 * wu2 - pw2 * wu1))
-        my -= 0.5 * ((pu2 * ww0 - pu0 * ww2) + (pw2 * wu0 - pw0 * wu2))
-        mz -= 0.5 * ((pu0 * ww1 - pu1 * ww0) + (pw0 * wu1 - pw1 * wu0))
-        nm = nx * mx + ny * my + nz * mz
-        dwx = ginv * (mx - 0.5 * nx * nm)
-        dwy = ginv * (my - 0.5 * ny * nm)
-        dwz = ginv * (mz - 0.5 * nz * nm)
+        c0, c1, c2 = cross3(pu0, pu1, pu2, ww0, ww1, ww2)
+        d0, d1, d2 = cross3(pw0, pw1, pw2, wu0, wu1, wu2)
+        mx -= 0.5 * (c0 + d0)
+        my -= 0.5 * (c1 + d1)
+        mz -= 0.5 * (c2 + d2)
+        dwx, dwy, dwz = _from_moment(ginv, nx, ny, nz, mx, my, mz)
         # Remove the Euler-rate terms: β̇ ė_β + γ̇ ė_γ, symmetrised.
         ya_u, pi_u, ro_u = ang[u_, 0], ang[u_, 1], ang[u_, 2]
         ya_w, pi_w, ro_w = ang[k, 0], ang[k, 1], ang[k, 2]
@@ -314,15 +326,11 @@ def tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work):
         ox = 0.5 * (ro_u * pi_w + ro_w * pi_u) * eb_x
         oy = 0.5 * (ro_u * pi_w + ro_w * pi_u) * eb_y
         oz = 0.5 * (ro_u * ya_w + ro_w * ya_u)
-        tx += oy * eg_z - oz * eg_y
-        ty += oz * eg_x - ox * eg_z
-        tz += ox * eg_y - oy * eg_x
-        ex = dwx - tx
-        ey = dwy - ty
-        ez = dwz - tz
-        roll_dd = (ex * ca + ey * sa) / cb
-        pitch_dd = -ex * sa + ey * ca
-        yaw_dd = ez + roll_dd * sb
+        c0, c1, c2 = cross3(ox, oy, oz, eg_x, eg_y, eg_z)
+        tx += c0
+        ty += c1
+        tz += c2
+        yaw_dd, pitch_dd, roll_dd = _euler_rates(dwx - tx, dwy - ty, dwz - tz, ca, sa, cb, sb)
         for i in range(3):
             Sd[2 * i, k] = 0.0
             Sd[2 * i + 1, k] = phidd[i]
@@ -404,24 +412,11 @@ def assemble(geom, q, phi, rot, pos, spheres):
     vx = spheres[2, 0] - spheres[0, 0]
     vy = spheres[2, 1] - spheres[0, 1]
     vz = spheres[2, 2] - spheres[0, 2]
-    nx = uy * vz - uz * vy
-    ny = uz * vx - ux * vz
-    nz = ux * vy - uy * vx
-    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-    nx /= nn
-    ny /= nn
-    nz /= nn
+    nx, ny, nz = cross3(ux, uy, uz, vx, vy, vz)
+    nx, ny, nz = unit3(nx, ny, nz)
     # f1: unit vector towards sphere 0 in the base frame; e1 the same in the platform frame.
-    fx = spheres[0, 0] - pos[0]
-    fy = spheres[0, 1] - pos[1]
-    fz = spheres[0, 2] - pos[2]
-    fn = math.sqrt(fx * fx + fy * fy + fz * fz)
-    fx /= fn
-    fy /= fn
-    fz /= fn
-    gx = ny * fz - nz * fy                  # n × f1
-    gy = nz * fx - nx * fz
-    gz = nx * fy - ny * fx
+    fx, fy, fz = unit3(spheres[0, 0] - pos[0], spheres[0, 1] - pos[1], spheres[0, 2] - pos[2])
+    gx, gy, gz = cross3(nx, ny, nz, fx, fy, fz)     # n × f1
     e1x = geom[3]
     e1y = geom[6]
     e2x = -e1y                              # ẑ × e1
@@ -481,8 +476,7 @@ def model_state(geom, limits, phi_guess, q_meas, qd, stb, step_tol, max_iteratio
     spheres = stb[rb.STATE_SPHERES:rb.STATE_SPHERES + 9].reshape((3, 3))
     sph = work[18:27].reshape((3, 3))
     assemble(geom, q, phi, rot, pos, sph)
-    roll = math.atan2(rot[2, 1], rot[2, 2])
-    pitch = math.atan2(-rot[2, 0], math.hypot(rot[2, 1], rot[2, 2]))
+    roll, pitch = roll_pitch(rot)
     yaw = math.atan2(rot[1, 0], rot[0, 0])
     # Workspace (Kinematics.workspace_violations): rods, spherical cones, roll, pitch.
     nx = rot[0, 2]
@@ -492,8 +486,7 @@ def model_state(geom, limits, phi_guess, q_meas, qd, stb, step_tol, max_iteratio
         p = phi[i]
         if abs(p) > limits[LIMIT_ROD]:
             return FK_OUTSIDE
-        dot = math.sin(p) * (geom[3 + i] * nx + geom[6 + i] * ny) + math.cos(p) * nz
-        if math.acos(max(-1.0, min(1.0, dot))) > limits[LIMIT_CONE]:
+        if rod_cone_angle(geom, i, math.sin(p), math.cos(p), nx, ny, nz) > limits[LIMIT_CONE]:
             return FK_OUTSIDE
     if abs(roll) > limits[LIMIT_ROLL] or abs(pitch) > limits[LIMIT_PITCH]:
         return FK_OUTSIDE

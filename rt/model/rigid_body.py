@@ -25,6 +25,8 @@ import math
 import numpy as np
 from numba import njit
 
+from rt.model.small_linalg import cross3, mat_t_vec3, mat_vec3
+
 #: Joint kinds (one DOF each).
 PRISMATIC = 0
 REVOLUTE = 1
@@ -103,12 +105,15 @@ def _inertia_times(pi, j, vl0, vl1, vl2, w0, w1, w2):
     iyz = pi[j, 8]
     izz = pi[j, 9]
     # f = m v + ω × h ; n = h × v + Ī ω
-    f0 = m * vl0 + (w1 * h2 - w2 * h1)
-    f1 = m * vl1 + (w2 * h0 - w0 * h2)
-    f2 = m * vl2 + (w0 * h1 - w1 * h0)
-    n0 = (h1 * vl2 - h2 * vl1) + ixx * w0 + ixy * w1 + ixz * w2
-    n1 = (h2 * vl0 - h0 * vl2) + ixy * w0 + iyy * w1 + iyz * w2
-    n2 = (h0 * vl1 - h1 * vl0) + ixz * w0 + iyz * w1 + izz * w2
+    wh0, wh1, wh2 = cross3(w0, w1, w2, h0, h1, h2)
+    hv0, hv1, hv2 = cross3(h0, h1, h2, vl0, vl1, vl2)
+    f0 = m * vl0 + wh0
+    f1 = m * vl1 + wh1
+    f2 = m * vl2 + wh2
+    # Ī ω summed after h × v, term by term (not dot3: that would sum Ī ω first).
+    n0 = hv0 + ixx * w0 + ixy * w1 + ixz * w2
+    n1 = hv1 + ixy * w0 + iyy * w1 + iyz * w2
+    n2 = hv2 + ixz * w0 + iyz * w1 + izz * w2
     return f0, f1, f2, n0, n1, n2
 
 
@@ -120,13 +125,10 @@ def body_force(pi, j, v, a):
     vl0, vl1, vl2, w0, w1, w2 = v[j, 0], v[j, 1], v[j, 2], v[j, 3], v[j, 4], v[j, 5]
     p0, p1, p2, p3, p4, p5 = _inertia_times(pi, j, vl0, vl1, vl2, w0, w1, w2)
     # (v, ω) ×* (p, L) = (ω × p, ω × L + v × p)
-    f0 = a0 + (w1 * p2 - w2 * p1)
-    f1 = a1 + (w2 * p0 - w0 * p2)
-    f2 = a2 + (w0 * p1 - w1 * p0)
-    n0 = a3 + (w1 * p5 - w2 * p4) + (vl1 * p2 - vl2 * p1)
-    n1 = a4 + (w2 * p3 - w0 * p5) + (vl2 * p0 - vl0 * p2)
-    n2 = a5 + (w0 * p4 - w1 * p3) + (vl0 * p1 - vl1 * p0)
-    return f0, f1, f2, n0, n1, n2
+    wp0, wp1, wp2 = cross3(w0, w1, w2, p0, p1, p2)
+    wl0, wl1, wl2 = cross3(w0, w1, w2, p3, p4, p5)
+    vp0, vp1, vp2 = cross3(vl0, vl1, vl2, p0, p1, p2)
+    return a0 + wp0, a1 + wp1, a2 + wp2, a3 + wl0 + vp0, a4 + wl1 + vp1, a5 + wl2 + vp2
 
 
 @njit(cache=True)
@@ -149,17 +151,12 @@ def forward_pass(parent, kind, axis, R, p, V, A, g_lin, v, a):
             paw0, paw1, paw2 = a[par, 3], a[par, 4], a[par, 5]
         px, py, pz = p[j, 0], p[j, 1], p[j, 2]
         # Motion from parent to child frame: ω' = Rᵀ ω, v' = Rᵀ (v + ω × p).
-        lv0 = pv0 + (pw1 * pz - pw2 * py)
-        lv1 = pv1 + (pw2 * px - pw0 * pz)
-        lv2 = pv2 + (pw0 * py - pw1 * px)
-        la0 = pa0 + (paw1 * pz - paw2 * py)
-        la1 = pa1 + (paw2 * px - paw0 * pz)
-        la2 = pa2 + (paw0 * py - paw1 * px)
-        for r in range(3):
-            v[j, r] = R[j, 0, r] * lv0 + R[j, 1, r] * lv1 + R[j, 2, r] * lv2
-            v[j, 3 + r] = R[j, 0, r] * pw0 + R[j, 1, r] * pw1 + R[j, 2, r] * pw2
-            a[j, r] = R[j, 0, r] * la0 + R[j, 1, r] * la1 + R[j, 2, r] * la2
-            a[j, 3 + r] = R[j, 0, r] * paw0 + R[j, 1, r] * paw1 + R[j, 2, r] * paw2
+        c0, c1, c2 = cross3(pw0, pw1, pw2, px, py, pz)
+        v[j, 0], v[j, 1], v[j, 2] = mat_t_vec3(R[j], pv0 + c0, pv1 + c1, pv2 + c2)
+        v[j, 3], v[j, 4], v[j, 5] = mat_t_vec3(R[j], pw0, pw1, pw2)
+        c0, c1, c2 = cross3(paw0, paw1, paw2, px, py, pz)
+        a[j, 0], a[j, 1], a[j, 2] = mat_t_vec3(R[j], pa0 + c0, pa1 + c1, pa2 + c2)
+        a[j, 3], a[j, 4], a[j, 5] = mat_t_vec3(R[j], paw0, paw1, paw2)
         # Joint contribution S q̇ and S q̈ + v × (S q̇).
         k = axis[j] if kind[j] == PRISMATIC else 3 + axis[j]
         qd = V[j]
@@ -184,12 +181,15 @@ def forward_pass(parent, kind, axis, R, p, V, A, g_lin, v, a):
         else:
             s5 = qd
         # (v, ω) × (s, σ) = (ω × s + v × σ, ω × σ)
-        a[j, 0] += (ww1 * s2 - ww2 * s1) + (wl1 * s5 - wl2 * s4)
-        a[j, 1] += (ww2 * s0 - ww0 * s2) + (wl2 * s3 - wl0 * s5)
-        a[j, 2] += (ww0 * s1 - ww1 * s0) + (wl0 * s4 - wl1 * s3)
-        a[j, 3] += ww1 * s5 - ww2 * s4
-        a[j, 4] += ww2 * s3 - ww0 * s5
-        a[j, 5] += ww0 * s4 - ww1 * s3
+        ws0, ws1, ws2 = cross3(ww0, ww1, ww2, s0, s1, s2)
+        vs0, vs1, vs2 = cross3(wl0, wl1, wl2, s3, s4, s5)
+        wo0, wo1, wo2 = cross3(ww0, ww1, ww2, s3, s4, s5)
+        a[j, 0] += ws0 + vs0
+        a[j, 1] += ws1 + vs1
+        a[j, 2] += ws2 + vs2
+        a[j, 3] += wo0
+        a[j, 4] += wo1
+        a[j, 5] += wo2
         a[j, k] += A[j]
         v[j, k] += qd
 
@@ -206,19 +206,15 @@ def backward_pass(parent, kind, axis, R, p, pi, v, a, f, tau):
         par = parent[j]
         if par >= 0:
             # Force to the parent frame: f_p = R f, n_p = R n + p × (R f).
-            rf0 = R[j, 0, 0] * f[j, 0] + R[j, 0, 1] * f[j, 1] + R[j, 0, 2] * f[j, 2]
-            rf1 = R[j, 1, 0] * f[j, 0] + R[j, 1, 1] * f[j, 1] + R[j, 1, 2] * f[j, 2]
-            rf2 = R[j, 2, 0] * f[j, 0] + R[j, 2, 1] * f[j, 1] + R[j, 2, 2] * f[j, 2]
-            rn0 = R[j, 0, 0] * f[j, 3] + R[j, 0, 1] * f[j, 4] + R[j, 0, 2] * f[j, 5]
-            rn1 = R[j, 1, 0] * f[j, 3] + R[j, 1, 1] * f[j, 4] + R[j, 1, 2] * f[j, 5]
-            rn2 = R[j, 2, 0] * f[j, 3] + R[j, 2, 1] * f[j, 4] + R[j, 2, 2] * f[j, 5]
-            px, py, pz = p[j, 0], p[j, 1], p[j, 2]
+            rf0, rf1, rf2 = mat_vec3(R[j], f[j, 0], f[j, 1], f[j, 2])
+            rn0, rn1, rn2 = mat_vec3(R[j], f[j, 3], f[j, 4], f[j, 5])
+            c0, c1, c2 = cross3(p[j, 0], p[j, 1], p[j, 2], rf0, rf1, rf2)
             f[par, 0] += rf0
             f[par, 1] += rf1
             f[par, 2] += rf2
-            f[par, 3] += rn0 + (py * rf2 - pz * rf1)
-            f[par, 4] += rn1 + (pz * rf0 - px * rf2)
-            f[par, 5] += rn2 + (px * rf1 - py * rf0)
+            f[par, 3] += rn0 + c0
+            f[par, 4] += rn1 + c1
+            f[par, 5] += rn2 + c2
 
 
 @njit(cache=True)
