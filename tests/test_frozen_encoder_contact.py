@@ -79,7 +79,7 @@ def _press(sup: Supervisor, rate_n_s: float, peak_n: float, lag_s: float, second
         tau = carry + true_share + freeze_ramp_n_s * max(0.0, t - 0.5)
         share = (measured,) * 3 if share_known else None
         sup.check(t, DT, (q,) * 3, 0, Z3, Z3, True, 0.0, 0.0, 0.0, 0.0, (q,) * 3,
-                  (qd_ref,) * 3, (tau,) * 3, 3.0 * measured, False, False, False, False,
+                  (qd_ref,) * 3, (tau,) * 3, 1.5 * measured, False, False, False, False,
                   False, contact_share=share)
         if _frozen(sup):
             return t
