@@ -24,16 +24,10 @@ import math
 import numpy as np
 
 from rt.benchmarks.tracking import PAYLOAD_COM_M, PAYLOAD_KG, Q0_M, STEP_S, THESIS, gains_for_rate
+from rt.control.base import Reference
 from rt.control.experiment import benchmark_reference_interpreted
 from rt.model import RobotModel
 from rt.model.dynamics import Payload
-
-
-class _Sample:
-    def __init__(self) -> None:
-        self.q = [0.0, 0.0, 0.0]
-        self.qd = [0.0, 0.0, 0.0]
-        self.qdd = [0.0, 0.0, 0.0]
 
 
 def model_error(com_m: tuple[float, float, float], seconds: float = 13.0,
@@ -45,7 +39,7 @@ def model_error(com_m: tuple[float, float, float], seconds: float = 13.0,
     loaded.dyn.set_payload(Payload(PAYLOAD_KG, com_m))
     ref = benchmark_reference_interpreted(Q0_M)
     out = []
-    s = _Sample()
+    s = Reference()
     for t in np.arange(STEP_S, STEP_S + seconds, step_s):
         ref(float(t), s)
         qd, qdd = np.array(s.qd), np.array(s.qdd)
