@@ -10,7 +10,7 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
   hand-held comfort stop → soft stop;
 * forward kinematics failed → hard stop (the platform pose is unknown);
 * encoder jump beyond physics (the estimator's innovation gate) → hard stop; encoder frozen while
-  commanded (:ref:`frozen-encoder criterion <frozen>` below) → hard stop;
+  commanded (the frozen-encoder criterion below) → hard stop;
 * stroke: inside the margin at either end → soft stop; beyond the end → hard stop;
 * slider speed beyond the robot's → soft stop; acceleration beyond it → warn;
 * patient ROM per axis with its end cushion: the cushion is the soft stop's own braking curve —
@@ -28,8 +28,6 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
 * client heartbeat older than its timeout while a client drives the robot → soft stop;
 * both DAC cards failed on a channel → hard stop (a single card's failure is a failover).
 
-.. _frozen:
-
 The frozen-encoder criterion (issue 15). A still count is judged against physics, per axis:
 
 * **force balance** (any contact): the axis' own load is the command less the measured
@@ -41,8 +39,8 @@ The frozen-encoder criterion (issue 15). A still count is judged against physics
   friction). A contact needs no special case: what it holds of the command is measured and
   taken out, so a slider stalled by what it presses balances, and a frozen one under a
   runaway command does not, in contact as in free motion. The excess must accelerate the
-  axis' inertia; once
-  ``∫excess dt · T / (2 m)`` reaches ``FROZEN_COUNTS`` counts the encoder is frozen. The sensor
+  axis' inertia; once ``∫excess dt · T / (2 m)`` reaches ``FROZEN_COUNTS`` counts the encoder
+  is frozen. The sensor
   reads the contact ``force_lag_s`` late (its filter and sample age): while the share changes,
   the true one may be ahead by its rate × that lag, which is added to the holding band — at a
   contact's onset a pressing slider is held by a force the ATI has not shown yet.
