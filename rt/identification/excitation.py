@@ -134,7 +134,7 @@ def tilt_path(exc: FourierExcitation, model: RobotModel,
     for j in range(len(t)):
         cfg = model.kin.fk(q[j], check=False)
         ang[j] = (cfg.roll, cfg.pitch)
-    rate = np.gradient(ang, t, axis=0)
+    rate = np.asarray(np.gradient(ang, t, axis=0))
     return ang[:-1], rate[:-1]
 
 
