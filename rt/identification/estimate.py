@@ -23,10 +23,12 @@ fc under-estimated, the bias of issue 15). Now:
    residual is close to white, so Gautier's σ is not optimistic;
 3. equations of an axis sliding slower than ``MIN_SPEED_M_S`` are left out: below it the
    twin's (and a rig's) friction is stiction and the Stribeck dip from the static to the
-   Coulomb level, which f_v q̇ + f_c tanh(q̇/v_s) does not describe. With the optimised
-   excitation's speeds (mostly < 50 mm/s) those samples are a large share, and least squares
-   bent the friction line through them: fv −31…−44 % (20 σ) on the twin with its effects off;
-   without them −0.5…+0.5 % (≤ 1.7 σ; ``bench/identification.py``).
+   Coulomb level, which f_v q̇ + f_c tanh(q̇/v_s) does not describe. With the first
+   optimised excitation's speeds (mostly < 50 mm/s) those samples were a large share, and
+   least squares bent the friction line through them: fv −31…−44 % (20 σ) on the twin with
+   its effects off; without them −0.5…+0.5 % (≤ 1.7 σ). The excitation is now played at the
+   limits (``excitation.to_limits``: ≈ 130 mm/s), which also moves the friction's ripple with
+   position (5 mm period) above this filter's band (``bench/identification.py``).
 
 Two estimates from the same data:
 
