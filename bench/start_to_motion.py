@@ -48,7 +48,13 @@ def _first_motion(sub: Any, sid: str, timeout_s: float = 30.0) -> float:
 
 
 def _one(client: Any, sub: Any, doc: dict[str, Any], reuse: bool, rec: str) -> dict[str, Any]:
+    from rt.errors import InputError
+
     out: dict[str, Any] = {"kind": "reused" if reuse else "fresh"}
+    latched = client.status()["latched"]
+    if latched:          # e.g. a loop late at start-up on a loaded machine: said, cleared
+        out["cleared"] = [e["cause"] for e in latched]
+        client.reset()
     if reuse:
         t0 = time.monotonic()
         client.session_preflight(doc, PATIENT, timeout_s=600.0)
@@ -56,7 +62,13 @@ def _one(client: Any, sub: Any, doc: dict[str, Any], reuse: bool, rec: str) -> d
     while sub.recv(0.0) is not None:
         pass
     t0 = time.monotonic()
-    started = client.session_start(doc, PATIENT, {"dir": rec}, timeout_s=600.0)
+    try:
+        started = client.session_start(doc, PATIENT, {"dir": rec}, timeout_s=600.0)
+    except InputError as exc:       # stopped during pre-flight (a loaded machine): a figure
+        out["refused"] = str(exc)
+        if client.status()["latched"]:
+            client.reset()
+        return out
     out["reply_s"] = round(time.monotonic() - t0, 3)
     out["motion_s"] = round(_first_motion(sub, started["session_id"]) - t0, 3)
     out["preflight_reused"] = started["preflight_reused"]
@@ -107,11 +119,13 @@ def main() -> int:
         proc.wait(timeout=60)
     summary: dict[str, Any] = {"protocol_s": float(args.cycles) + 2.0, "runs": runs}
     for kind in ("fresh", "reused"):
-        mine = [r for r in runs if r["kind"] == kind]
+        mine = [r for r in runs if r["kind"] == kind and "refused" not in r]
+        if not mine:
+            continue
         summary[kind] = {k: round(statistics.median(r[k] for r in mine), 3)
                          for k in ("reply_s", "motion_s") + (("preflight_s",)
                                                               if kind == "reused" else ())}
-    print(json.dumps(summary if args.json else {k: summary[k] for k in ("fresh", "reused")}))
+    print(json.dumps(summary if args.json else {k: summary.get(k) for k in ("fresh", "reused")}))
     return 0
 
 
