@@ -57,7 +57,11 @@ def _one(client: Any, sub: Any, doc: dict[str, Any], reuse: bool, rec: str) -> d
         client.reset()
     if reuse:
         t0 = time.monotonic()
-        client.session_preflight(doc, PATIENT, timeout_s=600.0)
+        try:
+            client.session_preflight(doc, PATIENT, timeout_s=600.0)
+        except InputError as exc:   # e.g. past the RT process's 120 s on a loaded machine
+            out["refused"] = f"pre-flight: {exc}"
+            return out
         out["preflight_s"] = round(time.monotonic() - t0, 3)
     while sub.recv(0.0) is not None:
         pass
