@@ -1,13 +1,19 @@
 """The recorder's encodings side by side: encoding cost per message, bytes per message, MB/h.
 
 Run:  .venv/bin/python bench/recording.py [--seconds 10] [--from RECORDING.mcap]
+          [--encodings json,protobuf-f32,protobuf-v2,protobuf] [--per-channel]
+          [--flush-interval 0.25,1]
 
 The stream is either a recording's own 1 kHz channels (``--from``: e.g. a twin session's file,
 read back and re-recorded) or the session-like generated stream of the tests
 (``tests/test_recording_encoding.session_signals``: encoder-quantized positions, noisy velocity,
-forces with noise). For each encoding (``json``: recordings before issue 16; ``protobuf-f32``:
-float32 protobuf, issue 16's first round; ``protobuf``: today's fixed-point protobuf) it prints
-one JSON line:
+forces with noise). The stream is recorded as the RT process records a session: the state
+from a ring drained by the writer, the wrench and the reference queued as blocks of 50 rows
+(the session pump's 50 ms), with the source's own stale/saturated flags, phases and modes.
+For each encoding (``json``: recordings before issue 16; ``protobuf-f32``: float32 protobuf,
+issue 16's first round; ``protobuf-v2``: fixed point with ``t_us``, 25 November 2026;
+``protobuf``: today's ``talus.v3``, no time in the payloads, volts as DAC codes) it prints one
+JSON line:
 
 * ``encode_us`` — the encoding cost per message, median and p99, as the recorder pays it:
   state, one drained block of 20 ring rows (the 20 ms drain period at 1 kHz) divided by its
@@ -17,7 +23,11 @@ one JSON line:
 * ``writer_cpu_us_per_message`` — the recorder thread's whole CPU per message (encoding,
   mcap records, compression, writing) from ``SessionRecorder.close()``;
 * ``bytes_per_message`` and ``mb_per_hour`` of the finished file (1 kHz extrapolated from the
-  stream's duration).
+  stream's duration);
+* with ``--per-channel``, ``mb_per_hour_by_channel``: each 1 kHz channel recorded alone, less
+  a recording of nothing (the metadata), so the three add up to the file's data;
+* with ``--flush-interval``, the same per flush interval (the writer closes a chunk at each
+  flush: the crash-loss window against zstd's context).
 
 Wall-clock figures: ±30 % run to run on these shared VMs.
 """
@@ -30,6 +40,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -42,19 +53,77 @@ META = {"protocol_name": "bench", "protocol_version": "1", "parameters": {},
         "patient_id": "bench", "robot_description": "talus_nominal"}
 
 
-def _stream_from(path: Path) -> dict[str, np.ndarray]:
-    """A recording's state, wrench and reference as the generated stream's arrays."""
+def _stream_from(path: Path) -> dict[str, Any]:
+    """A recording's state, wrench and reference as the generated stream's arrays, with the
+    wrench's flags and the reference's phase and mode."""
     from rt.recording.channels import REFERENCE, STATE, WRENCH
     from rt.recording.reader import read_recording
 
     data = read_recording(path, topics=[STATE, WRENCH, REFERENCE])
+
+    def num(x: Any) -> float:
+        return float("nan") if x is None else float(x)
     state = np.array([[m["t"], *m["q"], *m["qd"], *m["q_ref"], *m["tau"], *m["volts"]]
                       for m in data[STATE]], dtype=float)
     n = min(len(state), len(data[WRENCH]), len(data[REFERENCE]))
-    wrench = np.array([[m["t"], m["fx"], m["fy"], m["fz"], m["tx"], m["ty"], m["tz"]]
+    wrench = np.array([[m["t"], *(num(m[k]) for k in ("fx", "fy", "fz", "tx", "ty", "tz"))]
                        for m in data[WRENCH][:n]], dtype=float)
-    fz_ref = np.array([(m.get("force") or [0.0, 0.0, 0.0])[2] for m in data[REFERENCE][:n]])
-    return {"state": state[:n], "wrench": wrench, "fz_ref": fz_ref}
+    flags = np.array([[m["stale"], m["saturated"]] for m in data[WRENCH][:n]], dtype=float)
+    refs = data[REFERENCE][:n]
+    fz_ref = np.array([num((m.get("force") or [0.0, 0.0, 0.0])[2]) for m in refs])
+    return {"state": state[:n], "wrench": wrench, "fz_ref": fz_ref, "flags": flags,
+            "phase": [m.get("phase", "") for m in refs], "mode": [m.get("mode", "") for m in refs]}
+
+
+class _Ring:
+    """The state ring: rows made available as the loop writes them."""
+
+    def __init__(self, rows: np.ndarray):
+        self.rows = rows
+        self.written = 0
+
+    def drain(self, start: int) -> tuple[np.ndarray, int]:
+        end = self.written
+        return self.rows[start:end].copy(), end
+
+
+#: Rows per block the session pump hands to the recorder (its 50 ms at 1 kHz).
+PUMP_BLOCK = 50
+
+
+def record_like_a_session(path: Path, sig: dict[str, Any], encoding: str,
+                          channels: tuple[str, ...] = ("state", "wrench", "reference"),
+                          flush_interval_s: float | None = None) -> dict[str, Any]:
+    """Record ``sig`` as ``rt.service``'s session does (ring + ``wrench_rows`` +
+    ``reference_rows``), only ``channels``; the recorder's summary."""
+    from rt.recording.writer import DEFAULT_FLUSH_INTERVAL_S, SessionRecorder
+
+    n = len(sig["state"])
+    flags = sig.get("flags")
+    flags = np.zeros((n, 2)) if flags is None else flags
+    phase = sig.get("phase") or ["play"] * n
+    mode = sig.get("mode") or ["force"] * n
+    ring = _Ring(sig["state"])
+    rec = SessionRecorder(path, META, encoding=encoding, loop_t0=float(sig["state"][0, 0]),
+                          flush_interval_s=flush_interval_s or DEFAULT_FLUSH_INTERVAL_S)
+    if "state" in channels:
+        rec.attach_state_ring(ring, start=0)
+    force = np.zeros((n, 3))
+    force[:, 2] = sig["fz_ref"]
+    for k0 in range(0, n, PUMP_BLOCK):
+        k1 = min(n, k0 + PUMP_BLOCK)
+        if "wrench" in channels:
+            rec.wrench_rows(np.column_stack([sig["wrench"][k0:k1], flags[k0:k1]]))
+        if "reference" in channels:
+            rec.reference_rows(sig["state"][k0:k1, 0], force[k0:k1], phase[k0:k1],
+                               mode[k0:k1])
+        ring.written = k1
+        if not rec.wait_for_room(0.01, timeout_s=30.0):
+            raise RuntimeError("the recorder did not keep up")
+    summary = rec.close()
+    if not summary["complete"] or summary["dropped_total"]:
+        raise RuntimeError(f"recording incomplete: {summary}")
+    return summary
 
 
 def _percentiles(us: list[float]) -> dict[str, float]:
@@ -70,7 +139,8 @@ def encode_costs(encoding: str, sig: dict[str, np.ndarray]) -> dict[str, dict[st
     protos = PROTOS[Encoding(encoding)]
     state, wrench, fz_ref = sig["state"], sig["wrench"], sig["fz_ref"]
     encode_rows: Callable[[np.ndarray], list[bytes]] = (
-        STATE_LAYOUT.encode if encoding == "json" else protos[STATE].encode_rows)
+        STATE_LAYOUT.encode if encoding == "json"
+        else protos[STATE].row_encoder(STATE_LAYOUT.fields))
     block = 20
     out: dict[str, list[float]] = {"state": [], "wrench": [], "reference": []}
     for k in range(0, len(state) - block, block):
@@ -113,10 +183,16 @@ def main() -> int:
                     help="length of the generated stream (s, default %(default)s)")
     ap.add_argument("--from", dest="source", type=Path, default=None,
                     help="take the stream from this recording instead of generating it")
+    ap.add_argument("--encodings", default="json,protobuf-f32,protobuf-v2,protobuf")
+    ap.add_argument("--per-channel", action="store_true",
+                    help="also each 1 kHz channel's share (MB/h)")
+    ap.add_argument("--flush-interval", default="",
+                    help="comma-separated flush intervals (s) to compare (default: the "
+                         "writer's)")
     args = ap.parse_args()
     if args.seconds <= 0:
         ap.error("--seconds must be positive")
-    from test_recording_encoding import record, session_signals
+    from test_recording_encoding import session_signals
 
     if args.source is not None:
         sig, source = _stream_from(args.source), str(args.source)
@@ -124,15 +200,31 @@ def main() -> int:
         sig, source = session_signals(args.seconds), f"generated {args.seconds:g} s"
     duration = float(sig["state"][-1, 0] - sig["state"][0, 0]) + 1e-3
     tmp = Path(tempfile.mkdtemp(prefix="talus-bench-recording-"))
-    for encoding in ("json", "protobuf-f32", "protobuf"):
-        summary = record(tmp / f"{encoding}.mcap", sig, encoding, events=False)
-        n = sum(summary["messages"].values())
-        print(json.dumps({
-            "encoding": encoding, "source": source, "seconds": round(duration, 3),
-            "messages": n, "encode_us": encode_costs(encoding, sig),
-            "writer_cpu_us_per_message": round(summary["writer_us_per_message"], 2),
-            "bytes_per_message": round(summary["bytes"] / n, 2),
-            "mb_per_hour": round(summary["bytes"] / duration * 3600 / 1e6, 1)}))
+    flushes = [float(x) for x in args.flush_interval.split(",") if x] or [None]
+
+    def mb_h(nbytes: int) -> float:
+        return round(nbytes / duration * 3600 / 1e6, 1)
+    for flush in flushes:
+        for encoding in args.encodings.split(","):
+            tag = f"{encoding}-{flush}"
+            summary = record_like_a_session(tmp / f"{tag}.mcap", sig, encoding,
+                                            flush_interval_s=flush)
+            n = sum(summary["messages"].values())
+            line: dict[str, Any] = {
+                "encoding": encoding, "source": source, "seconds": round(duration, 3),
+                "flush_interval_s": flush, "messages": n,
+                "encode_us": encode_costs(encoding, sig),
+                "writer_cpu_us_per_message": round(summary["writer_us_per_message"], 2),
+                "bytes_per_message": round(summary["bytes"] / n, 2),
+                "mb_per_hour": mb_h(summary["bytes"])}
+            if args.per_channel:
+                empty = record_like_a_session(tmp / f"{tag}-none.mcap", sig, encoding, (),
+                                              flush)["bytes"]
+                line["mb_per_hour_by_channel"] = {
+                    ch: mb_h(record_like_a_session(tmp / f"{tag}-{ch}.mcap", sig, encoding,
+                                                   (ch,), flush)["bytes"] - empty)
+                    for ch in ("state", "wrench", "reference")}
+            print(json.dumps(line), flush=True)
     return 0
 
 

@@ -41,6 +41,7 @@ VARIANTS: dict[str, str] = {
     "worker_nice10": "the pre-flight worker at nice 10",
     "f32": "recording in float32 protobuf (the previous encoding)",
     "json": "recording in JSON (before issue 16)",
+    "v2": "recording in talus.v2 fixed point (t_us in the payloads, volts in mV)",
     "no_recorder": "sessions not recorded (a recorder that drops every message)",
     "no_record_rows": "the pump does not feed the recorder's wrench/reference/ankle channels",
     "no_figures": "the pump computes no session figures (SessionFigures.add skipped)",
@@ -78,9 +79,10 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
         config = config.model_copy(update={"service_priority": 1})
     if "worker_nice10" in tokens:
         ext["sessions"].worker_nice = 10
-    if "f32" in tokens or "json" in tokens:
+    if "f32" in tokens or "json" in tokens or "v2" in tokens:
         writer.SessionRecorder = functools.partial(  # type: ignore[misc]
-            writer.SessionRecorder, encoding="json" if "json" in tokens else "protobuf-f32")
+            writer.SessionRecorder, encoding="json" if "json" in tokens else
+            "protobuf-v2" if "v2" in tokens else "protobuf-f32")
     if "no_recorder" in tokens:
         class NullRecorder:
             def __init__(self, path: Any, metadata: Any, **kw: Any) -> None:
@@ -179,7 +181,9 @@ def run_variant(variant: str, doc: dict, idle_s: float) -> dict[str, Any]:
             s1 = c.status()
             t0 = time.monotonic()
             try:
-                sid = c.session_start(doc, PATIENT)["session_id"]
+                started = c.session_start(doc, PATIENT)
+                sid = started["session_id"]
+                out["recording"] = started["recording"]
             except Exception as exc:      # noqa: BLE001 - a refusal is a figure here
                 out["refused"] = str(exc)
                 sid = None

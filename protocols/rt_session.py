@@ -108,6 +108,15 @@ class ProtocolSession:
     def protocol_limits(self) -> ProtocolLimits | None:
         return protocol_limits_of(self.protocol)
 
+    def inputs_unchanged(self) -> bool:
+        """The data file this session was prepared from (a gait record, a playback CSV) still
+        has the sha256 it had then: a kept pre-flight (``rt.preflight_reuse``) of a file
+        edited since must not be reused."""
+        data = self.metadata.get("data_file")
+        if not data:
+            return True
+        return _sha256(Path(data["path"])) == data["sha256"]
+
     def figures(self, preload_n: float) -> SessionFigures:
         assert self.model is not None
         ankle = self.metadata.get("ankle")

@@ -47,6 +47,14 @@ from rt.ipc.messages import (
 from rt.ipc.security import ServerCurveConfig
 from rt.model.ankle import AnkleMonitor, AnkleSetup, parse_ankle_setup
 from rt.position_loop import PositionLoop, build_protocol_loop, shm_devices, sim_devices
+from rt.preflight_reuse import (
+    DEFAULT_MAX_AGE_S,
+    KeptPreflight,
+    PreflightKeeper,
+    PreflightKey,
+    canonical_sha256,
+    why_not_reusable,
+)
 from rt.references.program import Program, TrajectoryProgram
 from rt.references.sequencer import Phase
 from rt.safe_yaml import load_yaml_file
@@ -141,6 +149,10 @@ class RtConfig(BaseModel):
     #: default until a quiet machine shows it helps) leaves them ordinary threads; 1 is the
     #: value studied.
     service_priority: int | None = Field(default=None, ge=1, le=79)
+    #: How long a passing ``session_preflight`` may be reused by the same client's
+    #: ``session_start`` with the same protocol and patient (s; 0: never reused, every start
+    #: pre-flights again). ``rt.preflight_reuse`` lists what else invalidates it.
+    preflight_reuse_s: float = Field(default=DEFAULT_MAX_AGE_S, ge=0.0, le=3600.0)
 
     def limits_of_robot(self) -> RobotLimits:
         return self.robot_limits.model_copy(
@@ -209,6 +221,11 @@ class _Session:
     #: The pump's ankle monitor (``/ankle/state``) when the patient has an ankle setup: its
     #: last message is the ankle's live state in telemetry.
     ankle: AnkleMonitor | None = None
+    #: The kept pre-flight this session may run on (``rt.preflight_reuse``), or why it may
+    #: not; once started, which pre-flight it ran on (the recording's metadata says too).
+    kept: KeptPreflight | None = None
+    not_reused: str | None = None
+    preflight_run: dict[str, Any] | None = None
 
 
 class RtService:
@@ -234,6 +251,10 @@ class RtService:
         self.session: _Session | None = None
         self.last_summary: dict[str, Any] | None = None
         self._session_count = 0
+        self._preflight_count = 0
+        #: The last passing session_preflight, which a session_start may reuse.
+        self.preflights = PreflightKeeper(config.preflight_reuse_s)
+        self._robot_digest: tuple[Any, str] | None = None
         self._base_limits = pl.supervisor.limits
         #: Set when the RT process is stopping: a running session's pump finishes its
         #: recording at once.
@@ -339,6 +360,12 @@ class RtService:
                         f"control refused: {self.owner.name!r} was lost while the robot "
                         "moves; wait until it has stopped")
             previous = self.owner.name
+            if self.owner.client is None:
+                # The pre-flight's own client taking a free robot is the GUI's flow (check,
+                # take control, start); anyone else taking it is a change of owner.
+                self.preflights.keep_only_for(client, f"control was taken by {name!r}")
+            else:
+                self.preflights.drop(f"control passed from {previous!r} to {name!r}")
             self.owner = Ownership(client, name, time.time())
         return {"owner": True, "name": name, "took_over_from": previous}
 
@@ -349,6 +376,7 @@ class RtService:
                 raise InputError("control_release refused while a motion or a session runs: "
                                  "stop it first")
             self.owner = Ownership()
+            self.preflights.drop("control was released")
         return {"owner": False}
 
     def reset(self, client: str, acknowledge: list[int]) -> Any:
@@ -392,6 +420,7 @@ class RtService:
             law.check_gains(**gains)      # refused at once, with the range, not a cycle later
         except ConfigurationError as exc:
             raise InputError(str(exc)) from None
+        self.preflights.drop("the controller's gains changed")
         self.pl.loop.set_params("controller", **gains).result(timeout=1.0)
         return {"controller": controller, "gains": gains}
 
@@ -408,6 +437,7 @@ class RtService:
         with self._lock:
             self._check_can_move(client, "run")
             prog = self.programs[program](params, self)
+            self.preflights.drop(f"program {program!r} moved the robot")
             self.pl.reference.request(prog)
         return {"program": program, "duration_s": prog.duration_s}
 
@@ -420,6 +450,8 @@ class RtService:
             raise InputError("this RT process offers no protocol sessions (started without "
                              "the protocols package)")
         limits = self._patient_limits(patient)
+        info = PatientInfo(patient.id, patient.weight_kg, limits, self._patient_ankle(patient))
+        key = self._preflight_key(protocol, info)
         record_dir = Path(record.dir) if record.dir else self.config.recordings_path()
         if record.dir is None:
             record_dir.mkdir(parents=True, exist_ok=True)
@@ -433,12 +465,17 @@ class RtService:
             self._session_count += 1
             stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
             session = _Session(id=f"S{stamp}-{os.getpid()}-{self._session_count}",
-                               owner=client, record_dir=record_dir,
-                               patient=PatientInfo(patient.id, patient.weight_kg, limits,
-                                                   self._patient_ankle(patient)))
+                               owner=client, record_dir=record_dir, patient=info)
+            # A start uses the kept pre-flight at most once, and any start drops it (it moves
+            # the robot); reused only when nothing it depended on changed.
+            dropped = self.preflights.dropped_because
+            kept = self.preflights.take()
+            session.not_reused = self._why_not_reusable(kept, client, key, dropped)
+            session.kept = kept if session.not_reused is None else None
             self.session = session
         requested = self._now()
-        threading.Thread(target=self._session_worker, args=(session, protocol, requested),
+        threading.Thread(target=self._session_worker,
+                         args=(session, protocol, requested, key),
                          name=f"session-{session.id}", daemon=True).start()
 
         def outcome() -> dict[str, Any] | None:
@@ -451,7 +488,10 @@ class RtService:
             return {"session_id": session.id, "protocol": prep.name, "kind": prep.kind,
                     "duration_s": prep.program.duration_s, "preflight": prep.preflight,
                     "recording": None if session.recording is None else str(session.recording),
-                    "start_latency_s": session.start_latency_s}
+                    "start_latency_s": session.start_latency_s,
+                    "preflight_id": (session.preflight_run or {}).get("id"),
+                    "preflight_reused": bool((session.preflight_run or {}).get("reused")),
+                    "preflight_not_reused": session.not_reused}
         return Deferred(outcome, timeout_s=SESSION_START_TIMEOUT_S, what="session_start")
 
     def session_preflight(self, client: str, protocol: dict[str, Any],
@@ -466,23 +506,81 @@ class RtService:
             raise InputError("this RT process offers no protocol sessions")
         info = PatientInfo(patient.id, patient.weight_kg, self._patient_limits(patient),
                            self._patient_ankle(patient))
+        entry = self._new_preflight(client, self._preflight_key(protocol, info))
+        self.preflights.begin(entry)
         future: Future = Future()
 
         def work() -> None:
             try:
                 prep = sessions.prepare(protocol, info, self._context())
+                kept = self.preflights.passed(entry, prep, self._now())
                 future.set_result({"ok": True, "protocol": prep.name, "kind": prep.kind,
                                    "duration_s": prep.program.duration_s,
                                    "start_pose": list(prep.start_pose),
-                                   "predicted": prep.preflight})
+                                   "predicted": prep.preflight, "preflight_id": entry.id,
+                                   "kept_for_s": self.preflights.max_age_s if kept else 0.0})
             except TalusError as exc:
+                self.preflights.failed(entry)
                 future.set_exception(exc)
             except Exception as exc:  # a bug must still answer the client
+                self.preflights.failed(entry)
                 log.exception("session_preflight failed")
                 future.set_exception(InputError(f"internal error: {type(exc).__name__}: {exc}"))
         threading.Thread(target=work, name="session-preflight", daemon=True).start()
         return Deferred(lambda: future.result() if future.done() else None,
                         timeout_s=SESSION_START_TIMEOUT_S, what="session_preflight")
+
+    def preflight_reuse(self, client: str, protocol: dict[str, Any],
+                        patient: PatientArgs) -> str | None:
+        """Read-only: None when a ``session_start`` from ``client`` with ``protocol`` and
+        ``patient`` would now reuse the kept pre-flight, else why it would not."""
+        info = PatientInfo(patient.id, patient.weight_kg, self._patient_limits(patient),
+                           self._patient_ankle(patient))
+        return self._why_not_reusable(self.preflights.kept, client,
+                                      self._preflight_key(protocol, info),
+                                      self.preflights.dropped_because)
+
+    def _why_not_reusable(self, kept: KeptPreflight | None, client: str, key: PreflightKey,
+                          dropped: str | None) -> str | None:
+        event_count = self.pl.events.count      # before the snapshot: it holds them all
+        return why_not_reusable(kept, client, key, self._now(), self.preflights.max_age_s,
+                                self._robot_q(), self.pl.events.snapshot(), event_count,
+                                self.pl.reference.epoch, dropped)
+
+    def _new_preflight(self, client: str, key: PreflightKey) -> KeptPreflight:
+        with self._lock:
+            self._preflight_count += 1
+            n = self._preflight_count
+        stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+        return KeptPreflight(id=f"P{stamp}-{os.getpid()}-{n}", client=client, key=key,
+                             q=self._robot_q(), events=self.pl.events.count,
+                             epoch=self.pl.reference.epoch, requested=self._now(),
+                             requested_wall=time.time())
+
+    def _robot_q(self) -> np.ndarray:
+        return np.array(self.pl.graph.output("encoders.q"), dtype=float)
+
+    def _preflight_key(self, protocol: dict[str, Any], info: PatientInfo) -> PreflightKey:
+        """What a pre-flight for ``protocol`` and ``info`` depends on here and now
+        (``rt.preflight_reuse.PreflightKey``). The patient is keyed as parsed (the limits
+        with their defaults filled in), so the GUI's form and the clinical record's snapshot
+        of the same limits match; the robot's digest is computed once per description."""
+        d = self.pl.model.description
+        if self._robot_digest is None or self._robot_digest[0] is not d:
+            self._robot_digest = (d, canonical_sha256({
+                "description": d.model_dump(mode="json"),
+                "robot_limits": self.config.limits_of_robot().model_dump(mode="json"),
+                "rate_hz": self.config.rate_hz, "backend": self.config.backend,
+                "twin": self.pl.twin is not None}))
+        patient = {"id": info.id, "weight_kg": info.weight_kg,
+                   "limits": info.limits.model_dump(mode="json"),
+                   "ankle": None if info.ankle is None else info.ankle.model_dump(mode="json")}
+        start = {"mode": self._mode().name, "controller": self.pl.controller.name,
+                 "environment": self.config.environment,
+                 "session_environment": self.config.session_environment}
+        return PreflightKey(protocol=canonical_sha256(protocol),
+                            patient=canonical_sha256(patient),
+                            robot=self._robot_digest[1], start=canonical_sha256(start))
 
     def _patient_ankle(self, patient: PatientArgs) -> AnkleSetup | None:
         """The patient's ankle setup checked against this robot's platform (None when not
@@ -531,10 +629,25 @@ class RtService:
                 and e.reaction >= Reaction.SOFT_STOP]
 
     # -- worker: pre-flight, then start --------------------------------------------------
-    def _session_worker(self, s: _Session, protocol: dict[str, Any], requested: float) -> None:
+    def _session_worker(self, s: _Session, protocol: dict[str, Any], requested: float,
+                        key: PreflightKey) -> None:
         assert self.sessions is not None
         try:
-            prep = self.sessions.prepare(protocol, s.patient, self._context())
+            kept = s.kept
+            if kept is not None:
+                # What the IPC thread could not check cheaply: the data files it read.
+                unchanged = getattr(kept.prepared, "inputs_unchanged", None)
+                if unchanged is not None and not unchanged():
+                    s.not_reused = f"a data file of pre-flight {kept.id} changed"
+                    kept = s.kept = None
+            if kept is not None:
+                prep = kept.prepared
+                s.preflight_run = kept.describe(self._now(), reused=True)
+            else:
+                own = self._new_preflight(s.owner, key)
+                prep = self.sessions.prepare(protocol, s.patient, self._context())
+                own.finished = self._now()
+                s.preflight_run = own.describe(self._now(), reused=False)
             if s.stop.is_set():
                 raise InputError("session aborted during pre-flight")
             self._start(s, prep)
@@ -583,6 +696,10 @@ class RtService:
                 "rt": {"pid": os.getpid(), "endpoint": self.endpoint,
                        "backend": self.config.backend},
                 "robot_description": d.name, "preflight": prep.preflight,
+                # Which pre-flight this session ran on: its own, or a kept one (its id, age,
+                # key); ``preflight_not_reused`` says why a kept one was not used.
+                "preflight_run": {**(s.preflight_run or {}),
+                                  "not_reused": s.not_reused},
                 # The force law's floor: the reference the session's force error is taken to.
                 "preload_n": float(getattr(pl.graph.component("controller"), "preload_n",
                                            0.0))}
@@ -692,6 +809,7 @@ class RtService:
             "session_id": s.id, "patient_id": s.patient.id, "outcome": outcome,
             "aborted_by": s.aborted_by, "stops": stops,
             "preflight": None if s.prepared is None else s.prepared.preflight,
+            "preflight_run": s.preflight_run,
             "rt": {"pid": os.getpid(), "endpoint": self.endpoint,
                    "backend": self.config.backend},
             "limits": s.patient.limits.model_dump(),

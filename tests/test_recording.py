@@ -55,8 +55,15 @@ def synthetic_row(k: int) -> list[float]:
 
 
 #: Fixed-point quanta of today's encoding (rt.recording.channels): positions and speeds in
-#: µm and µm/s, forces and volts in mN and mV, torques in mN·m.
+#: µm and µm/s, forces in mN, torques in mN·m; volts are the DAC's codes (:func:`dac`).
 UM, MN = 1e-6, 1e-3
+
+
+def dac(values: list[float]) -> list[float]:
+    """What ``talus.v3`` reads back for drive commands: the voltage of the PCI-1720 code the
+    driver writes for each (clamped to its ±10 V range)."""
+    from rt.drivers.pci1720 import code_to_volts, volts_to_code
+    return [code_to_volts(volts_to_code(v)) for v in values]
 
 
 def fixed(values: list[float], quantum: float) -> list[float]:
@@ -134,7 +141,7 @@ def test_round_trip_counts_and_exact_values(session: dict) -> None:
         # quantum is below its sensor's or actuator's resolution).
         assert m["q"] == fixed(row[1:4], UM) and m["qd"] == fixed(row[4:7], UM)
         assert m["q_ref"] == fixed(row[7:10], UM)
-        assert m["tau"] == fixed(row[10:13], MN) and m["volts"] == fixed(row[13:16], MN)
+        assert m["tau"] == fixed(row[10:13], MN) and m["volts"] == dac(row[13:16])
         assert "qd_ref" not in m                  # optional, not recorded
     assert [m["t"] for m in data[STATE]] == [k / RATE_HZ for k in range(N_ROWS)]
     assert len(data[WRENCH]) == N_ROWS
@@ -444,7 +451,7 @@ def test_sigkilled_recording_is_recovered_up_to_the_last_chunk(tmp_path: Path,
     assert [m["t"] for m in state] == [k / RATE_HZ for k in range(n)]
     for k in (0, n // 2, n - 1):
         assert state[k]["q"] == fixed(synthetic_row(k)[1:4], UM)
-        assert state[k]["volts"] == fixed(synthetic_row(k)[13:16], MN)
+        assert state[k]["volts"] == dac(synthetic_row(k)[13:16])
     assert messages[METADATA][0]["patient_id"] == METADATA_IN["patient_id"]
     loss_s = (produced - n) / RATE_HZ
     print(f"\nSIGKILL after {produced} rows: recovered {n} in {info['chunks']} chunks, "

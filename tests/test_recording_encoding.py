@@ -1,6 +1,8 @@
-"""Recording encodings (issue 16): fixed-point protobuf 1 kHz channels round trip within half
-a quantum, read by the official mcap reader with ``mcap_protobuf``; recordings of the previous
-encodings (float32 protobuf, JSON before issue 16) still read everywhere; the size per hour of
+"""Recording encodings (issue 16): fixed-point protobuf 1 kHz channels (``talus.v3``: no time
+in the payloads, the drive command as the DAC's code) round trip within half a quantum, the
+time rebuilt from the log time exactly as ``talus.v2`` stored it, read by the official mcap
+reader with ``mcap_protobuf``; recordings of the previous encodings (``talus.v2`` with
+``t_us``, float32 protobuf, JSON before issue 16) still read everywhere; the size per hour of
 a generated 10 s recording."""
 from __future__ import annotations
 
@@ -15,9 +17,11 @@ from mcap.reader import make_reader
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap_protobuf.decoder import DecoderFactory
 
+from rt.drivers.pci1720 import code_to_volts, volts_to_code
 from rt.errors import InputError
 from rt.recording.channels import (
     ANKLE_PROTO,
+    ANKLE_PROTO_V2,
     CHANNELS,
     EVENTS,
     JSONSCHEMA_METADATA_KEY,
@@ -25,15 +29,20 @@ from rt.recording.channels import (
     REFERENCE,
     REFERENCE_PROTO,
     REFERENCE_PROTO_F32,
+    REFERENCE_PROTO_V2,
     STATE,
     STATE_PROTO,
     STATE_PROTO_F32,
+    STATE_PROTO_V2,
+    TIME_ORIGIN_NS_KEY,
     WRENCH,
     WRENCH_PROTO,
+    WRENCH_PROTO_V2,
+    LoopClock,
 )
 from rt.recording.protobuf_codec import ProtoCodecError
 from rt.recording.reader import export_csv, read_recording, recover
-from rt.recording.writer import SessionRecorder
+from rt.recording.writer import STATE_LAYOUT, SessionRecorder
 from rt.safety.events import Reaction, SafetyEvent
 from talus.cli import main as talus_main
 
@@ -120,14 +129,19 @@ def fixed(x: float, quantum: float) -> float:
     return float(np.rint(x * per)) / per
 
 
+def dac(v: float) -> float:
+    """What ``talus.v3``'s ``volts_dac`` reads back: the voltage of the PCI-1720's code."""
+    return code_to_volts(volts_to_code(v))
+
+
 @pytest.fixture(scope="module")
 def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    """The same 2 s session recorded in every encoding: fixed-point protobuf (today's),
-    float32 protobuf and JSON (the previous ones)."""
+    """The same 2 s session recorded in every encoding: fixed-point protobuf v3 (today's),
+    v2, float32 protobuf and JSON (the previous ones)."""
     d = tmp_path_factory.mktemp("enc")
     sig = session_signals(2.0)
     out = {"sig": sig}
-    for enc in ("protobuf", "protobuf-f32", "json"):
+    for enc in ("protobuf", "protobuf-v2", "protobuf-f32", "json"):
         out[enc] = d / f"{enc}.mcap"
         out[enc + "_summary"] = record(out[enc], sig, enc)
     return out
@@ -135,13 +149,15 @@ def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
 
 # ------------------------------------------------------------------ round trip, every channel
 
-def test_every_channel_round_trips_through_fixed_point_protobuf(pair: dict) -> None:
+@pytest.mark.parametrize("enc", ["protobuf", "protobuf-v2"])
+def test_every_channel_round_trips_through_fixed_point_protobuf(pair: dict, enc: str) -> None:
     """Each value is its nearest count of the field's quantum: within half a quantum (0.5 µm,
-    0.5 µm/s, 0.5 mN, 0.5 mV, 0.5 mN·m, 0.5 µs), bools exact; encoder positions (multiples
-    of 20 µm) exactly."""
+    0.5 µm/s, 0.5 mN, 0.5 mN·m, 0.5 µs; v2's volts 0.5 mV), bools exact; encoder positions
+    (multiples of 20 µm) exactly; v3's volts are the voltage of the DAC's code for the
+    command (within half a code, 2.44 mV); v3's t, rebuilt from the log time, is v2's t_us."""
     sig = pair["sig"]
-    data = read_recording(pair["protobuf"])
-    assert pair["protobuf_summary"]["encoding"] == "protobuf"
+    data = read_recording(pair[enc])
+    assert pair[enc + "_summary"]["encoding"] == enc
     n = len(sig["state"])
     assert len(data[STATE]) == len(data[WRENCH]) == len(data[REFERENCE]) == n
     for k in range(0, n, 37):
@@ -152,6 +168,10 @@ def test_every_channel_round_trips_through_fixed_point_protobuf(pair: dict) -> N
             quantum = STATE_QUANTA[name]
             values = row[cols:cols + (1 if name == "t" else 3)]
             got = np.atleast_1d(np.array(m[name], dtype=float))
+            if name == "volts" and enc == "protobuf":
+                assert got.tolist() == [dac(v) for v in values]
+                assert np.all(np.abs(got - values) <= 20 / 4095 / 2 * (1 + 1e-9))
+                continue
             assert got.tolist() == [fixed(v, quantum) for v in values], name
             assert np.all(np.abs(got - values) <= quantum / 2 * (1 + 1e-9)), name
         assert m["q"] == pytest.approx(row[1:4], abs=1e-12)     # encoder counts: exact
@@ -214,13 +234,15 @@ def test_the_json_encoding_is_exact_and_reads_as_the_same_dicts(pair: dict) -> N
                     assert va == f32(vb), key
                 else:
                     assert va == vb, key
-        # Fixed point: the same keys, every number within half its quantum of JSON's.
+        # Fixed point: the same keys, every number within half its quantum of JSON's (the
+        # DAC's half code for v3's volts).
         for a, b in zip(fx[topic][::101], js[topic][::101]):
             assert a.keys() == b.keys()
             for key, vb in b.items():
                 va = a[key]
                 if isinstance(vb, (float, list)):
-                    assert np.allclose(va, vb, rtol=0, atol=5e-4 + 1e-12), (topic, key)
+                    atol = 10 / 4095 if key == "volts" else 5e-4
+                    assert np.allclose(va, vb, rtol=0, atol=atol + 1e-12), (topic, key)
                 else:
                     assert va == vb, key
     # Events carry the host wall clock of their creation (each recording made its own).
@@ -236,36 +258,48 @@ def test_every_field_of_the_protobuf_messages_round_trips() -> None:
     got = REFERENCE_PROTO_F32.decode(REFERENCE_PROTO_F32.encode(ref))
     assert got == {**ref, "force": [1.5, -2.25, 300.0], "position": [f32(0.2), f32(0.21),
                                                                      f32(0.22)]}
-    # Fixed point: decimal values on the quantum come back as the same doubles.
-    assert REFERENCE_PROTO.decode(REFERENCE_PROTO.encode(ref)) == ref
+    # Fixed point: decimal values on the quantum come back as the same doubles (v3 without
+    # the time: the reader adds it from the log time).
+    no_t = {k: v for k, v in ref.items() if k != "t"}
+    assert REFERENCE_PROTO_V2.decode(REFERENCE_PROTO_V2.encode(ref)) == ref
+    assert REFERENCE_PROTO.decode(REFERENCE_PROTO.encode(ref)) == no_t
     assert REFERENCE_PROTO.decode(REFERENCE_PROTO.encode(
-        {"t": 1.0, "force": [0.0001, 0.0006, -2.0004]})) == {"t": 1.0,
-                                                              "force": [0.0, 0.001, -2.0]}
-    assert REFERENCE_PROTO.decode(REFERENCE_PROTO.encode({"t": 1.0})) == {"t": 1.0}
-    for proto in (STATE_PROTO, STATE_PROTO_F32):
+        {"t": 1.0, "force": [0.0001, 0.0006, -2.0004]})) == {"force": [0.0, 0.001, -2.0]}
+    assert REFERENCE_PROTO_V2.decode(REFERENCE_PROTO_V2.encode({"t": 1.0})) == {"t": 1.0}
+    assert REFERENCE_PROTO.decode(REFERENCE_PROTO.encode({"t": 1.0})) == {}
+    for proto in (STATE_PROTO, STATE_PROTO_V2, STATE_PROTO_F32):
         state = {"t": 0.001, "q": [0.1, 0.2, math.nan], "qd": [0.0, 0.0, math.inf],
                  "q_ref": [0.1, 0.2, 0.3], "tau": [1.0, 2.0, 3.0], "volts": [-1.0, 0.0, 1.0],
                  "qd_ref": [0.5, 0.5, 0.5]}
         got = proto.decode(proto.encode(state))
         cast = f32 if proto is STATE_PROTO_F32 else float
         assert got["q"] == [cast(0.1), cast(0.2), None] and got["qd"] == [0.0, 0.0, None]
-        assert got["qd_ref"] == [0.5, 0.5, 0.5] and got["t"] == 0.001
+        assert got["qd_ref"] == [0.5, 0.5, 0.5]
+        assert got.get("t") == (None if proto is STATE_PROTO else 0.001)
+        assert got["volts"] == ([dac(-1.0), dac(0.0), dac(1.0)] if proto is STATE_PROTO
+                                else [-1.0, 0.0, 1.0])
     w = {"t": 2.0, "fx": 1.0, "fy": 2.0, "fz": -300.0, "tx": 0.0, "ty": 0.0, "tz": 0.0,
          "stale": False, "saturated": True}
-    assert WRENCH_PROTO.decode(WRENCH_PROTO.encode(w)) == w
+    assert WRENCH_PROTO_V2.decode(WRENCH_PROTO_V2.encode(w)) == w
+    assert WRENCH_PROTO.decode(WRENCH_PROTO.encode(w)) == {k: v for k, v in w.items()
+                                                           if k != "t"}
     # A value beyond the type's range is refused naming the field (a ring's is marked as
     # not finite: the writer cannot refuse it).
     with pytest.raises(ProtoCodecError, match="tau_mn"):
         STATE_PROTO.encode({**state, "tau": [1e7, 0.0, 0.0]})
     rows = np.zeros((1, 16))
     rows[0, 10] = 1e7
-    assert STATE_PROTO.decode(STATE_PROTO.encode_rows(rows)[0])["tau"] == [None, 0.0, 0.0]
+    rows[0, 13] = math.nan
+    got = STATE_PROTO.decode(STATE_PROTO.row_encoder(STATE_LAYOUT.fields)(rows)[0])
+    assert got["tau"] == [None, 0.0, 0.0] and got["volts"] == [None, dac(0.0), dac(0.0)]
     ankle = {"t": 0.01, "plantarflexion_deg": 12.5, "inversion_deg": -3.25,
              "abduction_deg": 0.5, "plantarflexion_torque_nm": 20.0,
              "inversion_torque_nm": -1.5, "abduction_torque_nm": 0.25,
              "centre_displacement_mm": [1.0, -0.5, 0.125], "platform_roll_deg": 2.0,
              "platform_pitch_deg": -8.0}
-    assert ANKLE_PROTO.decode(ANKLE_PROTO.encode(ankle)) == ankle      # exact in float32
+    assert ANKLE_PROTO_V2.decode(ANKLE_PROTO_V2.encode(ankle)) == ankle    # exact in float32
+    assert ANKLE_PROTO.decode(ANKLE_PROTO.encode(ankle)) == {k: v for k, v in ankle.items()
+                                                             if k != "t"}
 
 
 def test_the_protobuf_library_reads_our_bytes_and_we_read_its() -> None:
@@ -278,8 +312,8 @@ def test_the_protobuf_library_reads_our_bytes_and_we_read_its() -> None:
     state = {"t": 0.0, "q": [0.1, 0.2, 0.3], "qd": [0.0] * 3, "q_ref": [0.1, 0.2, 0.3],
              "tau": [0.0, 5.0, 0.0], "volts": [0.0] * 3}
     ref = {"t": 0.5, "position": [0.1, 0.2, 0.3], "mode": "position"}
-    cases = ((STATE_PROTO_F32, state), (REFERENCE_PROTO_F32, ref), (STATE_PROTO, state),
-             (REFERENCE_PROTO, ref))
+    cases = ((STATE_PROTO_F32, state), (REFERENCE_PROTO_F32, ref), (STATE_PROTO_V2, state),
+             (REFERENCE_PROTO_V2, ref), (STATE_PROTO, state), (REFERENCE_PROTO, ref))
     for schema_id, (proto, msg) in enumerate(cases, start=1):
         schema = Schema(id=schema_id, name=proto.name, encoding="protobuf",
                         data=proto.file_descriptor_set)
@@ -287,10 +321,14 @@ def test_the_protobuf_library_reads_our_bytes_and_we_read_its() -> None:
         assert decode is not None
         parsed = decode(proto.encode(msg))
         for key, value in msg.items():
+            if key == "t" and not proto.carries_t:
+                continue                          # v3: the time is the message's log time
             field = next(f for f in proto.fields if f.dict_key == key)
             got = getattr(parsed, field.name)
             got = list(got) if isinstance(value, list) else got
-            if field.scale is not None:           # counts of the quantum
+            if field.code_range is not None:      # the DAC's codes
+                want = [volts_to_code(v) for v in value]
+            elif field.scale is not None:         # counts of the quantum
                 per = round(1 / field.scale)
                 want = [round(v * per) for v in value] if isinstance(value, list) \
                     else round(value * per)
@@ -298,8 +336,10 @@ def test_the_protobuf_library_reads_our_bytes_and_we_read_its() -> None:
                 want = [f32(v) for v in value] if isinstance(value, list) else value
             assert got == want, (proto.name, key)
         theirs = parsed.SerializeToString()      # t = 0 omitted: not our fixed layout
-        if proto in (STATE_PROTO, STATE_PROTO_F32):
+        if proto in (STATE_PROTO_V2, STATE_PROTO_F32):
             assert theirs != proto.encode(msg)
+        elif proto is STATE_PROTO:                # no zero scalar left: the same bytes
+            assert theirs == proto.encode(msg)
         assert proto.decode(theirs) == proto.decode(proto.encode(msg))
 
 
@@ -339,8 +379,9 @@ def test_channels_use_the_well_known_encodings_and_mcap_protobuf_decodes_them(
             assert ch.message_encoding == MessageEncoding.Protobuf == "protobuf"
             assert schema.encoding == SchemaEncoding.Protobuf == "protobuf"
             assert schema.name == CHANNELS[topic].proto.name     # type: ignore[union-attr]
-            assert schema.name.startswith("talus.v2.")
+            assert schema.name.startswith("talus.v3.")
             assert json.loads(ch.metadata[JSONSCHEMA_METADATA_KEY]) == CHANNELS[topic].schema
+            assert ch.metadata[TIME_ORIGIN_NS_KEY] == str(START_WALL_NS)
         for topic in (EVENTS, METADATA):
             assert by_topic[topic].message_encoding == "json"
             assert summary.schemas[by_topic[topic].schema_id].encoding == "jsonschema"
@@ -351,10 +392,15 @@ def test_channels_use_the_well_known_encodings_and_mcap_protobuf_decodes_them(
             seen[channel.topic] += 1
             if k % 250:
                 continue
-            # Counts of µs, µm, mN (the units in the wire names).
-            assert proto.t_us == round(sig["state"][k][0] * 1e6)
+            # The log time is the cycle's time; counts of µm, mN (the units in the wire
+            # names), the DAC's codes.
+            assert message.log_time == message.publish_time == \
+                START_WALL_NS + round(sig["state"][k][0] * 1e6) * 1000
+            assert not hasattr(proto, "t_us")
             if channel.topic == STATE:
                 assert list(proto.q_um) == [round(v * 1e6) for v in sig["state"][k][1:4]]
+                assert list(proto.volts_dac) == [volts_to_code(v)
+                                                 for v in sig["state"][k][13:16]]
             elif channel.topic == WRENCH:
                 assert proto.fz_mn == round(sig["wrench"][k][3] * 1e3)
             else:
@@ -366,7 +412,7 @@ def test_channels_use_the_well_known_encodings_and_mcap_protobuf_decodes_them(
 
 def test_json_recordings_still_read_by_info_export_recover(pair: dict, tmp_path: Path,
                                                             capsys) -> None:
-    for enc in ("json", "protobuf-f32", "protobuf"):
+    for enc in ("json", "protobuf-f32", "protobuf-v2", "protobuf"):
         path = pair[enc]
         assert talus_main(["record", "info", str(path)]) == 0
         info = json.loads(capsys.readouterr().out)
@@ -379,8 +425,12 @@ def test_json_recordings_still_read_by_info_export_recover(pair: dict, tmp_path:
         assert json.loads(capsys.readouterr().out)["rows"] == len(pair["sig"]["state"])
     # The same CSV columns from every encoding (the protobuf channel's JSON Schema says them).
     header = [(tmp_path / f"{e}_state.csv").read_text().splitlines()[0]
-              for e in ("json", "protobuf-f32", "protobuf")]
-    assert header[0] == header[1] == header[2] and "qd_ref0" in header[0]
+              for e in ("json", "protobuf-f32", "protobuf-v2", "protobuf")]
+    assert len(set(header)) == 1 and "qd_ref0" in header[0] and ",t," in header[0]
+    # v3's t column (rebuilt from the log time) is v2's t_us.
+    rows = [(tmp_path / f"{e}_state.csv").read_text().splitlines()[1:]
+            for e in ("protobuf-v2", "protobuf")]
+    assert [r.split(",")[:2] for r in rows[0]] == [r.split(",")[:2] for r in rows[1]]
     wrench = export_csv(pair["json"], WRENCH, tmp_path / "w.csv")
     assert wrench["rows"] == len(pair["sig"]["state"])
 
@@ -389,7 +439,7 @@ def test_report_reader_gives_the_same_figures_from_both_encodings(pair: dict) ->
     from reports.session_data import session_input_from_recording
 
     a = session_input_from_recording(pair["json"])
-    for enc in ("protobuf-f32", "protobuf"):
+    for enc in ("protobuf-f32", "protobuf-v2", "protobuf"):
         b = session_input_from_recording(pair[enc])
         assert a.figures is not None and b.figures is not None
         assert a.figures["samples"] == b.figures["samples"] == len(pair["sig"]["state"])
@@ -458,23 +508,85 @@ def test_size_per_hour_of_a_generated_10_s_recording(tmp_path: Path) -> None:
 
 
 def test_row_encoder_is_the_per_message_encoder() -> None:
-    """The numpy block encoder and the one-message encoder write the same bytes."""
+    """The numpy block encoder and the one-message encoder write the same bytes (v3: the ring
+    row's time column is skipped; v2: t_us first)."""
     rows = session_signals(0.05)["state"]
-    enc = STATE_PROTO.row_encoder(STATE_PROTO.fixed_layout)(rows)
-    names = [n for n, _ in STATE_PROTO.fixed_layout]
-    for row, data in zip(rows, enc):
-        msg = {"t": row[0]}
-        for i, name in enumerate(names[1:]):
-            msg[name] = row[1 + 3 * i:4 + 3 * i].tolist()
-        assert data == STATE_PROTO.encode(msg)
-        assert len(data) == STATE_PROTO.fixed_size == 9 + 5 * (2 + 12)
+    names = [n for n, _ in STATE_LAYOUT.fields]
+    for proto, size in ((STATE_PROTO, 5 * (2 + 12)), (STATE_PROTO_V2, 9 + 5 * (2 + 12))):
+        enc = proto.row_encoder(STATE_LAYOUT.fields)(rows)
+        for row, data in zip(rows, enc):
+            msg = {"t": row[0]}
+            for i, name in enumerate(names[1:]):
+                msg[name] = row[1 + 3 * i:4 + 3 * i].tolist()
+            assert data == proto.encode(msg)
+            assert len(data) == proto.fixed_size == size
+    enc = STATE_PROTO_V2.row_encoder(STATE_LAYOUT.fields)(rows)
     assert struct.unpack_from("<Bq", enc[0]) == (0x09, round(rows[0][0] * 1e6))
+
+
+def test_volts_are_the_dac_codes_the_pci1720_driver_writes() -> None:
+    """v3's ``volts_dac`` is ``rt.drivers.pci1720.volts_to_code`` of the command, halves and
+    the range's ends included, in the ring encoder and the one-message encoder alike."""
+    step = 20 / 4095
+    volts = np.concatenate([np.linspace(-12.0, 12.0, 2001), -10 + (np.arange(-3, 4100) + 0.5)
+                            * step, [-6.0, 6.0, 0.0, -0.0, 1e-12]])
+    rows = np.zeros((len(volts), 16))
+    rows[:, 13] = volts
+    rows[:, 14] = -volts
+    enc = STATE_PROTO.row_encoder(STATE_LAYOUT.fields)(rows)
+    for v, data in zip(volts.tolist(), enc):
+        code = struct.unpack_from("<3i", data, len(data) - 12)
+        assert code[0] == volts_to_code(v) and code[1] == volts_to_code(-v)
+        assert STATE_PROTO.decode(data)["volts"][:2] == [code_to_volts(code[0]),
+                                                        code_to_volts(code[1])]
+        msg = STATE_PROTO.encode({"q": [0.0] * 3, "qd": [0.0] * 3, "q_ref": [0.0] * 3,
+                                  "tau": [0.0] * 3, "volts": [v, -v, 0.0]})
+        assert msg == data
+
+
+def test_the_loop_time_rebuilt_from_the_log_time_is_the_microsecond_time() -> None:
+    """Whatever the time origin (an RT process up for days, a wall clock with ns digits),
+    ``LoopClock`` gives back ``round(t × 1e6) / 1e6``, what v2's ``t_us`` held."""
+    rng = np.random.default_rng(3)
+    for origin_ns, loop_t0 in ((START_WALL_NS, 0.0), (1_764_103_456_789_012_345, 12.3456789),
+                               (1_764_103_456_000_000_001, 345_678.901_234_567)):
+        clock = LoopClock(origin_ns, loop_t0, 1e-6)
+        t = loop_t0 + np.concatenate([np.arange(0, 3600, 0.001)[::997],
+                                      rng.uniform(0, 3600, 2000)])
+        for x in t.tolist():
+            log_time = origin_ns + round((clock.quantize(x) - loop_t0) * 1e9)
+            assert clock(log_time) == fixed(x, 1e-6)
 
 
 #: A recording written by the float32 protobuf writer as it was on 2026-11-25 (main at
 #: 3c13f86, ``tests.test_recording_encoding.record(path, session_signals(0.3, seed=7),
 #: "protobuf", events=True)``): the previous encoding, made by the previous code.
 PREVIOUS = Path(__file__).parent / "data" / "recording_protobuf_float32_2026-11-25.mcap"
+
+
+#: A ``talus.v2`` recording (fixed point, ``t_us``, volts in mV) written by the writer of
+#: 2026-11-25 before ``talus.v3`` (bde1a66, ``record(path, session_signals(0.3, seed=7),
+#: "protobuf", events=True)``).
+PREVIOUS_V2 = Path(__file__).parent / "data" / "recording_protobuf_v2_2026-11-25.mcap"
+
+
+def test_a_talus_v2_recording_still_reads(tmp_path: Path, capsys) -> None:
+    sig = session_signals(0.3, seed=7)
+    assert talus_main(["record", "info", str(PREVIOUS_V2)]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["complete"] and not info["corrupt"] and info["messages"][STATE] == 300
+    data = read_recording(PREVIOUS_V2)
+    for k in (0, 150, 299):
+        row = sig["state"][k]
+        assert data[STATE][k]["t"] == fixed(row[0], 1e-6)
+        assert data[STATE][k]["volts"] == [fixed(v, 1e-3) for v in row[13:16]]
+        assert data[WRENCH][k]["fz"] == fixed(sig["wrench"][k][3], 1e-3)
+        assert data[REFERENCE][k]["t"] == fixed(row[0], 1e-6)
+    out = tmp_path / "state.csv"
+    assert talus_main(["record", "export", str(PREVIOUS_V2), "--out", str(out)]) == 0
+    assert json.loads(capsys.readouterr().out)["rows"] == 300
+    messages, rinfo = recover(PREVIOUS_V2)
+    assert messages == data and rinfo["complete"]
 
 
 def test_a_recording_of_the_previous_writer_still_reads(tmp_path: Path, capsys) -> None:

@@ -157,6 +157,50 @@ def test_session_refusals_name_the_reason_and_record_nothing(fast_rt, tmp_path):
         assert viewer.status()["phase_name"] == "rest"
 
 
+def test_start_reuses_the_passing_preflight_and_the_recording_says_which(fast_rt, tmp_path):
+    """The GUI's flow: pre-flight on the Prescribe page (before taking control), take control,
+    Start with the clinical record's snapshot of the same patient: the start runs on that
+    pre-flight (no second one), the reply and the recording's metadata name it. A stop between
+    a pre-flight and the start makes the start pre-flight again and say why
+    (tests/test_preflight_reuse.py tests every invalidation on its own)."""
+    from rt.safety.limits import PatientLimits
+
+    _, endpoint, _ = fast_rt
+    doc = _short_sine(tmp_path, cycles=1)
+    patient = {"id": "P-1", "weight_kg": 70.0}
+    with RtClient(endpoint, timeout_s=2.0) as client:
+        pre = client.session_preflight(doc, patient)
+        assert pre["ok"] and pre["kept_for_s"] > 0
+        client.control_acquire("gui")
+        client.start_heartbeat(0.05)
+        record = {**patient, "limits": PatientLimits().model_dump()}
+        started = client.session_start(doc, record, {"dir": str(tmp_path)})
+        assert started["preflight_reused"] is True, started["preflight_not_reused"]
+        assert started["preflight_id"] == pre["preflight_id"]
+        assert started["preflight"] == pre["predicted"]
+        s = _wait_end(client, started["session_id"])
+        assert s["outcome"] == "completed" and s["preflight_run"]["id"] == pre["preflight_id"]
+        meta = read_recording(Path(started["recording"]),
+                              ["/protocol/metadata"])["/protocol/metadata"][0]
+        run = meta["preflight_run"]
+        assert run["id"] == pre["preflight_id"] and run["reused"] is True
+        assert run["not_reused"] is None and 0.0 <= run["age_s"] < 120.0
+        assert set(run["key"]) == {"protocol", "patient", "robot", "start"}
+
+        pre2 = client.session_preflight(doc, patient)
+        client.stop()
+        end = time.monotonic() + 10.0
+        while not client.status()["latched"] and time.monotonic() < end:
+            time.sleep(0.02)
+        client.reset()
+        started2 = client.session_start(doc, patient, {"dir": str(tmp_path)})
+        assert started2["preflight_reused"] is False
+        assert "a fault (stop_client) happened since pre-flight " + pre2["preflight_id"] in \
+            started2["preflight_not_reused"]
+        assert started2["preflight_id"] not in (pre["preflight_id"], pre2["preflight_id"])
+        _wait_end(client, started2["session_id"])
+
+
 def test_session_abort_returns_to_rest(fast_rt, tmp_path):
     _, endpoint, _ = fast_rt
     with RtClient(endpoint, timeout_s=2.0) as client, \

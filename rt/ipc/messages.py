@@ -29,7 +29,10 @@ command              ``args``                                                   
                      number, "limits"?: {...}}, "record": {"dir"?: str}}`` —
                      validated and pre-flighted in the RT process, recorded by it;
                      the reply comes after pre-flight: the session id and the
-                     predicted peaks, or the refusal's reason
+                     predicted peaks, or the refusal's reason. The same client's
+                     passing ``session_preflight`` of the same protocol and patient
+                     is reused when nothing changed (``rt.preflight_reuse``):
+                     ``preflight_reused``, ``preflight_id``, ``preflight_not_reused``
 ``session_preflight``  same ``protocol`` and ``patient`` as ``session_start``: the    anyone
                      pre-flight alone (predicted peaks or the refusal), nothing
                      moves; the reply comes when it is done

@@ -5,10 +5,18 @@ Encodings, all MCAP well-known ones that Foxglove opens and plots without plugin
 * **protobuf, fixed point** (the default, :attr:`Encoding.PROTOBUF`): the 1 kHz channels
   (``/robot/state``, ``/robot/wrench``, ``/protocol/reference``) and ``/ankle/state`` as
   ``message_encoding="protobuf"`` with a ``protobuf`` schema (a ``FileDescriptorSet``,
-  :mod:`rt.recording.protobuf_codec`, package ``talus.v2``). Every number of the 1 kHz
-  channels is an ``sfixed32``/``sfixed64`` count of a stated quantum, the unit in the wire
-  name (``q_um``, ``tau_mn``, ``t_us``); decoded, they are the JSON channels' SI dicts
-  (``q`` in m ...). A value that was not finite reads back as ``None``.
+  :mod:`rt.recording.protobuf_codec`, package ``talus.v3``). Every number of the 1 kHz
+  channels is an ``sfixed32`` count of a stated quantum, the unit in the wire name
+  (``q_um``, ``tau_mn``), or the code an instrument made of it (``volts_dac``: the DAC's
+  code, so the voltage it output, exactly); decoded, they are the JSON channels' SI dicts
+  (``q`` in m ...). A value that was not finite reads back as ``None``. The payloads carry
+  no time: a message's MCAP log time (and publish time) is its cycle's loop time, and the
+  channel's metadata the origin (:data:`TIME_ORIGIN_NS_KEY`, :class:`LoopClock`), from
+  which the readers put ``t`` back in the dicts. Why: the time repeated in 3 payloads per
+  cycle besides the log time cost 15 % of the file (issue 16's 150 MB/h).
+* **protobuf, fixed point with the time** (:attr:`Encoding.PROTOBUF_V2`, package
+  ``talus.v2``, ``t_us`` in every payload, volts in mV): the recordings of 25 November 2026
+  before ``talus.v3``; read always.
 * **protobuf, float32** (:attr:`Encoding.PROTOBUF_F32`, package ``talus``): the recordings
   made with issue 16's first round, floats as float32 and ``t`` as a double; read always.
 * **json** (every recording before issue 16, :attr:`Encoding.JSON`):
@@ -27,16 +35,17 @@ float32 files. A count of the finest quantum the hardware can resolve (or finer)
 bits that mean something, its high bytes constant, and zstd removes those. The quanta, each at
 or below what the robot resolves (so nothing measured is lost):
 
-* ``t`` → µs (``t_us``, sfixed64): the loop's period is 1000 µs and its lateness is reported
-  by the loop itself; a double's ns-level jitter digits cost ≈ 5 bytes per message and mean
-  nothing. The messages' MCAP log times use the same µs-rounded time.
+* ``t`` → µs (v2's ``t_us``, sfixed64; v3's log times): the loop's period is 1000 µs and its
+  lateness is reported by the loop itself; a double's ns-level jitter digits cost ≈ 5 bytes
+  per message and mean nothing. The messages' MCAP log times use the same µs-rounded time.
 * ``q``, ``q_ref``, ``position`` → µm: the encoders count 20 µm (robot description
   ``encoder.m_per_count``), 20x coarser; a measured ``q`` is an exact number of µm.
 * ``qd``, ``qd_ref`` → µm/s: the estimate's own quantum is a count per cycle, 20 000 µm/s.
 * ``tau``, forces ``fx..fz``, reference ``force`` → mN: what reaches a motor is resolved by
   the DAC's 4.88 mV LSB times ``drive.force_per_volt_n`` (newtons per LSB), the ATI SI-660-60
   resolves 1/8 N (1/4 N on z).
-* ``volts`` → mV: the PCI-1720's LSB is 4.88 mV.
+* ``volts`` → the PCI-1720's code (v3; its LSB is 4.88 mV, ``DAC_RANGE``): what the DAC
+  output, exactly (the driver writes ``volts_to_code`` of the command); v2: mV.
 * torques ``tx..tz`` → mN·m: the ATI resolves 7.5 mN·m.
 
 Quantisation error is at most half a quantum (0.5 µm, 0.5 mN ...), below the resolution of the
@@ -84,12 +93,15 @@ JSONSCHEMA_METADATA_KEY = "talus.jsonschema"
 class Encoding(enum.Enum):
     """How a recording encodes its channels that have a protobuf message.
 
-    ``PROTOBUF``: fixed-point integers (``talus.v2`` messages, the default); ``PROTOBUF_F32``:
+    ``PROTOBUF``: fixed-point integers without the time (``talus.v3`` messages, the
+    default); ``PROTOBUF_V2``: fixed point with ``t_us`` (``talus.v2``, 25 November 2026, still
+    written for comparison and compatibility tests); ``PROTOBUF_F32``:
     float32 (``talus`` messages, recordings of November 2026 before the fixed-point change,
     still written for comparison and compatibility tests); ``JSON``: every channel JSON, as
     recordings were before issue 16."""
 
     PROTOBUF = "protobuf"
+    PROTOBUF_V2 = "protobuf-v2"
     PROTOBUF_F32 = "protobuf-f32"
     JSON = "json"
 
@@ -232,9 +244,11 @@ def _fx(name: str, number: int, kind: Kind, scale: float, key: str,
     return ProtoField(name, number, kind, width, scale=scale, key=key)
 
 
-#: The 1 kHz channels as fixed-point integers (the default encoding): wire names carry the
-#: unit (``q_um``), decoded dicts the JSON channels' SI keys (``q``).
-STATE_PROTO = ProtoMessage("talus.v2.RobotState", [
+#: The 1 kHz channels as fixed-point integers with the time in the payload (``talus.v2``,
+#: recordings of 25 November 2026 before ``talus.v3``; read always, written with
+#: ``Encoding.PROTOBUF_V2``): wire names carry the unit (``q_um``), decoded dicts the JSON
+#: channels' SI keys (``q``).
+STATE_PROTO_V2 = ProtoMessage("talus.v2.RobotState", [
     _fx("t_us", 1, _I64, T_QUANTUM_S, "t"),
     _fx("q_um", 2, _I32, POSITION_QUANTUM_M, "q", 3),
     _fx("qd_um_s", 3, _I32, SPEED_QUANTUM_M_S, "qd", 3),
@@ -242,7 +256,7 @@ STATE_PROTO = ProtoMessage("talus.v2.RobotState", [
     _fx("tau_mn", 5, _I32, FORCE_QUANTUM_N, "tau", 3),
     _fx("volts_mv", 6, _I32, VOLTS_QUANTUM_V, "volts", 3),
     _fx("qd_ref_um_s", 7, _I32, SPEED_QUANTUM_M_S, "qd_ref", VARIABLE)])
-WRENCH_PROTO = ProtoMessage("talus.v2.Wrench", [
+WRENCH_PROTO_V2 = ProtoMessage("talus.v2.Wrench", [
     _fx("t_us", 1, _I64, T_QUANTUM_S, "t"),
     _fx("fx_mn", 2, _I32, FORCE_QUANTUM_N, "fx"), _fx("fy_mn", 3, _I32, FORCE_QUANTUM_N, "fy"),
     _fx("fz_mn", 4, _I32, FORCE_QUANTUM_N, "fz"),
@@ -250,15 +264,51 @@ WRENCH_PROTO = ProtoMessage("talus.v2.Wrench", [
     _fx("ty_mnm", 6, _I32, TORQUE_QUANTUM_NM, "ty"),
     _fx("tz_mnm", 7, _I32, TORQUE_QUANTUM_NM, "tz"),
     ProtoField("stale", 8, _B), ProtoField("saturated", 9, _B)])
-REFERENCE_PROTO = ProtoMessage("talus.v2.ProtocolReference", [
+REFERENCE_PROTO_V2 = ProtoMessage("talus.v2.ProtocolReference", [
     _fx("t_us", 1, _I64, T_QUANTUM_S, "t"),
     _fx("force_mn", 2, _I32, FORCE_QUANTUM_N, "force", VARIABLE),
     _fx("position_um", 3, _I32, POSITION_QUANTUM_M, "position", VARIABLE),
     ProtoField("phase", 4, _S), ProtoField("mode", 5, _S)])
 #: /ankle/state (100 Hz): float32 angles and torques (0.01° and 1 mN·m need no more than
 #: float32's 7 digits), the time as the other channels'.
-ANKLE_PROTO = ProtoMessage("talus.v2.AnkleState", [
+ANKLE_PROTO_V2 = ProtoMessage("talus.v2.AnkleState", [
     _fx("t_us", 1, _I64, T_QUANTUM_S, "t"),
+    ProtoField("plantarflexion_deg", 2, _F), ProtoField("inversion_deg", 3, _F),
+    ProtoField("abduction_deg", 4, _F), ProtoField("plantarflexion_torque_nm", 5, _F),
+    ProtoField("inversion_torque_nm", 6, _F), ProtoField("abduction_torque_nm", 7, _F),
+    ProtoField("centre_displacement_mm", 8, _F, 3), ProtoField("platform_roll_deg", 9, _F),
+    ProtoField("platform_pitch_deg", 10, _F)])
+
+#: The drive command's DAC: the PCI-1720 on its ±10 V range, 12 bits (``rt.drivers.pci1720``:
+#: ``RANGE_BIPOLAR_10V``, ``volts_to_code``; tests check these against it). One code is
+#: 20/4095 V = 4.88 mV.
+DAC_RANGE: tuple[float, float, int] = (-10.0, 10.0, 4095)
+DAC_STEP_V = (DAC_RANGE[1] - DAC_RANGE[0]) / DAC_RANGE[2]
+
+#: ``talus.v3`` (the default encoding, :attr:`Encoding.PROTOBUF`): the ``talus.v2`` fields
+#: less the time (a message's MCAP log time is its cycle's loop time, :class:`LoopClock`),
+#: and the drive command as the DAC's code (``volts_dac``: the code the PCI-1720 writes for
+#: it, so the voltage it outputs, exactly). Field numbers of v2 are kept; 1 (``t_us``) and 6
+#: (``volts_mv``) are retired.
+STATE_PROTO = ProtoMessage("talus.v3.RobotState", [
+    _fx("q_um", 2, _I32, POSITION_QUANTUM_M, "q", 3),
+    _fx("qd_um_s", 3, _I32, SPEED_QUANTUM_M_S, "qd", 3),
+    _fx("q_ref_um", 4, _I32, POSITION_QUANTUM_M, "q_ref", 3),
+    _fx("tau_mn", 5, _I32, FORCE_QUANTUM_N, "tau", 3),
+    ProtoField("volts_dac", 8, _I32, 3, scale=DAC_STEP_V, key="volts", code_range=DAC_RANGE),
+    _fx("qd_ref_um_s", 7, _I32, SPEED_QUANTUM_M_S, "qd_ref", VARIABLE)])
+WRENCH_PROTO = ProtoMessage("talus.v3.Wrench", [
+    _fx("fx_mn", 2, _I32, FORCE_QUANTUM_N, "fx"), _fx("fy_mn", 3, _I32, FORCE_QUANTUM_N, "fy"),
+    _fx("fz_mn", 4, _I32, FORCE_QUANTUM_N, "fz"),
+    _fx("tx_mnm", 5, _I32, TORQUE_QUANTUM_NM, "tx"),
+    _fx("ty_mnm", 6, _I32, TORQUE_QUANTUM_NM, "ty"),
+    _fx("tz_mnm", 7, _I32, TORQUE_QUANTUM_NM, "tz"),
+    ProtoField("stale", 8, _B), ProtoField("saturated", 9, _B)])
+REFERENCE_PROTO = ProtoMessage("talus.v3.ProtocolReference", [
+    _fx("force_mn", 2, _I32, FORCE_QUANTUM_N, "force", VARIABLE),
+    _fx("position_um", 3, _I32, POSITION_QUANTUM_M, "position", VARIABLE),
+    ProtoField("phase", 4, _S), ProtoField("mode", 5, _S)])
+ANKLE_PROTO = ProtoMessage("talus.v3.AnkleState", [
     ProtoField("plantarflexion_deg", 2, _F), ProtoField("inversion_deg", 3, _F),
     ProtoField("abduction_deg", 4, _F), ProtoField("plantarflexion_torque_nm", 5, _F),
     ProtoField("inversion_torque_nm", 6, _F), ProtoField("abduction_torque_nm", 7, _F),
@@ -322,6 +372,8 @@ CHANNELS: dict[str, ChannelSpec] = {
 PROTOS: dict[Encoding, dict[str, ProtoMessage]] = {
     Encoding.PROTOBUF: {STATE: STATE_PROTO, WRENCH: WRENCH_PROTO, REFERENCE: REFERENCE_PROTO,
                         ANKLE: ANKLE_PROTO},
+    Encoding.PROTOBUF_V2: {STATE: STATE_PROTO_V2, WRENCH: WRENCH_PROTO_V2,
+                           REFERENCE: REFERENCE_PROTO_V2, ANKLE: ANKLE_PROTO_V2},
     Encoding.PROTOBUF_F32: {STATE: STATE_PROTO_F32, WRENCH: WRENCH_PROTO_F32,
                             REFERENCE: REFERENCE_PROTO_F32},
     Encoding.JSON: {},
@@ -330,6 +382,7 @@ PROTOS: dict[Encoding, dict[str, ProtoMessage]] = {
 #: Protobuf messages talus writes or wrote, by full name: the reader's fast decoders.
 PROTO_MESSAGES: dict[str, ProtoMessage] = {
     m.name: m for m in (STATE_PROTO, WRENCH_PROTO, REFERENCE_PROTO, ANKLE_PROTO,
+                        STATE_PROTO_V2, WRENCH_PROTO_V2, REFERENCE_PROTO_V2, ANKLE_PROTO_V2,
                         STATE_PROTO_F32, WRENCH_PROTO_F32, REFERENCE_PROTO_F32)}
 
 #: Column layout of a ``RecorderTap`` row (rt.components.blocks): field name → width.
@@ -345,3 +398,57 @@ METADATA_REQUIRED_FROM_CALLER = ("protocol_name", "protocol_version", "parameter
 def log_time_ns(t: float, start_wall_ns: int, loop_t0: float = 0.0) -> int:
     """MCAP log time, ns since the Unix epoch, of loop time ``t`` (s)."""
     return start_wall_ns + round((t - loop_t0) * 1e9)
+
+
+# ------------------------------------------------------------------------------ time
+#: Channel metadata of a ``talus.v3`` protobuf channel: the time origin that turns a
+#: message's MCAP log time (ns since the Unix epoch) back into the loop time ``t`` (s): the
+#: log time of loop time ``origin_loop_s`` (decimal strings), and the quantum ``t`` was
+#: rounded to.
+TIME_ORIGIN_NS_KEY = "talus.time_origin_ns"
+TIME_ORIGIN_LOOP_S_KEY = "talus.time_origin_loop_s"
+TIME_QUANTUM_KEY = "talus.time_quantum_s"
+
+
+def time_metadata(start_wall_ns: int, loop_t0: float, quantum_s: float) -> dict[str, str]:
+    """The time origin of a recording's channels (:data:`TIME_ORIGIN_NS_KEY` ...)."""
+    return {TIME_ORIGIN_NS_KEY: str(int(start_wall_ns)),
+            TIME_ORIGIN_LOOP_S_KEY: repr(float(loop_t0)), TIME_QUANTUM_KEY: repr(quantum_s)}
+
+
+class LoopClock:
+    """Loop time ``t`` (s) of a message from its MCAP log time, for messages that do not carry
+    it (``talus.v3``): ``origin_loop_s + (log_time_ns - origin_ns) / 1e9``, rounded to the
+    recording's quantum (1 µs), which gives back exactly the ``t`` a ``talus.v2`` payload
+    held (``t_us`` / 1e6): the writer's log time is ``origin_ns + round((t_q - t0) * 1e9)``
+    with ``t_q`` the µs-rounded time, so the rebuilt value is within 1 ns of ``t_q``."""
+
+    def __init__(self, origin_ns: int, origin_loop_s: float, quantum_s: float | None) -> None:
+        self.origin_ns = int(origin_ns)
+        self.origin_loop_s = float(origin_loop_s)
+        self.per_unit = None if quantum_s is None else _per_quantum(quantum_s)
+
+    @classmethod
+    def from_metadata(cls, metadata: dict[str, str]) -> LoopClock | None:
+        """The clock a channel's metadata declares, None when it declares none."""
+        if TIME_ORIGIN_NS_KEY not in metadata:
+            return None
+        quantum = metadata.get(TIME_QUANTUM_KEY)
+        return cls(int(metadata[TIME_ORIGIN_NS_KEY]),
+                   float(metadata.get(TIME_ORIGIN_LOOP_S_KEY, "0.0")),
+                   None if quantum is None else float(quantum))
+
+    def __call__(self, log_time_ns: int) -> float:
+        t = self.origin_loop_s + (log_time_ns - self.origin_ns) * 1e-9
+        per = self.per_unit
+        return t if per is None else round(t * per) / per
+
+    def quantize(self, t: float) -> float:
+        """``t`` rounded to the quantum (what the writer stamps)."""
+        per = self.per_unit
+        return t if per is None else round(t * per) / per
+
+
+def _per_quantum(quantum_s: float) -> float:
+    inv = 1.0 / quantum_s
+    return float(round(inv)) if abs(inv - round(inv)) <= 1e-9 * inv else inv

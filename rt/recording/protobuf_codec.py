@@ -95,11 +95,23 @@ class ProtoField:
     #: The decoded dict's key when it differs from the wire name (``q`` for ``q_um``): the
     #: dicts stay those of the JSON channels, in SI units, whatever the encoding.
     key: str | None = None
+    #: An instrument's code instead of a plain count: ``(v_min, v_max, maxdata)`` of a
+    #: converter's range. The count is then the code the converter makes of the value
+    #: (``floor((v - v_min) / (v_max - v_min) * maxdata + 0.5)``, clamped to 0..maxdata, as
+    #: comedi's ``comedi_from_phys``), and reads back as the value that code stands for
+    #: (``v_min + code / maxdata * (v_max - v_min)``); ``scale`` is then one code's step.
+    code_range: tuple[float, float, int] | None = None
 
     def __post_init__(self) -> None:
         if (self.kind in NOT_FINITE) != (self.scale is not None):
             raise ValueError(f"field {self.name}: a scale is for fixed-point fields, and they "
                              "need one")
+        if self.code_range is not None:
+            lo, hi, maxdata = self.code_range
+            if self.scale is None or not (hi > lo and maxdata > 0) or \
+                    abs(self.scale - (hi - lo) / maxdata) > 1e-12 * (hi - lo):
+                raise ValueError(f"field {self.name}: code_range {self.code_range} needs a "
+                                 "fixed-point kind and scale (v_max - v_min) / maxdata")
         if self.scale is not None and not (math.isfinite(self.scale) and self.scale > 0):
             raise ValueError(f"field {self.name}: scale {self.scale}")
         if not 1 <= self.number <= 15:
@@ -178,7 +190,19 @@ def _per_unit(scale: float) -> float:
 
 def _from_count(v: int, f: ProtoField) -> float | None:
     """A fixed-point count → its SI value (None for the not-finite mark)."""
-    return None if v == NOT_FINITE[f.kind] else v / _per_unit(f.scale)
+    if v == NOT_FINITE[f.kind]:
+        return None
+    if f.code_range is not None:
+        lo, hi, maxdata = f.code_range
+        return lo + v / maxdata * (hi - lo)
+    return v / _per_unit(f.scale)
+
+
+def _code(v: float, code_range: tuple[float, float, int]) -> int:
+    """A converter's code of ``v`` (``ProtoField.code_range``)."""
+    lo, hi, maxdata = code_range
+    s = (v - lo) / (hi - lo) * maxdata
+    return 0 if s <= 0.0 else maxdata if s >= maxdata else math.floor(s + 0.5)
 
 
 def _to_count(x: Any, f: ProtoField) -> int:
@@ -189,6 +213,8 @@ def _to_count(x: Any, f: ProtoField) -> int:
     v = float(x)
     if not math.isfinite(v):
         return NOT_FINITE[f.kind]
+    if f.code_range is not None:
+        return _code(v, f.code_range)
     c = round(v * _per_unit(f.scale))
     if abs(c) > _COUNT_LIMIT[f.kind]:
         raise ProtoCodecError(f"{f.name}: {v} is beyond what {f.kind.value} counts of "
@@ -199,6 +225,14 @@ def _to_count(x: Any, f: ProtoField) -> int:
 def _counts(values: np.ndarray, f: ProtoField) -> np.ndarray:
     """Vectorised :func:`_to_count` for a ring block: a value that is not finite or beyond
     the range gets the not-finite mark (a ring value cannot be refused)."""
+    if f.code_range is not None:
+        lo, hi, maxdata = f.code_range
+        finite = np.isfinite(values)
+        s = (np.where(finite, values, 0.0) - lo) / (hi - lo) * maxdata
+        # Clipped to [0, maxdata] before the rounding: floor(maxdata + 0.5) is maxdata.
+        out = np.floor(np.clip(s, 0.0, float(maxdata)) + 0.5).astype(np.int64)
+        out[~finite] = NOT_FINITE[f.kind]
+        return out
     c = np.rint(values * _per_unit(f.scale))
     bad = ~(np.abs(c) <= _COUNT_LIMIT[f.kind])           # NaN compares False: bad too
     c[bad] = 0.0
@@ -270,6 +304,10 @@ class ProtoMessage:
         self.all_fixed = len(fixed) == len(self.fields)
         #: Values per message of the fixed part, in order (a ring row's width).
         self.row_width = sum(max(f.width, 1) for f in fixed)
+        #: Whether the payload carries the loop time ``t``. ``talus.v3`` messages do not: a
+        #: message's MCAP log time is its cycle's time, and the reader rebuilds ``t`` from it
+        #: (``rt.recording.channels.LoopClock``); a ring row's time column is then skipped.
+        self.carries_t = "t" in self._by_key
 
     @property
     def fixed_layout(self) -> tuple[tuple[str, int], ...]:
@@ -329,7 +367,8 @@ class ProtoMessage:
             columns[name] = (k, int(width))
             k += int(width)
         total = k
-        unknown = [n for n in columns if n not in self._by_key]
+        unknown = [n for n in columns if n not in self._by_key
+                   and not (n == "t" and not self.carries_t)]
         if unknown:
             raise ProtoCodecError(f"{self.name} has no field {unknown[0]!r}")
         plan: list[tuple[ProtoField, int, int]] = []      # field, first column, width

@@ -38,7 +38,7 @@ from mcap.stream_reader import breakup_chunk
 from rt.errors import InputError
 from rt.output_files import atomic_output
 from rt.recording import protobuf_codec
-from rt.recording.channels import JSONSCHEMA_METADATA_KEY, PROTO_MESSAGES
+from rt.recording.channels import JSONSCHEMA_METADATA_KEY, PROTO_MESSAGES, LoopClock
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
@@ -123,23 +123,43 @@ def _duration(start_ns: int | None, end_ns: int | None) -> float:
     return 0.0 if start_ns is None or end_ns is None else (end_ns - start_ns) / 1e9
 
 
-Decoder = Callable[[bytes], Any]
+#: (message bytes, MCAP log time in ns) → payload.
+Decoder = Callable[[bytes, int], Any]
 
 
-def _bytes(data: bytes) -> Any:
+def _bytes(data: bytes, log_time_ns: int) -> Any:
     return bytes(data)
 
 
+def _json(data: bytes, log_time_ns: int) -> Any:
+    return json.loads(data)
+
+
 def decoder_for(channel: Channel, schema: Schema | None) -> Decoder:
-    """bytes → payload for ``channel``'s messages: a dict for JSON and protobuf channels,
-    the raw bytes for an encoding we do not know."""
+    """(bytes, log time) → payload for ``channel``'s messages: a dict for JSON and protobuf
+    channels, the raw bytes for an encoding we do not know.
+
+    A ``talus.v3`` message carries no time: its dict gets ``t`` from the log time through the
+    channel's time origin (``rt.recording.channels.LoopClock``), so every encoding reads as
+    the same dicts."""
     if channel.message_encoding == "json":
-        return json.loads
+        return _json
     if (channel.message_encoding == protobuf_codec.MESSAGE_ENCODING and schema is not None
             and schema.encoding == protobuf_codec.SCHEMA_ENCODING):
         ours = PROTO_MESSAGES.get(schema.name)
         if ours is not None and bytes(schema.data) == ours.file_descriptor_set:
-            return ours.decode
+            decode = ours.decode
+            if ours.carries_t:
+                return lambda data, log_time_ns: decode(data)
+            # Without a declared origin (another writer of our schema) t is the log time
+            # itself, in s since the Unix epoch.
+            clock = LoopClock.from_metadata(dict(channel.metadata)) or LoopClock(0, 0.0, None)
+
+            def timed(data: bytes, log_time_ns: int) -> dict[str, Any]:
+                out = decode(data)
+                out["t"] = clock(log_time_ns)
+                return out
+            return timed
         return _generic_protobuf(schema)
     return _bytes
 
@@ -167,7 +187,7 @@ def _generic_protobuf(schema: Schema) -> Decoder:
             out[fd.name] = value
         return out
 
-    return lambda data: to_dict(decode(data))
+    return lambda data, log_time_ns: to_dict(decode(data))
 
 
 def _finite_or_none(v: Any) -> Any:
@@ -205,12 +225,12 @@ class RecordingScan:
                     return json.loads(schema.data)
         return None
 
-    def _decode(self, channel: Channel, data: bytes) -> Any:
+    def _decode(self, channel: Channel, msg: Message) -> Any:
         decode = self._decoders.get(channel.id)
         if decode is None:
             decode = decoder_for(channel, self.schemas.get(channel.schema_id))
             self._decoders[channel.id] = decode
-        return decode(data)
+        return decode(msg.data, msg.log_time)
 
     def topic_names(self) -> list[str]:
         return [c.topic for c in self.channels.values()]
@@ -233,7 +253,7 @@ class RecordingScan:
         if self.topics is not None and channel.topic not in self.topics:
             return None
         if payload is None:
-            payload = self._decode(channel, msg.data)
+            payload = self._decode(channel, msg)
         return RecordedMessage(channel.topic, msg.log_time, payload)
 
     def __iter__(self) -> Iterator[RecordedMessage]:
@@ -392,7 +412,7 @@ class RecordingScan:
 
     def _decoded(self, msg: Message) -> tuple[Message, Any]:
         channel = self.channels.get(msg.channel_id)
-        return msg, None if channel is None else self._decode(channel, msg.data)
+        return msg, None if channel is None else self._decode(channel, msg)
 
 
 def _reason(exc: BaseException) -> str:
@@ -455,7 +475,8 @@ def read_recording(path: str | os.PathLike[str],
                 decode = decoders.get(channel.id)
                 if decode is None:
                     decode = decoders[channel.id] = decoder_for(channel, schema)
-                out.setdefault(channel.topic, []).append(decode(message.data))
+                out.setdefault(channel.topic, []).append(decode(message.data,
+                                                                message.log_time))
     except (McapError, struct.error, ValueError) as exc:
         _check_complete(path)
         raise RecordingFileError(path, f"unreadable MCAP file: {exc}") from exc

@@ -69,6 +69,8 @@ from rt.recording.channels import (
     WRENCH,
     ChannelSpec,
     Encoding,
+    LoopClock,
+    time_metadata,
 )
 from rt.recording.protobuf_codec import ProtoCodecError, ProtoMessage
 
@@ -328,9 +330,10 @@ class SessionRecorder:
                 proto = standard.get(topic, spec.proto)
                 if proto is not None:
                     self._protos[topic] = proto
-        # Fixed-point recordings keep loop times to the µs (their ``t_us``); the log times
-        # follow, so a message's log time and its payload agree.
-        self._t_quantum = T_QUANTUM_S if self.encoding is Encoding.PROTOBUF else None
+        # Fixed-point recordings keep loop times to the µs (v2: their ``t_us``; v3: the log
+        # time is the time), so a message's log time and its payload agree.
+        self._t_quantum = T_QUANTUM_S if self.encoding in (Encoding.PROTOBUF,
+                                                           Encoding.PROTOBUF_V2) else None
         # The queued wrench samples (t, fx..tz, stale, saturated) as protobuf rows.
         wrench_proto = self._protos.get(WRENCH)
         self._wrench_rows = None if wrench_proto is None else wrench_proto.row_encoder(
@@ -339,6 +342,7 @@ class SessionRecorder:
         self._reference_rows: Callable[[np.ndarray], list[bytes]] | None = None
         self.loop_t0 = float(loop_t0)
         self.start_wall_ns = time.time_ns() if start_wall_ns is None else int(start_wall_ns)
+        self._clock = LoopClock(self.start_wall_ns, self.loop_t0, self._t_quantum)
         self.flush_interval_s = float(flush_interval_s)
         self.drain_period_s = float(drain_period_s)
         self.queue_capacity = int(queue_capacity)
@@ -393,11 +397,20 @@ class SessionRecorder:
                 schema_id = self._mcap.register_schema(
                     name=proto.name, encoding=protobuf_codec.SCHEMA_ENCODING,
                     data=proto.file_descriptor_set)
-                # The JSON Schema rides along: units and descriptions stay in the file.
+                # The JSON Schema rides along: units and descriptions stay in the file. A
+                # message without its time gets it back from the log time and this origin;
+                # a converter's code field says its range.
+                extra: dict[str, str] = {}
+                if not proto.carries_t:
+                    extra.update(time_metadata(self.start_wall_ns, self.loop_t0,
+                                               self._t_quantum or 1e-9))
+                for f in proto.fields:
+                    if f.code_range is not None:
+                        extra[f"talus.{f.name}.range"] = ",".join(map(repr, f.code_range))
                 self._channel_ids[spec.topic] = self._mcap.register_channel(
                     topic=spec.topic, message_encoding=protobuf_codec.MESSAGE_ENCODING,
                     schema_id=schema_id,
-                    metadata={**spec.metadata,
+                    metadata={**spec.metadata, **extra,
                               JSONSCHEMA_METADATA_KEY: json.dumps(spec.schema)})
             self._write(METADATA, self.loop_t0, encode_json(self.metadata))
             # The first chunk (schemas, channels, metadata) goes to disk now: a recording
@@ -631,9 +644,8 @@ class SessionRecorder:
         return out
 
     def _log_time(self, t: float) -> int:
-        if self._t_quantum is not None:
-            t = round(t / self._t_quantum) * self._t_quantum
-        return self.start_wall_ns + round((t - self.loop_t0) * 1e9)
+        # publish_time is the same: the cycle's time is when the message was produced.
+        return self.start_wall_ns + round((self._clock.quantize(t) - self.loop_t0) * 1e9)
 
     def _write(self, topic: str, t: float, data: bytes) -> None:
         ns = self._log_time(t)
