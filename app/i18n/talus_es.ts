@@ -96,13 +96,13 @@
     </message>
     <message>
         <location filename="../field_labels.py" line="32"/>
-        <location filename="../pages/patients.py" line="119"/>
+        <location filename="../pages/patients.py" line="132"/>
         <source>Maximum force (N)</source>
         <translation>Fuerza máxima (N)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="33"/>
-        <location filename="../pages/patients.py" line="120"/>
+        <location filename="../pages/patients.py" line="133"/>
         <source>Maximum angular speed (°/s)</source>
         <translation>Velocidad angular máxima (°/s)</translation>
     </message>
@@ -118,25 +118,25 @@
     </message>
     <message>
         <location filename="../field_labels.py" line="35"/>
-        <location filename="../pages/patients.py" line="116"/>
+        <location filename="../pages/patients.py" line="128"/>
         <source>Dorsiflexion (°)</source>
         <translation>Dorsiflexión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="35"/>
-        <location filename="../pages/patients.py" line="117"/>
+        <location filename="../pages/patients.py" line="129"/>
         <source>Plantarflexion (°)</source>
         <translation>Plantarflexión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="36"/>
-        <location filename="../pages/patients.py" line="118"/>
+        <location filename="../pages/patients.py" line="130"/>
         <source>Inversion (°)</source>
         <translation>Inversión (°)</translation>
     </message>
     <message>
         <location filename="../field_labels.py" line="36"/>
-        <location filename="../pages/patients.py" line="118"/>
+        <location filename="../pages/patients.py" line="131"/>
         <source>Eversion (°)</source>
         <translation>Eversión (°)</translation>
     </message>
@@ -380,7 +380,7 @@
         <translation>Bloqueado tras %1 min sin uso.</translation>
     </message>
     <message>
-        <location filename="../main_window.py" line="252"/>
+        <location filename="../main_window.py" line="253"/>
         <source>Reset refused: %1</source>
         <translation>Rearme rechazado: %1</translation>
     </message>
@@ -432,7 +432,7 @@
         <translation>Este protocolo no se puede ejecutar: %1</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="187"/>
+        <location filename="../pages/calibrate.py" line="190"/>
         <location filename="../pages/prescribe.py" line="201"/>
         <source>force (N)</source>
         <translation>fuerza (N)</translation>
@@ -450,7 +450,7 @@
     <message>
         <location filename="../pages/prescribe.py" line="207"/>
         <location filename="../pages/review.py" line="202"/>
-        <location filename="../pages/run.py" line="153"/>
+        <location filename="../pages/run.py" line="176"/>
         <source>plantar(+)/dorsi(−) flexion</source>
         <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
@@ -461,7 +461,7 @@
         <translation>balanceo (+ es inversión del pie derecho)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="156"/>
+        <location filename="../pages/run.py" line="179"/>
         <source>inversion(+)/eversion(−)</source>
         <translation>inversión(+)/eversión(−)</translation>
     </message>
@@ -543,14 +543,14 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="94"/>
-        <location filename="../pages/run.py" line="122"/>
+        <location filename="../pages/run.py" line="145"/>
         <source>Force (N)</source>
         <translation>Fuerza (N)</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="95"/>
-        <location filename="../pages/run.py" line="123"/>
-        <location filename="../pages/run.py" line="484"/>
+        <location filename="../pages/run.py" line="146"/>
+        <location filename="../pages/run.py" line="510"/>
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
@@ -576,13 +576,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="182"/>
-        <location filename="../pages/run.py" line="148"/>
+        <location filename="../pages/run.py" line="171"/>
         <source>reference</source>
         <translation>referencia</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="184"/>
-        <location filename="../pages/run.py" line="150"/>
+        <location filename="../pages/run.py" line="173"/>
         <source>measured</source>
         <translation>medida</translation>
     </message>
@@ -598,13 +598,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="196"/>
-        <location filename="../pages/run.py" line="498"/>
+        <location filename="../pages/run.py" line="524"/>
         <source>platform pitch (engineers)</source>
         <translation>cabeceo de la plataforma (ingeniería)</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="198"/>
-        <location filename="../pages/run.py" line="499"/>
+        <location filename="../pages/run.py" line="525"/>
         <source>platform roll (engineers)</source>
         <translation>alabeo de la plataforma (ingeniería)</translation>
     </message>
@@ -629,170 +629,175 @@
         <translation>el tobillo alcanzó flexión dorsal %1°, flexión plantar %2°, inversión %3°, eversión %4°; pares máximos FD %5, FP %6, INV %7, EV %8 N·m</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="72"/>
+        <location filename="../pages/run.py" line="95"/>
         <source>moving to the start position</source>
         <translation>yendo a la posición inicial</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="72"/>
+        <location filename="../pages/run.py" line="95"/>
         <source>exercise</source>
         <translation>ejercicio</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="73"/>
+        <location filename="../pages/run.py" line="96"/>
         <source>returning to rest</source>
         <translation>volviendo al reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="73"/>
+        <location filename="../pages/run.py" line="96"/>
         <source>stopped</source>
         <translation>detenido</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="74"/>
+        <location filename="../pages/run.py" line="97"/>
         <source>at rest</source>
         <translation>en reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="109"/>
+        <location filename="../pages/run.py" line="132"/>
         <source>No protocol prescribed: choose one in Prescribe.</source>
         <extracomment>False for roles that may not move the robot (viewer, engineer, admin) the clinical record&apos;s journal of sessions (None: no record) frames drawn, and the samples on the plots at the last one (monotonic time, seconds spent, CPU seconds of this thread) of the recent frames drawn (bench/gui.py&apos;s figures)</extracomment>
         <translation>Ningún protocolo prescrito: elija uno en Prescribir.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="111"/>
+        <location filename="../pages/run.py" line="134"/>
         <source>Take control of the robot</source>
         <translation>Tomar el control del robot</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="112"/>
+        <location filename="../pages/run.py" line="135"/>
         <source>Start session</source>
         <translation>Iniciar sesión</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="139"/>
+        <location filename="../pages/run.py" line="162"/>
         <source>seconds before now</source>
         <translation>segundos antes de ahora</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="162"/>
+        <location filename="../pages/run.py" line="185"/>
         <source>ankle: plantar(+)/dorsi(−) flexion from neutral</source>
         <translation>tobillo: flexión plantar(+)/dorsal(−) desde la posición neutra</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="167"/>
+        <location filename="../pages/run.py" line="190"/>
         <source>ankle: inversion(+)/eversion(−) from neutral</source>
         <translation>tobillo: inversión(+)/eversión(−) desde la posición neutra</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="207"/>
+        <location filename="../pages/run.py" line="229"/>
         <source>Platform angles (engineers)</source>
         <extracomment>True while the angle plot shows the ankle view (the telemetry&apos;s ankle fields)</extracomment>
         <translation>Ángulos de la plataforma (ingeniería)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="291"/>
+        <location filename="../pages/run.py" line="313"/>
         <source>Protocol: %1</source>
         <translation>Protocolo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="306"/>
+        <location filename="../pages/run.py" line="328"/>
         <source>Checking the protocol on the robot model, then starting…</source>
         <translation>Comprobando el protocolo en el modelo del robot; después se inicia…</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="319"/>
+        <location filename="../pages/run.py" line="341"/>
         <source>Could not take control: %1</source>
         <translation>No se pudo tomar el control: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="320"/>
+        <location filename="../pages/run.py" line="342"/>
         <source>You control the robot.</source>
         <translation>Usted controla el robot.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="324"/>
+        <location filename="../pages/run.py" line="346"/>
         <source>The session did not start: %1</source>
         <translation>La sesión no se inició: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="339"/>
+        <location filename="../pages/run.py" line="361"/>
         <source>Session running.</source>
         <translation>Sesión en curso.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="353"/>
+        <location filename="../pages/run.py" line="375"/>
         <source>Session ended: %1</source>
         <translation>Sesión terminada: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="357"/>
+        <location filename="../pages/run.py" line="380"/>
         <source>Stopped: %1</source>
         <translation>Detenido: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="362"/>
+        <location filename="../pages/run.py" line="383"/>
+        <source>Session stopping: %1</source>
+        <translation>La sesión se está deteniendo: %1</translation>
+    </message>
+    <message>
+        <location filename="../pages/run.py" line="388"/>
         <source>The clinical record did not take the session: %1</source>
         <translation>La historia clínica no registró la sesión: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="432"/>
+        <location filename="../pages/run.py" line="458"/>
         <source>%1 s left</source>
         <translation>quedan %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="483"/>
+        <location filename="../pages/run.py" line="509"/>
         <source>Ankle angles from neutral (°)</source>
         <translation>Ángulos del tobillo desde la posición neutra (°)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="534"/>
-        <location filename="../pages/run.py" line="587"/>
+        <location filename="../pages/run.py" line="560"/>
+        <location filename="../pages/run.py" line="613"/>
         <source>Ankle torque: —</source>
         <translation>Par en el tobillo: —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="544"/>
+        <location filename="../pages/run.py" line="570"/>
         <source>Ankle torque: %1 %2 N·m, %3 %4 N·m</source>
         <translation>Par en el tobillo: %1 %2 N·m, %3 %4 N·m</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="563"/>
+        <location filename="../pages/run.py" line="589"/>
         <source>Ankle from neutral: %1 %2°, %3 %4°</source>
         <translation>Tobillo desde la posición neutra: %1 %2°, %3 %4°</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="569"/>
+        <location filename="../pages/run.py" line="595"/>
         <source>Ankle from neutral: —</source>
         <translation>Tobillo desde la posición neutra: —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="572"/>
+        <location filename="../pages/run.py" line="598"/>
         <source>the ankle centre moved %1 mm (comfort limit %2 mm)</source>
         <translation>el centro del tobillo se ha desplazado %1 mm (límite de confort %2 mm)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="579"/>
+        <location filename="../pages/run.py" line="605"/>
         <source>Hold %1: %2 %3 N·m (target now %4 N·m)</source>
         <translation>Mantenimiento %1: %2 %3 N·m (objetivo ahora %4 N·m)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="595"/>
+        <location filename="../pages/run.py" line="621"/>
         <source>Platform (engineers): roll %1°, pitch %2°</source>
         <translation>Plataforma (ingeniería): alabeo %1°, cabeceo %2°</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="599"/>
+        <location filename="../pages/run.py" line="625"/>
         <source>Platform (engineers): —</source>
         <translation>Plataforma (ingeniería): —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="609"/>
+        <location filename="../pages/run.py" line="635"/>
         <source>Repetitions: %1</source>
         <translation>Repeticiones: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="611"/>
+        <location filename="../pages/run.py" line="637"/>
         <source>Repetitions: %1 of %2</source>
         <translation>Repeticiones: %1 de %2</translation>
     </message>
@@ -862,88 +867,90 @@
         <translation>Guardado. Una nueva dirección o idioma se aplica al volver a iniciar la interfaz.</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="160"/>
+        <location filename="../protocol_form.py" line="161"/>
         <source>Parameters</source>
         <extracomment>Keys never edited in the form (they say what the document is). Source name in validation messages (stripped before display). the nearest optional block holding this field (&quot;&quot; when none): a block left wholly empty is omitted, so its required fields are only required once one of them is set</extracomment>
         <translation>Parámetros</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="190"/>
+        <location filename="../protocol_form.py" line="191"/>
         <source>Edited in the protocol file</source>
         <translation>Se edita en el archivo del protocolo</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="270"/>
+        <location filename="../protocol_form.py" line="263"/>
         <source>required</source>
         <translation>obligatorio</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="277"/>
+        <location filename="../protocol_form.py" line="270"/>
+        <location filename="../pages/patients.py" line="70"/>
         <source>a number is needed</source>
+        <extracomment>Ankle-setup lengths entered here, in mm (``AnkleSetup`` stores m). Clinical limit fields edited here: (key, label) — degrees from neutral, N, deg/s.</extracomment>
         <translation>se necesita un número</translation>
     </message>
     <message>
-        <location filename="../protocol_form.py" line="278"/>
+        <location filename="../protocol_form.py" line="271"/>
         <source>a whole number is needed</source>
         <translation>se necesita un número entero</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="43"/>
+        <location filename="../status_band.py" line="55"/>
         <source>Reset…</source>
         <translation>Rearmar…</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="48"/>
+        <location filename="../status_band.py" line="60"/>
         <source>Patient checked: clear</source>
         <translation>Paciente revisado: borrar</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="49"/>
+        <location filename="../status_band.py" line="61"/>
         <source>Cancel</source>
         <translation>Cancelar</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="74"/>
+        <location filename="../status_band.py" line="86"/>
         <source>not connected yet</source>
         <translation>aún sin conexión</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="79"/>
+        <location filename="../status_band.py" line="91"/>
         <source>Patient: %1</source>
         <translation>Paciente: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="80"/>
+        <location filename="../status_band.py" line="92"/>
         <source>No patient selected</source>
         <translation>Ningún paciente seleccionado</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="95"/>
+        <location filename="../status_band.py" line="112"/>
         <source>Robot connected</source>
         <translation>Robot conectado</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="97"/>
+        <location filename="../status_band.py" line="113"/>
         <source>Robot NOT connected: %1</source>
         <translation>Robot NO conectado: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="99"/>
+        <location filename="../status_band.py" line="115"/>
         <source>Controlled by: %1</source>
         <translation>Controlado por: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="100"/>
+        <location filename="../status_band.py" line="116"/>
         <source>Nobody controls the robot</source>
         <translation>Nadie controla el robot</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="103"/>
+        <location filename="../status_band.py" line="119"/>
         <source>Why: %1</source>
         <translation>Motivo: %1</translation>
     </message>
     <message>
-        <location filename="../status_band.py" line="124"/>
+        <location filename="../status_band.py" line="141"/>
         <source>Reset will clear:</source>
         <translation>El rearme borrará:</translation>
     </message>
@@ -1177,131 +1184,123 @@
         <translation>Comprobando…</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="55"/>
+        <location filename="../pages/patients.py" line="73"/>
         <source>%1: a number is needed</source>
-        <extracomment>Ankle-setup lengths entered here, in mm (``AnkleSetup`` stores m). Clinical limit fields edited here: (key, label) — degrees from neutral, N, deg/s.</extracomment>
         <translation>%1: se necesita un número</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="80"/>
+        <location filename="../pages/patients.py" line="101"/>
         <source>Search by code</source>
         <extracomment>the progress report (messages on the page&apos;s message line)</extracomment>
         <translation>Buscar por código</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="86"/>
+        <location filename="../pages/patients.py" line="109"/>
         <source>automatic when empty</source>
         <translation>automático si se deja vacío</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="89"/>
-        <location filename="../pages/patients.py" line="137"/>
-        <location filename="../pages/patients.py" line="169"/>
+        <location filename="../pages/patients.py" line="106"/>
         <source>right</source>
         <translation>derecho</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="90"/>
-        <location filename="../pages/patients.py" line="138"/>
-        <location filename="../pages/patients.py" line="169"/>
+        <location filename="../pages/patients.py" line="106"/>
         <source>left</source>
         <translation>izquierdo</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="91"/>
-        <location filename="../pages/patients.py" line="170"/>
+        <location filename="../pages/patients.py" line="106"/>
         <source>both</source>
         <translation>ambos</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="93"/>
+        <location filename="../pages/patients.py" line="113"/>
         <source>Register patient</source>
         <translation>Registrar paciente</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="95"/>
+        <location filename="../pages/patients.py" line="107"/>
         <source>New patient</source>
         <translation>Nuevo paciente</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="97"/>
+        <location filename="../pages/patients.py" line="109"/>
         <source>Code</source>
         <translation>Código</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="98"/>
-        <location filename="../pages/patients.py" line="179"/>
-        <location filename="../pages/patients.py" line="304"/>
-        <location filename="../pages/patients.py" line="366"/>
+        <location filename="../pages/patients.py" line="110"/>
+        <location filename="../pages/patients.py" line="168"/>
         <source>Body mass (kg)</source>
         <translation>Masa corporal (kg)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="99"/>
-        <location filename="../pages/patients.py" line="181"/>
+        <location filename="../pages/patients.py" line="111"/>
+        <location filename="../pages/patients.py" line="170"/>
         <source>Affected side</source>
         <translation>Lado afectado</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="100"/>
-        <location filename="../pages/patients.py" line="182"/>
+        <location filename="../pages/patients.py" line="112"/>
+        <location filename="../pages/patients.py" line="171"/>
         <source>Diagnosis (no names)</source>
         <translation>Diagnóstico (sin nombres)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="108"/>
-        <location filename="../pages/patients.py" line="242"/>
+        <location filename="../pages/patients.py" line="121"/>
+        <location filename="../pages/patients.py" line="230"/>
         <source>Choose a patient.</source>
         <translation>Elija un paciente.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="114"/>
+        <location filename="../pages/patients.py" line="126"/>
         <source>Prescribe limits</source>
         <translation>Prescribir límites</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="121"/>
-        <location filename="../pages/patients.py" line="148"/>
+        <location filename="../pages/patients.py" line="134"/>
+        <location filename="../pages/patients.py" line="153"/>
         <source>Reason</source>
         <translation>Motivo</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="127"/>
+        <location filename="../pages/patients.py" line="137"/>
         <source>Save the new limits</source>
         <translation>Guardar los nuevos límites</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="140"/>
+        <location filename="../pages/patients.py" line="145"/>
         <source>Ankle centre on the platform</source>
         <translation>Centro del tobillo sobre la plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="142"/>
+        <location filename="../pages/patients.py" line="147"/>
         <source>Foot on the platform</source>
         <translation>Pie sobre la plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="144"/>
+        <location filename="../pages/patients.py" line="149"/>
         <source>Ankle centre above the sole (mm, malleoli)</source>
         <translation>Centro del tobillo sobre la planta (mm, maléolos)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="145"/>
+        <location filename="../pages/patients.py" line="150"/>
         <source>Offset along the foot (mm, toes +)</source>
         <translation>Desplazamiento a lo largo del pie (mm, dedos +)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="146"/>
+        <location filename="../pages/patients.py" line="151"/>
         <source>Offset across the foot (mm)</source>
         <translation>Desplazamiento transversal al pie (mm)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="147"/>
+        <location filename="../pages/patients.py" line="152"/>
         <source>Foot plate thickness (mm)</source>
         <translation>Espesor de la placa del pie (mm)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="154"/>
+        <location filename="../pages/patients.py" line="156"/>
         <source>Save the ankle setup</source>
         <translation>Guardar la configuración del tobillo</translation>
     </message>
@@ -1317,48 +1316,47 @@
         <translation>Abrir el informe</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="174"/>
+        <location filename="../pages/patients.py" line="173"/>
         <source>Save clinical data</source>
         <translation>Guardar los datos clínicos</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="177"/>
+        <location filename="../pages/patients.py" line="166"/>
         <source>Clinical data</source>
         <translation>Datos clínicos</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="180"/>
-        <location filename="../pages/patients.py" line="367"/>
+        <location filename="../pages/patients.py" line="169"/>
         <source>Height (cm)</source>
         <translation>Estatura (cm)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="183"/>
+        <location filename="../pages/patients.py" line="172"/>
         <source>Notes (no names)</source>
         <translation>Notas (sin nombres)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="188"/>
+        <location filename="../pages/patients.py" line="179"/>
         <source>Show identifying data (audited)</source>
         <translation>Mostrar datos identificativos (queda registrado)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="193"/>
+        <location filename="../pages/patients.py" line="184"/>
         <source>Use for the session</source>
         <translation>Usar para la sesión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="214"/>
+        <location filename="../pages/patients.py" line="202"/>
         <source>Sessions</source>
         <translation>Sesiones</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="328"/>
+        <location filename="../pages/patients.py" line="314"/>
         <source>Give the four ranges of motion.</source>
         <translation>Indique los cuatro rangos de movimiento.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="390"/>
+        <location filename="../pages/patients.py" line="372"/>
         <source>Save the progress report</source>
         <translation>Guardar el informe de evolución</translation>
     </message>
@@ -1378,125 +1376,125 @@
         <translation>Informe escrito: %1 (%2 páginas)</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="440"/>
+        <location filename="../pages/patients.py" line="422"/>
         <source>Ankle setup saved.</source>
         <translation>Configuración del tobillo guardada.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="446"/>
+        <location filename="../pages/patients.py" line="428"/>
         <source>Patient %1 registered.</source>
         <translation>Paciente %1 registrado.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="450"/>
+        <location filename="../pages/patients.py" line="432"/>
         <source>Limits saved.</source>
         <translation>Límites guardados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="453"/>
+        <location filename="../pages/patients.py" line="435"/>
         <source>Clinical data saved.</source>
         <translation>Datos clínicos guardados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="457"/>
+        <location filename="../pages/patients.py" line="439"/>
         <source>No identifying data recorded.</source>
         <translation>No hay datos identificativos registrados.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="475"/>
+        <location filename="../pages/patients.py" line="457"/>
         <source>No ankle setup entered: exercises turn about the platform&apos;s centre.</source>
         <translation>No se ha introducido la configuración del tobillo: los ejercicios giran alrededor del centro de la plataforma.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="481"/>
+        <location filename="../pages/patients.py" line="463"/>
         <source>measured with the camera</source>
         <translation>medido con la cámara</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="482"/>
+        <location filename="../pages/patients.py" line="464"/>
         <source>entered by hand</source>
         <translation>introducido a mano</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="484"/>
+        <location filename="../pages/patients.py" line="466"/>
         <source>Ankle centre in force (%1 foot): %2 mm above the sole; %3 mm along the foot (toes +), %4 mm across; foot plate %5 mm; %6</source>
         <translation>Centro del tobillo vigente (pie %1): %2 mm sobre la planta; %3 mm a lo largo del pie (dedos +), %4 mm transversal; placa del pie %5 mm; %6</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="499"/>
+        <location filename="../pages/patients.py" line="481"/>
         <source>Patient %1</source>
         <translation>Paciente %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="500"/>
+        <location filename="../pages/patients.py" line="482"/>
         <source>Body mass: %1 kg</source>
         <translation>Masa corporal: %1 kg</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="501"/>
+        <location filename="../pages/patients.py" line="483"/>
         <source>Height: %1 cm</source>
         <translation>Estatura: %1 cm</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="503"/>
+        <location filename="../pages/patients.py" line="486"/>
         <source>Affected side: %1</source>
         <translation>Lado afectado: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="504"/>
+        <location filename="../pages/patients.py" line="488"/>
         <source>Diagnosis: %1</source>
         <translation>Diagnóstico: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="505"/>
+        <location filename="../pages/patients.py" line="489"/>
         <source>Notes: %1</source>
         <translation>Notas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="515"/>
+        <location filename="../pages/patients.py" line="499"/>
         <source>No limits prescribed yet: a session needs them.</source>
         <translation>Aún no hay límites prescritos: una sesión los necesita.</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="519"/>
-        <location filename="../pages/run.py" line="61"/>
-        <location filename="../pages/run.py" line="545"/>
-        <location filename="../pages/run.py" line="564"/>
+        <location filename="../pages/patients.py" line="503"/>
+        <location filename="../pages/run.py" line="84"/>
+        <location filename="../pages/run.py" line="571"/>
+        <location filename="../pages/run.py" line="590"/>
         <source>dorsiflexion</source>
         <translation>dorsiflexión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="520"/>
-        <location filename="../pages/run.py" line="61"/>
-        <location filename="../pages/run.py" line="545"/>
-        <location filename="../pages/run.py" line="564"/>
+        <location filename="../pages/patients.py" line="504"/>
+        <location filename="../pages/run.py" line="84"/>
+        <location filename="../pages/run.py" line="571"/>
+        <location filename="../pages/run.py" line="590"/>
         <source>plantarflexion</source>
         <extracomment>Redraw rate of the live plots, Hz: the issue asks ≥ 30 fps; a 33 ms timer gives at most 30.3 and any late tick drops below, so the timer runs a little faster (frames with no new telemetry, 60 Hz, are skipped). Seconds of history on the live plots. The angle curves of the ankle view (from neutral) and of the platform (absolute).</extracomment>
         <translation>plantarflexión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="521"/>
-        <location filename="../pages/run.py" line="62"/>
-        <location filename="../pages/run.py" line="547"/>
-        <location filename="../pages/run.py" line="566"/>
+        <location filename="../pages/patients.py" line="505"/>
+        <location filename="../pages/run.py" line="85"/>
+        <location filename="../pages/run.py" line="573"/>
+        <location filename="../pages/run.py" line="592"/>
         <source>inversion</source>
         <translation>inversión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="521"/>
-        <location filename="../pages/run.py" line="62"/>
-        <location filename="../pages/run.py" line="547"/>
-        <location filename="../pages/run.py" line="566"/>
+        <location filename="../pages/patients.py" line="505"/>
+        <location filename="../pages/run.py" line="85"/>
+        <location filename="../pages/run.py" line="573"/>
+        <location filename="../pages/run.py" line="592"/>
         <source>eversion</source>
         <translation>eversión</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="524"/>
+        <location filename="../pages/patients.py" line="508"/>
         <source>Limits in force: %1; force ≤ %2 N; speed ≤ %3 °/s — set by %4 on %5</source>
         <translation>Límites vigentes: %1; fuerza ≤ %2 N; velocidad ≤ %3 °/s — fijados por %4 el %5</translation>
     </message>
     <message>
-        <location filename="../pages/patients.py" line="539"/>
+        <location filename="../pages/patients.py" line="523"/>
         <source>No sessions yet.</source>
         <translation>Aún no hay sesiones.</translation>
     </message>
@@ -1603,230 +1601,246 @@
         <translation>activa</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="134"/>
+        <location filename="../pages/calibrate.py" line="137"/>
         <source>empty: the default plan</source>
         <extracomment>The right side&apos;s tabs, and the one each step&apos;s result shows.</extracomment>
         <translation>vacío: el plan por defecto</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="136"/>
+        <location filename="../pages/calibrate.py" line="139"/>
         <source>robot twin (realistic)</source>
         <translation>gemelo del robot (realista)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="137"/>
+        <location filename="../pages/calibrate.py" line="140"/>
         <source>plate only (quick dry run)</source>
         <translation>solo la plataforma (ensayo rápido)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="141"/>
+        <location filename="../pages/calibrate.py" line="144"/>
         <source>1. Plan the loads</source>
         <translation>1. Planificar las cargas</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="142"/>
+        <location filename="../pages/calibrate.py" line="145"/>
         <source>2. Register the plate (camera)</source>
         <translation>2. Registrar la plataforma (cámara)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="143"/>
+        <location filename="../pages/calibrate.py" line="146"/>
         <source>3. Run the trials</source>
         <translation>3. Ejecutar los ensayos</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="144"/>
+        <location filename="../pages/calibrate.py" line="147"/>
         <source>4. Fit the calibration</source>
         <translation>4. Ajustar la calibración</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="145"/>
+        <location filename="../pages/calibrate.py" line="148"/>
         <source>5. Verify at check sites</source>
         <translation>5. Verificar en los puntos de control</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="146"/>
+        <location filename="../pages/calibrate.py" line="149"/>
         <source>6. Certificate (PDF)</source>
         <translation>6. Certificado (PDF)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="154"/>
+        <location filename="../pages/calibrate.py" line="157"/>
         <source>Choose the plate description and a new work folder, then plan.</source>
         <translation>Elija la descripción de la plataforma y una carpeta de trabajo nueva; después, planifique.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="166"/>
+        <location filename="../pages/calibrate.py" line="169"/>
         <source>Plate (top view, m)</source>
         <translation>Plataforma (vista superior, m)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="175"/>
-        <location filename="../pages/calibrate.py" line="358"/>
+        <location filename="../pages/calibrate.py" line="178"/>
+        <location filename="../pages/calibrate.py" line="376"/>
         <source>The camera&apos;s view of the plate appears when the plate is registered.</source>
         <translation>La vista de la plataforma desde la cámara aparece al registrar la plataforma.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="185"/>
+        <location filename="../pages/calibrate.py" line="188"/>
         <source>Vertical force on the plate</source>
         <translation>Fuerza vertical sobre la plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="188"/>
+        <location filename="../pages/calibrate.py" line="191"/>
         <source>robot time (s)</source>
         <translation>tiempo del robot (s)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="193"/>
+        <location filename="../pages/calibrate.py" line="196"/>
         <source>reference (ATI)</source>
         <translation>referencia (ATI)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="196"/>
+        <location filename="../pages/calibrate.py" line="199"/>
         <source>plate (nominal matrix)</source>
         <translation>plataforma (matriz nominal)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="204"/>
+        <location filename="../pages/calibrate.py" line="205"/>
+        <source>commanded</source>
+        <extracomment>the running trial, sample by sample while it runs (calibration&apos;s LiveSamples blocks): the commanded force and the load the ATI measures along the tool</extracomment>
+        <translation>ordenada</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="207"/>
+        <source>reference (ATI), trial running</source>
+        <translation>referencia (ATI), ensayo en curso</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="221"/>
         <source>Plate</source>
-        <extracomment>the live plot&apos;s data: per curve, the trials&apos; segments (x, y) in arrival order</extracomment>
+        <extracomment>the running trial&apos;s blocks (cleared when its file&apos;s forces arrive) the live plot&apos;s data: per curve, the trials&apos; segments (x, y) in arrival order</extracomment>
         <translation>Plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="205"/>
+        <location filename="../pages/calibrate.py" line="222"/>
         <source>Camera</source>
         <translation>Cámara</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="206"/>
+        <location filename="../pages/calibrate.py" line="223"/>
         <source>Trials</source>
         <translation>Ensayos</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="211"/>
+        <location filename="../pages/calibrate.py" line="228"/>
         <source>Plate description</source>
         <translation>Descripción de la plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="212"/>
+        <location filename="../pages/calibrate.py" line="229"/>
         <source>Work folder (new)</source>
         <translation>Carpeta de trabajo (nueva)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="213"/>
+        <location filename="../pages/calibrate.py" line="230"/>
         <source>Loading plan (YAML)</source>
         <translation>Plan de cargas (YAML)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="214"/>
+        <location filename="../pages/calibrate.py" line="231"/>
         <source>Run on</source>
         <translation>Ejecutar en</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="244"/>
+        <location filename="../pages/calibrate.py" line="261"/>
         <source>%1 is not empty: choose a new work folder.</source>
         <translation>%1 no está vacía: elija una carpeta de trabajo nueva.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="281"/>
+        <location filename="../pages/calibrate.py" line="299"/>
         <source>Save the calibration certificate</source>
         <translation>Guardar el certificado de calibración</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="293"/>
+        <location filename="../pages/calibrate.py" line="311"/>
         <source>Working…</source>
         <translation>Trabajando…</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="300"/>
+        <location filename="../pages/calibrate.py" line="318"/>
         <source>Trial %1 of %2: %3</source>
         <translation>Ensayo %1 de %2: %3</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="307"/>
+        <location filename="../pages/calibrate.py" line="325"/>
         <source>Step failed: %1</source>
         <translation>El paso falló: %1</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="315"/>
+        <location filename="../pages/calibrate.py" line="333"/>
         <source>%1 trials at %2 sites (%3 held out for validation), loads %4 N.</source>
         <translation>%1 ensayos en %2 puntos (%3 reservados para validación), cargas %4 N.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="323"/>
+        <location filename="../pages/calibrate.py" line="341"/>
         <source>%1 trials run (%2 s of robot time).</source>
         <translation>%1 ensayos ejecutados (%2 s de tiempo del robot).</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="329"/>
+        <location filename="../pages/calibrate.py" line="347"/>
         <source>PASS</source>
         <translation>APTO</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="329"/>
+        <location filename="../pages/calibrate.py" line="347"/>
         <source>FAIL</source>
         <translation>NO APTO</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="332"/>
+        <location filename="../pages/calibrate.py" line="350"/>
         <source>COP error RMS: %1 mm before, %2 mm after.</source>
         <translation>Error RMS del COP: %1 mm antes, %2 mm después.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="337"/>
+        <location filename="../pages/calibrate.py" line="355"/>
         <source>Not within the thresholds: %1.</source>
         <translation>Fuera de los umbrales: %1.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="342"/>
+        <location filename="../pages/calibrate.py" line="360"/>
         <source>Verification passed: COP error RMS %1 mm.</source>
         <translation>Verificación superada: error RMS del COP %1 mm.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="343"/>
+        <location filename="../pages/calibrate.py" line="361"/>
         <source>Verification failed: COP error RMS %1 mm.</source>
         <translation>Verificación no superada: error RMS del COP %1 mm.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="347"/>
+        <location filename="../pages/calibrate.py" line="365"/>
         <source>Certificate written: %1 (%2 pages)</source>
         <translation>Certificado escrito: %1 (%2 páginas)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="372"/>
+        <location filename="../pages/calibrate.py" line="398"/>
+        <source>Vertical force on the plate — trial running: %1</source>
+        <translation>Fuerza vertical sobre la plataforma — ensayo en curso: %1</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="406"/>
         <source>This plan places the plate by hand to its marks (nominal registration): no camera.</source>
         <translation>Este plan coloca la plataforma a mano sobre sus marcas (registro nominal): sin cámara.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="376"/>
+        <location filename="../pages/calibrate.py" line="410"/>
         <source>%1 of %2 markers detected (green). The plate outline (red) is where the camera puts it: %3 mm, %4 mm from the planned place, turned %5°; uncertainty %6 mm, %7° (1 σ).</source>
         <translation>%1 de %2 marcadores detectados (verde). El contorno de la plataforma (rojo) está donde la cámara la sitúa: a %3 mm, %4 mm del lugar previsto, girada %5°; incertidumbre %6 mm, %7° (1 σ).</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="400"/>
+        <location filename="../pages/calibrate.py" line="439"/>
         <source>Vertical force on the plate — trial %1 of %2: %3</source>
         <translation>Fuerza vertical sobre la plataforma — ensayo %1 de %2: %3</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="408"/>
+        <location filename="../pages/calibrate.py" line="447"/>
         <source>plate</source>
         <translation>plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="413"/>
+        <location filename="../pages/calibrate.py" line="452"/>
         <source>training sites</source>
         <translation>puntos de ajuste</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="414"/>
+        <location filename="../pages/calibrate.py" line="453"/>
         <source>validation sites</source>
         <translation>puntos de validación</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="426"/>
+        <location filename="../pages/calibrate.py" line="465"/>
         <source>COP error before (mm)</source>
         <translation>Error del COP antes (mm)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="427"/>
+        <location filename="../pages/calibrate.py" line="466"/>
         <source>COP error after (mm)</source>
         <translation>Error del COP después (mm)</translation>
     </message>
