@@ -79,6 +79,11 @@ SESSION_START_TIMEOUT_S = 120.0
 SHUTDOWN_SESSION_WAIT_S = 10.0
 #: GIL switch interval of the RT process (s).
 SWITCH_INTERVAL_S = 0.0002
+#: The GIL switch interval while the loop is awake with its guard on (s): longer than the guard
+#: and a cycle together, so that no other thread can force the loop off the GIL meanwhile.
+GIL_HOLD_S = 0.001
+#: How often a session_start/preflight reply is polled besides its worker's notification (s).
+DEFERRED_BACKSTOP_S = 0.25
 #: A program request not taken by the loop within this time is reported lost (s).
 PROGRAM_TAKE_TIMEOUT_S = 2.0
 
@@ -141,6 +146,13 @@ class RtConfig(BaseModel):
     #: default until a quiet machine shows it helps) leaves them ordinary threads; 1 is the
     #: value studied.
     service_priority: int | None = Field(default=None, ge=1, le=79)
+    #: The loop takes the GIL back this long before each deadline and keeps it, sleeping in C,
+    #: until its cycle has run (µs; realtime mode). The RT process's other threads (IPC,
+    #: telemetry, sessions, the recorder) then run Python only between a cycle's end and the
+    #: next guard, and none of them can delay a cycle's start or stretch it. None: off, the
+    #: loop shares the GIL by the 0.2 ms switch interval as before (``rt.engine.loop.Loop``,
+    #: ``gil_guard_us``; bench/rt_deadlines.py measures both).
+    gil_guard_us: float | None = Field(default=400.0, ge=0.0, le=500.0)
 
     def limits_of_robot(self) -> RobotLimits:
         return self.robot_limits.model_copy(
@@ -435,8 +447,6 @@ class RtService:
                                                    self._patient_ankle(patient)))
             self.session = session
         requested = self._now()
-        threading.Thread(target=self._session_worker, args=(session, protocol, requested),
-                         name=f"session-{session.id}", daemon=True).start()
 
         def outcome() -> dict[str, Any] | None:
             if session.state == "preflight":
@@ -449,7 +459,13 @@ class RtService:
                     "duration_s": prep.program.duration_s, "preflight": prep.preflight,
                     "recording": None if session.recording is None else str(session.recording),
                     "start_latency_s": session.start_latency_s}
-        return Deferred(outcome, timeout_s=SESSION_START_TIMEOUT_S, what="session_start")
+        reply = Deferred(outcome, timeout_s=SESSION_START_TIMEOUT_S, what="session_start",
+                         poll_interval_s=DEFERRED_BACKSTOP_S)
+        # The worker notifies the reply when the session leaves pre-flight (no polling).
+        threading.Thread(target=self._session_worker,
+                         args=(session, protocol, requested, reply.notify),
+                         name=f"session-{session.id}", daemon=True).start()
+        return reply
 
     def session_preflight(self, client: str, protocol: dict[str, Any],
                           patient: PatientArgs) -> Any:
@@ -477,9 +493,12 @@ class RtService:
             except Exception as exc:  # a bug must still answer the client
                 log.exception("session_preflight failed")
                 future.set_exception(InputError(f"internal error: {type(exc).__name__}: {exc}"))
+        reply = Deferred(lambda: future.result() if future.done() else None,
+                         timeout_s=SESSION_START_TIMEOUT_S, what="session_preflight",
+                         poll_interval_s=DEFERRED_BACKSTOP_S)
+        future.add_done_callback(lambda _: reply.notify())
         threading.Thread(target=work, name="session-preflight", daemon=True).start()
-        return Deferred(lambda: future.result() if future.done() else None,
-                        timeout_s=SESSION_START_TIMEOUT_S, what="session_preflight")
+        return reply
 
     def _patient_ankle(self, patient: PatientArgs) -> AnkleSetup | None:
         """The patient's ankle setup checked against this robot's platform (None when not
@@ -528,7 +547,17 @@ class RtService:
                 and e.reaction >= Reaction.SOFT_STOP]
 
     # -- worker: pre-flight, then start --------------------------------------------------
-    def _session_worker(self, s: _Session, protocol: dict[str, Any], requested: float) -> None:
+    def _session_worker(self, s: _Session, protocol: dict[str, Any], requested: float,
+                        notify: Callable[[], None] = lambda: None) -> None:
+        try:
+            self._prepare_and_start(s, protocol, requested)
+        finally:
+            notify()                   # its session_start reply is ready (started or refused)
+        if s.state == "running":
+            self._pump(s)
+
+    def _prepare_and_start(self, s: _Session, protocol: dict[str, Any],
+                           requested: float) -> None:
         assert self.sessions is not None
         try:
             prep = self.sessions.prepare(protocol, s.patient, self._context())
@@ -551,8 +580,6 @@ class RtService:
             with self._lock:
                 if self.session is s:
                     self.session = None
-            return
-        self._pump(s)
 
     def _start(self, s: _Session, prep: PreparedSession) -> None:
         """At a cycle boundary: the session's limits, the twin's environment; then the program;
@@ -790,6 +817,8 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
         "gains": config.gains or None, "patient_limits": config.patient_limits,
         "robot_limits": config.limits_of_robot(),
         "extra_blocks": [tap],
+        **({} if config.gil_guard_us is None or config.loop_mode != "realtime" else
+           {"gil_hold_s": GIL_HOLD_S, "gil_guard_us": config.gil_guard_us}),
         "extra_connections": [(src, f"session.{name}") for name, src in SESSION_SOURCES.items()]}
     if config.loop_mode == "fast" and config.backend != "sim":
         raise ConfigurationError("loop_mode fast is for the in-process twin (backend sim) only")

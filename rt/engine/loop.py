@@ -154,6 +154,8 @@ class Loop:
                  rt_priority: int | None = 80, cpus: Iterable[int] | None = None,
                  lock_memory: bool = True, switch_interval_s: float | None = 0.0002,
                  manage_gc: bool = True, gil_hold_s: float | None = None,
+                 gil_guard_us: float | None = None,
+                 hold_sleep: Callable[[int], None] | None = None,
                  command_capacity: int = 64,
                  stats_capacity: int = DEFAULT_CAPACITY) -> None:
         if not isinstance(graph, Graph):
@@ -183,6 +185,13 @@ class Loop:
         if gil_hold_s is not None and not (0.0 < gil_hold_s <= 0.1):
             raise ConfigurationError(f"gil_hold_s must be in (0, 0.1] s, got {gil_hold_s!r}")
         self._gil_hold_s = gil_hold_s
+        if gil_guard_us is not None and not (0.0 <= gil_guard_us <= 500.0):
+            raise ConfigurationError(f"gil_guard_us must be in [0, 500] µs, got {gil_guard_us!r}")
+        if gil_guard_us is not None and gil_hold_s is None:
+            raise ConfigurationError("gil_guard_us needs gil_hold_s (the guard keeps the GIL "
+                                     "only if no other thread can force it off meanwhile)")
+        self._guard_us = gil_guard_us
+        self._hold_sleep = hold_sleep or rt_hygiene.sleep_holding_gil
         self._queue = CommandQueue(command_capacity)
         self._capacity = check_capacity(stats_capacity)
         self._lat_ring = new_ring(self._capacity)
@@ -217,6 +226,8 @@ class Loop:
         self._period_s = 1.0 / rate
         self._period_ns = round(1e9 / rate)
         self._spin_ns = min(round(self._spin_us * 1e3), self._period_ns // 2)
+        guard = self._spin_us if self._guard_us is None else max(self._guard_us, self._spin_us)
+        self._guard_ns = min(round(guard * 1e3), self._period_ns // 2)
         self._tol_ns = round(self._miss_tolerance * self._period_ns)
         self._behind_ns = round(self._max_behind * self._period_ns)
 
@@ -401,6 +412,8 @@ class Loop:
         ring, mask = self._lat_ring, self._capacity - 1
         period_ns, spin_ns, tol_ns, behind_ns = (self._period_ns, self._spin_ns, self._tol_ns,
                                                  self._behind_ns)
+        guard_ns = self._guard_ns
+        hold_sleep = self._hold_sleep
         now = clock()
         if self._epoch_ns is None:
             self._epoch_ns = now
@@ -413,12 +426,17 @@ class Loop:
             if end_ns is not None and deadline >= end_ns:
                 break
             now = clock()
-            if deadline - now > spin_ns:
+            if deadline - now > guard_ns:
                 if between is not None:
                     set_interval(between)     # sleeping: take the GIL back quickly on waking
-                sleep((deadline - now - spin_ns) * 1e-9)
+                sleep((deadline - now - guard_ns) * 1e-9)
                 if hold is not None:
                     set_interval(hold)        # awake: keep it until the next sleep
+                now = clock()
+            if deadline - now > spin_ns:
+                # The guard: wait the rest in C *with* the GIL (nobody else runs Python), so
+                # the cycle starts on time whoever wanted the GIL meanwhile.
+                hold_sleep(deadline - now - spin_ns)
                 now = clock()
             while now < deadline:
                 now = clock()
@@ -442,6 +460,7 @@ class Loop:
                 queue.drain(self, cycle)
                 period_ns, spin_ns, tol_ns, behind_ns = (self._period_ns, self._spin_ns,
                                                          self._tol_ns, self._behind_ns)
+                guard_ns = self._guard_ns
             t = (now - epoch) * 1e-9
             self._t = t
             self._dt = dt
