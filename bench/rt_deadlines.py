@@ -52,8 +52,12 @@ VARIANTS: dict[str, str] = {
     "no_gil_hold": "one GIL switch interval (0.2 ms) during cycles too (as no_guard)",
     "no_guard": "the loop shares the GIL by the 0.2 ms switch interval (RtConfig "
                 "gil_guard_us=None: main before branch rtloop3)",
+    "guard": "the loop's GIL guard: awake 400 µs before each deadline, holding the GIL to the "
+             "cycle's end (RtConfig gil_guard_us=400)",
     "guard200": "the loop's GIL guard 200 µs before each deadline (RtConfig gil_guard_us)",
     "si50": "a 50 µs GIL switch interval (instead of 200 µs)",
+    "unaligned": "telemetry and the session pump on free-running timers (as before branch "
+                 "rtloop3), not woken by the loop right after a cycle",
     "no_hb": "the bench client sends no heartbeat while idle (only from the session start)",
 }
 
@@ -106,6 +110,24 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
         config = config.model_copy(update={"gil_guard_us": None})
     elif "guard200" in tokens:
         config = config.model_copy(update={"gil_guard_us": 200.0})
+    elif "guard" in tokens:
+        config = config.model_copy(update={"gil_guard_us": 400.0})
+    if "unaligned" in tokens:
+        from rt.engine import loop as loopmod
+
+        class FreeTimer:
+            """A CycleSignal stand-in that fires on its own period, whatever the loop does."""
+
+            def __init__(self, every: int) -> None:
+                self.period = every / config.rate_hz
+
+            def wait(self, timeout: float) -> bool:
+                time.sleep(min(timeout, self.period))
+                return True
+
+            def close(self) -> None:
+                pass
+        loopmod.Loop.cycle_signal = lambda self, every: FreeTimer(every)  # type: ignore
     if "no_telemetry" in tokens:
         config = config.model_copy(update={"telemetry_hz": 0.2})
     loop_kw: dict[str, Any] = {}

@@ -82,6 +82,8 @@ SWITCH_INTERVAL_S = 0.0002
 #: The GIL switch interval while the loop is awake with its guard on (s): longer than the guard
 #: and a cycle together, so that no other thread can force the loop off the GIL meanwhile.
 GIL_HOLD_S = 0.001
+#: How often a running session's pump drains the session tap (s).
+PUMP_PERIOD_S = 0.05
 #: How often a session_start/preflight reply is polled besides its worker's notification (s).
 DEFERRED_BACKSTOP_S = 0.25
 #: A program request not taken by the loop within this time is reported lost (s).
@@ -149,10 +151,12 @@ class RtConfig(BaseModel):
     #: The loop takes the GIL back this long before each deadline and keeps it, sleeping in C,
     #: until its cycle has run (µs; realtime mode). The RT process's other threads (IPC,
     #: telemetry, sessions, the recorder) then run Python only between a cycle's end and the
-    #: next guard, and none of them can delay a cycle's start or stretch it. None: off, the
-    #: loop shares the GIL by the 0.2 ms switch interval as before (``rt.engine.loop.Loop``,
-    #: ``gil_guard_us``; bench/rt_deadlines.py measures both).
-    gil_guard_us: float | None = Field(default=400.0, ge=0.0, le=500.0)
+    #: next guard, and cannot stretch a cycle. None (the default until a quiet machine shows it
+    #: helps: ``bench/rt_deadlines.py --variants base,guard``): the loop shares the GIL by the
+    #: 0.2 ms switch interval. Hazard, why it is not the default yet: a thread forced off the
+    #: GIL as the loop wakes may ask for it again with the short interval and take it at the
+    #: guard's end, and the loop then waits ``GIL_HOLD_S`` (closing note of branch rtloop3).
+    gil_guard_us: float | None = Field(default=None, ge=0.0, le=500.0)
 
     def limits_of_robot(self) -> RobotLimits:
         return self.robot_limits.model_copy(
@@ -669,9 +673,17 @@ class RtService:
         s.ankle = ankle
         fz, fr = COL_FZ, COL_FREF
         qd = COLUMNS["qd"]
+        # Realtime: drained right after a cycle, in the loop's sleep (see serve's telemetry).
+        tick = self.pl.loop.cycle_signal(max(1, round(PUMP_PERIOD_S * self.config.rate_hz))) \
+            if self.config.loop_mode == "realtime" else None
         try:
             while True:
-                if self.shutting_down.wait(0.05):
+                if tick is not None:
+                    tick.wait(2.0 * PUMP_PERIOD_S)
+                    stopping = self.shutting_down.is_set()
+                else:
+                    stopping = self.shutting_down.wait(PUMP_PERIOD_S)
+                if stopping:
                     rows, start = self.tap.drain(start)
                     figures.add(rows[rows[:, 0] >= s.t_start])
                     record_rows(recorder, rows[rows[:, 0] >= s.t_start], ankle)
@@ -695,6 +707,8 @@ class RtService:
                         if still_since is not None and last[0] - still_since >= 0.2:
                             break
         finally:
+            if tick is not None:
+                tick.close()
             self._finish(s, figures, recorder)
 
     def _finish(self, s: _Session, figures: Any, recorder: Any) -> None:
@@ -893,10 +907,28 @@ def _serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None
         if ready is not None:
             ready(server)
         period = 1.0 / config.telemetry_hz
+        # Realtime: telemetry is built right after a cycle, in the loop's sleep, woken by the
+        # loop every N cycles; a free-running 60 Hz timer woke it at random times, a third of
+        # them inside a cycle, which then lost the GIL for a switch interval or more.
+        tick = pl.loop.cycle_signal(max(1, round(config.rate_hz / config.telemetry_hz))) \
+            if config.loop_mode == "realtime" else None
         try:
-            while not stop_event.wait(period):
-                server.publish("telemetry", telemetry(service))
+            last = -math.inf
+            while not stop_event.is_set():
+                if tick is None:
+                    if stop_event.wait(period):
+                        break
+                elif not tick.wait(2.0 * period):
+                    # No cycle for two periods (the loop stalled or stopped): publish anyway,
+                    # a GUI must see the robot's state whatever the loop does.
+                    pass
+                now = time.monotonic()
+                if now - last >= 0.9 * period:
+                    last = now
+                    server.publish("telemetry", telemetry(service))
         finally:
+            if tick is not None:
+                tick.close()
             s = service.session
             if s is not None:
                 # Stopping mid-session: abort it (soft stop, return to rest) while the loop

@@ -24,6 +24,8 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import os
+import select
 import sys
 import threading
 import time
@@ -111,6 +113,58 @@ class LoopStats:
         return "\n".join(lines)
 
 
+class CycleSignal:
+    """Set by the loop after every ``every``-th cycle; another thread waits on it to run its
+    Python right after a cycle, in the loop's sleep, instead of at a random time when its
+    first bytecode may be the one that delays the loop's next cycle (the loop shares the GIL
+    with it). A pipe, not a ``threading.Event``: firing is one non-blocking ``write`` with no
+    lock the loop could wait on. Waiting clears it. :meth:`close` removes it from the loop."""
+
+    def __init__(self, loop: Loop, every: int) -> None:
+        self.every = every
+        self._loop = loop
+        self._r, self._w = os.pipe()
+        os.set_blocking(self._r, False)
+        os.set_blocking(self._w, False)
+        self.closed = False
+
+    def fire(self) -> None:
+        """The loop's side (any thread may call it): never blocks."""
+        try:
+            os.write(self._w, b"\0")
+        except OSError:
+            pass               # the pipe is full (the waiter is behind: one pending is enough)
+
+    def wait(self, timeout: float) -> bool:
+        """Wait until fired or ``timeout`` s; True when fired (and cleared)."""
+        if self.closed:
+            return False
+        ready, _, _ = select.select([self._r], [], [], max(0.0, timeout))
+        if not ready:
+            return False
+        try:
+            while os.read(self._r, 4096):
+                pass
+        except (BlockingIOError, InterruptedError):
+            pass
+        return True
+
+    def close(self) -> None:
+        """No more firing. The pipe is closed when the last reference goes (``__del__``): the
+        loop may be firing it from the tuple it read a moment ago, and a closed descriptor's
+        number can be reused by another file."""
+        if self.closed:
+            return
+        self.closed = True
+        self._loop._remove_signal(self)
+
+    def __del__(self) -> None:
+        for fd in (getattr(self, "_r", None), getattr(self, "_w", None)):
+            if fd is not None:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+
+
 class Loop:
     """One periodic activity running a :class:`Graph`.
 
@@ -193,6 +247,7 @@ class Loop:
         self._guard_us = gil_guard_us
         self._hold_sleep = hold_sleep or rt_hygiene.sleep_holding_gil
         self._queue = CommandQueue(command_capacity)
+        self._signals: tuple[CycleSignal, ...] = ()
         self._capacity = check_capacity(stats_capacity)
         self._lat_ring = new_ring(self._capacity)
         self._set_period(check_rate(rate_hz))
@@ -389,6 +444,10 @@ class Loop:
             step(t, dt)
             self._cycles = cycle + 1
             k += 1
+            if self._signals:
+                for sig in self._signals:
+                    if (cycle + 1) % sig.every == 0:
+                        sig.fire()
 
     def _run_realtime(self, cycles: int | None, seconds: float | None) -> None:
         hold = self._gil_hold_s
@@ -433,6 +492,11 @@ class Loop:
                 if hold is not None:
                     set_interval(hold)        # awake: keep it until the next sleep
                 now = clock()
+            elif between is not None:
+                # No room to sleep (a late or long cycle): the loop would keep the GIL from
+                # cycle to cycle and the others could take it only after ``hold``, each time
+                # stalling the loop as long. Share it by the short interval until it sleeps.
+                set_interval(between)
             if deadline - now > spin_ns:
                 # The guard: wait the rest in C *with* the GIL (nobody else runs Python), so
                 # the cycle starts on time whoever wanted the GIL meanwhile.
@@ -467,7 +531,23 @@ class Loop:
             step(t, dt)
             self._cycles = cycle + 1
             k += 1
+            if self._signals:
+                for sig in self._signals:
+                    if (cycle + 1) % sig.every == 0:
+                        sig.fire()
             deadline += period_ns
+
+    # ------------------------------------------------------------------ signals
+    def cycle_signal(self, every: int) -> CycleSignal:
+        """A :class:`CycleSignal` fired after every ``every``-th cycle (≥ 1), in both modes."""
+        if not isinstance(every, int) or every < 1:
+            raise ConfigurationError(f"cycle_signal needs every ≥ 1 cycles, got {every!r}")
+        sig = CycleSignal(self, every)
+        self._signals = (*self._signals, sig)    # one tuple swap: the loop reads it lock-free
+        return sig
+
+    def _remove_signal(self, sig: CycleSignal) -> None:
+        self._signals = tuple(x for x in self._signals if x is not sig)
 
     # ------------------------------------------------------------------ commands
     def set_rate(self, rate_hz: float) -> CommandResult:
