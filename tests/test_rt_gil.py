@@ -20,7 +20,7 @@ import pytest
 
 from rt.engine import Component, GraphBuilder, Loop
 from rt.engine.rt_hygiene import sleep_holding_gil
-from rt.errors import ConfigurationError
+from rt.errors import ConfigurationError, InputError
 
 NO_RT = {"rt_priority": None, "lock_memory": False, "switch_interval_s": None}
 
@@ -189,7 +189,9 @@ def test_the_deferred_poll_interval_is_checked() -> None:
 # ------------------------------------------------------------------------------ transfer
 def test_a_prepared_generator_travels_through_shared_memory_unchanged() -> None:
     """The sine's reference table (> 64 KB) crosses as a view of a mapped segment whose name
-    is gone once mapped; small arrays stay inside the pickle; every sample is identical."""
+    is gone once mapped, the kinematics as a name the receiver resolves to its own (refused,
+    the segment removed, when it has none); small arrays stay inside the pickle; every
+    sample is identical."""
     from protocols.generators import make_generator
     from protocols.library import LIBRARY_DIR
     from protocols.rt_session import SHARED_MIN_BYTES, from_shared, protocol_document, to_shared
@@ -205,11 +207,14 @@ def test_a_prepared_generator_travels_through_shared_memory_unchanged() -> None:
     big = [k for k, v in vars(gen).items()
            if isinstance(v, np.ndarray) and v.nbytes >= SHARED_MIN_BYTES]
     assert big, "the sine should carry a reference table worth sharing"
-    payload = to_shared(gen)
-    assert payload.segment is not None
+    payload = to_shared(gen, references={"kinematics": model.kin})
+    assert payload.segment is not None and payload.references == ("kinematics",)
     assert os.path.exists(f"/dev/shm/{payload.segment.lstrip('/')}")
     assert len(payload.pickled) < 64 * 1024           # the table is not in the pickle
-    back = from_shared(payload)
+    with pytest.raises(InputError, match="kinematics"):     # the receiver must supply it
+        from_shared(to_shared(gen, references={"kinematics": model.kin}))
+    back = from_shared(payload, {"kinematics": model.kin})
+    assert back.kinematics is model.kin                  # by reference, not rebuilt
     assert not os.path.exists(f"/dev/shm/{payload.segment.lstrip('/')}")
     for k in big:
         arr = getattr(back, k)
