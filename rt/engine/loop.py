@@ -187,6 +187,17 @@ class Loop:
       ``switch_interval_s``. Off by default until a quiet machine shows it helps: on a loaded
       one single runs were inconclusive (closing note of branch rtsession).
 
+    * ``gil_guard_us`` — with ``gil_hold_s``: wake this long before each deadline (instead of
+      ``spin_us``) and wait the rest in C *keeping* the GIL (``hold_sleep``, default
+      :data:`rt_hygiene.sleep_holding_gil`; injectable with a fake clock), so that the cycle
+      starts on time whoever wanted the GIL when the loop woke. None: off.
+    * :meth:`cycle_signal` — a pipe fired every N cycles, for threads that should run right
+      after a cycle (telemetry, the session pump) rather than at random times.
+
+    A cycle with no room to sleep before its deadline (late, or the first) shares the GIL by
+    the short interval: holding it from cycle to cycle would leave the other threads only
+    forced switches after ``gil_hold_s``, each stalling the loop as long.
+
     Why the two intervals: the loop shares the GIL with the process's other threads (IPC,
     telemetry, sessions, the recorder). A thread that asks for the GIL waits one switch
     interval, then forces its holder to drop it; with one short interval (0.2 ms) any busy
