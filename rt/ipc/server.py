@@ -114,7 +114,10 @@ class RtServer:
         heartbeat_timeout_s: age after which :meth:`heartbeat_lost` reports the client lost, s.
         publish_queue_len: hand-over queue length; when full the oldest message is dropped.
         context: a zmq context to share (default: a private one, terminated by ``close()``).
-        poll_interval_s: longest wait of the server thread between checks of its stop flag, s.
+        poll_interval_s: longest wait of the server thread between checks of its stop flag, s
+            (``close()`` wakes it at once; the wait only bounds a lost wake-up: the thread
+            shares the GIL with the RT loop, and each idle wake-up is a chance to hold it
+            when the loop wants it).
         curve: CurveZMQ keys (see :mod:`rt.ipc.security`); required for an endpoint that is
             not loopback.
 
@@ -127,7 +130,7 @@ class RtServer:
                  pub_endpoint: str = DEFAULT_PUB_ENDPOINT, heartbeat_timeout_s: float = 0.25,
                  *, publish_queue_len: int = 1024,
                  context: zmq.Context[Any] | None = None,
-                 poll_interval_s: float = 0.05,
+                 poll_interval_s: float = 0.5,
                  curve: ServerCurveConfig | None = None) -> None:
         missing = [m for m in HANDLER_METHODS if not callable(getattr(handler, m, None))]
         if missing:
