@@ -349,8 +349,10 @@ class RtServer:
         if not self._deferred:
             return self._poll_ms
         now = time.monotonic()
-        due = min(min(d.next_poll, d.deadline) for _, _, d in self._deferred)
-        return max(0, min(self._poll_ms, math.ceil((due - now) * 1000.0)))
+        wait_s = min(min(d.next_poll, d.deadline) for _, _, d in self._deferred) - now
+        if wait_s <= 0.0 or any(d._notified for _, _, d in self._deferred):
+            return 0                           # due now (a new one's next_poll is -inf)
+        return min(self._poll_ms, math.ceil(wait_s * 1000.0))
 
     def _drain_wake(self) -> None:
         try:
