@@ -103,35 +103,39 @@ def test_the_guard_is_refused_without_the_hold_and_out_of_range() -> None:
 
 
 def test_sleep_holding_gil_keeps_other_python_threads_out() -> None:
-    """A thread counting in Python advances while the main thread is in ``time.sleep`` and
-    not while it is in ``sleep_holding_gil`` (the GIL is not released around the C call).
-    The counting thread, always asking for the GIL, may force the main thread off once on
-    the bytecodes around the call: one switch interval's worth of counts (0.2 ms), against
-    100 ms of counting while the GIL is free."""
-    count = [0]
+    """A thread stamping the clock in Python, as fast as it can, is stopped for the whole of
+    a 100 ms ``sleep_holding_gil`` (the GIL is not released around the C call): its stamps
+    show a gap of at least the sleep. Load-proof: a loaded machine can only add gaps, and a
+    sleep that released the GIL would leave none of that length to a thread that has a CPU
+    (the check that it ran at all is that it stamped before and after)."""
+    stamps: list[int] = []
     stop = threading.Event()
+    clock = time.perf_counter_ns
 
-    def spin() -> None:
+    def stamp() -> None:
         while not stop.is_set():
-            count[0] += 1
-    t = threading.Thread(target=spin, daemon=True)
+            stamps.append(clock())
+    t = threading.Thread(target=stamp, daemon=True)
     before = sys.getswitchinterval()
     sys.setswitchinterval(0.0002)
     try:
         t.start()
-        held, released = [], []
-        for _ in range(3):
-            c0 = count[0]
-            sleep_holding_gil(100_000_000)
-            held.append(count[0] - c0)
-            c0 = count[0]
-            time.sleep(0.1)
-            released.append(count[0] - c0)
+        while len(stamps) < 1000:
+            time.sleep(0.001)
+        a = clock()
+        sleep_holding_gil(100_000_000)
+        b = clock()
+        end = clock() + 5_000_000_000          # only a guard against a hang
+        while clock() < end and (not stamps or stamps[-1] <= b):
+            time.sleep(0.001)
     finally:
         stop.set()
         t.join(5.0)
         sys.setswitchinterval(before)
-    assert sorted(held)[1] < 0.1 * sorted(released)[1], (held, released)
+    assert b - a >= 99_000_000
+    around = np.asarray([x for x in stamps if a - 10**9 <= x <= b + 10**9], dtype=np.int64)
+    assert around.min() < a and around.max() > b          # it ran before and after
+    assert np.diff(around).max() >= 99_000_000
 
 
 def test_sleep_holding_gil_sleeps_about_as_long_as_asked() -> None:
