@@ -48,9 +48,18 @@ VARIANTS: dict[str, str] = {
     "no_telemetry": "telemetry published at 0.2 Hz instead of 60 Hz",
     "no_fifo": "the loop thread without SCHED_FIFO (plain CFS thread)",
     "peer_prio": "the RT process's other threads at SCHED_FIFO 1 (RtConfig.service_priority)",
-    "hold1": "the loop holds the GIL for its cycle (Loop gil_hold_s=0.001)",
+    "hold1": "the loop holds the GIL for its cycle (Loop gil_hold_s=0.001), no guard",
     "hold5": "as hold1 with 5 ms",
-    "no_gil_hold": "one GIL switch interval (0.2 ms) during cycles too (Loop gil_hold_s=None)",
+    "no_gil_hold": "one GIL switch interval (0.2 ms) during cycles too (as no_guard)",
+    "no_guard": "the loop shares the GIL by the 0.2 ms switch interval (RtConfig "
+                "gil_guard_us=None: main before branch rtloop3)",
+    "guard": "the loop's GIL guard: awake 400 µs before each deadline, holding the GIL to the "
+             "cycle's end (RtConfig gil_guard_us=400)",
+    "guard200": "the loop's GIL guard 200 µs before each deadline (RtConfig gil_guard_us)",
+    "si50": "a 50 µs GIL switch interval (instead of 200 µs)",
+    "unaligned": "telemetry and the session pump on free-running timers (as before branch "
+                 "rtloop3), not woken by the loop right after a cycle",
+    "no_hb": "the bench client sends no heartbeat while idle (only from the session start)",
 }
 
 PATIENT = {"id": "BENCH", "weight_kg": 70.0}
@@ -65,7 +74,7 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
 
     tokens = set(variant.split("+")) - {"base"}
     if "shipped" in tokens:
-        tokens |= {"no_peer_prio", "f32", "no_gil_hold"}
+        tokens |= {"no_peer_prio", "f32", "no_guard"}
     real_build = service.build_rt_loop
 
     def build(cfg: Any) -> Any:
@@ -99,14 +108,39 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
     if "no_figures" in tokens:
         import protocols.session as psession
         psession.SessionFigures.add = lambda self, rows: None  # type: ignore[method-assign]
+    if "no_guard" in tokens:
+        config = config.model_copy(update={"gil_guard_us": None})
+    elif "guard200" in tokens:
+        config = config.model_copy(update={"gil_guard_us": 200.0})
+    elif "guard" in tokens:
+        config = config.model_copy(update={"gil_guard_us": 400.0})
+    if "unaligned" in tokens:
+        from rt.engine import loop as loopmod
+
+        class FreeTimer:
+            """A CycleSignal stand-in that fires on its own period, whatever the loop does."""
+
+            def __init__(self, every: int) -> None:
+                self.period = every / config.rate_hz
+
+            def wait(self, timeout: float) -> bool:
+                time.sleep(min(timeout, self.period))
+                return True
+
+            def close(self) -> None:
+                pass
+        loopmod.Loop.cycle_signal = lambda self, every: FreeTimer(every)  # type: ignore
     if "no_telemetry" in tokens:
         config = config.model_copy(update={"telemetry_hz": 0.2})
     loop_kw: dict[str, Any] = {}
     if "no_fifo" in tokens:
         loop_kw["rt_priority"] = None
-    if "no_gil_hold" in tokens:
-        loop_kw["gil_hold_s"] = None
-    elif "hold5" in tokens:
+    if "si50" in tokens:
+        loop_kw["switch_interval_s"] = 0.00005
+        service.SWITCH_INTERVAL_S = 0.00005
+    if "no_gil_hold" in tokens or "hold5" in tokens or "hold1" in tokens:
+        config = config.model_copy(update={"gil_guard_us": None})     # the hold alone
+    if "hold5" in tokens:
         loop_kw["gil_hold_s"] = 0.005
     elif "hold1" in tokens:
         loop_kw["gil_hold_s"] = 0.001
@@ -174,11 +208,15 @@ def run_variant(variant: str, doc: dict, idle_s: float) -> dict[str, Any]:
         endpoint = json.loads(line)["serving"]["endpoint"]
         with RtClient(endpoint, timeout_s=5.0) as c:
             c.control_acquire("deadlines bench")
-            c.start_heartbeat(0.05)
+            idle_hb = "no_hb" not in variant.split("+")
+            if idle_hb:
+                c.start_heartbeat(0.05)
             time.sleep(2.0)                       # the loop settles (compiled kernels loaded)
             s0 = c.status()
             time.sleep(idle_s)
             s1 = c.status()
+            if not idle_hb:
+                c.start_heartbeat(0.05)
             t0 = time.monotonic()
             try:
                 started = c.session_start(doc, PATIENT)

@@ -5,7 +5,11 @@ RT process what it needs to run, record and summarize it.
 All of that is CPU-heavy (a 60 s protocol's pre-flight simulates it on the twin through the
 whole loop: tens of seconds of CPU; its references are compiled, milliseconds): it runs in a worker *process* (spawned once, kept warm), never in a
 thread of the RT process, whose loop would then share the GIL with it and miss its deadlines.
-The validated generator comes back pickled.
+The validated generator comes back pickled, its arrays (a 60 s protocol's reference table is
+2 MB) in shared memory (:func:`to_shared` / :func:`from_shared`) and its robot kinematics by
+reference (the RT process has the same, built from the description it sent): unpickled in the
+RT process they cost a page mapping, not copies and 65 pydantic models rebuilt with the GIL
+held (13 ms measured under load, a stall of the loop; ``bench/session_transfer.py``).
 
 Data files a protocol names (a gait record, a playback CSV) resolve in the protocol library
 directory when relative; a client that loaded its protocol from elsewhere sends them absolute
@@ -13,9 +17,13 @@ directory when relative; a client that loaded its protocol from elsewhere sends 
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
+import mmap
 import multiprocessing
 import os
+import pickle
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -34,7 +42,7 @@ from protocols.session import (
     protocol_limits_of,
     start_pose,
 )
-from rt.errors import ProtocolValidationError
+from rt.errors import InputError, ProtocolValidationError
 from rt.model import RobotModel
 from rt.model.ankle import AnkleSetup
 from rt.references.program import Program
@@ -159,7 +167,8 @@ class ProtocolSessions:
         if self.in_process:
             session = prepare_session(*args)
         else:
-            session = self._worker().submit(prepare_session, *args).result()
+            session = from_shared(self._worker().submit(_prepare_shared, *args).result(),
+                                  {KINEMATICS_REF: context.model.kin})
         session.model = context.model
         return session
 
@@ -194,6 +203,139 @@ def _end_with_parent(parent_pid: int) -> None:
         os._exit(0)                            # nothing to flush: the work was for the parent
 
     threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+# ------------------------------------------------------------------ the transfer
+#: Arrays smaller than this travel inside the pickle (a segment per session is not worth it).
+SHARED_MIN_BYTES = 64 * 1024
+_SHM_DIR = Path("/dev/shm")
+_ALIGN = 64
+
+
+@dataclass(frozen=True)
+class SharedPayload:
+    """A pickled object (protocol 5) whose large buffers wait in one POSIX shared-memory
+    segment: ``spans`` are each out-of-band buffer's (offset, length) in ``segment``, in the
+    pickle's order; ``segment`` is None when no buffer was large enough."""
+
+    pickled: bytes
+    segment: str | None
+    size: int
+    spans: tuple[tuple[int, int], ...]
+    #: Names of the objects sent by reference (the receiver supplies them).
+    references: tuple[str, ...] = ()
+
+
+class _Pickler(pickle.Pickler):
+    def __init__(self, file: io.BytesIO, refs: dict[int, str], **kw: Any) -> None:
+        super().__init__(file, protocol=5, **kw)
+        self._refs = refs
+        self.used: set[str] = set()
+
+    def persistent_id(self, obj: Any) -> str | None:
+        name = self._refs.get(id(obj))
+        if name is not None:
+            self.used.add(name)
+        return name
+
+
+class _Unpickler(pickle.Unpickler):
+    def __init__(self, file: io.BytesIO, refs: dict[str, Any], **kw: Any) -> None:
+        super().__init__(file, **kw)
+        self._refs = refs
+
+    def persistent_load(self, pid: Any) -> Any:
+        try:
+            return self._refs[pid]
+        except (KeyError, TypeError):
+            raise pickle.UnpicklingError(f"the receiver has no object {pid!r} to stand for "
+                                         "the sender's") from None
+
+
+def to_shared(obj: Any, min_bytes: int = SHARED_MIN_BYTES,
+              references: dict[str, Any] | None = None) -> SharedPayload:
+    """Pickle ``obj`` with its large contiguous buffers (numpy arrays) copied into a new
+    shared-memory segment, which :func:`from_shared` maps and removes, and each object in
+    ``references`` (name → object) sent as its name only. Run in the worker."""
+    from multiprocessing import resource_tracker, shared_memory
+
+    buffers: list[pickle.PickleBuffer] = []
+
+    def out_of_band(buf: pickle.PickleBuffer) -> bool:
+        if buf.raw().nbytes < min_bytes:
+            return True                         # in band: inside the pickle
+        buffers.append(buf)
+        return False
+    out = io.BytesIO()
+    pickler = _Pickler(out, {id(v): k for k, v in (references or {}).items()},
+                       buffer_callback=out_of_band)
+    pickler.dump(obj)
+    pickled, used = out.getvalue(), tuple(sorted(pickler.used))
+    if not buffers:
+        return SharedPayload(pickled, None, 0, (), used)
+    spans, offset = [], 0
+    for buf in buffers:
+        n = buf.raw().nbytes
+        spans.append((offset, n))
+        offset += -(-n // _ALIGN) * _ALIGN
+    shm = shared_memory.SharedMemory(create=True, size=max(offset, 1))
+    try:
+        target = shm.buf
+        assert target is not None
+        for buf, (start, n) in zip(buffers, spans, strict=True):
+            target[start:start + n] = buf.raw().cast("B")
+        # The RT process unlinks it once mapped: the worker's resource tracker must not.
+        resource_tracker.unregister(shm._name, "shared_memory")  # type: ignore[attr-defined]
+        name = shm.name
+    except BaseException:
+        shm.close()
+        shm.unlink()
+        raise
+    shm.close()
+    return SharedPayload(pickled, name, offset, tuple(spans), used)
+
+
+def from_shared(payload: SharedPayload, references: dict[str, Any] | None = None) -> Any:
+    """The object :func:`to_shared` sent, its large arrays views of the mapped segment (no
+    copy), the segment's name removed at once (the mapping lives as long as the arrays), and
+    the objects it sent by reference taken from ``references`` (name → this side's object)."""
+    refs = references or {}
+    missing = sorted(set(payload.references) - set(refs))
+    if missing:
+        discard_shared(payload)
+        raise InputError(f"the prepared session refers to {missing}, which the RT process did "
+                         "not supply")
+    if payload.segment is None:
+        return _Unpickler(io.BytesIO(payload.pickled), refs).load()
+    path = _SHM_DIR / payload.segment.lstrip("/")
+    fd = os.open(path, os.O_RDWR)
+    try:
+        mapped = mmap.mmap(fd, payload.size)
+    finally:
+        os.close(fd)
+        os.unlink(path)
+    view = memoryview(mapped)
+    return _Unpickler(io.BytesIO(payload.pickled), refs,
+                      buffers=[view[start:start + n] for start, n in payload.spans]).load()
+
+
+def discard_shared(payload: SharedPayload) -> None:
+    """Remove a payload's segment without reading it (a refused or abandoned transfer)."""
+    if payload.segment is not None:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(_SHM_DIR / payload.segment.lstrip("/"))
+
+
+#: The name the worker's kinematics travels under (the RT process supplies its own).
+KINEMATICS_REF = "kinematics"
+
+
+def _prepare_shared(protocol: dict[str, Any], patient: PatientInfo, description: Any,
+                    *rest: Any) -> SharedPayload:
+    """:func:`prepare_session` in the worker, sent back through shared memory, the robot's
+    kinematics by reference."""
+    session = prepare_session(protocol, patient, description, *rest)
+    return to_shared(session, references={KINEMATICS_REF: _model_for(description).kin})
 
 
 _MODELS: dict[str, RobotModel] = {}

@@ -87,6 +87,13 @@ SESSION_START_TIMEOUT_S = 120.0
 SHUTDOWN_SESSION_WAIT_S = 10.0
 #: GIL switch interval of the RT process (s).
 SWITCH_INTERVAL_S = 0.0002
+#: The GIL switch interval while the loop is awake with its guard on (s): longer than the guard
+#: and a cycle together, so that no other thread can force the loop off the GIL meanwhile.
+GIL_HOLD_S = 0.001
+#: How often a running session's pump drains the session tap (s).
+PUMP_PERIOD_S = 0.05
+#: How often a session_start/preflight reply is polled besides its worker's notification (s).
+DEFERRED_BACKSTOP_S = 0.25
 #: A program request not taken by the loop within this time is reported lost (s).
 PROGRAM_TAKE_TIMEOUT_S = 2.0
 
@@ -153,6 +160,15 @@ class RtConfig(BaseModel):
     #: ``session_start`` with the same protocol and patient (s; 0: never reused, every start
     #: pre-flights again). ``rt.preflight_reuse`` lists what else invalidates it.
     preflight_reuse_s: float = Field(default=DEFAULT_MAX_AGE_S, ge=0.0, le=3600.0)
+    #: The loop takes the GIL back this long before each deadline and keeps it, sleeping in C,
+    #: until its cycle has run (µs; realtime mode). The RT process's other threads (IPC,
+    #: telemetry, sessions, the recorder) then run Python only between a cycle's end and the
+    #: next guard, and cannot stretch a cycle. None (the default until a quiet machine shows it
+    #: helps: ``bench/rt_deadlines.py --variants base,guard``): the loop shares the GIL by the
+    #: 0.2 ms switch interval. Hazard, why it is not the default yet: a thread forced off the
+    #: GIL as the loop wakes may ask for it again with the short interval and take it at the
+    #: guard's end, and the loop then waits ``GIL_HOLD_S`` (closing note of branch rtloop3).
+    gil_guard_us: float | None = Field(default=None, ge=0.0, le=500.0)
 
     def limits_of_robot(self) -> RobotLimits:
         return self.robot_limits.model_copy(
@@ -474,9 +490,6 @@ class RtService:
             session.kept = kept if session.not_reused is None else None
             self.session = session
         requested = self._now()
-        threading.Thread(target=self._session_worker,
-                         args=(session, protocol, requested, key),
-                         name=f"session-{session.id}", daemon=True).start()
 
         def outcome() -> dict[str, Any] | None:
             if session.state == "preflight":
@@ -492,7 +505,13 @@ class RtService:
                     "preflight_id": (session.preflight_run or {}).get("id"),
                     "preflight_reused": bool((session.preflight_run or {}).get("reused")),
                     "preflight_not_reused": session.not_reused}
-        return Deferred(outcome, timeout_s=SESSION_START_TIMEOUT_S, what="session_start")
+        reply = Deferred(outcome, timeout_s=SESSION_START_TIMEOUT_S, what="session_start",
+                         poll_interval_s=DEFERRED_BACKSTOP_S)
+        # The worker notifies the reply when the session leaves pre-flight (no polling).
+        threading.Thread(target=self._session_worker,
+                         args=(session, protocol, requested, key, reply.notify),
+                         name=f"session-{session.id}", daemon=True).start()
+        return reply
 
     def session_preflight(self, client: str, protocol: dict[str, Any],
                           patient: PatientArgs) -> Any:
@@ -526,9 +545,12 @@ class RtService:
                 self.preflights.failed(entry)
                 log.exception("session_preflight failed")
                 future.set_exception(InputError(f"internal error: {type(exc).__name__}: {exc}"))
+        reply = Deferred(lambda: future.result() if future.done() else None,
+                         timeout_s=SESSION_START_TIMEOUT_S, what="session_preflight",
+                         poll_interval_s=DEFERRED_BACKSTOP_S)
+        future.add_done_callback(lambda _: reply.notify())
         threading.Thread(target=work, name="session-preflight", daemon=True).start()
-        return Deferred(lambda: future.result() if future.done() else None,
-                        timeout_s=SESSION_START_TIMEOUT_S, what="session_preflight")
+        return reply
 
     def preflight_reuse(self, client: str, protocol: dict[str, Any],
                         patient: PatientArgs) -> str | None:
@@ -630,7 +652,16 @@ class RtService:
 
     # -- worker: pre-flight, then start --------------------------------------------------
     def _session_worker(self, s: _Session, protocol: dict[str, Any], requested: float,
-                        key: PreflightKey) -> None:
+                        key: PreflightKey, notify: Callable[[], None] = lambda: None) -> None:
+        try:
+            self._prepare_and_start(s, protocol, requested, key)
+        finally:
+            notify()                   # its session_start reply is ready (started or refused)
+        if s.state == "running":
+            self._pump(s)
+
+    def _prepare_and_start(self, s: _Session, protocol: dict[str, Any], requested: float,
+                           key: PreflightKey) -> None:
         assert self.sessions is not None
         try:
             kept = s.kept
@@ -667,8 +698,6 @@ class RtService:
             with self._lock:
                 if self.session is s:
                     self.session = None
-            return
-        self._pump(s)
 
     def _start(self, s: _Session, prep: PreparedSession) -> None:
         """At a cycle boundary: the session's limits, the twin's environment; then the program;
@@ -764,9 +793,17 @@ class RtService:
         s.ankle = ankle
         fz, fr = COL_FZ, COL_FREF
         qd = COLUMNS["qd"]
+        # Realtime: drained right after a cycle, in the loop's sleep (see serve's telemetry).
+        tick = self.pl.loop.cycle_signal(max(1, round(PUMP_PERIOD_S * self.config.rate_hz))) \
+            if self.config.loop_mode == "realtime" else None
         try:
             while True:
-                if self.shutting_down.wait(0.05):
+                if tick is not None:
+                    tick.wait(2.0 * PUMP_PERIOD_S)
+                    stopping = self.shutting_down.is_set()
+                else:
+                    stopping = self.shutting_down.wait(PUMP_PERIOD_S)
+                if stopping:
                     rows, start = self.tap.drain(start)
                     figures.add(rows[rows[:, 0] >= s.t_start])
                     record_rows(recorder, rows[rows[:, 0] >= s.t_start], ankle)
@@ -790,6 +827,8 @@ class RtService:
                         if still_since is not None and last[0] - still_since >= 0.2:
                             break
         finally:
+            if tick is not None:
+                tick.close()
             self._finish(s, figures, recorder)
 
     def _finish(self, s: _Session, figures: Any, recorder: Any) -> None:
@@ -913,6 +952,8 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
         "gains": config.gains or None, "patient_limits": config.patient_limits,
         "robot_limits": config.limits_of_robot(),
         "extra_blocks": [tap],
+        **({} if config.gil_guard_us is None or config.loop_mode != "realtime" else
+           {"gil_hold_s": GIL_HOLD_S, "gil_guard_us": config.gil_guard_us}),
         "extra_connections": [(src, f"session.{name}") for name, src in SESSION_SOURCES.items()]}
     if config.loop_mode == "fast" and config.backend != "sim":
         raise ConfigurationError("loop_mode fast is for the in-process twin (backend sim) only")
@@ -987,10 +1028,28 @@ def _serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None
         if ready is not None:
             ready(server)
         period = 1.0 / config.telemetry_hz
+        # Realtime: telemetry is built right after a cycle, in the loop's sleep, woken by the
+        # loop every N cycles; a free-running 60 Hz timer woke it at random times, a third of
+        # them inside a cycle, which then lost the GIL for a switch interval or more.
+        tick = pl.loop.cycle_signal(max(1, round(config.rate_hz / config.telemetry_hz))) \
+            if config.loop_mode == "realtime" else None
         try:
-            while not stop_event.wait(period):
-                server.publish("telemetry", telemetry(service))
+            last = -math.inf
+            while not stop_event.is_set():
+                if tick is None:
+                    if stop_event.wait(period):
+                        break
+                elif not tick.wait(2.0 * period):
+                    # No cycle for two periods (the loop stalled or stopped): publish anyway,
+                    # a GUI must see the robot's state whatever the loop does.
+                    pass
+                now = time.monotonic()
+                if now - last >= 0.9 * period:
+                    last = now
+                    server.publish("telemetry", telemetry(service))
         finally:
+            if tick is not None:
+                tick.close()
             s = service.session
             if s is not None:
                 # Stopping mid-session: abort it (soft stop, return to rest) while the loop

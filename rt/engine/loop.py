@@ -24,6 +24,8 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import os
+import select
 import sys
 import threading
 import time
@@ -111,6 +113,58 @@ class LoopStats:
         return "\n".join(lines)
 
 
+class CycleSignal:
+    """Set by the loop after every ``every``-th cycle; another thread waits on it to run its
+    Python right after a cycle, in the loop's sleep, instead of at a random time when its
+    first bytecode may be the one that delays the loop's next cycle (the loop shares the GIL
+    with it). A pipe, not a ``threading.Event``: firing is one non-blocking ``write`` with no
+    lock the loop could wait on. Waiting clears it. :meth:`close` removes it from the loop."""
+
+    def __init__(self, loop: Loop, every: int) -> None:
+        self.every = every
+        self._loop = loop
+        self._r, self._w = os.pipe()
+        os.set_blocking(self._r, False)
+        os.set_blocking(self._w, False)
+        self.closed = False
+
+    def fire(self) -> None:
+        """The loop's side (any thread may call it): never blocks."""
+        try:
+            os.write(self._w, b"\0")
+        except OSError:
+            pass               # the pipe is full (the waiter is behind: one pending is enough)
+
+    def wait(self, timeout: float) -> bool:
+        """Wait until fired or ``timeout`` s; True when fired (and cleared)."""
+        if self.closed:
+            return False
+        ready, _, _ = select.select([self._r], [], [], max(0.0, timeout))
+        if not ready:
+            return False
+        try:
+            while os.read(self._r, 4096):
+                pass
+        except (BlockingIOError, InterruptedError):
+            pass
+        return True
+
+    def close(self) -> None:
+        """No more firing. The pipe is closed when the last reference goes (``__del__``): the
+        loop may be firing it from the tuple it read a moment ago, and a closed descriptor's
+        number can be reused by another file."""
+        if self.closed:
+            return
+        self.closed = True
+        self._loop._remove_signal(self)
+
+    def __del__(self) -> None:
+        for fd in (getattr(self, "_r", None), getattr(self, "_w", None)):
+            if fd is not None:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+
+
 class Loop:
     """One periodic activity running a :class:`Graph`.
 
@@ -133,6 +187,17 @@ class Loop:
       ``switch_interval_s``. Off by default until a quiet machine shows it helps: on a loaded
       one single runs were inconclusive (closing note of branch rtsession).
 
+    * ``gil_guard_us`` — with ``gil_hold_s``: wake this long before each deadline (instead of
+      ``spin_us``) and wait the rest in C *keeping* the GIL (``hold_sleep``, default
+      :data:`rt_hygiene.sleep_holding_gil`; injectable with a fake clock), so that the cycle
+      starts on time whoever wanted the GIL when the loop woke. None: off.
+    * :meth:`cycle_signal` — a pipe fired every N cycles, for threads that should run right
+      after a cycle (telemetry, the session pump) rather than at random times.
+
+    A cycle with no room to sleep before its deadline (late, or the first) shares the GIL by
+    the short interval: holding it from cycle to cycle would leave the other threads only
+    forced switches after ``gil_hold_s``, each stalling the loop as long.
+
     Why the two intervals: the loop shares the GIL with the process's other threads (IPC,
     telemetry, sessions, the recorder). A thread that asks for the GIL waits one switch
     interval, then forces its holder to drop it; with one short interval (0.2 ms) any busy
@@ -154,6 +219,8 @@ class Loop:
                  rt_priority: int | None = 80, cpus: Iterable[int] | None = None,
                  lock_memory: bool = True, switch_interval_s: float | None = 0.0002,
                  manage_gc: bool = True, gil_hold_s: float | None = None,
+                 gil_guard_us: float | None = None,
+                 hold_sleep: Callable[[int], None] | None = None,
                  command_capacity: int = 64,
                  stats_capacity: int = DEFAULT_CAPACITY) -> None:
         if not isinstance(graph, Graph):
@@ -183,7 +250,15 @@ class Loop:
         if gil_hold_s is not None and not (0.0 < gil_hold_s <= 0.1):
             raise ConfigurationError(f"gil_hold_s must be in (0, 0.1] s, got {gil_hold_s!r}")
         self._gil_hold_s = gil_hold_s
+        if gil_guard_us is not None and not (0.0 <= gil_guard_us <= 500.0):
+            raise ConfigurationError(f"gil_guard_us must be in [0, 500] µs, got {gil_guard_us!r}")
+        if gil_guard_us is not None and gil_hold_s is None:
+            raise ConfigurationError("gil_guard_us needs gil_hold_s (the guard keeps the GIL "
+                                     "only if no other thread can force it off meanwhile)")
+        self._guard_us = gil_guard_us
+        self._hold_sleep = hold_sleep or rt_hygiene.sleep_holding_gil
         self._queue = CommandQueue(command_capacity)
+        self._signals: tuple[CycleSignal, ...] = ()
         self._capacity = check_capacity(stats_capacity)
         self._lat_ring = new_ring(self._capacity)
         self._set_period(check_rate(rate_hz))
@@ -217,6 +292,8 @@ class Loop:
         self._period_s = 1.0 / rate
         self._period_ns = round(1e9 / rate)
         self._spin_ns = min(round(self._spin_us * 1e3), self._period_ns // 2)
+        guard = self._spin_us if self._guard_us is None else max(self._guard_us, self._spin_us)
+        self._guard_ns = min(round(guard * 1e3), self._period_ns // 2)
         self._tol_ns = round(self._miss_tolerance * self._period_ns)
         self._behind_ns = round(self._max_behind * self._period_ns)
 
@@ -378,6 +455,10 @@ class Loop:
             step(t, dt)
             self._cycles = cycle + 1
             k += 1
+            if self._signals:
+                for sig in self._signals:
+                    if (cycle + 1) % sig.every == 0:
+                        sig.fire()
 
     def _run_realtime(self, cycles: int | None, seconds: float | None) -> None:
         hold = self._gil_hold_s
@@ -401,6 +482,8 @@ class Loop:
         ring, mask = self._lat_ring, self._capacity - 1
         period_ns, spin_ns, tol_ns, behind_ns = (self._period_ns, self._spin_ns, self._tol_ns,
                                                  self._behind_ns)
+        guard_ns = self._guard_ns
+        hold_sleep = self._hold_sleep
         now = clock()
         if self._epoch_ns is None:
             self._epoch_ns = now
@@ -413,12 +496,22 @@ class Loop:
             if end_ns is not None and deadline >= end_ns:
                 break
             now = clock()
-            if deadline - now > spin_ns:
+            if deadline - now > guard_ns:
                 if between is not None:
                     set_interval(between)     # sleeping: take the GIL back quickly on waking
-                sleep((deadline - now - spin_ns) * 1e-9)
+                sleep((deadline - now - guard_ns) * 1e-9)
                 if hold is not None:
                     set_interval(hold)        # awake: keep it until the next sleep
+                now = clock()
+            elif between is not None:
+                # No room to sleep (a late or long cycle): the loop would keep the GIL from
+                # cycle to cycle and the others could take it only after ``hold``, each time
+                # stalling the loop as long. Share it by the short interval until it sleeps.
+                set_interval(between)
+            if deadline - now > spin_ns:
+                # The guard: wait the rest in C *with* the GIL (nobody else runs Python), so
+                # the cycle starts on time whoever wanted the GIL meanwhile.
+                hold_sleep(deadline - now - spin_ns)
                 now = clock()
             while now < deadline:
                 now = clock()
@@ -442,13 +535,30 @@ class Loop:
                 queue.drain(self, cycle)
                 period_ns, spin_ns, tol_ns, behind_ns = (self._period_ns, self._spin_ns,
                                                          self._tol_ns, self._behind_ns)
+                guard_ns = self._guard_ns
             t = (now - epoch) * 1e-9
             self._t = t
             self._dt = dt
             step(t, dt)
             self._cycles = cycle + 1
             k += 1
+            if self._signals:
+                for sig in self._signals:
+                    if (cycle + 1) % sig.every == 0:
+                        sig.fire()
             deadline += period_ns
+
+    # ------------------------------------------------------------------ signals
+    def cycle_signal(self, every: int) -> CycleSignal:
+        """A :class:`CycleSignal` fired after every ``every``-th cycle (≥ 1), in both modes."""
+        if not isinstance(every, int) or every < 1:
+            raise ConfigurationError(f"cycle_signal needs every ≥ 1 cycles, got {every!r}")
+        sig = CycleSignal(self, every)
+        self._signals = (*self._signals, sig)    # one tuple swap: the loop reads it lock-free
+        return sig
+
+    def _remove_signal(self, sig: CycleSignal) -> None:
+        self._signals = tuple(x for x in self._signals if x is not sig)
 
     # ------------------------------------------------------------------ commands
     def set_rate(self, rate_hz: float) -> CommandResult:

@@ -27,6 +27,7 @@ import os
 import platform
 import sys
 import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 
@@ -250,6 +251,45 @@ def realtime_thread(priority: int | None = 80, cpus: Iterable[int] | None = None
         for fn in reversed(undo):
             with contextlib.suppress(Exception):
                 fn()
+
+
+# ---------------------------------------------------------------------- the GIL
+class _Timespec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+def _gil_holding_nanosleep() -> Callable[[int], None] | None:
+    """libc's ``nanosleep`` called through ``ctypes.PyDLL``, which does *not* release the GIL
+    around the call (``ctypes.CDLL`` and ``time.sleep`` do)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.PyDLL(ctypes.util.find_library("c") or None)
+        fn = libc.nanosleep
+    except (OSError, AttributeError):
+        return None
+    fn.argtypes = [ctypes.POINTER(_Timespec), ctypes.c_void_p]
+    fn.restype = ctypes.c_int
+    ts = _Timespec()
+    ref = ctypes.byref(ts)
+
+    def sleep_ns(ns: int) -> None:
+        if ns <= 0:
+            return
+        ts.tv_sec, ts.tv_nsec = divmod(int(ns), 1_000_000_000)
+        fn(ref, None)            # EINTR: returns early; the caller spins the rest
+    return sleep_ns
+
+
+def _busy_wait_ns(ns: int) -> None:
+    end = time.perf_counter_ns() + ns
+    while time.perf_counter_ns() < end:
+        pass
+
+
+#: Sleep ``ns`` nanoseconds *keeping* the GIL (no other Python thread runs meanwhile); a busy
+#: wait where libc's nanosleep is not reachable. The loop's guard before its deadline.
+sleep_holding_gil: Callable[[int], None] = _gil_holding_nanosleep() or _busy_wait_ns
 
 
 # ---------------------------------------------------------------------- threads sharing the GIL

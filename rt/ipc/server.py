@@ -53,18 +53,41 @@ _MAX_REQUESTS_PER_TURN = 64  # so a flood of requests cannot starve publishing
 _MAX_CLIENTS_TRACKED = 1000
 
 
+#: How often a pending :class:`Deferred` is polled unless it says otherwise (s).
+DEFERRED_POLL_S = 0.005
+
+
 class Deferred:
     """A reply the handler cannot give at once: a reset answered after the cycle that took it,
     a session start answered after its pre-flight. The server calls ``poll()`` on its own
-    thread every turn (1 ms apart while any is pending); ``poll`` returns the result dict when
-    ready, None while not, or raises :class:`TalusError` (the error reply). Past ``timeout_s``
-    the reply is an error naming ``what``."""
+    thread once when the request arrives, then every ``poll_interval_s``, and at once after
+    :meth:`notify`; ``poll`` returns the result dict when ready, None while not, or raises
+    :class:`TalusError` (the error reply). Past ``timeout_s`` the reply is an error naming
+    ``what``.
+
+    Why not poll every millisecond: the server thread shares the GIL with the RT loop, and a
+    wake-up per ms during a pre-flight of seconds is a thousand chances per second to hold the
+    GIL when the loop wants it. A handler whose outcome comes from another thread (a session's
+    pre-flight) calls :meth:`notify` when it is there, and polls rarely as a backstop."""
 
     def __init__(self, poll: Callable[[], dict[str, Any] | None], timeout_s: float,
-                 what: str) -> None:
+                 what: str, poll_interval_s: float = DEFERRED_POLL_S) -> None:
+        if not poll_interval_s > 0:
+            raise ConfigurationError(f"poll_interval_s must be > 0, got {poll_interval_s!r}")
         self.poll = poll
         self.deadline = time.monotonic() + timeout_s
         self.what = what
+        self.poll_interval_s = float(poll_interval_s)
+        self.next_poll = -math.inf                  # polled at once when the server gets it
+        self._wake: Callable[[], None] | None = None
+        self._notified = False
+
+    def notify(self) -> None:
+        """The outcome may be ready: the server polls at once (any thread; never blocks)."""
+        self._notified = True
+        wake = self._wake
+        if wake is not None:
+            wake()
 
 
 class Handler(Protocol):
@@ -91,7 +114,10 @@ class RtServer:
         heartbeat_timeout_s: age after which :meth:`heartbeat_lost` reports the client lost, s.
         publish_queue_len: hand-over queue length; when full the oldest message is dropped.
         context: a zmq context to share (default: a private one, terminated by ``close()``).
-        poll_interval_s: longest wait of the server thread between checks of its stop flag, s.
+        poll_interval_s: longest wait of the server thread between checks of its stop flag, s
+            (``close()`` wakes it at once; the wait only bounds a lost wake-up: the thread
+            shares the GIL with the RT loop, and each idle wake-up is a chance to hold it
+            when the loop wants it).
         curve: CurveZMQ keys (see :mod:`rt.ipc.security`); required for an endpoint that is
             not loopback.
 
@@ -104,7 +130,7 @@ class RtServer:
                  pub_endpoint: str = DEFAULT_PUB_ENDPOINT, heartbeat_timeout_s: float = 0.25,
                  *, publish_queue_len: int = 1024,
                  context: zmq.Context[Any] | None = None,
-                 poll_interval_s: float = 0.05,
+                 poll_interval_s: float = 0.5,
                  curve: ServerCurveConfig | None = None) -> None:
         missing = [m for m in HANDLER_METHODS if not callable(getattr(handler, m, None))]
         if missing:
@@ -303,7 +329,7 @@ class RtServer:
         poller.register(self._wake_r.fileno(), zmq.POLLIN)
         while not self._stop.is_set():
             try:
-                events = dict(poller.poll(1 if self._deferred else self._poll_ms))
+                events = dict(poller.poll(self._poll_timeout_ms()))
                 if self._router in events:
                     self._handle_requests()
                 if self._wake_r.fileno() in events:
@@ -316,6 +342,17 @@ class RtServer:
             except Exception:  # keep serving: a dead server would leave the robot deaf
                 log.exception("RT server loop error (continuing)")
                 time.sleep(0.01)
+
+    def _poll_timeout_ms(self) -> int:
+        """Until the next deferred reply is due (its poll interval or its deadline), at most
+        the stop-flag period."""
+        if not self._deferred:
+            return self._poll_ms
+        now = time.monotonic()
+        wait_s = min(min(d.next_poll, d.deadline) for _, _, d in self._deferred) - now
+        if wait_s <= 0.0 or any(d._notified for _, _, d in self._deferred):
+            return 0                           # due now (a new one's next_poll is -inf)
+        return min(self._poll_ms, math.ceil(wait_s * 1000.0))
 
     def _drain_wake(self) -> None:
         try:
@@ -334,6 +371,7 @@ class RtServer:
             envelope, body = _split_envelope(frames)
             reply = self._reply_to(body)
             if isinstance(reply, tuple):           # deferred: answered by _flush_deferred
+                reply[1]._wake = self._wake
                 self._deferred.append((envelope, *reply))
                 continue
             self._send(envelope, reply)
@@ -349,6 +387,11 @@ class RtServer:
         now = time.monotonic()
         pending = []
         for envelope, request_id, deferred in self._deferred:
+            if now < deferred.next_poll and now < deferred.deadline and not deferred._notified:
+                pending.append((envelope, request_id, deferred))
+                continue
+            deferred._notified = False
+            deferred.next_poll = now + deferred.poll_interval_s
             try:
                 result = deferred.poll()
                 if result is None:
