@@ -85,6 +85,15 @@ def test_clinician_flow_refusal_run_stop_acknowledge_review(gui, qtbot):
     qtbot.waitUntil(lambda: run.frames > frames + 20 and run.samples_shown > 50,
                     timeout=30_000)
     qtbot.waitUntil(lambda: window.band.state == "running", timeout=30_000)
+
+    def sine_played() -> bool:
+        # STOP once the live plot has shown the sine's crest (300 ± 100 N): with the Prescribe
+        # page's pre-flight reused the session starts at once, and 20 frames are still the
+        # ramp-in.
+        latest = run.link.telemetry.latest or {}
+        return (latest.get("session") == run.session_id
+                and (latest.get("force_n") or 0.0) > 360.0)
+    qtbot.waitUntil(sine_played, timeout=60_000)
     qtbot.keyClick(window, Qt.Key.Key_Escape)          # STOP from the keyboard
     qtbot.waitUntil(lambda: window.band.state == "soft_stop" and bool(window.band.latched),
                     timeout=10_000)
