@@ -59,7 +59,7 @@ from calibration.push import (
 from calibration.twin_plate_daq import WirePublisher
 from rt.errors import InputError, validation_summary
 from rt.references.program import ProgramInput, ReferenceOutput
-from rt.references.sequencer import Phase
+from rt.references.sequencer import STOP_EVENTS_SETTLE_S, program_outcome
 from rt.sessions import COLUMNS
 
 if TYPE_CHECKING:
@@ -283,14 +283,11 @@ def _record(service: RtService, program: ContactRecordingProgram, out: Path,
                 continue
             chunks.append(_robot_rows(rows))
             phases = rows[:, phase_col]
-            seen_motion = seen_motion or bool(np.any(phases <= Phase.RETURN))
-            last = Phase(int(phases[-1]))
-            if seen_motion and last == Phase.REST:
-                outcome = "completed"
-                break
-            if last == Phase.STOPPED:
-                outcome = "stopped"
-                time.sleep(0.3)        # let the stop's events reach the log
+            seen_motion, decided = program_outcome(phases, seen_motion)
+            if decided is not None:
+                outcome = decided
+                if decided == "stopped":
+                    time.sleep(STOP_EVENTS_SETTLE_S)   # the stop's events reach the log
                 break
         program.close_wire()
         robot = np.vstack(chunks) if chunks else np.zeros((0, ROBOT_WIDTH))

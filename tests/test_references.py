@@ -685,3 +685,23 @@ def test_sequencer_abort_in_force_ramps_the_force_down_then_holds_where_the_robo
     assert ph in (Phase.RETURN, Phase.REST)
     assert h.ref.ctrl_mode.data[0] == ProgramMode.POSITION
     np.testing.assert_allclose(h.ref.q_ref.data, [0.195] * 3)   # holds where it is, no jump
+
+
+def test_a_watched_programs_outcome_from_its_phase_blocks():
+    import numpy as np
+
+    from rt.references.sequencer import Phase, program_outcome
+
+    rest = np.full(5, float(Phase.REST))
+    # At rest before anything moved: still waiting (the program has not been taken yet).
+    assert program_outcome(rest, False) == (False, None)
+    moving = np.array([Phase.REST, Phase.APPROACH, Phase.PLAY], dtype=float)
+    assert program_outcome(moving, False) == (True, None)
+    # Back at rest after moving, in this block or an earlier one: completed.
+    assert program_outcome(np.array([Phase.RETURN, Phase.REST], dtype=float), False) == \
+        (True, "completed")
+    assert program_outcome(rest, True) == (True, "completed")
+    # Stopped, moving or not before: stopped.
+    assert program_outcome(np.array([Phase.PLAY, Phase.STOPPED], dtype=float), False) == \
+        (True, "stopped")
+    assert program_outcome(np.full(3, float(Phase.STOPPED)), False) == (False, "stopped")

@@ -45,7 +45,7 @@ from rt.errors import InputError, KinematicsError, validation_summary
 from rt.identification.excitation import N_HARMONICS, FourierExcitation
 from rt.model.kinematics import Kinematics
 from rt.references.program import Mode, ProgramInput, ProgramStatus, ReferenceOutput
-from rt.references.sequencer import Phase
+from rt.references.sequencer import STOP_EVENTS_SETTLE_S, Phase, program_outcome
 from rt.safety.limits import EffectiveLimits
 
 if TYPE_CHECKING:
@@ -279,14 +279,11 @@ def _record(service: RtService, program: ExcitationProgram, recorder: Any, parti
             played = rows[phases == Phase.PLAY, 0]
             if len(played):
                 t_play = [t_play[0] if t_play else float(played[0]), float(played[-1])]
-            seen_motion = seen_motion or bool(np.any(phases <= Phase.RETURN))
-            last = Phase(int(phases[-1]))
-            if seen_motion and last == Phase.REST:
-                outcome = "completed"
-                break
-            if last == Phase.STOPPED:
-                outcome = "stopped"
-                time.sleep(0.3)        # let the stop's events reach the log
+            seen_motion, decided = program_outcome(phases, seen_motion)
+            if decided is not None:
+                outcome = decided
+                if decided == "stopped":
+                    time.sleep(STOP_EVENTS_SETTLE_S)   # the stop's events reach the log
                 break
         for ev in pl.events.snapshot():
             if ev.id > recorded_events:

@@ -60,6 +60,25 @@ class Phase(IntEnum):
         return self in (Phase.APPROACH, Phase.PLAY, Phase.RETURN)
 
 
+#: How long a program's watcher waits after seeing the sequencer stopped, so the stop's events
+#: reach the loop's event log before it records them (s).
+STOP_EVENTS_SETTLE_S = 0.3
+
+
+def program_outcome(phases, seen_motion: bool) -> tuple[bool, str | None]:
+    """What a block of the session tap's phase column says of a program watched from outside
+    the loop (a recording thread): whether it has moved yet (any phase up to RETURN, carried
+    over from earlier blocks in ``seen_motion``), and its outcome once decided: "completed"
+    when the sequencer is back at rest after moving, "stopped" when it stopped, else None."""
+    seen_motion = seen_motion or bool((phases <= Phase.RETURN).any())
+    last = Phase(int(phases[-1]))
+    if seen_motion and last == Phase.REST:
+        return seen_motion, "completed"
+    if last == Phase.STOPPED:
+        return seen_motion, "stopped"
+    return seen_motion, None
+
+
 @dataclass(frozen=True)
 class _Request:
     program: Program
