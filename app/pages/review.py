@@ -29,7 +29,7 @@ from app.report_export import write_session_report
 from app.review_data import ReviewData, load_review
 from app.settings import GuiSettings
 from app.style import TARGET_PX
-from app.words import cause_words
+from app.words import cause_words, local_time
 from rt.errors import TalusError
 
 
@@ -43,10 +43,9 @@ def recording_title(path: Path) -> str:
         when = dt.datetime.strptime(parts[0], "%Y%m%dT%H%M%SZ").replace(tzinfo=dt.UTC)
     except (ValueError, IndexError):
         return path.stem
-    local = when.astimezone()
     patient = parts[1] if len(parts) > 1 else "?"
     protocol = parts[2].replace("-", " ") if len(parts) > 2 else ""
-    return f"{local:%Y-%m-%d %H:%M} — {patient}\n{protocol}"
+    return f"{local_time(when.isoformat())} — {patient}\n{protocol}"
 
 
 class ReviewPage(QWidget):
