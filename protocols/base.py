@@ -55,6 +55,7 @@ from rt.model.ankle import (
     platform_angles,
 )
 from rt.model.kinematics import Kinematics
+from rt.references.program import ProgramTable
 
 FOOT_MOUNTING = "foot along +x (toes +x); plantarflexion = +pitch; inversion = +roll (right foot)"
 #: Longest precomputed protocol (s): 20 min is 163 MB of position table at 1 kHz.
@@ -306,6 +307,16 @@ class TableGenerator(Generator):
         self._ready = report.ok
         self.index = 0
         return report
+
+    def table_view(self) -> ProgramTable | None:
+        """The validated table as the loop's compiled sequencer plays it (``ProgramTable``:
+        this block's columns over ``_const``); None before a passing ``validate()`` and for a
+        subclass whose ``update`` does more than copy a row (it is then called each cycle)."""
+        if not self._ready or type(self).update is not TableGenerator.update:
+            return None
+        col0 = (POSITION_BLOCK if self._block_id == BLOCK_POSITION else FORCE_BLOCK).start
+        return ProgramTable(np.ascontiguousarray(self._table, dtype=np.float64), col0,
+                            self._const.copy(), self.mode)
 
     def update(self, out: ReferenceOutput, inp: GeneratorInput | None = None) -> int:
         if not self._ready:

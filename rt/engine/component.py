@@ -110,11 +110,13 @@ class Component:
         return port
 
     def declare_output(self, name: str, type: PortType, doc: str = "",
-                       initial: Any = None) -> OutputPort:
+                       initial: Any = None, buffer: Any = None) -> OutputPort:
         """Declare an output port; its buffer is allocated now, holding ``initial`` (default
-        zeros / 0 / False / ``cls()``) until the component first writes it."""
+        zeros / 0 / False / ``cls()``) until the component first writes it. An array port may
+        instead live in ``buffer``, a writeable float64 view of the component's own arena of
+        the port's shape (so a compiled cycle takes every output as one argument)."""
         self._check_new_port(name)
-        port = OutputPort(self, name, type, doc, initial)
+        port = OutputPort(self, name, type, doc, initial, buffer)
         self.outputs[name] = port
         return port
 

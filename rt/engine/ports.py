@@ -23,6 +23,7 @@ before it is configured.
 from __future__ import annotations
 
 import abc
+import builtins
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -246,10 +247,25 @@ class OutputPort(Port):
     __slots__ = ("initial",)
 
     def __init__(self, owner: Component, name: str, type: PortType, doc: str = "",
-                 initial: Any = None) -> None:
+                 initial: Any = None, buffer: np.ndarray | None = None) -> None:
         super().__init__(owner, name, type, doc)
         self.initial = initial
-        self.data = type.allocate(initial)
+        if buffer is None:
+            self.data = type.allocate(initial)
+            return
+        # A view into the owner's arena: the block's kernel then takes all its outputs as one
+        # argument (numba's dispatch costs per array argument).
+        if not isinstance(type, ArrayType):
+            raise ConfigurationError(f"port {owner.name}.{name}: only array ports can live in "
+                                     f"a given buffer, not a {type} port")
+        if not (isinstance(buffer, np.ndarray) and buffer.dtype == np.float64
+                and buffer.shape == type.shape and buffer.flags.writeable):
+            raise ConfigurationError(
+                f"port {owner.name}.{name}: its buffer must be a writeable float64 array of "
+                f"shape {type.shape}, got "
+                f"{getattr(buffer, 'dtype', builtins.type(buffer).__name__)}{getattr(buffer, 'shape', '')}")
+        buffer[...] = type.allocate(initial)
+        self.data = buffer
 
     def reset_value(self) -> None:
         """Put the buffer back to its initial value, in place (not in the cycle: may allocate)."""

@@ -44,7 +44,13 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from rt.errors import InputError, KinematicsError, validation_summary
 from rt.identification.excitation import N_HARMONICS, FourierExcitation
 from rt.model.kinematics import Kinematics
-from rt.references.program import Mode, ProgramInput, ProgramStatus, ReferenceOutput
+from rt.references.program import (
+    Mode,
+    ProgramInput,
+    ProgramStatus,
+    ProgramTable,
+    ReferenceOutput,
+)
 from rt.references.sequencer import STOP_EVENTS_SETTLE_S, Phase, program_outcome
 from rt.safety.limits import EffectiveLimits
 
@@ -109,6 +115,10 @@ class ExcitationProgram:
 
     def reset(self) -> None:
         self.index = 0
+
+    def table_view(self) -> ProgramTable:
+        """The table as the compiled sequencer plays it (q, q̇, q̈ in columns 0-8)."""
+        return ProgramTable(self.table, 0, ReferenceOutput().buf, Mode.POSITION)
 
     def update(self, out: ReferenceOutput, inp: ProgramInput | None = None) -> int:
         k = self.index if self.index < self.n_samples else self.n_samples - 1

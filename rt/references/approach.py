@@ -411,6 +411,17 @@ class Approach:
         inp.current_acceleration = [0.0] * N_AXES
         self._hold_at_rest = True
 
+    def still_hold(self, out: np.ndarray) -> bool:
+        """True when every ``update`` until the next command only writes the held position
+        (m) with zero velocity and acceleration (holding at rest, after a reset or an arrival);
+        the held position is then written into ``out`` (3,). A compiled caller may then write
+        the hold itself instead of calling ``update`` (``rt.references.sequencer_kernel``)."""
+        if (self.mode == Mode.IDLE or self.mode == Mode.HOLD) and self._hold_at_rest:
+            h = self._hold
+            out[0], out[1], out[2] = h[0], h[1], h[2]
+            return True
+        return False
+
     # -- helpers ---------------------------------------------------------------------------------
     def _in_stroke(self, p: Sequence[float]) -> bool:
         lo, hi = self.lo - POSITION_SLACK_M, self.hi + POSITION_SLACK_M

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from enum import IntEnum
 from typing import Protocol
 
@@ -135,9 +136,42 @@ class ProgramInput:
         self.force_z_n = 0.0
 
 
+#: Longest table a program hands the sequencer (samples): 20 min at 1 kHz, ≤ 163 MB.
+MAX_TABLE_SAMPLES = 1_200_000
+
+
+@dataclass(frozen=True)
+class ProgramTable:
+    """A program's whole reference as one table, for the sequencer's compiled cycle
+    (``rt.references.sequencer_kernel``): the j-th ``update`` would write row min(j, n − 1)
+    of ``table`` (n, w) into columns ``col0 … col0 + w − 1`` of ``ReferenceOutput.buf`` over
+    ``const`` (the other columns, N_FIELDS), in ``mode``, done from row n − 1 on. A program
+    offers one (``table_view()``) only when its ``update`` does exactly that and nothing else;
+    the sequencer then samples the table without calling ``update`` (the program's own
+    sample counter is not advanced)."""
+
+    table: np.ndarray
+    col0: int
+    const: np.ndarray
+    mode: Mode
+
+    def __post_init__(self) -> None:
+        t = self.table
+        if not (isinstance(t, np.ndarray) and t.dtype == np.float64 and t.ndim == 2
+                and t.shape[0] >= 1 and t.flags.c_contiguous
+                and 0 <= self.col0 and self.col0 + t.shape[1] <= N_FIELDS):
+            raise ValueError(f"a program table must be a C-contiguous float64 (n ≥ 1, w) "
+                             f"array fitting columns {self.col0}… of {N_FIELDS}")
+        if self.const.shape != (N_FIELDS,):
+            raise ValueError(f"a program table's constant row must have {N_FIELDS} columns")
+
+
 class Program(Protocol):
     """What the sequencer plays. ``validate()`` has been called (and passed) before a program
-    is handed to the loop; ``update`` then never raises and never allocates."""
+    is handed to the loop; ``update`` then never raises and never allocates.
+
+    A program may also offer ``table_view() -> ProgramTable | None`` (:class:`ProgramTable`):
+    the sequencer then plays it compiled."""
 
     duration_s: float
 
@@ -165,6 +199,7 @@ class TrajectoryProgram:
         self.n_samples = round(duration_s / dt) + 1
         self.index = 0
         self._ref = Reference()
+        self._table: ProgramTable | None = None
 
     @staticmethod
     def new_output() -> ReferenceOutput:
@@ -172,6 +207,22 @@ class TrajectoryProgram:
 
     def reset(self) -> None:
         self.index = 0
+
+    def table_view(self) -> ProgramTable | None:
+        """The trajectory sampled at every cycle, once (a trajectory is a function of ``t``
+        alone), for the compiled sequencer: the same calls at the same times as ``update``
+        makes, so the same samples. None beyond :data:`MAX_TABLE_SAMPLES`."""
+        if self.n_samples > MAX_TABLE_SAMPLES:
+            return None
+        if self._table is None:
+            table = np.empty((self.n_samples, 9))
+            out = ReferenceOutput()          # the fields persist from one call to the next,
+            r = Reference(out.q_ref, out.qd_ref, out.qdd_ref)     # as in update's buffer
+            for k in range(self.n_samples):
+                self.trajectory(k * self.dt, r)
+                table[k] = out.buf[0:9]
+            self._table = ProgramTable(table, 0, ReferenceOutput().buf, Mode.POSITION)
+        return self._table
 
     def update(self, out: ReferenceOutput, inp: ProgramInput | None = None) -> int:
         k = self.index if self.index < self.n_samples else self.n_samples - 1

@@ -34,12 +34,12 @@ import numpy as np
 
 from rt.components.tare import TareState, refusal_message
 from rt.engine import Array, Component
+from rt.references import sequencer_kernel as sk
 from rt.references.approach import Approach, ApproachStatus
-from rt.references.program import Mode, Program, ProgramInput, ReferenceOutput
+from rt.references.program import Mode, Program, ProgramInput, ProgramTable, ReferenceOutput
+from rt.references.sequencer_kernel import F_DDOT_SMOOTHING
 from rt.safety.events import SupervisorMode
 
-#: First-order smoothing of F̈_d per cycle (≈ 35 Hz at 1 kHz).
-F_DDOT_SMOOTHING = 0.2
 #: Component status codes (non-zero = the cycle's block failed).
 STATUS_APPROACH_FAILED = 20
 STATUS_PROGRAM_FAILED = 21
@@ -86,6 +86,7 @@ class _Request:
     approach_min_s: float | None = None
     rest_q: tuple[float, float, float] | None = None
     return_min_s: float | None = None
+    table: ProgramTable | None = None
 
 
 @dataclass
@@ -97,6 +98,42 @@ class _State:
     taring: bool = False             # holding at the first sample while the sensor is tared
     tare_measuring: bool = False     # the force reader has started this tare
     tares_before: float = 0.0        # the force reader's tare count when the tare began
+
+
+class _Field:
+    """One ``_State`` field kept in the compiled sequencer's state array (``sk.S_*``)."""
+
+    def __init__(self, index: int, kind: type) -> None:
+        self.index = index
+        self.kind = kind
+
+    def __get__(self, obj: _SeqState, owner: type | None = None):  # type: ignore[no-untyped-def]
+        value = obj.seq[self.index]
+        if self.kind is float:
+            return float(value)
+        return self.kind(int(value))
+
+    def __set__(self, obj: _SeqState, value: object) -> None:
+        obj.seq[self.index] = float(value)  # type: ignore[arg-type]
+
+
+class _SeqState:
+    """``_State`` over the array the compiled cycle reads and writes (same fields)."""
+
+    phase = _Field(sk.S_PHASE, Phase)
+    mode = _Field(sk.S_MODE, SupervisorMode)
+    started = _Field(sk.S_STARTED, bool)
+    k = _Field(sk.S_K, int)
+    taring = _Field(sk.S_TARING, bool)
+    tare_measuring = _Field(sk.S_TARE_MEASURING, bool)
+    tares_before = _Field(sk.S_TARES_BEFORE, float)
+
+    def __init__(self, seq: np.ndarray) -> None:
+        seq[:] = 0.0
+        seq[sk.S_PHASE] = float(Phase.REST)
+        seq[sk.S_MODE] = float(SupervisorMode.RUN)
+        seq[sk.S_N] = 1.0
+        self.seq = seq
 
 
 class ProgramReference(Component):
@@ -111,28 +148,50 @@ class ProgramReference(Component):
 
     Attributes readable from other threads: ``epoch`` (programs started so far), ``refused``
     (requests whose approach was refused) and ``last_error`` (why), ``busy``.
+
+    The cycle runs compiled (``rt.references.sequencer_kernel``: one call per steady cycle;
+    events — a mode change, a request, an abort, the approach, a tare, the end of a program —
+    run here, in Python, on their exact cycle); ``compiled=False`` runs the interpreted
+    cycle throughout, the reference it is tested against. Programs that offer a table
+    (``ProgramTable``: the protocols' table generators, the identification excitation,
+    trajectories) play from it; others are called each cycle.
     """
 
     def __init__(self, name: str, stroke: tuple[float, float], dt: float,
-                 program: Program | None = None, force_ramp_s: float = 0.3):
+                 program: Program | None = None, force_ramp_s: float = 0.3,
+                 compiled: bool = True):
         super().__init__(name)
         self.approach = Approach(dt=dt, stroke=stroke)
         self.force_ramp_s = force_ramp_s
+        self.compiled = compiled
+        if compiled:
+            sk.warm_up()
+        # Every output is a view of one arena, the state one array: the kernel's arguments.
+        self._io = io = np.zeros(sk.IO_SIZE)
+        self._seq = np.zeros(sk.SEQ_SIZE)
+        self._no_table = np.zeros((1, 1))
+        self._table: np.ndarray = self._no_table
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.mode = self.declare_input("mode", Array(1))
         self.wrench = self.declare_input("wrench", Array(6))
-        self.q_ref = self.declare_output("q_ref", Array(3))
-        self.qd_ref = self.declare_output("qd_ref", Array(3))
-        self.qdd_ref = self.declare_output("qdd_ref", Array(3))
-        self.force = self.declare_output("force", Array(3))
-        self.pose = self.declare_output("pose", Array(3))
-        self.ctrl_mode = self.declare_output("ctrl_mode", Array(1))
-        self.phase = self.declare_output("phase", Array(1), initial=np.full(1, float(Phase.REST)))
-        self.progress = self.declare_output("progress", Array(1))
-        self.tare_request = self.declare_output("tare_request", Array(1))
+        self.q_ref = self.declare_output("q_ref", Array(3), buffer=io[sk.IO_Q:sk.IO_Q + 3])
+        self.qd_ref = self.declare_output("qd_ref", Array(3), buffer=io[sk.IO_QD:sk.IO_QD + 3])
+        self.qdd_ref = self.declare_output("qdd_ref", Array(3),
+                                           buffer=io[sk.IO_QDD:sk.IO_QDD + 3])
+        self.force = self.declare_output("force", Array(3),
+                                         buffer=io[sk.IO_FORCE:sk.IO_FORCE + 3])
+        self.pose = self.declare_output("pose", Array(3), buffer=io[sk.IO_POSE:sk.IO_POSE + 3])
+        self.ctrl_mode = self.declare_output("ctrl_mode", Array(1),
+                                             buffer=io[sk.IO_CTRL_MODE:sk.IO_CTRL_MODE + 1])
+        self.phase = self.declare_output("phase", Array(1), initial=np.full(1, float(Phase.REST)),
+                                         buffer=io[sk.IO_PHASE:sk.IO_PHASE + 1])
+        self.progress = self.declare_output("progress", Array(1),
+                                            buffer=io[sk.IO_PROGRESS:sk.IO_PROGRESS + 1])
+        self.tare_request = self.declare_output(
+            "tare_request", Array(1), buffer=io[sk.IO_TARE_REQUEST:sk.IO_TARE_REQUEST + 1])
         self.tare = self.declare_input("tare", Array(10))
         self.tare_refused = 0
-        self._initial = None if program is None else _Request(program, program.new_output())
+        self._initial = None if program is None else self._new_request(program)
         self._pending: _Request | None = None
         self._abort = False
         self.program: Program | None = None
@@ -161,9 +220,16 @@ class ProgramReference(Component):
                 program's last state.
             return_min_s: the return to ``rest_q`` takes at least this long (s).
         """
-        # The output is allocated here, on the caller's thread, not in the cycle.
-        self._pending = _Request(program, program.new_output(), approach_min_s, rest_q,
-                                 return_min_s)
+        # The output (and the table) is built here, on the caller's thread, not in the cycle.
+        self._pending = self._new_request(program, approach_min_s, rest_q, return_min_s)
+
+    def _new_request(self, program: Program, approach_min_s: float | None = None,
+                     rest_q: tuple[float, float, float] | None = None,
+                     return_min_s: float | None = None) -> _Request:
+        view = getattr(program, "table_view", None)
+        table = view() if (self.compiled and view is not None) else None
+        return _Request(program, program.new_output(), approach_min_s, rest_q, return_min_s,
+                        table)
 
     def request_abort(self) -> None:
         """Soft stop of the program without a fault: brake, ramp force down, then rest."""
@@ -180,11 +246,12 @@ class ProgramReference(Component):
         return Phase.REST if self.state is None else self.state.phase
 
     # ------------------------------------------------------------------ lifecycle
-    def make_state(self) -> _State:
-        return _State()
+    def make_state(self) -> _State | _SeqState:
+        return _SeqState(self._seq) if self.compiled else _State()
 
     def on_start(self) -> None:
-        self.state = _State()
+        self.state = self.make_state()
+        self._table = self._no_table
         self._pending = self._initial
 
     # ------------------------------------------------------------------ the cycle
@@ -210,11 +277,27 @@ class ProgramReference(Component):
             return
         self.program, self._out, self._req = program, out, req
         self._n = max(1, round(program.duration_s / self.approach.dt))
+        self._set_table(req.table)
         st.k = 0
         st.taring = False
         st.phase = Phase.APPROACH
         self._needs_tare = out.mode == Mode.FORCE
         self.epoch += 1
+
+    def _set_table(self, view: ProgramTable | None) -> None:
+        """The compiled cycle's copy of the program's length and table (or none)."""
+        seq = self._seq
+        seq[sk.S_N] = float(self._n)
+        if view is None:
+            self._table = self._no_table
+            seq[sk.S_TABLE] = 0.0
+            return
+        self._table = view.table
+        seq[sk.S_TABLE] = 1.0
+        seq[sk.S_COL0] = float(view.col0)
+        seq[sk.S_PROGRAM_MODE] = float(view.mode)
+        seq[sk.S_LAST] = float(view.table.shape[0] - 1)
+        seq[sk.S_CONST:sk.S_CONST + len(view.const)] = view.const
 
     def _brake(self) -> None:
         """Jerk-limited stop from the current reference; the force ramps down in the cycle."""
@@ -237,6 +320,29 @@ class ProgramReference(Component):
                 self.approach.reset(self.q_meas.data)
 
     def update(self, t: float, dt: float) -> int:
+        if not self.compiled:
+            return self._update(dt)
+        if self._pending is None and not self._abort:
+            result = sk.cycle(self._io, self._seq, self.q_meas.data, self.mode.data,
+                              self._table, dt)
+            if result == sk.DONE:
+                return 0
+            if result == sk.PLAY_DONE:          # the program's last sample: plan the return
+                self._end_play(self._seq[sk.S_PROGRAM_MODE] == 1.0)
+                self._sync_hold()
+                return 0
+        status = self._update(dt)
+        self._sync_hold()
+        return status
+
+    def _sync_hold(self) -> None:
+        """Tell the compiled cycle whether the approach now holds still, and where."""
+        seq = self._seq
+        seq[sk.S_HOLDING] = float(self.approach.still_hold(seq[sk.S_HOLD:sk.S_HOLD + 3]))
+
+    def _update(self, dt: float) -> int:
+        """The cycle, interpreted (every cycle with ``compiled=False``; the events' cycles
+        otherwise)."""
         st = self.state
         mode = SupervisorMode.from_port(self.mode.data[0])
         if not st.started and self._pending is None:
@@ -335,6 +441,10 @@ class ProgramReference(Component):
         return ApproachStatus.WORKING
 
     def _play(self, dt: float) -> int:
+        if self.compiled and self._table is not self._no_table:
+            if sk.play_table(self._io, self._seq, self._table, dt):
+                self._end_play(self._seq[sk.S_PROGRAM_MODE] == 1.0)
+            return 0
         st = self.state
         o = self._out
         assert o is not None and self.program is not None
@@ -349,6 +459,11 @@ class ProgramReference(Component):
         status = self.program.update(o, inp)
         if status < 0:
             return status
+        if self.compiled:
+            sk.emit(self._io, self._seq, o.buf, float(o.mode), dt)
+            if o.done:
+                self._end_play(o.mode == Mode.FORCE)
+            return 0
         st.k += 1
         self.q_ref.data[:] = o.q_ref
         self.qd_ref.data[:] = o.qd_ref
@@ -368,20 +483,24 @@ class ProgramReference(Component):
         else:
             f[:] = 0.0
         if o.done:
-            if force_mode:
-                # Leaving force control: the position law takes over where the robot is.
-                self.q_ref.data[:] = self.q_meas.data
-                self.qd_ref.data[:] = 0.0
-                self.qdd_ref.data[:] = 0.0
-            req = self._req
-            if req is not None and req.rest_q is not None:
-                self.approach.reset(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
-                if self.approach.set_target(req.rest_q, minimum_duration=req.return_min_s) \
-                        != ApproachStatus.WORKING:
-                    self._brake()            # rest unreachable: brake where it is instead
-            else:
-                self._brake()
-            self.ctrl_mode.data[0] = float(Mode.POSITION)
-            f[:] = 0.0
-            st.phase = Phase.RETURN
+            self._end_play(force_mode)
         return 0
+
+    def _end_play(self, force_mode: bool) -> None:
+        """The program wrote its last sample (this cycle's reference): return to rest."""
+        if force_mode:
+            # Leaving force control: the position law takes over where the robot is.
+            self.q_ref.data[:] = self.q_meas.data
+            self.qd_ref.data[:] = 0.0
+            self.qdd_ref.data[:] = 0.0
+        req = self._req
+        if req is not None and req.rest_q is not None:
+            self.approach.reset(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
+            if self.approach.set_target(req.rest_q, minimum_duration=req.return_min_s) \
+                    != ApproachStatus.WORKING:
+                self._brake()            # rest unreachable: brake where it is instead
+        else:
+            self._brake()
+        self.ctrl_mode.data[0] = float(Mode.POSITION)
+        self.force.data[:] = 0.0
+        self.state.phase = Phase.RETURN

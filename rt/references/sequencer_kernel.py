@@ -1,0 +1,169 @@
+"""The sequencer's steady cycle compiled (issue 16): one numba call per cycle.
+
+:class:`rt.references.sequencer.ProgramReference` keeps its state in one float64 array
+(``seq``, layout below) and its outputs in one arena (``io``: its ports are views of it), so
+a cycle is ``cycle(io, seq, q_meas, mode, table, dt)``. The kernel runs every *steady*
+cycle — a table program playing (the sample's row, the force reference and its smoothed F̈,
+the progress), a hold at rest, a hard stop following the measured position — and answers
+:data:`NEED_PYTHON` without writing anything when the cycle is an event: the supervisor's
+mode changed this cycle, a program is requested or aborted, the approach or the return runs
+(ruckig stays in Python: its update is one call per cycle at most), a tare, a force ramp.
+The interpreted sequencer then runs that cycle exactly as it always did; its PLAY step goes
+through :func:`play_table` / :func:`emit` too, so a program's samples are produced by one
+code path whichever side runs the cycle. A table program's last sample answers
+:data:`PLAY_DONE`: Python plans the return (ruckig) on that same cycle.
+
+Every operation is the interpreted sequencer's, in its order (``tests/test_compiled_cycle.py``
+replays recorded inputs through both and compares every output bit for bit).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from rt.references.program import FZ, FZ_DOT, N_FIELDS, POSE
+
+#: First-order smoothing of F̈_d per cycle (≈ 35 Hz at 1 kHz).
+F_DDOT_SMOOTHING = 0.2
+
+# ---- the outputs' arena (ProgramReference's ports are views of it)
+IO_Q, IO_QD, IO_QDD, IO_FORCE, IO_POSE = 0, 3, 6, 9, 12
+IO_CTRL_MODE, IO_PHASE, IO_PROGRESS, IO_TARE_REQUEST = 15, 16, 17, 18
+IO_SIZE = 19
+
+# ---- the sequencer's state (``seq``)
+S_PHASE = 0            # Phase
+S_MODE = 1             # SupervisorMode last seen
+S_STARTED = 2          # 1 once the first cycle ran
+S_K = 3                # samples played of the current program
+S_TARING = 4           # holding at the first sample while the sensor is tared
+S_TARE_MEASURING = 5   # the force reader has started this tare
+S_TARES_BEFORE = 6     # the force reader's tare count when the tare began
+S_N = 7                # the program's length in cycles (progress = k / n)
+S_HOLDING = 8          # 1 while the approach holds still at rest (its output is S_HOLD)
+S_HOLD = 9             # 3: where it holds (m)
+S_TABLE = 12           # 1 while the current program plays from a table
+S_COL0 = 13            # first column of a ReferenceOutput row the table's columns fill
+S_PROGRAM_MODE = 14    # the table program's Mode (0 position, 1 force)
+S_LAST = 15            # the table's last sample index
+S_CONST = 16           # N_FIELDS: the row's columns outside the table's
+S_ROW = S_CONST + N_FIELDS   # N_FIELDS: scratch, the row of this cycle's sample
+SEQ_SIZE = S_ROW + N_FIELDS
+
+# Phase and SupervisorMode values (rt.references.sequencer.Phase, rt.safety.events).
+APPROACH, PLAY, RETURN, STOPPED, REST = 0.0, 1.0, 2.0, 3.0, 4.0
+RUN, SOFT_STOP, HARD_STOP = 0.0, 2.0, 3.0
+
+#: ``cycle`` results: the cycle is done; or nothing was written and Python runs the cycle;
+#: or a table program wrote its last sample and Python ends it (the return's planning).
+DONE, NEED_PYTHON, PLAY_DONE = 0, 1, 2
+
+
+@njit(cache=True)
+def emit(io, seq, row, mode, dt):
+    """A PLAY cycle's outputs from the program's sample ``row`` (a ``ReferenceOutput.buf``) in
+    ``mode`` (0 position, 1 force): the sample count, q, q̇, q̈, pose, the control mode and the
+    force reference (F_d, Ḟ_d, and F̈_d as a low-passed first difference of Ḟ_d: only the
+    small inertia feedforward uses it, and recorded gait forces are not smooth to second
+    order)."""
+    k = seq[S_K] + 1.0
+    seq[S_K] = k
+    for i in range(9):
+        io[IO_Q + i] = row[i]
+    for i in range(3):
+        io[IO_POSE + i] = row[POSE.start + i]
+    io[IO_CTRL_MODE] = mode
+    fz = row[FZ]
+    if mode == 1.0 and not math.isnan(fz):
+        f_dot = row[FZ_DOT]
+        raw = (f_dot - io[IO_FORCE + 1]) / dt if k > 1.0 else 0.0
+        io[IO_FORCE + 2] += F_DDOT_SMOOTHING * (raw - io[IO_FORCE + 2])
+        io[IO_FORCE] = fz
+        io[IO_FORCE + 1] = f_dot
+    else:
+        io[IO_FORCE] = 0.0
+        io[IO_FORCE + 1] = 0.0
+        io[IO_FORCE + 2] = 0.0
+
+
+@njit(cache=True)
+def play_table(io, seq, table, dt):
+    """Play the table program's next sample (its row over the program's constant columns, as
+    ``protocols.base.TableGenerator.update`` writes it) and emit it; returns 1 on the last
+    sample (the program is done), else 0."""
+    k = int(seq[S_K])
+    last = int(seq[S_LAST])
+    k = min(k, last)
+    for i in range(N_FIELDS):
+        seq[S_ROW + i] = seq[S_CONST + i]
+    col0 = int(seq[S_COL0])
+    for j in range(table.shape[1]):
+        seq[S_ROW + col0 + j] = table[k, j]
+    emit(io, seq, seq[S_ROW:S_ROW + N_FIELDS], seq[S_PROGRAM_MODE], dt)
+    return 1 if k >= last else 0
+
+
+@njit(cache=True)
+def finish(io, seq, emitted):
+    """Every cycle's last outputs: no tare request outside APPROACH (a stop or an abort ends a
+    tare in progress), the phase (the one that produced this cycle's reference while
+    approaching or playing) and the progress."""
+    phase = seq[S_PHASE]
+    if phase != APPROACH:
+        io[IO_TARE_REQUEST] = 0.0
+    io[IO_PHASE] = emitted if (emitted == APPROACH or emitted == PLAY) else phase
+    p = seq[S_K] / seq[S_N]
+    io[IO_PROGRESS] = min(1.0, p)
+
+
+@njit(cache=True)
+def cycle(io, seq, q_meas, mode, table, dt):
+    """One steady cycle (module docstring); ``mode`` the supervisor's mode port (one cycle
+    late). Returns DONE, NEED_PYTHON (nothing written) or PLAY_DONE."""
+    if seq[S_STARTED] == 0.0 or mode[0] != seq[S_MODE]:
+        return NEED_PYTHON
+    phase = seq[S_PHASE]
+    result = DONE
+    if mode[0] == HARD_STOP:
+        for i in range(3):
+            io[IO_Q + i] = q_meas[i]
+            io[IO_QD + i] = 0.0
+            io[IO_QDD + i] = 0.0
+            io[IO_FORCE + i] = 0.0
+        io[IO_CTRL_MODE] = 0.0
+    elif phase == STOPPED or phase == REST:
+        # The approach holds still (its update writes the hold); a force reference still
+        # ramping down is Python's (it ends by re-planning the approach).
+        if seq[S_HOLDING] == 0.0 or io[IO_CTRL_MODE] > 0.5:
+            return NEED_PYTHON
+        for i in range(3):
+            io[IO_Q + i] = seq[S_HOLD + i]
+            io[IO_QD + i] = 0.0
+            io[IO_QDD + i] = 0.0
+    elif phase == PLAY and seq[S_TABLE] != 0.0:
+        if play_table(io, seq, table, dt):
+            result = PLAY_DONE
+    else:
+        return NEED_PYTHON
+    finish(io, seq, phase)
+    return result
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) for the argument types the loop passes — the mode
+    and q_meas as read-only port views — at construction, never in a cycle."""
+    io = np.zeros(IO_SIZE)
+    seq = np.zeros(SEQ_SIZE)
+    seq[S_N] = 1.0
+    q = np.zeros(3)
+    m = np.zeros(1)
+    q.flags.writeable = m.flags.writeable = False
+    for ro in (False, True):
+        qq, mm = (q, m) if ro else (q.copy(), m.copy())
+        cycle(io, seq, qq, mm, np.zeros((1, 9)), 1e-3)
+    seq[S_K] = 0.0
+    play_table(io, seq, np.zeros((1, 9)), 1e-3)
+    emit(io, seq, np.zeros(N_FIELDS), 0.0, 1e-3)
+    finish(io, seq, REST)
