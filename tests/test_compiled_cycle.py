@@ -190,9 +190,11 @@ def _kernels():
     from rt.control import kernels as ck
     from rt.estimation import compiled as ec
     from rt.model import kernels as mk
+    from rt.references import sequencer_kernel as sk
 
     return (ck.pid, ck.paden_panja, ck.adaptive, ck.pd_gravity, ck.computed_torque,
-            ck.gravity, ec.kalman_update, mk.model_state)
+            ck.gravity, ec.kalman_update, mk.model_state, sk.cycle, sk.play_table, sk.emit,
+            sk.finish)
 
 
 @pytest.mark.parametrize("controller", ["paden_panja", "adaptive", "pid"])
@@ -261,3 +263,206 @@ def test_benchmark_sampler_matches_its_interpreted_reference() -> None:
     compiled(1.5, lists)
     interpreted(1.5, ri)
     assert lists.q == list(ri.q) and lists.qdd == list(ri.qdd)
+
+
+# -- the sequencer (issue 16: the reference sampled compiled) ---------------------------------
+class _PythonForceHold:
+    """A program without a table (called every cycle): 250 N in z where it starts, reading the
+    patient's torque each cycle as an interactive program would."""
+
+    def __init__(self, q, duration_s: float) -> None:
+        self.q = np.array(q, float)
+        self.duration_s = duration_s
+        self.n = round(duration_s / DT) + 1
+        self.k = 0
+
+    @staticmethod
+    def new_output():
+        from rt.references.program import ReferenceOutput
+
+        return ReferenceOutput()
+
+    def reset(self) -> None:
+        self.k = 0
+
+    def update(self, out, inp=None) -> int:
+        from rt.references.program import Mode
+
+        out.q_ref[:] = self.q
+        out.qd_ref[:] = 0.0
+        out.qdd_ref[:] = 0.0
+        tau = 0.0 if inp is None else inp.tau_roll_nm
+        out.buf[15], out.buf[16] = 250.0 + 0.5 * tau, 10.0 * math.sin(0.01 * self.k)
+        out.mode = Mode.FORCE
+        out.done = self.k >= self.n - 1
+        self.k = min(self.k + 1, self.n - 1)
+        return 1 if out.done else 0
+
+
+class _Twins:
+    """A compiled and an interpreted sequencer on the same input buffers (q_meas, the
+    supervisor's mode, the wrench, the force reader's tare answering the compiled one's
+    request one cycle late, as in the loop); the measured position follows the compiled one's
+    reference with a small deterministic error."""
+
+    def __init__(self, q0) -> None:
+        from rt.components.tare import Tare
+        from rt.references.sequencer import ProgramReference
+
+        stroke = RobotModel.load().description.limits.stroke
+        self.refs = [ProgramReference("reference", stroke, DT, compiled=c) for c in (True, False)]
+        self.q = np.array(q0, float)
+        self.mode = np.zeros(1)
+        self.wrench = np.array([0.3, -0.2, -3.9, 0.01, 0.02, 0.0])
+        self.tare = Tare()
+        self.tare_port = np.zeros(10)
+        self.tare_request = np.zeros(1)
+        for r in self.refs:
+            for port, buf in ((r.q_meas, self.q), (r.mode, self.mode), (r.wrench, self.wrench),
+                              (r.tare, self.tare_port)):
+                view = buf.view()
+                view.flags.writeable = False
+                port._bind(view, "test")
+            r.configure()
+            r.start()
+        self.interpreted_cycles = 0
+        compiled = self.refs[0]
+        run = compiled._update
+
+        def counted(dt: float) -> int:
+            self.interpreted_cycles += 1
+            return run(dt)
+
+        compiled._update = counted  # type: ignore[method-assign]
+        self.k = 0
+
+    def request(self, make_program, **kw) -> None:
+        """Each sequencer gets its own program (the interpreted one calls it every cycle)."""
+        for r in self.refs:
+            r.request(make_program(), **kw)
+
+    def abort(self) -> None:
+        for r in self.refs:
+            r.request_abort()
+
+    def step(self) -> None:
+        c, i = self.refs
+        self.tare.cycle(self.wrench.copy(), True, self.tare_request[0] > 0.5, self.tare_port)
+        w = self.wrench.copy()
+        for r in self.refs:
+            assert r.update(self.k * DT, DT) == 0
+            self.wrench[:] = w
+        assert np.array_equal(c._io, i._io, equal_nan=True), (self.k, [(j, a, b) for j, (a, b) in enumerate(zip(c._io, i._io)) if not (a == b or a != a and b != b)])
+        for name in ("phase", "mode", "started", "k", "taring", "tare_measuring",
+                     "tares_before"):
+            assert getattr(c.state, name) == getattr(i.state, name), (self.k, name)
+        assert (c.epoch, c.refused, c.last_error, c.tare_refused) == \
+            (i.epoch, i.refused, i.last_error, i.tare_refused), self.k
+        self.tare_request[:] = c.tare_request.data
+        self.q[:] = c.q_ref.data + 2e-6 * math.sin(0.37 * self.k)
+        self.k += 1
+
+    def run(self, cycles: int) -> None:
+        for _ in range(cycles):
+            self.step()
+
+    def until(self, phase, limit: int = 60_000) -> None:
+        from rt.references.sequencer import Phase
+
+        for _ in range(limit):
+            self.step()
+            if Phase(int(self.refs[0].phase.data[0])) == phase:
+                return
+        raise AssertionError(f"never reached {phase!r}")
+
+
+def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -> None:
+    """Table programs (a force protocol with its tare, a position protocol, a trajectory, the
+    identification excitation) and a Python program, through approach, play, return, a soft
+    stop mid-play and its reset, a hard stop following the measured position, an abort in
+    force, requests refused, a refused tare and a NaN wrench: every output of every cycle is
+    the interpreted sequencer's bit for bit, and the interpreted path runs only on events."""
+    from protocols.generators import make_generator
+    from protocols.library import LIBRARY_DIR, parse_protocol_text
+    from rt.control.experiment import benchmark_reference
+    from rt.identification.program import ExcitationProgram
+    from rt.references.program import TrajectoryProgram
+    from rt.references.sequencer import Phase
+    from rt.safety.events import SupervisorMode
+
+    def protocol(name: str, **replace: tuple[str, str]):
+        text = (LIBRARY_DIR / name).read_text()
+        for old, new in replace.values():
+            assert old in text
+            text = text.replace(old, new)
+
+        def make():
+            gen = make_generator(parse_protocol_text(text), dt=DT, kinematics=model.kin)
+            assert gen.validate().ok
+            assert gen.table_view() is not None
+            return gen
+        return make
+
+    sine = protocol("sine_fz.yaml", c=("cycles: 20", "cycles: 2"),
+                    r=("ramp_in_s: 2.0", "ramp_in_s: 0.5"), o=("ramp_out_s: 2.0", "ramp_out_s: 0.5"))
+    rom = protocol("ankle_rom.yaml", r=("repetitions: 3", "repetitions: 1"),
+                   s=("sequence: [dorsi_plantar, inversion_eversion]", "sequence: [dorsi_plantar]"),
+                   a=("dorsiflexion: 10.0", "dorsiflexion: 3.0"),
+                   p=("plantarflexion: 10.0", "plantarflexion: 3.0"),
+                   h=("hold_s: 1.0", "hold_s: 0.1"))
+    q_mid = np.array(model.kin.ik(0.63, 0.0, 0.0).q)
+    h = _Twins(q_mid + 0.002)
+    h.run(5)                                       # at rest, nothing to play
+    h.request(sine, rest_q=tuple(q_mid + 0.002))
+    h.until(Phase.PLAY)                            # approach, tare
+    h.wrench[2] = math.nan                         # a lost sensor sample while playing
+    h.run(3)
+    h.wrench[2] = -3.9
+    h.run(800)
+    h.request(rom)                                 # refused: a program is running
+    h.run(2)
+    h.mode[0] = SupervisorMode.SOFT_STOP           # mid-play: brake, ramp the force down
+    h.run(2500)
+    h.request(rom)                                 # refused: stopped
+    h.run(3)
+    h.mode[0] = SupervisorMode.RUN                 # the reset
+    h.run(10)
+    h.request(rom, rest_q=tuple(q_mid))            # plays to its end, returns to rest
+    h.until(Phase.PLAY)
+    h.until(Phase.REST)
+    h.run(20)
+    h.request(lambda: TrajectoryProgram(benchmark_reference(float(q_mid[0])), 1.0, DT))
+    h.until(Phase.PLAY)
+    h.run(300)
+    h.mode[0] = SupervisorMode.HARD_STOP           # the reference follows the platform
+    h.run(50)
+    h.mode[0] = SupervisorMode.RUN
+    h.run(10)
+    table = np.zeros((400, 9))
+    table[:, 0:3] = h.q + 1e-3 * np.sin(np.linspace(0.0, 3.0, 400))[:, None]
+    table[:, 3:6] = 1e-3 * 3.0 / 0.399 * np.cos(np.linspace(0.0, 3.0, 400))[:, None]
+    h.request(lambda: ExcitationProgram(table, DT))
+    h.until(Phase.REST)
+    h.run(5)
+    # A Python program, aborted while in force: the ramp down, then the hold.
+    start = h.q.copy()
+    h.request(lambda: _PythonForceHold(start, 1.0))
+    h.wrench[:] = [0.1, 0.0, -3.9, 0.2, 0.0, 0.0]
+    h.until(Phase.PLAY)
+    h.run(300)
+    h.abort()
+    h.until(Phase.REST)
+    h.run(5)
+    # A force protocol on a loaded platform: the tare is refused, nothing plays.
+    h.wrench[2] = -80.0
+    h.request(sine)
+    h.until(Phase.APPROACH)
+    h.until(Phase.REST)
+    h.run(5)
+    c = h.refs[0]
+    assert c.tare_refused == 1 and c.refused == 2 and c.epoch == 6
+    # Steady cycles ran compiled: the interpreted path took the approaches, returns, ramps,
+    # tares and the events, not the playing or the holding.
+    assert h.k > 10_000
+    played = h.k - h.interpreted_cycles
+    assert played > 0.4 * h.k, (played, h.k)

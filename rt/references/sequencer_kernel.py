@@ -160,10 +160,15 @@ def warm_up() -> None:
     q = np.zeros(3)
     m = np.zeros(1)
     q.flags.writeable = m.flags.writeable = False
+    # A table may be read-only too: a prepared session's arrays arrive through shared memory.
+    table_ro = np.zeros((1, 9))
+    table_ro.flags.writeable = False
     for ro in (False, True):
         qq, mm = (q, m) if ro else (q.copy(), m.copy())
-        cycle(io, seq, qq, mm, np.zeros((1, 9)), 1e-3)
-    seq[S_K] = 0.0
-    play_table(io, seq, np.zeros((1, 9)), 1e-3)
+        for table in (np.zeros((1, 9)), table_ro):
+            cycle(io, seq, qq, mm, table, 1e-3)
+    for table in (np.zeros((1, 9)), table_ro):
+        seq[S_K] = 0.0
+        play_table(io, seq, table, 1e-3)
     emit(io, seq, np.zeros(N_FIELDS), 0.0, 1e-3)
     finish(io, seq, REST)
