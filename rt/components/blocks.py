@@ -42,22 +42,31 @@ class VelocityEstimation(Component):
     m/s²) — the Kalman estimate from the quantized encoders; out ``status``: float64[1] — the
     estimator's status (−3 = implausible jump, for the supervisor).
 
-    The filter runs compiled (``rt.estimation.compiled``); ``compiled=False`` runs the
-    interpreted ``KalmanVelocityEstimator``, its reference."""
+    The filter runs compiled (``rt.estimation.compiled``: one call writes the four outputs,
+    views of one arena); ``compiled=False`` runs the interpreted ``KalmanVelocityEstimator``,
+    its reference."""
 
     def __init__(self, name: str, compiled: bool = True):
         super().__init__(name)
         self.compiled = compiled
+        self._io = io = np.zeros(10)
         self.q_meas = self.declare_input("q_meas", Array(3))
-        self.q = self.declare_output("q", Array(3))
-        self.qd = self.declare_output("qd", Array(3))
-        self.qdd = self.declare_output("qdd", Array(3))
-        self.status = self.declare_output("status", Array(1))
+        self.q = self.declare_output("q", Array(3), buffer=io[0:3])
+        self.qd = self.declare_output("qd", Array(3), buffer=io[3:6])
+        self.qdd = self.declare_output("qdd", Array(3), buffer=io[6:9])
+        self.status = self.declare_output("status", Array(1), buffer=io[9:10])
+        self._step = None
 
     def make_state(self) -> KalmanVelocityEstimator | CompiledKalmanEstimator:
-        return CompiledKalmanEstimator() if self.compiled else KalmanVelocityEstimator()
+        est = CompiledKalmanEstimator() if self.compiled else KalmanVelocityEstimator()
+        self._step = est.update_into if isinstance(est, CompiledKalmanEstimator) else None
+        return est
 
     def update(self, t: float, dt: float) -> int:
+        step = self._step
+        if step is not None:
+            status = step(self.q_meas.data, dt, self._io)
+            return STATUS_SENSOR if (status < 0 and status != -3) else 0
         est = self.state
         status = est.update(self.q_meas.data, dt)
         self.status.data[0] = status
@@ -157,6 +166,11 @@ class ControllerBlock(Component):
         except TalusError as exc:
             raise InputError(f"component {self.name!r}: rejected {values!r}: {exc}") from exc
 
+    def on_start(self) -> None:
+        # The law's compiled cycle on this block's buffers (bound now: a swap has bound the
+        # inputs and adopted the outputs before it starts the new block).
+        self.controller.bind_cycle(self.state_in.data, self._bind_reference(), self.tau.data)
+
     def handover(self, old: Component) -> None:
         # The outputs already hold the old law's last force (the engine adopts its buffers).
         self.controller.handover(self.tau.data.copy(), self.state_in.data,
@@ -169,8 +183,10 @@ class ControllerBlock(Component):
         if raw != self._mode_raw:
             self._mode_raw = raw
             self._mode_changed(SupervisorMode.from_port(raw))
-        return self.controller.update(self.state_in.data, self._bind_reference(), dt,
-                                      self.tau.data)
+        cycle = self.controller.cycle
+        if cycle is not None:                 # one compiled call (``Controller.bind_cycle``)
+            return cycle(dt)
+        return self.controller.update(self.state_in.data, self._ref, dt, self.tau.data)
 
     def _mode_changed(self, mode: SupervisorMode) -> None:
         if mode != self._mode:

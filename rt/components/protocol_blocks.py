@@ -49,6 +49,7 @@ class HybridController(Component):
         self._fref = ForceReference()
         self._in_force = False
         self._sup_mode = SupervisorMode.RUN
+        self._sup_raw = float(SupervisorMode.RUN)
         self._offset = 0.0
         self.entry_time_s = 0.3
         self._decay_per_s = math.exp(-1.0 / self.entry_time_s)
@@ -92,14 +93,24 @@ class HybridController(Component):
         except TalusError as exc:
             raise InputError(f"component {self.name!r}: rejected {values!r}: {exc}") from exc
 
+    def on_start(self) -> None:
+        r = self._ref
+        r.q, r.qd, r.qdd = self.q_ref.data, self.qd_ref.data, self.qdd_ref.data
+        # The position law's compiled cycle on this block's buffers (``Controller.bind_cycle``).
+        self.position.bind_cycle(self.state_in.data, r, self.tau.data)
+
     def update(self, t: float, dt: float) -> int:
-        mode = SupervisorMode.from_port(self.mode.data[0])
-        if mode != self._sup_mode:
-            if self._sup_mode == SupervisorMode.HARD_STOP:
-                # Drives back after a hard stop: integrators and estimates start afresh.
-                self.position.reset()
-                self.force_law.reset()
-            self._sup_mode = mode
+        raw = self.mode.data[0]
+        # The enum is built only when the mode changed.
+        if raw != self._sup_raw:
+            self._sup_raw = raw
+            mode = SupervisorMode.from_port(raw)
+            if mode != self._sup_mode:
+                if self._sup_mode == SupervisorMode.HARD_STOP:
+                    # Drives back after a hard stop: integrators and estimates start afresh.
+                    self.position.reset()
+                    self.force_law.reset()
+                self._sup_mode = mode
         force_mode = self.ctrl_mode.data[0] > 0.5
         measured = -self.wrench.data[2]
         if force_mode != self._in_force:
@@ -123,6 +134,7 @@ class HybridController(Component):
             fr.roll, fr.pitch = self.pose.data[1], self.pose.data[2]
             fr.roll_rate = fr.pitch_rate = 0.0
             return self.force_law.update(st, measured, fr, dt, self.tau.data)
-        r = self._ref
-        r.q, r.qd, r.qdd = self.q_ref.data, self.qd_ref.data, self.qdd_ref.data
-        return self.position.update(st, r, dt, self.tau.data)
+        cycle = self.position.cycle
+        if cycle is not None:
+            return cycle(dt)
+        return self.position.update(st, self._ref, dt, self.tau.data)

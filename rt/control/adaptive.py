@@ -174,6 +174,19 @@ class Adaptive(Controller):
                     self._amap, self._est, self._nb, dt, dry_run, self._work, out)
         return STATUS_OK
 
+    def _bound_kernel(self, st, ref, out):
+        d = self.dyn
+        kernel, ti, tf, stb, q, qd, qdd = ck.adaptive, d.tree_i, d.tree_f, st.buf, ref.q, \
+            ref.qd, ref.qdd
+        g, work = self._gain_array, self._work
+
+        def cycle(dt: float) -> int:
+            # The estimate's arrays are rebuilt by a reset or new gains: read at call time.
+            kernel(ti, tf, stb, q, qd, qdd, g, self._amap, self._est, self._nb, dt, False, work,
+                   out)
+            return STATUS_OK
+        return cycle
+
     def estimate(self, name: str) -> float:
         """Current estimate of base parameter ``name``."""
         return float(self.theta[self.regressor.base.names.index(name)])

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import abc
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -93,7 +93,14 @@ def check_range_table(owner: str, ranges: Mapping[str, GainRange],
 
 
 class Controller(abc.ABC):
-    """One position-control law. Subclasses set ``name``, ``gains_type`` and ``_law``."""
+    """One position-control law. Subclasses set ``name``, ``gains_type`` and ``_law``.
+
+    A block that hosts the law calls :meth:`bind_cycle` once with its buffers; ``cycle`` is
+    then the compiled law bound to them (``cycle(dt) -> status``: one kernel call, what
+    ``update`` computes, without the interpreter's layers) whenever that is all ``update``
+    would do, and None otherwise (interpreted, a law without a whole kernel, a bumpless
+    offset still fading): the block then calls ``update``.
+    """
 
     name: ClassVar[str]
     gains_type: ClassVar[type[Gains]]
@@ -114,6 +121,8 @@ class Controller(abc.ABC):
         self.compiled = compiled
         self._gain_array = np.zeros(4)
         self._work = np.zeros(8 + rb.work_size(TREE_DOF))
+        self._binding: tuple[State, Reference, np.ndarray] | None = None
+        self.cycle: Callable[[float], int] | None = None
         self._pack_gains()
         self.reset()
         if compiled:
@@ -163,6 +172,27 @@ class Controller(abc.ABC):
         """Back to the initial state (integrals and estimates cleared)."""
         self._offset[:] = 0.0
         self._offset_weight = 0.0
+        self._rebind()
+
+    def bind_cycle(self, st: State, ref: Reference, out: np.ndarray) -> None:
+        """The buffers a block runs this law on every cycle (its state and reference inputs,
+        its τ output, N): ``cycle`` is the law bound to them when it can be (class
+        docstring). ``tau`` becomes ``out`` (the last output either way)."""
+        self._binding = (st, ref, out)
+        self.tau = out
+        self._rebind()
+
+    def _rebind(self) -> None:
+        b = self._binding
+        self.cycle = (None if b is None or not self.compiled or self._offset_weight > 0.0
+                      else self._bound_kernel(*b))
+
+    def _bound_kernel(self, st: State, ref: Reference, out: np.ndarray
+                      ) -> Callable[[float], int] | None:
+        """Hook: the compiled law as ``cycle(dt) -> status`` on these buffers, exactly what
+        ``update`` computes when no offset fades; arrays a reset or new gains replace are
+        read through ``self`` at call time. None: the law has no whole kernel."""
+        return None
 
     def handover(self, previous_tau: np.ndarray, st: State, ref: Reference, dt: float) -> None:
         """Take over from a controller whose last output was ``previous_tau`` (N)."""
@@ -173,6 +203,7 @@ class Controller(abc.ABC):
     def _absorb(self, difference: np.ndarray) -> None:
         self._offset[:] = difference
         self._offset_weight = 1.0
+        self._rebind()
 
     # ------------------------------------------------------------------ cycle
     def update(self, st: State, ref: Reference, dt: float, out: np.ndarray) -> int:
@@ -183,7 +214,9 @@ class Controller(abc.ABC):
             self._offset_weight *= math.exp(-dt / self.bumpless_time_s)
             if self._offset_weight < 1e-6:
                 self._offset_weight = 0.0
-        self.tau[:] = out
+                self._rebind()
+        if out is not self.tau:
+            self.tau[:] = out
         return status
 
     def _run_law(self, st: State, ref: Reference, dt: float, out: np.ndarray,

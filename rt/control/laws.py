@@ -13,6 +13,7 @@ clamps stay below what the drives can give (6 V × 339 N/V ≈ 2 kN per axis).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated
 
 import numpy as np
@@ -51,6 +52,14 @@ PID_RANGES = {**PD_RANGES, "ki_n_per_m_s": GainRange(0.0, 2.0e7, "N/(m s)"),
 #: Kp = ω², Kd = 2 ζ ω on the linearised error dynamics, same ω and ζ.
 CT_RANGES = {"kp_per_s2": GainRange(25.0, 22500.0, "1/s²"),
              "kd_per_s": GainRange(5.0, 600.0, "1/s")}
+
+
+def _bound(kernel: Callable[..., None], *args: object) -> Callable[[float], int]:
+    """``cycle(dt)`` calling a law's kernel on fixed arguments (laws that do not use dt)."""
+    def cycle(dt: float) -> int:
+        kernel(*args)
+        return STATUS_OK
+    return cycle
 
 
 def _pd(g: PdGains, st: State, ref: Reference, out: np.ndarray) -> None:
@@ -93,6 +102,14 @@ class Pid(Controller):
         ck.pid(st.buf, ref.q, ref.qd, self._gain_array, self.integral, dt, dry_run, out)
         return STATUS_OK
 
+    def _bound_kernel(self, st, ref, out):
+        kernel, stb, q, qd, g = ck.pid, st.buf, ref.q, ref.qd, self._gain_array
+
+        def cycle(dt: float) -> int:
+            kernel(stb, q, qd, g, self.integral, dt, False, out)   # reset() replaces integral
+            return STATUS_OK
+        return cycle
+
     def _absorb(self, difference: np.ndarray) -> None:
         # Bumpless: preload the integrator so the first output equals the previous one.
         ki = self.gains.ki_n_per_m_s
@@ -125,6 +142,11 @@ class PdG(Controller):
         ck.pd_gravity(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, self._gain_array, self._work,
                       out)
         return STATUS_OK
+
+    def _bound_kernel(self, st, ref, out):
+        d = self.dyn
+        return _bound(ck.pd_gravity, d.tree_i, d.tree_f, st.buf, ref.q, ref.qd,
+                      self._gain_array, self._work, out)
 
 
 @register
@@ -201,6 +223,11 @@ class PadenPanja(Controller):
                        self._work, out)
         return STATUS_OK
 
+    def _bound_kernel(self, st, ref, out):
+        d = self.dyn
+        return _bound(ck.paden_panja, d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
+                      self._gain_array, self._work, out)
+
 
 def _computed_torque(dyn, st: State, v: np.ndarray, out: np.ndarray) -> None:
     """τ = M(q) v + C(q, q̇) q̇ + G(q) + F(q̇): the inverse-dynamics part both laws share."""
@@ -233,6 +260,11 @@ class ComputedTorquePtp(Controller):
                            self._gain_array, False, self._work, out)
         return STATUS_OK
 
+    def _bound_kernel(self, st, ref, out):
+        d = self.dyn
+        return _bound(ck.computed_torque, d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
+                      self._gain_array, False, self._work, out)
+
 
 @register
 class ComputedTorqueTrajectory(Controller):
@@ -258,3 +290,8 @@ class ComputedTorqueTrajectory(Controller):
         ck.computed_torque(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
                            self._gain_array, True, self._work, out)
         return STATUS_OK
+
+    def _bound_kernel(self, st, ref, out):
+        d = self.dyn
+        return _bound(ck.computed_torque, d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
+                      self._gain_array, True, self._work, out)

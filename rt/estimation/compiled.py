@@ -167,6 +167,20 @@ def kalman_update(c, s, z, dt, out):
     return _OK
 
 
+@njit(cache=True)
+def block_update(c, s, z, dt, out, io):
+    """:func:`kalman_update`, then the estimation block's outputs in one arena ``io`` = [q (3),
+    q̇ (3), q̈ (3), status]: the status always, the estimate unless the sample was refused
+    (a flagged jump is published: it is the supervisor's business)."""
+    status = kalman_update(c, s, z, dt, out)
+    io[9] = status
+    if status < 0 and status != _JUMP:
+        return status
+    for i in range(9):
+        io[i] = out[i]
+    return status
+
+
 class CompiledKalmanEstimator:
     """:class:`KalmanVelocityEstimator`'s interface (``q``, ``qd``, ``qdd``, ``innovation``,
     ``update``, ``reset``, ``gain``, ``converged``, ``jump_latched``) over the compiled cycle.
@@ -193,6 +207,8 @@ class CompiledKalmanEstimator:
         kalman_update(self._c, self._s.copy(), z, c.dt_s, self._out.copy())
         z.flags.writeable = False
         kalman_update(self._c, self._s.copy(), z, c.dt_s, self._out.copy())
+        for zz in (z, z.copy()):
+            block_update(self._c, self._s.copy(), zz, c.dt_s, self._out.copy(), np.zeros(10))
 
     def reset(self) -> None:
         """Forget the state; the next valid sample re-initialises the filter."""
@@ -203,6 +219,11 @@ class CompiledKalmanEstimator:
     def update(self, q_measured: np.ndarray, dt: float) -> int:
         """See :meth:`KalmanVelocityEstimator.update`."""
         return kalman_update(self._c, self._s, q_measured, dt, self._out)
+
+    def update_into(self, q_measured: np.ndarray, dt: float, io: np.ndarray) -> int:
+        """:meth:`update`, then [q, q̇, q̈, status] written into ``io`` (10,) in the same call:
+        the status always, the estimate unless the sample was refused (``block_update``)."""
+        return block_update(self._c, self._s, q_measured, dt, self._out, io)
 
     @property
     def gain(self) -> tuple[float, float, float]:
