@@ -233,14 +233,15 @@ def test_payload_reaches_the_compiled_model(model) -> None:
 
 
 def _kernels():
+    from rt.components.blocks import tap_row
     from rt.control import kernels as ck
     from rt.estimation import compiled as ec
     from rt.model import kernels as mk
     from rt.references import sequencer_kernel as sk
 
     return (ck.pid, ck.paden_panja, ck.adaptive, ck.pd_gravity, ck.computed_torque,
-            ck.gravity, ec.kalman_update, mk.model_state, sk.cycle, sk.play_table, sk.emit,
-            sk.finish)
+            ck.gravity, ec.kalman_update, ec.block_update, mk.model_state, sk.cycle,
+            sk.play_table, sk.emit, sk.finish, tap_row)
 
 
 @pytest.mark.parametrize("controller", ["paden_panja", "adaptive", "pid"])
@@ -513,3 +514,33 @@ def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -
     assert h.k > 10_000
     played = h.k - h.interpreted_cycles
     assert played > 0.4 * h.k, (played, h.k)
+
+
+def test_a_signal_taps_compiled_row_is_the_signals_in_order() -> None:
+    """The tap's one-call row (``tap_row``) on a graph's read-only views holds t and every
+    signal in order, wrapping around its ring; mixed array kinds keep the interpreted copy,
+    with the same rows."""
+    from rt.components.blocks import SignalTap
+
+    rng = np.random.default_rng(3)
+    rows = {}
+    for read_only in (True, False):
+        tap = SignalTap("tap", [("a", 3), ("b", 1), ("c", 6)], capacity=16)
+        bufs = [np.zeros(3), np.zeros(1), np.zeros(6)]
+        for port, buf in zip(tap.ports, bufs):
+            view = buf.view()
+            view.flags.writeable = not read_only if port.name == "b" else False
+            port._bind(view, "test")
+        tap.configure()
+        tap.start()
+        assert (tap._signals is not None) == read_only
+        want = []
+        for k in range(40):
+            for buf in bufs:
+                buf[:] = rng.normal(size=buf.shape)
+            tap.update(k * DT, DT)
+            want.append(np.concatenate([[k * DT], *bufs]))
+        got, end = tap.drain(0)
+        assert end == 40 and np.array_equal(got, np.array(want[-16:]))
+        rows[read_only] = got
+    assert rows[True].shape == rows[False].shape

@@ -7,6 +7,7 @@ Each block's ports are documented first thing in its docstring; units are SI.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from rt.control.base import Controller, Reference
 from rt.devices.interfaces import EncoderBank
@@ -94,6 +95,7 @@ class ModelState(Component):
         self.model = model
         self.compiled = compiled
         self._work = np.zeros(MODEL_STATE_WORK)
+        self._args: tuple | None = None
         if compiled:
             # Compile (or load from numba's cache) now, not in the first cycle; on a copy of
             # the warm start, so the model's own is untouched.
@@ -109,13 +111,20 @@ class ModelState(Component):
         self.state_out = self.declare_output("state", Struct(State))
         self.fk_ok = self.declare_output("fk_ok", Array(1))
 
+    def on_start(self) -> None:
+        self._args = None              # bound again at the first cycle (ports may be rebound)
+
     def update(self, t: float, dt: float) -> int:
         if self.compiled:
-            kin = self.model.kin
+            args = self._args
+            if args is None:
+                # The kernel's arguments are the same objects every cycle: bound once.
+                kin = self.model.kin
+                args = self._args = (kin.geom, kin.limits_array, kin._phi_guess,
+                                     self.q_meas.data, self.qd.data, self.state_out.data.buf,
+                                     FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, self._work)
             st = self.state_out.data
-            status = model_state(kin.geom, kin.limits_array, kin._phi_guess, self.q_meas.data,
-                                 self.qd.data, st.buf, FK_STEP_TOL_RAD, FK_MAX_ITERATIONS,
-                                 self._work)
+            status = model_state(*args)
             if status >= 0:
                 st.buffer_filled()
                 self.fk_ok.data[0] = 1.0
@@ -196,6 +205,18 @@ class ControllerBlock(Component):
             self._mode = mode
 
 
+@njit(cache=True)
+def tap_row(ring, row, t, signals):
+    """Row ``row`` of ``ring`` = [t, every signal in order] (``signals``: a tuple of arrays)."""
+    r = ring[row]
+    r[0] = t
+    k = 1
+    for a in signals:
+        for i in range(a.shape[0]):
+            r[k + i] = a[i]
+        k += a.shape[0]
+
+
 class SignalTap(Component):
     """Ports: one float64[n] input per declared signal; no outputs.
 
@@ -211,8 +232,26 @@ class SignalTap(Component):
         self.capacity = capacity
         self.ring = np.zeros((capacity, self.width))
         self.written = 0
+        self._signals: tuple[np.ndarray, ...] | None = None
+
+    def on_start(self) -> None:
+        # The inputs are bound now (and stay so while the graph runs): the row is then one
+        # compiled call on them (``tap_row``), compiled here rather than in a cycle. Inputs of
+        # mixed array kinds (not a graph's read-only views) keep the interpreted copy.
+        signals = tuple(p.data for p in self.ports)
+        kinds = {(type(a), a.dtype, a.ndim, a.flags.c_contiguous, a.flags.writeable)
+                 for a in signals}
+        self._signals = signals if len(kinds) == 1 and next(iter(kinds))[:4] == (
+            np.ndarray, np.float64, 1, True) else None
+        if self._signals is not None:
+            tap_row(np.zeros((1, self.width)), 0, 0.0, self._signals)
 
     def update(self, t: float, dt: float) -> int:
+        signals = self._signals
+        if signals is not None:
+            tap_row(self.ring, self.written % self.capacity, t, signals)
+            self.written += 1
+            return 0
         row = self.ring[self.written % self.capacity]
         row[0] = t
         k = 1
