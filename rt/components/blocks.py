@@ -6,6 +6,8 @@ Each block's ports are documented first thing in its docstring; units are SI.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numba import njit
 
@@ -56,7 +58,7 @@ class VelocityEstimation(Component):
         self.qd = self.declare_output("qd", Array(3), buffer=io[3:6])
         self.qdd = self.declare_output("qdd", Array(3), buffer=io[6:9])
         self.status = self.declare_output("status", Array(1), buffer=io[9:10])
-        self._step = None
+        self._step: Callable[[np.ndarray, float, np.ndarray], int] | None = None
 
     def make_state(self) -> KalmanVelocityEstimator | CompiledKalmanEstimator:
         est = CompiledKalmanEstimator() if self.compiled else KalmanVelocityEstimator()

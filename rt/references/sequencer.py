@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 
@@ -107,7 +108,7 @@ class _Field:
         self.index = index
         self.kind = kind
 
-    def __get__(self, obj: _SeqState, owner: type | None = None):  # type: ignore[no-untyped-def]
+    def __get__(self, obj: _SeqState, owner: type | None = None) -> Any:
         value = obj.seq[self.index]
         if self.kind is float:
             return float(value)
