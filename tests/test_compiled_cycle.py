@@ -306,6 +306,11 @@ def test_benchmark_sampler_matches_its_interpreted_reference() -> None:
         interpreted(float(t), ri)
         for name in ("q", "qd", "qdd"):
             assert np.array_equal(getattr(rc, name), getattr(ri, name)), (t, name)
+    # Its table (a TrajectoryProgram's for the compiled sequencer): the same samples.
+    table = compiled.tabulate(DT, 2001)
+    for k in (0, 1, 777, 2000):
+        interpreted(k * DT, ri)
+        assert np.array_equal(table[k], np.concatenate((ri.q, ri.qd, ri.qdd))), k
     lists = Reference([0.0] * 3, [0.0] * 3, [0.0] * 3)  # type: ignore[arg-type]
     compiled(1.5, lists)
     interpreted(1.5, ri)

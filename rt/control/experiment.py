@@ -51,18 +51,31 @@ def benchmark_reference(q0: float = 0.20) -> RefFn:
     Sampled by a compiled kernel (the loop calls it every cycle); the arithmetic is
     :func:`benchmark_reference_interpreted`'s, its reference, operation for operation."""
     _warm_benchmark()
-    w1, w2 = 2 * math.pi * 0.25, 2 * math.pi * 0.6
-    q0 = float(q0)
-    interpreted = benchmark_reference_interpreted(q0)
+    return _BenchmarkReference(float(q0))
 
-    def ref(t: float, out: Reference) -> None:
+
+class _BenchmarkReference:
+    """The compiled benchmark trajectory: called per sample as any ``RefFn``, and
+    ``tabulate(dt, n)`` samples it at k·dt, k < n, in one compiled call (the same arithmetic:
+    the sequencer's table of a ``TrajectoryProgram``)."""
+
+    def __init__(self, q0: float) -> None:
+        self.q0 = q0
+        self.w1, self.w2 = 2 * math.pi * 0.25, 2 * math.pi * 0.6
+        self._interpreted = benchmark_reference_interpreted(q0)
+
+    def __call__(self, t: float, out: Reference) -> None:
         q, qd, qdd = out.q, out.qd, out.qdd
         if type(q) is np.ndarray and type(qd) is np.ndarray and type(qdd) is np.ndarray:
-            _benchmark_sample(float(t), q0, w1, w2, q, qd, qdd)
+            _benchmark_sample(float(t), self.q0, self.w1, self.w2, q, qd, qdd)
         else:                         # lists or other sequences: the interpreted sampler
-            interpreted(t, out)
+            self._interpreted(t, out)
 
-    return ref
+    def tabulate(self, dt: float, n: int) -> np.ndarray:
+        """(n, 9) rows of q, q̇, q̈ (m, m/s, m/s²) at t = k·dt."""
+        table = np.empty((n, 9))
+        _benchmark_table(self.q0, self.w1, self.w2, float(dt), table)
+        return table
 
 
 def benchmark_reference_interpreted(q0: float = 0.20) -> RefFn:
@@ -91,11 +104,19 @@ def _benchmark_sample(t, q0, w1, w2, q, qd, qdd):
             w2 * t + ph)
 
 
+@njit(cache=True)
+def _benchmark_table(q0, w1, w2, dt, table):
+    """Rows k of ``table`` = the sample at t = k·dt (as ``_benchmark_sample`` at float(k·dt))."""
+    for k in range(table.shape[0]):
+        _benchmark_sample(k * dt, q0, w1, w2, table[k, 0:3], table[k, 3:6], table[k, 6:9])
+
+
 def _warm_benchmark() -> None:
     """Compile (or load from numba's cache) the sampler when a trajectory is built, not in
     the first cycle that samples it."""
     z = np.zeros(3)
     _benchmark_sample(0.0, 0.2, 1.0, 1.0, z, z, z)
+    _benchmark_table(0.2, 1.0, 1.0, 1e-3, np.zeros((1, 9)))
 
 
 def run_tracking(controller: str, seconds: float, reference: RefFn, environment=None,

@@ -138,6 +138,9 @@ class ProgramInput:
 
 #: Longest table a program hands the sequencer (samples): 20 min at 1 kHz, ≤ 163 MB.
 MAX_TABLE_SAMPLES = 1_200_000
+#: Longest trajectory tabulated by calling it sample by sample (2 min at 1 kHz: ≈ 0.3 s of
+#: Python on the requesting thread, which shares the interpreter with the loop).
+MAX_CALLED_SAMPLES = 120_000
 
 
 @dataclass(frozen=True)
@@ -210,17 +213,25 @@ class TrajectoryProgram:
 
     def table_view(self) -> ProgramTable | None:
         """The trajectory sampled at every cycle, once (a trajectory is a function of ``t``
-        alone), for the compiled sequencer: the same calls at the same times as ``update``
-        makes, so the same samples. None beyond :data:`MAX_TABLE_SAMPLES`."""
-        if self.n_samples > MAX_TABLE_SAMPLES:
-            return None
+        alone), for the compiled sequencer: the same samples ``update`` writes — by the
+        trajectory's own ``tabulate(dt, n)`` when it has one (the benchmark's: one compiled
+        call), else by the same calls at the same times (on the requesting thread: up to
+        :data:`MAX_CALLED_SAMPLES`). None beyond that, or beyond :data:`MAX_TABLE_SAMPLES`:
+        the program is then called each cycle."""
         if self._table is None:
-            table = np.empty((self.n_samples, 9))
-            out = ReferenceOutput()          # the fields persist from one call to the next,
-            r = Reference(out.q_ref, out.qd_ref, out.qdd_ref)     # as in update's buffer
-            for k in range(self.n_samples):
-                self.trajectory(k * self.dt, r)
-                table[k] = out.buf[0:9]
+            tabulate = getattr(self.trajectory, "tabulate", None)
+            n = self.n_samples
+            if n > MAX_TABLE_SAMPLES or (tabulate is None and n > MAX_CALLED_SAMPLES):
+                return None
+            if tabulate is not None:
+                table = np.ascontiguousarray(tabulate(self.dt, n), dtype=np.float64)
+            else:
+                table = np.empty((n, 9))
+                out = ReferenceOutput()      # the fields persist from one call to the next,
+                r = Reference(out.q_ref, out.qd_ref, out.qdd_ref)     # as in update's buffer
+                for k in range(n):
+                    self.trajectory(k * self.dt, r)
+                    table[k] = out.buf[0:9]
             self._table = ProgramTable(table, 0, ReferenceOutput().buf, Mode.POSITION)
         return self._table
 
