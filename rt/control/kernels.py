@@ -16,7 +16,7 @@ import math
 from numba import njit
 
 from rt.model import rigid_body as rb
-from rt.model.kernels import inv3
+from rt.model.kernels import inv3, model_state
 
 #: ``gains`` layouts: PD-family [Kp (N/m), Kd (N s/m)]; computed torque [Kp (1/s²), Kd (1/s)];
 #: PID [Kp, Kd, Ki (N/(m s)), integral limit (N)]; adaptive [Λ (1/s), K_D (N s/m)].
@@ -57,6 +57,28 @@ def pd_gravity(ti, tf, stb, rq, rqd, gains, work, out):
     pd(stb, rq, rqd, gains[0], gains[1], out)
     for i in range(3):
         out[i] += g[i]
+
+
+@njit(cache=True)
+def pd_gravity_desired(ti, tf, geom, limits, phi, stb, rq, rqd, gains, gq, g, std, zero3,
+                       tol, maxit, mwork, work, out):
+    """τ = −Kp e − Kd ė + G(q_d) (PD+G0). G at the desired position is cached in ``g`` while
+    q_d holds (``gq`` = [q_d (3), valid]); a new q_d solves FK there into ``std`` (a State
+    buffer; ``model_state`` with the model's shared warm start ``phi``, q̇ = ``zero3``) and
+    computes G. Returns the FK status (< 0: no FK at q_d; τ is not written)."""
+    if not (gq[3] != 0.0 and rq[0] == gq[0] and rq[1] == gq[1] and rq[2] == gq[2]):
+        status = model_state(geom, limits, phi, rq, zero3, std, tol, maxit, mwork)
+        if status < 0:
+            return status
+        gravity(ti, tf, std, work, g)
+        gq[0] = rq[0]
+        gq[1] = rq[1]
+        gq[2] = rq[2]
+        gq[3] = 1.0
+    pd(stb, rq, rqd, gains[0], gains[1], out)
+    for i in range(3):
+        out[i] += g[i]
+    return 0
 
 
 @njit(cache=True)
@@ -240,11 +262,25 @@ def warm_up(dyn) -> None:
         pid(st.buf, z3, z3, gains, np.zeros(3), 1e-3, True, out)
         adaptive(ti, tf, st.buf, z3, z3, z3, gains, amap, est, 0, 1e-3, True, work, out)
     gravity(ti, tf, st.buf, work, out)
+    from rt.model.kernels import MODEL_STATE_WORK
+
+    for z3 in (read_only, writable):
+        pd_gravity_desired(ti, tf, kin.geom, kin.limits_array, kin._phi_guess.copy(), st.buf,
+                           np.array(cfg.q) if z3 is writable else _ro(np.array(cfg.q)), z3,
+                           gains, np.zeros(4), np.zeros(3), State().buf, np.zeros(3), 1e-12, 50,
+                           np.zeros(MODEL_STATE_WORK), work, out)
     fg = np.ones(13)
     fs = np.ones(FS_SIZE)
     explicit_force(ti, tf, st.buf, fg, fs, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-3,
                    np.zeros(30 + rb.work_size(TREE_DOF)), out)
     _warm = True
+
+
+def _ro(a):
+    """A read-only view of ``a`` (as the loop's port views)."""
+    v = a.view()
+    v.flags.writeable = False
+    return v
 
 
 # Explicit force law (``rt.control.force.ExplicitForce``). ``fg`` (float64) = [Kp, Ki, D,

@@ -21,7 +21,10 @@ from pydantic import Field
 
 from rt.control import kernels as ck
 from rt.control.base import STATUS_OK, Controller, GainRange, Gains, Reference, register
+from rt.errors import KinematicsError
 from rt.model.dynamics import State
+from rt.model.kernels import MODEL_STATE_WORK
+from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
 
 Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
@@ -159,12 +162,14 @@ class PdG0(Controller):
     gain_ranges = PD_RANGES
 
     def reset(self) -> None:
-        super().reset()
         self._g_at = None
         self._g = np.zeros(3)
         self._state_d = None
-        self._g_q = np.zeros(3)
-        self._g_ok = False
+        self._gq = np.zeros(4)          # the q_d of the cached G, and 1 when it is valid
+        self._std = State()
+        self._zero3 = np.zeros(3)
+        self._mwork = np.zeros(MODEL_STATE_WORK)
+        super().reset()
 
     def _law(self, st, ref, dt, out, dry_run):
         key = (float(ref.q[0]), float(ref.q[1]), float(ref.q[2]))
@@ -182,20 +187,27 @@ class PdG0(Controller):
         self._gain_array[1] = self.gains.kd_n_s_per_m
 
     def _law_compiled(self, st, ref, dt, out, dry_run):
-        q0, q1, q2 = ref.q
-        if q0 != self._g_q[0] or q1 != self._g_q[1] or q2 != self._g_q[2] or not self._g_ok:
-            # A new desired position: FK there (interpreted, it shares the model's warm start
-            # like ``_law``), G through the kernel.
-            if self._state_d is None:
-                self._state_d = State()
-            st_d = self.dyn.state(ref.q, out=self._state_d)
-            d = self.dyn
-            ck.gravity(d.tree_i, d.tree_f, st_d.buf, self._work, self._g)
-            self._g_q[:] = ref.q
-            self._g_ok = True
-        ck.pd(st.buf, ref.q, ref.qd, self._gain_array[0], self._gain_array[1], out)
-        out += self._g
+        return self._g0_kernel(st, ref, out)
+
+    def _g0_kernel(self, st, ref, out) -> int:
+        # A new desired position: FK there (compiled; it shares the model's warm start like
+        # ``_law``), then G, all in the kernel; refused FK raises as ``_law`` does.
+        d = self.dyn
+        kin = d.kin
+        status = ck.pd_gravity_desired(d.tree_i, d.tree_f, kin.geom, kin.limits_array,
+                                       kin._phi_guess, st.buf, ref.q, ref.qd, self._gain_array,
+                                       self._gq, self._g, self._std.buf, self._zero3,
+                                       FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, self._mwork,
+                                       self._work, out)
+        if status < 0:
+            raise KinematicsError(f"PD+G0: no forward kinematics at the desired position "
+                                  f"{tuple(float(x) for x in ref.q)} m (status {status})")
         return STATUS_OK
+
+    def _bound_kernel(self, st, ref, out):
+        def cycle(dt: float) -> int:
+            return self._g0_kernel(st, ref, out)
+        return cycle
 
 
 @register
