@@ -1,6 +1,7 @@
 """The cycle's compiled blocks against their interpreted references, one call at a time
 (this machine; issue 16): every position law, the explicit-force law, the model block, the
-velocity estimator, the supervisor block and the benchmark trajectory's sampler. Prints
+velocity estimator, the supervisor block, the benchmark trajectory's sampler and the sequencer
+playing a table program. Prints
 median / p99 (µs) per implementation.
 
     .venv/bin/python bench/cycle_kernels.py [--calls 3000]
@@ -28,6 +29,8 @@ from rt.estimation.compiled import CompiledKalmanEstimator
 from rt.estimation.velocity import KalmanVelocityEstimator
 from rt.model import RobotModel
 from rt.model.dynamics import State
+from rt.references.program import TrajectoryProgram
+from rt.references.sequencer import Phase, ProgramReference
 from rt.safety.events import EventLog
 from rt.safety.limits import PatientLimits, RobotLimits, effective
 from rt.safety.supervisor import InterpretedSupervisor, Supervisor, supervisor_physics
@@ -112,6 +115,23 @@ def main(argv: list[str] | None = None) -> int:
                           ("interpreted", benchmark_reference_interpreted())):
         rows.append(("benchmark sampler", name,
                      *_time(lambda s=sampler: s(1.234, r), args.calls)))
+    for compiled in (True, False):
+        # The sequencer playing a long table program (a benchmark trajectory), steady PLAY.
+        seq = ProgramReference("reference", model.description.limits.stroke, 1e-3,
+                               TrajectoryProgram(benchmark_reference(), 600.0, 1e-3),
+                               compiled=compiled)
+        for port, value in ((seq.q_meas, np.full(3, 0.2)), (seq.mode, np.zeros(1)),
+                            (seq.wrench, np.zeros(6)), (seq.tare, np.zeros(10))):
+            value.flags.writeable = False
+            port._bind(value, "bench")
+        seq.configure()
+        seq.start()
+        for k in range(20000):               # through the approach, into PLAY
+            seq.update(k * 1e-3, 1e-3)
+            if seq.phase.data[0] == float(Phase.PLAY):
+                break
+        rows.append(("sequencer (PLAY)", "compiled" if compiled else "interpreted",
+                     *_time(lambda b=seq: b.update(0.0, 1e-3), args.calls)))
     print(f"{'block':22s} {'implementation':14s} {'median µs':>10s} {'p99 µs':>10s}")
     for name, impl, med, p99 in rows:
         print(f"{name:22s} {impl:14s} {med:10.1f} {p99:10.1f}")
