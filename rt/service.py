@@ -169,6 +169,11 @@ class RtConfig(BaseModel):
     #: GIL as the loop wakes may ask for it again with the short interval and take it at the
     #: guard's end, and the loop then waits ``GIL_HOLD_S`` (closing note of branch rtloop3).
     gil_guard_us: float | None = Field(default=None, ge=0.0, le=500.0)
+    #: Bound on every CPU's wake-up latency while the loop runs, through the kernel's PM QoS
+    #: (µs; 0: idle CPUs poll rather than halt; realtime mode; ``rt_hygiene``): an idle vCPU
+    #: otherwise halts and the loop's wake-up waits for the host to run it again. None: not
+    #: requested.
+    cpu_latency_us: int | None = Field(default=None, ge=0, le=10_000)
 
     def limits_of_robot(self) -> RobotLimits:
         return self.robot_limits.model_copy(
@@ -954,6 +959,8 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
         "extra_blocks": [tap],
         **({} if config.gil_guard_us is None or config.loop_mode != "realtime" else
            {"gil_hold_s": GIL_HOLD_S, "gil_guard_us": config.gil_guard_us}),
+        **({} if config.cpu_latency_us is None or config.loop_mode != "realtime" else
+           {"cpu_latency_us": config.cpu_latency_us}),
         "extra_connections": [(src, f"session.{name}") for name, src in SESSION_SOURCES.items()]}
     if config.loop_mode == "fast" and config.backend != "sim":
         raise ConfigurationError("loop_mode fast is for the in-process twin (backend sim) only")
