@@ -52,9 +52,9 @@ VARIANTS: dict[str, str] = {
     "hold5": "as hold1 with 5 ms",
     "no_gil_hold": "one GIL switch interval (0.2 ms) during cycles too (as no_guard)",
     "no_guard": "the loop shares the GIL by the 0.2 ms switch interval (RtConfig "
-                "gil_guard_us=None: main before branch rtloop3)",
+                "gil_guard_us=None: the default before 2026-11-26)",
     "guard": "the loop's GIL guard: awake 400 µs before each deadline, holding the GIL to the "
-             "cycle's end (RtConfig gil_guard_us=400)",
+             "cycle's end (RtConfig gil_guard_us=400: the default since 2026-11-26)",
     "guard200": "the loop's GIL guard 200 µs before each deadline (RtConfig gil_guard_us)",
     "si50": "a 50 µs GIL switch interval (instead of 200 µs)",
     "qos": "every CPU's wake-up latency bounded to 0 µs through PM QoS while the loop runs "

@@ -163,12 +163,14 @@ class RtConfig(BaseModel):
     #: The loop takes the GIL back this long before each deadline and keeps it, sleeping in C,
     #: until its cycle has run (µs; realtime mode). The RT process's other threads (IPC,
     #: telemetry, sessions, the recorder) then run Python only between a cycle's end and the
-    #: next guard, and cannot stretch a cycle. None (the default until a quiet machine shows it
-    #: helps: ``bench/rt_deadlines.py --variants base,guard``): the loop shares the GIL by the
-    #: 0.2 ms switch interval. Hazard, why it is not the default yet: a thread forced off the
-    #: GIL as the loop wakes may ask for it again with the short interval and take it at the
+    #: next guard, and cannot stretch a cycle. None: the loop shares the GIL by the 0.2 ms
+    #: switch interval. The default since the quiet machine's 5 interleaved pairs
+    #: (``bench/rt_deadlines.py --variants base,guard --reps 5``; docs/worklog/2026-11-26):
+    #: session misses 68 against 102 per 1000 (medians), fewer in every phase, sessions
+    #: soft-stopped by ``deadline_overruns`` 2 of 5 against 3 of 5. Known hazard, measured in
+    #: those figures: a thread forced off the GIL as the loop wakes may take it back at the
     #: guard's end, and the loop then waits ``GIL_HOLD_S`` (closing note of branch rtloop3).
-    gil_guard_us: float | None = Field(default=None, ge=0.0, le=500.0)
+    gil_guard_us: float | None = Field(default=400.0, ge=0.0, le=500.0)
     #: Bound on every CPU's wake-up latency while the loop runs, through the kernel's PM QoS
     #: (µs; 0: idle CPUs poll rather than halt; realtime mode; ``rt_hygiene``): an idle vCPU
     #: otherwise halts and the loop's wake-up waits for the host to run it again. None: not
