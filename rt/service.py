@@ -81,6 +81,8 @@ log = logging.getLogger(__name__)
 
 #: The robot counts as at rest below this slider speed (m/s): 1 mm/s.
 REST_SPEED_M_S = 1e-3
+#: Window over which the encoders' positions judge "at rest" when the estimator failed (s).
+REST_WINDOW_S = 0.1
 #: Longest pre-flight the IPC client waits for before its session_start reply is an error (s).
 SESSION_START_TIMEOUT_S = 120.0
 #: How long a stopping RT process lets a running session abort and come to rest (s).
@@ -316,8 +318,35 @@ class RtService:
         return self._owner_age() > self.config.heartbeat_timeout_s
 
     def _at_rest(self) -> bool:
+        if self.pl.reference.busy:
+            return False
+        if "estimator" in self.pl.graph.failed:
+            return self._still_by_encoders()
         qd = self.pl.graph.output("estimator.qd")
-        return not self.pl.reference.busy and bool(np.all(np.abs(qd) < REST_SPEED_M_S))
+        return bool(np.all(np.abs(qd) < REST_SPEED_M_S))
+
+    def _still_by_encoders(self) -> bool:
+        """At rest judged without the estimator, which a fault took out of the loop: its q̇
+        stays what it was when it failed, possibly a speed, and a lost owner's robot could
+        then never be taken over (nor reset) without restarting the RT process. The encoders'
+        positions, as the recorder tap kept them every cycle since, moved less than
+        ``REST_SPEED_M_S`` × ``REST_WINDOW_S`` over the last ``REST_WINDOW_S``. Not judged (not
+        at rest) when the encoders or the tap failed too, or fewer cycles than the window ran
+        since the estimator failed: nothing measured says it stands still."""
+        g = self.pl.graph
+        if "encoders" in g.failed or "recorder" in g.failed:
+            return False
+        rec = self.pl.recorder
+        n = max(2, round(REST_WINDOW_S * self.config.rate_hz))
+        failed_t = max((f.t for f in g.faults() if f.slot == "estimator"), default=None)
+        written = rec.written
+        if failed_t is None or written < n or n > rec.capacity:
+            return False
+        rows = rec.ring[np.arange(written - n, written) % rec.capacity]
+        if rows[0, 0] <= failed_t:             # the window must lie after the failure
+            return False
+        q = rows[:, 1:4]                       # the tap's layout: t, q[3], qd, q_ref, tau, V
+        return bool(np.all(q.max(axis=0) - q.min(axis=0) < REST_SPEED_M_S * REST_WINDOW_S))
 
     def _require_owner(self, client: str, what: str) -> None:
         if self.owner.client != client:
