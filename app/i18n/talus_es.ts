@@ -404,7 +404,7 @@
     <message>
         <location filename="../pages/prescribe.py" line="114"/>
         <source>Check on the robot model (pre-flight)</source>
-        <translation>Comprobar en el modelo del robot (comprobación previa)</translation>
+        <translation>Comprobación previa en el modelo del robot</translation>
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="115"/>
