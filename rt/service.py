@@ -1053,6 +1053,8 @@ def _serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None
         check_server_endpoint(config.endpoint, None)
         check_server_endpoint(config.pub_endpoint, None)
     pl, tap = build_rt_loop(config)
+    if pl.twin is not None and config.loop_mode == "realtime":
+        pl.twin.warm_session_paths()   # no kernel loads in a cycle at a session's foot strap
     warm = getattr(sessions, "warm", None)
     if warm is not None:
         warm(pl.model.description)   # the pre-flight worker starts while the loop does
