@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from rt.control.experiment import benchmark_reference
+from rt.control.experiment import RefFn, benchmark_reference
 from rt.errors import TalusError
 from rt.model import RobotModel
 from rt.model.description import RobotDescription
@@ -116,13 +116,15 @@ def _change_controller_parameters(model: RobotModel, controller) -> None:
 def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
             rate_hz: float = 1000.0, truth: RobotDescription | None = None,
             robot: RobotDescription | None = None, ideal: bool = False, seed: int = 0,
-            gains: dict | None = None, imperfections: RigImperfections | None = None
-            ) -> tuple[np.ndarray, np.ndarray, float]:
+            gains: dict | None = None, imperfections: RigImperfections | None = None,
+            trajectory: RefFn | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """One controller through one experiment: (trajectory time s, error (n, 3) m, approach s).
 
     ``robot`` is the description the controllers believe (default the nominal one); ``truth``
     the twin's (default: the realistic twin's truth; with ``ideal`` the model itself);
-    ``imperfections`` the realistic twin's unmodelled effects (default: ``RigImperfections()``).
+    ``imperfections`` the realistic twin's unmodelled effects (default: ``RigImperfections()``);
+    ``trajectory`` the sliders' reference (default: ``benchmark_reference``; it must start near
+    the benchmark's home, ``Q0_M``, where the twin is placed).
     """
     model = RobotModel.from_description(robot) if robot is not None else RobotModel.load()
     if gains is None:
@@ -134,7 +136,8 @@ def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
     twin = (Twin.ideal(truth or model.description, environment=env, seed=seed) if ideal
             else Twin(truth, environment=env, seed=seed, imperfections=imperfections))
     twin.place((Q0_M, Q0_M, Q0_M))
-    pl = build_sim_position_loop(controller, gains, benchmark_reference(Q0_M), seconds,
+    reference = trajectory if trajectory is not None else benchmark_reference(Q0_M)
+    pl = build_sim_position_loop(controller, gains, reference, seconds,
                                  rate_hz=rate_hz, model=model, twin=twin,
                                  robot_limits=BENCH_LIMITS)
     dt = 1.0 / rate_hz
