@@ -31,11 +31,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rt.benchmarks.tracking import (DURATION_S, PAYLOAD_COM_M, PAYLOAD_KG, Q0_M, STEP_S, THESIS,
-                                    StoppedBySupervisor, gains_for_rate, metrics, run_one)
+from rt.benchmarks.tracking import (
+    DURATION_S,
+    PAYLOAD_COM_M,
+    PAYLOAD_KG,
+    Q0_M,
+    STEP_S,
+    THESIS,
+    StoppedBySupervisor,
+    gains_for_rate,
+    metrics,
+    run_one,
+)
 from rt.control.base import Reference
-from rt.control.experiment import benchmark_reference_interpreted
+from rt.control.experiment import RefFn, benchmark_reference, benchmark_reference_interpreted
 from rt.model import RobotModel
+from rt.model.description import RobotDescription
 from rt.model.dynamics import Payload
 
 #: The issue's target: every twin figure within this factor of the thesis's.
@@ -76,11 +87,14 @@ def rule_gains(controller: str, rate_hz: float = 100.0, kp_scale: float = 1.0,
 
 
 def model_error(com_m: tuple[float, float, float] = PAYLOAD_COM_M, seconds: float = 13.0,
-                step_s: float = 0.02) -> np.ndarray:
+                step_s: float = 0.02, robot: RobotDescription | None = None) -> np.ndarray:
     """Δτ (n, 3) N: the loaded model's M q̈_d + C q̇_d + G minus the unloaded one's along the
-    benchmark trajectory of period 2."""
-    plain = RobotModel.load()
-    loaded = RobotModel.load()
+    benchmark trajectory of period 2 (``robot``: the description the controller believes,
+    default the nominal one)."""
+    if not (math.isfinite(seconds) and seconds > 0.0 and math.isfinite(step_s) and step_s > 0.0):
+        raise ValueError(f"seconds and step_s must be positive, got {seconds!r}, {step_s!r}")
+    plain = RobotModel.from_description(robot) if robot is not None else RobotModel.load()
+    loaded = RobotModel.from_description(robot) if robot is not None else RobotModel.load()
     loaded.dyn.set_payload(Payload(PAYLOAD_KG, com_m))
     ref = benchmark_reference_interpreted(Q0_M)
     out = []
@@ -145,37 +159,78 @@ def sweep_band(scales: Sequence[float], values: Sequence[float], thesis_m: float
 
 @dataclass(frozen=True)
 class SweepPoint:
-    """One Kp scale on the twin at 100 Hz: fig. 48's PID peak, fig. 50's Paden-Panja periods."""
+    """One Kp scale on the twin at 100 Hz, m (None: the supervisor stopped that run): fig. 48's
+    PID and Paden-Panja peaks, and Paden-Panja's period 1 (from fig. 48's run, identical to
+    fig. 50's before 13 s) and period 2 (fig. 50's parameter step)."""
 
     kp_scale: float
     kp_n_per_m: float
-    pid_peak_m: float | None          # None: the supervisor stopped the run
+    pid_peak_m: float | None
+    paden_peak_m: float | None
     paden_p1_mean_m: float | None
     paden_p2_mean_m: float | None
 
 
+def _run(experiment: str, controller: str, seconds: float, rate_hz: float, scale: float
+         ) -> dict | None:
+    try:
+        t, e, _ = run_one(experiment, controller, seconds, rate_hz,
+                          gains=rule_gains(controller, rate_hz, scale))
+    except StoppedBySupervisor:
+        return None
+    return metrics(t, e)
+
+
 def measure(scales: Sequence[float] = SWEEP_SCALES, rate_hz: float = 100.0,
             seconds: float = DURATION_S) -> list[SweepPoint]:
-    """Run fig. 48's PID (``pid-vs-paden``) and fig. 50's Paden-Panja (``parameter-step``) on the
-    realistic twin at each Kp scale (twin figures)."""
+    """Run fig. 48's two laws (``pid-vs-paden``) and fig. 50's Paden-Panja (``parameter-step``)
+    on the realistic twin at each Kp scale (twin figures; three runs per scale)."""
     out = []
     for scale in scales:
-        figures: dict[str, float | None] = {}
-        for exp, ctrl in (("pid-vs-paden", "pid"), ("parameter-step", "paden_panja")):
-            try:
-                t, e, _ = run_one(exp, ctrl, seconds, rate_hz,
-                                  gains=rule_gains(ctrl, rate_hz, scale))
-            except StoppedBySupervisor:
-                figures[ctrl] = None
-                continue
-            m = metrics(t, e)
-            if ctrl == "pid":
-                figures["pid"] = m["peak_abs_m"]
-            else:
-                figures["p1"] = m["period1"]["mean_abs_m"]
-                figures["p2"] = m["period2"]["mean_abs_m"]
-        out.append(SweepPoint(scale, rule_gains("paden_panja", rate_hz, scale)["kp_n_per_m"],
-                              figures.get("pid"), figures.get("p1"), figures.get("p2")))
+        pid = _run("pid-vs-paden", "pid", seconds, rate_hz, scale)
+        pp = _run("pid-vs-paden", "paden_panja", seconds, rate_hz, scale)
+        step = _run("parameter-step", "paden_panja", seconds, rate_hz, scale)
+        out.append(SweepPoint(
+            scale, rule_gains("paden_panja", rate_hz, scale)["kp_n_per_m"],
+            pid["peak_abs_m"] if pid else None, pp["peak_abs_m"] if pp else None,
+            pp["period1"]["mean_abs_m"] if pp else None,
+            step["period2"]["mean_abs_m"] if step else None))
+    return out
+
+
+def scaled_benchmark(amplitude: float) -> RefFn:
+    """The benchmark trajectory with its excursion about ``Q0_M`` (and so its speeds and
+    accelerations) times ``amplitude``: the thesis does not give its trajectory, and fig. 48's
+    PID error scales with what the trajectory demands."""
+    if not (math.isfinite(amplitude) and 0.0 < amplitude <= 2.0):
+        raise ValueError(f"amplitude must be in (0, 2], got {amplitude!r}")
+    base = benchmark_reference(Q0_M)
+
+    def ref(t: float, out: Reference) -> None:
+        base(t, out)
+        for i in range(3):
+            out.q[i] = Q0_M + amplitude * (out.q[i] - Q0_M)
+            out.qd[i] *= amplitude
+            out.qdd[i] *= amplitude
+
+    return ref
+
+
+def pid_peak_vs_amplitude(amplitudes: Sequence[float], kp_scale: float = 1.0,
+                          rate_hz: float = 100.0, seconds: float = DURATION_S
+                          ) -> list[tuple[float, float | None]]:
+    """Fig. 48's PID peak (m; None if stopped) on the twin for the benchmark trajectory scaled
+    by each amplitude, at the rule's Kp × ``kp_scale``."""
+    out: list[tuple[float, float | None]] = []
+    for a in amplitudes:
+        try:
+            t, e, _ = run_one("pid-vs-paden", "pid", seconds, rate_hz,
+                              gains=rule_gains("pid", rate_hz, kp_scale),
+                              trajectory=scaled_benchmark(a))
+        except StoppedBySupervisor:
+            out.append((a, None))
+            continue
+        out.append((a, metrics(t, e)["peak_abs_m"]))
     return out
 
 
@@ -196,8 +251,9 @@ def one_sample_shift(rate_hz: float = 100.0, seconds: float = STEP_S) -> tuple[f
 
 
 def thesis_figures() -> dict[str, float]:
-    """The three thesis figures the gains bear on, m."""
+    """The thesis figures the gains bear on, m (fig. 48's Paden-Panja peak is a bound)."""
     pp = THESIS["parameter-step"]["paden_panja"]
     return {"fig48_pid_peak": THESIS["pid-vs-paden"]["pid"]["peak_abs_mm"] * 1e-3,
+            "fig48_paden_peak": THESIS["pid-vs-paden"]["paden_panja"]["peak_abs_mm"] * 1e-3,
             "fig50_paden_p1_mean": pp["period1_mean_abs_mm"] * 1e-3,
             "fig50_paden_p2_mean": pp["period2_mean_abs_mm"] * 1e-3}
