@@ -100,15 +100,19 @@ def main() -> None:
             except ValueError as exc:
                 print(f"   {label}: no band ({exc})")
                 continue
-            print(f"   {label} (twin sweep, log-log interpolated): {_band(*bands[key])}")
+            lo_s, hi_s = pts[0][0], pts[-1][0]
+            how = ("interpolated" if lo_s <= bands[key][0] and bands[key][1] <= hi_s
+                   else "extrapolated beyond the sweep")
+            print(f"   {label} (twin sweep, log-log {how}): {_band(*bands[key])}")
         lo = max(b[0] for b in bands.values())
         hi = min(b[1] for b in bands.values())
         both = {k: b for k, b in bands.items() if k != "fig50_paden_p1_mean"}
         lo2, hi2 = max(b[0] for b in both.values()), min(b[1] for b in both.values())
-        amps = tg.pid_peak_vs_amplitude((0.5, 1.5))
-        print("   fig. 48's band moves with the trajectory the thesis does not give: PID peak at the "
-              "rule, benchmark trajectory × amplitude: " + ", ".join(
-                  f"{a:g}: {_mm(v)} mm" for a, v in amps))
+        amps = tg.pid_peak_vs_amplitude((0.5, 0.75))
+        amps += [(1.0, p.pid_peak_m) for p in points if p.kp_scale == 1.0]
+        print("   fig. 48's band moves with the trajectory the thesis does not give; PID peak (mm) "
+              "at the rule, benchmark trajectory × amplitude: "
+              + ", ".join(f"{a:g}: {_mm(v)}" for a, v in amps))
         out["pid_peak_vs_amplitude"] = amps
         print(f"   all three: {_band(lo, hi) if lo <= hi else 'empty'}; fig. 48 and fig. 50 p2 "
               f"only: {_band(lo2, hi2) if lo2 <= hi2 else 'empty'}")
