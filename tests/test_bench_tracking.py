@@ -76,3 +76,20 @@ def test_bench_tracking_refuses_bad_options():
                            "thesis", "--rate", "50"],
                            check=False, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "--rate" in proc.stderr
+
+
+def test_the_table_explains_period_two_by_its_statics():
+    from rt.benchmarks.tracking import THESIS, table
+
+    m = {"period1": {"mean_abs_m": 1.4e-4, "rms_m": 1.8e-4},
+         "period2": {"mean_abs_m": 7.8e-3, "rms_m": 8.0e-3}, "peak_abs_m": 1.1e-2}
+    r = {"experiment": "parameter-step", "rate_hz": 100.0, "controllers": {"paden_panja": m},
+         "thesis": THESIS["parameter-step"],
+         "p2_statics": {"kp_n_per_m": 41293.0, "model_error_mean_abs_n": 327.0,
+                        "mean_abs_m": 327.0 / 41293.0, "kp_for_thesis_n_per_m": 327.0 / 2.809e-3}}
+    text = table([r])
+    assert "p2 mean        7.800      2.809   2.78" in text
+    assert ("p2 statics: |Δτ| 327 N / Kp 41.3 kN/m = 7.919 mm; the thesis's 2.809 mm needs Kp "
+            "116 kN/m (2.82×" in text)
+    del r["p2_statics"]
+    assert "statics" not in table([r])
