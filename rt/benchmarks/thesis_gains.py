@@ -16,6 +16,10 @@ of the same kind of loop (a PD around the model: PID, thesis table 5 / eq. 18; P
   not give: the twin uses the benchmark trajectory).
 * fig. 50, Paden-Panja period 1 (0.615 mm): measured by the same sweep.
 
+Fig. 50's two periods come from one run of one law, so their bands must meet with no assumption;
+fig. 48 is another experiment (4.1.3, PID and Paden-Panja on one trajectory) and the thesis does
+not say it used fig. 50's gains or trajectory: checking fig. 48 against fig. 50 assumes both.
+
 Eq. 19 puts the feedback outside M(q) (τ = M q̈_d + C q̇_d + G − Kp e − Kd ė), as
 :class:`rt.control.laws.PadenPanja` does; :func:`p2_feedback_inside_mass` gives period 2 under
 the other reading (eq. 31's form, M̂(q)(… − Kp e), where the 100 kg in M̂ also stiffens the loop).
