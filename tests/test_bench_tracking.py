@@ -63,11 +63,12 @@ def test_thesis_profile_at_100_hz_keeps_the_shape_and_the_fig50_ordering():
     assert g["kd_n_s_per_m"] == pytest.approx(0.28 * 210.68 * 100.0, rel=1e-3)
     assert g["kp_n_per_m"] == pytest.approx(g["kd_n_s_per_m"] ** 2 / (4 * 210.68), rel=1e-3)
     # Period 2 is statics: the model's 100 kg over Kp (327 N / 41.3 kN/m). The twin's 3 s of
-    # period 2 include the ~0.4 s settling (ζ = 1, ωn 14 rad/s), hence the 20 % below.
+    # period 2 include the ~0.4 s settling (ζ = 1, ωn 14 rad/s): 0.93 of the statics measured
+    # (0.985 over the full 13 s).
     st = out["p2_statics"]
     assert st["kp_n_per_m"] == g["kp_n_per_m"]
     assert st["model_error_mean_abs_n"] == pytest.approx(100.0 * 9.81 / 3, rel=0.01)
-    assert 0.8 < pp["period2"]["mean_abs_m"] / st["mean_abs_m"] < 1.05
+    assert 0.85 < pp["period2"]["mean_abs_m"] / st["mean_abs_m"] < 1.02
     assert st["kp_for_thesis_n_per_m"] == pytest.approx(st["model_error_mean_abs_n"] / 2.809e-3)
 
 
