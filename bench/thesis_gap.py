@@ -10,7 +10,8 @@ Prints, twin figures:
 2. the band of Kp (× the rule's) that puts each thesis figure within a factor 2 on the twin:
    fig. 50's p2 from the statics; fig. 48's PID peak and fig. 50's p1 from a twin sweep of Kp
    (``--scales``; each point is three 26 s runs at 100 Hz); and their intersection;
-3. period 1's floor if the rig's log paired q with the previous cycle's reference.
+3. period 1's floor if the rig's log paired q with the previous cycle's reference: from the
+   trajectory, and measured on the twin's parameter-step runs read both ways.
 
     .venv/bin/python bench/thesis_gap.py [--scales 0.5 1 1.41 2 2.82] [--statics-only] [--json]
 """
@@ -23,7 +24,7 @@ import math
 import numpy as np
 
 from rt.benchmarks import thesis_gains as tg
-from rt.benchmarks.tracking import PAYLOAD_COM_M
+from rt.benchmarks.tracking import PAYLOAD_COM_M, THESIS
 
 
 def _mm(x: float | None) -> str:
@@ -81,11 +82,11 @@ def main() -> None:
         points = tg.measure(args.scales, rate)
         print("   twin sweep (100 Hz, realistic twin, 26 s each):")
         print(f"   {'Kp scale':>8s} {'Kp kN/m':>8s} {'PID peak mm':>12s} {'PP peak mm':>11s} "
-              f"{'PP p1 mm':>9s} {'PP p2 mm':>9s}")
+              f"{'PP p1 mm':>9s} {'PP p2 mm':>9s} {'PP p1 q_d(k-1) mm':>18s}")
         for p in points:
             print(f"   {p.kp_scale:8.2f} {p.kp_n_per_m / 1e3:8.1f} {_mm(p.pid_peak_m):>12s} "
                   f"{_mm(p.paden_peak_m):>11s} {_mm(p.paden_p1_mean_m):>9s} "
-                  f"{_mm(p.paden_p2_mean_m):>9s}")
+                  f"{_mm(p.paden_p2_mean_m):>9s} {_mm(p.paden_p1_shifted_mean_m):>18s}")
         below = [p.kp_scale for p in points
                  if p.paden_peak_m is not None and p.paden_peak_m < th["fig48_paden_peak"]]
         print(f"   fig. 48 Paden-Panja below 1 mm: met at scales {below} (a bound, no band)")
@@ -108,6 +109,15 @@ def main() -> None:
         hi = min(b[1] for b in bands.values())
         both = {k: b for k, b in bands.items() if k != "fig50_paden_p1_mean"}
         lo2, hi2 = max(b[0] for b in both.values()), min(b[1] for b in both.values())
+        # Period 1 read as q(k) − q_d(k−1): a band only where it lies within the factor.
+        p1s = [(p.kp_scale, p.paden_p1_shifted_mean_m) for p in points
+               if p.paden_p1_shifted_mean_m is not None]
+        inside = [s for s, v in p1s
+                  if th["fig50_paden_p1_mean"] / tg.FACTOR <= v <= tg.FACTOR * th[
+                      "fig50_paden_p1_mean"]]
+        print(f"   fig. 50 Paden-Panja p1 read as q(k) − q_d(k−1): within ×{tg.FACTOR:g} at the "
+              f"swept scales {inside} (of {[s for s, _ in p1s]})")
+        out["p1_shifted_within_factor_at"] = inside
         amps = tg.pid_peak_vs_amplitude((0.5, 0.75))
         amps += [(1.0, p.pid_peak_m) for p in points if p.kp_scale == 1.0]
         print("   fig. 48's band moves with the trajectory the thesis does not give; PID peak (mm) "
@@ -123,6 +133,23 @@ def main() -> None:
           f"{mean * 1e3:.3f} mm, RMS {rms * 1e3:.3f} mm per period (thesis p1: 0.615 / 0.813 "
           "Paden-Panja, 0.681 / 0.871 adaptive; the thesis does not say how it logged)")
     out["one_sample_shift_m"] = {"mean": mean, "rms": rms}
+    if not args.statics_only:
+        shifted = tg.shifted_log_metrics()
+        out["shifted_log"] = shifted
+        pp_th = THESIS["parameter-step"]
+        print("   measured on the twin (rule gains, same runs read both ways), mean / RMS mm:")
+        for ctrl, r in shifted.items():
+            if "stopped_by_supervisor" in r:
+                print(f"   {ctrl}: stopped ({r['stopped_by_supervisor']})")
+                continue
+            th = pp_th[ctrl]
+            for way, m in r.items():
+                print(f"   {ctrl:12s} {way:19s} p1 {m['period1']['mean_abs_m'] * 1e3:.3f} / "
+                      f"{m['period1']['rms_m'] * 1e3:.3f}  p2 {m['period2']['mean_abs_m'] * 1e3:.3f}"
+                      f" / {m['period2']['rms_m'] * 1e3:.3f}")
+            print(f"   {ctrl:12s} {'thesis':19s} p1 {th['period1_mean_abs_mm']:.3f} / "
+                  f"{th['period1_rms_mm']:.3f}  p2 {th['period2_mean_abs_mm']:.3f} / "
+                  f"{th['period2_rms_mm']:.3f}")
     if args.json:
         print(json.dumps(out))
 

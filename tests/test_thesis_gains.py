@@ -139,3 +139,17 @@ def test_on_the_twin_period_two_falls_as_one_over_kp_and_the_pid_peak_falls_with
     assert one.pid_peak_m is not None and two.pid_peak_m is not None
     assert two.pid_peak_m < 0.8 * one.pid_peak_m
     assert one.paden_peak_m is not None and one.paden_peak_m < 1.0e-3   # fig. 48's bound
+
+
+def test_the_previous_reference_shift_is_the_one_sample_shift_sample_by_sample():
+    t = np.arange(1300) * 0.01
+    shift = tg.previous_reference_shift(t, 100.0)
+    ref = benchmark_reference_interpreted(Q0_M)
+    a, b = Reference(), Reference()
+    for k in (1, 250, 1299):
+        ref(float(t[k]), a)
+        ref(float(t[k - 1]), b)
+        np.testing.assert_allclose(shift[k], np.asarray(a.q) - np.asarray(b.q), atol=1e-15)
+    mean, rms = tg.one_sample_shift(100.0)
+    assert np.abs(shift).mean() == pytest.approx(mean, rel=0.01)
+    assert math.sqrt(float((shift ** 2).mean())) == pytest.approx(rms, rel=0.01)

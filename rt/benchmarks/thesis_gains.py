@@ -173,16 +173,21 @@ class SweepPoint:
     paden_peak_m: float | None
     paden_p1_mean_m: float | None
     paden_p2_mean_m: float | None
+    #: Period 1 as a log pairing q(k) with q_d(k−1) would read it (``previous_reference_shift``).
+    paden_p1_shifted_mean_m: float | None = None
 
 
-def _run(experiment: str, controller: str, seconds: float, rate_hz: float, scale: float
-         ) -> dict | None:
+def _run(experiment: str, controller: str, seconds: float, rate_hz: float, scale: float,
+         shifted: bool = False) -> dict | None:
     try:
         t, e, _ = run_one(experiment, controller, seconds, rate_hz,
                           gains=rule_gains(controller, rate_hz, scale))
     except StoppedBySupervisor:
         return None
-    return metrics(t, e)
+    m = metrics(t, e)
+    if shifted:
+        m["shifted"] = metrics(t, e + previous_reference_shift(t, rate_hz))
+    return m
 
 
 def measure(scales: Sequence[float] = SWEEP_SCALES, rate_hz: float = 100.0,
@@ -192,13 +197,14 @@ def measure(scales: Sequence[float] = SWEEP_SCALES, rate_hz: float = 100.0,
     out = []
     for scale in scales:
         pid = _run("pid-vs-paden", "pid", seconds, rate_hz, scale)
-        pp = _run("pid-vs-paden", "paden_panja", seconds, rate_hz, scale)
+        pp = _run("pid-vs-paden", "paden_panja", seconds, rate_hz, scale, shifted=True)
         step = _run("parameter-step", "paden_panja", seconds, rate_hz, scale)
         out.append(SweepPoint(
             scale, rule_gains("paden_panja", rate_hz, scale)["kp_n_per_m"],
             pid["peak_abs_m"] if pid else None, pp["peak_abs_m"] if pp else None,
             pp["period1"]["mean_abs_m"] if pp else None,
-            step["period2"]["mean_abs_m"] if step else None))
+            step["period2"]["mean_abs_m"] if step else None,
+            pp["shifted"]["period1"]["mean_abs_m"] if pp else None))
     return out
 
 
@@ -252,6 +258,38 @@ def one_sample_shift(rate_hz: float = 100.0, seconds: float = STEP_S) -> tuple[f
         diffs.append(np.array(a.q) - np.array(b.q))
     d = np.array(diffs)
     return float(np.abs(d).mean()), float(np.sqrt((d ** 2).mean()))
+
+
+def previous_reference_shift(t: np.ndarray, rate_hz: float) -> np.ndarray:
+    """q_d(t_k) − q_d(t_k − T) (n, 3) m on the benchmark trajectory (sample k is the trajectory
+    at k·T): added to a run's logged error it gives q(k) − q_d(k−1)."""
+    ref = benchmark_reference_interpreted(Q0_M)
+    a, b = Reference(), Reference()
+    shift = np.empty((len(t), 3))
+    for k, tk in enumerate(t):
+        ref(float(tk), a)
+        ref(float(tk) - 1.0 / rate_hz, b)
+        shift[k] = np.asarray(a.q) - np.asarray(b.q)
+    return shift
+
+
+def shifted_log_metrics(experiment: str = "parameter-step",
+                        controllers: Sequence[str] = ("paden_panja", "adaptive"),
+                        rate_hz: float = 100.0, seconds: float = DURATION_S) -> dict:
+    """Each law's fig. 50 metrics on the twin at the rule's gains, as logged (q(k) − q_d(k)) and
+    as a log pairing q(k) with the previous cycle's reference would read them (q(k) − q_d(k−1),
+    the same run): the hypothesis of :func:`one_sample_shift`, measured (twin figures)."""
+    out: dict = {}
+    for ctrl in controllers:
+        try:
+            t, e, _ = run_one(experiment, ctrl, seconds, rate_hz,
+                              gains=rule_gains(ctrl, rate_hz))
+        except StoppedBySupervisor as exc:
+            out[ctrl] = {"stopped_by_supervisor": str(exc)}
+            continue
+        out[ctrl] = {"as_logged": metrics(t, e),
+                     "previous_reference": metrics(t, e + previous_reference_shift(t, rate_hz))}
+    return out
 
 
 def thesis_figures() -> dict[str, float]:
