@@ -248,15 +248,7 @@ def one_sample_shift(rate_hz: float = 100.0, seconds: float = STEP_S) -> tuple[f
     """(mean |·|, RMS) m of q_d(t) − q_d(t − T) over period 1 of the benchmark trajectory: what
     a log pairing each measured q with the previous cycle's reference would add to the error
     (a controller-independent floor, like the thesis's period 1 for both laws)."""
-    ref = benchmark_reference_interpreted(Q0_M)
-    a, b = Reference(), Reference()
-    diffs = []
-    dt = 1.0 / rate_hz
-    for t in np.arange(dt, seconds, dt):
-        ref(float(t), a)
-        ref(float(t - dt), b)
-        diffs.append(np.array(a.q) - np.array(b.q))
-    d = np.array(diffs)
+    d = previous_reference_shift(np.arange(1, round(seconds * rate_hz)) / rate_hz, rate_hz)
     return float(np.abs(d).mean()), float(np.sqrt((d ** 2).mean()))
 
 
