@@ -7,13 +7,15 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numba import njit
 
-from rt.components.tare import Tare
+from rt.components.tare import TARE_ENDED, Tare, tare_cycle
 from rt.devices.interfaces import (
+    FT_SATURATED,
+    FT_STALE,
     ActuatorOutputs,
     DigitalInputs,
-    DigitalInputState,
     ForceTorqueSensor,
     Wrench,
+    new_ft_reading,
 )
 from rt.engine import Array, Component, Struct
 from rt.errors import HardwareError
@@ -22,27 +24,67 @@ from rt.safety.events import EventLog, Reaction, SafetyEvent, SupervisorMode
 from rt.safety.supervisor import Supervisor
 
 
+@njit(cache=True)
+def _force_cycle(raw, wrench, flags, request, tare_port, tare_buf):
+    """:class:`ForceReader`'s cycle on the sensor's reading ``raw`` (layout ``FT_*``): the
+    wrench and flags to the ports, the reading's validity (fresh, not saturated, finite) and
+    the tare's cycle (:func:`rt.components.tare.tare_cycle`, whose answer it returns)."""
+    for k in range(6):
+        wrench[k] = raw[k]
+    stale = raw[FT_STALE] != 0.0
+    saturated = raw[FT_SATURATED] != 0.0
+    flags[0] = 1.0 if stale else 0.0
+    flags[1] = 1.0 if saturated else 0.0
+    valid = not (stale or saturated) and math.isfinite(
+        raw[0] + raw[1] + raw[2] + raw[3] + raw[4] + raw[5])
+    return tare_cycle(wrench, valid, request[0] > 0.5, tare_port, tare_buf)
+
+
 class ForceReader(Component):
     """Ports: out ``wrench``: float64[6], N and N m, sensor frame, minus the tare's zero (NaN
     when never read); out ``flags``: float64[2] — [stale, saturated] as 0/1; in
     ``tare_request``: float64[1] (a rising edge above 0.5 starts a tare, :mod:`rt.components.
     tare`); out ``tare``: float64[10] — [:class:`TareState`, tares done, :class:`TareRefusal`,
-    mean force magnitude of the last tare (N), offset (6: N, N m)]."""
+    mean force magnitude of the last tare (N), offset (6: N, N m)].
 
-    def __init__(self, name: str, sensor: ForceTorqueSensor, tare: Tare | None = None):
+    A cycle is the sensor's ``read_array`` and one compiled call (:func:`_force_cycle`);
+    ``compiled=False`` runs the previous Python body (``Wrench``, ``Tare.cycle_interpreted``),
+    the reference of ``tests/test_device_compiled.py``."""
+
+    def __init__(self, name: str, sensor: ForceTorqueSensor, tare: Tare | None = None,
+                 compiled: bool = True):
         super().__init__(name)
         self.sensor = sensor
         self.tare = tare or Tare()
+        self.compiled = compiled
         self.wrench = self.declare_output("wrench", Array(6), initial=np.full(6, math.nan))
         self.flags = self.declare_output("flags", Array(2))
         self.tare_request = self.declare_input("tare_request", Array(1))
         self.tare_out = self.declare_output("tare", Array(10))
         self._w = Wrench()
+        self._raw = new_ft_reading()
+        if compiled:
+            # Compile (or load from numba's cache) now: the request as the loop binds it, a
+            # read-only view; on scratch buffers.
+            request = np.zeros(1)
+            request.flags.writeable = False
+            _force_cycle(self._raw.copy(), np.zeros(6), np.zeros(2), request, np.zeros(10),
+                         self.tare._buf.copy())
 
     def on_start(self) -> None:
         self.sensor.start()
 
     def update(self, t: float, dt: float) -> int:
+        if not self.compiled:
+            return self._update_interpreted(t, dt)
+        raw = self.sensor.read_array(self._raw)
+        out, port = self.wrench.data, self.tare_out.data
+        if _force_cycle(raw, out, self.flags.data, self.tare_request.data, port,
+                        self.tare._buf) == TARE_ENDED:
+            self.tare._end_cycle(out, port)
+        return 0
+
+    def _update_interpreted(self, t: float, dt: float) -> int:
         w = self.sensor.read(self._w)
         out = self.wrench.data
         out[0], out[1], out[2], out[3], out[4], out[5] = w.fx, w.fy, w.fz, w.tx, w.ty, w.tz
@@ -50,7 +92,8 @@ class ForceReader(Component):
         self.flags.data[1] = 1.0 if w.saturated else 0.0
         valid = not (w.stale or w.saturated) and math.isfinite(
             w.fx + w.fy + w.fz + w.tx + w.ty + w.tz)
-        self.tare.cycle(out, valid, self.tare_request.data[0] > 0.5, self.tare_out.data)
+        self.tare.cycle_interpreted(out, valid, self.tare_request.data[0] > 0.5,
+                                    self.tare_out.data)
         return 0
 
 
@@ -61,12 +104,9 @@ class StopInputs(Component):
         super().__init__(name)
         self.device = inputs
         self.stops = self.declare_output("inputs", Array(2))
-        self._state = DigitalInputState()
 
     def update(self, t: float, dt: float) -> int:
-        s = self.device.read(self._state)
-        self.stops.data[0] = 1.0 if s.hardware_estop else 0.0
-        self.stops.data[1] = 1.0 if s.hand_stop else 0.0
+        self.device.read_array(self.stops.data)
         return 0
 
 

@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from rt.devices.interfaces import ActuatorOutputs
+from rt.drivers import kernels
 from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError, InputError
 
 AREF_GROUND = 0
@@ -215,13 +216,17 @@ class Pci1720Outputs(ActuatorOutputs):
         self._enabled = False
         self._dev: Any = None
         self._enable_dev: Any = None
-        self.last_codes = [0] * self.n_channels
-        self.last_volts = [math.nan] * self.n_channels
-        self.clamped = [False] * self.n_channels
+        # Codes, voltages and clamp flags of the last write in one array that the compiled
+        # write (``rt.drivers.kernels.pci1720_codes``) fills; ``last_codes`` etc. read it.
+        self._dac = np.zeros(kernels.DAC_STATE_SIZE)
+        self._dac[kernels.DAC_VOLTS:kernels.DAC_VOLTS + 3] = math.nan
+        self._ranges = np.zeros(3 * self.n_channels)
 
         self._dev = self._open(device)
         try:
             self._channels = tuple(self._probe_channel(n) for n in numbers)
+            for i, ch in enumerate(self._channels):
+                self._ranges[3 * i:3 * i + 3] = (ch.v_min, ch.v_max, ch.maxdata)
             if enable_line is not None:
                 self._setup_enable_line(enable_line)
             self._write_zero()
@@ -282,6 +287,21 @@ class Pci1720Outputs(ActuatorOutputs):
         return self._enabled
 
     @property
+    def last_codes(self) -> list[int]:
+        """The DAC code of each channel's last write (0 before any)."""
+        return [int(c) for c in self._dac[kernels.DAC_CODES:kernels.DAC_CODES + 3]]
+
+    @property
+    def last_volts(self) -> list[float]:
+        """The voltage (V) each channel's last code produces (NaN before any write)."""
+        return self._dac[kernels.DAC_VOLTS:kernels.DAC_VOLTS + 3].tolist()
+
+    @property
+    def clamped(self) -> list[bool]:
+        """Which channels hit the command limit on the last write."""
+        return [c != 0.0 for c in self._dac[kernels.DAC_CLAMPED:kernels.DAC_CLAMPED + 3]]
+
+    @property
     def lsb_v(self) -> tuple[float, ...]:
         """Voltage step of one DAC code per channel (V); 20/4095 V on ±10 V."""
         return tuple((c.v_max - c.v_min) / c.maxdata for c in self._channels)
@@ -324,7 +344,41 @@ class Pci1720Outputs(ActuatorOutputs):
 
         Refused (``HardwareError``, nothing written) with a non-zero value while disabled;
         refused (``InputError``, nothing written) for a wrong length or a non-finite value.
+        A float64 array (the loop's port) is validated and converted in one compiled call
+        (``rt.drivers.kernels.pci1720_codes``), then the three codes go to comedilib; any
+        other sequence takes :meth:`write_volts_interpreted`, the reference. Same results.
         """
+        if type(volts) is not np.ndarray or volts.dtype != np.float64 or volts.ndim != 1 \
+                or volts.shape[0] != self.n_channels:
+            self.write_volts_interpreted(volts)
+            return
+        self._check_open()
+        dac = self._dac
+        rc = kernels.pci1720_codes(volts, self._enabled, self.limit_v, self._ranges, dac)
+        if rc == kernels.DAC_NOT_FINITE:
+            raise InputError(f"write_volts got a non-finite command {list(volts)}; nothing "
+                             f"was written")
+        if rc == kernels.DAC_DISABLED:
+            raise HardwareError(
+                "Pci1720Outputs refused a non-zero command while disabled; only the "
+                "supervisor enables the drives")
+        write = self._lib.comedi_data_write
+        dev, sub, rng = self._dev, self.subdevice, self.range_index
+        codes = dac[kernels.DAC_CODES:kernels.DAC_CODES + 3].tolist()
+        for i in range(3):
+            if write(dev, sub, self._channels[i].number, rng, AREF_GROUND, int(codes[i])) < 0:
+                # As the channel-by-channel write left it: the channels before this one
+                # written, this one's clamp flag set, the rest as before.
+                b = kernels.DAC_BACKUP
+                dac[kernels.DAC_CODES + i:3] = dac[b + kernels.DAC_CODES + i:b + 3]
+                dac[kernels.DAC_VOLTS + i:6] = dac[b + kernels.DAC_VOLTS + i:b + 6]
+                dac[kernels.DAC_CLAMPED + i + 1:9] = dac[b + kernels.DAC_CLAMPED + i + 1:b + 9]
+                raise HardwareError(
+                    f"comedi_data_write on {self.device} channel {self._channels[i].number} "
+                    f"failed: {self._error_text()}")
+
+    def write_volts_interpreted(self, volts: Sequence[float] | np.ndarray) -> None:
+        """:meth:`write_volts` one value at a time in Python (the reference; any sequence)."""
         self._check_open()
         if len(volts) != self.n_channels:
             raise InputError(f"write_volts needs {self.n_channels} values, got {len(volts)}")
@@ -342,7 +396,7 @@ class Pci1720Outputs(ActuatorOutputs):
         limit = self.limit_v
         for i in range(self.n_channels):
             v = float(volts[i])
-            self.clamped[i] = not -limit <= v <= limit
+            self._dac[kernels.DAC_CLAMPED + i] = 0.0 if -limit <= v <= limit else 1.0
             self._write_channel(i, min(limit, max(-limit, v)))
 
     # --- internals ---------------------------------------------------------------------
@@ -356,13 +410,13 @@ class Pci1720Outputs(ActuatorOutputs):
             raise HardwareError(
                 f"comedi_data_write on {self.device} channel {ch.number} failed: "
                 f"{self._error_text()}")
-        self.last_codes[i] = code
-        self.last_volts[i] = code_to_volts(code, ch.v_min, ch.v_max, ch.maxdata)
+        self._dac[kernels.DAC_CODES + i] = code
+        self._dac[kernels.DAC_VOLTS + i] = code_to_volts(code, ch.v_min, ch.v_max, ch.maxdata)
 
     def _write_zero(self) -> None:
         error: HardwareError | None = None
         for i in range(self.n_channels):
-            self.clamped[i] = False
+            self._dac[kernels.DAC_CLAMPED + i] = 0.0
             try:
                 self._write_channel(i, 0.0)
             except HardwareError as exc:     # still zero the other channels
