@@ -198,6 +198,10 @@ class SupervisorBlock(Component):
         return 0
 
 
+_F64 = np.dtype(np.float64)
+_SHAPE3 = (3,)
+
+
 @njit(cache=True)
 def _disagreement(measured, last, mismatch, tolerance_v, confirm_cycles):
     """Count each channel's consecutive cycles of amplifier input (``measured``, V) away from
@@ -300,8 +304,12 @@ class RedundantDrive(Component):
         measured = self.monitor() if enabled and self.monitor is not None and \
             self._enabled else None
         if measured is not None:               # None: no reading newer than the last command
-            m = self._measured
-            m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
+            if type(measured) is np.ndarray and measured.dtype is _F64 \
+                    and measured.shape == _SHAPE3:
+                m = measured                   # the twin's amplifier inputs: read in place
+            else:
+                m = self._measured
+                m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
             i = _disagreement(m, self._last, self._mismatch, self.tolerance_v,
                               self.confirm_cycles)
             if i >= 0:

@@ -41,10 +41,13 @@ _REG_STATUS = 14
 _LATCH_SOURCE_MASK = 0x07
 _LATCH_SOURCE_SOFTWARE_READ = 0
 
-# --- PCI-1720 write outcome -------------------------------------------------------------------
-DAC_OK = 0
-DAC_NOT_FINITE = 1          # a command is NaN or infinite: nothing written
-DAC_DISABLED = 2            # a non-zero command while disabled: nothing written
+# --- PCI-1720 write outcome (``pci1720_codes``' answer) --------------------------------------
+DAC_NOT_FINITE = -1         # a command is NaN or infinite: nothing written
+DAC_DISABLED = -2           # a non-zero command while disabled: nothing written
+#: Otherwise the three codes packed in one integer, 16 bits each (channel i at bits 16·i):
+#: the caller reads them with shifts instead of going through an array (maxdata ≤ 0xFFFF).
+DAC_CODE_BITS = 16
+DAC_CODE_MASK = (1 << DAC_CODE_BITS) - 1
 
 
 @njit(cache=True)
@@ -141,7 +144,8 @@ def pci1720_codes(volts, enabled, limit, ranges, dac):
     the command clamped to ±``limit``, its code ``floor((V − v_min)/(v_max − v_min)·maxdata +
     0.5)`` clamped to 0..maxdata (``volts_to_code``) and the voltage the code produces
     (``code_to_volts``), into ``dac`` (layout ``DAC_*``; the previous values go to its backup).
-    ``ranges`` holds (v_min, v_max, maxdata) per channel."""
+    ``ranges`` holds (v_min, v_max, maxdata) per channel. Returns the codes packed
+    (``DAC_CODE_BITS`` per channel), or a refusal (< 0)."""
     nonzero = False
     for i in range(3):
         v = volts[i]
@@ -153,6 +157,7 @@ def pci1720_codes(volts, enabled, limit, ranges, dac):
         return DAC_DISABLED
     for k in range(9):
         dac[DAC_BACKUP + k] = dac[k]
+    packed = 0
     for i in range(3):
         v = volts[i]
         dac[DAC_CLAMPED + i] = 0.0 if -limit <= v <= limit else 1.0
@@ -169,4 +174,5 @@ def pci1720_codes(volts, enabled, limit, ranges, dac):
             code = float(math.floor(s + 0.5))
         dac[DAC_CODES + i] = code
         dac[DAC_VOLTS + i] = v_min + code / maxdata * (v_max - v_min)
-    return DAC_OK
+        packed |= int(code) << (DAC_CODE_BITS * i)
+    return packed

@@ -62,6 +62,11 @@ RANGE_BIPOLAR_10V = 3
 #: Thesis 3.1.2: commands are saturated at ±6 V.
 DEFAULT_LIMIT_V = 6.0
 
+_SHAPE = (3,)
+_F64 = np.dtype(np.float64)
+_BITS = kernels.DAC_CODE_BITS
+_MASK = kernels.DAC_CODE_MASK
+
 MISSING_LIBRARY_MESSAGE = "comedilib not found: install libcomedi0 or choose the 'sim' backend"
 
 
@@ -227,6 +232,16 @@ class Pci1720Outputs(ActuatorOutputs):
             self._channels = tuple(self._probe_channel(n) for n in numbers)
             for i, ch in enumerate(self._channels):
                 self._ranges[3 * i:3 * i + 3] = (ch.v_min, ch.v_max, ch.maxdata)
+            self._numbers = tuple(ch.number for ch in self._channels)
+            # The compiled write packs the codes in 16-bit fields (every DAC card this driver
+            # knows has 12 bits); a wider card would take the interpreted write.
+            self._packable = all(ch.maxdata <= kernels.DAC_CODE_MASK for ch in self._channels)
+            self._write = self._lib.comedi_data_write
+            # Compile (or load from numba's cache) now, not in a cycle: a read-only view, as
+            # the loop's port is, on a scratch state.
+            probe = np.zeros(3)
+            probe.flags.writeable = False
+            kernels.pci1720_codes(probe, False, self.limit_v, self._ranges, self._dac.copy())
             if enable_line is not None:
                 self._setup_enable_line(enable_line)
             self._write_zero()
@@ -348,34 +363,43 @@ class Pci1720Outputs(ActuatorOutputs):
         (``rt.drivers.kernels.pci1720_codes``), then the three codes go to comedilib; any
         other sequence takes :meth:`write_volts_interpreted`, the reference. Same results.
         """
-        if type(volts) is not np.ndarray or volts.dtype != np.float64 or volts.ndim != 1 \
-                or volts.shape[0] != self.n_channels:
+        if type(volts) is not np.ndarray or volts.shape != _SHAPE or volts.dtype is not _F64 \
+                or not self._packable:
             self.write_volts_interpreted(volts)
             return
-        self._check_open()
-        dac = self._dac
-        rc = kernels.pci1720_codes(volts, self._enabled, self.limit_v, self._ranges, dac)
+        if self._closed:
+            self._check_open()
+        packed = kernels.pci1720_codes(volts, self._enabled, self.limit_v, self._ranges,
+                                       self._dac)
+        if packed < 0:
+            self._refuse(packed, volts)
+        write, dev, sub, rng = self._write, self._dev, self.subdevice, self.range_index
+        n0, n1, n2 = self._numbers
+        if write(dev, sub, n0, rng, AREF_GROUND, packed & _MASK) < 0:
+            self._write_failed(0)
+        if write(dev, sub, n1, rng, AREF_GROUND, (packed >> _BITS) & _MASK) < 0:
+            self._write_failed(1)
+        if write(dev, sub, n2, rng, AREF_GROUND, packed >> (2 * _BITS)) < 0:
+            self._write_failed(2)
+
+    def _refuse(self, rc: int, volts: np.ndarray) -> None:
         if rc == kernels.DAC_NOT_FINITE:
             raise InputError(f"write_volts got a non-finite command {list(volts)}; nothing "
                              f"was written")
-        if rc == kernels.DAC_DISABLED:
-            raise HardwareError(
-                "Pci1720Outputs refused a non-zero command while disabled; only the "
-                "supervisor enables the drives")
-        write = self._lib.comedi_data_write
-        dev, sub, rng = self._dev, self.subdevice, self.range_index
-        codes = dac[kernels.DAC_CODES:kernels.DAC_CODES + 3].tolist()
-        for i in range(3):
-            if write(dev, sub, self._channels[i].number, rng, AREF_GROUND, int(codes[i])) < 0:
-                # As the channel-by-channel write left it: the channels before this one
-                # written, this one's clamp flag set, the rest as before.
-                b = kernels.DAC_BACKUP
-                dac[kernels.DAC_CODES + i:3] = dac[b + kernels.DAC_CODES + i:b + 3]
-                dac[kernels.DAC_VOLTS + i:6] = dac[b + kernels.DAC_VOLTS + i:b + 6]
-                dac[kernels.DAC_CLAMPED + i + 1:9] = dac[b + kernels.DAC_CLAMPED + i + 1:b + 9]
-                raise HardwareError(
-                    f"comedi_data_write on {self.device} channel {self._channels[i].number} "
-                    f"failed: {self._error_text()}")
+        raise HardwareError(
+            "Pci1720Outputs refused a non-zero command while disabled; only the "
+            "supervisor enables the drives")
+
+    def _write_failed(self, i: int) -> None:
+        """Channel ``i``'s write failed: the state as the channel-by-channel write leaves it
+        (the channels before ``i`` written, ``i``'s clamp flag set, the rest as before)."""
+        dac, b = self._dac, kernels.DAC_BACKUP
+        dac[kernels.DAC_CODES + i:3] = dac[b + kernels.DAC_CODES + i:b + 3]
+        dac[kernels.DAC_VOLTS + i:6] = dac[b + kernels.DAC_VOLTS + i:b + 6]
+        dac[kernels.DAC_CLAMPED + i + 1:9] = dac[b + kernels.DAC_CLAMPED + i + 1:b + 9]
+        raise HardwareError(
+            f"comedi_data_write on {self.device} channel {self._channels[i].number} "
+            f"failed: {self._error_text()}")
 
     def write_volts_interpreted(self, volts: Sequence[float] | np.ndarray) -> None:
         """:meth:`write_volts` one value at a time in Python (the reference; any sequence)."""
