@@ -119,9 +119,9 @@ def test_a_non_finite_position_is_refused_and_changes_nothing_after_it():
 
 # --- drive ---------------------------------------------------------------------------------------
 
-def _outcome(call):
+def _outcome(call, volts):
     try:
-        call()
+        call(volts)
     except (HardwareError, InputError) as exc:
         return type(exc).__name__, str(exc)
     return None
@@ -151,8 +151,8 @@ def test_dac_write_equals_the_interpreted_write_bit_for_bit(recorded):
         if k == 83:
             for lib in libs:
                 lib.fail_writes = False
-        a = _outcome(lambda: cards[0].write_volts(v))
-        b = _outcome(lambda: cards[1].write_volts_interpreted(v))
+        a = _outcome(cards[0].write_volts, v)
+        b = _outcome(cards[1].write_volts_interpreted, v)
         assert a == b, f"command {k}: {v}"
         assert cards[0].last_codes == cards[1].last_codes, f"command {k}"
         assert cards[0].last_volts == cards[1].last_volts, f"command {k}"
@@ -160,9 +160,9 @@ def test_dac_write_equals_the_interpreted_write_bit_for_bit(recorded):
         assert [w[1:] for w in libs[0].writes] == [w[1:] for w in libs[1].writes]
     assert sum(w[-1] == 4095 or w[-1] == 0 for w in libs[0].writes) == 0   # clamp at 6 V
     # A sequence other than a float64[3] array takes the interpreted path: same refusals.
-    assert _outcome(lambda: cards[0].write_volts([0.1, 0.2])) == \
+    assert _outcome(cards[0].write_volts, [0.1, 0.2]) == \
         ("InputError", "write_volts needs 3 values, got 2")
-    assert _outcome(lambda: cards[0].write_volts(np.zeros(4))) == \
+    assert _outcome(cards[0].write_volts, np.zeros(4)) == \
         ("InputError", "write_volts needs 3 values, got 4")
 
 
@@ -281,3 +281,34 @@ def test_stop_inputs_through_the_array_read():
         dev.levels = levels
         blk.update(0.0, 1e-3)
         assert blk.stops.data.tolist() == [float(levels[0]), float(levels[1])]
+
+
+def _device_kernels():
+    from rt.components import safety_blocks, tare
+    from rt.devices import sampled_ft
+    from rt.drivers import kernels as dk
+
+    return (dk.fake_pcl833_read, dk.fake_pcl833_move, dk.fake_pcl833_positions,
+            dk.fake_pcl833_set_counts, dk.pcl833_decode, dk.pci1720_codes, tare.tare_cycle,
+            safety_blocks._force_cycle, safety_blocks._disagreement, sampled_ft._read_sample)
+
+
+def test_no_device_kernel_compiles_inside_a_cycle():
+    """The device kernels are compiled at construction for the argument types the loop passes
+    (read-only port views, the twin's sample tuple): a first-cycle compile stalls the loop."""
+    from rt.position_loop import build_protocol_loop, build_sim_position_loop, sim_devices
+    from rt.twin.environment import FreeMotion
+    from rt.twin.twin import SimClock
+
+    pl = build_sim_position_loop("paden_panja", duration_s=1.0)
+    clock = SimClock()
+    twin = Twin(None, FreeMotion(), clock=clock)
+    twin.place((0.2, 0.2, 0.2))
+    hybrid = build_protocol_loop(sim_devices(twin, clock), controller="paden_panja")
+    before = [len(k.signatures) for k in _device_kernels()]
+    pl.loop.run(cycles=30)
+    hybrid.loop.run(cycles=30)
+    pl.graph.stop()
+    hybrid.graph.stop()
+    assert [len(k.signatures) for k in _device_kernels()] == before
+    assert min(before) >= 1

@@ -100,6 +100,13 @@ class FakePcl833Port(PortIO):
         self._encoder_index = st[kernels.FAKE_INDEX:kernels.FAKE_INDEX + 3]  # counts from q=0
         self._frozen = st[kernels.FAKE_FROZEN:kernels.FAKE_FROZEN + 3]
         self._sign_mpc = np.array([*self.sign, *self.m_per_count], dtype=np.float64)
+        # Compile (or load from numba's cache) now, not in a cycle: on a scratch state.
+        scratch, three = np.zeros_like(st), np.zeros(3, dtype=np.int64)
+        kernels.fake_pcl833_read(scratch, base, np.array([base + 2], dtype=np.int64), three,
+                                 strict)
+        kernels.fake_pcl833_move(scratch, np.zeros(3))
+        kernels.fake_pcl833_positions(scratch, self._sign_mpc, np.zeros(3))
+        kernels.fake_pcl833_set_counts(scratch, np.zeros(3, dtype=np.uint64), three)
 
     # --- PortIO ----------------------------------------------------------------------------
 
@@ -187,6 +194,11 @@ class FakePcl833Port(PortIO):
         """Preset the live counter of ``axis`` to ``count`` (mod 2**24); a reset hold wins."""
         self._count[axis] = count & COUNTER_MASK
         self._apply_reset_hold()
+
+    def set_counts(self, counts: np.ndarray, offsets: np.ndarray) -> None:
+        """``set_count`` of every axis to ``counts + offsets`` (int arrays; e.g. the rig's
+        counters read over shared memory and a reader's reset offsets), in one compiled call."""
+        kernels.fake_pcl833_set_counts(self._st, counts, offsets)
 
     def move_counts(self, axis: int, delta: int) -> None:
         """Feed ``delta`` counts (signed) to ``axis``'s counter, wrapping modulo 2**24.

@@ -114,6 +114,18 @@ def fake_pcl833_positions(st, sign_mpc, positions_m):
 
 
 @njit(cache=True)
+def fake_pcl833_set_counts(st, counts, offsets):
+    """``FakePcl833Port.set_count`` for the three axes: each live counter preset to
+    ``counts + offsets`` modulo 2**24, then the reset hold (a held channel keeps its reset
+    value: 0x800000 with the mode register's "middle" bit, else 0)."""
+    for axis in range(3):
+        st[FAKE_COUNT + axis] = (int(counts[axis]) + offsets[axis]) & _COUNTER_MASK
+    for axis in range(3):
+        if (st[FAKE_REG + _REG_COUNTER_RESET] >> axis) & 1:
+            st[FAKE_COUNT + axis] = _HALF_RANGE if st[FAKE_REG + axis] & 0x08 else 0
+
+
+@njit(cache=True)
 def pcl833_decode(raw, unwrap, dec, out):
     """Slider positions (m) into ``out`` from one read of the three channels: ``raw`` holds
     each axis' bytes in read order (high, low, middle), ``unwrap`` each axis' (last count,

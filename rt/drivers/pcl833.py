@@ -291,6 +291,8 @@ class Pcl833Encoders(EncoderBank):
         self._unwrap = tuple(CountUnwrapper(MIDPOINT, store=self._unwrap_state[2 * i:2 * i + 2])
                              for i in range(3))
         self._dec = np.array([*self.sign, *self.origin_m, *self.m_per_count], dtype=np.float64)
+        # Compile (or load from numba's cache) now, not in the first cycle (scratch arrays).
+        pcl833_decode(self._raw.copy(), self._unwrap_state.copy(), self._dec, np.zeros(3))
         try:
             self.configure()
             if reset_on_open:
