@@ -11,15 +11,16 @@ import numpy as np
 import pytest
 
 from rt.ati.rdt import STATUS_ANY_ERROR
-from rt.components.safety_blocks import ForceReader, StopInputs
+from rt.components.safety_blocks import ForceReader, RedundantDrive, StopInputs
 from rt.components.tare import Tare, TareRefusal, TareState
 from rt.devices.interfaces import DigitalInputs, DigitalInputState
 from rt.devices.sampled_ft import SampledForceTorque
 from rt.drivers.fake_comedi import FakeComedi
 from rt.drivers.fake_pcl833 import FakePcl833Port
-from rt.drivers.pci1720 import Pci1720Outputs
+from rt.drivers.pci1720 import Pci1720Outputs, code_to_volts
 from rt.drivers.pcl833 import COUNTER_MODULUS, Pcl833Encoders
 from rt.errors import HardwareError, InputError
+from rt.safety.events import EventLog
 from rt.twin.twin import Twin
 
 
@@ -166,6 +167,77 @@ def test_dac_write_equals_the_interpreted_write_bit_for_bit(recorded):
         ("InputError", "write_volts needs 3 values, got 4")
 
 
+class _Amplifiers:
+    """The amplifier inputs the current monitors read back: each enabled card's last codes as
+    volts, with faults: a dead channel, readings not yet fresh (None), a tuple reading."""
+
+    def __init__(self, libs):
+        self.libs = libs
+        self.k = 0
+        self.out = np.zeros(3)
+
+    def __call__(self):
+        k = self.k
+        if k % 37 == 5:
+            return None                                   # no reading newer than the command
+        lib = self.libs[0] if k < 400 else self.libs[1]
+        v = np.array([code_to_volts(lib.last_code.get(c, 2048)) for c in range(3)])
+        if 150 <= k < 160 or 600 <= k:
+            v[1] = 0.0                                    # channel 1 dead (card 0, then 1)
+        if k % 11 == 0:
+            return tuple(v.tolist())                      # a sequence, not an array
+        self.out[:] = v
+        return self.out
+
+
+def _drive(compiled: bool):
+    libs = (FakeComedi(), FakeComedi())
+    cards = [Pci1720Outputs(device=f"/dev/comedi{i}", lib=lib) for i, lib in enumerate(libs)]
+    log = EventLog()
+    amps = _Amplifiers(libs)
+    blk = RedundantDrive("drive", cards, log, monitor=amps, compiled=compiled)
+    blk.volts.data = np.zeros(3)
+    blk.enable.data = np.ones(1)
+    blk.on_start()
+    return blk, libs, amps, log
+
+
+def test_redundant_drive_equals_the_interpreted_block_on_recorded_commands(recorded):
+    """The recorded commands through the compiled and the interpreted drive: a dead channel
+    (the monitor disagrees: failover to card 1 after 3 cycles), stale and tuple readings, a
+    drive disable and enable, a failing write on card 1, then the last card's channel dead (hard
+    stop, every card off). Every cycle: outputs, state, writes and events equal."""
+    volts = np.concatenate([recorded[2], recorded[2][:300]])
+    drives = [_drive(c) for c in (True, False)]
+    for k, v in enumerate(volts):
+        outcomes = []
+        for blk, libs, amps, _ in drives:
+            amps.k = k
+            command = np.array(v)
+            command.flags.writeable = False
+            blk.volts.data = command
+            blk.enable.data = np.array([0.0 if 250 <= k < 260 else 1.0])
+            libs[1].fail_writes = k == 500
+            try:
+                blk.update(k * 1e-3, 1e-3)
+                outcomes.append(None)
+            except HardwareError as exc:
+                outcomes.append(str(exc))
+        (c, lc, _, ec), (i, li, _, ei) = drives
+        assert outcomes[0] == outcomes[1], f"cycle {k}"
+        assert c.failed.data.tolist() == i.failed.data.tolist(), f"cycle {k}"
+        assert c.active_card.data.tolist() == i.active_card.data.tolist(), f"cycle {k}"
+        assert c._st.tolist() == i._st.tolist() or c._last.tolist() == i._last.tolist() and \
+            c._mismatch.tolist() == i._mismatch.tolist(), f"cycle {k}"
+        assert [w[1:] for w in lc[0].writes + lc[1].writes] == \
+            [w[1:] for w in li[0].writes + li[1].writes], f"cycle {k}"
+        assert [(e.t, e.kind, e.cause, e.message) for e in ec.snapshot()] == \
+            [(e.t, e.kind, e.cause, e.message) for e in ei.snapshot()], f"cycle {k}"
+    causes = [e.cause for e in drives[0][3].snapshot()]
+    assert causes[:1] == ["dac_card_0"] and "drive_channel" in causes
+    assert drives[0][0].failed.data[0] == 1.0
+
+
 # --- force reader, tare, stop inputs --------------------------------------------------------
 
 class _Replayed(SampledForceTorque):
@@ -290,7 +362,7 @@ def _device_kernels():
 
     return (dk.fake_pcl833_read, dk.fake_pcl833_move, dk.fake_pcl833_positions,
             dk.fake_pcl833_set_counts, dk.pcl833_decode, dk.pci1720_codes, tare.tare_cycle,
-            safety_blocks._force_cycle, safety_blocks._disagreement, sampled_ft._read_sample)
+            safety_blocks._force_cycle, safety_blocks._drive_cycle, sampled_ft._read_sample)
 
 
 def test_no_device_kernel_compiles_inside_a_cycle():

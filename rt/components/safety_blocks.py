@@ -218,6 +218,32 @@ def _disagreement(measured, last, mismatch, tolerance_v, confirm_cycles):
     return -1
 
 
+# RedundantDrive's numbers (float64 array): the last command written (3), the one before it
+# (3, restored when a write fails), each channel's disagreement count (3; integers exact).
+_LAST, _BACKUP, _MISMATCH, _DRIVE_SIZE = 0, 3, 6, 9
+
+
+@njit(cache=True)
+def _drive_cycle(measured, has_measured, volts, enabled, st, tolerance_v, confirm_cycles):
+    """:class:`RedundantDrive`'s arithmetic of a cycle: with a monitor reading, count each
+    channel's disagreement with the last command (:func:`_disagreement`'s rule) and return the
+    first channel confirmed failed (nothing else done); otherwise the command about to be
+    written becomes the last one (0 V when the drives are disabled), the previous one kept in
+    the backup, and -1 is returned."""
+    if has_measured:
+        for i in range(3):
+            if abs(measured[i] - st[_LAST + i]) > tolerance_v:
+                st[_MISMATCH + i] += 1.0
+                if st[_MISMATCH + i] >= confirm_cycles:
+                    return i
+            else:
+                st[_MISMATCH + i] = 0.0
+    for i in range(3):
+        st[_BACKUP + i] = st[_LAST + i]
+        st[_LAST + i] = volts[i] if enabled else 0.0
+    return -1
+
+
 class RedundantDrive(Component):
     """Ports: in ``volts``: float64[3] V; in ``enable``: float64[1]; out ``failed``: float64[1]
     (1 when a channel has failed on both cards); out ``active_card``: float64[1].
@@ -232,8 +258,9 @@ class RedundantDrive(Component):
 
     def __init__(self, name: str, cards: Sequence[ActuatorOutputs], log: EventLog,
                  monitor: Callable[[], Sequence[float] | np.ndarray | None] | None = None,
-                 tolerance_v: float = 0.1, confirm_cycles: int = 3):
+                 tolerance_v: float = 0.1, confirm_cycles: int = 3, compiled: bool = True):
         super().__init__(name)
+        self.compiled = compiled
         self.cards = list(cards)
         self.log = log
         self.monitor = monitor
@@ -244,15 +271,22 @@ class RedundantDrive(Component):
         self.failed = self.declare_output("failed", Array(1))
         self.active_card = self.declare_output("active_card", Array(1))
         self._card = 0
-        self._last = np.zeros(3)
+        self._st = np.zeros(_DRIVE_SIZE)
+        self._last = self._st[_LAST:_LAST + 3]
+        self._mismatch = self._st[_MISMATCH:_MISMATCH + 3]
         self._zero = np.zeros(3)
         self._measured = np.zeros(3)
-        self._mismatch = np.zeros(3, dtype=np.int64)
         self._enabled = False
-        # Compile (or load from numba's cache) now, not in the first cycle.
-        _disagreement(self._measured, self._last, self._mismatch, self.tolerance_v,
-                      self.confirm_cycles)
-        self._mismatch[:] = 0
+        # Compile (or load from numba's cache) now, not in the first cycle: the command as the
+        # loop binds it (a read-only view), on a scratch state.
+        probe = np.zeros(3)
+        probe.flags.writeable = False
+        for measured in (self._measured, probe):
+            _drive_cycle(measured, True, probe, True, self._st.copy(), self.tolerance_v,
+                         self.confirm_cycles)
+        if not compiled:
+            _disagreement(self._measured, self._last.copy(), self._mismatch.copy(),
+                          self.tolerance_v, self.confirm_cycles)
 
     def on_start(self) -> None:
         self._card = 0
@@ -294,6 +328,8 @@ class RedundantDrive(Component):
         self._enabled = False
 
     def update(self, t: float, dt: float) -> int:
+        if not self.compiled:
+            return self._update_interpreted(t, dt)
         if self.failed.data[0] > 0.5:
             if self._enabled:
                 self._all_off()
@@ -303,20 +339,48 @@ class RedundantDrive(Component):
         card = self.cards[self._card]
         measured = self.monitor() if enabled and self.monitor is not None and \
             self._enabled else None
-        if measured is not None:               # None: no reading newer than the last command
-            if type(measured) is np.ndarray and measured.dtype is _F64 \
-                    and measured.shape == _SHAPE3:
-                m = measured                   # the twin's amplifier inputs: read in place
-            else:
-                m = self._measured
-                m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
-            i = _disagreement(m, self._last, self._mismatch, self.tolerance_v,
-                              self.confirm_cycles)
-            if i >= 0:
-                if not self._fail_over(t, i, "amplifier input disagrees with the command"):
-                    self._all_off()
-                    return 0
-                card = self.cards[self._card]
+        if measured is None:                   # None: no reading newer than the last command
+            m, has = v, False
+        elif type(measured) is np.ndarray and measured.dtype is _F64 \
+                and measured.shape == _SHAPE3:
+            m, has = measured, True            # the twin's amplifier inputs: read in place
+        else:
+            m, has = self._measured, True
+            m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
+        # One compiled call: the monitor check, and the command stored as the last one.
+        i = _drive_cycle(m, has, v, enabled, self._st, self.tolerance_v, self.confirm_cycles)
+        if i >= 0:
+            if not self._fail_over(t, i, "amplifier input disagrees with the command"):
+                self._all_off()
+                return 0
+            return self._finish_cycle(t, v, enabled)
+        if enabled != self._enabled:
+            try:
+                if enabled:
+                    card.enable()
+                else:
+                    card.disable()
+            except HardwareError:
+                self._last[:] = self._st[_BACKUP:_BACKUP + 3]     # as before this cycle
+                raise
+            self._enabled = enabled
+        if not enabled:
+            return 0
+        try:
+            card.write_volts(v)
+        except HardwareError as exc:
+            self._last[:] = self._st[_BACKUP:_BACKUP + 3]         # nothing was written
+            if not self._fail_over(t, -1, f"write failed: {exc}"):
+                self._all_off()
+                return 0
+            self.cards[self._card].write_volts(v)
+            self._last[:] = v
+        return 0
+
+    def _finish_cycle(self, t: float, v: np.ndarray, enabled: bool) -> int:
+        """The rest of a cycle after the monitor check, in Python (the previous code): the
+        interpreted cycle's, and the compiled one's after a failover."""
+        card = self.cards[self._card]
         if enabled != self._enabled:
             if enabled:
                 card.enable()
@@ -335,3 +399,25 @@ class RedundantDrive(Component):
             self.cards[self._card].write_volts(v)
         self._last[:] = v
         return 0
+
+    def _update_interpreted(self, t: float, dt: float) -> int:
+        """The block as it ran before :func:`_drive_cycle` (``compiled=False``): the reference
+        of ``tests/test_device_compiled.py``."""
+        if self.failed.data[0] > 0.5:
+            if self._enabled:
+                self._all_off()
+            return 0
+        v = self.volts.data
+        enabled = self.enable.data[0] > 0.5
+        measured = self.monitor() if enabled and self.monitor is not None and \
+            self._enabled else None
+        if measured is not None:               # None: no reading newer than the last command
+            m = self._measured
+            m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
+            i = _disagreement(m, self._last, self._mismatch, self.tolerance_v,
+                              self.confirm_cycles)
+            if i >= 0 and not self._fail_over(t, i, "amplifier input disagrees with the "
+                                                    "command"):
+                self._all_off()
+                return 0
+        return self._finish_cycle(t, v, enabled)
