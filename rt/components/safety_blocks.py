@@ -219,18 +219,22 @@ def _disagreement(measured, last, mismatch, tolerance_v, confirm_cycles):
 
 
 # RedundantDrive's numbers (float64 array): the last command written (3), the one before it
-# (3, restored when a write fails), each channel's disagreement count (3; integers exact).
-_LAST, _BACKUP, _MISMATCH, _DRIVE_SIZE = 0, 3, 6, 9
+# (3, restored when a write fails), each channel's disagreement count (3; integers exact), the
+# tolerance (V) and the cycles that confirm a disagreement (one array: numba's dispatch costs
+# per argument).
+_LAST, _BACKUP, _MISMATCH, _TOLERANCE, _CONFIRM, _DRIVE_SIZE = 0, 3, 6, 9, 10, 11
 
 
 @njit(cache=True)
-def _drive_cycle(measured, has_measured, volts, enabled, st, tolerance_v, confirm_cycles):
+def _drive_cycle(measured, has_measured, volts, enabled, st):
     """:class:`RedundantDrive`'s arithmetic of a cycle: with a monitor reading, count each
     channel's disagreement with the last command (:func:`_disagreement`'s rule) and return the
     first channel confirmed failed (nothing else done); otherwise the command about to be
     written becomes the last one (0 V when the drives are disabled), the previous one kept in
     the backup, and -1 is returned."""
     if has_measured:
+        tolerance_v = st[_TOLERANCE]
+        confirm_cycles = st[_CONFIRM]
         for i in range(3):
             if abs(measured[i] - st[_LAST + i]) > tolerance_v:
                 st[_MISMATCH + i] += 1.0
@@ -272,6 +276,8 @@ class RedundantDrive(Component):
         self.active_card = self.declare_output("active_card", Array(1))
         self._card = 0
         self._st = np.zeros(_DRIVE_SIZE)
+        self._st[_TOLERANCE] = self.tolerance_v
+        self._st[_CONFIRM] = self.confirm_cycles
         self._last = self._st[_LAST:_LAST + 3]
         self._mismatch = self._st[_MISMATCH:_MISMATCH + 3]
         self._zero = np.zeros(3)
@@ -282,8 +288,7 @@ class RedundantDrive(Component):
         probe = np.zeros(3)
         probe.flags.writeable = False
         for measured in (self._measured, probe):
-            _drive_cycle(measured, True, probe, True, self._st.copy(), self.tolerance_v,
-                         self.confirm_cycles)
+            _drive_cycle(measured, True, probe, True, self._st.copy())
         if not compiled:
             _disagreement(self._measured, self._last.copy(), self._mismatch.copy(),
                           self.tolerance_v, self.confirm_cycles)
@@ -348,7 +353,7 @@ class RedundantDrive(Component):
             m, has = self._measured, True
             m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
         # One compiled call: the monitor check, and the command stored as the last one.
-        i = _drive_cycle(m, has, v, enabled, self._st, self.tolerance_v, self.confirm_cycles)
+        i = _drive_cycle(m, has, v, enabled, self._st)
         if i >= 0:
             if not self._fail_over(t, i, "amplifier input disagrees with the command"):
                 self._all_off()

@@ -21,13 +21,13 @@ from rt.devices.interfaces import (
     Wrench,
 )
 
-# The polled sensor's own state (float64[3]): last sample counter (integers are exact in
-# float64), the time it last changed (s), the stale timeout (s).
-_LAST_SEQ, _LAST_NEW_T, _TIMEOUT = 0, 1, 2
+# The polled sensor's own state (float64[9]): last sample counter (integers are exact in
+# float64), the time it last changed (s), the stale timeout (s), the software bias (6).
+_LAST_SEQ, _LAST_NEW_T, _TIMEOUT, _BIAS, _ST_SIZE = 0, 1, 2, 3, 9
 
 
 @njit(cache=True)
-def _read_sample(w, seq, status, t, bias, st, out):
+def _read_sample(w, seq, status, t, st, out):
     """:meth:`SampledForceTorque.read`'s arithmetic on a fresh sample into ``out`` (layout
     ``FT_*``): the wrench minus the software bias, the sample's time, counter and status,
     saturated from the status word, stale when the counter has not moved for the timeout."""
@@ -35,7 +35,7 @@ def _read_sample(w, seq, status, t, bias, st, out):
         st[_LAST_SEQ] = seq
         st[_LAST_NEW_T] = t
     for k in range(6):
-        out[k] = w[k] - bias[k]
+        out[k] = w[k] - st[_BIAS + k]
     out[FT_T] = t
     out[FT_SEQUENCE] = seq
     out[FT_STATUS] = status
@@ -50,13 +50,14 @@ class SampledForceTorque(ForceTorqueSensor):
 
     def __init__(self, timeout_s: float = 0.05):
         self._streaming = False
-        self._bias = np.zeros(6)
-        self._st = np.array([-1.0, -math.inf, timeout_s])
+        self._st = np.zeros(_ST_SIZE)
+        self._st[:3] = (-1.0, -math.inf, timeout_s)
+        self._bias = self._st[_BIAS:_BIAS + 6]
         # Compile (or load from numba's cache) now, not in a cycle: the wrench as an array
         # (shared memory) and as a tuple of floats (the twin's sample).
         scratch = np.zeros(FT_READ_SIZE)
         for w in (np.zeros(6), (0.0,) * 6):
-            _read_sample(w, 0, 0, 0.0, self._bias, np.array([-1.0, -math.inf, 1.0]), scratch)
+            _read_sample(w, 0, 0, 0.0, self._st.copy(), scratch)
 
     @property
     def timeout_s(self) -> float:
@@ -129,7 +130,7 @@ class SampledForceTorque(ForceTorqueSensor):
             out[FT_STALE] = 1.0
             return out
         w, seq, status, t = sample
-        _read_sample(w, seq, status, t, self._bias, self._st, out)
+        _read_sample(w, seq, status, t, self._st, out)
         return out
 
     def _close(self) -> None:

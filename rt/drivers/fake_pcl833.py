@@ -83,17 +83,17 @@ class FakePcl833Port(PortIO):
     def __init__(self, base: int = DEFAULT_BASE,
                  m_per_count: float | Sequence[float] = DEFAULT_M_PER_COUNT,
                  sign: int | Sequence[int] = +1, strict: bool = True) -> None:
+        # The card's state in one int64 array, so a block of reads (``read_block``) and the
+        # encoders' motion (``set_positions_m``) are one compiled call each
+        # (``rt.drivers.kernels``); the views below are the same numbers by name.
+        self._st = np.zeros(kernels.FAKE_SIZE, dtype=np.int64)
+        st = self._st
         self.base = base
         self.m_per_count = [float(m) for m in _per_axis(m_per_count, "m_per_count")]
         self.sign = [int(s) for s in _per_axis(sign, "sign")]
         self.strict = strict
         self.writes: list[tuple[int, int]] = []
         self.n_reads = 0
-        # The card's state in one int64 array, so a block of reads (``read_block``) and the
-        # encoders' motion (``set_positions_m``) are one compiled call each
-        # (``rt.drivers.kernels``); the views below are the same numbers by name.
-        self._st = np.zeros(kernels.FAKE_SIZE, dtype=np.int64)
-        st = self._st
         self._reg = st[kernels.FAKE_REG:kernels.FAKE_REG + PORT_SPAN]   # last byte written
         self._count = st[kernels.FAKE_COUNT:kernels.FAKE_COUNT + 3]      # live counters
         self._latched = st[kernels.FAKE_LATCHED:kernels.FAKE_LATCHED + 3]   # what bytes read
@@ -101,12 +101,29 @@ class FakePcl833Port(PortIO):
         self._frozen = st[kernels.FAKE_FROZEN:kernels.FAKE_FROZEN + 3]
         self._sign_mpc = np.array([*self.sign, *self.m_per_count], dtype=np.float64)
         # Compile (or load from numba's cache) now, not in a cycle: on a scratch state.
-        scratch, three = np.zeros_like(st), np.zeros(3, dtype=np.int64)
-        kernels.fake_pcl833_read(scratch, base, np.array([base + 2], dtype=np.int64), three,
-                                 strict)
+        scratch, three = st.copy(), np.zeros(3, dtype=np.int64)
+        kernels.fake_pcl833_read(scratch, np.array([base + 2], dtype=np.int64), three)
         kernels.fake_pcl833_move(scratch, np.zeros(3))
         kernels.fake_pcl833_positions(scratch, self._sign_mpc, np.zeros(3))
         kernels.fake_pcl833_set_counts(scratch, np.zeros(3, dtype=np.uint64), three)
+
+    @property
+    def base(self) -> int:
+        """The card's base port (its DIP switches)."""
+        return int(self._st[kernels.FAKE_BASE])
+
+    @base.setter
+    def base(self, value: int) -> None:
+        self._st[kernels.FAKE_BASE] = value
+
+    @property
+    def strict(self) -> bool:
+        """An access to a port the card does not decode raises ``HardwareError``."""
+        return bool(self._st[kernels.FAKE_STRICT])
+
+    @strict.setter
+    def strict(self, value: bool) -> None:
+        self._st[kernels.FAKE_STRICT] = 1 if value else 0
 
     # --- PortIO ----------------------------------------------------------------------------
 
@@ -135,7 +152,7 @@ class FakePcl833Port(PortIO):
         compiled call (``rt.drivers.kernels.fake_pcl833_read``); the same bytes, latches,
         ``n_reads`` and refusal as ``inb`` one port at a time."""
         self._check_open()
-        bad = kernels.fake_pcl833_read(self._st, self.base, ports, out, self.strict)
+        bad = kernels.fake_pcl833_read(self._st, ports, out)
         if bad >= 0:
             self.n_reads += bad + 1
             raise HardwareError(f"port 0x{int(ports[bad]):X} is not a PCL-833 register at "

@@ -32,7 +32,9 @@ FAKE_COUNT = 16         # 3: live counters
 FAKE_LATCHED = 19       # 3: latched counters (what the count bytes read)
 FAKE_INDEX = 22         # 3: encoder position in counts from q = 0
 FAKE_FROZEN = 25        # 3: fault injection, 1 = frozen
-FAKE_SIZE = 28
+FAKE_BASE = 28          # the card's base port (read by the block read: one argument less)
+FAKE_STRICT = 29        # 1: an undecoded port is an error (else it reads 0xFF)
+FAKE_SIZE = 30
 
 _COUNTER_MASK = (1 << 24) - 1
 _HALF_RANGE = 1 << 23
@@ -51,12 +53,14 @@ DAC_CODE_MASK = (1 << DAC_CODE_BITS) - 1
 
 
 @njit(cache=True)
-def fake_pcl833_read(st, base, ports, out, strict):
+def fake_pcl833_read(st, ports, out):
     """``inb`` of each of ``ports`` in order into ``out`` (``FakePcl833Port.inb``): a high
     byte read latches its channel (software-read latch source), count bytes read the latch,
     overflow and status read 0. Returns -1, or the index of the first port the card does not
-    decode when ``strict`` (the reads before it happened); an undecoded port reads 0xFF
-    otherwise."""
+    decode when the card is strict (the reads before it happened); an undecoded port reads
+    0xFF otherwise. The base port and strictness are read from ``st``."""
+    base = st[FAKE_BASE]
+    strict = st[FAKE_STRICT] != 0
     for k in range(ports.shape[0]):
         offset = ports[k] - base
         if 0 <= offset < 12 and offset % 4 != 3:
@@ -125,18 +129,26 @@ def fake_pcl833_set_counts(st, counts, offsets):
             st[FAKE_COUNT + axis] = _HALF_RANGE if st[FAKE_REG + axis] & 0x08 else 0
 
 
+# --- the PCL-833 driver's read buffer (int64 array; rt.drivers.pcl833) ------------------------
+PCL_RAW = 0             # 9: each axis' bytes in read order (high, low, middle)
+PCL_UNWRAP = 9          # 6: each axis' last count and displacement (``CountUnwrapper``)
+PCL_IO_SIZE = 15
+
+
 @njit(cache=True)
-def pcl833_decode(raw, unwrap, dec, out):
-    """Slider positions (m) into ``out`` from one read of the three channels: ``raw`` holds
-    each axis' bytes in read order (high, low, middle), ``unwrap`` each axis' (last count,
-    displacement) updated in place (``CountUnwrapper.update``), ``dec`` the signs, the origins
-    (m) and the m per count. ``origin + sign·displacement·mpc``, as the driver computes it."""
+def pcl833_decode(io, dec, out):
+    """Slider positions (m) into ``out`` from one read of the three channels: ``io`` holds the
+    bytes read and each axis' (last count, displacement), updated in place
+    (``CountUnwrapper.update``; layout ``PCL_*``), ``dec`` the signs, the origins (m) and the
+    m per count. ``origin + sign·displacement·mpc``, as the driver computes it."""
     for i in range(3):
-        count = ((raw[3 * i] << 16) | (raw[3 * i + 2] << 8) | raw[3 * i + 1]) & _COUNTER_MASK
-        step = ((count - unwrap[2 * i] + _HALF_RANGE) & _COUNTER_MASK) - _HALF_RANGE
-        displacement = unwrap[2 * i + 1] + step
-        unwrap[2 * i] = count
-        unwrap[2 * i + 1] = displacement
+        r = PCL_RAW + 3 * i
+        count = ((io[r] << 16) | (io[r + 2] << 8) | io[r + 1]) & _COUNTER_MASK
+        u = PCL_UNWRAP + 2 * i
+        step = ((count - io[u] + _HALF_RANGE) & _COUNTER_MASK) - _HALF_RANGE
+        displacement = io[u + 1] + step
+        io[u] = count
+        io[u + 1] = displacement
         out[i] = dec[3 + i] + (dec[i] * displacement) * dec[6 + i]
 
 
@@ -145,19 +157,25 @@ DAC_CODES = 0           # 3: codes of the last write (floats holding integers)
 DAC_VOLTS = 3           # 3: the voltages they produce (V)
 DAC_CLAMPED = 6         # 3: 1 where the last write hit the command limit
 DAC_BACKUP = 9          # 9: the three above before the last write (restored on a failed write)
-DAC_STATE_SIZE = 18
+DAC_ENABLED = 18        # 1 when the driver is enabled (non-zero commands allowed)
+DAC_LIMIT = 19          # the command limit (V)
+DAC_RANGES = 20         # 9: (v_min, v_max, maxdata) per channel
+DAC_STATE_SIZE = 29
 
 
 @njit(cache=True)
-def pci1720_codes(volts, enabled, limit, ranges, dac):
+def pci1720_codes(volts, dac):
     """``Pci1720Outputs.write_volts``' arithmetic for the three axes: every command finite
     (else :data:`DAC_NOT_FINITE`), no non-zero command while disabled (else
     :data:`DAC_DISABLED`); nothing is changed then. Otherwise, per channel: the clamp flag,
     the command clamped to ±``limit``, its code ``floor((V − v_min)/(v_max − v_min)·maxdata +
     0.5)`` clamped to 0..maxdata (``volts_to_code``) and the voltage the code produces
-    (``code_to_volts``), into ``dac`` (layout ``DAC_*``; the previous values go to its backup).
-    ``ranges`` holds (v_min, v_max, maxdata) per channel. Returns the codes packed
-    (``DAC_CODE_BITS`` per channel), or a refusal (< 0)."""
+    (``code_to_volts``), into ``dac`` (layout ``DAC_*``; the previous values go to its backup;
+    the enable flag, the limit and the channels' ranges are read from it: one array argument,
+    as numba's dispatch costs per argument). Returns the codes packed (``DAC_CODE_BITS`` per
+    channel), or a refusal (< 0)."""
+    enabled = dac[DAC_ENABLED] != 0.0
+    limit = dac[DAC_LIMIT]
     nonzero = False
     for i in range(3):
         v = volts[i]
@@ -174,9 +192,9 @@ def pci1720_codes(volts, enabled, limit, ranges, dac):
         v = volts[i]
         dac[DAC_CLAMPED + i] = 0.0 if -limit <= v <= limit else 1.0
         v = min(limit, max(-limit, v))
-        v_min = ranges[3 * i]
-        v_max = ranges[3 * i + 1]
-        maxdata = ranges[3 * i + 2]
+        v_min = dac[DAC_RANGES + 3 * i]
+        v_max = dac[DAC_RANGES + 3 * i + 1]
+        maxdata = dac[DAC_RANGES + 3 * i + 2]
         s = (v - v_min) / (v_max - v_min) * maxdata
         if s <= 0.0:
             code = 0.0

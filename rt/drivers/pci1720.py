@@ -206,6 +206,11 @@ class Pci1720Outputs(ActuatorOutputs):
         self.device = device
         self.subdevice = int(subdevice)
         self.range_index = int(range_index)
+        # Codes, voltages and clamp flags of the last write, the enable flag, the limit and
+        # the channel ranges in one array: the compiled write (``rt.drivers.kernels.
+        # pci1720_codes``) takes it as its one state argument; ``last_codes`` etc. read it.
+        self._dac = np.zeros(kernels.DAC_STATE_SIZE)
+        self._dac[kernels.DAC_VOLTS:kernels.DAC_VOLTS + 3] = math.nan
         self.limit_v = float(limit_v)
         if isinstance(enable_line, dict):          # from a YAML config
             enable_line = EnableLine(**enable_line)
@@ -221,17 +226,13 @@ class Pci1720Outputs(ActuatorOutputs):
         self._enabled = False
         self._dev: Any = None
         self._enable_dev: Any = None
-        # Codes, voltages and clamp flags of the last write in one array that the compiled
-        # write (``rt.drivers.kernels.pci1720_codes``) fills; ``last_codes`` etc. read it.
-        self._dac = np.zeros(kernels.DAC_STATE_SIZE)
-        self._dac[kernels.DAC_VOLTS:kernels.DAC_VOLTS + 3] = math.nan
-        self._ranges = np.zeros(3 * self.n_channels)
 
         self._dev = self._open(device)
         try:
             self._channels = tuple(self._probe_channel(n) for n in numbers)
             for i, ch in enumerate(self._channels):
-                self._ranges[3 * i:3 * i + 3] = (ch.v_min, ch.v_max, ch.maxdata)
+                r = kernels.DAC_RANGES + 3 * i
+                self._dac[r:r + 3] = (ch.v_min, ch.v_max, ch.maxdata)
             self._numbers = tuple(ch.number for ch in self._channels)
             # The compiled write packs the codes in 16-bit fields (every DAC card this driver
             # knows has 12 bits); a wider card would take the interpreted write.
@@ -241,7 +242,7 @@ class Pci1720Outputs(ActuatorOutputs):
             # the loop's port is, on a scratch state.
             probe = np.zeros(3)
             probe.flags.writeable = False
-            kernels.pci1720_codes(probe, False, self.limit_v, self._ranges, self._dac.copy())
+            kernels.pci1720_codes(probe, self._dac.copy())
             if enable_line is not None:
                 self._setup_enable_line(enable_line)
             self._write_zero()
@@ -300,6 +301,23 @@ class Pci1720Outputs(ActuatorOutputs):
     @property
     def enabled(self) -> bool:
         return self._enabled
+
+    @property
+    def _enabled(self) -> bool:
+        return self._dac[kernels.DAC_ENABLED] != 0.0
+
+    @_enabled.setter
+    def _enabled(self, value: bool) -> None:
+        self._dac[kernels.DAC_ENABLED] = 1.0 if value else 0.0
+
+    @property
+    def limit_v(self) -> float:
+        """The software command limit (V)."""
+        return float(self._dac[kernels.DAC_LIMIT])
+
+    @limit_v.setter
+    def limit_v(self, value: float) -> None:
+        self._dac[kernels.DAC_LIMIT] = value
 
     @property
     def last_codes(self) -> list[int]:
@@ -369,8 +387,7 @@ class Pci1720Outputs(ActuatorOutputs):
             return
         if self._closed:
             self._check_open()
-        packed = kernels.pci1720_codes(volts, self._enabled, self.limit_v, self._ranges,
-                                       self._dac)
+        packed = kernels.pci1720_codes(volts, self._dac)
         if packed < 0:
             self._refuse(packed, volts)
         write, dev, sub, rng = self._write, self._dev, self.subdevice, self.range_index

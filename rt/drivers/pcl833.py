@@ -47,7 +47,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from rt.devices.interfaces import EncoderBank
-from rt.drivers.kernels import pcl833_decode
+from rt.drivers import kernels
 from rt.drivers.port_io import DevPortIO, PortIO
 from rt.errors import ConfigurationError
 
@@ -286,13 +286,14 @@ class Pcl833Encoders(EncoderBank):
         self._read_ports = np.array(
             [base + count_register(c, b) for c in self.channels for b in (2, 0, 1)],
             dtype=np.int64)
-        self._raw = np.zeros(9, dtype=np.int64)
-        self._unwrap_state = np.zeros(6, dtype=np.int64)   # per axis: last count, displacement
+        self._io = np.zeros(kernels.PCL_IO_SIZE, dtype=np.int64)
+        self._raw = self._io[kernels.PCL_RAW:kernels.PCL_RAW + 9]
+        self._unwrap_state = self._io[kernels.PCL_UNWRAP:kernels.PCL_UNWRAP + 6]
         self._unwrap = tuple(CountUnwrapper(MIDPOINT, store=self._unwrap_state[2 * i:2 * i + 2])
                              for i in range(3))
         self._dec = np.array([*self.sign, *self.origin_m, *self.m_per_count], dtype=np.float64)
         # Compile (or load from numba's cache) now, not in the first cycle (scratch arrays).
-        pcl833_decode(self._raw.copy(), self._unwrap_state.copy(), self._dec, np.zeros(3))
+        kernels.pcl833_decode(self._io.copy(), self._dec, np.zeros(3))
         try:
             self.configure()
             if reset_on_open:
@@ -354,7 +355,7 @@ class Pcl833Encoders(EncoderBank):
         port and one compiled decode, bit for bit :meth:`read_positions_m_interpreted`."""
         self._check_open()
         self._port.read_block(self._read_ports, self._raw)
-        pcl833_decode(self._raw, self._unwrap_state, self._dec, out)
+        kernels.pcl833_decode(self._io, self._dec, out)
         return out
 
     def read_positions_m_interpreted(self, out: np.ndarray) -> np.ndarray:
