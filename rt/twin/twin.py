@@ -253,6 +253,10 @@ class Twin:
             if self.clock is None:
                 return
             t = self.clock()
+        if t - self.plant.t <= 1e-12:
+            # Already there (every device backend syncs before it reads, after the loop's
+            # twin block advanced the physics): nothing to integrate, as below, at less cost.
+            return
         if (self.fused_period and self.compiled and not self.faults.faults
                 and not self.ati._faults_possible and self._arrival is None
                 and (self._payload_applied or not isinstance(self.environment, PayloadStep))):
@@ -287,7 +291,6 @@ class Twin:
             pp = self._port_params = np.array([*port.sign, *port.m_per_count, 0.0, 0.0, 0.0],
                                               dtype=np.float64)
             self._port_params_of = port
-        index = port._encoder_index
         while t - plant.t > 1e-12:
             chunk = min(_MAX_CHUNK_S, t - plant.t)
             self._update_amplifier_input()
@@ -296,12 +299,7 @@ class Twin:
             bits = plant.advance_sensed(chunk, self.amp_volts, pp, block, row, ati._kparams,
                                         ati._state.drift, ati._out, ati._dt_to(t_end),
                                         _ATI_OVERLOAD)
-            new = pp[kernels.PORT_INDEX:].tolist()          # floats holding integers
-            for axis in range(3):
-                delta = int(new[axis]) - index[axis]
-                if delta:
-                    index[axis] += delta
-                    port.move_counts(axis, delta)
+            port.move_to_indices(pp[kernels.PORT_INDEX:])   # floats holding integers
             self.ati_sample = ati._commit_compiled(bits, plant.t)
 
     def _update_amplifier_input(self) -> None:
