@@ -38,6 +38,7 @@ class HybridController(Component):
         self.qd_ref = self.declare_input("qd_ref", Array(3))
         self.qdd_ref = self.declare_input("qdd_ref", Array(3))
         self.force = self.declare_input("force", Array(3))
+        self.force_preview = self.declare_input("force_preview", Array(3))
         self.pose = self.declare_input("pose", Array(3))
         self.ctrl_mode = self.declare_input("ctrl_mode", Array(1))
         self.wrench = self.declare_input("wrench", Array(6))
@@ -108,12 +109,15 @@ class HybridController(Component):
             self.supervisor.force_control = force_mode
             # Bumpless entry: the reference starts from the force the contact already carries
             # and converges to the protocol's with time constant ``entry_time_s``.
-            self._offset = 0.0 if math.isnan(measured) else measured - self.force.data[0]
+            self._offset = (0.0 if math.isnan(measured)
+                            else measured - self.force_preview.data[0])
             self._f_gov = math.nan
         st = self.state_in.data
         if force_mode:
             fr = self._fref
-            f = self.force.data
+            # The law tracks the reference read ahead by its loop's lag (the sequencer's
+            # preview; equal to ``force`` for a program not known in advance).
+            f = self.force_preview.data
             off = self._offset
             self._offset = off * self._decay_per_s ** dt
             fr.f = f[0] + off
