@@ -56,6 +56,37 @@ class HybridController(Component):
         #: Deceleration the platform can give when the force falls to the preload (m/s²).
         self.unload_decel_m_s2 = 0.5
         self._f_gov = math.nan
+        #: How long (s) the law takes to come back from the previewed reference to the
+        #: program's own once the transient is over: the reference's time runs at
+        #: 1 − preview/release of its speed meanwhile, so nothing jumps.
+        self.preview_release_s = 0.02
+        self._ahead_weight = 0.0
+
+    def _beyond(self, f_dot: float) -> bool:
+        """True when a force rate (N/s) asks the platform, through the contact's stiffness,
+        to move faster than the law's motion feedforward may (``max_feedforward_speed_m_s``):
+        a heel strike, a fast toe off. There the force lags the reference by tens of ms
+        (the drives at their limit, the unloading governed); slower, it follows within a
+        cycle or two."""
+        law = self.force_law
+        return abs(f_dot) > law.gains.max_feedforward_speed_m_s * law.k_est
+
+    def _lead(self, fr: ForceReference, dt: float) -> None:
+        """The reference the law tracks: the program's (``force``), or the one read ahead
+        (``force_preview``, equal to ``force`` when the program has no preview) while the
+        program, now or ahead, asks more than the robot follows (:meth:`_beyond`): the law
+        then starts the heel strike's push and the toe off's fall that much earlier. The
+        preview is taken at once (at the transient's onset the two differ little) and left
+        over ``preview_release_s``."""
+        f, ahead = self.force.data, self.force_preview.data
+        if self._beyond(ahead[1]) or self._beyond(f[1]):
+            w = 1.0
+        else:
+            w = max(0.0, self._ahead_weight - dt / self.preview_release_s)
+        self._ahead_weight = w
+        fr.f = f[0] + w * (ahead[0] - f[0])
+        fr.f_dot = f[1] + w * (ahead[1] - f[1])
+        fr.f_ddot = f[2] + w * (ahead[2] - f[2])
 
     def _govern(self, fr: ForceReference, dt: float) -> None:
         """The force reference as the law gets it: never below the preload, and falling to it
@@ -109,20 +140,18 @@ class HybridController(Component):
             self.supervisor.force_control = force_mode
             # Bumpless entry: the reference starts from the force the contact already carries
             # and converges to the protocol's with time constant ``entry_time_s``.
-            self._offset = (0.0 if math.isnan(measured)
-                            else measured - self.force_preview.data[0])
+            self._offset = 0.0 if math.isnan(measured) else measured - self.force.data[0]
+            self._ahead_weight = 0.0
             self._f_gov = math.nan
         st = self.state_in.data
         if force_mode:
             fr = self._fref
-            # The law tracks the reference read ahead by its loop's lag (the sequencer's
-            # preview; equal to ``force`` for a program not known in advance).
-            f = self.force_preview.data
+            self._lead(fr, dt)
             off = self._offset
             self._offset = off * self._decay_per_s ** dt
-            fr.f = f[0] + off
-            fr.f_dot = f[1] - off / self.entry_time_s
-            fr.f_ddot = f[2] + off / self.entry_time_s ** 2
+            fr.f += off
+            fr.f_dot -= off / self.entry_time_s
+            fr.f_ddot += off / self.entry_time_s ** 2
             self._govern(fr, dt)
             fr.roll, fr.pitch = self.pose.data[1], self.pose.data[2]
             fr.roll_rate = fr.pitch_rate = 0.0
