@@ -137,6 +137,23 @@ def test_the_integral_is_held_while_a_drive_is_at_its_limit(compiled):
     assert free.integral == pytest.approx(5 * 100.0 * 1e-3, rel=1e-12)
 
 
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_transient_beyond_the_robot_holds_the_integral(compiled):
+    """While the reference is a transient the robot cannot follow (the hybrid controller's
+    lead), the error drives the proportional action but not the integral: a 40 N error for
+    50 ms would otherwise leave 2 N s (2 kN at Ki 1000) to overshoot with afterwards."""
+    st = _pressed_state()
+    law = ExplicitForce(MODEL, compiled=compiled)
+    tau_held, tau_free = np.zeros(3), np.zeros(3)
+    for _ in range(50):
+        law.update(st, 260.0, ForceReference(f=300.0, transient=True), 1e-3, tau_held)
+    assert law.integral == 0.0
+    law.update(st, 260.0, ForceReference(f=300.0), 1e-3, tau_free)
+    assert law.integral == pytest.approx(40.0 * 1e-3, rel=1e-12)
+    # The integral's one step is all that differs: Ki·e·dt on the task force.
+    np.testing.assert_allclose(tau_free - tau_held, st.S[8, :] * 1000.0 * 0.04, rtol=1e-9)
+
+
 def test_compiled_and_interpreted_laws_agree_through_saturation():
     st = _pressed_state()
     laws = [ExplicitForce(MODEL, compiled=c) for c in (True, False)]
@@ -145,7 +162,7 @@ def test_compiled_and_interpreted_laws_agree_through_saturation():
         t = k * 1e-3
         f_ref = 10.0 + 2400.0 * math.exp(-((t - 0.1) / 0.01) ** 2)
         measured = 10.0 + 300.0 * (1.0 - math.cos(8.0 * t))
-        ref = ForceReference(f=f_ref, f_dot=0.0, f_ddot=0.0)
+        ref = ForceReference(f=f_ref, f_dot=0.0, f_ddot=0.0, transient=150 <= k < 200)
         for law, out in zip(laws, outs, strict=True):
             law.update(st, measured, ref, 1e-3, out)
         np.testing.assert_allclose(outs[0], outs[1], rtol=1e-12, atol=1e-9)
@@ -245,6 +262,6 @@ def test_the_preview_starts_a_step_beyond_the_robot_earlier_by_its_length():
     rms0 = np.sqrt(np.mean((ref - f0)[window] ** 2))
     rms5 = np.sqrt(np.mean((ref - f5)[window] ** 2))
     assert rms5 < 0.7 * rms0, (rms0, rms5)          # 36.7 → 18.3 N measured
-    slow_ref, slow0 = _step_on_the_twin(0.0, 1000.0)
+    _, slow0 = _step_on_the_twin(0.0, 1000.0)
     _, slow5 = _step_on_the_twin(0.005, 1000.0)
     np.testing.assert_allclose(slow5, slow0, atol=1e-9)

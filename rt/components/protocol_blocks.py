@@ -61,6 +61,7 @@ class HybridController(Component):
         #: 1 − preview/release of its speed meanwhile, so nothing jumps.
         self.preview_release_s = 0.02
         self._ahead_weight = 0.0
+        self._rising = False
 
     def _beyond(self, f_dot: float) -> bool:
         """True when a force rate (N/s) asks the platform, through the contact's stiffness,
@@ -79,11 +80,20 @@ class HybridController(Component):
         preview is taken at once (at the transient's onset the two differ little) and left
         over ``preview_release_s``."""
         f, ahead = self.force.data, self.force_preview.data
-        if self._beyond(ahead[1]) or self._beyond(f[1]):
+        rate = ahead[1] if self._beyond(ahead[1]) else f[1] if self._beyond(f[1]) else 0.0
+        if rate != 0.0:
+            if self._ahead_weight == 0.0:
+                # What kind of transient this is, fixed at its onset: a heel strike's spike
+                # falls back within it.
+                self._rising = rate > 0.0
             w = 1.0
         else:
             w = max(0.0, self._ahead_weight - dt / self.preview_release_s)
         self._ahead_weight = w
+        # A rise beyond the drives (a heel strike) is a transient the integral must not wind
+        # up on. A fall is not: the governor (``_govern``) slows it to what the platform can
+        # brake, and the integral's share is needed to stop at the preload.
+        fr.transient = w > 0.0 and self._rising
         fr.f = f[0] + w * (ahead[0] - f[0])
         fr.f_dot = f[1] + w * (ahead[1] - f[1])
         fr.f_ddot = f[2] + w * (ahead[2] - f[2])

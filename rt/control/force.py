@@ -59,6 +59,11 @@ class ForceReference:
     pitch: float = 0.0
     roll_rate: float = 0.0
     pitch_rate: float = 0.0
+    #: The reference is a transient beyond what the robot follows (a heel strike, a fast toe
+    #: off; ``rt.components.protocol_blocks.HybridController``): its error is the transient's,
+    #: not a steady disturbance, so the integral holds instead of winding up for the
+    #: overshoot after it.
+    transient: bool = False
 
 
 class ExplicitForceGains(BaseModel):
@@ -267,7 +272,8 @@ class ExplicitForce:
             ck.explicit_force(d.tree_i, d.tree_f, st.buf, self._fg, self._fs, float(force_n),
                               float(ref.f), float(ref.f_dot), float(ref.f_ddot),
                               float(ref.roll), float(ref.pitch), float(ref.roll_rate),
-                              float(ref.pitch_rate), float(dt), self._work, out)
+                              float(ref.pitch_rate), 1.0 if ref.transient else 0.0,
+                              float(dt), self._work, out)
             self.tau[:] = out
             return 0
         g = self.gains
@@ -290,7 +296,8 @@ class ExplicitForce:
         if not math.isnan(force_n):
             e = f_d - force_n
             limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
-            integral = max(-limit, min(limit, integral + e * dt))
+            if not ref.transient:
+                integral = max(-limit, min(limit, integral + e * dt))
             if g.estimate_stiffness and force_n > 50.0:
                 # Learn the contact's stiffness only while clearly in contact and moving a
                 # little; the estimate stays within 1/5..20× the guess, so a poorly excited

@@ -242,8 +242,8 @@ def warm_up(dyn) -> None:
     gravity(ti, tf, st.buf, work, out)
     fg = np.ones(14)
     fs = np.ones(FS_SIZE)
-    explicit_force(ti, tf, st.buf, fg, fs, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-3,
-                   np.zeros(30 + rb.work_size(TREE_DOF)), out)
+    explicit_force(ti, tf, st.buf, fg, fs, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                   1e-3, np.zeros(30 + rb.work_size(TREE_DOF)), out)
     _warm = True
 
 
@@ -257,8 +257,9 @@ FS_SIZE = 9
 
 @njit(cache=True)
 def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, roll_ref,
-                   pitch_ref, roll_rate_ref, pitch_rate_ref, dt, work, out):
-    """Hybrid explicit force in z, PD on roll and pitch, G and the motion feedforward."""
+                   pitch_ref, roll_rate_ref, pitch_rate_ref, hold, dt, work, out):
+    """Hybrid explicit force in z, PD on roll and pitch, G and the motion feedforward.
+    ``hold`` ≠ 0: the reference is a transient beyond the robot; the integral holds."""
     Q, _, qd, S, _, _, _, _, _ = rb.unpack_state(stb)
     z = Q[8]
     pitch = Q[10]
@@ -284,7 +285,8 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
     if not math.isnan(force_n):
         e = f_d - force_n
         limit = fg[3] / ki if ki > 0 else 0.0
-        integral = max(-limit, min(limit, integral + e * dt))
+        if hold == 0.0:
+            integral = max(-limit, min(limit, integral + e * dt))
         if fg[7] != 0.0 and force_n > 50.0:
             last_z = fs[FS_LAST_Z]
             if not math.isnan(last_z) and abs(z - last_z) > 1e-7:
