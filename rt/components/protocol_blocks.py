@@ -20,7 +20,10 @@ class HybridController(Component):
     float64[3] N.
 
     Position mode: the position law tracks the slider references. Force mode: hybrid explicit
-    force in z (F = −w_S.fz, the platform's push) with roll and pitch held. Switching between
+    force in z (F = −w_S.fz, the platform's push) with roll and pitch held; while the program
+    asks a force rate the robot cannot follow (a heel strike, a fast toe off: ``_lead``) the
+    law tracks the reference read ahead (``force_preview``), and during such a rise its
+    integral holds. Switching between
     them resets the force law's integral so the force starts from its feedforward. The
     supervisor is told when the loop depends on the force sensor. The force reference handed
     to the law is never below the law's preload (``preload_n``, N): the platform only pushes

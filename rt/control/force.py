@@ -21,6 +21,15 @@ stays below 0 N anyway (``rt.safety.supervisor``).
   what its actuators can reach in that time; the bounded feedforward (z̈_ff too, by
   ``max_feedforward_accel_m_s2``) leaves the rest to the feedback instead of demanding
   kilonewtons. Roll/pitch: PD on the angles with gravity compensation G(q).
+  The integral is held (conditional integration) while a drive would be at its force limit
+  in the direction the integral pushes (``drive_force_limit_n``: the amplifier's current or
+  command limit), and while the reference is a rise beyond what the robot follows
+  (``ForceReference.transient``): a heel strike asks 2.7-3 kN of ≈ 2 kN drives for a few ms,
+  and an integral wound up there overshoots for tens of ms afterwards.
+  Preview (``preview_s``): a reference known in advance (a protocol's table) is read that far
+  ahead by the sequencer; the hybrid controller tracks the read-ahead reference while the
+  program asks more than the robot follows (``rt.components.protocol_blocks``), so the push
+  of a heel strike and the fall of a toe off start that much earlier.
 * ``Admittance`` — the contact is rendered as a virtual mass-damper-spring in z driven by the
   force error, M_a z̈_c + D_a ż_c = F − F_d, and the resulting pose (z_c, roll_d, pitch_d) is
   tracked by the inner Paden-Panja position law (IK to slider references each cycle).
