@@ -253,6 +253,8 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
         "peak_platform_force_n": summary["peak_force_n"],
         "min_platform_force_n": summary["min_force_n"],
         "rms_error_pct": summary["rms_error_pct"],
+        # Where the protocol was beyond the robot (the drives at their limit), even briefly.
+        "at_robot_limit": figures.at_limit(1.0 / RATE_HZ),
     }
     holds = summary.get("ankle", {}).get("torque_holds")
     if holds is not None:

@@ -35,11 +35,16 @@ import numpy as np
 from rt.components.tare import TareState, refusal_message
 from rt.engine import Array, Component
 from rt.references.approach import Approach, ApproachStatus
-from rt.references.program import Mode, Program, ProgramInput, ReferenceOutput
+from rt.references.program import ForcePreview, Mode, Program, ProgramInput, ReferenceOutput
 from rt.safety.events import SupervisorMode
 
 #: First-order smoothing of F̈_d per cycle (≈ 35 Hz at 1 kHz).
 F_DDOT_SMOOTHING = 0.2
+#: Half-width (samples) of the centred difference that gives the previewed F̈_d: the table is
+#: known on both sides of the sample read ahead, so the derivative is smoothed without lag
+#: (a recorded gait force's 1 kHz noise through a one-sample difference asks metres per
+#: second squared of the platform; ±5 samples at 1 kHz: first zero at 100 Hz).
+PREVIEW_F_DDOT_HALF_WIDTH = 5
 #: Component status codes (non-zero = the cycle's block failed).
 STATUS_APPROACH_FAILED = 20
 STATUS_PROGRAM_FAILED = 21
@@ -125,6 +130,14 @@ class ProgramReference(Component):
         self.qd_ref = self.declare_output("qd_ref", Array(3))
         self.qdd_ref = self.declare_output("qdd_ref", Array(3))
         self.force = self.declare_output("force", Array(3))
+        self.force_preview = self.declare_output("force_preview", Array(3))
+        #: How far ahead ``force_preview`` reads a previewable force program (samples; 0: no
+        #: preview). Set by the loop's builder from the force law's ``preview_s``.
+        self.preview_steps = 0
+        self._preview: ForcePreview | None = None
+        self._ahead = np.zeros(2)
+        self._ahead_next = np.zeros(2)
+        self._ahead_read = False
         self.pose = self.declare_output("pose", Array(3))
         self.ctrl_mode = self.declare_output("ctrl_mode", Array(1))
         self.phase = self.declare_output("phase", Array(1), initial=np.full(1, float(Phase.REST)))
@@ -209,6 +222,7 @@ class ProgramReference(Component):
             st.phase = Phase.REST
             return
         self.program, self._out, self._req = program, out, req
+        self._preview = program if isinstance(program, ForcePreview) else None
         self._n = max(1, round(program.duration_s / self.approach.dt))
         st.k = 0
         st.taring = False
@@ -301,9 +315,37 @@ class ProgramReference(Component):
                 st.phase = Phase.REST
         if st.phase != Phase.APPROACH:
             self.tare_request.data[0] = 0.0      # a stop or an abort ends a tare in progress
+        if self._ahead_read:
+            self._ahead_read = False
+        else:
+            # No preview this cycle (not playing, a ramp down, a program without one): the
+            # law tracks the force reference itself.
+            self.force_preview.data[:] = f
         self.phase.data[0] = float(emitted if emitted in (Phase.APPROACH, Phase.PLAY) else st.phase)
         self.progress.data[0] = min(1.0, st.k / self._n)
         return 0
+
+    def _previewing(self) -> bool:
+        return (self._preview is not None and self.preview_steps > 0
+                and self.ctrl_mode.data[0] > 0.5)
+
+    def _read_ahead(self, index: int, dt: float) -> None:
+        """``force_preview`` = the program's force ``preview_steps`` samples after ``index``
+        (the sample just played)."""
+        pv = self._preview
+        assert pv is not None
+        ahead, nxt = self._ahead, self._ahead_next
+        k = index + self.preview_steps
+        h = PREVIEW_F_DDOT_HALF_WIDTH
+        pv.force_at(k + h, nxt)
+        f_dot_next = float(nxt[1])
+        pv.force_at(k - h, nxt)
+        pv.force_at(k, ahead)
+        out = self.force_preview.data
+        out[0] = ahead[0]
+        out[1] = ahead[1]
+        out[2] = (f_dot_next - nxt[1]) / (2.0 * h * dt)
+        self._ahead_read = True
 
     def _tare_step(self) -> ApproachStatus:
         """At the first sample of a force program: ask for a tare and hold until the force
@@ -365,6 +407,8 @@ class ProgramReference(Component):
             raw = (f_dot - f[1]) / dt if st.k > 1 else 0.0
             f[2] += F_DDOT_SMOOTHING * (raw - f[2])
             f[0], f[1] = fz, f_dot
+            if self._previewing() and not o.done:
+                self._read_ahead(o.index, dt)
         else:
             f[:] = 0.0
         if o.done:
