@@ -266,10 +266,10 @@ class RecordingScan:
             if cycle is not None and topic in cycle.by_topic \
                     and JSONSCHEMA_METADATA_KEY in ch.metadata:
                 # A cycle's part: its channel schema, kept in the cycle's JSON Schema.
-                part = cycle.by_topic[topic]
-                sub = json.loads(ch.metadata[JSONSCHEMA_METADATA_KEY])["properties"].get(
-                    part.name)
-                return sub      # the part's channel schema, "t" included
+                root = json.loads(ch.metadata[JSONSCHEMA_METADATA_KEY])
+                sub = root["properties"].get(cycle.by_topic[topic].name)
+                # The part's channel schema ("t" included), a root schema again.
+                return None if sub is None else {"$schema": root.get("$schema"), **sub}
             if ch.topic == topic and JSONSCHEMA_METADATA_KEY in ch.metadata:
                 return json.loads(ch.metadata[JSONSCHEMA_METADATA_KEY])
             if ch.topic == topic and ch.schema_id in self.schemas:
@@ -298,6 +298,14 @@ class RecordingScan:
             if cycle is not None:
                 out += [t for t in cycle.topics if t not in out]
         return out
+
+    def channel_topic(self, topic: str) -> str:
+        """The channel a topic's messages are in: a cycle's part's is the cycle channel."""
+        for c in self.channels.values():
+            cycle = self._cycle_of(c)
+            if cycle is not None and topic in cycle.by_topic:
+                return c.topic
+        return topic
 
     def read_topics(self) -> list[str]:
         """The topics a whole read gives: every channel's, a cycle channel's as its parts."""
@@ -729,4 +737,5 @@ def export_csv(path: str | os.PathLike[str], channel: str, out_csv: str | os.Pat
             "columns": ["log_time_ns"] + [c for c, _, _ in cols],
             "complete": scan.info.complete, "tail": scan.info.tail,
             "bad_chunks": scan.info.bad_chunks, "crc_errors": scan.info.crc_errors,
-            "sequence_gaps": scan.info.sequence_gaps.get(channel, 0)}
+            # A cycle's part (v4): the gaps of the cycle channel that holds it.
+            "sequence_gaps": scan.info.sequence_gaps.get(scan.channel_topic(channel), 0)}
