@@ -66,9 +66,9 @@ def synthetic_row(k: int) -> list[float]:
 #: Fixed-point quanta of today's encoding (rt.recording.channels): positions and speeds in
 #: µm and µm/s, forces in mN, torques in mN·m; volts are the DAC's codes (:func:`dac`).
 UM, MN = 1e-6, 1e-3
-#: talus.v4's quanta of the velocity, the actuator forces and the ATI's forces
-#: (rt.recording.channels: V4_SPEED_QUANTUM_M_S, V4_TAU_QUANTUM_N, V4_ATI_FORCE_QUANTUM_N).
-QD4, TAU4, F4 = 1e-4, 0.1, 0.025
+#: talus.v4's quanta of the velocity and the actuator forces (rt.recording.channels:
+#: V4_SPEED_QUANTUM_M_S, V4_TAU_QUANTUM_N; the ATI's: 1/16 N, 2 mN·m).
+QD4, TAU4 = 1e-4, 0.1
 
 
 def dac(values: list[float]) -> list[float]:

@@ -152,10 +152,11 @@ def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
 # ------------------------------------------------------------------ round trip, every channel
 
 #: talus.v4's quanta where they differ from v3's (rt.recording.channels: 0.1 mm/s, 0.1 N,
-#: the ATI's forces and the reference force 25 mN).
+#: the ATI's forces and the reference force 1/16 N, its torques 2 mN·m).
 V4_STATE_QUANTA = {**STATE_QUANTA, "qd": 1e-4, "tau": 0.1}
-V4_WRENCH_QUANTA = {**WRENCH_QUANTA, "fx": 0.025, "fy": 0.025, "fz": 0.025}
-QUANTA = {"protobuf": (V4_STATE_QUANTA, V4_WRENCH_QUANTA, 0.025),
+V4_WRENCH_QUANTA = {**WRENCH_QUANTA, "fx": 1 / 16, "fy": 1 / 16, "fz": 1 / 16, "tx": 2e-3,
+                    "ty": 2e-3, "tz": 2e-3}
+QUANTA = {"protobuf": (V4_STATE_QUANTA, V4_WRENCH_QUANTA, 1 / 16),
           "protobuf-v3": (STATE_QUANTA, WRENCH_QUANTA, 1e-3),
           "protobuf-v2": (STATE_QUANTA, WRENCH_QUANTA, 1e-3)}
 
@@ -467,9 +468,9 @@ def test_report_reader_gives_the_same_figures_from_both_encodings(pair: dict) ->
         assert a.figures["samples"] == b.figures["samples"] == len(pair["sig"]["state"])
         # A figure of a difference (force error = reference - measured) moves by up to one
         # quantum with fixed point (half a quantum each): 1 mN, the largest quantum of v2
-        # and v3; v4's: a force error 25 mN, the peak actuator force half of tau's 0.1 N.
+        # and v3; v4's: a force error 1/16 N (its forces' quantum).
         _close(a.figures, b.figures, f"{enc} figures",
-               1e-6 if enc == "protobuf-f32" else 0.05 if enc == "protobuf" else 1e-3)
+               1e-6 if enc == "protobuf-f32" else 1 / 16 if enc == "protobuf" else 1e-3)
 
 
 def _close(a: object, b: object, where: str, abs_tol: float = 1e-6) -> None:

@@ -339,19 +339,27 @@ ANKLE_PROTO = ProtoMessage("talus.v3.AnkleState", [
 #:   (``rt.estimation.velocity``); 0.1 mm/s steps add 0.029 mm/s RMS;
 #: * ``tau`` → 0.1 N: what reaches a motor is the DAC's code, 4.88 mV × 339 N/V = 1.66 N per
 #:   code (``drive.force_per_volt_n``); 0.1 N is 1/16 of it;
-#: * ATI forces ``fx..fz`` and the reference ``force`` → 25 mN: the SI-660-60 resolves 1/8 N
-#:   (1/4 N on z); 25 mN is 1/5 of its finest step. The reference shares the measured
-#:   forces' quantum, so a force error is a whole number of quanta;
-#: * unchanged: ``q``, ``q_ref``, ``position`` 1 µm (1/20 of a count), torques 1 mN·m (the
-#:   ATI's 7.5 mN·m / 7.5), ``volts`` the DAC's own code (exact).
+#: * ATI forces ``fx..fz`` → 1/16 N and torques ``tx..tz`` → 2 mN·m: the ATI's own counts on
+#:   its CAN short data format (``rt.ati.can_protocol``: 16 counts/N, 500 counts/(N·m)), so
+#:   a CAN-transported wrench is recorded exactly, like the DAC's code; over Net F/T (finer
+#:   counts) they are still finer than what the SI-660-60 resolves, 1/8 N (1/4 N on z) and
+#:   7.5 mN·m: the error (≤ 31 mN, ≤ 1 mN·m) stays below half the sensor's own step;
+#: * the reference ``force`` → 1/16 N, the measured forces' quantum, so a force error is a
+#:   whole number of quanta;
+#: * unchanged: ``q``, ``q_ref``, ``position`` 1 µm (1/20 of a count), ``volts`` the DAC's
+#:   own code (exact).
+#:
+#: What each saves on an RT twin session (bench/recording.py, the issue-16 note): with v3's
+#: quanta one message per cycle is ≈ 175 MB/h; these bring it under 150.
 V4_SPEED_QUANTUM_M_S = 1e-4
 V4_TAU_QUANTUM_N = 0.1
-V4_ATI_FORCE_QUANTUM_N = 0.025
+V4_ATI_FORCE_QUANTUM_N = 1 / 16
+V4_ATI_TORQUE_QUANTUM_NM = 2e-3
 
 #: ``talus.v4``'s parts of a cycle (:mod:`rt.recording.cycle` joins them into one
 #: ``talus.v4.Cycle`` per loop cycle): v3's messages at the v4 quanta. A field whose quantum
 #: changed has a new number and name (the unit in the name: ``qd_100um_s``, ``tau_dn`` in
-#: decinewtons, ``fz_25mn``); the others keep v3's.
+#: decinewtons, ``fz_n16`` in sixteenths of a newton, ``tz_2mnm``); the others keep v3's.
 STATE_PROTO_V4 = ProtoMessage("talus.v4.RobotState", [
     _fx("q_um", 2, _I32, POSITION_QUANTUM_M, "q", 3),
     _fx("qd_100um_s", 9, _I32, V4_SPEED_QUANTUM_M_S, "qd", 3),
@@ -360,15 +368,15 @@ STATE_PROTO_V4 = ProtoMessage("talus.v4.RobotState", [
     ProtoField("volts_dac", 8, _I32, 3, scale=DAC_STEP_V, key="volts", code_range=DAC_RANGE),
     _fx("qd_ref_100um_s", 11, _I32, V4_SPEED_QUANTUM_M_S, "qd_ref", VARIABLE)])
 WRENCH_PROTO_V4 = ProtoMessage("talus.v4.Wrench", [
-    _fx("fx_25mn", 10, _I32, V4_ATI_FORCE_QUANTUM_N, "fx"),
-    _fx("fy_25mn", 11, _I32, V4_ATI_FORCE_QUANTUM_N, "fy"),
-    _fx("fz_25mn", 12, _I32, V4_ATI_FORCE_QUANTUM_N, "fz"),
-    _fx("tx_mnm", 5, _I32, TORQUE_QUANTUM_NM, "tx"),
-    _fx("ty_mnm", 6, _I32, TORQUE_QUANTUM_NM, "ty"),
-    _fx("tz_mnm", 7, _I32, TORQUE_QUANTUM_NM, "tz"),
+    _fx("fx_n16", 10, _I32, V4_ATI_FORCE_QUANTUM_N, "fx"),
+    _fx("fy_n16", 11, _I32, V4_ATI_FORCE_QUANTUM_N, "fy"),
+    _fx("fz_n16", 12, _I32, V4_ATI_FORCE_QUANTUM_N, "fz"),
+    _fx("tx_2mnm", 13, _I32, V4_ATI_TORQUE_QUANTUM_NM, "tx"),
+    _fx("ty_2mnm", 14, _I32, V4_ATI_TORQUE_QUANTUM_NM, "ty"),
+    _fx("tz_2mnm", 15, _I32, V4_ATI_TORQUE_QUANTUM_NM, "tz"),
     ProtoField("stale", 8, _B), ProtoField("saturated", 9, _B)])
 REFERENCE_PROTO_V4 = ProtoMessage("talus.v4.ProtocolReference", [
-    _fx("force_25mn", 6, _I32, V4_ATI_FORCE_QUANTUM_N, "force", VARIABLE),
+    _fx("force_n16", 6, _I32, V4_ATI_FORCE_QUANTUM_N, "force", VARIABLE),
     _fx("position_um", 3, _I32, POSITION_QUANTUM_M, "position", VARIABLE),
     ProtoField("phase", 4, _S), ProtoField("mode", 5, _S)])
 

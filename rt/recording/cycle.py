@@ -4,7 +4,7 @@ Why (issue 16, ≤ 150 MB per hour at 1 kHz): recorded as three channels, each c
 MCAP's message framing three times (a 31-byte record header whose log time, publish time and
 sequence change every message: ≈ 50-67 MB/h of the 217 MB/h of ``talus.v3``). Joined, it is
 paid once. Foxglove still plots every cycle: ``/robot/cycle`` carries one
-``talus.v4.Cycle`` per cycle, and a plot path is ``/robot/cycle.wrench.fz_25mn``.
+``talus.v4.Cycle`` per cycle, and a plot path is ``/robot/cycle.wrench.fz_n16``.
 
 The message (proto3, package ``talus.v4``, one ``.proto`` file in the schema's
 ``FileDescriptorSet``)::
