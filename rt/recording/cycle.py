@@ -182,6 +182,8 @@ CYCLE_TOPIC = CYCLE
 #: its rows every ≈ 50 ms; a late part is still written (a cycle of that part alone, at its
 #: time), so this bounds only how long a cycle may wait, never what is kept.
 DEFAULT_HOLD_S = 0.5
+#: ``CycleJoiner.reached`` of an expected source before it gave anything: below every key.
+_NOTHING_YET = -(1 << 62)
 
 
 class CycleJoiner:
@@ -221,6 +223,12 @@ class CycleJoiner:
                 self.late += 1
         entry[2 + part] = data
         self.passed(part, key)
+
+    def expect(self, part: int) -> None:
+        """Wait for ``part`` from now on, before its source is heard from (a ring attached
+        before the first row was drained): its cycles are not written without it."""
+        if self.reached[part] is None:
+            self.reached[part] = _NOTHING_YET
 
     def passed(self, part: int, key: int) -> None:
         r = self.reached[part]

@@ -73,7 +73,7 @@ from rt.recording.channels import (
     LoopClock,
     time_metadata,
 )
-from rt.recording.cycle import CYCLE_V4, CycleJoiner, CycleMessage
+from rt.recording.cycle import CYCLE_V4, DEFAULT_HOLD_S, CycleJoiner, CycleMessage
 from rt.recording.protobuf_codec import ProtoCodecError, ProtoMessage
 
 #: Chunk size, bytes of uncompressed records: ≈ 1 s of 1 kHz state. The flush timer, not the
@@ -275,6 +275,10 @@ class SessionRecorder:
     ``rt.recording.channels.CHANNELS``; write to them with :meth:`publish` or
     :meth:`attach_ring`.
 
+    ``cycle_hold_s`` (talus.v4): how long (s, the writer's clock) a cycle waits for a part
+    whose source has been heard from (or attached) but has not reached it yet, before it is
+    written without it (``rt.recording.cycle.CycleJoiner``).
+
     ``encoding``: ``"protobuf"`` (default) writes the channels that have a protobuf message
     (``ChannelSpec.proto``) as protobuf, the others as JSON; ``"json"`` writes every channel
     as JSON, as recordings were before issue 16 (kept for comparison and compatibility tests).
@@ -291,7 +295,8 @@ class SessionRecorder:
                  start_wall_ns: int | None = None,
                  extra_channels: dict[str, ChannelSpec] | None = None, fsync: bool = False,
                  force: bool = False, inputs: Iterable[str | os.PathLike[str]] = (),
-                 encoding: Encoding | str = Encoding.PROTOBUF):
+                 encoding: Encoding | str = Encoding.PROTOBUF,
+                 cycle_hold_s: float = DEFAULT_HOLD_S):
         try:
             self.encoding = Encoding(encoding)
         except ValueError:
@@ -304,6 +309,8 @@ class SessionRecorder:
                 or queue_capacity <= 0:
             raise InputError("chunk_size, flush_interval_s, drain_period_s and queue_capacity "
                              "must be positive")
+        if not cycle_hold_s > 0:
+            raise InputError(f"cycle_hold_s must be positive, got {cycle_hold_s!r}")
         missing = [k for k in METADATA_REQUIRED_FROM_CALLER if k not in metadata]
         if missing:
             raise InputError(f"session metadata lacks {missing} (needs "
@@ -343,7 +350,8 @@ class SessionRecorder:
             else None
         self._part = {} if self._cycle is None else \
             {topic: k for k, topic in enumerate(self._cycle.topics)}
-        self._joiner = None if self._cycle is None else CycleJoiner(len(self._part))
+        self._joiner = None if self._cycle is None else CycleJoiner(len(self._part),
+                                                                     cycle_hold_s)
         # The queued wrench samples (t, fx..tz, stale, saturated) as protobuf rows.
         wrench_proto = self._protos.get(WRENCH)
         self._wrench_rows = None if wrench_proto is None else wrench_proto.row_encoder(
@@ -492,6 +500,11 @@ class SessionRecorder:
                        source.written if start is None else int(start), encode)
         # Copy-on-write: the thread iterates whatever tuple it read, never a list being changed.
         self._taps = self._taps + (tap,)
+        part = self._part.get(topic)
+        if part is not None and self._joiner is not None:
+            # The ring's rows are expected from now on: the cycles of the parts queued before
+            # its first drain wait for them (up to cycle_hold_s), not written without them.
+            self._joiner.expect(part)
 
     def event(self, event: dict[str, Any]) -> bool:
         """Enqueue a safety event dict (``SafetyEvent.as_dict()``); usable as
