@@ -412,3 +412,67 @@ def test_a_recorded_twin_stream_costs_at_most_150_mb_per_hour(tmp_path: Path) ->
               f"cycles/s), {per_cycle:.1f} MB/h at 1000 cycles/s")
     assert sizes["protobuf"] <= 150.0
     assert sizes["protobuf"] <= 0.75 * sizes["protobuf-v3"]
+
+
+# ------------------------------------------------------------------ crash safety
+
+CHILD = """
+import sys, time
+import numpy as np
+sys.path.insert(0, sys.argv[3])
+from test_recording import bound_tap, push, METADATA_IN
+from rt.recording.writer import SessionRecorder
+
+path, progress_path = sys.argv[1], sys.argv[2]
+progress = np.memmap(progress_path, dtype=np.int64, mode="r+", shape=(1,))
+tap, arrays = bound_tap()
+rec = SessionRecorder(path, METADATA_IN)
+rec.attach_state_ring(tap)
+t0 = time.perf_counter()
+k = 0
+while True:        # a 1 kHz loop, and a pump handing the wrench in blocks of 50; a SIGKILL ends it
+    wait = t0 + k / 1000 - time.perf_counter()
+    if wait > 0:
+        time.sleep(wait)
+    push(tap, arrays, k)
+    k += 1
+    if k % 50 == 0:
+        t = np.arange(k - 50, k) / 1000
+        rec.wrench_rows(np.column_stack([t, np.ones((50, 1)), np.zeros((50, 5)),
+                                         np.zeros((50, 2))]))
+    progress[0] = k
+"""
+
+
+def test_a_killed_v4_writer_leaves_an_exact_prefix_of_joined_cycles(tmp_path: Path) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from rt.recording.reader import TruncatedRecordingError
+
+    path, progress_path = tmp_path / "crash.mcap", tmp_path / "progress"
+    np.zeros(1, np.int64).tofile(progress_path)
+    child = subprocess.Popen([sys.executable, "-c", CHILD, str(path), str(progress_path),
+                              str(Path(__file__).parent)])
+    progress = np.memmap(progress_path, dtype=np.int64, mode="r", shape=(1,))
+    try:
+        deadline = time.monotonic() + 30
+        while progress[0] < 1700:
+            assert child.poll() is None and time.monotonic() < deadline
+            time.sleep(0.001)
+    finally:
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait()
+    with pytest.raises(TruncatedRecordingError):
+        read_recording(path)
+    messages, info = recover(path)
+    assert not info["complete"] and info["chunks"] >= 2
+    n = len(messages[STATE])
+    # Every cycle up to the last whole chunk, in order, none missing, each with its wrench
+    # (the state waited for it); nothing after.
+    assert n > 0 and [m["t"] for m in messages[STATE]] == [k / 1000 for k in range(n)]
+    assert [m["t"] for m in messages[WRENCH]] == [k / 1000 for k in range(n)]
+    assert info["cycles"] == {CYCLE: n} and info["sequence_gaps"] == {}

@@ -4,7 +4,15 @@ Both encodings are read (``rt.recording.channels``): JSON channels with ``json.l
 protobuf channels of talus's own messages with their ``struct`` fast path
 (``rt.recording.protobuf_codec``), any other protobuf schema through
 ``mcap_protobuf.decoder``; every payload comes out as the same dict, so callers never ask which
-encoding a file has.
+encoding a file has. A ``talus.v4`` cycle channel (``/robot/cycle``, ``rt.recording.cycle``)
+is read as its parts: each cycle gives a ``/robot/state``, ``/robot/wrench`` and
+``/protocol/reference`` message (those present), counted under those topics; the cycle
+channel's own messages are counted in ``ScanInfo.cycles``, and asking for its topic gives the
+cycle whole.
+
+What a crash loses with v4: the writer holds a cycle until its parts are in (the session
+pump's ≈ 50 ms, at most ``cycle_hold_s``), so besides the last partial chunk up to that much
+more of the tail.
 
 A complete file (footer, summary, closing magic) is read with mcap's own reader, so what we
 write is checked against the reference implementation. A file whose writer died has no

@@ -6,8 +6,12 @@ Data flow (DESIGN 3): the 1 kHz loop never touches the file. State leaves the lo
 handed over with a non-blocking append to a bounded queue. The thread encodes, feeds the
 mcap ``Writer`` and owns the file.
 
-Encoding (``rt.recording.channels``): by default the 1 kHz channels are protobuf (float32
-where the resolution allows), a drained block of ring rows encoded at once with numpy, and
+Encoding (``rt.recording.channels``): by default (``talus.v4``) the 1 kHz state, wrench and
+reference are the parts of one protobuf message per loop cycle on ``/robot/cycle``
+(``rt.recording.cycle``): each part is encoded as it arrives (a drained block of ring rows at
+once with numpy), the parts are joined by cycle time (``CycleJoiner``: a cycle waits for a
+part whose source has been heard from, at most ``cycle_hold_s``), and each cycle is written
+as one MCAP message; and
 the file carries no per-message index (MCAP MessageIndex records: 16 bytes per message that
 compression never touches, a quarter of the file at 1 kHz; readers, Foxglove and mcap's own,
 find messages through the chunk indexes and read the chunk). ``encoding="json"`` writes the
@@ -26,6 +30,9 @@ earlier; with the defaults ≈ 0.27 s (measured: at most 0.26 s over 20 SIGKILLs
 recording, also with two CPU hogs running; ``bench/costs.py --crash`` measures it, the tests
 check that what is recovered is an exact prefix). ``rt.recording.reader.recover`` reads such a
 file up to its last complete chunk.
+With talus.v4 a cycle is written once its parts are in: in a session the pump hands the
+wrench and reference every ≈ 50 ms, which adds that much to the window (a killed writer's file
+is still an exact prefix of cycles, tested).
 Data reaches the OS page cache, which survives a process crash; surviving a power loss needs
 ``fsync=True`` (an fsync per flush).
 """
