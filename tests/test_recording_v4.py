@@ -181,12 +181,16 @@ def test_parts_join_whatever_order_their_sources_give_them(tmp_path: Path) -> No
                           cycle_hold_s=60.0)
     ring = Ring(rows)
     rec.attach_ring(STATE, ring, STATE_LAYOUT, start=0)
+    rec.expect(WRENCH, REFERENCE)      # as the RT process says before its pump's first block
+    with pytest.raises(InputError, match="/robot/nothing"):
+        rec.expect("/robot/nothing")
     wrench = np.column_stack([t, np.zeros((n, 6)), np.zeros((n, 2))])
     wrench[:30, 1:7] = math.nan                  # the ATI answers from cycle 30 on
     force = np.zeros((n, 3))
     for k0 in range(0, n, 50):
         k1 = k0 + 50
-        if k0 % 100:          # half the blocks: the state first, then the pump's rows
+        if k0 % 100 == 0:     # half the blocks (the first too): the state first, then the
+            # pump's rows; the state's cycles wait for them.
             ring.written = k1
             assert rec.wait_for_room(0.0001, timeout_s=30)
         rec.wrench_rows(wrench[k0:k1])
@@ -475,4 +479,6 @@ def test_a_killed_v4_writer_leaves_an_exact_prefix_of_joined_cycles(tmp_path: Pa
     # (the state waited for it); nothing after.
     assert n > 0 and [m["t"] for m in messages[STATE]] == [k / 1000 for k in range(n)]
     assert [m["t"] for m in messages[WRENCH]] == [k / 1000 for k in range(n)]
-    assert info["cycles"] == {CYCLE: n} and info["sequence_gaps"] == {}
+    # (A cycle whose wrench came more than cycle_hold_s late, the loaded child stalled, was
+    # written before it, and its wrench then alone: more cycle messages than cycles.)
+    assert info["cycles"][CYCLE] >= n and info["sequence_gaps"] == {}

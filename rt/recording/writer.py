@@ -513,6 +513,21 @@ class SessionRecorder:
             # its first drain wait for them (up to cycle_hold_s), not written without them.
             self._joiner.expect(part)
 
+    def expect(self, *topics: str) -> None:
+        """Say that ``topics`` (``/robot/wrench``, ``/protocol/reference``) will be given for
+        every cycle from now on (a session pump is about to hand them over): with talus.v4 the
+        state's cycles wait for them (at most ``cycle_hold_s``) instead of being written
+        before their first block arrives. Other encodings: nothing to do."""
+        unknown = [t for t in topics if t not in self._channel_ids and t not in self._part]
+        if unknown:
+            raise InputError(f"unknown channel {unknown[0]!r}; channels: "
+                             f"{sorted(self._channel_ids)}")
+        if self._joiner is not None:
+            for topic in topics:
+                part = self._part.get(topic)
+                if part is not None:
+                    self._joiner.expect(part)
+
     def event(self, event: dict[str, Any]) -> bool:
         """Enqueue a safety event dict (``SafetyEvent.as_dict()``); usable as
         ``EventLog.listener``. False when dropped (queue full or recorder closed)."""
