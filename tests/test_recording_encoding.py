@@ -1,5 +1,6 @@
-"""Recording encodings (issue 16): fixed-point protobuf 1 kHz channels (``talus.v3``: no time
-in the payloads, the drive command as the DAC's code) round trip within half a quantum, the
+"""Recording encodings (issue 16): fixed-point protobuf (``talus.v4``, today's, one message per
+cycle: tests/test_recording_v4.py; ``talus.v3``: three 1 kHz channels, no time in the
+payloads, the drive command as the DAC's code) round trip within half a quantum, the
 time rebuilt from the log time exactly as ``talus.v2`` stored it, read by the official mcap
 reader with ``mcap_protobuf``; recordings of the previous encodings (``talus.v2`` with
 ``t_us``, float32 protobuf, JSON before issue 16) still read everywhere; the size per hour of
@@ -138,7 +139,7 @@ def dac(v: float) -> float:
 
 @pytest.fixture(scope="module")
 def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    """The same 2 s session recorded in every encoding: fixed-point protobuf v3 (today's),
+    """The same 2 s session recorded in every encoding: fixed-point protobuf v4 (today's), v3,
     v2, float32 protobuf and JSON (the previous ones)."""
     d = tmp_path_factory.mktemp("enc")
     sig = session_signals(2.0)
