@@ -42,6 +42,8 @@ VARIANTS: dict[str, str] = {
     "f32": "recording in float32 protobuf (the previous encoding)",
     "json": "recording in JSON (before issue 16)",
     "v2": "recording in talus.v2 fixed point (t_us in the payloads, volts in mV)",
+    "v3": "recording in talus.v3 (three 1 kHz channels; the default is talus.v4, one message "
+          "per cycle)",
     "no_recorder": "sessions not recorded (a recorder that drops every message)",
     "no_record_rows": "the pump does not feed the recorder's wrench/reference/ankle channels",
     "no_figures": "the pump computes no session figures (SessionFigures.add skipped)",
@@ -90,10 +92,11 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
         config = config.model_copy(update={"service_priority": 1})
     if "worker_nice10" in tokens:
         ext["sessions"].worker_nice = 10
-    if "f32" in tokens or "json" in tokens or "v2" in tokens:
+    if "f32" in tokens or "json" in tokens or "v2" in tokens or "v3" in tokens:
         writer.SessionRecorder = functools.partial(  # type: ignore[misc]
             writer.SessionRecorder, encoding="json" if "json" in tokens else
-            "protobuf-v2" if "v2" in tokens else "protobuf-f32")
+            "protobuf-v2" if "v2" in tokens else "protobuf-v3" if "v3" in tokens
+            else "protobuf-f32")
     if "no_recorder" in tokens:
         class NullRecorder:
             def __init__(self, path: Any, metadata: Any, **kw: Any) -> None:

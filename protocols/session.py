@@ -317,6 +317,8 @@ def run_session(setup: SessionSetup, record: Path | None = None,
             meta["ankle"] = setup.ankle.model_dump()   # where the ankle centre was
         recorder = SessionRecorder(record, meta, force=force, inputs=inputs)
         recorder.attach_state_ring(pl.recorder, start=0)
+        # The pump gives these for every cycle: talus.v4 joins them with the state.
+        recorder.expect("/robot/wrench", "/protocol/reference")
         pl.events.listener = recorder.event
         ankle = None if setup.ankle is None else AnkleMonitor(model.kin, setup.ankle,
                                                               start_pose(gen))

@@ -776,6 +776,8 @@ class RtService:
         self._recorder = recorder
         self._tap_start = self.tap.written
         recorder.attach_state_ring(pl.recorder, start=pl.recorder.written)
+        # The pump gives these for every cycle: talus.v4 joins them with the state.
+        recorder.expect("/robot/wrench", "/protocol/reference")
         pl.events.listener = self._event_listener(recorder)
         strap = None
         if pl.twin is not None and self.config.session_environment == "patient_foot":
