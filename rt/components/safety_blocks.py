@@ -137,6 +137,8 @@ class SupervisorBlock(Component):
             pitch_rate = S[10, 0] * qd[0] + S[10, 1] * qd[1] + S[10, 2] * qd[2]
         w = self.wrench.data
         force = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        # The force at the DAC's command limit (as the compiled block_cycle computes it).
+        self.sup.applied_force_max_n = self.sup.limits.max_command_v / self.k
         share = [0.0, 0.0, 0.0]
         if fk_ok:
             # The same statics as the compiled block's, run as Python (same arithmetic).

@@ -90,6 +90,14 @@ HOLDING_MARGIN = 1.5
 #: cycle-to-cycle ripple, short next to a payload's arrival (the estimate follows it as the
 #: axis sinks under the new load) and to a velocity reversal's stick (tens of ms).
 CARRY_TAU_S = sk.CARRY_TAU_S
+#: The carried load is learnt only while the axis is quasi-static: its estimated acceleration
+#: within this (m/s²; the inertia's m·q̈ then ≤ 104 N of the 207 kg axis, under half the 225 N
+#: friction band, and m·q̈ is subtracted as well) ...
+QUASI_STATIC_ACCEL = sk.QUASI_STATIC_ACCEL
+#: ... for this long (s): the velocity estimator's q̈ lags the true one by ~10 ms, so between
+#: a drive-limited acceleration and its braking it crosses zero while the axis still
+#: accelerates at 10 m/s²; that crossing lasts ~1 ms, a quasi-static stretch tens of ms.
+QUASI_STATIC_S = sk.QUASI_STATIC_S
 #: Lever ∂q/∂angle of a slider per radian of platform tilt, in platform radii (≈ 1.5 R_p for
 #: a 3-PRS with the spheres on a circle: the farthest leg moves R_p·(1 + 1/2) per radian).
 LEVER_PER_PLATFORM_RADIUS = 1.5
@@ -256,6 +264,7 @@ class Supervisor:
     contact_force_n = _Packed(sk.P_CONTACT)
     force_lag_s = _Packed(sk.P_FORCE_LAG)
     contact_release_s = _Packed(sk.P_CONTACT_RELEASE)
+    applied_force_max_n = _Packed(sk.P_APPLIED_MAX)
     startup_grace_s = _Packed(sk.P_GRACE)
     force_control = _PackedFlag(sk.P_FORCE_CONTROL)
 
@@ -287,6 +296,10 @@ class Supervisor:
         self.contact_force_n = 50.0
         self.force_lag_s = FORCE_LAG_S
         self.contact_release_s = CONTACT_RELEASE_S
+        # The force a drive applies at the DAC's command limit (N): the force balance uses the
+        # command saturated there. The supervisor block sets it every cycle from the limits'
+        # max_command_v and the drives' N/V; inf (no saturation) for direct ``check`` calls.
+        self.applied_force_max_n = math.inf
         self.sensor_offset_m = (float(sensor_offset_m[0]), float(sensor_offset_m[1]),
                                 float(sensor_offset_m[2]))
         # The force sensor's first samples arrive a few cycles after the loop starts.
@@ -575,6 +588,7 @@ class InterpretedSupervisor(Supervisor):
         # NaN until the first cycle (then the first command: the loop starts holding still).
         self._carry = [math.nan, math.nan, math.nan]
         self._share = [math.nan, math.nan, math.nan]   # last cycle's contact share (N)
+        self._quiet = [0.0, 0.0, 0.0]                  # quasi-static for this long (s)
         self._contact_until = 0.0                      # touched until this loop time (s)
         self._overruns = 0
         self._pull_time = 0.0
@@ -590,15 +604,20 @@ class InterpretedSupervisor(Supervisor):
     def _forget(self, cleared: list[str]) -> None:
         self._reported.clear()
 
-    def _track_carry_force(self, i: int, tau: float, dt: float) -> None:
-        """Update axis ``i``'s carried-force estimate with this cycle's load (the command less
-        the measured contact's share; its count moved, or the brakes hold it): first-order,
-        :data:`CARRY_TAU_S`."""
+    def _track_carry_force(self, i: int, load: float, dt: float) -> None:
+        """Update axis ``i``'s carried-force estimate with this cycle's static load (the
+        applied force less the measured contact's share and the inertia's m·q̈; its count
+        moved, or the brakes hold it): first-order, :data:`CARRY_TAU_S`, only once the axis
+        has been quasi-static for :data:`QUASI_STATIC_S` (the first cycle seeds it), and by at
+        most ``holding_force_n`` per :data:`CARRY_TAU_S`: a change of force the acceleration
+        estimate has not caught up with yet (it lags ~10 ms) moves it little."""
         c = self._carry[i]
         if math.isnan(c):
-            self._carry[i] = tau
-        else:
-            self._carry[i] = c + (tau - c) * dt / (CARRY_TAU_S + dt)
+            self._carry[i] = load
+        elif self._quiet[i] >= QUASI_STATIC_S:
+            step = (load - c) * dt / (CARRY_TAU_S + dt)
+            cap = self.holding_force_n * dt / CARRY_TAU_S
+            self._carry[i] = c + (cap if step > cap else (-cap if -cap > step else step))  # noqa: FURB136
 
     def _frozen_net_force(self, i: int, load: float, lag_allowance: float) -> float:
         """The part of axis ``i``'s command that must accelerate it although its count has not
@@ -686,8 +705,17 @@ class InterpretedSupervisor(Supervisor):
         brakes_open = t >= self._brakes_open_at and self.reaction < Reaction.HARD_STOP
         for i in range(3):
             qi = q[i]
-            # The axis' own load: the command less what the measured contact takes of it.
-            load = float(tau[i]) - share[i]
+            # The axis' own load: the force its drive applies (the command saturated at the
+            # DAC's limit) less what the measured contact takes of it.
+            ta = float(tau[i])
+            cap = self.applied_force_max_n
+            applied = cap if ta > cap else (-cap if -cap > ta else ta)  # noqa: FURB136
+            load = applied - share[i]
+            # Quasi-static: the estimated acceleration small for QUASI_STATIC_S.
+            if abs(qdd[i]) <= QUASI_STATIC_ACCEL:
+                self._quiet[i] += dt
+            else:
+                self._quiet[i] = 0.0
             last_share = self._share[i]
             if math.isnan(last_share):
                 last_share = share[i]
@@ -723,7 +751,8 @@ class InterpretedSupervisor(Supervisor):
                 self._frozen_time[i] = 0.0
                 self._impulse[i] = 0.0
                 self._impulse_time[i] = 0.0
-                self._track_carry_force(i, load, dt)
+                # The static load (what holds the axis once it stops): the inertia taken out.
+                self._track_carry_force(i, load - self.axis_mass_kg * float(qdd[i]), dt)
             self._last_q[i] = qi
             # -- stroke, speed, acceleration, tracking, actuator force
             if qi < lim.stroke_lo_m or qi > lim.stroke_hi_m:

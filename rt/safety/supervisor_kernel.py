@@ -59,6 +59,8 @@ N_VALUES = 3
 R_NONE, R_WARN, R_SOFT, R_HARD = 0, 1, 2, 3
 JUMP_STATUS = -3
 CARRY_TAU_S = 0.02
+QUASI_STATIC_ACCEL = 0.5
+QUASI_STATIC_S = 0.01
 FROZEN_COUNTS = 4
 FORCE_CUSHION = 0.9
 
@@ -68,8 +70,8 @@ FORCE_CUSHION = 0.9
  P_PITCH_MAX, P_MAX_ANGULAR, P_ROM_TOL, P_DEADLINE_OVERRUNS, P_FROZEN_S, P_FROZEN_MIN_REF,
  P_MAX_PULL_S, P_PERIOD, P_ALPHA_STOP, P_JERK_TIME, P_AXIS_MASS, P_HOLDING, P_COUNT_M,
  P_CONTACT, P_GRACE, P_FORCE_CONTROL, P_SENSOR_X, P_SENSOR_Y, P_SENSOR_Z, P_FORCE_LAG,
- P_CONTACT_RELEASE) = range(33)
-PAR_SIZE = 33
+ P_CONTACT_RELEASE, P_APPLIED_MAX) = range(34)
+PAR_SIZE = 34
 
 # ------------------------------------------------------------------------- mem layout
 M_FROZEN_TIME = 0
@@ -84,7 +86,8 @@ M_REACTION = 18      # the latched reaction (Python's ``Supervisor.reaction``): 
 M_CONTACT_UNTIL = 19  # loop time until which the platform counts as touched (contact hysteresis)
 M_SHARE = 20         # last cycle's contact share per axis (N): its rate sizes the sensor-lag allowance
 M_SHARE_IN = 23      # this cycle's contact share (N), computed by ``block_cycle`` (scratch)
-M_REACT = 26
+M_QUIET = 26         # per axis: how long its estimated |q̈| has been quasi-static (s)
+M_REACT = 29
 M_LATCHED = M_REACT + N_CAUSES
 M_REPORTED = M_LATCHED + N_CAUSES
 M_NEW = M_REPORTED + N_CAUSES
@@ -160,12 +163,25 @@ def contact_share(stb, wrench, par, out):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _carry(mem, i, tau, dt):
+def _carry(par, mem, i, load, dt):
+    """Axis ``i``'s carried (static) load follows ``load`` first-order (CARRY_TAU_S) while
+    quasi-static, by at most the friction band per CARRY_TAU_S (the interpreted
+    ``_track_carry_force``'s arithmetic)."""
     c = mem[M_CARRY + i]
     if math.isnan(c):
-        mem[M_CARRY + i] = tau
-    else:
-        mem[M_CARRY + i] = c + (tau - c) * dt / (CARRY_TAU_S + dt)
+        mem[M_CARRY + i] = load
+    elif mem[M_QUIET + i] >= QUASI_STATIC_S:
+        step = (load - c) * dt / (CARRY_TAU_S + dt)
+        cap = par[P_HOLDING] * dt / CARRY_TAU_S
+        mem[M_CARRY + i] = c + (cap if step > cap else (-cap if -cap > step else step))  # noqa: FURB136
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def applied_force(tau, limit):
+    """The force a drive applies for the command ``tau`` (N): the command saturated at the
+    force of the DAC's command limit, ``limit`` (N; inf: none), as :func:`outputs` saturates
+    the volts. Spelled out so a NaN command stays NaN (as the interpreted check's)."""
+    return limit if tau > limit else (-limit if -limit > tau else tau)  # noqa: FURB136
 
 
 @njit(cache=True, error_model="numpy")
@@ -205,8 +221,15 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
     for i in range(3):
         qi = q[i]
         base = C_AXIS + AXIS_SLOTS * i
-        # The axis' own load: the command less what the measured contact takes of it.
-        load = tau[i] - share[i]
+        # The axis' own load: the force its drive applies (the command, saturated at the DAC's
+        # limit) less what the measured contact takes of it.
+        load = applied_force(tau[i], par[P_APPLIED_MAX]) - share[i]
+        # Quasi-static: the estimated acceleration small for QUASI_STATIC_S (the estimate
+        # lags, so a brief zero crossing between an acceleration and a braking is not).
+        if abs(qdd[i]) <= QUASI_STATIC_ACCEL:
+            mem[M_QUIET + i] += dt
+        else:
+            mem[M_QUIET + i] = 0.0
         last_share = mem[M_SHARE + i]
         if math.isnan(last_share):
             last_share = share[i]
@@ -238,7 +261,9 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
             mem[M_FROZEN_TIME + i] = 0.0
             mem[M_IMPULSE + i] = 0.0
             mem[M_IMPULSE_TIME + i] = 0.0
-            _carry(mem, i, load, dt)
+            # The carried load is the static one (what holds the axis once it stops): the
+            # inertia's m·q̈ taken out, and learnt only while quasi-static.
+            _carry(par, mem, i, load - par[P_AXIS_MASS] * qdd[i], dt)
         mem[M_LAST_Q + i] = qi
         # -- stroke, speed, acceleration, tracking, actuator force
         if qi < par[P_STROKE_LO] or qi > par[P_STROKE_HI]:
@@ -351,6 +376,8 @@ def block_cycle(par, mem, t, dt, q, est_status, qd, qdd, stb, fk_ok_in, filled, 
         roll_rate = stb[s + 33] * stb[v] + stb[s + 34] * stb[v + 1] + stb[s + 35] * stb[v + 2]
         pitch_rate = stb[s + 30] * stb[v] + stb[s + 31] * stb[v + 1] + stb[s + 32] * stb[v + 2]
     force = math.sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1] + wrench[2] * wrench[2])
+    # The force at the DAC's command limit: what a saturated drive applies (the balance's τ).
+    par[P_APPLIED_MAX] = par[P_MAX_COMMAND_V] / volts_per_n
     share = mem[M_SHARE_IN:M_SHARE_IN + 3]        # a view: nothing allocated
     if fk_ok:                              # the twist map and R_BP are this cycle's
         contact_share(stb, wrench, par, share)
