@@ -30,19 +30,30 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
 
 The frozen-encoder criterion (issue 15). A still count is judged against physics, per axis:
 
-* **force balance** (any contact): the axis' own load is the command less the measured
-  contact's share of it, ``load = τ − s`` with ``s = −J_Sᵀ w_S`` (the ATI's wrench through the
-  platform's statics, :func:`rt.safety.supervisor_kernel.contact_share`). A still axis is in
-  static equilibrium: ``load`` stays within the friction it can hold
-  (``holding_force_n``) of the load that carried it while its count moved (``carry``, a
-  running estimate of ``load``, :data:`CARRY_TAU_S`: gravity, an unmeasured payload,
-  friction). A contact needs no special case: what it holds of the command is measured and
-  taken out, so a slider stalled by what it presses balances, and a frozen one under a
-  runaway command does not, in contact as in free motion. The excess must accelerate the
-  axis' inertia; once ``∫excess dt · T / (2 m)`` reaches ``FROZEN_COUNTS`` counts the encoder
-  is frozen. The sensor
-  reads the contact ``force_lag_s`` late (its filter and sample age): while the share changes,
-  the true one may be ahead by its rate × that lag, which is added to the holding band — at a
+* **force balance** (any contact): the axis' own load is the force its drive applies less the
+  measured contact's share of it, ``load = sat(τ) − s`` with ``s = −J_Sᵀ w_S`` (the ATI's
+  wrench through the platform's statics, :func:`rt.safety.supervisor_kernel.contact_share`)
+  and ``sat(τ)`` the command saturated at the force of the DAC's command limit
+  (``applied_force_max_n`` = ``max_command_v`` × the drives' N/V, set by the supervisor
+  block): a law winding up beyond the drives (a pre-flight with the drives limited, a heel
+  strike) pushes with what the drive gives, not with what it asks. A still axis is in static
+  equilibrium: ``load`` stays within the friction it can hold (``holding_force_n``) of the
+  static load that carries it (``carry``: gravity, an unmeasured payload, friction, an
+  amplifier's offset). ``carry`` is a running estimate (:data:`CARRY_TAU_S`) of the load less
+  the inertia's ``m·q̈`` (``q̈`` the velocity estimator's), learnt while the count moves and
+  only while the axis is quasi-static (``|q̈| ≤`` :data:`QUASI_STATIC_ACCEL` for
+  :data:`QUASI_STATIC_S`), and it slews by at most ``holding_force_n`` per CARRY_TAU_S: a
+  slider braked at the drives' limit (after a pull's soft stop) must not leave the braking's
+  kilonewtons in it, which the first still cycles would read as an unbalanced load. The
+  estimator's q̈ lags the true one by ~10 ms, hence the hold time (a lagging estimate crosses
+  zero between an acceleration and its braking) and the slew (a force step it has not caught
+  up with yet). A contact needs no special case: what it holds of the applied force is
+  measured and taken out, so a slider stalled by what it presses balances, and a frozen one
+  under a runaway command does not, in contact as in free motion. The excess must accelerate
+  the axis' inertia; once ``∫excess dt · T / (2 m)`` reaches ``FROZEN_COUNTS`` counts the
+  encoder is frozen. The sensor reads the
+  contact ``force_lag_s`` late (its filter and sample age): while the share changes, the true
+  one may be ahead by its rate × that lag, which is added to the holding band — at a
   contact's onset a pressing slider is held by a force the ATI has not shown yet.
 * **reference speed** (nothing touching): the reference has moved the axis at
   ≥ ``frozen_min_ref_speed_m_s`` for ``frozen_encoder_s`` without a count. It counts only
@@ -52,8 +63,8 @@ The frozen-encoder criterion (issue 15). A still count is judged against physics
   balance judges it there.
 
 State per axis: last count, carried load, excess impulse and its duration, reference-speed
-time, last contact share; and one contact-release time. Judged only while the drives are on
-and the brakes open.
+time, last contact share, quasi-static time; and one contact-release time. Judged only while
+the drives are on and the brakes open.
 
 The numeric checks run compiled (:mod:`rt.safety.supervisor_kernel`, one call per cycle that
 allocates nothing); this module keeps what users and tests see: cause names, latching, events,
