@@ -198,11 +198,12 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
         assert sups[0].carry_force_n == pytest.approx(sups[1].carry_force_n, nan_ok=True,
                                                       rel=0.0, abs=0.0), k
         # The force balance's state: the share, how long quasi-static, the applied limit.
-        mem = sups[0]._mem
+        mem, ref = sups[0]._mem, sups[1]
+        assert isinstance(ref, InterpretedSupervisor)
         assert mem[sk.M_SHARE:sk.M_SHARE + 3].tolist() == pytest.approx(
-            sups[1]._share, nan_ok=True, rel=0.0, abs=0.0), k
-        assert mem[sk.M_QUIET:sk.M_QUIET + 3].tolist() == sups[1]._quiet, k
-        assert mem[sk.M_CONTACT_UNTIL] == sups[1]._contact_until, k
+            ref._share, nan_ok=True, rel=0.0, abs=0.0), k
+        assert mem[sk.M_QUIET:sk.M_QUIET + 3].tolist() == ref._quiet, k
+        assert mem[sk.M_CONTACT_UNTIL] == ref._contact_until, k
         assert sups[0].applied_force_max_n == sups[1].applied_force_max_n == 480.0, k
     events = [[_event(e) for e in sup.log.snapshot()] for sup in sups]
     assert events[0] == events[1]
