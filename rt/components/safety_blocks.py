@@ -20,6 +20,7 @@ from rt.devices.interfaces import (
 from rt.engine import Array, Component, Struct
 from rt.errors import HardwareError
 from rt.model.dynamics import State
+from rt.safety import supervisor_kernel as sk
 from rt.safety.events import EventLog, Reaction, SafetyEvent, SupervisorMode
 from rt.safety.supervisor import Supervisor
 
@@ -176,13 +177,19 @@ class SupervisorBlock(Component):
             pitch_rate = S[10, 0] * qd[0] + S[10, 1] * qd[1] + S[10, 2] * qd[2]
         w = self.wrench.data
         force = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        # The force at the DAC's command limit (as the compiled block_cycle computes it).
+        self.sup.applied_force_max_n = self.sup.limits.max_command_v / self.k
+        share = [0.0, 0.0, 0.0]
+        if fk_ok:
+            # The same statics as the compiled block's, run as Python (same arithmetic).
+            sk.contact_share.py_func(st.buf, w, self.sup._par, share)
         flags = self.wrench_flags.data
         ins = self.stops.data
         reaction = self.sup.check(
             t, dt, self.q.data, int(self.est_status.data[0]), self.qd.data, self.qdd.data,
             fk_ok, roll, pitch, roll_rate, pitch_rate, self.q_ref.data, self.qd_ref.data,
             self.tau.data, force, flags[0] > 0.5, flags[1] > 0.5, ins[0] > 0.5, ins[1] > 0.5,
-            self.drive_failed.data[0] > 0.5, -w[2], self.failed_components())
+            self.drive_failed.data[0] > 0.5, -w[2], self.failed_components(), share)
         v = self.volts.data
         if reaction >= Reaction.HARD_STOP:
             v[:] = 0.0
