@@ -104,9 +104,27 @@ class IdentificationData:
 FILTERING = ("parallel", "states")
 
 
+def held_to_positions(tau: np.ndarray) -> np.ndarray:
+    """Commands a sampled loop held for one period, at the instants its positions were read.
+
+    Row j's positions are read at t_j and its command, computed from them, is then held by the
+    DAC over [t_j, t_j + T]: the force applied is the command sequence through a zero-order
+    hold, i.e. the samples delayed by T/2 (at the excitation's frequencies). Its value at t_j
+    is the mean of the commands held on either side, (τ_{j−1} + τ_j)/2. Left as is, the half
+    period is a time shift between τ and W: with ω the excitation's harmonics, the rotor
+    inertia's force J_r q̈ shifted by δ reads as J_r δ ω² of *negative* viscous friction
+    (fv −0.2…−1.3 % on the realistic twin at the limits, ``bench/identification.py``)."""
+    out = np.array(tau, float)
+    out[1:] = 0.5 * (out[1:] + out[:-1])
+    return out
+
+
 def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float,
-            filtering: str = "parallel") -> IdentificationData:
-    """Filter and differentiate a recording (see module docstring)."""
+            filtering: str = "parallel", held: bool = True) -> IdentificationData:
+    """Filter and differentiate a recording (see module docstring). ``held``: ``tau`` are the
+    commands of a sampled loop, each held for one period after its row's positions were read
+    (:func:`held_to_positions` aligns them); ``False``: forces sampled at the positions'
+    instants (synthetic data)."""
     q = np.asarray(q, float)
     tau = np.asarray(tau, float)
     if filtering not in FILTERING:
@@ -132,7 +150,8 @@ def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float,
     qf = scipy.signal.sosfiltfilt(sos, q, axis=0)
     qd = np.gradient(qf, dt, axis=0)
     qdd = np.gradient(qd, dt, axis=0)
-    return IdentificationData(qf, qd, qdd, tau, float(rate_hz))
+    return IdentificationData(qf, qd, qdd, held_to_positions(tau) if held else tau,
+                              float(rate_hz))
 
 
 def _parallel(data: IdentificationData, per_sample: np.ndarray) -> np.ndarray:
