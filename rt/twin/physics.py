@@ -642,7 +642,7 @@ COULOMB_SWEEPS = 30
 
 @njit(cache=True)
 def _clamp(x, lim):
-    return lim if x > lim else (-lim if x < -lim else x)
+    return lim if x > lim else max(x, -lim)
 
 
 @njit(cache=True)
