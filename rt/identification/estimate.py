@@ -1,7 +1,9 @@
 """Least-squares identification of the robot's dynamics from a recorded excitation.
 
 Data: slider positions from the encoders and the actuator forces the drives were commanded
-(current-mode amplifiers: force = command V × force per volt), recorded at the loop rate.
+(current-mode amplifiers: force = command V × force per volt), recorded at the loop rate. Each
+command is held by the DAC for one period after its row's positions were read, so the forces
+are first aligned to the positions' instants (:func:`held_to_positions`: half a period).
 
 Filtering (Gautier's *parallel filtering*): the model is linear in the parameters, τ = W θ, but
 W is a nonlinear function of the states — the Coulomb column is sign(q̇) smoothed over
