@@ -62,6 +62,23 @@ def _every(rows: list[dict[str, Any]], rate_hz: float) -> list[dict[str, Any]]:
     return rows[::step]
 
 
+def recording_protocol_name(path: str | Path) -> str | None:
+    """The protocol's name as the recording's metadata holds it (the file name carries only a
+    filesystem-safe form of it: "300 ± 100 N" became "300---100-N"); None when the file holds
+    no readable metadata.
+
+    Raises:
+        RecordingFileError: not a readable recording (the message names the file).
+    """
+    try:
+        data = read_recording(path, [METADATA])
+    except TruncatedRecordingError:
+        data, _ = recover(path, [METADATA])
+    meta = (data.get(METADATA) or [{}])[0]
+    name = meta.get("protocol_name")
+    return name if isinstance(name, str) and name.strip() else None
+
+
 def load_review(path: str | Path, model: Any | None = None) -> ReviewData:
     """Read recording ``path`` (complete, or recovered up to its last whole chunk).
 

@@ -62,6 +62,8 @@ def _fixed(cause: str) -> str | None:
         "rom_pitch": tr("dorsi/plantarflexion at the end of the patient's range"),
         "angular_speed_roll": tr("inversion/eversion faster than the patient's limit"),
         "angular_speed_pitch": tr("dorsi/plantarflexion faster than the patient's limit"),
+        "pulling": tr("the platform pulled on the foot"),
+        "component_failed": tr("the control computer found a fault in its own software"),
     }.get(cause)
 
 
@@ -84,6 +86,13 @@ def cause_words(cause: str) -> str:
             "encoder_frozen": tr("position sensor %1 stopped changing"),
         }[kind]
         return text.replace("%1", str(leg))
+    m = re.fullmatch(r"dac_card_(\d)", cause)
+    if m:   # a failover: the spare card took over (a warning, the session goes on)
+        return tr("motor drive card %1 failed; the spare card took over").replace(
+            "%1", str(int(m.group(1)) + 1))
+    m = re.fullmatch(r"estop_(\w+)", cause)
+    if m:   # an e-stop source this screen has no words for yet
+        return tr("E-STOP (%1)").replace("%1", m.group(1))
     return cause
 
 

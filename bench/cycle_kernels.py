@@ -1,7 +1,8 @@
 """The cycle's compiled blocks against their interpreted references, one call at a time
 (this machine; issue 16): every position law, the explicit-force law, the model block, the
-velocity estimator, the supervisor block, the benchmark trajectory's sampler and the sequencer
-playing a table program. Prints
+velocity estimator, the supervisor block, the benchmark trajectory's sampler, the sequencer
+playing a table program and the device blocks' driver work (encoder read and decode, DAC
+write, force reader with its tare). Prints
 median / p99 (µs) per implementation.
 
     .venv/bin/python bench/cycle_kernels.py [--calls 3000]
@@ -21,10 +22,15 @@ import numpy as np
 import rt.control.adaptive
 import rt.control.laws  # noqa: F401  (registers the laws)
 from rt.components.blocks import ModelState
-from rt.components.safety_blocks import SupervisorBlock
+from rt.components.safety_blocks import ForceReader, SupervisorBlock
 from rt.control.base import CONTROLLERS, Reference, create
 from rt.control.experiment import benchmark_reference, benchmark_reference_interpreted
 from rt.control.force import ExplicitForce, ForceReference
+from rt.devices.sampled_ft import SampledForceTorque
+from rt.drivers.fake_comedi import FakeComedi
+from rt.drivers.fake_pcl833 import FakePcl833Port
+from rt.drivers.pci1720 import Pci1720Outputs
+from rt.drivers.pcl833 import Pcl833Encoders
 from rt.estimation.compiled import CompiledKalmanEstimator
 from rt.estimation.velocity import KalmanVelocityEstimator
 from rt.model import RobotModel
@@ -68,6 +74,46 @@ def _time(fn: Callable[[], object], calls: int) -> tuple[float, float]:
         fn()
         ts[i] = pc() - t0
     return float(np.median(ts)) / 1e3, float(np.percentile(ts, 99)) / 1e3
+
+
+class _PolledSensor(SampledForceTorque):
+    """A polled force sensor whose sample advances every read (the twin's form: a tuple)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seq = 0
+
+    def _sample(self):
+        self.seq += 1
+        return (1.0, -2.0, -30.0, 0.1, 0.2, 0.0), self.seq, 0, self.seq * 1e-3
+
+
+def _device_rows(calls: int) -> list[tuple[str, str, float, float]]:
+    """The device blocks' driver work (issue 16): the PCL-833 read and decode on the emulated
+    card, the PCI-1720 write into the comedilib double, the force reader with its tare."""
+    rows: list[tuple[str, str, float, float]] = []
+    port = FakePcl833Port()
+    enc = Pcl833Encoders(port_io=port)
+    q = np.zeros(3)
+    for name, read in (("compiled", enc.read_positions_m),
+                       ("interpreted", enc.read_positions_m_interpreted)):
+        rows.append(("encoder read+decode", name, *_time(lambda r=read: r(q), calls)))
+    dac = Pci1720Outputs(lib=FakeComedi(keep_log=False))
+    dac.enable()
+    volts = np.array([1.2, -0.4, 5.9])
+    volts.flags.writeable = False                 # the loop's port view
+    for name, write in (("compiled", dac.write_volts), ("interpreted",
+                                                        dac.write_volts_interpreted)):
+        rows.append(("DAC write", name, *_time(lambda w=write: w(volts), calls)))
+    for compiled in (True, False):
+        blk = ForceReader("force", _PolledSensor(), compiled=compiled)
+        blk.sensor.start()
+        request = np.zeros(1)
+        request.flags.writeable = False
+        blk.tare_request.data = request
+        rows.append(("force reader block", "compiled" if compiled else "interpreted",
+                     *_time(lambda b=blk: b.update(0.0, 1e-3), calls)))
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -132,6 +178,7 @@ def main(argv: list[str] | None = None) -> int:
                 break
         rows.append(("sequencer (PLAY)", "compiled" if compiled else "interpreted",
                      *_time(lambda b=seq: b.update(0.0, 1e-3), args.calls)))
+    rows += _device_rows(args.calls)
     print(f"{'block':22s} {'implementation':14s} {'median µs':>10s} {'p99 µs':>10s}")
     for name, impl, med, p99 in rows:
         print(f"{name:22s} {impl:14s} {med:10.1f} {p99:10.1f}")

@@ -67,6 +67,7 @@ def identify_run(q, tau, val, reg, nominal, truth) -> dict[str, Any]:
             for n, e, s, t in zip(est.names, est.theta, est.sigma, tb)]
     ident = description_from_physical(estimate_physical(reg, data, nominal), nominal, "bench")
     return {"base": rows, "residual_rms_n": est.residual_rms_n,
+            "friction_ripple_n": None if est.ripple_n is None else est.ripple_n.tolist(),
             "validation_pct_of_peak": {
                 label: force_prediction_error(d, val)["rms_pct_of_peak"]
                 for label, d in (("nominal", nominal), ("identified", ident), ("truth", truth))}}
@@ -121,6 +122,9 @@ def main() -> None:
             es = f"{b['error_sigmas']:6.1f}" if b["error_sigmas"] is not None else "   n/a"
             print(f"{b['name']:34s} {b['truth']:10.4g} {b['estimate']:10.4g} {rel} "
                   f"{b['sigma']:9.3g} {es}")
+        if r["friction_ripple_n"] is not None:
+            print("screw friction ripple per axis (nuisance parameters): "
+                  + ", ".join(f"{x:.2f} N" for x in r["friction_ripple_n"]))
         v = r["validation_pct_of_peak"]
         print("validation force error (benchmark trajectory), % of peak: "
               + ", ".join(f"{k} {x:.2f}" for k, x in v.items()))

@@ -1,7 +1,7 @@
 """The recorder's encodings side by side: encoding cost per message, bytes per message, MB/h.
 
 Run:  .venv/bin/python bench/recording.py [--seconds 10] [--from RECORDING.mcap]
-          [--encodings json,protobuf-f32,protobuf-v2,protobuf] [--per-channel]
+          [--encodings json,protobuf-f32,protobuf-v2,protobuf-v3,protobuf] [--per-channel]
           [--flush-interval 0.25,1]
 
 The stream is either a recording's own 1 kHz channels (``--from``: e.g. a twin session's file,
@@ -12,18 +12,22 @@ from a ring drained by the writer, the wrench and the reference queued as blocks
 (the session pump's 50 ms), with the source's own stale/saturated flags, phases and modes.
 For each encoding (``json``: recordings before issue 16; ``protobuf-f32``: float32 protobuf,
 issue 16's first round; ``protobuf-v2``: fixed point with ``t_us``, 25 November 2026;
-``protobuf``: today's ``talus.v3``, no time in the payloads, volts as DAC codes) it prints one
-JSON line:
+``protobuf-v3``: ``talus.v3``, no time in the payloads, volts as DAC codes; ``protobuf``:
+today's ``talus.v4``, one message per cycle, the instruments' quanta) it prints one JSON line:
 
 * ``encode_us`` — the encoding cost per message, median and p99, as the recorder pays it:
   state, one drained block of 20 ring rows (the 20 ms drain period at 1 kHz) divided by its
   rows; wrench, the same for protobuf (the writer encodes a pump's queued samples as one
   block) and one message at a time for JSON; reference, one message (protobuf: in
-  ``publish()``, the producer's thread; JSON: in the writer thread);
+  ``publish()``, the producer's thread; JSON: in the writer thread); for v4 also ``cycle``:
+  joining a drained block's three parts by cycle time and assembling each cycle's message
+  (``rt.recording.cycle``), per cycle;
 * ``writer_cpu_us_per_message`` — the recorder thread's whole CPU per message (encoding,
   mcap records, compression, writing) from ``SessionRecorder.close()``;
-* ``bytes_per_message`` and ``mb_per_hour`` of the finished file (1 kHz extrapolated from the
-  stream's duration);
+* ``bytes_per_message`` (per MCAP message: per cycle for v4, per channel message before) and
+  ``mb_per_hour`` of the finished file, extrapolated from the stream's duration, and
+  ``mb_per_hour_at_1khz``: bytes per cycle × 3.6 million cycles (a loop that missed cycles
+  made fewer per second than 1000: this is the figure of an hour at a true 1 kHz);
 * with ``--per-channel``, ``mb_per_hour_by_channel``: each 1 kHz channel recorded alone, less
   a recording of nothing (the metadata), so the three add up to the file's data;
 * with ``--flush-interval``, the same per flush interval (the writer closes a chunk at each
@@ -174,7 +178,45 @@ def encode_costs(encoding: str, sig: dict[str, np.ndarray]) -> dict[str, dict[st
         if one is not None:
             out["wrench"].append((t1 - t0) / 1e3)
         out["reference"].append((t2 - t1) / 1e3)
+    if encoding == "protobuf":
+        out["cycle"] = _cycle_costs(sig, block)
     return {k: _percentiles(v) for k, v in out.items()}
+
+
+def _cycle_costs(sig: dict[str, Any], block: int) -> list[float]:
+    """µs per cycle of v4's join: a block's encoded parts into the joiner, the ready cycles
+    out, each cycle's message assembled (what the writer adds to v3's per-part encoding)."""
+    from rt.recording.channels import PROTOS, REFERENCE, STATE, WRENCH, Encoding
+    from rt.recording.cycle import CYCLE_V4, CycleJoiner
+    from rt.recording.writer import STATE_LAYOUT
+
+    protos = PROTOS[Encoding.PROTOBUF]
+    state = protos[STATE].row_encoder(STATE_LAYOUT.fields)
+    wrench = protos[WRENCH].row_encoder([(n, 1) for n in (
+        "t", "fx", "fy", "fz", "tx", "ty", "tz", "stale", "saturated")])
+    ref = protos[REFERENCE].row_encoder([("t", 1), ("force", 3)])
+    suffix = protos[REFERENCE].encode_strings({"phase": "play", "mode": "force"})
+    n = len(sig["state"])
+    flags = np.zeros((n, 2))
+    force = np.zeros((n, 3))
+    force[:, 2] = sig["fz_ref"]
+    wrench_rows = np.column_stack([sig["wrench"], flags])
+    ref_rows = np.column_stack([sig["state"][:, 0], force])
+    joiner = CycleJoiner(3)
+    out = []
+    for k in range(0, n - block, block):
+        parts = (state(sig["state"][k:k + block]), wrench(wrench_rows[k:k + block]),
+                 [r + suffix for r in ref(ref_rows[k:k + block])])
+        keys = np.rint(sig["state"][k:k + block, 0] * 1e6).astype(np.int64).tolist()
+        ts = sig["state"][k:k + block, 0].tolist()
+        t0 = time.perf_counter_ns()
+        for p, encoded in enumerate(parts):
+            for key, t, data in zip(keys, ts, encoded):
+                joiner.add(p, key, t, data)
+        for _, cycle_parts in joiner.ready():
+            CYCLE_V4.encode(cycle_parts)
+        out.append((time.perf_counter_ns() - t0) / 1e3 / block)
+    return out
 
 
 def main() -> int:
@@ -183,7 +225,7 @@ def main() -> int:
                     help="length of the generated stream (s, default %(default)s)")
     ap.add_argument("--from", dest="source", type=Path, default=None,
                     help="take the stream from this recording instead of generating it")
-    ap.add_argument("--encodings", default="json,protobuf-f32,protobuf-v2,protobuf")
+    ap.add_argument("--encodings", default="json,protobuf-f32,protobuf-v2,protobuf-v3,protobuf")
     ap.add_argument("--per-channel", action="store_true",
                     help="also each 1 kHz channel's share (MB/h)")
     ap.add_argument("--flush-interval", default="",
@@ -209,14 +251,17 @@ def main() -> int:
             tag = f"{encoding}-{flush}"
             summary = record_like_a_session(tmp / f"{tag}.mcap", sig, encoding,
                                             flush_interval_s=flush)
-            n = sum(summary["messages"].values())
+            n = summary["mcap_messages"]
+            cycles = len(sig["state"])
             line: dict[str, Any] = {
                 "encoding": encoding, "source": source, "seconds": round(duration, 3),
-                "flush_interval_s": flush, "messages": n,
+                "cycles": cycles, "flush_interval_s": flush, "messages": n,
                 "encode_us": encode_costs(encoding, sig),
                 "writer_cpu_us_per_message": round(summary["writer_us_per_message"], 2),
+                "writer_cpu_us_per_cycle": round(1e6 * summary["writer_busy_s"] / cycles, 2),
                 "bytes_per_message": round(summary["bytes"] / n, 2),
-                "mb_per_hour": mb_h(summary["bytes"])}
+                "mb_per_hour": mb_h(summary["bytes"]),
+                "mb_per_hour_at_1khz": round(summary["bytes"] / cycles * 3.6e6 / 1e6, 1)}
             if args.per_channel:
                 empty = record_like_a_session(tmp / f"{tag}-none.mcap", sig, encoding, (),
                                               flush)["bytes"]

@@ -42,6 +42,8 @@ VARIANTS: dict[str, str] = {
     "f32": "recording in float32 protobuf (the previous encoding)",
     "json": "recording in JSON (before issue 16)",
     "v2": "recording in talus.v2 fixed point (t_us in the payloads, volts in mV)",
+    "v3": "recording in talus.v3 (three 1 kHz channels; the default is talus.v4, one message "
+          "per cycle)",
     "no_recorder": "sessions not recorded (a recorder that drops every message)",
     "no_record_rows": "the pump does not feed the recorder's wrench/reference/ankle channels",
     "no_figures": "the pump computes no session figures (SessionFigures.add skipped)",
@@ -52,11 +54,13 @@ VARIANTS: dict[str, str] = {
     "hold5": "as hold1 with 5 ms",
     "no_gil_hold": "one GIL switch interval (0.2 ms) during cycles too (as no_guard)",
     "no_guard": "the loop shares the GIL by the 0.2 ms switch interval (RtConfig "
-                "gil_guard_us=None: main before branch rtloop3)",
+                "gil_guard_us=None: the default before 2026-11-26)",
     "guard": "the loop's GIL guard: awake 400 µs before each deadline, holding the GIL to the "
-             "cycle's end (RtConfig gil_guard_us=400)",
+             "cycle's end (RtConfig gil_guard_us=400: the default since 2026-11-26)",
     "guard200": "the loop's GIL guard 200 µs before each deadline (RtConfig gil_guard_us)",
     "si50": "a 50 µs GIL switch interval (instead of 200 µs)",
+    "qos": "every CPU's wake-up latency bounded to 0 µs through PM QoS while the loop runs "
+           "(RtConfig cpu_latency_us=0: idle vCPUs poll instead of halting)",
     "unaligned": "telemetry and the session pump on free-running timers (as before branch "
                  "rtloop3), not woken by the loop right after a cycle",
     "no_hb": "the bench client sends no heartbeat while idle (only from the session start)",
@@ -88,10 +92,11 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
         config = config.model_copy(update={"service_priority": 1})
     if "worker_nice10" in tokens:
         ext["sessions"].worker_nice = 10
-    if "f32" in tokens or "json" in tokens or "v2" in tokens:
+    if "f32" in tokens or "json" in tokens or "v2" in tokens or "v3" in tokens:
         writer.SessionRecorder = functools.partial(  # type: ignore[misc]
             writer.SessionRecorder, encoding="json" if "json" in tokens else
-            "protobuf-v2" if "v2" in tokens else "protobuf-f32")
+            "protobuf-v2" if "v2" in tokens else "protobuf-v3" if "v3" in tokens
+            else "protobuf-f32")
     if "no_recorder" in tokens:
         class NullRecorder:
             def __init__(self, path: Any, metadata: Any, **kw: Any) -> None:
@@ -114,6 +119,8 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
         config = config.model_copy(update={"gil_guard_us": 200.0})
     elif "guard" in tokens:
         config = config.model_copy(update={"gil_guard_us": 400.0})
+    if "qos" in tokens:
+        config = config.model_copy(update={"cpu_latency_us": 0})
     if "unaligned" in tokens:
         from rt.engine import loop as loopmod
 

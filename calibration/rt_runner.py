@@ -150,14 +150,23 @@ class RtTrialRunner(TrialRunner):
                 self.daq.place(T_true)
                 params["twin_contact_shm"] = self.daq.wire_name
             acq.start(len(profile_n) * dt + 2.0 * WAIT_MARGIN_S)
+        # Subscribed before the program starts (a PUB/SUB subscription takes a moment to reach
+        # the server), only when someone watches the trial live.
+        live = _LiveTelemetry(self, trial_id, loop_clock=acq is not None) \
+            if self.samples is not None else None
         try:
             started = self.client.run(PROGRAM_NAME, params)
+            if live is not None:
+                live.started()
             deadline = time.monotonic() + float(started["duration_s"]) + WAIT_MARGIN_S
             while not out.exists():
                 if time.monotonic() > deadline:
                     raise HardwareError(f"trial {trial_id}: the RT process wrote no recording "
                                         f"within {started['duration_s'] + WAIT_MARGIN_S:.0f} s")
-                time.sleep(POLL_S)
+                if live is not None:
+                    live.pump(POLL_S)
+                else:
+                    time.sleep(POLL_S)
         except BaseException:
             if acq is not None and acq.running:
                 try:
@@ -165,6 +174,9 @@ class RtTrialRunner(TrialRunner):
                 except HardwareError:
                     pass      # the trial failed already; that failure is the one to report
             raise
+        finally:
+            if live is not None:
+                live.close()
         plate_scans = acq.stop() if acq is not None else None
         with np.load(out, allow_pickle=False) as z:
             robot, contact = z["robot"], z["contact"]
@@ -294,3 +306,54 @@ def trial_from_acquisition(trial_id: str, model: RobotModel, robot: np.ndarray,
                      np.asarray(channels, float), registered.T_BF,
                      registered.sigma_translation_m, registered.sigma_rotation_rad,
                      TOOL_LENGTH_M)
+
+
+class _LiveTelemetry:
+    """A running trial's samples as the RT process's telemetry shows them (≈ 60 per second),
+    handed to the runner's :attr:`~calibration.trial.TrialRunner.samples` block by block on the
+    runner's thread while the trial runs; the trial's file, written at its end, is the record.
+
+    On the file's clock, within one telemetry period (≈ 17 ms): with the plate's DAQ the file
+    keeps the loop's own clock (:func:`trial_from_acquisition`), and so do these samples; on
+    the twin plate the file starts at the program's first played cycle with the runner's
+    offset added (:func:`_common_instants`, ``trial_from_rows``), and these samples start at
+    the first telemetry of the played phase."""
+
+    def __init__(self, runner: RtTrialRunner, trial_id: str, loop_clock: bool) -> None:
+        self.runner = runner
+        self.trial_id = trial_id
+        self.loop_clock = loop_clock
+        self.sub = runner.client.subscribe(["telemetry"])
+        self._running = False
+        self._t_first: float | None = None
+
+    def started(self) -> None:
+        """The program was requested: samples from now on are the trial's."""
+        while self.sub.recv(0.0) is not None:      # what was published before it
+            pass
+        self._running = True
+
+    def pump(self, seconds: float) -> None:
+        """Receive for ``seconds``, then publish what arrived as one block."""
+        end = time.monotonic() + seconds
+        t, ref, fz = [], [], []
+        while True:
+            msg = self.sub.recv(max(0.0, end - time.monotonic()))
+            if msg is None:
+                break
+            force_n, t_loop = msg.get("force_n"), msg.get("t")
+            if not self._running or force_n is None or t_loop is None:
+                continue                          # the ATI has no reading yet
+            if not self.loop_clock and msg.get("phase") != "play":
+                continue                          # the twin plate's file holds the play only
+            if self._t_first is None:
+                self._t_first = float(t_loop)
+            t.append(float(t_loop) if self.loop_clock
+                     else float(t_loop) - self._t_first + self.runner._t_offset)
+            ref.append(float(msg.get("force_ref_n") or 0.0))
+            fz.append(-float(force_n))            # the ATI's S-axis z (force_n is −Fz)
+        if t:
+            self.runner.publish(self.trial_id, np.array(t), np.array(ref), np.array(fz))
+
+    def close(self) -> None:
+        self.sub.close()

@@ -136,7 +136,8 @@ class TrialRunner(abc.ABC):
     #: Robot time spent in trials so far (s), for the campaign's length figure.
     robot_time_s: float = 0.0
     #: Where the running trial's samples go while it runs (:class:`LiveSamples`; None:
-    #: nowhere). Runners that record in this process publish them; the others publish none.
+    #: nowhere). Every runner publishes them: those that record in this process every sample,
+    #: the RT process's runner its telemetry's (≈ 60 per second).
     samples: SampleSink | None = None
 
     def publish(self, trial_id: str, t_robot: np.ndarray, force_ref: np.ndarray,

@@ -36,6 +36,7 @@ from rt.position_loop import build_protocol_loop, sim_devices
 from rt.safety.events import Reaction
 from rt.safety.limits import PatientLimits, RobotLimits
 from rt.twin.environment import ForcePlateContact
+from rt.twin.realism import RigImperfections
 from rt.twin.twin import SimClock, Twin
 
 RATE_HZ = 1000.0
@@ -166,8 +167,11 @@ class TwinTrialRunner(TrialRunner):
                  registration: str = "camera", seed: int = 0,
                  model: RobotModel | None = None,
                  level_sigma_rad: float | None = math.radians(0.1),
-                 moves: _SiteMoves | None = None) -> None:
+                 moves: _SiteMoves | None = None,
+                 imperfections: RigImperfections | None = None) -> None:
+        """``imperfections``: the robot twin's rig effects (None: the default twin's)."""
         self.plate = plate
+        self.imperfections = imperfections
         self.twin_plate = twin_plate
         self.model = model or RobotModel.load()
         self.seed = seed
@@ -189,7 +193,8 @@ class TwinTrialRunner(TrialRunner):
                                 tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
                                 friction_coefficient=TIP_FRICTION_COEFFICIENT)
         clock = SimClock()
-        twin = Twin(model.description, env, seed=self.seed + len(trial_id), clock=clock)
+        twin = Twin(model.description, env, seed=self.seed + len(trial_id), clock=clock,
+                    imperfections=self.imperfections)
         twin.place(q0)
         gen = ForceTableGenerator(trial_id, profile_n, pose, dt, model.kin, tilt_rad)
         report = gen.validate()

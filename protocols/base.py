@@ -356,6 +356,18 @@ class ForceGenerator(TableGenerator):
     mode = Mode.FORCE
     _block_id = BLOCK_FORCE
 
+    def force_at(self, index: int, out: np.ndarray) -> None:
+        """F_d (N) and Ḟ_d (N/s) of sample ``index`` (clamped to the table) into ``out[0:2]``:
+        the whole reference is known before it plays, so the loop can read it ahead
+        (``rt.references.program.ForcePreview``)."""
+        table = self._table
+        if table.shape[0] == 0:                 # not validated: nothing plays either
+            out[0] = out[1] = 0.0
+            return
+        k = min(max(index, 0), table.shape[0] - 1)
+        out[0] = table[k, 0]
+        out[1] = table[k, 1]
+
     def _hold_pose(self, report: ValidationReport) -> bool:
         pose = self.protocol.pose  # type: ignore[union-attr]
         roll, pitch = math.radians(pose.roll_deg), math.radians(pose.pitch_deg)

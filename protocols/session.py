@@ -253,6 +253,8 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
         "peak_platform_force_n": summary["peak_force_n"],
         "min_platform_force_n": summary["min_force_n"],
         "rms_error_pct": summary["rms_error_pct"],
+        # Where the protocol was beyond the robot (the drives at their limit), even briefly.
+        "at_robot_limit": figures.at_limit(1.0 / RATE_HZ),
     }
     holds = summary.get("ankle", {}).get("torque_holds")
     if holds is not None:
@@ -315,6 +317,8 @@ def run_session(setup: SessionSetup, record: Path | None = None,
             meta["ankle"] = setup.ankle.model_dump()   # where the ankle centre was
         recorder = SessionRecorder(record, meta, force=force, inputs=inputs)
         recorder.attach_state_ring(pl.recorder, start=0)
+        # The pump gives these for every cycle: talus.v4 joins them with the state.
+        recorder.expect("/robot/wrench", "/protocol/reference")
         pl.events.listener = recorder.event
         ankle = None if setup.ankle is None else AnkleMonitor(model.kin, setup.ankle,
                                                               start_pose(gen))

@@ -93,3 +93,9 @@ def print_summary(s: dict) -> None:
     pre = s["preflight"]
     w(f"  pre-flight peaks  actuator {pre['peak_actuator_force_n']:.0f} N, slider "
       f"{pre['peak_slider_speed_m_s'] * 1e3:.0f} mm/s\n")
+    for lim in pre.get("at_robot_limit") or ():
+        # Beyond the robot, if briefly: the force there is what the drives give, not the
+        # protocol's.
+        w(f"  beyond the robot  {lim['what']} {lim['peak']:.4g} {lim['unit']} asked, limit "
+          f"{lim['limit']:g} {lim['unit']}, {lim['longest_s'] * 1e3:.0f} ms from t = "
+          f"{lim['from_s']:.3f} s\n")

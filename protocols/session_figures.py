@@ -412,6 +412,21 @@ class SessionFigures:
                            "allowed)")
         return out
 
+    def at_limit(self, dt: float | None = None) -> list[dict[str, Any]]:
+        """Where the protocol asked more than the robot gives, however briefly (a heel strike
+        asks 2.7-3 kN of ≈ 2 kN drives for a few ms): per limit reached, its longest stretch
+        (s), when it began (s) and the peak asked, so the clinician sees it even when it is
+        short enough to be allowed (:meth:`saturation` refuses the long ones)."""
+        dt = self.dt if dt is None else dt
+        out = []
+        for what, limit, unit in (("actuator force", self.robot.max_actuator_force_n, "N"),
+                                  ("drive command", self.robot.max_command_v, "V")):
+            _, _, longest, t0, peak = self._runs[what]
+            if longest > 0:
+                out.append({"what": what, "limit": limit, "unit": unit,
+                            "longest_s": longest * dt, "from_s": t0, "peak": peak})
+        return out
+
     def unloading(self) -> list[str]:
         """The force in contact below the preload (less the sensor's noise), if it happened."""
         f, t = self._min_contact

@@ -35,7 +35,7 @@ from protocols.session_figures import (
 )
 from reports.decimate import Envelope, EnvelopeDecimator
 from reports.inputs import ReportInputError
-from rt.recording.channels import ANKLE, EVENTS, METADATA, REFERENCE, STATE, WRENCH
+from rt.recording.channels import ANKLE, CYCLE, EVENTS, METADATA, REFERENCE, STATE, WRENCH
 from rt.recording.reader import RecordingScan
 
 #: The lead's end-of-session message: the summary dict (incl. ``preflight``, ``stops``, ``rt``).
@@ -325,7 +325,8 @@ def session_input_from_recording(path: str | os.PathLike[str], robot: Any = None
     amplitude = params.get("amplitude_n")
     rate_hz = 1000.0
     for ch in scan.channels.values():
-        if ch.topic == STATE and "rate_hz" in ch.metadata:
+        # talus.v4 records the state inside /robot/cycle, whose metadata carries the rate.
+        if ch.topic in (STATE, CYCLE) and "rate_hz" in ch.metadata:
             try:
                 rate_hz = float(ch.metadata["rate_hz"])
             except ValueError:

@@ -217,11 +217,17 @@ def build_protocol_loop(devices: Devices, program: Program | None = None,
     model = model or RobotModel.load()
     reference = ProgramReference("reference", model.description.limits.stroke,
                                  1.0 / rate_hz, program)
+    force_law = ExplicitForce(model, force_gains)
+    # The force law's preview, in the loop's samples: the sequencer reads a program known in
+    # advance this far ahead for it.
+    reference.preview_steps = round(force_law.gains.preview_s * rate_hz)
     return _assemble(
         devices, model, reference,
         lambda sup: HybridController("controller", create(controller, model, gains),
-                                     ExplicitForce(model, force_gains), sup),
-        [("reference.force", "controller.force"), ("reference.pose", "controller.pose"),
+                                     force_law, sup),
+        [("reference.force", "controller.force"),
+         ("reference.force_preview", "controller.force_preview"),
+         ("reference.pose", "controller.pose"),
          ("reference.ctrl_mode", "controller.ctrl_mode"), ("force.wrench", "controller.wrench")],
         rate_hz, mode, robot_limits, patient_limits, protocol_limits, extra_blocks,
         extra_connections, loop_kwargs)

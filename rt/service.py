@@ -81,6 +81,8 @@ log = logging.getLogger(__name__)
 
 #: The robot counts as at rest below this slider speed (m/s): 1 mm/s.
 REST_SPEED_M_S = 1e-3
+#: Window over which the encoders' positions judge "at rest" when the estimator failed (s).
+REST_WINDOW_S = 0.1
 #: Longest pre-flight the IPC client waits for before its session_start reply is an error (s).
 SESSION_START_TIMEOUT_S = 120.0
 #: How long a stopping RT process lets a running session abort and come to rest (s).
@@ -163,12 +165,19 @@ class RtConfig(BaseModel):
     #: The loop takes the GIL back this long before each deadline and keeps it, sleeping in C,
     #: until its cycle has run (µs; realtime mode). The RT process's other threads (IPC,
     #: telemetry, sessions, the recorder) then run Python only between a cycle's end and the
-    #: next guard, and cannot stretch a cycle. None (the default until a quiet machine shows it
-    #: helps: ``bench/rt_deadlines.py --variants base,guard``): the loop shares the GIL by the
-    #: 0.2 ms switch interval. Hazard, why it is not the default yet: a thread forced off the
-    #: GIL as the loop wakes may ask for it again with the short interval and take it at the
+    #: next guard, and cannot stretch a cycle. None: the loop shares the GIL by the 0.2 ms
+    #: switch interval. The default since the quiet machine's 5 interleaved pairs
+    #: (``bench/rt_deadlines.py --variants base,guard --reps 5``; docs/worklog/2026-11-26):
+    #: session misses 68 against 102 per 1000 (medians), fewer in every phase, sessions
+    #: soft-stopped by ``deadline_overruns`` 2 of 5 against 3 of 5. Known hazard, measured in
+    #: those figures: a thread forced off the GIL as the loop wakes may take it back at the
     #: guard's end, and the loop then waits ``GIL_HOLD_S`` (closing note of branch rtloop3).
-    gil_guard_us: float | None = Field(default=None, ge=0.0, le=500.0)
+    gil_guard_us: float | None = Field(default=400.0, ge=0.0, le=500.0)
+    #: Bound on every CPU's wake-up latency while the loop runs, through the kernel's PM QoS
+    #: (µs; 0: idle CPUs poll rather than halt; realtime mode; ``rt_hygiene``): an idle vCPU
+    #: otherwise halts and the loop's wake-up waits for the host to run it again. None: not
+    #: requested.
+    cpu_latency_us: int | None = Field(default=None, ge=0, le=10_000)
 
     def limits_of_robot(self) -> RobotLimits:
         return self.robot_limits.model_copy(
@@ -309,8 +318,35 @@ class RtService:
         return self._owner_age() > self.config.heartbeat_timeout_s
 
     def _at_rest(self) -> bool:
+        if self.pl.reference.busy:
+            return False
+        if "estimator" in self.pl.graph.failed:
+            return self._still_by_encoders()
         qd = self.pl.graph.output("estimator.qd")
-        return not self.pl.reference.busy and bool(np.all(np.abs(qd) < REST_SPEED_M_S))
+        return bool(np.all(np.abs(qd) < REST_SPEED_M_S))
+
+    def _still_by_encoders(self) -> bool:
+        """At rest judged without the estimator, which a fault took out of the loop: its q̇
+        stays what it was when it failed, possibly a speed, and a lost owner's robot could
+        then never be taken over (nor reset) without restarting the RT process. The encoders'
+        positions, as the recorder tap kept them every cycle since, moved less than
+        ``REST_SPEED_M_S`` × ``REST_WINDOW_S`` over the last ``REST_WINDOW_S``. Not judged (not
+        at rest) when the encoders or the tap failed too, or fewer cycles than the window ran
+        since the estimator failed: nothing measured says it stands still."""
+        g = self.pl.graph
+        if "encoders" in g.failed or "recorder" in g.failed:
+            return False
+        rec = self.pl.recorder
+        n = max(2, round(REST_WINDOW_S * self.config.rate_hz))
+        failed_t = max((f.t for f in g.faults() if f.slot == "estimator"), default=None)
+        written = rec.written
+        if failed_t is None or written < n or n > rec.capacity:
+            return False
+        rows = rec.ring[np.arange(written - n, written) % rec.capacity]
+        if rows[0, 0] <= failed_t:             # the window must lie after the failure
+            return False
+        q = rows[:, 1:4]                       # the tap's layout: t, q[3], qd, q_ref, tau, V
+        return bool(np.all(q.max(axis=0) - q.min(axis=0) < REST_SPEED_M_S * REST_WINDOW_S))
 
     def _require_owner(self, client: str, what: str) -> None:
         if self.owner.client != client:
@@ -740,6 +776,8 @@ class RtService:
         self._recorder = recorder
         self._tap_start = self.tap.written
         recorder.attach_state_ring(pl.recorder, start=pl.recorder.written)
+        # The pump gives these for every cycle: talus.v4 joins them with the state.
+        recorder.expect("/robot/wrench", "/protocol/reference")
         pl.events.listener = self._event_listener(recorder)
         strap = None
         if pl.twin is not None and self.config.session_environment == "patient_foot":
@@ -954,6 +992,8 @@ def build_rt_loop(config: RtConfig) -> tuple[PositionLoop, SignalTap]:
         "extra_blocks": [tap],
         **({} if config.gil_guard_us is None or config.loop_mode != "realtime" else
            {"gil_hold_s": GIL_HOLD_S, "gil_guard_us": config.gil_guard_us}),
+        **({} if config.cpu_latency_us is None or config.loop_mode != "realtime" else
+           {"cpu_latency_us": config.cpu_latency_us}),
         "extra_connections": [(src, f"session.{name}") for name, src in SESSION_SOURCES.items()]}
     if config.loop_mode == "fast" and config.backend != "sim":
         raise ConfigurationError("loop_mode fast is for the in-process twin (backend sim) only")
@@ -1015,6 +1055,8 @@ def _serve(config: RtConfig, stop_event: threading.Event, ready: Callable | None
         check_server_endpoint(config.endpoint, None)
         check_server_endpoint(config.pub_endpoint, None)
     pl, tap = build_rt_loop(config)
+    if pl.twin is not None and config.loop_mode == "realtime":
+        pl.twin.warm_session_paths()   # no kernel loads in a cycle at a session's foot strap
     warm = getattr(sessions, "warm", None)
     if warm is not None:
         warm(pl.model.description)   # the pre-flight worker starts while the loop does

@@ -6,6 +6,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from rt.benchmarks.tracking import run_experiment
 
 
@@ -56,6 +58,18 @@ def test_thesis_profile_at_100_hz_keeps_the_shape_and_the_fig50_ordering():
     # law's does not.
     assert pp["period2"]["mean_abs_m"] > 3 * pp["period1"]["mean_abs_m"]
     assert pp["period2"]["mean_abs_m"] > 3 * ad["period2"]["mean_abs_m"]
+    # The gains each law ran with are reported: the 100 Hz rule's (ζ = 1 on the 211 kg axis).
+    g = out["gains"]["paden_panja"]
+    assert g["kd_n_s_per_m"] == pytest.approx(0.28 * 210.68 * 100.0, rel=1e-3)
+    assert g["kp_n_per_m"] == pytest.approx(g["kd_n_s_per_m"] ** 2 / (4 * 210.68), rel=1e-3)
+    # Period 2 is statics: the model's 100 kg over Kp (327 N / 41.3 kN/m). The twin's 3 s of
+    # period 2 include the ~0.4 s settling (ζ = 1, ωn 14 rad/s): 0.93 of the statics measured
+    # (0.985 over the full 13 s).
+    st = out["p2_statics"]
+    assert st["kp_n_per_m"] == g["kp_n_per_m"]
+    assert st["model_error_mean_abs_n"] == pytest.approx(100.0 * 9.81 / 3, rel=0.01)
+    assert 0.85 < pp["period2"]["mean_abs_m"] / st["mean_abs_m"] < 1.02
+    assert st["kp_for_thesis_n_per_m"] == pytest.approx(st["model_error_mean_abs_n"] / 2.809e-3)
 
 
 def test_bench_tracking_refuses_bad_options():
@@ -63,3 +77,20 @@ def test_bench_tracking_refuses_bad_options():
                            "thesis", "--rate", "50"],
                            check=False, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "--rate" in proc.stderr
+
+
+def test_the_table_explains_period_two_by_its_statics():
+    from rt.benchmarks.tracking import THESIS, table
+
+    m = {"period1": {"mean_abs_m": 1.4e-4, "rms_m": 1.8e-4},
+         "period2": {"mean_abs_m": 7.8e-3, "rms_m": 8.0e-3}, "peak_abs_m": 1.1e-2}
+    r = {"experiment": "parameter-step", "rate_hz": 100.0, "controllers": {"paden_panja": m},
+         "thesis": THESIS["parameter-step"],
+         "p2_statics": {"kp_n_per_m": 41293.0, "model_error_mean_abs_n": 327.0,
+                        "mean_abs_m": 327.0 / 41293.0, "kp_for_thesis_n_per_m": 327.0 / 2.809e-3}}
+    text = table([r])
+    assert "p2 mean        7.800      2.809   2.78" in text
+    assert ("p2 statics: |Δτ| 327 N / Kp 41.3 kN/m = 7.919 mm; the thesis's 2.809 mm needs Kp "
+            "116 kN/m (2.82×" in text)
+    del r["p2_statics"]
+    assert "statics" not in table([r])

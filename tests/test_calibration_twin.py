@@ -89,12 +89,19 @@ def test_a_shear_push_loads_the_plate_sideways_through_static_friction(plate) ->
     """A shear push (load at the level pose, then a 1.5° roll under load): the tip, stuck to the
     plate, is dragged sideways; the plate (exactly linear truth) and the ATI reference agree on
     a shear of hundreds of newtons, bounded by the friction cone — the Fx/Fy excitation a
-    tilted push alone does not give (the tip then only moves vertically)."""
+    tilted push alone does not give (the tip then only moves vertically).
+
+    The robot twin without its amplifier offsets: with them the hybrid force loop falls into a
+    limit cycle during the roll against the stuck tip (the ATI bouncing 0-1.4 kN), which
+    ``tests/test_calibration_frozen_encoder.py``'s strict xfail tracks; this test is about the
+    plate's shear, not that loop (issue 15)."""
     from calibration.plan import expand, tilt_profile, trial_pose
     from calibration.push import TIP_FRICTION_COEFFICIENT
+    from rt.twin.realism import RigImperfections
 
     truth = draw_truth(plate, TruthSettings.ideal())
-    runner = TwinTrialRunner(plate, TwinPlate(plate, truth), registration="nominal", seed=4)
+    runner = TwinTrialRunner(plate, TwinPlate(plate, truth), registration="nominal", seed=4,
+                             imperfections=RigImperfections(amplifier_offset_v=0.0))
     plan = default_plan(shear=[{"roll_deg": 1.5, "load_n": 600.0}], baseline_s=0.5)
     trial = next(t for t in expand(plan, plate.size_m) if t.profile == ProfileKind.SHEAR)
     profile, tilt = force_profile(plan, trial, 1e-3), tilt_profile(plan, trial, 1e-3)

@@ -352,6 +352,29 @@ class _PythonForceHold:
         return 1 if out.done else 0
 
 
+class _PythonForcePreview(_PythonForceHold):
+    """The same program known in advance (a ``ForcePreview``): its force can be read ahead."""
+
+    def _force(self, k: int) -> tuple[float, float]:
+        return 250.0 + 40.0 * math.sin(0.004 * k), 160.0 * math.cos(0.004 * k)
+
+    def update(self, out, inp=None) -> int:
+        from rt.references.program import Mode
+
+        out.q_ref[:] = self.q
+        out.qd_ref[:] = 0.0
+        out.qdd_ref[:] = 0.0
+        out.buf[15], out.buf[16] = self._force(self.k)
+        out.mode = Mode.FORCE
+        out.index = self.k
+        out.done = self.k >= self.n - 1
+        self.k = min(self.k + 1, self.n - 1)
+        return 1 if out.done else 0
+
+    def force_at(self, index: int, out) -> None:
+        out[0], out[1] = self._force(min(max(index, 0), self.n - 1))
+
+
 class _Twins:
     """A compiled and an interpreted sequencer on the same input buffers (q_meas, the
     supervisor's mode, the wrench, the force reader's tare answering the compiled one's
@@ -520,6 +543,61 @@ def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -
     assert h.k > 10_000
     played = h.k - h.interpreted_cycles
     assert played > 0.4 * h.k, (played, h.k)
+
+    # The force law's preview (gait4): a force program known in advance is read ahead
+    # (``force_preview``); the compiled cycle hands its PLAY to the interpreted read-ahead, and
+    # every output, ``force_preview`` included, is still the interpreted sequencer's bit for
+    # bit, through the play, its last sample, a soft stop mid-play and the return.
+    from rt.references import sequencer_kernel as sk
+    from rt.references.program import ForcePreview
+
+    for r in h.refs:
+        r.preview_steps = 5
+    h.wrench[2] = -3.9
+    preview = h.refs[0].force_preview.data
+    force = h.refs[0].force.data
+    ahead = 0
+
+    def count_ahead(cycles: int) -> int:
+        n = 0
+        for _ in range(cycles):
+            h.step()
+            n += int(not np.array_equal(preview, force))
+        return n
+
+    h.request(sine, rest_q=tuple(q_mid))
+    assert isinstance(h.refs[0]._pending.program, ForcePreview)
+    h.until(Phase.PLAY)
+    assert h.refs[0]._seq[sk.S_PREVIEW] == 1.0
+    before = h.interpreted_cycles
+    ahead += count_ahead(500)
+    assert h.interpreted_cycles - before == 500            # PLAY read ahead: interpreted
+    for _ in range(10_000):
+        if Phase(int(h.refs[0].phase.data[0])) == Phase.REST:
+            break
+        ahead += int(not np.array_equal(preview, force))
+        h.step()
+    assert Phase(int(h.refs[0].phase.data[0])) == Phase.REST
+    h.run(5)
+    assert np.array_equal(preview, force)                  # no preview at rest
+    # A Python program known in advance (its samples called each cycle), soft-stopped.
+    start = h.q.copy()
+    h.request(lambda: _PythonForcePreview(start, 1.0))
+    h.until(Phase.PLAY)
+    ahead += count_ahead(400)
+    h.mode[0] = SupervisorMode.SOFT_STOP
+    h.run(1500)
+    h.mode[0] = SupervisorMode.RUN
+    h.run(10)
+    assert ahead > 1500, ahead                             # the read-ahead really ran
+    # Without a preview (0 steps) the same program plays compiled again, preview = force.
+    for r in h.refs:
+        r.preview_steps = 0
+    h.request(sine)
+    h.until(Phase.PLAY)
+    before = h.interpreted_cycles
+    assert count_ahead(300) == 0
+    assert h.interpreted_cycles == before                  # steady PLAY: the kernel's
 
 
 def test_a_signal_taps_compiled_row_is_the_signals_in_order() -> None:

@@ -9,7 +9,8 @@ from rt.safety.fault_matrix import run_scenario, scenarios
 MODEL = RobotModel.load()
 SCENARIOS = {sc.name: sc for sc in scenarios(MODEL)}
 EXPECTED = {
-    "encoder_freeze": "hard_stop", "encoder_jump": "hard_stop", "encoder_noise": "hard_stop",
+    "encoder_freeze": "hard_stop", "encoder_freeze_contact": "hard_stop",
+    "encoder_jump": "hard_stop", "encoder_noise": "hard_stop",
     "dac_dead": "failover", "dac_stuck": "failover", "ati_dropout": "warn", "ati_stale": "warn",
     "ati_saturation": "soft_stop", "latency": "hard_stop", "hardware_estop": "hard_stop",
     "hand_stop": "soft_stop", "gui_estop": "hard_stop", "client_loss": "soft_stop",
@@ -32,6 +33,9 @@ def test_fault_is_caught_within_its_targets(name):
     r = run_scenario(SCENARIOS[name], MODEL)
     assert r["detected"], r
     assert r["reaction"] == EXPECTED[name], r
+    if name.startswith("encoder_freeze"):
+        # The frozen encoder itself, free or with the foot on (and nothing tripped before it).
+        assert r["cause"] == "encoder_frozen_0", r
     if r["reaction"] == "hard_stop":
         # Hard stop: zero drive output within 20 ms of the fault (issue 5).
         assert r["time_to_zero_output_ms"] is not None and r["time_to_zero_output_ms"] <= 20.0

@@ -142,6 +142,13 @@ def _bench():
     return module
 
 
+#: Each file's (first plate's) force RMS error bound, % of the peak: the figure measured on the
+#: twin (type2 2.48, type4 2.45, type3 0.37, functional_walk 3.22, eb015pi 0.33) with margin.
+RMS_BOUND_PCT = {"type2_vicon.c3d": 2.8, "type4_vicon.c3d": 2.8, "type3_kistler_fp1.c3d": 0.6,
+                 "functional_walk.c3d": 3.5, "eb015pi_offset.c3d": 0.6}
+HEEL_STRIKES = {"type2_vicon.c3d", "type4_vicon.c3d", "functional_walk.c3d"}
+
+
 @pytest.mark.parametrize("name", ["type2_vicon.c3d", "type4_vicon.c3d", "type3_kistler_fp1.c3d",
                                   "functional_walk.c3d", "eb015pi_offset.c3d"])
 def test_each_real_file_replays_on_the_twin_without_pulling(tmp_path, name):
@@ -157,9 +164,21 @@ def test_each_real_file_replays_on_the_twin_without_pulling(tmp_path, name):
     s = run_session(SessionSetup(path, patient_weight_kg=bench.PATIENT_KG), tmp_path / "g.mcap")
     assert s["completed"] and s["stops"] == [], s["stops"]
     assert s["min_force_n"] >= 0.0
-    # Twin figure: heel strikes rise by 0.5 BW in ~5 ms, beyond what the actuators can follow;
-    # the slow 200 Hz and quasi-static records track within 1 %.
-    assert s["rms_error_pct"] <= 6.0
+    # Twin figures (bench/gait_files.py --in-process; deterministic): heel strikes rise by
+    # 0.5 BW in ~5 ms, beyond what the actuators can follow. The force law's preview and its
+    # integral held through such a rise took them from 3.9-4.5 % to 2.4-3.2 % of the peak
+    # (functional_walk plate 0 is the one still above the 3 % target: its toe off is slowed by
+    # the unloading governor); the slow 200 Hz and quasi-static records track within 0.4 %.
+    assert s["rms_error_pct"] <= RMS_BOUND_PCT[name], s["rms_error_pct"]
+    # Where the protocol was beyond the robot is reported, not hidden: the heel strikes ask
+    # the drives more than their ≈ 2 kN for a few ms (allowed: under 20 ms).
+    beyond = {b["what"]: b for b in s["preflight"]["at_robot_limit"]}
+    if name in HEEL_STRIKES:
+        hit = beyond["actuator force"]
+        assert hit["peak"] > hit["limit"] == 2000.0 and 0.0 < hit["longest_s"] <= 0.02
+        assert 0.0 < hit["from_s"] < s["duration_s"]
+    else:
+        assert beyond == {}
     src = s["source"]
     assert src["source_sha256"] == hashlib.sha256((DATA / name).read_bytes()).hexdigest()
     assert src["plate_index"] == case.plate and src["scale_factor"] > 0.0

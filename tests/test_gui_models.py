@@ -92,3 +92,18 @@ def test_record_instants_read_in_local_time(monkeypatch):
     finally:
         monkeypatch.undo()
         time.tzset()
+
+
+def test_every_cause_the_robot_reports_has_a_clinicians_words(qapp):
+    """Every cause the supervisor, the drives' failover and the loop's components can latch
+    is shown in words, never as its internal name."""
+    from app.words import cause_words
+    from rt.safety.supervisor import CAUSES
+
+    others = ["estop_gui", "estop_keyboard", "estop_cli", "stop_client", "heartbeat_lost",
+              "component_failed", "dac_card_0", "dac_card_1"]
+    for cause in (*CAUSES, *others):
+        words = cause_words(cause)
+        assert words != cause and "_" not in words, cause
+    assert cause_words("dac_card_1") == "motor drive card 2 failed; the spare card took over"
+    assert cause_words("estop_pedal") == "E-STOP (pedal)"

@@ -45,7 +45,8 @@ def _fv(recording, filtering, monkeypatch):
     # The truth here has the model's own friction (no Stribeck region): every sample counts.
     monkeypatch.setattr(E, "MIN_SPEED_M_S", 0.0)
     reg = Regressor(RobotModel.load().dyn)
-    est = estimate_base(reg, prepare(*recording, RATE_HZ, filtering=filtering))
+    # The forces are sampled at the positions' instants, not commands held by a DAC.
+    est = estimate_base(reg, prepare(*recording, RATE_HZ, filtering=filtering, held=False))
     truth = Regressor(RobotModel.from_description(default_truth()).dyn).theta_base()
     idx = [est.names.index(f"fv{i}") for i in range(3)]
     return est.theta[idx], est.sigma[idx], truth[idx]

@@ -5,6 +5,8 @@ import json
 import subprocess
 import sys
 
+import numpy as np
+
 from rt.model import RobotModel
 from rt.model.description import load_description
 
@@ -22,6 +24,26 @@ def test_identify_writes_a_loadable_description_and_refuses_to_overwrite(tmp_pat
     assert all(b["sigma"] >= 0.0 for b in result["base"])
     v = result["validation"]
     assert v["identified"]["rms_pct_of_peak"] < v["nominal"]["rms_pct_of_peak"]
+    assert v["identified"]["rms_pct_of_peak"] < 5.0                 # issue 15's target
+    # Issue 15 on the realistic twin (compliant, backlashed screw with split friction, its
+    # ripple per revolution, amplifier lag, warming grease): the rotor inertias and friction
+    # within 5 % of the truth, and within 4 σ + 1 %: σ is statistical only, and 1 % allows
+    # for the two biases measured and left in (the amplifier's current-loop lag beyond the
+    # held half period and the grease warming during the run: ≤ 0.8 % together on the 40 s
+    # figure in the ident4 closing note). Before the twin's coupled Coulomb step and
+    # the estimator's ripple columns fv was −4.8…−9.6 %.
+    base = {b["name"]: b for b in result["base"]}
+    for name in [f"{p}{i}" for p in ("Jr", "fv", "fc") for i in range(3)]:
+        b = base[name]
+        assert b["rel_error"] < 0.05, (name, b)
+        assert abs(b["estimate"] - b["truth"]) <= (4.0 * b["sigma"]
+                                                   + 0.01 * abs(b["truth"])), (name, b)
+    # The screw's friction ripple it estimated: the twin's ±8 % of the Coulomb level
+    # (5-6 N) within 20 %.
+    from rt.twin.realism import RigImperfections, default_truth
+
+    want = RigImperfections().friction_ripple * np.array(default_truth().friction.coulomb_axes)
+    np.testing.assert_allclose(result["friction_ripple_n"], want, rtol=0.2)
     # The file exists now: a second run without --force is refused and changes nothing.
     before = out.read_bytes()
     proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=120)

@@ -35,6 +35,10 @@ def test_offset_drives_current_with_a_zero_command_only_while_enabled():
 def test_the_ideal_twin_has_no_offset():
     assert RigImperfections.none().ideal
     assert np.all(RigImperfections.none().amplifier_offsets_v() == 0.0)
-    # Off by default until the supervisor's contact-onset judgement is fixed (realism.py).
-    assert np.all(RigImperfections().amplifier_offsets_v() == 0.0)
-    assert np.any(RigImperfections(amplifier_offset_v=0.015).amplifier_offsets_v() != 0.0)
+    # On by default: ±15 mV per axis (the PCI-1720's zero error plus an amplifier's residual
+    # offset after trim), seeded, so every default twin carries the same offsets.
+    default = RigImperfections().amplifier_offsets_v()
+    assert RigImperfections().amplifier_offset_v == 0.015
+    assert np.all(np.abs(default) <= 0.015) and np.all(default != 0.0)
+    assert np.array_equal(default, RigImperfections(amplifier_offset_v=0.015)
+                          .amplifier_offsets_v())

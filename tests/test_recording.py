@@ -22,7 +22,16 @@ import pytest
 from rt.components.blocks import RecorderTap
 from rt.errors import InputError
 from rt.recording import writer as writer_mod
-from rt.recording.channels import CHANNELS, EVENTS, METADATA, REFERENCE, STATE, WRENCH, log_time_ns
+from rt.recording.channels import (
+    CHANNELS,
+    CYCLE,
+    EVENTS,
+    METADATA,
+    REFERENCE,
+    STATE,
+    WRENCH,
+    log_time_ns,
+)
 from rt.recording.reader import (
     RecordingFileError,
     RecordingScan,
@@ -57,6 +66,9 @@ def synthetic_row(k: int) -> list[float]:
 #: Fixed-point quanta of today's encoding (rt.recording.channels): positions and speeds in
 #: µm and µm/s, forces in mN, torques in mN·m; volts are the DAC's codes (:func:`dac`).
 UM, MN = 1e-6, 1e-3
+#: talus.v4's quanta of the velocity and the actuator forces (rt.recording.channels:
+#: V4_SPEED_QUANTUM_M_S, V4_TAU_QUANTUM_N; the ATI's: 1/16 N, 2 mN·m).
+QD4, TAU4 = 1e-4, 0.1
 
 
 def dac(values: list[float]) -> list[float]:
@@ -139,13 +151,13 @@ def test_round_trip_counts_and_exact_values(session: dict) -> None:
         assert m["t"] == row[0]                   # whole µs: exact
         # Fixed point: the nearest count of each field's quantum (channels.py says why each
         # quantum is below its sensor's or actuator's resolution).
-        assert m["q"] == fixed(row[1:4], UM) and m["qd"] == fixed(row[4:7], UM)
+        assert m["q"] == fixed(row[1:4], UM) and m["qd"] == fixed(row[4:7], QD4)
         assert m["q_ref"] == fixed(row[7:10], UM)
-        assert m["tau"] == fixed(row[10:13], MN) and m["volts"] == dac(row[13:16])
+        assert m["tau"] == fixed(row[10:13], TAU4) and m["volts"] == dac(row[13:16])
         assert "qd_ref" not in m                  # optional, not recorded
     assert [m["t"] for m in data[STATE]] == [k / RATE_HZ for k in range(N_ROWS)]
     assert len(data[WRENCH]) == N_ROWS
-    assert data[WRENCH][10] == {"t": 0.01, "fx": 1.01, "fy": -2.0, "fz": 6.0, "tx": 0.1,
+    assert data[WRENCH][10] == {"t": 0.01, "fx": 1.0, "fy": -2.0, "fz": 6.0, "tx": 0.1,
                                 "ty": -0.2, "tz": 0.3, "stale": True, "saturated": False}
     assert data[EVENTS] == [{**e, "values": e["values"]} for e in session["events"]]
     assert len(data[EVENTS]) == 5 and data[EVENTS][0]["reaction"] == "warn"
@@ -515,7 +527,7 @@ def test_csv_export_of_state(session: dict, tmp_path: Path) -> None:
         r, expected = rows[k + 1], synthetic_row(k)
         assert float(r[col["t"]]) == expected[0]
         assert [float(r[col[f"q{i}"]]) for i in range(3)] == fixed(expected[1:4], UM)
-        assert [float(r[col[f"tau{i}"]]) for i in range(3)] == fixed(expected[10:13], MN)
+        assert [float(r[col[f"tau{i}"]]) for i in range(3)] == fixed(expected[10:13], TAU4)
         assert r[col["qd_ref0"]] == ""           # optional field, not recorded
         assert int(r[col["log_time_ns"]]) == log_time_ns(expected[0], START_WALL_NS)
 
@@ -648,7 +660,8 @@ def test_sequence_numbers_count_each_channel_from_one(session: dict) -> None:
         for _, channel, message in make_reader(f, validate_crcs=True).iter_messages():
             assert message.sequence == last.get(channel.topic, 0) + 1
             last[channel.topic] = message.sequence
-    assert last[STATE] == N_ROWS and last[WRENCH] == N_ROWS
+    # talus.v4: one channel, one message per cycle (the state, wrench and reference inside).
+    assert last[CYCLE] == N_ROWS and STATE not in last and WRENCH not in last
 
 
 def test_an_undamaged_recording_checks_every_crc(session: dict, capsys) -> None:
@@ -661,7 +674,7 @@ def test_an_undamaged_recording_checks_every_crc(session: dict, capsys) -> None:
 def test_flipped_bytes_in_a_chunk_are_reported_and_salvaged(session: dict, tmp_path: Path,
                                                            capsys) -> None:
     bad = tmp_path / "flipped.mcap"
-    which = _a_middle_chunk_holding(session["path"], STATE)
+    which = _a_middle_chunk_holding(session["path"], CYCLE)
     offset = _flip(session["path"], bad, CHUNK, which=which, at=0.5)
     assert talus_main(["record", "info", str(bad)]) == 2
     info = json.loads(capsys.readouterr().out)

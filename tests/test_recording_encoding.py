@@ -1,5 +1,6 @@
-"""Recording encodings (issue 16): fixed-point protobuf 1 kHz channels (``talus.v3``: no time
-in the payloads, the drive command as the DAC's code) round trip within half a quantum, the
+"""Recording encodings (issue 16): fixed-point protobuf (``talus.v4``, today's, one message per
+cycle: tests/test_recording_v4.py; ``talus.v3``: three 1 kHz channels, no time in the
+payloads, the drive command as the DAC's code) round trip within half a quantum, the
 time rebuilt from the log time exactly as ``talus.v2`` stored it, read by the official mcap
 reader with ``mcap_protobuf``; recordings of the previous encodings (``talus.v2`` with
 ``t_us``, float32 protobuf, JSON before issue 16) still read everywhere; the size per hour of
@@ -26,6 +27,7 @@ from rt.recording.channels import (
     EVENTS,
     JSONSCHEMA_METADATA_KEY,
     METADATA,
+    PROTOS,
     REFERENCE,
     REFERENCE_PROTO,
     REFERENCE_PROTO_F32,
@@ -38,6 +40,7 @@ from rt.recording.channels import (
     WRENCH,
     WRENCH_PROTO,
     WRENCH_PROTO_V2,
+    Encoding,
     LoopClock,
 )
 from rt.recording.protobuf_codec import ProtoCodecError
@@ -136,12 +139,12 @@ def dac(v: float) -> float:
 
 @pytest.fixture(scope="module")
 def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    """The same 2 s session recorded in every encoding: fixed-point protobuf v3 (today's),
+    """The same 2 s session recorded in every encoding: fixed-point protobuf v4 (today's), v3,
     v2, float32 protobuf and JSON (the previous ones)."""
     d = tmp_path_factory.mktemp("enc")
     sig = session_signals(2.0)
     out = {"sig": sig}
-    for enc in ("protobuf", "protobuf-v2", "protobuf-f32", "json"):
+    for enc in ("protobuf", "protobuf-v3", "protobuf-v2", "protobuf-f32", "json"):
         out[enc] = d / f"{enc}.mcap"
         out[enc + "_summary"] = record(out[enc], sig, enc)
     return out
@@ -149,13 +152,26 @@ def pair(tmp_path_factory: pytest.TempPathFactory) -> dict:
 
 # ------------------------------------------------------------------ round trip, every channel
 
-@pytest.mark.parametrize("enc", ["protobuf", "protobuf-v2"])
+#: talus.v4's quanta where they differ from v3's (rt.recording.channels: 0.1 mm/s, 0.1 N,
+#: the ATI's forces and the reference force 1/16 N, its torques 2 mN·m).
+V4_STATE_QUANTA = {**STATE_QUANTA, "qd": 1e-4, "tau": 0.1}
+V4_WRENCH_QUANTA = {**WRENCH_QUANTA, "fx": 1 / 16, "fy": 1 / 16, "fz": 1 / 16, "tx": 2e-3,
+                    "ty": 2e-3, "tz": 2e-3}
+QUANTA = {"protobuf": (V4_STATE_QUANTA, V4_WRENCH_QUANTA, 1 / 16),
+          "protobuf-v3": (STATE_QUANTA, WRENCH_QUANTA, 1e-3),
+          "protobuf-v2": (STATE_QUANTA, WRENCH_QUANTA, 1e-3)}
+
+
+@pytest.mark.parametrize("enc", ["protobuf", "protobuf-v3", "protobuf-v2"])
 def test_every_channel_round_trips_through_fixed_point_protobuf(pair: dict, enc: str) -> None:
-    """Each value is its nearest count of the field's quantum: within half a quantum (0.5 µm,
-    0.5 µm/s, 0.5 mN, 0.5 mN·m, 0.5 µs; v2's volts 0.5 mV), bools exact; encoder positions
-    (multiples of 20 µm) exactly; v3's volts are the voltage of the DAC's code for the
-    command (within half a code, 2.44 mV); v3's t, rebuilt from the log time, is v2's t_us."""
+    """Each value is its nearest count of the field's quantum: within half a quantum (v3:
+    0.5 µm, 0.5 µm/s, 0.5 mN, 0.5 mN·m, 0.5 µs; v2's volts 0.5 mV; v4: 0.05 mm/s, 0.05 N for
+    tau, 12.5 mN for the ATI's and the reference's forces), bools exact; encoder positions
+    (multiples of 20 µm) exactly; v3's and v4's volts are the voltage of the DAC's code for
+    the command (within half a code, 2.44 mV); their t, rebuilt from the log time, is v2's
+    t_us."""
     sig = pair["sig"]
+    state_quanta, wrench_quanta, ref_quantum = QUANTA[enc]
     data = read_recording(pair[enc])
     assert pair[enc + "_summary"]["encoding"] == enc
     n = len(sig["state"])
@@ -165,10 +181,10 @@ def test_every_channel_round_trips_through_fixed_point_protobuf(pair: dict, enc:
         m = data[STATE][k]
         for name, cols in (("t", 0), ("q", 1), ("qd", 4), ("q_ref", 7), ("tau", 10),
                            ("volts", 13)):
-            quantum = STATE_QUANTA[name]
+            quantum = state_quanta[name]
             values = row[cols:cols + (1 if name == "t" else 3)]
             got = np.atleast_1d(np.array(m[name], dtype=float))
-            if name == "volts" and enc == "protobuf":
+            if name == "volts" and enc != "protobuf-v2":
                 assert got.tolist() == [dac(v) for v in values]
                 assert np.all(np.abs(got - values) <= 20 / 4095 / 2 * (1 + 1e-9))
                 continue
@@ -177,10 +193,11 @@ def test_every_channel_round_trips_through_fixed_point_protobuf(pair: dict, enc:
         assert m["q"] == pytest.approx(row[1:4], abs=1e-12)     # encoder counts: exact
         w = sig["wrench"][k]
         assert data[WRENCH][k] == {
-            **{key: fixed(w[i], WRENCH_QUANTA[key]) for i, key in enumerate(WRENCH_QUANTA)},
+            **{key: fixed(w[i], wrench_quanta[key]) for i, key in enumerate(wrench_quanta)},
             "stale": k % 7 == 0, "saturated": k % 11 == 0}
         assert data[REFERENCE][k] == {"t": fixed(w[0], 1e-6),
-                                      "force": [0.0, 0.0, fixed(sig["fz_ref"][k], 1e-3)],
+                                      "force": [0.0, 0.0, fixed(sig["fz_ref"][k],
+                                                               ref_quantum)],
                                       "phase": "play" if k > 100 else "approach"}
     # The rare channels stay JSON, exact.
     assert len(data[EVENTS]) == n // 1000 and data[EVENTS][0]["values"] == {
@@ -219,7 +236,7 @@ def test_every_channel_round_trips_through_float32_protobuf(pair: dict) -> None:
 
 def test_the_json_encoding_is_exact_and_reads_as_the_same_dicts(pair: dict) -> None:
     pb, js = read_recording(pair["protobuf-f32"]), read_recording(pair["json"])
-    fx = read_recording(pair["protobuf"])
+    fx, v4 = read_recording(pair["protobuf-v3"]), read_recording(pair["protobuf"])
     assert pair["json_summary"]["encoding"] == "json"
     assert set(pb) == set(js)
     for topic in (STATE, WRENCH, REFERENCE):
@@ -235,19 +252,24 @@ def test_the_json_encoding_is_exact_and_reads_as_the_same_dicts(pair: dict) -> N
                 else:
                     assert va == vb, key
         # Fixed point: the same keys, every number within half its quantum of JSON's (the
-        # DAC's half code for v3's volts).
-        for a, b in zip(fx[topic][::101], js[topic][::101]):
-            assert a.keys() == b.keys()
-            for key, vb in b.items():
-                va = a[key]
-                if isinstance(vb, (float, list)):
-                    atol = 10 / 4095 if key == "volts" else 5e-4
-                    assert np.allclose(va, vb, rtol=0, atol=atol + 1e-12), (topic, key)
-                else:
-                    assert va == vb, key
+        # DAC's half code for v3's and v4's volts).
+        for enc, fixed_point in (("protobuf-v3", fx), ("protobuf", v4)):
+            state_quanta, wrench_quanta, ref_quantum = QUANTA[enc]
+            quanta = {**state_quanta, **wrench_quanta, "force": ref_quantum}
+            for a, b in zip(fixed_point[topic][::101], js[topic][::101]):
+                assert a.keys() == b.keys()
+                for key, vb in b.items():
+                    va = a[key]
+                    if isinstance(vb, (float, list)):
+                        atol = 10 / 4095 if key == "volts" else quanta[key] / 2
+                        assert np.allclose(va, vb, rtol=0, atol=atol * (1 + 1e-9)), (
+                            enc, topic, key)
+                    else:
+                        assert va == vb, key
     # Events carry the host wall clock of their creation (each recording made its own).
     assert [{**e, "wall": 0} for e in pb[EVENTS]] == [{**e, "wall": 0} for e in js[EVENTS]]
     assert [{**e, "wall": 0} for e in fx[EVENTS]] == [{**e, "wall": 0} for e in js[EVENTS]]
+    assert [{**e, "wall": 0} for e in v4[EVENTS]] == [{**e, "wall": 0} for e in js[EVENTS]]
 
 
 def test_every_field_of_the_protobuf_messages_round_trips() -> None:
@@ -367,8 +389,9 @@ def test_bad_messages_are_refused_naming_the_field(tmp_path: Path) -> None:
 
 def test_channels_use_the_well_known_encodings_and_mcap_protobuf_decodes_them(
         pair: dict) -> None:
+    """talus.v3's three channels (v4's cycle: tests/test_recording_v4.py)."""
     sig = pair["sig"]
-    with open(pair["protobuf"], "rb") as f:
+    with open(pair["protobuf-v3"], "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         summary = reader.get_summary()
         assert summary is not None
@@ -378,7 +401,7 @@ def test_channels_use_the_well_known_encodings_and_mcap_protobuf_decodes_them(
             schema = summary.schemas[ch.schema_id]
             assert ch.message_encoding == MessageEncoding.Protobuf == "protobuf"
             assert schema.encoding == SchemaEncoding.Protobuf == "protobuf"
-            assert schema.name == CHANNELS[topic].proto.name     # type: ignore[union-attr]
+            assert schema.name == PROTOS[Encoding.PROTOBUF_V3][topic].name
             assert schema.name.startswith("talus.v3.")
             assert json.loads(ch.metadata[JSONSCHEMA_METADATA_KEY]) == CHANNELS[topic].schema
             assert ch.metadata[TIME_ORIGIN_NS_KEY] == str(START_WALL_NS)
@@ -412,7 +435,7 @@ def test_channels_use_the_well_known_encodings_and_mcap_protobuf_decodes_them(
 
 def test_json_recordings_still_read_by_info_export_recover(pair: dict, tmp_path: Path,
                                                             capsys) -> None:
-    for enc in ("json", "protobuf-f32", "protobuf-v2", "protobuf"):
+    for enc in ("json", "protobuf-f32", "protobuf-v2", "protobuf-v3", "protobuf"):
         path = pair[enc]
         assert talus_main(["record", "info", str(path)]) == 0
         info = json.loads(capsys.readouterr().out)
@@ -425,12 +448,13 @@ def test_json_recordings_still_read_by_info_export_recover(pair: dict, tmp_path:
         assert json.loads(capsys.readouterr().out)["rows"] == len(pair["sig"]["state"])
     # The same CSV columns from every encoding (the protobuf channel's JSON Schema says them).
     header = [(tmp_path / f"{e}_state.csv").read_text().splitlines()[0]
-              for e in ("json", "protobuf-f32", "protobuf-v2", "protobuf")]
+              for e in ("json", "protobuf-f32", "protobuf-v2", "protobuf-v3", "protobuf")]
     assert len(set(header)) == 1 and "qd_ref0" in header[0] and ",t," in header[0]
-    # v3's t column (rebuilt from the log time) is v2's t_us.
+    # v3's and v4's t columns (rebuilt from the log time) are v2's t_us.
     rows = [(tmp_path / f"{e}_state.csv").read_text().splitlines()[1:]
-            for e in ("protobuf-v2", "protobuf")]
-    assert [r.split(",")[:2] for r in rows[0]] == [r.split(",")[:2] for r in rows[1]]
+            for e in ("protobuf-v2", "protobuf-v3", "protobuf")]
+    assert [r.split(",")[:2] for r in rows[0]] == [r.split(",")[:2] for r in rows[1]] \
+        == [r.split(",")[:2] for r in rows[2]]
     wrench = export_csv(pair["json"], WRENCH, tmp_path / "w.csv")
     assert wrench["rows"] == len(pair["sig"]["state"])
 
@@ -439,13 +463,15 @@ def test_report_reader_gives_the_same_figures_from_both_encodings(pair: dict) ->
     from reports.session_data import session_input_from_recording
 
     a = session_input_from_recording(pair["json"])
-    for enc in ("protobuf-f32", "protobuf-v2", "protobuf"):
+    for enc in ("protobuf-f32", "protobuf-v2", "protobuf-v3", "protobuf"):
         b = session_input_from_recording(pair[enc])
         assert a.figures is not None and b.figures is not None
         assert a.figures["samples"] == b.figures["samples"] == len(pair["sig"]["state"])
         # A figure of a difference (force error = reference - measured) moves by up to one
-        # quantum with fixed point (half a quantum each): 1 mN, the largest quantum.
-        _close(a.figures, b.figures, f"{enc} figures", 1e-6 if enc == "protobuf-f32" else 1e-3)
+        # quantum with fixed point (half a quantum each): 1 mN, the largest quantum of v2
+        # and v3; v4's: a force error 1/16 N (its forces' quantum).
+        _close(a.figures, b.figures, f"{enc} figures",
+               1e-6 if enc == "protobuf-f32" else 1 / 16 if enc == "protobuf" else 1e-3)
 
 
 def _close(a: object, b: object, where: str, abs_tol: float = 1e-6) -> None:

@@ -19,6 +19,7 @@ from rt.components.safety_blocks import SupervisorBlock
 from rt.model import RobotModel
 from rt.model.dynamics import State
 from rt.position_loop import build_sim_position_loop
+from rt.safety import supervisor_kernel as sk
 from rt.safety.events import EventLog, Reaction
 from rt.safety.limits import PatientLimits, RobotLimits, effective
 from rt.safety.supervisor import InterpretedSupervisor, Supervisor, supervisor_physics
@@ -101,6 +102,19 @@ def _stream(recorded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     q[1000:1200, 2] = q[1000, 2]
     s["tau"][1000:1200, 2] = np.linspace(0.0, 4000.0, 200)
     s["qd_ref"][1000:1200, 2] = 0.01
+    # The force balance's inputs (issue 15): a contact's wrench rising and falling on a
+    # moving platform (its share, the sensor-lag allowance, the contact hysteresis); a command
+    # beyond the drives' limit (the balance takes the applied, saturated force: 6 V × 80 N/V
+    # here); a braking (|q̈| large, then quasi-static again: the carried load's gate, m·q̈, its
+    # slew) ending in a still count.
+    w[1300:1400, 2] = -np.r_[np.linspace(0.0, 900.0, 50), np.linspace(900.0, 0.0, 50)]
+    w[1300:1400, 0] = np.linspace(0.0, 80.0, 100)
+    w[1300:1400, 4] = np.linspace(0.0, -12.0, 100)
+    s["tau"][1400:1430, 0] = 1450.0
+    s["tau"][1430:1460, 0] = -1450.0
+    s["qdd"][1460:1490, 1] = np.linspace(-9.0, 0.0, 30)
+    s["tau"][1460:1490, 1] = -1450.0
+    q[1490:1560, 1] = q[1490, 1]
     return s
 
 
@@ -183,6 +197,14 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
         assert sups[0].latched_ids == sups[1].latched_ids, k
         assert sups[0].carry_force_n == pytest.approx(sups[1].carry_force_n, nan_ok=True,
                                                       rel=0.0, abs=0.0), k
+        # The force balance's state: the share, how long quasi-static, the applied limit.
+        mem, ref = sups[0]._mem, sups[1]
+        assert isinstance(ref, InterpretedSupervisor)
+        assert mem[sk.M_SHARE:sk.M_SHARE + 3].tolist() == pytest.approx(
+            ref._share, nan_ok=True, rel=0.0, abs=0.0), k
+        assert mem[sk.M_QUIET:sk.M_QUIET + 3].tolist() == ref._quiet, k
+        assert mem[sk.M_CONTACT_UNTIL] == ref._contact_until, k
+        assert sups[0].applied_force_max_n == sups[1].applied_force_max_n == 480.0, k
     events = [[_event(e) for e in sup.log.snapshot()] for sup in sups]
     assert events[0] == events[1]
     for tc, ti in zip(*tickets, strict=True):

@@ -220,3 +220,60 @@ def test_ati_reading_carries_its_tool_side_weight_turning_with_the_tilt():
     assert np.linalg.norm(tilted[:3]) == pytest.approx(mg)
     assert abs(tilted[1]) == pytest.approx(mg * math.sin(0.2), rel=1e-3)
     assert tilted[3] == pytest.approx(-0.03 * tilted[1])    # M = c × F, c = (0, 0, h)
+
+
+def _slider_side_mass(q=(0.2, 0.23, 0.17)) -> np.ndarray:
+    """The slider side's mass matrix (no rotor: behind the compliant screw the rotors are
+    separate bodies): strongly coupled through the rods and the platform."""
+    data = default_truth().model_dump()
+    data["drive"]["rotor_inertia_per_axis_kg_m2"] = [1e-12] * 3
+    from rt.model.description import description_from_dict
+
+    model = RobotModel.from_description(description_from_dict(data, "slider side"))
+    return model.dyn.mass_matrix(model.dyn.state(q))
+
+
+def test_slider_coulomb_friction_acts_on_its_own_axis_only():
+    """The compliant screw's implicit Coulomb step applies each slider's friction through the
+    coupled mass matrix: the generalised force it adds is exactly −level_i sign(q̇_i) on axis i
+    and nothing on the others (the first step used M_ii alone and put 7-8 % of every other
+    axis's Coulomb force on each axis, a friction no rig has: issue 15's fv bias)."""
+    from rt.twin.physics import coulomb_step
+
+    m = _slider_side_mass()
+    off = m - np.diag(np.diag(m))
+    assert np.abs(off).max() > 0.05 * np.diag(m).min()        # the coupling is real
+    h = 2.0e-4
+    levels = np.array([32.0, 31.0, 36.0])
+    qdd = np.array([0.4, -0.7, 0.2])
+    for qd0 in (np.array([0.10, -0.06, 0.03]), np.array([-0.12, 0.02, -0.09])):
+        qd = qd0.copy()
+        coulomb_step(m, qd, qdd, h, *levels)
+        force = m @ (qd - (qd0 + h * qdd)) / h
+        np.testing.assert_allclose(force, -levels * np.sign(qd), rtol=1e-9, atol=1e-9)
+
+
+def test_slider_coulomb_step_sticks_exactly_within_the_friction_cone():
+    from rt.twin.physics import _toward_zero, coulomb_step
+
+    m = _slider_side_mass()
+    h = 2.0e-4
+    levels = np.array([32.0, 31.0, 36.0])
+    # Axis 1 nearly at rest with a small push: it sticks (exactly 0) while 0 and 2 slide with
+    # their full friction; the impulse holding axis 1 is inside its bound.
+    qd0 = np.array([0.05, 1.0e-4, -0.04])
+    qdd = np.zeros(3)
+    qd = qd0.copy()
+    coulomb_step(m, qd, qdd, h, *levels)
+    assert qd[1] == 0.0
+    impulse = m @ (qd0 - qd)                   # p = M Δv (N s)
+    assert abs(impulse[1]) < h * levels[1]
+    np.testing.assert_allclose(impulse[[0, 2]], h * levels[[0, 2]] * np.sign(qd[[0, 2]]),
+                               rtol=1e-9)
+    # A diagonal mass matrix gives the per-axis step exactly.
+    d = np.diag(np.diag(m))
+    for qd0 in (np.array([0.05, 1.0e-4, -0.04]), np.array([-0.2, 0.3, 2.0e-4])):
+        qd = qd0.copy()
+        coulomb_step(d, qd, qdd, h, *levels)
+        want = [_toward_zero(qd0[i], h * levels[i] / d[i, i]) for i in range(3)]
+        np.testing.assert_allclose(qd, want, rtol=1e-12, atol=1e-15)

@@ -391,7 +391,7 @@
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="106"/>
-        <location filename="../pages/review.py" line="100"/>
+        <location filename="../pages/review.py" line="105"/>
         <source>time (s)</source>
         <translation>tiempo (s)</translation>
     </message>
@@ -404,7 +404,7 @@
     <message>
         <location filename="../pages/prescribe.py" line="114"/>
         <source>Check on the robot model (pre-flight)</source>
-        <translation>Comprobar en el modelo del robot (comprobación previa)</translation>
+        <translation>Comprobación previa en el modelo del robot</translation>
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="115"/>
@@ -449,14 +449,14 @@
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="207"/>
-        <location filename="../pages/review.py" line="202"/>
+        <location filename="../pages/review.py" line="226"/>
         <location filename="../pages/run.py" line="176"/>
         <source>plantar(+)/dorsi(−) flexion</source>
         <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
     <message>
         <location filename="../pages/prescribe.py" line="209"/>
-        <location filename="../pages/review.py" line="205"/>
+        <location filename="../pages/review.py" line="229"/>
         <source>roll (+ is inversion of a right foot)</source>
         <translation>balanceo (+ es inversión del pie derecho)</translation>
     </message>
@@ -521,110 +521,110 @@
         <translation>duración %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="79"/>
+        <location filename="../pages/review.py" line="84"/>
         <source>Refresh</source>
-        <extracomment>the session report (its ``last_result[&quot;session&quot;]``: the clinical record&apos;s session it came from, None when from the file alone)</extracomment>
+        <extracomment>(recording path, protocol name from its metadata), read on the worker after a refresh the session report (its ``last_result[&quot;session&quot;]``: the clinical record&apos;s session it came from, None when from the file alone) its own worker, so that a folder of recordings being retitled never delays opening one</extracomment>
         <translation>Actualizar</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="80"/>
+        <location filename="../pages/review.py" line="85"/>
         <source>Open</source>
         <translation>Abrir</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="81"/>
+        <location filename="../pages/review.py" line="86"/>
         <source>Session report (PDF)</source>
         <translation>Informe de la sesión (PDF)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="92"/>
+        <location filename="../pages/review.py" line="97"/>
         <source>Choose a session on the left.</source>
         <translation>Elija una sesión a la izquierda.</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="94"/>
+        <location filename="../pages/review.py" line="99"/>
         <location filename="../pages/run.py" line="145"/>
         <source>Force (N)</source>
         <translation>Fuerza (N)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="95"/>
+        <location filename="../pages/review.py" line="100"/>
         <location filename="../pages/run.py" line="146"/>
         <location filename="../pages/run.py" line="510"/>
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="105"/>
+        <location filename="../pages/review.py" line="110"/>
         <source>Recorded sessions</source>
         <translation>Sesiones grabadas</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="145"/>
+        <location filename="../pages/review.py" line="169"/>
         <source>Reading %1…</source>
         <translation>Leyendo %1…</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="167"/>
+        <location filename="../pages/review.py" line="191"/>
         <source>Save the session report</source>
         <translation>Guardar el informe de la sesión</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="178"/>
+        <location filename="../pages/review.py" line="202"/>
         <source>Cannot open: %1</source>
         <translation>No se puede abrir: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="182"/>
+        <location filename="../pages/review.py" line="206"/>
         <location filename="../pages/run.py" line="171"/>
         <source>reference</source>
         <translation>referencia</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="184"/>
+        <location filename="../pages/review.py" line="208"/>
         <location filename="../pages/run.py" line="173"/>
         <source>measured</source>
         <translation>medida</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="190"/>
+        <location filename="../pages/review.py" line="214"/>
         <source>ankle: plantar(+)/dorsi(−) flexion</source>
         <translation>tobillo: flexión plantar(+)/dorsal(−)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="193"/>
+        <location filename="../pages/review.py" line="217"/>
         <source>ankle: inversion(+)/eversion(−)</source>
         <translation>tobillo: inversión(+)/eversión(−)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="196"/>
+        <location filename="../pages/review.py" line="220"/>
         <location filename="../pages/run.py" line="524"/>
         <source>platform pitch (engineers)</source>
         <translation>cabeceo de la plataforma (ingeniería)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="198"/>
+        <location filename="../pages/review.py" line="222"/>
         <location filename="../pages/run.py" line="525"/>
         <source>platform roll (engineers)</source>
         <translation>alabeo de la plataforma (ingeniería)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="214"/>
+        <location filename="../pages/review.py" line="238"/>
         <source>%1 — patient %2 — %3 s</source>
         <translation>%1 — paciente %2 — %3 s</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="219"/>
+        <location filename="../pages/review.py" line="243"/>
         <source>stops: %1</source>
         <translation>paradas: %1</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="222"/>
+        <location filename="../pages/review.py" line="246"/>
         <source>recording cut short (recovered up to its last whole block)</source>
         <translation>grabación interrumpida (recuperada hasta su último bloque completo)</translation>
     </message>
     <message>
-        <location filename="../pages/review.py" line="231"/>
+        <location filename="../pages/review.py" line="255"/>
         <source>ankle reached dorsiflexion %1°, plantarflexion %2°, inversion %3°, eversion %4°; peak torques DF %5, PF %6, INV %7, EV %8 N·m</source>
         <translation>el tobillo alcanzó flexión dorsal %1°, flexión plantar %2°, inversión %3°, eversión %4°; pares máximos FD %5, FP %6, INV %7, EV %8 N·m</translation>
     </message>
@@ -1087,39 +1087,59 @@
         <translation>dorsi/plantarflexión más rápida que el límite del paciente</translation>
     </message>
     <message>
-        <location filename="../words.py" line="78"/>
+        <location filename="../words.py" line="65"/>
+        <source>the platform pulled on the foot</source>
+        <translation>la plataforma tiró del pie</translation>
+    </message>
+    <message>
+        <location filename="../words.py" line="66"/>
+        <source>the control computer found a fault in its own software</source>
+        <translation>el ordenador de control detectó un fallo en su propio software</translation>
+    </message>
+    <message>
+        <location filename="../words.py" line="80"/>
         <source>actuator %1 at the end of its travel</source>
         <translation>actuador %1 al final de su recorrido</translation>
     </message>
     <message>
-        <location filename="../words.py" line="79"/>
+        <location filename="../words.py" line="81"/>
         <source>actuator %1 near the end of its travel</source>
         <translation>actuador %1 cerca del final de su recorrido</translation>
     </message>
     <message>
-        <location filename="../words.py" line="80"/>
+        <location filename="../words.py" line="82"/>
         <source>actuator %1 moving too fast</source>
         <translation>actuador %1 demasiado rápido</translation>
     </message>
     <message>
-        <location filename="../words.py" line="81"/>
+        <location filename="../words.py" line="83"/>
         <source>actuator %1 accelerating too hard</source>
         <translation>actuador %1 acelera demasiado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="82"/>
+        <location filename="../words.py" line="84"/>
         <source>actuator %1 could not follow its path</source>
         <translation>actuador %1 no pudo seguir su trayectoria</translation>
     </message>
     <message>
-        <location filename="../words.py" line="83"/>
+        <location filename="../words.py" line="85"/>
         <source>actuator %1 pushing too hard</source>
         <translation>actuador %1 empuja demasiado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="84"/>
+        <location filename="../words.py" line="86"/>
         <source>position sensor %1 stopped changing</source>
         <translation>el sensor de posición %1 dejó de cambiar</translation>
+    </message>
+    <message>
+        <location filename="../words.py" line="91"/>
+        <source>motor drive card %1 failed; the spare card took over</source>
+        <translation>falló la tarjeta de accionamiento %1; la tarjeta de reserva tomó el control</translation>
+    </message>
+    <message>
+        <location filename="../words.py" line="95"/>
+        <source>E-STOP (%1)</source>
+        <translation>PARADA DE EMERGENCIA (%1)</translation>
     </message>
     <message>
         <location filename="../pages/login.py" line="30"/>

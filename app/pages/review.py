@@ -26,16 +26,18 @@ from PySide6.QtWidgets import (
 from app.i18n import tr
 from app.report_action import ReportAction
 from app.report_export import write_session_report
-from app.review_data import ReviewData, load_review
+from app.review_data import ReviewData, load_review, recording_protocol_name
 from app.settings import GuiSettings
 from app.style import TARGET_PX
 from app.words import cause_words, local_time
 from rt.errors import TalusError
 
 
-def recording_title(path: Path) -> str:
+def recording_title(path: Path, protocol_name: str | None = None) -> str:
     """``<date time> — <patient>`` over ``<protocol>`` from the RT process's file name
-    (``20261123T181621Z_<patient>_<protocol>.mcap``), in local time; the stem otherwise."""
+    (``20261123T181621Z_<patient>_<protocol>.mcap``), in local time; the stem otherwise.
+    ``protocol_name`` (read from the recording's metadata) replaces the file name's
+    filesystem-safe form of it, which lost characters such as "±"."""
     import datetime as dt
 
     parts = path.stem.split("_", 2)
@@ -45,13 +47,15 @@ def recording_title(path: Path) -> str:
         return path.stem
     patient = parts[1] if len(parts) > 1 else "?"
     protocol = parts[2].replace("-", " ") if len(parts) > 2 else ""
-    return f"{local_time(when.isoformat())} — {patient}\n{protocol}"
+    return f"{local_time(when.isoformat())} — {patient}\n{protocol_name or protocol}"
 
 
 class ReviewPage(QWidget):
     """Lists the recordings in a folder (newest first) and plots the one opened."""
 
     loaded = Signal(object, str)
+    #: (recording path, protocol name from its metadata), read on the worker after a refresh
+    title_read = Signal(str, str)
 
     def __init__(self, recordings_dir: Path | None, parent: QWidget | None = None,
                  settings: GuiSettings | None = None, record: Any = None,
@@ -68,6 +72,8 @@ class ReviewPage(QWidget):
         self.report.message.connect(self._report_said)
         self.report.busy_changed.connect(self._report_busy)
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-review")
+        #: its own worker, so that a folder of recordings being retitled never delays opening one
+        self._titles_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gui-titles")
         self.sessions = QListWidget()
         self.sessions.setMinimumWidth(260)
         self.sessions.setStyleSheet("QListWidget::item { min-height: 48px; }")
@@ -118,6 +124,7 @@ class ReviewPage(QWidget):
         layout.addLayout(left, 1)
         layout.addLayout(right, 3)
         self.loaded.connect(self._show)
+        self.title_read.connect(self._retitle)
         self.refresh()
 
     def refresh(self) -> None:
@@ -133,6 +140,24 @@ class ReviewPage(QWidget):
             self.sessions.addItem(item)
         if files:
             self.sessions.setCurrentRow(0)
+            # The file names' titles show at once; the protocols' own names follow from the
+            # files' metadata, read on the worker (a chunk per file: not on the GUI thread).
+            self._titles_pool.submit(self._read_titles, files)
+
+    def _read_titles(self, files: list[Path]) -> None:
+        for path in files:
+            try:
+                name = recording_protocol_name(path)
+            except TalusError:
+                continue                  # the title from the file name stays; open says why
+            if name is not None:
+                self.title_read.emit(str(path), name)
+
+    def _retitle(self, path: str, protocol_name: str) -> None:
+        for row in range(self.sessions.count()):
+            item = self.sessions.item(row)
+            if item.data(Qt.ItemDataRole.UserRole) == path:
+                item.setText(recording_title(Path(path), protocol_name))
 
     def _open_selected(self) -> None:
         item = self.sessions.currentItem()

@@ -6,6 +6,8 @@ the figure to compare with the rig's sensors→outputs budget. Twin figures, thi
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rt.position_loop import build_sim_position_loop
@@ -18,9 +20,12 @@ def _summary(samples_ns: np.ndarray) -> dict[str, float]:
 
 
 def run_loop_benchmark(controller: str, seconds: float, rate_hz: float = 1000.0,
-                       mode: str = "realtime", model=None) -> dict:
+                       mode: str = "realtime", model=None,
+                       cpu_latency_us: int | None = None) -> dict:
+    extra: dict[str, Any] = {} if cpu_latency_us is None or mode != "realtime" else {
+        "cpu_latency_us": cpu_latency_us}
     pl = build_sim_position_loop(controller, duration_s=max(1.0, seconds), rate_hz=rate_hz,
-                                 mode=mode, model=model)
+                                 mode=mode, model=model, **extra)
     cycles = pl.loop.run(seconds=seconds)
     stats = pl.loop.stats()
     graph = pl.graph
@@ -32,7 +37,9 @@ def run_loop_benchmark(controller: str, seconds: float, rate_hz: float = 1000.0,
     without = cycle_ns[valid] - twin_ns[valid]
     cycle_ns = cycle_ns[cycle_ns >= 0]
     pl.graph.stop()
+    hyg = pl.loop.hygiene
     return {"controller": controller, "rate_hz": rate_hz, "mode": mode, "twin": True,
+            "cpu_latency_us": None if hyg is None else hyg.cpu_latency_us,
             "cycles": int(cycles), "deadline_misses": int(stats.misses),
             "cycle_us": _summary(cycle_ns), "cycle_without_twin_us": _summary(without),
             "components": components}

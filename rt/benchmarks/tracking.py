@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from rt.control.experiment import benchmark_reference
+from rt.control.experiment import RefFn, benchmark_reference
+from rt.control.laws import PdGains
 from rt.errors import TalusError
 from rt.model import RobotModel
 from rt.model.description import RobotDescription
@@ -95,6 +96,12 @@ def gains_for_rate(controller: str, rate_hz: float, axis_mass_kg: float) -> dict
     return None
 
 
+def rate_gains(controller: str, rate_hz: float, model: RobotModel) -> dict | None:
+    """``gains_for_rate`` with the axis mass of ``model`` at the benchmark's home."""
+    st = model.dyn.state((Q0_M, Q0_M, Q0_M))
+    return gains_for_rate(controller, rate_hz, float(model.dyn.mass_matrix(st)[0, 0]))
+
+
 def metrics(t: np.ndarray, error: np.ndarray) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for name, window in (("period1", t < STEP_S), ("period2", t >= STEP_S)):
@@ -116,25 +123,27 @@ def _change_controller_parameters(model: RobotModel, controller) -> None:
 def run_one(experiment: str, controller: str, seconds: float = DURATION_S,
             rate_hz: float = 1000.0, truth: RobotDescription | None = None,
             robot: RobotDescription | None = None, ideal: bool = False, seed: int = 0,
-            gains: dict | None = None, imperfections: RigImperfections | None = None
-            ) -> tuple[np.ndarray, np.ndarray, float]:
+            gains: dict | None = None, imperfections: RigImperfections | None = None,
+            trajectory: RefFn | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """One controller through one experiment: (trajectory time s, error (n, 3) m, approach s).
 
     ``robot`` is the description the controllers believe (default the nominal one); ``truth``
     the twin's (default: the realistic twin's truth; with ``ideal`` the model itself);
-    ``imperfections`` the realistic twin's unmodelled effects (default: ``RigImperfections()``).
+    ``imperfections`` the realistic twin's unmodelled effects (default: ``RigImperfections()``);
+    ``trajectory`` the sliders' reference (default: ``benchmark_reference``; it must start near
+    the benchmark's home, ``Q0_M``, where the twin is placed).
     """
     model = RobotModel.from_description(robot) if robot is not None else RobotModel.load()
     if gains is None:
-        st = model.dyn.state((Q0_M, Q0_M, Q0_M))
-        gains = gains_for_rate(controller, rate_hz, float(model.dyn.mass_matrix(st)[0, 0]))
+        gains = rate_gains(controller, rate_hz, model)
     env: FreeMotion | PayloadStep = FreeMotion()
     if experiment == "payload-step":
         env = PayloadStep(mass_kg=PAYLOAD_KG, at_s=1e9, com_m=PAYLOAD_COM_M)  # timed below
     twin = (Twin.ideal(truth or model.description, environment=env, seed=seed) if ideal
             else Twin(truth, environment=env, seed=seed, imperfections=imperfections))
     twin.place((Q0_M, Q0_M, Q0_M))
-    pl = build_sim_position_loop(controller, gains, benchmark_reference(Q0_M), seconds,
+    reference = trajectory if trajectory is not None else benchmark_reference(Q0_M)
+    pl = build_sim_position_loop(controller, gains, reference, seconds,
                                  rate_hz=rate_hz, model=model, twin=twin,
                                  robot_limits=BENCH_LIMITS)
     dt = 1.0 / rate_hz
@@ -175,8 +184,12 @@ def _events(pl) -> str:
 def run_experiment(name: str, seconds: float = DURATION_S, rate_hz: float = 1000.0,
                    profile: str = "product", truth: RobotDescription | None = None,
                    robot: RobotDescription | None = None, ideal: bool = False) -> dict:
-    """Run one experiment; returns the JSON shape (plus ``rate_hz`` and ``profile``)."""
+    """Run one experiment; returns the JSON shape (plus ``rate_hz`` and ``profile``), with the
+    gains each controller ran with (``None``: the controller's defaults) and, for the
+    parameter step, Paden-Panja's period 2 predicted by statics (``p2_statics``)."""
     results = {}
+    model = RobotModel.from_description(robot) if robot is not None else RobotModel.load()
+    gains = {ctrl: rate_gains(ctrl, rate_hz, model) for ctrl in EXPERIMENTS[name]}
     approach = 0.0
     for ctrl in EXPERIMENTS[name]:
         try:
@@ -185,9 +198,24 @@ def run_experiment(name: str, seconds: float = DURATION_S, rate_hz: float = 1000
             results[ctrl] = {"stopped_by_supervisor": str(exc)}
             continue
         results[ctrl] = metrics(t, err)
-    return {"experiment": name, "profile": profile, "twin": "ideal" if ideal else "realistic",
-            "rate_hz": rate_hz, "duration_s": seconds, "approach_s": approach,
-            "controllers": results, "thesis": THESIS[name]}
+    out = {"experiment": name, "profile": profile, "twin": "ideal" if ideal else "realistic",
+           "rate_hz": rate_hz, "duration_s": seconds, "approach_s": approach,
+           "controllers": results, "thesis": THESIS[name], "gains": gains}
+    if name == "parameter-step" and seconds > STEP_S:
+        out["p2_statics"] = _p2_statics(gains["paden_panja"], seconds - STEP_S, robot)
+    return out
+
+
+def _p2_statics(gains: dict | None, seconds: float, robot: RobotDescription | None) -> dict:
+    """Paden-Panja's period 2 of the parameter step from statics: the model's error Δτ over Kp
+    (``rt.benchmarks.thesis_gains``), and the Kp the thesis's figure would need."""
+    from rt.benchmarks.thesis_gains import model_error  # imports this module: not at the top
+
+    kp = gains["kp_n_per_m"] if gains else PdGains().kp_n_per_m
+    d = float(np.abs(model_error(PAYLOAD_COM_M, seconds=seconds, robot=robot)).mean())
+    thesis = THESIS["parameter-step"]["paden_panja"]["period2_mean_abs_mm"] * 1e-3
+    return {"kp_n_per_m": kp, "model_error_mean_abs_n": d, "mean_abs_m": d / kp,
+            "kp_for_thesis_n_per_m": d / thesis}
 
 
 def table(results: list[dict]) -> str:
@@ -214,5 +242,12 @@ def table(results: list[dict]) -> str:
                              f"{twin_m * 1e3:9.3f} "
                              f"{'' if thesis_mm is None else f'{thesis_mm:10.3f}':>10s} "
                              f"{ratio:>6s}")
+        st = r.get("p2_statics")
+        if st:
+            lines.append(f"{r['experiment']:15s} {r['rate_hz']:6.0f} {'paden_panja':12s} p2 statics: "
+                         f"|Δτ| {st['model_error_mean_abs_n']:.0f} N / Kp {st['kp_n_per_m'] / 1e3:.1f}"
+                         f" kN/m = {st['mean_abs_m'] * 1e3:.3f} mm; the thesis's 2.809 mm needs Kp "
+                         f"{st['kp_for_thesis_n_per_m'] / 1e3:.0f} kN/m "
+                         f"({st['kp_for_thesis_n_per_m'] / st['kp_n_per_m']:.2f}×; bench/thesis_gap.py)")
     return "\n".join(lines)
 

@@ -20,7 +20,10 @@ class HybridController(Component):
     float64[3] N.
 
     Position mode: the position law tracks the slider references. Force mode: hybrid explicit
-    force in z (F = −w_S.fz, the platform's push) with roll and pitch held. Switching between
+    force in z (F = −w_S.fz, the platform's push) with roll and pitch held; while the program
+    asks a force rate the robot cannot follow (a heel strike, a fast toe off: ``_lead``) the
+    law tracks the reference read ahead (``force_preview``), and during such a rise its
+    integral holds. Switching between
     them resets the force law's integral so the force starts from its feedforward. The
     supervisor is told when the loop depends on the force sensor. The force reference handed
     to the law is never below the law's preload (``preload_n``, N): the platform only pushes
@@ -38,6 +41,7 @@ class HybridController(Component):
         self.qd_ref = self.declare_input("qd_ref", Array(3))
         self.qdd_ref = self.declare_input("qdd_ref", Array(3))
         self.force = self.declare_input("force", Array(3))
+        self.force_preview = self.declare_input("force_preview", Array(3))
         self.pose = self.declare_input("pose", Array(3))
         self.ctrl_mode = self.declare_input("ctrl_mode", Array(1))
         self.wrench = self.declare_input("wrench", Array(6))
@@ -56,6 +60,47 @@ class HybridController(Component):
         #: Deceleration the platform can give when the force falls to the preload (m/s²).
         self.unload_decel_m_s2 = 0.5
         self._f_gov = math.nan
+        #: How long (s) the law takes to come back from the previewed reference to the
+        #: program's own once the transient is over: the reference's time runs at
+        #: 1 − preview/release of its speed meanwhile, so nothing jumps.
+        self.preview_release_s = 0.02
+        self._ahead_weight = 0.0
+        self._rising = False
+
+    def _beyond(self, f_dot: float) -> bool:
+        """True when a force rate (N/s) asks the platform, through the contact's stiffness,
+        to move faster than the law's motion feedforward may (``max_feedforward_speed_m_s``):
+        a heel strike, a fast toe off. There the force lags the reference by tens of ms
+        (the drives at their limit, the unloading governed); slower, it follows within a
+        cycle or two."""
+        law = self.force_law
+        return abs(f_dot) > law.gains.max_feedforward_speed_m_s * law.k_est
+
+    def _lead(self, fr: ForceReference, dt: float) -> None:
+        """The reference the law tracks: the program's (``force``), or the one read ahead
+        (``force_preview``, equal to ``force`` when the program has no preview) while the
+        program, now or ahead, asks more than the robot follows (:meth:`_beyond`): the law
+        then starts the heel strike's push and the toe off's fall that much earlier. The
+        preview is taken at once (at the transient's onset the two differ little) and left
+        over ``preview_release_s``."""
+        f, ahead = self.force.data, self.force_preview.data
+        rate = ahead[1] if self._beyond(ahead[1]) else f[1] if self._beyond(f[1]) else 0.0
+        if rate != 0.0:
+            if self._ahead_weight == 0.0:
+                # What kind of transient this is, fixed at its onset: a heel strike's spike
+                # falls back within it.
+                self._rising = rate > 0.0
+            w = 1.0
+        else:
+            w = max(0.0, self._ahead_weight - dt / self.preview_release_s)
+        self._ahead_weight = w
+        # A rise beyond the drives (a heel strike) is a transient the integral must not wind
+        # up on. A fall is not: the governor (``_govern``) slows it to what the platform can
+        # brake, and the integral's share is needed to stop at the preload.
+        fr.transient = w > 0.0 and self._rising
+        fr.f = f[0] + w * (ahead[0] - f[0])
+        fr.f_dot = f[1] + w * (ahead[1] - f[1])
+        fr.f_ddot = f[2] + w * (ahead[2] - f[2])
 
     def _govern(self, fr: ForceReference, dt: float) -> None:
         """The force reference as the law gets it: never below the preload, and falling to it
@@ -120,16 +165,17 @@ class HybridController(Component):
             # Bumpless entry: the reference starts from the force the contact already carries
             # and converges to the protocol's with time constant ``entry_time_s``.
             self._offset = 0.0 if math.isnan(measured) else measured - self.force.data[0]
+            self._ahead_weight = 0.0
             self._f_gov = math.nan
         st = self.state_in.data
         if force_mode:
             fr = self._fref
-            f = self.force.data
+            self._lead(fr, dt)
             off = self._offset
             self._offset = off * self._decay_per_s ** dt
-            fr.f = f[0] + off
-            fr.f_dot = f[1] - off / self.entry_time_s
-            fr.f_ddot = f[2] + off / self.entry_time_s ** 2
+            fr.f += off
+            fr.f_dot -= off / self.entry_time_s
+            fr.f_ddot += off / self.entry_time_s ** 2
             self._govern(fr, dt)
             fr.roll, fr.pitch = self.pose.data[1], self.pose.data[2]
             fr.roll_rate = fr.pitch_rate = 0.0

@@ -7,19 +7,38 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numba import njit
 
-from rt.components.tare import Tare
+from rt.components.tare import TARE_ENDED, Tare, tare_cycle
 from rt.devices.interfaces import (
+    FT_SATURATED,
+    FT_STALE,
     ActuatorOutputs,
     DigitalInputs,
-    DigitalInputState,
     ForceTorqueSensor,
     Wrench,
+    new_ft_reading,
 )
 from rt.engine import Array, Component, Struct
 from rt.errors import HardwareError
 from rt.model.dynamics import State
+from rt.safety import supervisor_kernel as sk
 from rt.safety.events import EventLog, Reaction, SafetyEvent, SupervisorMode
 from rt.safety.supervisor import Supervisor
+
+
+@njit(cache=True)
+def _force_cycle(raw, wrench, flags, request, tare_port, tare_buf):
+    """:class:`ForceReader`'s cycle on the sensor's reading ``raw`` (layout ``FT_*``): the
+    wrench and flags to the ports, the reading's validity (fresh, not saturated, finite) and
+    the tare's cycle (:func:`rt.components.tare.tare_cycle`, whose answer it returns)."""
+    for k in range(6):
+        wrench[k] = raw[k]
+    stale = raw[FT_STALE] != 0.0
+    saturated = raw[FT_SATURATED] != 0.0
+    flags[0] = 1.0 if stale else 0.0
+    flags[1] = 1.0 if saturated else 0.0
+    valid = not (stale or saturated) and math.isfinite(
+        raw[0] + raw[1] + raw[2] + raw[3] + raw[4] + raw[5])
+    return tare_cycle(wrench, valid, request[0] > 0.5, tare_port, tare_buf)
 
 
 class ForceReader(Component):
@@ -27,22 +46,46 @@ class ForceReader(Component):
     when never read); out ``flags``: float64[2] — [stale, saturated] as 0/1; in
     ``tare_request``: float64[1] (a rising edge above 0.5 starts a tare, :mod:`rt.components.
     tare`); out ``tare``: float64[10] — [:class:`TareState`, tares done, :class:`TareRefusal`,
-    mean force magnitude of the last tare (N), offset (6: N, N m)]."""
+    mean force magnitude of the last tare (N), offset (6: N, N m)].
 
-    def __init__(self, name: str, sensor: ForceTorqueSensor, tare: Tare | None = None):
+    A cycle is the sensor's ``read_array`` and one compiled call (:func:`_force_cycle`);
+    ``compiled=False`` runs the previous Python body (``Wrench``, ``Tare.cycle_interpreted``),
+    the reference of ``tests/test_device_compiled.py``."""
+
+    def __init__(self, name: str, sensor: ForceTorqueSensor, tare: Tare | None = None,
+                 compiled: bool = True):
         super().__init__(name)
         self.sensor = sensor
         self.tare = tare or Tare()
+        self.compiled = compiled
         self.wrench = self.declare_output("wrench", Array(6), initial=np.full(6, math.nan))
         self.flags = self.declare_output("flags", Array(2))
         self.tare_request = self.declare_input("tare_request", Array(1))
         self.tare_out = self.declare_output("tare", Array(10))
         self._w = Wrench()
+        self._raw = new_ft_reading()
+        if compiled:
+            # Compile (or load from numba's cache) now: the request as the loop binds it, a
+            # read-only view; on scratch buffers.
+            request = np.zeros(1)
+            request.flags.writeable = False
+            _force_cycle(self._raw.copy(), np.zeros(6), np.zeros(2), request, np.zeros(10),
+                         self.tare._buf.copy())
 
     def on_start(self) -> None:
         self.sensor.start()
 
     def update(self, t: float, dt: float) -> int:
+        if not self.compiled:
+            return self._update_interpreted(t, dt)
+        raw = self.sensor.read_array(self._raw)
+        out, port = self.wrench.data, self.tare_out.data
+        if _force_cycle(raw, out, self.flags.data, self.tare_request.data, port,
+                        self.tare._buf) == TARE_ENDED:
+            self.tare._end_cycle(out, port)
+        return 0
+
+    def _update_interpreted(self, t: float, dt: float) -> int:
         w = self.sensor.read(self._w)
         out = self.wrench.data
         out[0], out[1], out[2], out[3], out[4], out[5] = w.fx, w.fy, w.fz, w.tx, w.ty, w.tz
@@ -50,7 +93,8 @@ class ForceReader(Component):
         self.flags.data[1] = 1.0 if w.saturated else 0.0
         valid = not (w.stale or w.saturated) and math.isfinite(
             w.fx + w.fy + w.fz + w.tx + w.ty + w.tz)
-        self.tare.cycle(out, valid, self.tare_request.data[0] > 0.5, self.tare_out.data)
+        self.tare.cycle_interpreted(out, valid, self.tare_request.data[0] > 0.5,
+                                    self.tare_out.data)
         return 0
 
 
@@ -61,12 +105,9 @@ class StopInputs(Component):
         super().__init__(name)
         self.device = inputs
         self.stops = self.declare_output("inputs", Array(2))
-        self._state = DigitalInputState()
 
     def update(self, t: float, dt: float) -> int:
-        s = self.device.read(self._state)
-        self.stops.data[0] = 1.0 if s.hardware_estop else 0.0
-        self.stops.data[1] = 1.0 if s.hand_stop else 0.0
+        self.device.read_array(self.stops.data)
         return 0
 
 
@@ -136,13 +177,19 @@ class SupervisorBlock(Component):
             pitch_rate = S[10, 0] * qd[0] + S[10, 1] * qd[1] + S[10, 2] * qd[2]
         w = self.wrench.data
         force = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        # The force at the DAC's command limit (as the compiled block_cycle computes it).
+        self.sup.applied_force_max_n = self.sup.limits.max_command_v / self.k
+        share = [0.0, 0.0, 0.0]
+        if fk_ok:
+            # The same statics as the compiled block's, run as Python (same arithmetic).
+            sk.contact_share.py_func(st.buf, w, self.sup._par, share)
         flags = self.wrench_flags.data
         ins = self.stops.data
         reaction = self.sup.check(
             t, dt, self.q.data, int(self.est_status.data[0]), self.qd.data, self.qdd.data,
             fk_ok, roll, pitch, roll_rate, pitch_rate, self.q_ref.data, self.qd_ref.data,
             self.tau.data, force, flags[0] > 0.5, flags[1] > 0.5, ins[0] > 0.5, ins[1] > 0.5,
-            self.drive_failed.data[0] > 0.5, -w[2], self.failed_components())
+            self.drive_failed.data[0] > 0.5, -w[2], self.failed_components(), share)
         v = self.volts.data
         if reaction >= Reaction.HARD_STOP:
             v[:] = 0.0
@@ -156,6 +203,10 @@ class SupervisorBlock(Component):
         self.enable.data[0] = 1.0
         self.mode.data[0] = float(SupervisorMode.of(reaction))
         return 0
+
+
+_F64 = np.dtype(np.float64)
+_SHAPE3 = (3,)
 
 
 @njit(cache=True)
@@ -174,6 +225,36 @@ def _disagreement(measured, last, mismatch, tolerance_v, confirm_cycles):
     return -1
 
 
+# RedundantDrive's numbers (float64 array): the last command written (3), the one before it
+# (3, restored when a write fails), each channel's disagreement count (3; integers exact), the
+# tolerance (V) and the cycles that confirm a disagreement (one array: numba's dispatch costs
+# per argument).
+_LAST, _BACKUP, _MISMATCH, _TOLERANCE, _CONFIRM, _DRIVE_SIZE = 0, 3, 6, 9, 10, 11
+
+
+@njit(cache=True)
+def _drive_cycle(measured, has_measured, volts, enabled, st):
+    """:class:`RedundantDrive`'s arithmetic of a cycle: with a monitor reading, count each
+    channel's disagreement with the last command (:func:`_disagreement`'s rule) and return the
+    first channel confirmed failed (nothing else done); otherwise the command about to be
+    written becomes the last one (0 V when the drives are disabled), the previous one kept in
+    the backup, and -1 is returned."""
+    if has_measured:
+        tolerance_v = st[_TOLERANCE]
+        confirm_cycles = st[_CONFIRM]
+        for i in range(3):
+            if abs(measured[i] - st[_LAST + i]) > tolerance_v:
+                st[_MISMATCH + i] += 1.0
+                if st[_MISMATCH + i] >= confirm_cycles:
+                    return i
+            else:
+                st[_MISMATCH + i] = 0.0
+    for i in range(3):
+        st[_BACKUP + i] = st[_LAST + i]
+        st[_LAST + i] = volts[i] if enabled else 0.0
+    return -1
+
+
 class RedundantDrive(Component):
     """Ports: in ``volts``: float64[3] V; in ``enable``: float64[1]; out ``failed``: float64[1]
     (1 when a channel has failed on both cards); out ``active_card``: float64[1].
@@ -188,8 +269,9 @@ class RedundantDrive(Component):
 
     def __init__(self, name: str, cards: Sequence[ActuatorOutputs], log: EventLog,
                  monitor: Callable[[], Sequence[float] | np.ndarray | None] | None = None,
-                 tolerance_v: float = 0.1, confirm_cycles: int = 3):
+                 tolerance_v: float = 0.1, confirm_cycles: int = 3, compiled: bool = True):
         super().__init__(name)
+        self.compiled = compiled
         self.cards = list(cards)
         self.log = log
         self.monitor = monitor
@@ -200,15 +282,23 @@ class RedundantDrive(Component):
         self.failed = self.declare_output("failed", Array(1))
         self.active_card = self.declare_output("active_card", Array(1))
         self._card = 0
-        self._last = np.zeros(3)
+        self._st = np.zeros(_DRIVE_SIZE)
+        self._st[_TOLERANCE] = self.tolerance_v
+        self._st[_CONFIRM] = self.confirm_cycles
+        self._last = self._st[_LAST:_LAST + 3]
+        self._mismatch = self._st[_MISMATCH:_MISMATCH + 3]
         self._zero = np.zeros(3)
         self._measured = np.zeros(3)
-        self._mismatch = np.zeros(3, dtype=np.int64)
         self._enabled = False
-        # Compile (or load from numba's cache) now, not in the first cycle.
-        _disagreement(self._measured, self._last, self._mismatch, self.tolerance_v,
-                      self.confirm_cycles)
-        self._mismatch[:] = 0
+        # Compile (or load from numba's cache) now, not in the first cycle: the command as the
+        # loop binds it (a read-only view), on a scratch state.
+        probe = np.zeros(3)
+        probe.flags.writeable = False
+        for measured in (self._measured, probe):
+            _drive_cycle(measured, True, probe, True, self._st.copy())
+        if not compiled:
+            _disagreement(self._measured, self._last.copy(), self._mismatch.copy(),
+                          self.tolerance_v, self.confirm_cycles)
 
     def on_start(self) -> None:
         self._card = 0
@@ -250,6 +340,8 @@ class RedundantDrive(Component):
         self._enabled = False
 
     def update(self, t: float, dt: float) -> int:
+        if not self.compiled:
+            return self._update_interpreted(t, dt)
         if self.failed.data[0] > 0.5:
             if self._enabled:
                 self._all_off()
@@ -259,16 +351,48 @@ class RedundantDrive(Component):
         card = self.cards[self._card]
         measured = self.monitor() if enabled and self.monitor is not None and \
             self._enabled else None
-        if measured is not None:               # None: no reading newer than the last command
-            m = self._measured
+        if measured is None:                   # None: no reading newer than the last command
+            m, has = v, False
+        elif type(measured) is np.ndarray and measured.dtype is _F64 \
+                and measured.shape == _SHAPE3:
+            m, has = measured, True            # the twin's amplifier inputs: read in place
+        else:
+            m, has = self._measured, True
             m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
-            i = _disagreement(m, self._last, self._mismatch, self.tolerance_v,
-                              self.confirm_cycles)
-            if i >= 0:
-                if not self._fail_over(t, i, "amplifier input disagrees with the command"):
-                    self._all_off()
-                    return 0
-                card = self.cards[self._card]
+        # One compiled call: the monitor check, and the command stored as the last one.
+        i = _drive_cycle(m, has, v, enabled, self._st)
+        if i >= 0:
+            if not self._fail_over(t, i, "amplifier input disagrees with the command"):
+                self._all_off()
+                return 0
+            return self._finish_cycle(t, v, enabled)
+        if enabled != self._enabled:
+            try:
+                if enabled:
+                    card.enable()
+                else:
+                    card.disable()
+            except HardwareError:
+                self._last[:] = self._st[_BACKUP:_BACKUP + 3]     # as before this cycle
+                raise
+            self._enabled = enabled
+        if not enabled:
+            return 0
+        try:
+            card.write_volts(v)
+        except HardwareError as exc:
+            self._last[:] = self._st[_BACKUP:_BACKUP + 3]         # nothing was written
+            if not self._fail_over(t, -1, f"write failed: {exc}"):
+                self._all_off()
+                return 0
+            self.cards[self._card].write_volts(v)
+            self._last[:] = v
+        return 0
+
+    def _finish_cycle(self, t: float, v: np.ndarray, enabled: bool) -> int:
+        """The rest of a cycle after the monitor check, in Python (the previous code): the
+        interpreted cycle's, and the compiled one's after a failover."""
+        card = self.cards[self._card]
         if enabled != self._enabled:
             if enabled:
                 card.enable()
@@ -287,3 +411,25 @@ class RedundantDrive(Component):
             self.cards[self._card].write_volts(v)
         self._last[:] = v
         return 0
+
+    def _update_interpreted(self, t: float, dt: float) -> int:
+        """The block as it ran before :func:`_drive_cycle` (``compiled=False``): the reference
+        of ``tests/test_device_compiled.py``."""
+        if self.failed.data[0] > 0.5:
+            if self._enabled:
+                self._all_off()
+            return 0
+        v = self.volts.data
+        enabled = self.enable.data[0] > 0.5
+        measured = self.monitor() if enabled and self.monitor is not None and \
+            self._enabled else None
+        if measured is not None:               # None: no reading newer than the last command
+            m = self._measured
+            m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
+            i = _disagreement(m, self._last, self._mismatch, self.tolerance_v,
+                              self.confirm_cycles)
+            if i >= 0 and not self._fail_over(t, i, "amplifier input disagrees with the "
+                                                    "command"):
+                self._all_off()
+                return 0
+        return self._finish_cycle(t, v, enabled)

@@ -23,6 +23,7 @@ import math
 from enum import IntEnum
 
 import numpy as np
+from numba import njit
 
 #: Readings averaged (at 1 kHz: 0.1 s; the mean's noise is σ/10, 0.025 N on z).
 TARE_SAMPLES = 100
@@ -62,12 +63,60 @@ def refusal_message(code: int, mean_force_n: float) -> str:
     return "no valid force reading for the tare (sensor stale or invalid)"
 
 
+# The tare's numbers in one float64 array (``Tare._buf``), so a cycle is one compiled call
+# (:func:`tare_cycle`): state, tares done, valid readings summed, cycles measured, the request
+# seen last cycle, samples wanted, cycle budget; then the offset (6), the sums (6) and the sums
+# of squares of the force (3). Integers are exact in float64.
+_STATE, _COUNT, _N, _CYCLES, _REQUESTED, _SAMPLES, _MAX_CYCLES = range(7)
+_OFFSET, _SUM, _SQ, _BUF_SIZE = 7, 13, 19, 22
+_MEASURING = float(TareState.MEASURING)
+
+#: :func:`tare_cycle`'s answer when the measurement ended this cycle (Python finishes it).
+TARE_ENDED = 1
+
+
+@njit(cache=True)
+def tare_cycle(wrench, valid, requested, port, buf):
+    """One cycle of :meth:`Tare.cycle` on ``buf`` (layout above): a rising edge of
+    ``requested`` starts a measurement, a measuring tare adds the reading (when ``valid``),
+    the zero is subtracted from ``wrench`` in place and ``port``'s state and count are set.
+    Returns :data:`TARE_ENDED`, before subtracting anything, when this reading ended the
+    measurement (enough samples, or the cycle budget spent): :meth:`Tare.cycle` then judges
+    it in Python (once per tare) and completes the cycle; 0 otherwise."""
+    if requested and buf[_REQUESTED] == 0.0:
+        for k in range(_SUM, _BUF_SIZE):
+            buf[k] = 0.0
+        buf[_N] = 0.0
+        buf[_CYCLES] = 0.0
+        buf[_STATE] = _MEASURING
+    buf[_REQUESTED] = 1.0 if requested else 0.0
+    if buf[_STATE] == _MEASURING:
+        buf[_CYCLES] += 1.0
+        if valid:
+            for k in range(6):
+                buf[_SUM + k] += wrench[k]
+            for i in range(3):
+                buf[_SQ + i] += wrench[i] * wrench[i]
+            buf[_N] += 1.0
+        if buf[_N] >= buf[_SAMPLES] or buf[_CYCLES] >= buf[_MAX_CYCLES]:
+            return TARE_ENDED
+    for k in range(6):
+        wrench[k] -= buf[_OFFSET + k]
+    port[0] = buf[_STATE]
+    port[1] = buf[_COUNT]
+    return 0
+
+
 class Tare:
     """Software zero of a 6-axis wrench; no allocation per sample (the loop's cycle).
 
     ``offset`` (N, N m) is subtracted by :meth:`apply`; :meth:`start` begins a new measurement,
     :meth:`add` feeds one reading per cycle and returns the state; ``reason`` says why a tare
     was refused, ``mean_force_n`` is the force magnitude the last measurement saw.
+
+    :meth:`cycle` (the loop's) is one compiled call (:func:`tare_cycle`) except in the cycle a
+    measurement ends; :meth:`cycle_interpreted` is the same in Python, the reference. Both work
+    on the same numbers.
     """
 
     def __init__(self, samples: int = TARE_SAMPLES, max_load_n: float = TARE_MAX_LOAD_N,
@@ -75,21 +124,64 @@ class Tare:
         if samples < 2 or max_cycles < samples:
             raise ValueError(f"tare needs 2 <= samples <= max_cycles, got {samples}, "
                              f"{max_cycles}")
+        self._buf = np.zeros(_BUF_SIZE)
+        self._buf[_SAMPLES] = samples
+        self._buf[_MAX_CYCLES] = max_cycles
         self.samples = samples
         self.max_load_n = max_load_n
         self.max_sigma_n = max_sigma_n
         self.max_cycles = max_cycles
-        self.offset = np.zeros(6)
+        self.offset = self._buf[_OFFSET:_OFFSET + 6]
+        self._sum = self._buf[_SUM:_SUM + 6]
+        self._sq = self._buf[_SQ:_SQ + 3]
         self.state = TareState.NONE
         self.reason = ""
         self.refusal = TareRefusal.NONE
         self.mean_force_n = math.nan
-        self.count = 0                      # completed tares
-        self._sum = np.zeros(6)
-        self._sq = np.zeros(3)
-        self._n = 0
-        self._cycles = 0
-        self._requested = False
+        # Compile (or load from numba's cache) now, not in the first cycle (on a copy).
+        tare_cycle(np.zeros(6), True, False, np.zeros(10), self._buf.copy())
+
+    # The scalar state lives in ``_buf`` (read and written by the compiled cycle too).
+    @property
+    def state(self) -> TareState:
+        return TareState(int(self._buf[_STATE]))
+
+    @state.setter
+    def state(self, value: TareState) -> None:
+        self._buf[_STATE] = float(value)
+
+    @property
+    def count(self) -> int:
+        """Completed tares."""
+        return int(self._buf[_COUNT])
+
+    @count.setter
+    def count(self, value: int) -> None:
+        self._buf[_COUNT] = value
+
+    @property
+    def _n(self) -> int:
+        return int(self._buf[_N])
+
+    @_n.setter
+    def _n(self, value: int) -> None:
+        self._buf[_N] = value
+
+    @property
+    def _cycles(self) -> int:
+        return int(self._buf[_CYCLES])
+
+    @_cycles.setter
+    def _cycles(self, value: int) -> None:
+        self._buf[_CYCLES] = value
+
+    @property
+    def _requested(self) -> bool:
+        return bool(self._buf[_REQUESTED])
+
+    @_requested.setter
+    def _requested(self, value: bool) -> None:
+        self._buf[_REQUESTED] = 1.0 if value else 0.0
 
     def start(self) -> None:
         self._sum[:] = 0.0
@@ -110,11 +202,14 @@ class Tare:
             for i in range(3):
                 sq[i] += raw[i] * raw[i]
             self._n += 1
+        self._judge()
+        return self.state
+
+    def _judge(self) -> None:
         if self._n >= self.samples:
             self._finish()
         elif self._cycles >= self.max_cycles:
             self._refuse(TareRefusal.NO_READING)
-        return self.state
 
     def _finish(self) -> None:
         n = self._n
@@ -145,14 +240,32 @@ class Tare:
         """One loop cycle of the force reader: a rising edge of ``requested`` starts a tare,
         ``wrench`` (the raw reading) feeds it, then the zero is subtracted from ``wrench`` in
         place; ``port`` (float64[10]) gets [state, tares done, refusal, mean force magnitude
-        (N), offset (6)] — what the sequencer reads."""
+        (N), offset (6)] — what the sequencer reads. One compiled call
+        (:func:`tare_cycle`), and Python only in the cycle a measurement ends."""
+        if tare_cycle(wrench, valid, requested, port, self._buf) == TARE_ENDED:
+            self._end_cycle(wrench, port)
+
+    def _end_cycle(self, wrench: np.ndarray, port: np.ndarray) -> None:
+        """The rest of a cycle whose reading ended the measurement (already added)."""
+        self._judge()
+        self._report(port)
+        self.apply(wrench)
+        port[0] = float(self.state)
+        port[1] = float(self.count)
+
+    def _report(self, port: np.ndarray) -> None:
+        port[2] = float(self.refusal)
+        port[3] = self.mean_force_n
+        port[4:] = self.offset
+
+    def cycle_interpreted(self, wrench: np.ndarray, valid: bool, requested: bool,
+                          port: np.ndarray) -> None:
+        """:meth:`cycle` in Python (the reference of ``tests/test_device_compiled.py``)."""
         if requested and not self._requested:
             self.start()
         self._requested = requested
         if self.state == TareState.MEASURING and self.add(wrench, valid) != TareState.MEASURING:
-            port[2] = float(self.refusal)
-            port[3] = self.mean_force_n
-            port[4:] = self.offset
+            self._report(port)
         self.apply(wrench)
         port[0] = float(self.state)
         port[1] = float(self.count)

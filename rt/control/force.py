@@ -21,6 +21,15 @@ stays below 0 N anyway (``rt.safety.supervisor``).
   what its actuators can reach in that time; the bounded feedforward (z̈_ff too, by
   ``max_feedforward_accel_m_s2``) leaves the rest to the feedback instead of demanding
   kilonewtons. Roll/pitch: PD on the angles with gravity compensation G(q).
+  The integral is held (conditional integration) while a drive would be at its force limit
+  in the direction the integral pushes (``drive_force_limit_n``: the amplifier's current or
+  command limit), and while the reference is a rise beyond what the robot follows
+  (``ForceReference.transient``): a heel strike asks 2.7-3 kN of ≈ 2 kN drives for a few ms,
+  and an integral wound up there overshoots for tens of ms afterwards.
+  Preview (``preview_s``): a reference known in advance (a protocol's table) is read that far
+  ahead by the sequencer; the hybrid controller tracks the read-ahead reference while the
+  program asks more than the robot follows (``rt.components.protocol_blocks``), so the push
+  of a heel strike and the fall of a toe off start that much earlier.
 * ``Admittance`` — the contact is rendered as a virtual mass-damper-spring in z driven by the
   force error, M_a z̈_c + D_a ż_c = F − F_d, and the resulting pose (z_c, roll_d, pitch_d) is
   tracked by the inner Paden-Panja position law (IK to slider references each cycle).
@@ -59,6 +68,11 @@ class ForceReference:
     pitch: float = 0.0
     roll_rate: float = 0.0
     pitch_rate: float = 0.0
+    #: The reference is a transient beyond what the robot follows (a heel strike, a fast toe
+    #: off; ``rt.components.protocol_blocks.HybridController``): its error is the transient's,
+    #: not a steady disturbance, so the integral holds instead of winding up for the
+    #: overshoot after it.
+    transient: bool = False
 
 
 class ExplicitForceGains(BaseModel):
@@ -79,6 +93,14 @@ class ExplicitForceGains(BaseModel):
     preload_n: Annotated[float, Field(ge=0.0, le=200.0, allow_inf_nan=False)] = 10.0
     max_feedforward_speed_m_s: Pos = 0.05
     max_feedforward_accel_m_s2: Pos = 1.0
+    #: How far ahead (s) the law reads a force reference known in advance (a protocol's
+    #: precomputed table) while the reference asks more than the robot follows (the hybrid
+    #: controller's ``_lead``: a heel strike, a fast toe off). 5 ms: on the twin a 20 kN/s
+    #: step lags 6-11 ms, and the preview takes its own length off that lag (tests/
+    #: test_force_preview.py); functional_walk plate 0 is best at 5 ms (3 ms: 3.67 %, 8 ms:
+    #: 3.44 %). The loop's builder hands it to the sequencer (``preview_steps``); the law's
+    #: arithmetic does not use it.
+    preview_s: Annotated[float, Field(ge=0.0, le=0.05, allow_inf_nan=False)] = 0.005
 
 
 #: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
@@ -99,6 +121,9 @@ EXPLICIT_FORCE_RANGES = {
     # Bounds on the motion feedforward (a heel strike once asked for 16 kN without them).
     "max_feedforward_speed_m_s": GainRange(0.001, 0.2, "m/s"),
     "max_feedforward_accel_m_s2": GainRange(0.01, 5.0, "m/s²"),
+    # Preview of a reference known in advance: a few times the loop's lag at most (the lag
+    # measured on the twin is 3-5 ms); 0 = none.
+    "preview_s": GainRange(0.0, 0.05, "s"),
 }
 #: Admittance: a virtual mass below 1 kg or a rate above 0.2 m/s would let the platform jump
 #: at a patient's push; above 500 kg / 1e5 N s/m it no longer yields to a person.
@@ -165,7 +190,13 @@ class ExplicitForce:
         #: ``_fs`` (the properties below and the RLS are views of it).
         self.compiled = compiled
         self._fs = np.zeros(ck.FS_SIZE)
-        self._fg = np.zeros(13)
+        self._fg = np.zeros(14)
+        drive = model.description.drive
+        #: The force a drive gives at its limit (N at the slider): the amplifier's current limit
+        #: or its command limit, whichever binds first. The law holds its integral while a
+        #: drive would be there (anti-windup); the supervisor clips the command itself.
+        self.drive_force_limit_n = drive.force_per_amp_n * min(
+            drive.current_limit_a, drive.amplifier_gain_a_per_v * drive.command_limit_v)
         self._work = np.zeros(30 + rb.work_size(TREE_DOF))
         self._pack_gains()
         self.reset()
@@ -178,7 +209,8 @@ class ExplicitForce:
                        g.angle_kp_n_m_per_rad, g.angle_kd_n_m_s_per_rad,
                        g.stiffness_guess_n_per_m, 1.0 if g.estimate_stiffness else 0.0,
                        g.forgetting, g.preload_n, g.max_feedforward_speed_m_s,
-                       g.max_feedforward_accel_m_s2, self.axis_inertia)
+                       g.max_feedforward_accel_m_s2, self.axis_inertia,
+                       self.drive_force_limit_n)
 
     @property
     def integral(self) -> float:
@@ -226,6 +258,19 @@ class ExplicitForce:
                                {**self.gains.model_dump(), **changes})
         self._pack_gains()
 
+    def _winds_up(self, base: np.ndarray, S: np.ndarray, fz: float, e: float) -> bool:
+        """True when a drive would be at its force limit with τ = base + S_z fz and the
+        integral's action on that axis (the sign of S_z e) pushes it further."""
+        limit = self.drive_force_limit_n
+        if limit <= 0.0 or e == 0.0:
+            return False
+        for i in range(3):
+            tau = base[i] + S[8, i] * fz
+            push = S[8, i] * e
+            if (tau >= limit and push > 0.0) or (tau <= -limit and push < 0.0):
+                return True
+        return False
+
     def update(self, st: State, force_n: float, ref: ForceReference, dt: float,
                out: np.ndarray) -> int:
         """τ (N) into ``out``. ``force_n`` is the measured F (NaN → the law holds its integral
@@ -236,7 +281,8 @@ class ExplicitForce:
             ck.explicit_force(d.tree_i, d.tree_f, st.buf, self._fg, self._fs, float(force_n),
                               float(ref.f), float(ref.f_dot), float(ref.f_ddot),
                               float(ref.roll), float(ref.pitch), float(ref.roll_rate),
-                              float(ref.pitch_rate), float(dt), self._work, out)
+                              float(ref.pitch_rate), 1.0 if ref.transient else 0.0,
+                              float(dt), self._work, out)
             self.tau[:] = out
             return 0
         g = self.gains
@@ -259,7 +305,8 @@ class ExplicitForce:
         if not math.isnan(force_n):
             e = f_d - force_n
             limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
-            integral = max(-limit, min(limit, integral + e * dt))
+            if not ref.transient:
+                integral = max(-limit, min(limit, integral + e * dt))
             if g.estimate_stiffness and force_n > 50.0:
                 # Learn the contact's stiffness only while clearly in contact and moving a
                 # little; the estimate stays within 1/5..20× the guess, so a poorly excited
@@ -271,7 +318,27 @@ class ExplicitForce:
                 self._last_z = cfg.z
         else:
             e = 0.0
-        fz = f_d + g.kp * e + g.ki_per_s * integral - g.damping_n_s_per_m * (zd - z_dot_ff)
+        q_roll = (-g.angle_kp_n_m_per_rad * (cfg.roll - ref.roll)
+                  - g.angle_kd_n_m_s_per_rad * (rd - ref.roll_rate))
+        q_pitch = (-g.angle_kp_n_m_per_rad * (cfg.pitch - ref.pitch)
+                   - g.angle_kd_n_m_s_per_rad * (pd - ref.pitch_rate))
+        # Everything but the z task force: τ = G + J_fkᵀ (0, Q_roll, Q_pitch), J_fk = rows
+        # (z, roll, pitch) of S, plus the feedforward of the motion the force profile implies
+        # (slider space via J_ik).
+        grav = self.dyn.gravity(st)
+        j_ik = st.inverse_jacobian()
+        qd_ff = j_ik[:, 0] * z_dot_ff
+        qdd_ff = j_ik[:, 0] * z_ddot_ff
+        fric = self.dyn.friction(qd_ff)
+        for i in range(3):
+            out[i] = (grav[i] + S[11, i] * q_roll + S[10, i] * q_pitch
+                      + fric[i] + self.axis_inertia * qdd_ff[i])
+        held = self.integral
+
+        def task(integ: float) -> float:
+            return f_d + g.kp * e + g.ki_per_s * integ - g.damping_n_s_per_m * (zd - z_dot_ff)
+
+        fz = task(integral)
         if fz < floor and not force_n > floor:
             # Never pull: with the foot carrying no more than the preload (or no reading) the
             # command is held at the preload, and the integral only moves up (conditional
@@ -279,22 +346,16 @@ class ExplicitForce:
             # preload the feedback may command less than it: that moves the platform down
             # against its friction while the foot still pushes on it.
             fz = floor
-            self.integral = max(self.integral, integral)
-        else:
-            self.integral = integral
-        q_roll = (-g.angle_kp_n_m_per_rad * (cfg.roll - ref.roll)
-                  - g.angle_kd_n_m_s_per_rad * (rd - ref.roll_rate))
-        q_pitch = (-g.angle_kp_n_m_per_rad * (cfg.pitch - ref.pitch)
-                   - g.angle_kd_n_m_s_per_rad * (pd - ref.pitch_rate))
-        # τ = G + J_fkᵀ Q_x, J_fk = rows (z, roll, pitch) of S.
-        grav = self.dyn.gravity(st)
+            integral = max(held, integral)
+        elif self._winds_up(out, S, fz, e):
+            # A drive at its force limit in the direction the integral pushes: the integral is
+            # held (conditional integration). A heel strike asks more than the drives give
+            # for a few ms; a wound-up ∫e would then overshoot for tens of ms.
+            integral = held
+            fz = task(integral)
+        self.integral = integral
         for i in range(3):
-            out[i] = grav[i] + S[8, i] * fz + S[11, i] * q_roll + S[10, i] * q_pitch
-        # Feedforward of the motion the force profile implies (slider space via J_ik).
-        j_ik = st.inverse_jacobian()
-        qd_ff = j_ik[:, 0] * z_dot_ff
-        qdd_ff = j_ik[:, 0] * z_ddot_ff
-        out += self.dyn.friction(qd_ff) + self.axis_inertia * qdd_ff
+            out[i] += S[8, i] * fz
         self.tau[:] = out
         return 0
 

@@ -269,10 +269,10 @@ def warm_up(dyn) -> None:
                            np.array(cfg.q) if z3 is writable else _ro(np.array(cfg.q)), z3,
                            gains, np.zeros(4), np.zeros(3), State().buf, np.zeros(3), 1e-12, 50,
                            np.zeros(MODEL_STATE_WORK), work, out)
-    fg = np.ones(13)
+    fg = np.ones(14)
     fs = np.ones(FS_SIZE)
-    explicit_force(ti, tf, st.buf, fg, fs, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e-3,
-                   np.zeros(30 + rb.work_size(TREE_DOF)), out)
+    explicit_force(ti, tf, st.buf, fg, fs, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                   1e-3, np.zeros(30 + rb.work_size(TREE_DOF)), out)
     _warm = True
 
 
@@ -285,16 +285,17 @@ def _ro(a):
 
 # Explicit force law (``rt.control.force.ExplicitForce``). ``fg`` (float64) = [Kp, Ki, D,
 # integral limit, angle Kp, angle Kd, stiffness guess, estimate stiffness (0/1), forgetting,
-# preload, max ż_ff, max z̈_ff, axis inertia]; ``fs`` (float64) = [∫e, last z, k̂, RLS θ (2),
-# RLS P (2×2 row-major)]; the reference as scalars.
+# preload, max ż_ff, max z̈_ff, axis inertia, drive force limit (N; ≤ 0: none)]; ``fs``
+# (float64) = [∫e, last z, k̂, RLS θ (2), RLS P (2×2 row-major)]; the reference as scalars.
 FS_INTEGRAL, FS_LAST_Z, FS_K, FS_THETA, FS_P = 0, 1, 2, 3, 5
 FS_SIZE = 9
 
 
 @njit(cache=True)
 def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, roll_ref,
-                   pitch_ref, roll_rate_ref, pitch_rate_ref, dt, work, out):
-    """Hybrid explicit force in z, PD on roll and pitch, G and the motion feedforward."""
+                   pitch_ref, roll_rate_ref, pitch_rate_ref, hold, dt, work, out):
+    """Hybrid explicit force in z, PD on roll and pitch, G and the motion feedforward.
+    ``hold`` ≠ 0: the reference is a transient beyond the robot; the integral holds."""
     Q, _, qd, S, _, _, _, _, _ = rb.unpack_state(stb)
     z = Q[8]
     pitch = Q[10]
@@ -320,7 +321,8 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
     if not math.isnan(force_n):
         e = f_d - force_n
         limit = fg[3] / ki if ki > 0 else 0.0
-        integral = max(-limit, min(limit, integral + e * dt))
+        if hold == 0.0:
+            integral = max(-limit, min(limit, integral + e * dt))
         if fg[7] != 0.0 and force_n > 50.0:
             last_z = fs[FS_LAST_Z]
             if not math.isnan(last_z) and abs(z - last_z) > 1e-7:
@@ -349,12 +351,6 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
             fs[FS_LAST_Z] = z
     else:
         e = 0.0
-    fz = f_d + fg[0] * e + ki * integral - fg[2] * (zd - z_dot_ff)
-    if fz < floor and not force_n > floor:
-        fz = floor
-        fs[FS_INTEGRAL] = max(fs[FS_INTEGRAL], integral)
-    else:
-        fs[FS_INTEGRAL] = integral
     q_roll = -fg[4] * (roll - roll_ref) - fg[5] * (rd - roll_rate_ref)
     q_pitch = -fg[4] * (pitch - pitch_ref) - fg[5] * (pd_ - pitch_rate_ref)
     grav = work[0:3]
@@ -364,8 +360,6 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
     zero[2] = 0.0
     pi = rb.unpack_tree(ti, tf)[5]
     rb.mixed_torque(ti, tf, pi, stb, zero, zero, True, work[30:], grav)
-    for i in range(3):
-        out[i] = grav[i] + S[8, i] * fz + S[11, i] * q_roll + S[10, i] * q_pitch
     # J_ik = (rows z, roll, pitch of S)⁻¹; its first column maps ż to the sliders.
     jfk = work[6:15].reshape((3, 3))
     jik = work[15:24].reshape((3, 3))
@@ -382,5 +376,42 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
     fric[1] = 0.0
     fric[2] = 0.0
     rb.friction(ti, tf, qd_ff, fric)
+    # Everything but the z task force: G, the angle PDs and the motion feedforward.
     for i in range(3):
-        out[i] += fric[i] + fg[12] * (jik[i, 0] * z_ddot_ff)
+        out[i] = (grav[i] + S[11, i] * q_roll + S[10, i] * q_pitch
+                  + fric[i] + fg[12] * (jik[i, 0] * z_ddot_ff))
+    held = fs[FS_INTEGRAL]
+    fz = _task_fz(fg, f_d, e, integral, zd, z_dot_ff, force_n)
+    if fz < floor and not force_n > floor:
+        fz = floor
+        integral = max(held, integral)
+    elif _winds_up(out, S, fz, e, fg[13]):
+        # A drive at its limit in the direction the integral pushes: hold the integral
+        # (conditional integration), so a heel strike the drives cannot follow does not
+        # leave ∫e wound up to overshoot for tens of ms once they catch up.
+        integral = held
+        fz = _task_fz(fg, f_d, e, integral, zd, z_dot_ff, force_n)
+    fs[FS_INTEGRAL] = integral
+    for i in range(3):
+        out[i] += S[8, i] * fz
+
+
+@njit(cache=True)
+def _task_fz(fg, f_d, e, integral, zd, z_dot_ff, force_n):
+    """Q_z = F_d + Kp e + Ki ∫e − D (ż − ż_ff) (N)."""
+    return f_d + fg[0] * e + fg[1] * integral - fg[2] * (zd - z_dot_ff)
+
+
+@njit(cache=True)
+def _winds_up(base, S, fz, e, tau_max):
+    """True when a drive would be at its force limit ``tau_max`` (N) with τ = base + S_z fz
+    and the integral's action (sign of S_z e on that axis) pushes it further (``tau_max`` ≤ 0:
+    never)."""
+    if tau_max <= 0.0 or e == 0.0:
+        return False
+    for i in range(3):
+        tau = base[i] + S[8, i] * fz
+        push = S[8, i] * e
+        if (tau >= tau_max and push > 0.0) or (tau <= -tau_max and push < 0.0):
+            return True
+    return False

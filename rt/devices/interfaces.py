@@ -159,6 +159,36 @@ class ForceTorqueSensor(Device):
     def read(self, out: Wrench) -> Wrench:
         """Latest wrench written into ``out`` (stale flag set if none arrived in time)."""
 
+    def read_array(self, out: np.ndarray) -> np.ndarray:
+        """:meth:`read` into a float64[``FT_READ_SIZE``] array (layout ``FT_*``: fx..tz, t,
+        sequence, status, stale, saturated as 0/1), the loop's per-cycle form; as
+        :meth:`read`, a reading without a fresh sample changes only the stale flag. This
+        default goes through a ``Wrench``; a sensor that can fill the array directly (the
+        polled ones, one compiled call) overrides it with the same values."""
+        w = self._read_array_wrench
+        if w is None:
+            w = self._read_array_wrench = Wrench()
+        self.read(w)
+        out[0], out[1], out[2], out[3], out[4], out[5] = w.fx, w.fy, w.fz, w.tx, w.ty, w.tz
+        out[FT_T], out[FT_SEQUENCE], out[FT_STATUS] = w.t, w.sequence, w.status
+        out[FT_STALE] = 1.0 if w.stale else 0.0
+        out[FT_SATURATED] = 1.0 if w.saturated else 0.0
+        return out
+
+    _read_array_wrench: Wrench | None = None
+
+
+#: Layout of :meth:`ForceTorqueSensor.read_array`'s array: the wrench (6), then these.
+FT_T, FT_SEQUENCE, FT_STATUS, FT_STALE, FT_SATURATED, FT_READ_SIZE = 6, 7, 8, 9, 10, 11
+
+
+def new_ft_reading() -> np.ndarray:
+    """A :meth:`ForceTorqueSensor.read_array` buffer as a new ``Wrench``: NaN, no sequence,
+    stale."""
+    out = np.full(FT_READ_SIZE, NAN)
+    out[FT_SEQUENCE], out[FT_STATUS], out[FT_STALE], out[FT_SATURATED] = -1.0, 0.0, 1.0, 0.0
+    return out
+
 
 class ForcePlate(Device):
     """A force plate's raw channels (V or counts as the backend documents); calibration maps them."""
@@ -192,3 +222,16 @@ class DigitalInputs(Device):
 
     @abc.abstractmethod
     def read(self, out: DigitalInputState) -> DigitalInputState: ...
+
+    def read_array(self, out: np.ndarray) -> np.ndarray:
+        """[hardware e-stop, hand-held stop] as 0/1 into ``out`` (float64[2]), the loop's
+        per-cycle form of :meth:`read`; a backend holding the levels directly overrides it."""
+        s = self._read_array_state
+        if s is None:
+            s = self._read_array_state = DigitalInputState()
+        self.read(s)
+        out[0] = 1.0 if s.hardware_estop else 0.0
+        out[1] = 1.0 if s.hand_stop else 0.0
+        return out
+
+    _read_array_state: DigitalInputState | None = None

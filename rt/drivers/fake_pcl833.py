@@ -38,6 +38,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from rt.drivers import kernels
 from rt.drivers.pcl833 import (
     COUNTER_MASK,
     DEFAULT_BASE,
@@ -82,17 +83,47 @@ class FakePcl833Port(PortIO):
     def __init__(self, base: int = DEFAULT_BASE,
                  m_per_count: float | Sequence[float] = DEFAULT_M_PER_COUNT,
                  sign: int | Sequence[int] = +1, strict: bool = True) -> None:
+        # The card's state in one int64 array, so a block of reads (``read_block``) and the
+        # encoders' motion (``set_positions_m``) are one compiled call each
+        # (``rt.drivers.kernels``); the views below are the same numbers by name.
+        self._st = np.zeros(kernels.FAKE_SIZE, dtype=np.int64)
+        st = self._st
         self.base = base
         self.m_per_count = [float(m) for m in _per_axis(m_per_count, "m_per_count")]
         self.sign = [int(s) for s in _per_axis(sign, "sign")]
         self.strict = strict
         self.writes: list[tuple[int, int]] = []
         self.n_reads = 0
-        self._reg = [0] * PORT_SPAN              # last byte written to each write register
-        self._count = [0, 0, 0]                  # live counters
-        self._latched = [0, 0, 0]                # latched counters (what the bytes read)
-        self._encoder_index = [0, 0, 0]          # encoder position in counts from q = 0
-        self._frozen = [False, False, False]
+        self._reg = st[kernels.FAKE_REG:kernels.FAKE_REG + PORT_SPAN]   # last byte written
+        self._count = st[kernels.FAKE_COUNT:kernels.FAKE_COUNT + 3]      # live counters
+        self._latched = st[kernels.FAKE_LATCHED:kernels.FAKE_LATCHED + 3]   # what bytes read
+        self._encoder_index = st[kernels.FAKE_INDEX:kernels.FAKE_INDEX + 3]  # counts from q=0
+        self._frozen = st[kernels.FAKE_FROZEN:kernels.FAKE_FROZEN + 3]
+        self._sign_mpc = np.array([*self.sign, *self.m_per_count], dtype=np.float64)
+        # Compile (or load from numba's cache) now, not in a cycle: on a scratch state.
+        scratch, three = st.copy(), np.zeros(3, dtype=np.int64)
+        kernels.fake_pcl833_read(scratch, np.array([base + 2], dtype=np.int64), three)
+        kernels.fake_pcl833_move(scratch, np.zeros(3))
+        kernels.fake_pcl833_positions(scratch, self._sign_mpc, np.zeros(3))
+        kernels.fake_pcl833_set_counts(scratch, np.zeros(3, dtype=np.uint64), three)
+
+    @property
+    def base(self) -> int:
+        """The card's base port (its DIP switches)."""
+        return int(self._st[kernels.FAKE_BASE])
+
+    @base.setter
+    def base(self, value: int) -> None:
+        self._st[kernels.FAKE_BASE] = value
+
+    @property
+    def strict(self) -> bool:
+        """An access to a port the card does not decode raises ``HardwareError``."""
+        return bool(self._st[kernels.FAKE_STRICT])
+
+    @strict.setter
+    def strict(self, value: bool) -> None:
+        self._st[kernels.FAKE_STRICT] = 1 if value else 0
 
     # --- PortIO ----------------------------------------------------------------------------
 
@@ -105,7 +136,7 @@ class FakePcl833Port(PortIO):
             channel, byte = divmod(offset, 4)
             if byte == 2 and (self._reg[3 + channel] & LATCH_SOURCE_MASK) == LATCH_SOURCE_SOFTWARE_READ:
                 self._latched[channel] = self._count[channel]
-            return (self._latched[channel] >> (8 * byte)) & 0xFF
+            return (int(self._latched[channel]) >> (8 * byte)) & 0xFF
         register = self._offset(port, _READABLE)
         if register is None:
             return 0xFF
@@ -114,7 +145,20 @@ class FakePcl833Port(PortIO):
         channel, byte = divmod(register, 4)
         if byte == 2 and (self._reg[3 + channel] & LATCH_SOURCE_MASK) == LATCH_SOURCE_SOFTWARE_READ:
             self._latched[channel] = self._count[channel]
-        return (self._latched[channel] >> (8 * byte)) & 0xFF
+        return (int(self._latched[channel]) >> (8 * byte)) & 0xFF
+
+    def read_block(self, ports: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``inb`` of each of ``ports`` (int64) in order into ``out`` (int64), as one
+        compiled call (``rt.drivers.kernels.fake_pcl833_read``); the same bytes, latches,
+        ``n_reads`` and refusal as ``inb`` one port at a time."""
+        self._check_open()
+        bad = kernels.fake_pcl833_read(self._st, ports, out)
+        if bad >= 0:
+            self.n_reads += bad + 1
+            raise HardwareError(f"port 0x{int(ports[bad]):X} is not a PCL-833 register at "
+                                f"base 0x{self.base:X}")
+        self.n_reads += ports.shape[0]
+        return out
 
     def outb(self, port: int, value: int) -> None:
         self._check_open()
@@ -145,28 +189,33 @@ class FakePcl833Port(PortIO):
         return bool(self._reg[REG_COUNTER_RESET] & (1 << axis))
 
     def _counting(self, axis: int) -> bool:
-        mode = self._reg[axis] & 0x07
+        mode = int(self._reg[axis]) & 0x07
         return mode != InputMode.DISABLE and not self._held(axis) and not self._frozen[axis]
 
     def _apply_reset_hold(self) -> None:
         for axis in range(3):
             if self._held(axis):
-                self._count[axis] = reset_value(self._reg[axis])
+                self._count[axis] = reset_value(int(self._reg[axis]))
 
     # --- simulation side -------------------------------------------------------------------
 
     def count(self, axis: int) -> int:
         """Live counter of ``axis`` (0-2, card channel axis+1), without latching."""
-        return self._count[axis]
+        return int(self._count[axis])
 
     def register(self, offset: int) -> int:
         """Last byte the driver wrote to write-register ``offset`` (0 if never written)."""
-        return self._reg[offset]
+        return int(self._reg[offset])
 
     def set_count(self, axis: int, count: int) -> None:
         """Preset the live counter of ``axis`` to ``count`` (mod 2**24); a reset hold wins."""
         self._count[axis] = count & COUNTER_MASK
         self._apply_reset_hold()
+
+    def set_counts(self, counts: np.ndarray, offsets: np.ndarray) -> None:
+        """``set_count`` of every axis to ``counts + offsets`` (int arrays; e.g. the rig's
+        counters read over shared memory and a reader's reset offsets), in one compiled call."""
+        kernels.fake_pcl833_set_counts(self._st, counts, offsets)
 
     def move_counts(self, axis: int, delta: int) -> None:
         """Feed ``delta`` counts (signed) to ``axis``'s counter, wrapping modulo 2**24.
@@ -183,20 +232,24 @@ class FakePcl833Port(PortIO):
         call goes to the counter as pulses.
         """
         index = math.floor(self.sign[axis] * position_m / self.m_per_count[axis] + 0.5)
-        delta = index - self._encoder_index[axis]
+        delta = index - int(self._encoder_index[axis])
         self._encoder_index[axis] = index
         self.move_counts(axis, delta)
 
     def set_positions_m(self, positions_m: Sequence[float] | np.ndarray) -> None:
-        """``set_position_m`` for the three axes (inlined: the twin calls it every period)."""
-        sign, mpc, index = self.sign, self.m_per_count, self._encoder_index
-        for axis in range(3):
-            new = math.floor(sign[axis] * positions_m[axis] / mpc[axis] + 0.5)
-            delta = new - index[axis]
-            if delta:
-                index[axis] = new
-                self.move_counts(axis, delta)
+        """``set_position_m`` for the three axes (one compiled call: the twin calls it every
+        period; ``rt.drivers.kernels.fake_pcl833_positions``)."""
+        if not isinstance(positions_m, np.ndarray) or positions_m.dtype != np.float64:
+            positions_m = np.asarray(positions_m, dtype=np.float64)
+        bad = kernels.fake_pcl833_positions(self._st, self._sign_mpc, positions_m)
+        if bad >= 0:        # what math.floor said of it, one axis at a time
+            raise ValueError(f"cannot convert float {positions_m[bad]} to integer")
+
+    def move_to_indices(self, indices: np.ndarray) -> None:
+        """The encoders at ``indices`` (float64[3] holding integers, counts from q = 0, as the
+        twin's fused period computes them): each change goes to the counter as pulses."""
+        kernels.fake_pcl833_move(self._st, indices)
 
     def set_frozen(self, axis: int, frozen: bool = True) -> None:
         """Fault injection: a frozen channel ignores all motion until unfrozen."""
-        self._frozen[axis] = frozen
+        self._frozen[axis] = 1 if frozen else 0

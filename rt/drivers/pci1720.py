@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from rt.devices.interfaces import ActuatorOutputs
+from rt.drivers import kernels
 from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError, InputError
 
 AREF_GROUND = 0
@@ -60,6 +61,11 @@ COMEDI_OUTPUT = 1
 RANGE_BIPOLAR_10V = 3
 #: Thesis 3.1.2: commands are saturated at ±6 V.
 DEFAULT_LIMIT_V = 6.0
+
+_SHAPE = (3,)
+_F64 = np.dtype(np.float64)
+_BITS = kernels.DAC_CODE_BITS
+_MASK = kernels.DAC_CODE_MASK
 
 MISSING_LIBRARY_MESSAGE = "comedilib not found: install libcomedi0 or choose the 'sim' backend"
 
@@ -200,6 +206,11 @@ class Pci1720Outputs(ActuatorOutputs):
         self.device = device
         self.subdevice = int(subdevice)
         self.range_index = int(range_index)
+        # Codes, voltages and clamp flags of the last write, the enable flag, the limit and
+        # the channel ranges in one array: the compiled write (``rt.drivers.kernels.
+        # pci1720_codes``) takes it as its one state argument; ``last_codes`` etc. read it.
+        self._dac = np.zeros(kernels.DAC_STATE_SIZE)
+        self._dac[kernels.DAC_VOLTS:kernels.DAC_VOLTS + 3] = math.nan
         self.limit_v = float(limit_v)
         if isinstance(enable_line, dict):          # from a YAML config
             enable_line = EnableLine(**enable_line)
@@ -215,13 +226,23 @@ class Pci1720Outputs(ActuatorOutputs):
         self._enabled = False
         self._dev: Any = None
         self._enable_dev: Any = None
-        self.last_codes = [0] * self.n_channels
-        self.last_volts = [math.nan] * self.n_channels
-        self.clamped = [False] * self.n_channels
 
         self._dev = self._open(device)
         try:
             self._channels = tuple(self._probe_channel(n) for n in numbers)
+            for i, ch in enumerate(self._channels):
+                r = kernels.DAC_RANGES + 3 * i
+                self._dac[r:r + 3] = (ch.v_min, ch.v_max, ch.maxdata)
+            self._numbers = tuple(ch.number for ch in self._channels)
+            # The compiled write packs the codes in 16-bit fields (every DAC card this driver
+            # knows has 12 bits); a wider card would take the interpreted write.
+            self._packable = all(ch.maxdata <= kernels.DAC_CODE_MASK for ch in self._channels)
+            self._write = self._lib.comedi_data_write
+            # Compile (or load from numba's cache) now, not in a cycle: a read-only view, as
+            # the loop's port is, on a scratch state.
+            probe = np.zeros(3)
+            probe.flags.writeable = False
+            kernels.pci1720_codes(probe, self._dac.copy())
             if enable_line is not None:
                 self._setup_enable_line(enable_line)
             self._write_zero()
@@ -282,6 +303,38 @@ class Pci1720Outputs(ActuatorOutputs):
         return self._enabled
 
     @property
+    def _enabled(self) -> bool:
+        return self._dac[kernels.DAC_ENABLED] != 0.0
+
+    @_enabled.setter
+    def _enabled(self, value: bool) -> None:
+        self._dac[kernels.DAC_ENABLED] = 1.0 if value else 0.0
+
+    @property
+    def limit_v(self) -> float:
+        """The software command limit (V)."""
+        return float(self._dac[kernels.DAC_LIMIT])
+
+    @limit_v.setter
+    def limit_v(self, value: float) -> None:
+        self._dac[kernels.DAC_LIMIT] = value
+
+    @property
+    def last_codes(self) -> list[int]:
+        """The DAC code of each channel's last write (0 before any)."""
+        return [int(c) for c in self._dac[kernels.DAC_CODES:kernels.DAC_CODES + 3]]
+
+    @property
+    def last_volts(self) -> list[float]:
+        """The voltage (V) each channel's last code produces (NaN before any write)."""
+        return self._dac[kernels.DAC_VOLTS:kernels.DAC_VOLTS + 3].tolist()
+
+    @property
+    def clamped(self) -> list[bool]:
+        """Which channels hit the command limit on the last write."""
+        return [c != 0.0 for c in self._dac[kernels.DAC_CLAMPED:kernels.DAC_CLAMPED + 3]]
+
+    @property
     def lsb_v(self) -> tuple[float, ...]:
         """Voltage step of one DAC code per channel (V); 20/4095 V on ±10 V."""
         return tuple((c.v_max - c.v_min) / c.maxdata for c in self._channels)
@@ -324,7 +377,49 @@ class Pci1720Outputs(ActuatorOutputs):
 
         Refused (``HardwareError``, nothing written) with a non-zero value while disabled;
         refused (``InputError``, nothing written) for a wrong length or a non-finite value.
+        A float64 array (the loop's port) is validated and converted in one compiled call
+        (``rt.drivers.kernels.pci1720_codes``), then the three codes go to comedilib; any
+        other sequence takes :meth:`write_volts_interpreted`, the reference. Same results.
         """
+        if type(volts) is not np.ndarray or volts.shape != _SHAPE or volts.dtype is not _F64 \
+                or not self._packable:
+            self.write_volts_interpreted(volts)
+            return
+        if self._closed:
+            self._check_open()
+        packed = kernels.pci1720_codes(volts, self._dac)
+        if packed < 0:
+            self._refuse(packed, volts)
+        write, dev, sub, rng = self._write, self._dev, self.subdevice, self.range_index
+        n0, n1, n2 = self._numbers
+        if write(dev, sub, n0, rng, AREF_GROUND, packed & _MASK) < 0:
+            self._write_failed(0)
+        if write(dev, sub, n1, rng, AREF_GROUND, (packed >> _BITS) & _MASK) < 0:
+            self._write_failed(1)
+        if write(dev, sub, n2, rng, AREF_GROUND, packed >> (2 * _BITS)) < 0:
+            self._write_failed(2)
+
+    def _refuse(self, rc: int, volts: np.ndarray) -> None:
+        if rc == kernels.DAC_NOT_FINITE:
+            raise InputError(f"write_volts got a non-finite command {list(volts)}; nothing "
+                             f"was written")
+        raise HardwareError(
+            "Pci1720Outputs refused a non-zero command while disabled; only the "
+            "supervisor enables the drives")
+
+    def _write_failed(self, i: int) -> None:
+        """Channel ``i``'s write failed: the state as the channel-by-channel write leaves it
+        (the channels before ``i`` written, ``i``'s clamp flag set, the rest as before)."""
+        dac, b = self._dac, kernels.DAC_BACKUP
+        dac[kernels.DAC_CODES + i:3] = dac[b + kernels.DAC_CODES + i:b + 3]
+        dac[kernels.DAC_VOLTS + i:6] = dac[b + kernels.DAC_VOLTS + i:b + 6]
+        dac[kernels.DAC_CLAMPED + i + 1:9] = dac[b + kernels.DAC_CLAMPED + i + 1:b + 9]
+        raise HardwareError(
+            f"comedi_data_write on {self.device} channel {self._channels[i].number} "
+            f"failed: {self._error_text()}")
+
+    def write_volts_interpreted(self, volts: Sequence[float] | np.ndarray) -> None:
+        """:meth:`write_volts` one value at a time in Python (the reference; any sequence)."""
         self._check_open()
         if len(volts) != self.n_channels:
             raise InputError(f"write_volts needs {self.n_channels} values, got {len(volts)}")
@@ -342,7 +437,7 @@ class Pci1720Outputs(ActuatorOutputs):
         limit = self.limit_v
         for i in range(self.n_channels):
             v = float(volts[i])
-            self.clamped[i] = not -limit <= v <= limit
+            self._dac[kernels.DAC_CLAMPED + i] = 0.0 if -limit <= v <= limit else 1.0
             self._write_channel(i, min(limit, max(-limit, v)))
 
     # --- internals ---------------------------------------------------------------------
@@ -356,13 +451,13 @@ class Pci1720Outputs(ActuatorOutputs):
             raise HardwareError(
                 f"comedi_data_write on {self.device} channel {ch.number} failed: "
                 f"{self._error_text()}")
-        self.last_codes[i] = code
-        self.last_volts[i] = code_to_volts(code, ch.v_min, ch.v_max, ch.maxdata)
+        self._dac[kernels.DAC_CODES + i] = code
+        self._dac[kernels.DAC_VOLTS + i] = code_to_volts(code, ch.v_min, ch.v_max, ch.maxdata)
 
     def _write_zero(self) -> None:
         error: HardwareError | None = None
         for i in range(self.n_channels):
-            self.clamped[i] = False
+            self._dac[kernels.DAC_CLAMPED + i] = 0.0
             try:
                 self._write_channel(i, 0.0)
             except HardwareError as exc:     # still zero the other channels

@@ -47,6 +47,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from rt.devices.interfaces import EncoderBank
+from rt.drivers import kernels
 from rt.drivers.port_io import DevPortIO, PortIO
 from rt.errors import ConfigurationError
 
@@ -172,33 +173,42 @@ class CountUnwrapper:
     [-2**23, 2**23). That is right as long as the counter moves less than 2**23 counts
     between two updates (at 1 kHz: 8.4e9 counts/s, i.e. never for this rig).
     ``displacement`` is measured from ``reference`` (the reset value).
+
+    ``store`` (int64[2]: last count, displacement) holds the state when given: the driver
+    keeps its three unwrappers in one array that its compiled decode (``rt.drivers.kernels.
+    pcl833_decode``) updates, so both paths share one state.
     """
 
-    __slots__ = ("_displacement", "_last", "reference")
+    __slots__ = ("_s", "reference")
 
-    def __init__(self, reference: int = MIDPOINT, count: int | None = None) -> None:
+    def __init__(self, reference: int = MIDPOINT, count: int | None = None,
+                 store: np.ndarray | None = None) -> None:
         self.reference = reference
-        self._last = reference
-        self._displacement = 0
+        self._s = np.zeros(2, dtype=np.int64) if store is None else store
+        self._s[0] = reference
+        self._s[1] = 0
         self.reset(reference if count is None else count)
 
     def reset(self, count: int | None = None) -> None:
         """Restart from ``count`` (default: the reference value, as after a card reset)."""
         count = self.reference if count is None else count
-        self._last = count & COUNTER_MASK
-        self._displacement = signed_offset(self._last, self.reference)
+        last = count & COUNTER_MASK
+        self._s[0] = last
+        self._s[1] = signed_offset(last, self.reference)
 
     def update(self, count: int) -> int:
         """Feed a new raw counter value; returns the displacement from the reference (counts)."""
         count &= COUNTER_MASK
-        self._displacement += ((count - self._last + HALF_RANGE) & COUNTER_MASK) - HALF_RANGE
-        self._last = count
-        return self._displacement
+        s = self._s
+        displacement = int(s[1]) + ((count - int(s[0]) + HALF_RANGE) & COUNTER_MASK) - HALF_RANGE
+        s[0] = count
+        s[1] = displacement
+        return displacement
 
     @property
     def displacement(self) -> int:
         """Displacement from the reference after the last update (counts)."""
-        return self._displacement
+        return int(self._s[1])
 
 
 # --- the driver ----------------------------------------------------------------------------
@@ -271,7 +281,19 @@ class Pcl833Encoders(EncoderBank):
 
         self._owns_port = port_io is None
         self._port = DevPortIO(port_path) if port_io is None else port_io
-        self._unwrap = tuple(CountUnwrapper(MIDPOINT) for _ in range(3))
+        # Per cycle: one block read of the nine count bytes (high, low, middle per axis, the
+        # vendor's order) and one compiled decode (``rt.drivers.kernels``).
+        self._read_ports = np.array(
+            [base + count_register(c, b) for c in self.channels for b in (2, 0, 1)],
+            dtype=np.int64)
+        self._io = np.zeros(kernels.PCL_IO_SIZE, dtype=np.int64)
+        self._raw = self._io[kernels.PCL_RAW:kernels.PCL_RAW + 9]
+        self._unwrap_state = self._io[kernels.PCL_UNWRAP:kernels.PCL_UNWRAP + 6]
+        self._unwrap = tuple(CountUnwrapper(MIDPOINT, store=self._unwrap_state[2 * i:2 * i + 2])
+                             for i in range(3))
+        self._dec = np.array([*self.sign, *self.origin_m, *self.m_per_count], dtype=np.float64)
+        # Compile (or load from numba's cache) now, not in the first cycle (scratch arrays).
+        kernels.pcl833_decode(self._io.copy(), self._dec, np.zeros(3))
         try:
             self.configure()
             if reset_on_open:
@@ -329,6 +351,15 @@ class Pcl833Encoders(EncoderBank):
         return tuple(self.read_channel(c) for c in self.channels)
 
     def read_positions_m(self, out: np.ndarray) -> np.ndarray:
+        """The three slider positions (m) into ``out`` (float64[3]): one block read of the
+        port and one compiled decode, bit for bit :meth:`read_positions_m_interpreted`."""
+        self._check_open()
+        self._port.read_block(self._read_ports, self._raw)
+        kernels.pcl833_decode(self._io, self._dec, out)
+        return out
+
+    def read_positions_m_interpreted(self, out: np.ndarray) -> np.ndarray:
+        """:meth:`read_positions_m` one byte and one axis at a time (the reference)."""
         self._check_open()
         for i in range(3):
             displacement = self._unwrap[i].update(self.read_channel(self.channels[i]))

@@ -25,6 +25,8 @@ import ctypes.util
 import errno
 import os
 
+import numpy as np
+
 from rt.devices.interfaces import Device
 from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError
 
@@ -50,6 +52,17 @@ class PortIO(Device):
     @abc.abstractmethod
     def outb(self, port: int, value: int) -> None:
         """Write the byte ``value`` (0-255) to ``port``."""
+
+    def read_block(self, ports: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """``inb`` of each of ``ports`` (int64), in this order, into ``out`` (int64): a
+        driver's whole per-cycle read in one call. The order is kept because a read may have
+        side effects (the PCL-833 latches a counter on its high byte). This default reads one
+        port at a time; a backend that can do better (the card's emulation: one compiled
+        call) overrides it with the same results."""
+        inb = self.inb
+        for k in range(ports.shape[0]):
+            out[k] = inb(int(ports[k]))
+        return out
 
 
 class DevPortIO(PortIO):

@@ -180,6 +180,9 @@ class Loop:
     * ``max_behind_periods`` — re-phase when a cycle starts more than this many periods late.
     * ``rt_priority``, ``cpus``, ``lock_memory``, ``switch_interval_s`` — real-time hygiene
       tried in realtime mode (:func:`rt_hygiene.realtime_thread`); None/False skips one.
+    * ``cpu_latency_us`` — realtime mode: bound every CPU's wake-up latency through the
+      kernel's PM QoS while the loop runs (:func:`rt_hygiene.try_cpu_latency_bound`; 0: idle
+      CPUs poll instead of halting). None: not requested.
     * ``manage_gc`` — freeze and disable gc while running (both modes; the collection before
       freezing is only done in realtime mode, where its tens of ms at start-up do not matter).
     * ``gil_hold_s`` — realtime mode: the GIL switch interval while a cycle runs (``None``, the
@@ -218,6 +221,7 @@ class Loop:
                  max_behind_periods: float = 1.0,
                  rt_priority: int | None = 80, cpus: Iterable[int] | None = None,
                  lock_memory: bool = True, switch_interval_s: float | None = 0.0002,
+                 cpu_latency_us: int | None = None,
                  manage_gc: bool = True, gil_hold_s: float | None = None,
                  gil_guard_us: float | None = None,
                  hold_sleep: Callable[[int], None] | None = None,
@@ -245,7 +249,8 @@ class Loop:
         # Bound now, entered in the thread that runs the cycles (FIFO/affinity are per thread).
         self._hygiene = functools.partial(
             rt_hygiene.realtime_thread, priority=rt_priority, cpus=cpu_list,
-            lock_memory=lock_memory, switch_interval_s=switch_interval_s)
+            lock_memory=lock_memory, switch_interval_s=switch_interval_s,
+            cpu_latency_us=cpu_latency_us)
         self._manage_gc = manage_gc
         if gil_hold_s is not None and not (0.0 < gil_hold_s <= 0.1):
             raise ConfigurationError(f"gil_hold_s must be in (0, 0.1] s, got {gil_hold_s!r}")

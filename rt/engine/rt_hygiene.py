@@ -16,6 +16,11 @@ jitter). Everything applied is undone on exit, so a test process is left as it w
   ``sys.getswitchinterval()`` (5 ms by default) after the loop thread asks for it; a shorter
   interval bounds that wait. Process-wide.
 * gc frozen and disabled while the loop runs (:func:`gc_paused`, reference-counted).
+* CPU wake-up latency bound through the kernel's PM QoS (``/dev/cpu_dma_latency``, as
+  ``cyclictest`` does): an idle CPU otherwise enters an idle state (on these VMs ``haltpoll``
+  with ``guest_halt_poll_ns=0``: a HLT, i.e. the vCPU is handed back to the host) and the
+  loop's wake-up waits for the host to schedule the vCPU again. Process-wide, held while the
+  file stays open, reference-counted.
 """
 from __future__ import annotations
 
@@ -42,6 +47,11 @@ _lock = threading.Lock()
 _gc_users = 0
 _gc_was_enabled = True
 _mlock_users = 0
+_qos_users = 0
+_qos_fd: int | None = None
+#: The kernel's PM QoS request file (Documentation/power/pm_qos_interface.rst): write a 32-bit
+#: latency bound in µs; the request holds while the file descriptor stays open.
+CPU_DMA_LATENCY = "/dev/cpu_dma_latency"
 
 
 def _libc() -> ctypes.CDLL | None:
@@ -67,6 +77,8 @@ class HygieneReport:
     timer_slack_detail: str = "not requested"
     switch_interval_s: float | None = None
     switch_interval_detail: str = "not requested"
+    cpu_latency_us: int | None = None
+    cpu_latency_detail: str = "not requested"
     notes: list[str] = field(default_factory=list)
 
     def summary(self) -> str:
@@ -82,6 +94,8 @@ class HygieneReport:
             (f"timerslack: {self.timer_slack_ns if self.timer_slack_ns is not None else '-'} ns "
             f"({self.timer_slack_detail})"),
             f"GIL switch: {si} ({self.switch_interval_detail})",
+            (f"CPU wake:   {self.cpu_latency_us if self.cpu_latency_us is not None else '-'} µs "
+             f"({self.cpu_latency_detail})"),
         ] + self.notes)
 
 
@@ -172,6 +186,48 @@ def try_timer_slack(ns: int) -> tuple[bool, str, int | None]:
     return True, "ok", prev
 
 
+def try_cpu_latency_bound(us: int, path: str = CPU_DMA_LATENCY) -> tuple[bool, str]:
+    """Ask the kernel to keep every CPU's wake-up latency ≤ ``us`` µs (0: no idle state deeper
+    than polling) while the request is held; reference-counted across loops of the process.
+
+    Costs power (an idle CPU polls instead of halting): a rig's RT PC pays it gladly."""
+    global _qos_users, _qos_fd
+    if not (0 <= int(us) <= 1_000_000):
+        return False, f"a wake-up latency bound in [0, 1e6] µs, got {us!r}"
+    with _lock:
+        if _qos_users > 0:
+            _qos_users += 1
+            return True, "already held by another loop"
+        try:
+            fd = os.open(path, os.O_WRONLY)
+        except FileNotFoundError:
+            return False, f"{path} not present (kernel without PM QoS)"
+        except PermissionError:
+            return False, f"{path} not writable (needs root)"
+        except OSError as exc:
+            return False, f"{path}: {exc}"
+        try:
+            os.write(fd, int(us).to_bytes(4, sys.byteorder, signed=True))
+        except OSError as exc:
+            os.close(fd)
+            return False, f"{path} refused the request: {exc}"
+        _qos_fd, _qos_users = fd, 1
+        return True, "ok (process-wide)"
+
+
+def release_cpu_latency_bound() -> None:
+    """Undo one successful :func:`try_cpu_latency_bound`; the request ends with the last user."""
+    global _qos_users, _qos_fd
+    with _lock:
+        if _qos_users == 0:
+            return
+        _qos_users -= 1
+        if _qos_users == 0 and _qos_fd is not None:
+            with contextlib.suppress(OSError):
+                os.close(_qos_fd)
+            _qos_fd = None
+
+
 @contextlib.contextmanager
 def gc_paused(collect: bool = True) -> Iterator[None]:
     """Collect once (if ``collect``), freeze what survives, and disable gc until the last user
@@ -205,7 +261,8 @@ def gc_paused(collect: bool = True) -> Iterator[None]:
 @contextlib.contextmanager
 def realtime_thread(priority: int | None = 80, cpus: Iterable[int] | None = None,
                     lock_memory: bool = True, timer_slack_ns: int | None = 1,
-                    switch_interval_s: float | None = 0.0002) -> Iterator[HygieneReport]:
+                    switch_interval_s: float | None = 0.0002,
+                    cpu_latency_us: int | None = None) -> Iterator[HygieneReport]:
     """Apply the hygiene measures to the calling thread for the duration of the ``with``.
 
     ``None``/``False`` skips a measure. Yields a :class:`HygieneReport`; restores the previous
@@ -246,6 +303,11 @@ def realtime_thread(priority: int | None = 80, cpus: Iterable[int] | None = None
                 undo.append(lambda p=prev_si: sys.setswitchinterval(p))
             except ValueError as exc:
                 report.switch_interval_detail = f"refused: {exc}"
+        if cpu_latency_us is not None:
+            ok, report.cpu_latency_detail = try_cpu_latency_bound(cpu_latency_us)
+            if ok:
+                report.cpu_latency_us = int(cpu_latency_us)
+                undo.append(release_cpu_latency_bound)
         yield report
     finally:
         for fn in reversed(undo):

@@ -97,6 +97,9 @@ def identify(data, validation, nominal, truth=None) -> tuple[Any, dict[str, Any]
                         "error_sigmas": float(abs(e - t) / max(s, 1e-300))})
         rows.append(row)
     result: dict[str, Any] = {"base": rows, "residual_rms_n": base.residual_rms_n}
+    if base.ripple_n is not None:
+        # The screw's friction ripple per axis (N), estimated as nuisance parameters.
+        result["friction_ripple_n"] = [float(v) for v in base.ripple_n]
     if validation is not None:
         result["validation"] = {"nominal": force_prediction_error(nominal, validation),
                                 "identified": force_prediction_error(ident, validation)}
@@ -214,6 +217,9 @@ def _print(result: dict[str, Any], as_json: bool) -> int:
             line += (f" {b['truth']:11.4g} {100 * b['rel_error']:7.2f}% "
                      f"{b['error_sigmas']:6.1f}")
         print(line)
+    if "friction_ripple_n" in result:
+        print("screw friction ripple (once per revolution), amplitude per axis: "
+              + ", ".join(f"{v:.2f} N" for v in result["friction_ripple_n"]))
     for label, v in result.get("validation", {}).items():
         print(f"validation (benchmark trajectory), {label:10s} model: force RMS error "
               f"{v['rms_n']:.1f} N = {v['rms_pct_of_peak']:.2f} % of the {v['peak_n']:.0f} N peak")

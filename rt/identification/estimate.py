@@ -1,7 +1,9 @@
 """Least-squares identification of the robot's dynamics from a recorded excitation.
 
 Data: slider positions from the encoders and the actuator forces the drives were commanded
-(current-mode amplifiers: force = command V × force per volt), recorded at the loop rate.
+(current-mode amplifiers: force = command V × force per volt), recorded at the loop rate. Each
+command is held by the DAC for one period after its row's positions were read, so the forces
+are first aligned to the positions' instants (:func:`held_to_positions`: half a period).
 
 Filtering (Gautier's *parallel filtering*): the model is linear in the parameters, τ = W θ, but
 W is a nonlinear function of the states — the Coulomb column is sign(q̇) smoothed over
@@ -28,7 +30,18 @@ fc under-estimated, the bias of issue 15). Now:
    least squares bent the friction line through them: fv −31…−44 % (20 σ) on the twin with
    its effects off; without them −0.5…+0.5 % (≤ 1.7 σ). The excitation is now played at the
    limits (``excitation.to_limits``: ≈ 130 mm/s), which also moves the friction's ripple with
-   position (5 mm period) above this filter's band (``bench/identification.py``).
+   position (5 mm period) above this filter's band (``bench/identification.py``);
+4. the ball screw's friction is not the same all around a revolution (the nut's preload
+   follows the screw's straightness, the balls recirculate once per turn): a force
+   ∝ sign(q̇) sin(2π q / lead + φ) per axis, periodic in *position* with the screw's lead,
+   which the description knows; its amplitude and phase are not. Played at the limits it is
+   ≈ 26 Hz, but every slower stretch of the path (20-60 mm/s around each reversal) puts it
+   inside the 8 Hz band, where least squares read it as friction: on the realistic twin
+   fv0 −1.1 %, fc0 +1.7 %, and it was the largest force left in the residual (1.7 N of the
+   fit's 1.7 N RMS). Two nuisance columns per axis, tanh(q̇/v_s)·sin(2π q/lead) and ·cos,
+   model it (``ripple=True``, the default): estimated with the rest, not written to the
+   description (which has no place for it), reported as an amplitude per axis. With them
+   the residual fell to 0.3 N and the identified amplitudes match the twin's ±8 % of f_c.
 
 Two estimates from the same data:
 
@@ -71,6 +84,8 @@ EDGE_S = 1.0
 MIN_SPEED_M_S = 0.02
 #: Weight of the prior toward the nominal description, relative to the data (dimensionless).
 PRIOR_WEIGHT = 1e-3
+#: Nuisance columns per axis for the ball screw's friction ripple (module docstring, 4.).
+RIPPLE_COLUMNS = 2
 
 PHYSICAL_NAMES = (["slider.m"] + [f"rod.{n}" for n in INERTIAL_NAMES]
                   + [f"platform.{n}" for n in INERTIAL_NAMES]
@@ -104,9 +119,27 @@ class IdentificationData:
 FILTERING = ("parallel", "states")
 
 
+def held_to_positions(tau: np.ndarray) -> np.ndarray:
+    """Commands a sampled loop held for one period, at the instants its positions were read.
+
+    Row j's positions are read at t_j and its command, computed from them, is then held by the
+    DAC over [t_j, t_j + T]: the force applied is the command sequence through a zero-order
+    hold, i.e. the samples delayed by T/2 (at the excitation's frequencies). Its value at t_j
+    is the mean of the commands held on either side, (τ_{j−1} + τ_j)/2. Left as is, the half
+    period is a time shift between τ and W: with ω the excitation's harmonics, the rotor
+    inertia's force J_r q̈ shifted by δ reads as J_r δ ω² of *negative* viscous friction
+    (fv −0.2…−1.3 % on the realistic twin at the limits, ``bench/identification.py``)."""
+    out = np.array(tau, float)
+    out[1:] = 0.5 * (out[1:] + out[:-1])
+    return out
+
+
 def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float,
-            filtering: str = "parallel") -> IdentificationData:
-    """Filter and differentiate a recording (see module docstring)."""
+            filtering: str = "parallel", held: bool = True) -> IdentificationData:
+    """Filter and differentiate a recording (see module docstring). ``held``: ``tau`` are the
+    commands of a sampled loop, each held for one period after its row's positions were read
+    (:func:`held_to_positions` aligns them); ``False``: forces sampled at the positions'
+    instants (synthetic data)."""
     q = np.asarray(q, float)
     tau = np.asarray(tau, float)
     if filtering not in FILTERING:
@@ -132,7 +165,8 @@ def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float,
     qf = scipy.signal.sosfiltfilt(sos, q, axis=0)
     qd = np.gradient(qf, dt, axis=0)
     qdd = np.gradient(qd, dt, axis=0)
-    return IdentificationData(qf, qd, qdd, tau, float(rate_hz))
+    return IdentificationData(qf, qd, qdd, held_to_positions(tau) if held else tau,
+                              float(rate_hz))
 
 
 def _parallel(data: IdentificationData, per_sample: np.ndarray) -> np.ndarray:
@@ -171,13 +205,32 @@ def _sliding(data: IdentificationData) -> np.ndarray:
     return (np.abs(_parallel(data, data.qd)) >= MIN_SPEED_M_S).reshape(-1)
 
 
-def _system(reg: Regressor, data: IdentificationData) -> tuple[np.ndarray, np.ndarray]:
-    """(W standard, τ) of the sliding equations, both through the parallel filter."""
+def _ripple_rows(reg: Regressor, data: IdentificationData) -> np.ndarray:
+    """The screw's friction-ripple columns (module docstring, 4.): per axis i,
+    tanh(q̇_i/v_s) sin(2π q_i/lead) and … cos(…) on axis i's equations, through the same
+    filter as W; flattened like the rows, (3n, 3 × RIPPLE_COLUMNS)."""
+    lead = reg.dyn.description.drive.screw_lead_m
+    smooth = reg.dyn.description.friction.coulomb_smoothing_m_s
+    ang = 2.0 * math.pi * data.q / lead
+    sgn = np.tanh(data.qd / smooth)
+    rows = np.zeros((len(data.q), 3, 3 * RIPPLE_COLUMNS))
+    for i in range(3):
+        rows[:, i, RIPPLE_COLUMNS * i] = sgn[:, i] * np.sin(ang[:, i])
+        rows[:, i, RIPPLE_COLUMNS * i + 1] = sgn[:, i] * np.cos(ang[:, i])
+    return _parallel(data, rows).reshape(-1, 3 * RIPPLE_COLUMNS)
+
+
+def _system(reg: Regressor, data: IdentificationData,
+            ripple: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(W standard, ripple columns, τ) of the sliding equations, all through the parallel
+    filter; the ripple columns are empty (0 wide) without ``ripple``."""
     keep = _sliding(data)
     if keep.sum() < 2 * len(STANDARD_NAMES):
         raise IdentificationError(f"only {int(keep.sum())} samples slide faster than "
                                   f"{MIN_SPEED_M_S * 1e3:.0f} mm/s: the excitation is too slow")
-    return _standard_rows(reg, data)[keep], _forces(data)[keep]
+    nuisance = (_ripple_rows(reg, data)[keep] if ripple
+                else np.zeros((int(keep.sum()), 0)))
+    return _standard_rows(reg, data)[keep], nuisance, _forces(data)[keep]
 
 
 @dataclass
@@ -186,19 +239,27 @@ class BaseEstimate:
     theta: np.ndarray
     sigma: np.ndarray
     residual_rms_n: float
+    #: The screw's friction-ripple amplitude per axis (N; None without ``ripple``).
+    ripple_n: np.ndarray | None = None
 
 
-def estimate_base(reg: Regressor, data: IdentificationData) -> BaseEstimate:
-    """OLS on the base parameters with their standard deviations."""
-    w_std, y = _system(reg, data)
-    w = w_std[:, reg.base.base_index]
+def estimate_base(reg: Regressor, data: IdentificationData,
+                  ripple: bool = True) -> BaseEstimate:
+    """OLS on the base parameters with their standard deviations (and, with ``ripple``, the
+    screw's friction ripple as nuisance parameters: module docstring, 4.)."""
+    w_std, nuisance, y = _system(reg, data, ripple)
+    nb = len(reg.base.base_index)
+    w = np.hstack((w_std[:, reg.base.base_index], nuisance))
     theta, *_ = np.linalg.lstsq(w, y, rcond=None)
     r = y - w @ theta
     dof = max(1, len(y) - len(theta))
     var = float(r @ r) / dof
     cov = var * np.linalg.pinv(w.T @ w)
-    return BaseEstimate(reg.base.names, theta, np.sqrt(np.maximum(np.diag(cov), 0.0)),
-                        float(np.sqrt(np.mean(r ** 2))))
+    sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    amp = (np.hypot(theta[nb::RIPPLE_COLUMNS], theta[nb + 1::RIPPLE_COLUMNS]) if ripple
+           else None)
+    return BaseEstimate(reg.base.names, theta[:nb], sigma[:nb],
+                        float(np.sqrt(np.mean(r ** 2))), amp)
 
 
 def _physical_columns(std_rows: np.ndarray) -> np.ndarray:
@@ -228,9 +289,10 @@ def nominal_physical(description: RobotDescription) -> np.ndarray:
 
 
 def estimate_physical(reg: Regressor, data: IdentificationData,
-                      nominal: RobotDescription) -> np.ndarray:
-    """Bounded LS in the description's parameters with a weak prior (module docstring)."""
-    w_std, y = _system(reg, data)
+                      nominal: RobotDescription, ripple: bool = True) -> np.ndarray:
+    """Bounded LS in the description's parameters with a weak prior (module docstring); the
+    screw's friction ripple (``ripple``) is estimated alongside, free, and not returned."""
+    w_std, nuisance, y = _system(reg, data, ripple)
     a = _physical_columns(w_std)
     p0 = nominal_physical(nominal)
     scale = np.maximum(np.abs(p0), 1e-3)
@@ -240,10 +302,12 @@ def estimate_physical(reg: Regressor, data: IdentificationData,
     # Prior rows: a relative deviation of 1 from the nominal costs PRIOR_WEIGHT × the data's
     # mean square force, so only directions the data leave open follow the prior.
     prior = math.sqrt(PRIOR_WEIGHT * len(y)) * y_scale * np.diag(1.0 / scale)
-    lhs = np.vstack((a, prior))
+    n_extra = nuisance.shape[1]
+    lhs = np.vstack((np.hstack((a, nuisance)),
+                     np.hstack((prior, np.zeros((len(prior), n_extra))))))
     rhs = np.concatenate((y, prior @ p0))
-    lo = np.full(len(p0), -np.inf)
-    hi = np.full(len(p0), np.inf)
+    lo = np.full(len(p0) + n_extra, -np.inf)
+    hi = np.full(len(p0) + n_extra, np.inf)
     for k in (0, 1, 11):                                # masses
         lo[k] = 1e-3
     for base in (1, 11):                                # inertia diagonals about the origin
@@ -252,7 +316,7 @@ def estimate_physical(reg: Regressor, data: IdentificationData,
     lo[21:30] = 0.0                                     # rotor inertia, friction
     lo[21:24] = 1e-3
     res = scipy.optimize.lsq_linear(lhs, rhs, bounds=(lo, hi), method="trf")
-    return res.x
+    return res.x[:len(p0)]
 
 
 def description_from_physical(p: np.ndarray, nominal: RobotDescription,

@@ -253,6 +253,8 @@ def identify_excitation(params: dict[str, Any], service: RtService) -> Excitatio
     recorder = SessionRecorder(partial, meta, loop_t0=t_now, force=True,
                                extra_channels={SUMMARY_TOPIC: channel})
     recorder.attach_state_ring(pl.recorder, start=pl.recorder.written)
+    # The pump gives these for every cycle: talus.v4 joins them with the state.
+    recorder.expect("/robot/wrench", "/protocol/reference")
     threading.Thread(target=_record, args=(service, program, recorder, partial, out,
                                            service.tap.written, pl.events.count),
                      name=f"identify-{label}", daemon=True).start()

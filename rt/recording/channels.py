@@ -2,7 +2,16 @@
 
 Encodings, all MCAP well-known ones that Foxglove opens and plots without plugins:
 
-* **protobuf, fixed point** (the default, :attr:`Encoding.PROTOBUF`): the 1 kHz channels
+* **one message per cycle** (``talus.v4``, the default, :attr:`Encoding.PROTOBUF`): the
+  three 1 kHz channels joined into one ``talus.v4.Cycle`` message per loop cycle on
+  :data:`CYCLE` (``/robot/cycle``), with ``state``, ``wrench`` and ``reference``
+  sub-messages (:mod:`rt.recording.cycle`): MCAP's per-message framing is paid once per cycle
+  instead of three times, and the quanta are the instruments' (:data:`V4_SPEED_QUANTUM_M_S`
+  ...). Foxglove plots every cycle (``/robot/cycle.wrench.fz_25mn``); talus's readers give
+  the three parts back as ``/robot/state``, ``/robot/wrench`` and ``/protocol/reference``
+  dicts, so callers never see the difference.
+* **protobuf, fixed point, three channels** (``talus.v3``, :attr:`Encoding.PROTOBUF_V3`,
+  25-26 November 2026; read always): the 1 kHz channels
   (``/robot/state``, ``/robot/wrench``, ``/protocol/reference``) and ``/ankle/state`` as
   ``message_encoding="protobuf"`` with a ``protobuf`` schema (a ``FileDescriptorSet``,
   :mod:`rt.recording.protobuf_codec`, package ``talus.v3``). Every number of the 1 kHz
@@ -93,14 +102,18 @@ JSONSCHEMA_METADATA_KEY = "talus.jsonschema"
 class Encoding(enum.Enum):
     """How a recording encodes its channels that have a protobuf message.
 
-    ``PROTOBUF``: fixed-point integers without the time (``talus.v3`` messages, the
-    default); ``PROTOBUF_V2``: fixed point with ``t_us`` (``talus.v2``, 25 November 2026, still
+    ``PROTOBUF``: one ``talus.v4.Cycle`` message per loop cycle on ``/robot/cycle`` (state,
+    wrench and reference together, fixed point at the instruments' quanta, no time in the
+    payload; the default, :mod:`rt.recording.cycle`); ``PROTOBUF_V3``: the three 1 kHz
+    channels apart, fixed point without the time (``talus.v3``, 25-26 November 2026, still
+    written for comparison and compatibility tests); ``PROTOBUF_V2``: fixed point with ``t_us`` (``talus.v2``, 25 November 2026, still
     written for comparison and compatibility tests); ``PROTOBUF_F32``:
     float32 (``talus`` messages, recordings of November 2026 before the fixed-point change,
     still written for comparison and compatibility tests); ``JSON``: every channel JSON, as
     recordings were before issue 16."""
 
     PROTOBUF = "protobuf"
+    PROTOBUF_V3 = "protobuf-v3"
     PROTOBUF_V2 = "protobuf-v2"
     PROTOBUF_F32 = "protobuf-f32"
     JSON = "json"
@@ -111,6 +124,8 @@ EVENTS = "/safety/events"
 METADATA = "/protocol/metadata"
 REFERENCE = "/protocol/reference"
 ANKLE = "/ankle/state"
+#: ``talus.v4``: the three 1 kHz channels above joined, one message per loop cycle.
+CYCLE = "/robot/cycle"
 
 
 @dataclass(frozen=True)
@@ -315,6 +330,56 @@ ANKLE_PROTO = ProtoMessage("talus.v3.AnkleState", [
     ProtoField("centre_displacement_mm", 8, _F, 3), ProtoField("platform_roll_deg", 9, _F),
     ProtoField("platform_pitch_deg", 10, _F)])
 
+#: ``talus.v4`` quanta that differ from v3's, each at most a fifth of the resolution of the
+#: instrument that measured (or receives) the value, so that the quantisation error (RMS
+#: quantum/√12) adds at most 2 % in quadrature to the instrument's own:
+#:
+#: * ``qd`` → 0.1 mm/s: the Kalman estimate of 20 µm encoder counts is itself uncertain by
+#:   0.19 mm/s RMS at best (at 0.05 m/s), 1.0 mm/s at rest, up to 1.45 mm/s
+#:   (``rt.estimation.velocity``); 0.1 mm/s steps add 0.029 mm/s RMS;
+#: * ``tau`` → 0.1 N: what reaches a motor is the DAC's code, 4.88 mV × 339 N/V = 1.66 N per
+#:   code (``drive.force_per_volt_n``); 0.1 N is 1/16 of it;
+#: * ATI forces ``fx..fz`` → 1/16 N and torques ``tx..tz`` → 2 mN·m: the ATI's own counts on
+#:   its CAN short data format (``rt.ati.can_protocol``: 16 counts/N, 500 counts/(N·m)), so
+#:   a CAN-transported wrench is recorded exactly, like the DAC's code; over Net F/T (finer
+#:   counts) they are still finer than what the SI-660-60 resolves, 1/8 N (1/4 N on z) and
+#:   7.5 mN·m: the error (≤ 31 mN, ≤ 1 mN·m) stays below half the sensor's own step;
+#: * the reference ``force`` → 1/16 N, the measured forces' quantum, so a force error is a
+#:   whole number of quanta;
+#: * unchanged: ``q``, ``q_ref``, ``position`` 1 µm (1/20 of a count), ``volts`` the DAC's
+#:   own code (exact).
+#:
+#: What each saves on an RT twin session (bench/recording.py, the issue-16 note): with v3's
+#: quanta one message per cycle is ≈ 175 MB/h; these bring it under 150.
+V4_SPEED_QUANTUM_M_S = 1e-4
+V4_TAU_QUANTUM_N = 0.1
+V4_ATI_FORCE_QUANTUM_N = 1 / 16
+V4_ATI_TORQUE_QUANTUM_NM = 2e-3
+
+#: ``talus.v4``'s parts of a cycle (:mod:`rt.recording.cycle` joins them into one
+#: ``talus.v4.Cycle`` per loop cycle): v3's messages at the v4 quanta. A field whose quantum
+#: changed has a new number and name (the unit in the name: ``qd_100um_s``, ``tau_dn`` in
+#: decinewtons, ``fz_n16`` in sixteenths of a newton, ``tz_2mnm``); the others keep v3's.
+STATE_PROTO_V4 = ProtoMessage("talus.v4.RobotState", [
+    _fx("q_um", 2, _I32, POSITION_QUANTUM_M, "q", 3),
+    _fx("qd_100um_s", 9, _I32, V4_SPEED_QUANTUM_M_S, "qd", 3),
+    _fx("q_ref_um", 4, _I32, POSITION_QUANTUM_M, "q_ref", 3),
+    _fx("tau_dn", 10, _I32, V4_TAU_QUANTUM_N, "tau", 3),
+    ProtoField("volts_dac", 8, _I32, 3, scale=DAC_STEP_V, key="volts", code_range=DAC_RANGE),
+    _fx("qd_ref_100um_s", 11, _I32, V4_SPEED_QUANTUM_M_S, "qd_ref", VARIABLE)])
+WRENCH_PROTO_V4 = ProtoMessage("talus.v4.Wrench", [
+    _fx("fx_n16", 10, _I32, V4_ATI_FORCE_QUANTUM_N, "fx"),
+    _fx("fy_n16", 11, _I32, V4_ATI_FORCE_QUANTUM_N, "fy"),
+    _fx("fz_n16", 12, _I32, V4_ATI_FORCE_QUANTUM_N, "fz"),
+    _fx("tx_2mnm", 13, _I32, V4_ATI_TORQUE_QUANTUM_NM, "tx"),
+    _fx("ty_2mnm", 14, _I32, V4_ATI_TORQUE_QUANTUM_NM, "ty"),
+    _fx("tz_2mnm", 15, _I32, V4_ATI_TORQUE_QUANTUM_NM, "tz"),
+    ProtoField("stale", 8, _B), ProtoField("saturated", 9, _B)])
+REFERENCE_PROTO_V4 = ProtoMessage("talus.v4.ProtocolReference", [
+    _fx("force_n16", 6, _I32, V4_ATI_FORCE_QUANTUM_N, "force", VARIABLE),
+    _fx("position_um", 3, _I32, POSITION_QUANTUM_M, "position", VARIABLE),
+    ProtoField("phase", 4, _S), ProtoField("mode", 5, _S)])
+
 #: The float32 messages of the recordings made between issue 16's first round and the
 #: fixed-point change (read always; written with ``Encoding.PROTOBUF_F32``). Numbers are never
 #: reused (a removed field keeps its number retired).
@@ -370,8 +435,12 @@ CHANNELS: dict[str, ChannelSpec] = {
 #: The standard channels' protobuf message per protobuf encoding (added channels use their
 #: spec's ``proto``).
 PROTOS: dict[Encoding, dict[str, ProtoMessage]] = {
-    Encoding.PROTOBUF: {STATE: STATE_PROTO, WRENCH: WRENCH_PROTO, REFERENCE: REFERENCE_PROTO,
-                        ANKLE: ANKLE_PROTO},
+    # v4: the parts of a cycle (rt.recording.cycle), each encoded alone then joined; the
+    # 100 Hz ankle channel stays on its own, in its v3 message.
+    Encoding.PROTOBUF: {STATE: STATE_PROTO_V4, WRENCH: WRENCH_PROTO_V4,
+                        REFERENCE: REFERENCE_PROTO_V4, ANKLE: ANKLE_PROTO},
+    Encoding.PROTOBUF_V3: {STATE: STATE_PROTO, WRENCH: WRENCH_PROTO, REFERENCE: REFERENCE_PROTO,
+                           ANKLE: ANKLE_PROTO},
     Encoding.PROTOBUF_V2: {STATE: STATE_PROTO_V2, WRENCH: WRENCH_PROTO_V2,
                            REFERENCE: REFERENCE_PROTO_V2, ANKLE: ANKLE_PROTO_V2},
     Encoding.PROTOBUF_F32: {STATE: STATE_PROTO_F32, WRENCH: WRENCH_PROTO_F32,
@@ -381,7 +450,8 @@ PROTOS: dict[Encoding, dict[str, ProtoMessage]] = {
 
 #: Protobuf messages talus writes or wrote, by full name: the reader's fast decoders.
 PROTO_MESSAGES: dict[str, ProtoMessage] = {
-    m.name: m for m in (STATE_PROTO, WRENCH_PROTO, REFERENCE_PROTO, ANKLE_PROTO,
+    m.name: m for m in (STATE_PROTO_V4, WRENCH_PROTO_V4, REFERENCE_PROTO_V4,
+                        STATE_PROTO, WRENCH_PROTO, REFERENCE_PROTO, ANKLE_PROTO,
                         STATE_PROTO_V2, WRENCH_PROTO_V2, REFERENCE_PROTO_V2, ANKLE_PROTO_V2,
                         STATE_PROTO_F32, WRENCH_PROTO_F32, REFERENCE_PROTO_F32)}
 

@@ -322,24 +322,31 @@ class ProtoMessage:
         (proto3, package ``talus``), deterministic bytes."""
         from google.protobuf import descriptor_pb2 as d
 
+        fdp = d.FileDescriptorProto(name=f"{self.package.replace('.', '/')}/{self.short_name}"
+                                         ".proto", package=self.package, syntax="proto3")
+        self.add_descriptor(fdp)
+        fds = d.FileDescriptorSet(file=[fdp])
+        return fds.SerializeToString(deterministic=True)
+
+    def add_descriptor(self, fdp: Any) -> None:
+        """Add this message's ``DescriptorProto`` to ``fdp`` (a ``FileDescriptorProto`` of
+        this message's package): also how a message that holds it as a field
+        (``rt.recording.cycle``) declares it in its own file."""
+        from google.protobuf import descriptor_pb2 as d
+
         types = {Kind.DOUBLE: d.FieldDescriptorProto.TYPE_DOUBLE,
                  Kind.FLOAT: d.FieldDescriptorProto.TYPE_FLOAT,
                  Kind.BOOL: d.FieldDescriptorProto.TYPE_BOOL,
                  Kind.STRING: d.FieldDescriptorProto.TYPE_STRING,
                  Kind.SFIXED32: d.FieldDescriptorProto.TYPE_SFIXED32,
                  Kind.SFIXED64: d.FieldDescriptorProto.TYPE_SFIXED64}
-        short = self.short_name
-        fdp = d.FileDescriptorProto(name=f"{self.package.replace('.', '/')}/{short}.proto",
-                                    package=self.package, syntax="proto3")
-        msg = fdp.message_type.add(name=short)
+        msg = fdp.message_type.add(name=self.short_name)
         for f in self.fields:
             msg.field.add(
                 name=f.name, number=f.number, type=types[f.kind],
                 label=(d.FieldDescriptorProto.LABEL_REPEATED if f.width
                        else d.FieldDescriptorProto.LABEL_OPTIONAL),
                 json_name=f.name)
-        fds = d.FileDescriptorSet(file=[fdp])
-        return fds.SerializeToString(deterministic=True)
 
     # ------------------------------------------------------------------ encoding
 

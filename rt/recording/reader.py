@@ -4,7 +4,15 @@ Both encodings are read (``rt.recording.channels``): JSON channels with ``json.l
 protobuf channels of talus's own messages with their ``struct`` fast path
 (``rt.recording.protobuf_codec``), any other protobuf schema through
 ``mcap_protobuf.decoder``; every payload comes out as the same dict, so callers never ask which
-encoding a file has.
+encoding a file has. A ``talus.v4`` cycle channel (``/robot/cycle``, ``rt.recording.cycle``)
+is read as its parts: each cycle gives a ``/robot/state``, ``/robot/wrench`` and
+``/protocol/reference`` message (those present), counted under those topics; the cycle
+channel's own messages are counted in ``ScanInfo.cycles``, and asking for its topic gives the
+cycle whole.
+
+What a crash loses with v4: the writer holds a cycle until its parts are in (the session
+pump's ≈ 50 ms, at most ``cycle_hold_s``), so besides the last partial chunk up to that much
+more of the tail.
 
 A complete file (footer, summary, closing magic) is read with mcap's own reader, so what we
 write is checked against the reference implementation. A file whose writer died has no
@@ -39,6 +47,7 @@ from rt.errors import InputError
 from rt.output_files import atomic_output
 from rt.recording import protobuf_codec
 from rt.recording.channels import JSONSCHEMA_METADATA_KEY, PROTO_MESSAGES, LoopClock
+from rt.recording.cycle import CYCLE_MESSAGES, CycleMessage
 
 MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEAD = struct.Struct("<BQ")
@@ -87,6 +96,9 @@ class ScanInfo:
     data_crc_checked: bool = False      # the file carried a data-section CRC and it was read
     sequence_gaps: dict[str, int] = field(default_factory=dict)   # per topic: messages missing
     orphan_messages: int = 0            # messages whose channel is unknown (not decodable)
+    #: talus.v4: MCAP messages per cycle channel (``/robot/cycle``); their parts are counted
+    #: in ``messages`` under the topics they are read as (``/robot/state`` ...).
+    cycles: dict[str, int] = field(default_factory=dict)
 
     @property
     def message_total(self) -> int:
@@ -127,6 +139,33 @@ def _duration(start_ns: int | None, end_ns: int | None) -> float:
 Decoder = Callable[[bytes, int], Any]
 
 
+class CycleParts(dict[str, dict[str, Any]]):
+    """A decoded ``talus.v4`` cycle: the parts present, topic → dict (with ``t``), the
+    topics they were recorded on as channels (``/robot/state`` ...). The readers give each
+    part as a message of its topic."""
+
+    cycle: CycleMessage
+
+    def whole(self) -> dict[str, Any]:
+        """The cycle as one dict: ``t`` and each part present under its field name
+        (``state`` ...), without its own ``t`` (what ``/robot/cycle`` reads as)."""
+        out: dict[str, Any] = {"t": next(iter(self.values()))["t"] if self else None}
+        for topic, part in self.items():
+            out[self.cycle.by_topic[topic].name] = {k: v for k, v in part.items() if k != "t"}
+        return out
+
+
+def cycle_of(channel: Channel, schema: Schema | None) -> CycleMessage | None:
+    """The cycle message (``rt.recording.cycle``) a channel carries, None for any other."""
+    if (schema is None or channel.message_encoding != protobuf_codec.MESSAGE_ENCODING
+            or schema.encoding != protobuf_codec.SCHEMA_ENCODING):
+        return None
+    cycle = CYCLE_MESSAGES.get(schema.name)
+    if cycle is None or bytes(schema.data) != cycle.file_descriptor_set:
+        return None
+    return cycle
+
+
 def _bytes(data: bytes, log_time_ns: int) -> Any:
     return bytes(data)
 
@@ -144,6 +183,20 @@ def decoder_for(channel: Channel, schema: Schema | None) -> Decoder:
     the same dicts."""
     if channel.message_encoding == "json":
         return _json
+    cycle = cycle_of(channel, schema)
+    if cycle is not None:
+        clock_ = LoopClock.from_metadata(dict(channel.metadata)) or LoopClock(0, 0.0, None)
+
+        def cycle_parts(data: bytes, log_time_ns: int) -> CycleParts:
+            out = CycleParts()
+            out.cycle = cycle
+            t = clock_(log_time_ns)
+            for part, raw in cycle.split(bytes(data)):
+                d = part.proto.decode(raw)
+                d["t"] = t
+                out[part.topic] = d
+            return out
+        return cycle_parts
     if (channel.message_encoding == protobuf_codec.MESSAGE_ENCODING and schema is not None
             and schema.encoding == protobuf_codec.SCHEMA_ENCODING):
         ours = PROTO_MESSAGES.get(schema.name)
@@ -217,6 +270,14 @@ class RecordingScan:
         """The JSON Schema (a dict) of ``topic``'s channel, if the file declared one: the
         schema of a JSON channel, the one a protobuf channel carries in its metadata."""
         for ch in self.channels.values():
+            cycle = self._cycle_of(ch)
+            if cycle is not None and topic in cycle.by_topic \
+                    and JSONSCHEMA_METADATA_KEY in ch.metadata:
+                # A cycle's part: its channel schema, kept in the cycle's JSON Schema.
+                root = json.loads(ch.metadata[JSONSCHEMA_METADATA_KEY])
+                sub = root["properties"].get(cycle.by_topic[topic].name)
+                # The part's channel schema ("t" included), a root schema again.
+                return None if sub is None else {"$schema": root.get("$schema"), **sub}
             if ch.topic == topic and JSONSCHEMA_METADATA_KEY in ch.metadata:
                 return json.loads(ch.metadata[JSONSCHEMA_METADATA_KEY])
             if ch.topic == topic and ch.schema_id in self.schemas:
@@ -232,29 +293,84 @@ class RecordingScan:
             self._decoders[channel.id] = decode
         return decode(msg.data, msg.log_time)
 
-    def topic_names(self) -> list[str]:
-        return [c.topic for c in self.channels.values()]
+    def _cycle_of(self, channel: Channel) -> CycleMessage | None:
+        return cycle_of(channel, self.schemas.get(channel.schema_id))
 
-    def _message(self, msg: Message, payload: Any = None) -> RecordedMessage | None:
+    def topic_names(self) -> list[str]:
+        """The topics a reader can ask for: every channel's, and for a cycle channel (v4)
+        its parts' too."""
+        out: list[str] = []
+        for c in self.channels.values():
+            out.append(c.topic)
+            cycle = self._cycle_of(c)
+            if cycle is not None:
+                out += [t for t in cycle.topics if t not in out]
+        return out
+
+    def channel_topic(self, topic: str) -> str:
+        """The channel a topic's messages are in: a cycle's part's is the cycle channel."""
+        for c in self.channels.values():
+            cycle = self._cycle_of(c)
+            if cycle is not None and topic in cycle.by_topic:
+                return c.topic
+        return topic
+
+    def read_topics(self) -> list[str]:
+        """The topics a whole read gives: every channel's, a cycle channel's as its parts."""
+        out: list[str] = []
+        for c in self.channels.values():
+            cycle = self._cycle_of(c)
+            out += [t for t in (cycle.topics if cycle is not None else (c.topic,))
+                    if t not in out]
+        return out
+
+    def _message(self, msg: Message, payload: Any = None) -> list[RecordedMessage]:
         channel = self.channels.get(msg.channel_id)
         if channel is None:
             self.info.orphan_messages += 1   # a message whose channel was never declared
-            return None
+            return []
         info = self.info
         last = self._sequence.get(channel.topic)
         if last is not None and msg.sequence > last + 1:
             gaps = info.sequence_gaps
             gaps[channel.topic] = gaps.get(channel.topic, 0) + msg.sequence - last - 1
         self._sequence[channel.topic] = msg.sequence
-        info.messages[channel.topic] = info.messages.get(channel.topic, 0) + 1
         info.start_ns = msg.log_time if info.start_ns is None else min(info.start_ns,
                                                                        msg.log_time)
         info.end_ns = msg.log_time if info.end_ns is None else max(info.end_ns, msg.log_time)
+        cycle = self._cycle_of(channel)
+        if cycle is not None:
+            return self._cycle_message(cycle, channel, msg, payload)
+        info.messages[channel.topic] = info.messages.get(channel.topic, 0) + 1
         if self.topics is not None and channel.topic not in self.topics:
-            return None
+            return []
         if payload is None:
             payload = self._decode(channel, msg)
-        return RecordedMessage(channel.topic, msg.log_time, payload)
+        return [RecordedMessage(channel.topic, msg.log_time, payload)]
+
+    def _cycle_message(self, cycle: CycleMessage, channel: Channel, msg: Message,
+                       payload: Any) -> list[RecordedMessage]:
+        """A v4 cycle: counted per part, given as its parts' messages (and as itself when
+        its own topic is asked for)."""
+        info = self.info
+        topics = self.topics
+        info.cycles[channel.topic] = info.cycles.get(channel.topic, 0) + 1
+        wanted = topics is None or channel.topic in topics or any(
+            t in topics for t in cycle.topics)
+        if not wanted:      # only counted: the parts present, without decoding their fields
+            for part, _ in cycle.split(bytes(msg.data)):
+                info.messages[part.topic] = info.messages.get(part.topic, 0) + 1
+            return []
+        if payload is None:
+            payload = self._decode(channel, msg)
+        out = []
+        for topic, part in payload.items():
+            info.messages[topic] = info.messages.get(topic, 0) + 1
+            if topics is None or topic in topics:
+                out.append(RecordedMessage(topic, msg.log_time, part))
+        if topics is not None and channel.topic in topics:
+            out.append(RecordedMessage(channel.topic, msg.log_time, payload.whole()))
+        return out
 
     def __iter__(self) -> Iterator[RecordedMessage]:
         yield from self._scan()
@@ -382,8 +498,7 @@ class RecordingScan:
             channel = Channel.read(stream)
             self.channels[channel.id] = channel
         elif opcode == Opcode.MESSAGE:
-            rec = self._message(Message.read(stream, length))
-            return [] if rec is None else [rec]
+            return self._message(Message.read(stream, length))
         elif opcode == Opcode.CHUNK:
             # The chunk is decoded, CRC-checked and its JSON parsed whole before any of its
             # messages is returned: a damaged chunk yields nothing rather than half of it.
@@ -403,8 +518,7 @@ class RecordingScan:
             for x in channels:
                 self._decoders.pop(x.id, None)
             decoded = [self._decoded(m) for m in pending]
-            out = [rec for rec in (self._message(m, payload) for m, payload in decoded)
-                   if rec is not None]
+            out = [rec for m, payload in decoded for rec in self._message(m, payload)]
             self.info.chunks += 1
             return out
         # Indexes, statistics, summary offsets, footer: nothing to return.
@@ -466,17 +580,34 @@ def read_recording(path: str | os.PathLike[str],
         with open(path, "rb") as f:
             reader = make_reader(f, validate_crcs=True)
             summary = reader.get_summary()
+            channel_topics = topics
             if summary is not None:
                 for ch in summary.channels.values():
-                    if topics is None or ch.topic in topics:
-                        out.setdefault(ch.topic, [])
+                    cycle = cycle_of(ch, summary.schemas.get(ch.schema_id))
+                    if cycle is None:
+                        if topics is None or ch.topic in topics:
+                            out.setdefault(ch.topic, [])
+                        continue
+                    # A v4 cycle channel is read for its parts (/robot/state ...).
+                    for t in cycle.topics:
+                        if topics is None or t in topics:
+                            out.setdefault(t, [])
+                            if channel_topics is not None and ch.topic not in channel_topics:
+                                channel_topics = [*channel_topics, ch.topic]
             decoders: dict[int, Decoder] = {}
-            for schema, channel, message in reader.iter_messages(topics=topics):
+            for schema, channel, message in reader.iter_messages(topics=channel_topics):
                 decode = decoders.get(channel.id)
                 if decode is None:
                     decode = decoders[channel.id] = decoder_for(channel, schema)
-                out.setdefault(channel.topic, []).append(decode(message.data,
-                                                                message.log_time))
+                payload = decode(message.data, message.log_time)
+                if isinstance(payload, CycleParts):
+                    for t, part in payload.items():
+                        if topics is None or t in topics:
+                            out.setdefault(t, []).append(part)
+                    if topics is None or channel.topic not in topics:
+                        continue
+                    payload = payload.whole()
+                out.setdefault(channel.topic, []).append(payload)
     except (McapError, struct.error, ValueError) as exc:
         _check_complete(path)
         raise RecordingFileError(path, f"unreadable MCAP file: {exc}") from exc
@@ -496,7 +627,7 @@ def recover(path: str | os.PathLike[str], topics: Iterable[str] | None = None
     out: dict[str, list[dict[str, Any]]] = {}
     for rec in scan:
         out.setdefault(rec.topic, []).append(rec.payload)
-    for topic in scan.topic_names():
+    for topic in scan.read_topics() if topics is None else scan.topic_names():
         if topics is None or topic in topics:
             out.setdefault(topic, [])
     return out, scan.info.as_dict()
@@ -517,7 +648,7 @@ def recording_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     for _ in scan:
         pass
     info = scan.info.as_dict()
-    for topic in scan.topic_names():
+    for topic in scan.read_topics():
         info["messages"].setdefault(topic, 0)
     info["channels"] = sorted(info["messages"])
     return info
@@ -614,4 +745,5 @@ def export_csv(path: str | os.PathLike[str], channel: str, out_csv: str | os.Pat
             "columns": ["log_time_ns"] + [c for c, _, _ in cols],
             "complete": scan.info.complete, "tail": scan.info.tail,
             "bad_chunks": scan.info.bad_chunks, "crc_errors": scan.info.crc_errors,
-            "sequence_gaps": scan.info.sequence_gaps.get(channel, 0)}
+            # A cycle's part (v4): the gaps of the cycle channel that holds it.
+            "sequence_gaps": scan.info.sequence_gaps.get(scan.channel_topic(channel), 0)}

@@ -6,8 +6,12 @@ Data flow (DESIGN 3): the 1 kHz loop never touches the file. State leaves the lo
 handed over with a non-blocking append to a bounded queue. The thread encodes, feeds the
 mcap ``Writer`` and owns the file.
 
-Encoding (``rt.recording.channels``): by default the 1 kHz channels are protobuf (float32
-where the resolution allows), a drained block of ring rows encoded at once with numpy, and
+Encoding (``rt.recording.channels``): by default (``talus.v4``) the 1 kHz state, wrench and
+reference are the parts of one protobuf message per loop cycle on ``/robot/cycle``
+(``rt.recording.cycle``): each part is encoded as it arrives (a drained block of ring rows at
+once with numpy), the parts are joined by cycle time (``CycleJoiner``: a cycle waits for a
+part whose source has been heard from, at most ``cycle_hold_s``), and each cycle is written
+as one MCAP message; and
 the file carries no per-message index (MCAP MessageIndex records: 16 bytes per message that
 compression never touches, a quarter of the file at 1 kHz; readers, Foxglove and mcap's own,
 find messages through the chunk indexes and read the chunk). ``encoding="json"`` writes the
@@ -26,6 +30,9 @@ earlier; with the defaults ≈ 0.27 s (measured: at most 0.26 s over 20 SIGKILLs
 recording, also with two CPU hogs running; ``bench/costs.py --crash`` measures it, the tests
 check that what is recovered is an exact prefix). ``rt.recording.reader.recover`` reads such a
 file up to its last complete chunk.
+With talus.v4 a cycle is written once its parts are in: in a session the pump hands the
+wrench and reference every ≈ 50 ms, which adds that much to the window (a killed writer's file
+is still an exact prefix of cycles, tested).
 Data reaches the OS page cache, which survives a process crash; surviving a power loss needs
 ``fsync=True`` (an fsync per flush).
 """
@@ -55,6 +62,7 @@ from rt.output_files import PARTIAL_SUFFIX, check_output, commit_output, partial
 from rt.recording import protobuf_codec
 from rt.recording.channels import (
     CHANNELS,
+    CYCLE,
     EVENTS,
     JSONSCHEMA_METADATA_KEY,
     MESSAGE_ENCODING,
@@ -72,6 +80,7 @@ from rt.recording.channels import (
     LoopClock,
     time_metadata,
 )
+from rt.recording.cycle import CYCLE_V4, DEFAULT_HOLD_S, CycleJoiner, CycleMessage
 from rt.recording.protobuf_codec import ProtoCodecError, ProtoMessage
 
 #: Chunk size, bytes of uncompressed records: ≈ 1 s of 1 kHz state. The flush timer, not the
@@ -273,6 +282,10 @@ class SessionRecorder:
     ``rt.recording.channels.CHANNELS``; write to them with :meth:`publish` or
     :meth:`attach_ring`.
 
+    ``cycle_hold_s`` (talus.v4): how long (s, the writer's clock) a cycle waits for a part
+    whose source has been heard from (or attached) but has not reached it yet, before it is
+    written without it (``rt.recording.cycle.CycleJoiner``).
+
     ``encoding``: ``"protobuf"`` (default) writes the channels that have a protobuf message
     (``ChannelSpec.proto``) as protobuf, the others as JSON; ``"json"`` writes every channel
     as JSON, as recordings were before issue 16 (kept for comparison and compatibility tests).
@@ -289,7 +302,8 @@ class SessionRecorder:
                  start_wall_ns: int | None = None,
                  extra_channels: dict[str, ChannelSpec] | None = None, fsync: bool = False,
                  force: bool = False, inputs: Iterable[str | os.PathLike[str]] = (),
-                 encoding: Encoding | str = Encoding.PROTOBUF):
+                 encoding: Encoding | str = Encoding.PROTOBUF,
+                 cycle_hold_s: float = DEFAULT_HOLD_S):
         try:
             self.encoding = Encoding(encoding)
         except ValueError:
@@ -302,6 +316,8 @@ class SessionRecorder:
                 or queue_capacity <= 0:
             raise InputError("chunk_size, flush_interval_s, drain_period_s and queue_capacity "
                              "must be positive")
+        if not cycle_hold_s > 0:
+            raise InputError(f"cycle_hold_s must be positive, got {cycle_hold_s!r}")
         missing = [k for k in METADATA_REQUIRED_FROM_CALLER if k not in metadata]
         if missing:
             raise InputError(f"session metadata lacks {missing} (needs "
@@ -330,10 +346,19 @@ class SessionRecorder:
                 proto = standard.get(topic, spec.proto)
                 if proto is not None:
                     self._protos[topic] = proto
-        # Fixed-point recordings keep loop times to the µs (v2: their ``t_us``; v3: the log
-        # time is the time), so a message's log time and its payload agree.
-        self._t_quantum = T_QUANTUM_S if self.encoding in (Encoding.PROTOBUF,
-                                                           Encoding.PROTOBUF_V2) else None
+        # Fixed-point recordings keep loop times to the µs (v2: their ``t_us``; v3, v4: the
+        # log time is the time), so a message's log time and its payload agree.
+        self._t_quantum = T_QUANTUM_S if self.encoding in (
+            Encoding.PROTOBUF, Encoding.PROTOBUF_V3, Encoding.PROTOBUF_V2) else None
+        # talus.v4: the three 1 kHz channels' messages are parts of one message per cycle
+        # (rt.recording.cycle): encoded as before, then joined by cycle time and written on
+        # the cycle channel. ``_part`` maps a part's topic to its index in the cycle.
+        self._cycle: CycleMessage | None = CYCLE_V4 if self.encoding is Encoding.PROTOBUF \
+            else None
+        self._part = {} if self._cycle is None else \
+            {topic: k for k, topic in enumerate(self._cycle.topics)}
+        self._joiner = None if self._cycle is None else CycleJoiner(len(self._part),
+                                                                     cycle_hold_s)
         # The queued wrench samples (t, fx..tz, stale, saturated) as protobuf rows.
         wrench_proto = self._protos.get(WRENCH)
         self._wrench_rows = None if wrench_proto is None else wrench_proto.row_encoder(
@@ -354,7 +379,11 @@ class SessionRecorder:
         self._taps: tuple[_RingTap, ...] = ()
         self._closed = False
         self._dropped = {topic: 0 for topic in self.channels}
+        #: Messages written per topic: a channel's MCAP messages, and for a cycle's parts
+        #: the parts written (so a part's topic counts as it is read back).
         self._messages = {topic: 0 for topic in self.channels}
+        #: MCAP messages written per channel (the sequence numbers).
+        self._sequence: dict[str, int] = {}
         self._error: str | None = None
         self._wrench_without_sample = 0
         self._busy_s = 0.0
@@ -384,7 +413,11 @@ class SessionRecorder:
             self._mcap.start(profile="", library=f"talus {software_version()}; "
                                                  f"{LIBRARY_IDENTIFIER}")
             self._channel_ids: dict[str, int] = {}
+            if self._cycle is not None:
+                self._register_cycle(self._cycle)
             for spec in self.channels.values():
+                if spec.topic in self._part:
+                    continue            # written inside the cycle channel
                 proto = self._protos.get(spec.topic)
                 if proto is None:
                     schema_id = self._mcap.register_schema(
@@ -423,6 +456,23 @@ class SessionRecorder:
         self._thread = threading.Thread(target=self._run, name="talus-recorder", daemon=True)
         self._thread.start()
 
+    def _register_cycle(self, cycle: CycleMessage) -> None:
+        """The cycle channel (v4): its schema, the time origin, what its parts are."""
+        schema_id = self._mcap.register_schema(
+            name=cycle.name, encoding=protobuf_codec.SCHEMA_ENCODING,
+            data=cycle.file_descriptor_set)
+        extra = {**CHANNELS[STATE].metadata, **cycle.metadata(),
+                 **time_metadata(self.start_wall_ns, self.loop_t0, self._t_quantum or 1e-9)}
+        for part in cycle.parts:
+            for f in part.proto.fields:
+                if f.code_range is not None:
+                    extra[f"talus.{part.name}.{f.name}.range"] = ",".join(map(repr,
+                                                                             f.code_range))
+        self._channel_ids[CYCLE] = self._mcap.register_channel(
+            topic=CYCLE, message_encoding=protobuf_codec.MESSAGE_ENCODING,
+            schema_id=schema_id,
+            metadata={**extra, JSONSCHEMA_METADATA_KEY: json.dumps(cycle.json_schema)})
+
     # ------------------------------------------------------------------ producer side (any
     # thread, including the loop's): O(1), no lock, no I/O.
 
@@ -441,7 +491,7 @@ class SessionRecorder:
         """
         if not isinstance(layout, RowLayout):
             layout = RowLayout(layout)
-        if topic not in self._channel_ids:
+        if topic not in self._channel_ids and topic not in self._part:
             raise InputError(f"unknown channel {topic!r}; channels: {sorted(self._channel_ids)}")
         if self._closed:
             raise InputError("the recorder is closed")
@@ -453,10 +503,30 @@ class SessionRecorder:
             except ProtoCodecError as exc:
                 raise InputError(f"channel {topic!r}: ring rows {list(layout.fields)} do not "
                                  f"fit: {exc}") from None
-        tap = _RingTap(topic, self._channel_ids[topic], source, layout,
+        tap = _RingTap(topic, self._channel_ids.get(topic, -1), source, layout,
                        source.written if start is None else int(start), encode)
         # Copy-on-write: the thread iterates whatever tuple it read, never a list being changed.
         self._taps = self._taps + (tap,)
+        part = self._part.get(topic)
+        if part is not None and self._joiner is not None:
+            # The ring's rows are expected from now on: the cycles of the parts queued before
+            # its first drain wait for them (up to cycle_hold_s), not written without them.
+            self._joiner.expect(part)
+
+    def expect(self, *topics: str) -> None:
+        """Say that ``topics`` (``/robot/wrench``, ``/protocol/reference``) will be given for
+        every cycle from now on (a session pump is about to hand them over): with talus.v4 the
+        state's cycles wait for them (at most ``cycle_hold_s``) instead of being written
+        before their first block arrives. Other encodings: nothing to do."""
+        unknown = [t for t in topics if t not in self._channel_ids and t not in self._part]
+        if unknown:
+            raise InputError(f"unknown channel {unknown[0]!r}; channels: "
+                             f"{sorted(self._channel_ids)}")
+        if self._joiner is not None:
+            for topic in topics:
+                part = self._part.get(topic)
+                if part is not None:
+                    self._joiner.expect(part)
 
     def event(self, event: dict[str, Any]) -> bool:
         """Enqueue a safety event dict (``SafetyEvent.as_dict()``); usable as
@@ -507,7 +577,7 @@ class SessionRecorder:
         A protobuf channel's message is encoded here, so a message that does not fit its
         schema (a missing field, a wrong length) is refused with :class:`InputError` now,
         not lost in the writer thread. Not for the loop: it costs a few µs."""
-        if topic not in self._channel_ids:
+        if topic not in self._channel_ids and topic not in self._part:
             raise InputError(f"unknown channel {topic!r}; channels: {sorted(self._channel_ids)}")
         t = message.get("t")
         if not isinstance(t, numbers.Real) or isinstance(t, bool):
@@ -597,7 +667,7 @@ class SessionRecorder:
             if self._error is not None:
                 for tap in self._taps:
                     dropped[tap.topic] += max(0, tap.source.written - tap.start)
-            n = sum(self._messages.values())
+            n = sum(self._sequence.values())       # MCAP messages
             if self._error is None and self._partial is not None:
                 try:
                     commit_output(self._partial, self.path, force=True)
@@ -613,6 +683,9 @@ class SessionRecorder:
                 "sha256": self._stream.sha256.hexdigest() if complete else None,
                 "bytes": self._stream.bytes,
                 "messages": dict(self._messages),
+                "mcap_messages": n,
+                "cycles": 0 if self._cycle is None else self._sequence.get(CYCLE, 0),
+                "late_parts": 0 if self._joiner is None else self._joiner.late,
                 "dropped": dropped,
                 "dropped_total": sum(dropped.values()),
                 "wrench_without_sample": self._wrench_without_sample,
@@ -648,12 +721,43 @@ class SessionRecorder:
         return self.start_wall_ns + round((self._clock.quantize(t) - self.loop_t0) * 1e9)
 
     def _write(self, topic: str, t: float, data: bytes) -> None:
+        part = self._part.get(topic)
+        if part is not None:
+            # A part of a cycle (v4): joined with the cycle's other parts, written by
+            # _write_cycles.
+            self._messages[topic] += 1
+            assert self._joiner is not None
+            self._joiner.add(part, round(self._clock.quantize(t) * 1e6), t, data)
+            return
+        self._messages[topic] += 1
+        self._add(topic, t, data)
+
+    def _add(self, topic: str, t: float, data: bytes) -> None:
         ns = self._log_time(t)
         # Per-channel sequence numbers 1, 2, 3...: a reader sees exactly which messages a
         # skipped (damaged) chunk held, per channel.
-        self._messages[topic] += 1
+        seq = self._sequence[topic] = self._sequence.get(topic, 0) + 1
         self._mcap.add_message(channel_id=self._channel_ids[topic], log_time=ns, data=data,
-                               publish_time=ns, sequence=self._messages[topic])
+                               publish_time=ns, sequence=seq)
+
+    def _passed(self, topic: str, ts: Iterable[float]) -> None:
+        """A part's source went past these times without a part (a wrench row without a
+        sample): its cycles need not wait for it."""
+        part = self._part.get(topic)
+        if part is not None and self._joiner is not None:
+            last = max(ts, default=None)
+            if last is not None:
+                self._joiner.passed(part, round(self._clock.quantize(last) * 1e6))
+
+    def _write_cycles(self, flush: bool = False) -> int:
+        """Write the cycles whose parts are all in (every one with ``flush``)."""
+        if self._joiner is None or self._cycle is None:
+            return 0
+        encode = self._cycle.encode
+        ready = self._joiner.ready(flush)
+        for t, parts in ready:
+            self._add(CYCLE, t, encode(parts))
+        return len(ready)
 
     def _flush_chunk(self) -> None:
         flush = getattr(self._mcap, "flush", None)
@@ -736,6 +840,7 @@ class SessionRecorder:
             for topic, _, payload in items[k:]:       # taken from the queue, never written
                 self._dropped[topic] += len(payload) if isinstance(payload, _Block) else 1
             raise
+        self._write_cycles()
 
     def _encode_block(self, topic: str, block: _Block) -> list[tuple[float, bytes]]:
         """(t, bytes) of each message of a queued block (:meth:`wrench_rows`,
@@ -744,6 +849,7 @@ class SessionRecorder:
         if topic == WRENCH:
             finite = np.isfinite(rows[:, 1:7]).all(axis=1)
             self._wrench_without_sample += int(len(rows) - finite.sum())
+            self._passed(WRENCH, rows[:, 0].tolist())
             rows = rows[finite]
             ts = rows[:, 0].tolist()
             if self._wrench_rows is not None:
@@ -786,6 +892,7 @@ class SessionRecorder:
             return {}
         rows = np.array([(items[i][1], *items[i][2]) for i in index], dtype=float)
         finite = np.isfinite(rows[:, 1:7]).all(axis=1)
+        self._passed(WRENCH, rows[:, 0].tolist())
         self._wrench_without_sample += int(len(index) - finite.sum())
         encoded = self._wrench_rows(rows[finite])
         return dict(zip(np.asarray(index)[finite].tolist(), encoded))
@@ -806,6 +913,7 @@ class SessionRecorder:
             t0 = time.thread_time()
             while self._queue:     # what producers queued while the last turn ran
                 self._pump()
+            self._write_cycles(flush=True)      # v4: cycles still waiting for a part
             self._mcap.finish()
             self._stream.flush()
             if self._fsync:

@@ -38,7 +38,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -183,6 +183,18 @@ class Program(Protocol):
     def reset(self) -> None: ...
 
     def update(self, out: ReferenceOutput, inp: ProgramInput | None = None) -> int: ...
+
+
+@runtime_checkable
+class ForcePreview(Protocol):
+    """A force program whose whole reference is known before it plays (a precomputed table:
+    sine Fz, gait replay) and can be read ahead of the sample being played: the force law's
+    preview (``rt.references.sequencer``, ``ProgramReference.preview_steps``)."""
+
+    def force_at(self, index: int, out: np.ndarray) -> None:
+        """Write F_d (N) and Ḟ_d (N/s) of sample ``index`` into ``out[0:2]``; an index past the
+        last sample reads the last one, before the first the first. Never allocates."""
+        ...
 
 
 #: A slider trajectory: fills ``out`` (q, q̇, q̈ in m, m/s, m/s²) at time ``t`` (s) from its start.

@@ -37,10 +37,23 @@ from rt.components.tare import TareState, refusal_message
 from rt.engine import Array, Component
 from rt.references import sequencer_kernel as sk
 from rt.references.approach import Approach, ApproachStatus
-from rt.references.program import Mode, Program, ProgramInput, ProgramTable, ReferenceOutput
+from rt.references.program import (
+    FZ,
+    ForcePreview,
+    Mode,
+    Program,
+    ProgramInput,
+    ProgramTable,
+    ReferenceOutput,
+)
 from rt.references.sequencer_kernel import F_DDOT_SMOOTHING
 from rt.safety.events import SupervisorMode
 
+#: Half-width (samples) of the centred difference that gives the previewed F̈_d: the table is
+#: known on both sides of the sample read ahead, so the derivative is smoothed without lag
+#: (a recorded gait force's 1 kHz noise through a one-sample difference asks metres per
+#: second squared of the platform; ±5 samples at 1 kHz: first zero at 100 Hz).
+PREVIEW_F_DDOT_HALF_WIDTH = 5
 #: Component status codes (non-zero = the cycle's block failed).
 STATUS_APPROACH_FAILED = 20
 STATUS_PROGRAM_FAILED = 21
@@ -141,7 +154,8 @@ class ProgramReference(Component):
     """Ports: in ``q_meas``: float64[3] m; in ``mode``: float64[1] (the supervisor's
     :class:`SupervisorMode`, one cycle late); in ``wrench``: float64[6] (sensor frame: the
     patient's torques for interactive programs). Out ``q_ref``, ``qd_ref``, ``qdd_ref``:
-    float64[3] (m, m/s, m/s²); ``force``: float64[3] (F_d N, Ḟ_d N/s, F̈_d N/s²); ``pose``:
+    float64[3] (m, m/s, m/s²); ``force``: float64[3] (F_d N, Ḟ_d N/s, F̈_d N/s²); ``force_preview``: float64[3] (the same read
+    ``preview_steps`` samples ahead for a :class:`ForcePreview` program, else ``force``); ``pose``:
     float64[3] (z m, roll, pitch rad); ``ctrl_mode``: float64[1] (:class:`Mode`); ``phase``:
     float64[1] (:class:`Phase`); ``progress``: float64[1] (0..1 of the program played);
     ``tare_request``: float64[1] (1 while a tare is wanted; to the force reader, one cycle
@@ -181,6 +195,15 @@ class ProgramReference(Component):
                                            buffer=io[sk.IO_QDD:sk.IO_QDD + 3])
         self.force = self.declare_output("force", Array(3),
                                          buffer=io[sk.IO_FORCE:sk.IO_FORCE + 3])
+        self.force_preview = self.declare_output(
+            "force_preview", Array(3), buffer=io[sk.IO_FORCE_PREVIEW:sk.IO_FORCE_PREVIEW + 3])
+        #: How far ahead ``force_preview`` reads a previewable force program (samples; 0: no
+        #: preview). Set by the loop's builder from the force law's ``preview_s``.
+        self._preview_steps = 0
+        self._preview: ForcePreview | None = None
+        self._ahead = np.zeros(2)
+        self._ahead_next = np.zeros(2)
+        self._ahead_read = False
         self.pose = self.declare_output("pose", Array(3), buffer=io[sk.IO_POSE:sk.IO_POSE + 3])
         self.ctrl_mode = self.declare_output("ctrl_mode", Array(1),
                                              buffer=io[sk.IO_CTRL_MODE:sk.IO_CTRL_MODE + 1])
@@ -204,6 +227,24 @@ class ProgramReference(Component):
         self.epoch = 0
         self.refused = 0
         self.last_error = ""
+
+    @property
+    def preview_steps(self) -> int:
+        """How far ahead ``force_preview`` reads a previewable force program (samples; 0: no
+        preview). Set by the loop's builder from the force law's ``preview_s``."""
+        return self._preview_steps
+
+    @preview_steps.setter
+    def preview_steps(self, steps: int) -> None:
+        if steps < 0:
+            raise ValueError(f"preview_steps must be >= 0 samples, got {steps}")
+        self._preview_steps = int(steps)
+        self._sync_preview()
+
+    def _sync_preview(self) -> None:
+        """Tell the compiled cycle whether the current program is read ahead: its PLAY cycles
+        are then the interpreted ones (the read-ahead is Python's)."""
+        self._seq[sk.S_PREVIEW] = float(self._preview is not None and self._preview_steps > 0)
 
     # ------------------------------------------------------------------ any thread
     def request(self, program: Program, *, approach_min_s: float | None = None,
@@ -277,8 +318,10 @@ class ProgramReference(Component):
             st.phase = Phase.REST
             return
         self.program, self._out, self._req = program, out, req
+        self._preview = program if isinstance(program, ForcePreview) else None
         self._n = max(1, round(program.duration_s / self.approach.dt))
         self._set_table(req.table)
+        self._sync_preview()
         st.k = 0
         st.taring = False
         st.phase = Phase.APPROACH
@@ -330,6 +373,9 @@ class ProgramReference(Component):
                 return 0
             if result == sk.PLAY_DONE:          # the program's last sample: plan the return
                 self._end_play(self._seq[sk.S_PROGRAM_MODE] == 1.0)
+                # The kernel copied the force before _end_play zeroed it (as the
+                # interpreted cycle's last step does after it).
+                self.force_preview.data[:] = self.force.data
                 self._sync_hold()
                 return 0
         status = self._update(dt)
@@ -408,9 +454,37 @@ class ProgramReference(Component):
                 st.phase = Phase.REST
         if st.phase != Phase.APPROACH:
             self.tare_request.data[0] = 0.0      # a stop or an abort ends a tare in progress
+        if self._ahead_read:
+            self._ahead_read = False
+        else:
+            # No preview this cycle (not playing, a ramp down, a program without one): the
+            # law tracks the force reference itself.
+            self.force_preview.data[:] = f
         self.phase.data[0] = float(emitted if emitted in (Phase.APPROACH, Phase.PLAY) else st.phase)
         self.progress.data[0] = min(1.0, st.k / self._n)
         return 0
+
+    def _previewing(self) -> bool:
+        return (self._preview is not None and self.preview_steps > 0
+                and self.ctrl_mode.data[0] > 0.5)
+
+    def _read_ahead(self, index: int, dt: float) -> None:
+        """``force_preview`` = the program's force ``preview_steps`` samples after ``index``
+        (the sample just played)."""
+        pv = self._preview
+        assert pv is not None
+        ahead, nxt = self._ahead, self._ahead_next
+        k = index + self.preview_steps
+        h = PREVIEW_F_DDOT_HALF_WIDTH
+        pv.force_at(k + h, nxt)
+        f_dot_next = float(nxt[1])
+        pv.force_at(k - h, nxt)
+        pv.force_at(k, ahead)
+        out = self.force_preview.data
+        out[0] = ahead[0]
+        out[1] = ahead[1]
+        out[2] = (f_dot_next - nxt[1]) / (2.0 * h * dt)
+        self._ahead_read = True
 
     def _tare_step(self) -> ApproachStatus:
         """At the first sample of a force program: ask for a tare and hold until the force
@@ -443,8 +517,13 @@ class ProgramReference(Component):
 
     def _play(self, dt: float) -> int:
         if self.compiled and self._table is not self._no_table:
-            if sk.play_table(self._io, self._seq, self._table, dt):
-                self._end_play(self._seq[sk.S_PROGRAM_MODE] == 1.0)
+            seq = self._seq
+            if sk.play_table(self._io, seq, self._table, dt):
+                self._end_play(seq[sk.S_PROGRAM_MODE] == 1.0)
+            elif self._previewing() and not math.isnan(seq[sk.S_ROW + FZ]):
+                # The sample just played: k counts the samples played, and sample 0 was
+                # consumed at the approach's end (the program's own index, interpreted).
+                self._read_ahead(int(seq[sk.S_K]) - 1, dt)
             return 0
         st = self.state
         o = self._out
@@ -464,6 +543,8 @@ class ProgramReference(Component):
             sk.emit(self._io, self._seq, o.buf, float(o.mode), dt)
             if o.done:
                 self._end_play(o.mode == Mode.FORCE)
+            elif self._previewing() and not math.isnan(o.fz_ref):
+                self._read_ahead(o.index, dt)
             return 0
         st.k += 1
         self.q_ref.data[:] = o.q_ref
@@ -481,6 +562,8 @@ class ProgramReference(Component):
             raw = (f_dot - f[1]) / dt if st.k > 1 else 0.0
             f[2] += F_DDOT_SMOOTHING * (raw - f[2])
             f[0], f[1] = fz, f_dot
+            if self._previewing() and not o.done:
+                self._read_ahead(o.index, dt)
         else:
             f[:] = 0.0
         if o.done:

@@ -7,7 +7,8 @@ cycle — a table program playing (the sample's row, the force reference and its
 the progress), a hold at rest, a hard stop following the measured position — and answers
 :data:`NEED_PYTHON` without writing anything when the cycle is an event: the supervisor's
 mode changed this cycle, a program is requested or aborted, the approach or the return runs
-(ruckig stays in Python: its update is one call per cycle at most), a tare, a force ramp.
+(ruckig stays in Python: its update is one call per cycle at most), a tare, a force ramp,
+the PLAY of a force program read ahead (``force_preview``: the interpreted read-ahead runs).
 The interpreted sequencer then runs that cycle exactly as it always did; its PLAY step goes
 through :func:`play_table` / :func:`emit` too, so a program's samples are produced by one
 code path whichever side runs the cycle. A table program's last sample answers
@@ -31,7 +32,8 @@ F_DDOT_SMOOTHING = 0.2
 # ---- the outputs' arena (ProgramReference's ports are views of it)
 IO_Q, IO_QD, IO_QDD, IO_FORCE, IO_POSE = 0, 3, 6, 9, 12
 IO_CTRL_MODE, IO_PHASE, IO_PROGRESS, IO_TARE_REQUEST = 15, 16, 17, 18
-IO_SIZE = 19
+IO_FORCE_PREVIEW = 19  # 3: the force reference read ahead (= the force without a preview)
+IO_SIZE = 22
 
 # ---- the sequencer's state (``seq``)
 S_PHASE = 0            # Phase
@@ -50,7 +52,9 @@ S_PROGRAM_MODE = 14    # the table program's Mode (0 position, 1 force)
 S_LAST = 15            # the table's last sample index
 S_CONST = 16           # N_FIELDS: the row's columns outside the table's
 S_ROW = S_CONST + N_FIELDS   # N_FIELDS: scratch, the row of this cycle's sample
-SEQ_SIZE = S_ROW + N_FIELDS
+S_PREVIEW = S_ROW + N_FIELDS  # 1 while the program is a ForcePreview read ahead (preview
+                              # steps > 0): its PLAY cycles are Python's (the read-ahead)
+SEQ_SIZE = S_PREVIEW + 1
 
 # Phase and SupervisorMode values (rt.references.sequencer.Phase, rt.safety.events).
 APPROACH, PLAY, RETURN, STOPPED, REST = 0.0, 1.0, 2.0, 3.0, 4.0
@@ -108,11 +112,14 @@ def play_table(io, seq, table, dt):
 @njit(cache=True)
 def finish(io, seq, emitted):
     """Every cycle's last outputs: no tare request outside APPROACH (a stop or an abort ends a
-    tare in progress), the phase (the one that produced this cycle's reference while
-    approaching or playing) and the progress."""
+    tare in progress), the force preview (the force itself: the compiled cycle never reads
+    ahead, a previewed program's PLAY is Python's), the phase (the one that produced this
+    cycle's reference while approaching or playing) and the progress."""
     phase = seq[S_PHASE]
     if phase != APPROACH:
         io[IO_TARE_REQUEST] = 0.0
+    for i in range(3):
+        io[IO_FORCE_PREVIEW + i] = io[IO_FORCE + i]
     io[IO_PHASE] = emitted if (emitted == APPROACH or emitted == PLAY) else phase
     p = seq[S_K] / seq[S_N]
     io[IO_PROGRESS] = min(1.0, p)
@@ -142,7 +149,7 @@ def cycle(io, seq, q_meas, mode, table, dt):
             io[IO_Q + i] = seq[S_HOLD + i]
             io[IO_QD + i] = 0.0
             io[IO_QDD + i] = 0.0
-    elif phase == PLAY and seq[S_TABLE] != 0.0:
+    elif phase == PLAY and seq[S_TABLE] != 0.0 and seq[S_PREVIEW] == 0.0:
         if play_table(io, seq, table, dt):
             result = PLAY_DONE
     else:

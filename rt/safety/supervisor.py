@@ -10,9 +10,7 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
   hand-held comfort stop → soft stop;
 * forward kinematics failed → hard stop (the platform pose is unknown);
 * encoder jump beyond physics (the estimator's innovation gate) → hard stop; encoder frozen while
-  commanded: no count change although the reference moved the axis for ``frozen_encoder_s``,
-  or although the commanded net force must have moved the free axis by ``FROZEN_COUNTS``
-  counts (a few ms at saturation) → hard stop;
+  commanded (the frozen-encoder criterion below) → hard stop;
 * stroke: inside the margin at either end → soft stop; beyond the end → hard stop;
 * slider speed beyond the robot's → soft stop; acceleration beyond it → warn;
 * patient ROM per axis with its end cushion: the cushion is the soft stop's own braking curve —
@@ -30,6 +28,44 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
 * client heartbeat older than its timeout while a client drives the robot → soft stop;
 * both DAC cards failed on a channel → hard stop (a single card's failure is a failover).
 
+The frozen-encoder criterion (issue 15). A still count is judged against physics, per axis:
+
+* **force balance** (any contact): the axis' own load is the force its drive applies less the
+  measured contact's share of it, ``load = sat(τ) − s`` with ``s = −J_Sᵀ w_S`` (the ATI's
+  wrench through the platform's statics, :func:`rt.safety.supervisor_kernel.contact_share`)
+  and ``sat(τ)`` the command saturated at the force of the DAC's command limit
+  (``applied_force_max_n`` = ``max_command_v`` × the drives' N/V, set by the supervisor
+  block): a law winding up beyond the drives (a pre-flight with the drives limited, a heel
+  strike) pushes with what the drive gives, not with what it asks. A still axis is in static
+  equilibrium: ``load`` stays within the friction it can hold (``holding_force_n``) of the
+  static load that carries it (``carry``: gravity, an unmeasured payload, friction, an
+  amplifier's offset). ``carry`` is a running estimate (:data:`CARRY_TAU_S`) of the load less
+  the inertia's ``m·q̈`` (``q̈`` the velocity estimator's), learnt while the count moves and
+  only while the axis is quasi-static (``|q̈| ≤`` :data:`QUASI_STATIC_ACCEL` for
+  :data:`QUASI_STATIC_S`), and it slews by at most ``holding_force_n`` per CARRY_TAU_S: a
+  slider braked at the drives' limit (after a pull's soft stop) must not leave the braking's
+  kilonewtons in it, which the first still cycles would read as an unbalanced load. The
+  estimator's q̈ lags the true one by ~10 ms, hence the hold time (a lagging estimate crosses
+  zero between an acceleration and its braking) and the slew (a force step it has not caught
+  up with yet). A contact needs no special case: what it holds of the applied force is
+  measured and taken out, so a slider stalled by what it presses balances, and a frozen one
+  under a runaway command does not, in contact as in free motion. The excess must accelerate
+  the axis' inertia; once ``∫excess dt · T / (2 m)`` reaches ``FROZEN_COUNTS`` counts the
+  encoder is frozen. The sensor reads the
+  contact ``force_lag_s`` late (its filter and sample age): while the share changes, the true
+  one may be ahead by its rate × that lag, which is added to the holding band — at a
+  contact's onset a pressing slider is held by a force the ATI has not shown yet.
+* **reference speed** (nothing touching): the reference has moved the axis at
+  ≥ ``frozen_min_ref_speed_m_s`` for ``frozen_encoder_s`` without a count. It counts only
+  while nothing has been measured on the platform (ATI force ≤ ``contact_force_n``) for
+  ``contact_release_s`` (contact hysteresis): in contact a slider legitimately stalls against
+  what it presses while its reference moves (a shear push's tilt, a foot), and the force
+  balance judges it there.
+
+State per axis: last count, carried load, excess impulse and its duration, reference-speed
+time, last contact share, quasi-static time; and one contact-release time. Judged only while
+the drives are on and the brakes open.
+
 The numeric checks run compiled (:mod:`rt.safety.supervisor_kernel`, one call per cycle that
 allocates nothing); this module keeps what users and tests see: cause names, latching, events,
 reset tickets, client requests. :class:`InterpretedSupervisor` runs the same checks in Python:
@@ -42,6 +78,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -64,12 +101,28 @@ HOLDING_MARGIN = 1.5
 #: cycle-to-cycle ripple, short next to a payload's arrival (the estimate follows it as the
 #: axis sinks under the new load) and to a velocity reversal's stick (tens of ms).
 CARRY_TAU_S = sk.CARRY_TAU_S
+#: The carried load is learnt only while the axis is quasi-static: its estimated acceleration
+#: within this (m/s²; the inertia's m·q̈ then ≤ 104 N of the 207 kg axis, under half the 225 N
+#: friction band, and m·q̈ is subtracted as well) ...
+QUASI_STATIC_ACCEL = sk.QUASI_STATIC_ACCEL
+#: ... for this long (s): the velocity estimator's q̈ lags the true one by ~10 ms, so between
+#: a drive-limited acceleration and its braking it crosses zero while the axis still
+#: accelerates at 10 m/s²; that crossing lasts ~1 ms, a quasi-static stretch tens of ms.
+QUASI_STATIC_S = sk.QUASI_STATIC_S
 #: Lever ∂q/∂angle of a slider per radian of platform tilt, in platform radii (≈ 1.5 R_p for
 #: a 3-PRS with the spheres on a circle: the farthest leg moves R_p·(1 + 1/2) per radian).
 LEVER_PER_PLATFORM_RADIUS = 1.5
+#: How late the force sensor shows a contact force (s): the ATI's output filter (150 Hz: a
+#: 1.1 ms time constant), the age of the latest sample (≤ 1 ms at the 1 kHz RDT stream), with
+#: margin. Sizes the frozen-encoder check's allowance while the contact's share changes.
+FORCE_LAG_S = 0.003
+#: How long the platform stays "touched" for the frozen-encoder reference-speed criterion
+#: after the measured force falls below ``contact_force_n`` (s): the sensor's lag plus the
+#: contact's and the transmission's springs unloading before the sliders follow again.
+CONTACT_RELEASE_S = 0.02
 
 
-def supervisor_physics(d: RobotDescription) -> dict[str, float]:
+def supervisor_physics(d: RobotDescription) -> dict[str, Any]:
     """The supervisor's physical constants from the robot description (SI):
 
     * ``axis_mass_kg``: slider mass + rotor inertia reflected through the screw;
@@ -79,13 +132,16 @@ def supervisor_physics(d: RobotDescription) -> dict[str, float]:
       (gravity of the links, of the platform and of any payload) is in the carried force
       itself, so it is not part of this band;
     * ``count_m``: one encoder count;
-    * ``lever_m_per_rad``: slider travel per radian of tilt (the soft stop's braking cushion).
+    * ``lever_m_per_rad``: slider travel per radian of tilt (the soft stop's braking cushion);
+    * ``sensor_offset_m``: the ATI's origin in the platform frame P (its wrench is carried to P
+      for the contact's share of each actuator force).
     """
     b = d.bodies
     return {"axis_mass_kg": b.slider.mass_kg + d.drive.reflected_inertia_kg,
             "holding_force_n": HOLDING_MARGIN * 2.0 * d.friction.static_n,
             "count_m": d.encoder.m_per_count,
-            "lever_m_per_rad": LEVER_PER_PLATFORM_RADIUS * d.geometry.platform_radius_m}
+            "lever_m_per_rad": LEVER_PER_PLATFORM_RADIUS * d.geometry.platform_radius_m,
+            "sensor_offset_m": tuple(float(x) for x in d.sensor.offset_m)}
 
 
 @dataclass
@@ -217,13 +273,17 @@ class Supervisor:
     holding_force_n = _Packed(sk.P_HOLDING)
     count_m = _Packed(sk.P_COUNT_M)
     contact_force_n = _Packed(sk.P_CONTACT)
+    force_lag_s = _Packed(sk.P_FORCE_LAG)
+    contact_release_s = _Packed(sk.P_CONTACT_RELEASE)
+    applied_force_max_n = _Packed(sk.P_APPLIED_MAX)
     startup_grace_s = _Packed(sk.P_GRACE)
     force_control = _PackedFlag(sk.P_FORCE_CONTROL)
 
     def __init__(self, limits: EffectiveLimits, period_s: float, log: EventLog | None = None,
                  soft_stop_accel_m_s2: float = 0.5, soft_stop_jerk_m_s3: float = 5.0,
                  lever_m_per_rad: float = 0.27, axis_mass_kg: float = 207.3,
-                 holding_force_n: float = 225.0, count_m: float = 2e-5):
+                 holding_force_n: float = 225.0, count_m: float = 2e-5,
+                 sensor_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.08)):
         """The defaults are the nominal robot's (:func:`supervisor_physics`); the loop passes
         the values of the robot it drives."""
         self._par = np.zeros(sk.PAR_SIZE)
@@ -245,6 +305,14 @@ class Supervisor:
         self.holding_force_n = holding_force_n
         self.count_m = count_m
         self.contact_force_n = 50.0
+        self.force_lag_s = FORCE_LAG_S
+        self.contact_release_s = CONTACT_RELEASE_S
+        # The force a drive applies at the DAC's command limit (N): the force balance uses the
+        # command saturated there. The supervisor block sets it every cycle from the limits'
+        # max_command_v and the drives' N/V; inf (no saturation) for direct ``check`` calls.
+        self.applied_force_max_n = math.inf
+        self.sensor_offset_m = (float(sensor_offset_m[0]), float(sensor_offset_m[1]),
+                                float(sensor_offset_m[2]))
         # The force sensor's first samples arrive a few cycles after the loop starts.
         self.startup_grace_s = 0.1
         # The motors' spring-applied holding brakes close when the drives are off and open
@@ -254,6 +322,23 @@ class Supervisor:
         self.brake_release_s = 0.05
         self.reset_state()
         sk.warm_up()
+
+    @property
+    def sensor_offset_m(self) -> tuple[float, float, float]:
+        """The ATI's origin in the platform frame P (m)."""
+        p = self._par
+        return (float(p[sk.P_SENSOR_X]), float(p[sk.P_SENSOR_Y]), float(p[sk.P_SENSOR_Z]))
+
+    @sensor_offset_m.setter
+    def sensor_offset_m(self, offset: tuple[float, float, float]) -> None:
+        self._par[sk.P_SENSOR_X:sk.P_SENSOR_Z + 1] = offset
+
+    def contact_share(self, state_buf: np.ndarray, wrench) -> np.ndarray:
+        """The measured contact's share of each actuator force (N) for a model state buffer
+        and the ATI's wrench (:func:`rt.safety.supervisor_kernel.contact_share`)."""
+        out = np.zeros(3)
+        sk.contact_share(state_buf, np.asarray(wrench, dtype=np.float64), self._par, out)
+        return out
 
     @property
     def limits(self) -> EffectiveLimits:
@@ -343,10 +428,12 @@ class Supervisor:
               pitch: float, roll_rate: float, pitch_rate: float, q_ref, qd_ref, tau,
               force_n: float, wrench_stale: bool, wrench_saturated: bool, hw_estop: bool,
               hand_stop: bool, drive_failed: bool, fz_n: float = math.nan,
-              failed_components: str | None = None) -> Reaction:
+              failed_components: str | None = None, contact_share=None) -> Reaction:
         """Run every check; returns the latched reaction for this cycle. ``force_n`` is the
         magnitude of the sensor's force, ``fz_n`` the platform's push along its z (N);
-        ``failed_components`` names the loop's components a fault put in error (None: none).
+        ``failed_components`` names the loop's components a fault put in error (None: none);
+        ``contact_share`` the measured contact's share of each actuator force (N, None: none;
+        :meth:`contact_share`).
 
         Takes any sequences (copied into arrays: this entry point is for tests and tools; the
         loop's block calls :meth:`check_block`, which copies nothing)."""
@@ -359,7 +446,8 @@ class Supervisor:
                        a(qdd), bool(fk_ok), float(roll), float(pitch), float(roll_rate),
                        float(pitch_rate), a(q_ref), a(qd_ref), a(tau), float(force_n),
                        bool(wrench_stale), bool(wrench_saturated), bool(hw_estop),
-                       bool(hand_stop), bool(drive_failed), float(fz_n))
+                       bool(hand_stop), bool(drive_failed), float(fz_n),
+                       np.zeros(3) if contact_share is None else a(contact_share))
         if new or self._python_side_pending():
             self._after_checks(t, new)
         return self.reaction
@@ -510,6 +598,9 @@ class InterpretedSupervisor(Supervisor):
         # Running estimate of the force that carries each axis while its count moves (N):
         # NaN until the first cycle (then the first command: the loop starts holding still).
         self._carry = [math.nan, math.nan, math.nan]
+        self._share = [math.nan, math.nan, math.nan]   # last cycle's contact share (N)
+        self._quiet = [0.0, 0.0, 0.0]                  # quasi-static for this long (s)
+        self._contact_until = 0.0                      # touched until this loop time (s)
         self._overruns = 0
         self._pull_time = 0.0
         self._brakes_open_at = self.brake_release_s      # drives enabled at t = 0
@@ -524,17 +615,22 @@ class InterpretedSupervisor(Supervisor):
     def _forget(self, cleared: list[str]) -> None:
         self._reported.clear()
 
-    def _track_carry_force(self, i: int, tau: float, dt: float) -> None:
-        """Update axis ``i``'s carried-force estimate with this cycle's command (its count
-        moved, the brakes still hold it, or a contact holds the platform): first-order,
-        :data:`CARRY_TAU_S`."""
+    def _track_carry_force(self, i: int, load: float, dt: float) -> None:
+        """Update axis ``i``'s carried-force estimate with this cycle's static load (the
+        applied force less the measured contact's share and the inertia's m·q̈; its count
+        moved, or the brakes hold it): first-order, :data:`CARRY_TAU_S`, only once the axis
+        has been quasi-static for :data:`QUASI_STATIC_S` (the first cycle seeds it), and by at
+        most ``holding_force_n`` per :data:`CARRY_TAU_S`: a change of force the acceleration
+        estimate has not caught up with yet (it lags ~10 ms) moves it little."""
         c = self._carry[i]
         if math.isnan(c):
-            self._carry[i] = tau
-        else:
-            self._carry[i] = c + (tau - c) * dt / (CARRY_TAU_S + dt)
+            self._carry[i] = load
+        elif self._quiet[i] >= QUASI_STATIC_S:
+            step = (load - c) * dt / (CARRY_TAU_S + dt)
+            cap = self.holding_force_n * dt / CARRY_TAU_S
+            self._carry[i] = c + (cap if step > cap else (-cap if -cap > step else step))  # noqa: FURB136
 
-    def _frozen_net_force(self, i: int, tau: float) -> float:
+    def _frozen_net_force(self, i: int, load: float, lag_allowance: float) -> float:
         """The part of axis ``i``'s command that must accelerate it although its count has not
         moved (N; ≤ 0: none).
 
@@ -545,21 +641,27 @@ class InterpretedSupervisor(Supervisor):
         (``carry_force_n``), so a heavy payload is not read as a frozen encoder; a truly
         frozen encoder makes the controller push ever further from that force (the reference
         runs away from a count that does not move), and the excess beyond the friction band
-        (``holding_force_n``) must move the axis.
+        (``holding_force_n``) must move the axis. ``load`` is the command less the measured
+        contact's share (what presses the platform holds that much of it); ``lag_allowance``
+        what the sensor's lag may hide of that share (N).
         """
         carry = self._carry[i]
         if math.isnan(carry):
             carry = 0.0
-        return abs(tau - carry) - self.holding_force_n
+        return abs(load - carry) - self.holding_force_n - lag_allowance
 
     def check(self, t: float, dt: float, q, est_status: int, qd, qdd, fk_ok: bool, roll: float,
               pitch: float, roll_rate: float, pitch_rate: float, q_ref, qd_ref, tau,
               force_n: float, wrench_stale: bool, wrench_saturated: bool, hw_estop: bool,
               hand_stop: bool, drive_failed: bool, fz_n: float = math.nan,
-              failed_components: str | None = None) -> Reaction:
+              failed_components: str | None = None, contact_share=None) -> Reaction:
         """Run every check; returns the latched reaction for this cycle. ``force_n`` is the
         magnitude of the sensor's force, ``fz_n`` the platform's push along its z (N);
-        ``failed_components`` names the loop's components a fault put in error (None: none)."""
+        ``failed_components`` names the loop's components a fault put in error (None: none);
+        ``contact_share`` the measured contact's share of each actuator force (N; None:
+        none)."""
+        share = (0.0, 0.0, 0.0) if contact_share is None else \
+            tuple(float(x) for x in contact_share)
         lim = self.limits
         active = self._active
         active.clear()
@@ -605,33 +707,50 @@ class InterpretedSupervisor(Supervisor):
             trip("encoder_jump", Reaction.HARD_STOP, "encoder reading jumped beyond physics",
                  q=list(q))
         free = not (force_n > self.contact_force_n)         # NaN (no sensor) counts as free
+        if not free:
+            self._contact_until = t + self.contact_release_s
+        # Free for the reference-speed criterion: nothing measured for the release time.
+        untouched = free and t >= self._contact_until
         # In a hard stop the drives are off and the brakes hold: a still count is expected, and
         # judging it against the law's (unapplied) force would latch a cause no reset clears.
         brakes_open = t >= self._brakes_open_at and self.reaction < Reaction.HARD_STOP
         for i in range(3):
             qi = q[i]
+            # The axis' own load: the force its drive applies (the command saturated at the
+            # DAC's limit) less what the measured contact takes of it.
+            ta = float(tau[i])
+            cap = self.applied_force_max_n
+            applied = cap if ta > cap else (-cap if -cap > ta else ta)  # noqa: FURB136
+            load = applied - share[i]
+            # Quasi-static: the estimated acceleration small for QUASI_STATIC_S.
+            if abs(qdd[i]) <= QUASI_STATIC_ACCEL:
+                self._quiet[i] += dt
+            else:
+                self._quiet[i] = 0.0
+            last_share = self._share[i]
+            if math.isnan(last_share):
+                last_share = share[i]
+            # The sensor shows the contact late: the true share may be ahead of the measured
+            # one by its rate times the sensor's lag (a contact's onset), held unseen.
+            lag_allowance = abs(share[i] - last_share) / dt * self.force_lag_s
+            self._share[i] = share[i]
             if qi == self._last_q[i] and brakes_open:
                 # Two ways to know the slider must have moved although its count did not:
-                # the reference has been moving it for ``frozen_encoder_s``, or (when nothing
-                # pushes back on the platform) the commanded net force must have carried the
-                # axis' inertia over ``FROZEN_COUNTS`` counts: x = J T / (2 m), J = ∫F dt.
-                if abs(qd_ref[i]) >= lim.frozen_min_ref_speed_m_s:
+                # the reference has been moving it for ``frozen_encoder_s`` while nothing
+                # touched the platform, or its load beyond what friction holds must have
+                # carried the axis' inertia over ``FROZEN_COUNTS`` counts: x = J T / (2 m),
+                # J = ∫F dt.
+                if abs(qd_ref[i]) >= lim.frozen_min_ref_speed_m_s and untouched:
                     self._frozen_time[i] += dt
                 else:
                     self._frozen_time[i] = 0.0
-                net = self._frozen_net_force(i, float(tau[i]))
-                if net > 0.0 and free:
+                net = self._frozen_net_force(i, load, lag_allowance)
+                if net > 0.0:
                     self._impulse[i] += net * dt
                     self._impulse_time[i] += dt
                 else:
                     self._impulse[i] = 0.0
                     self._impulse_time[i] = 0.0
-                if not free:
-                    # In contact the platform is held by what it presses: the force that holds
-                    # the still axis now includes the contact's reaction (force control
-                    # changes it while the count stands), so it is the carried force when the
-                    # contact ends.
-                    self._track_carry_force(i, float(tau[i]), dt)
                 moved = self._impulse[i] * self._impulse_time[i] / (2.0 * self.axis_mass_kg)
                 if moved >= FROZEN_COUNTS * self.count_m or \
                         self._frozen_time[i] >= lim.frozen_encoder_s:
@@ -643,7 +762,8 @@ class InterpretedSupervisor(Supervisor):
                 self._frozen_time[i] = 0.0
                 self._impulse[i] = 0.0
                 self._impulse_time[i] = 0.0
-                self._track_carry_force(i, float(tau[i]), dt)
+                # The static load (what holds the axis once it stops): the inertia taken out.
+                self._track_carry_force(i, load - self.axis_mass_kg * float(qdd[i]), dt)
             self._last_q[i] = qi
             # -- stroke, speed, acceleration, tracking, actuator force
             if qi < lim.stroke_lo_m or qi > lim.stroke_hi_m:

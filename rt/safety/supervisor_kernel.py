@@ -31,7 +31,7 @@ import math
 import numpy as np
 from numba import njit
 
-from rt.model.rigid_body import STATE_Q, STATE_QD, STATE_S
+from rt.model.rigid_body import STATE_Q, STATE_QD, STATE_ROT, STATE_S, STATE_TWIST
 
 # ------------------------------------------------------------------------- causes
 C_ESTOP_HW = 0
@@ -59,6 +59,8 @@ N_VALUES = 3
 R_NONE, R_WARN, R_SOFT, R_HARD = 0, 1, 2, 3
 JUMP_STATUS = -3
 CARRY_TAU_S = 0.02
+QUASI_STATIC_ACCEL = 0.5
+QUASI_STATIC_S = 0.01
 FROZEN_COUNTS = 4
 FORCE_CUSHION = 0.9
 
@@ -67,8 +69,9 @@ FORCE_CUSHION = 0.9
  P_MAX_ACTUATOR, P_MAX_TRACKING, P_MAX_FORCE, P_ROLL_MIN, P_ROLL_MAX, P_PITCH_MIN,
  P_PITCH_MAX, P_MAX_ANGULAR, P_ROM_TOL, P_DEADLINE_OVERRUNS, P_FROZEN_S, P_FROZEN_MIN_REF,
  P_MAX_PULL_S, P_PERIOD, P_ALPHA_STOP, P_JERK_TIME, P_AXIS_MASS, P_HOLDING, P_COUNT_M,
- P_CONTACT, P_GRACE, P_FORCE_CONTROL) = range(28)
-PAR_SIZE = 28
+ P_CONTACT, P_GRACE, P_FORCE_CONTROL, P_SENSOR_X, P_SENSOR_Y, P_SENSOR_Z, P_FORCE_LAG,
+ P_CONTACT_RELEASE, P_APPLIED_MAX) = range(34)
+PAR_SIZE = 34
 
 # ------------------------------------------------------------------------- mem layout
 M_FROZEN_TIME = 0
@@ -80,7 +83,11 @@ M_OVERRUNS = 15
 M_PULL_TIME = 16
 M_BRAKES_OPEN_AT = 17
 M_REACTION = 18      # the latched reaction (Python's ``Supervisor.reaction``): the outputs' verdict
-M_REACT = 20
+M_CONTACT_UNTIL = 19  # loop time until which the platform counts as touched (contact hysteresis)
+M_SHARE = 20         # last cycle's contact share per axis (N): its rate sizes the sensor-lag allowance
+M_SHARE_IN = 23      # this cycle's contact share (N), computed by ``block_cycle`` (scratch)
+M_QUIET = 26         # per axis: how long its estimated |q̈| has been quasi-static (s)
+M_REACT = 29
 M_LATCHED = M_REACT + N_CAUSES
 M_REPORTED = M_LATCHED + N_CAUSES
 M_NEW = M_REPORTED + N_CAUSES
@@ -93,6 +100,7 @@ def new_mem() -> np.ndarray:
     mem = np.zeros(MEM_SIZE)
     mem[M_LAST_Q:M_LAST_Q + 3] = math.nan
     mem[M_CARRY:M_CARRY + 3] = math.nan
+    mem[M_SHARE:M_SHARE + 3] = math.nan
     return mem
 
 
@@ -119,22 +127,71 @@ def _trip(mem, c, reaction, v0, v1, v2):
     return 1
 
 
+@njit(cache=True, error_model="numpy")
+def contact_share(stb, wrench, par, out):
+    """The contact's share of each actuator force (N): what the drives must supply to hold the
+    wrench the ATI measures, ``out = −J_Sᵀ w_S`` (the dynamics' ``τ + J_Sᵀ w_S`` term, the
+    statics the force law uses). ``wrench`` is what touches the platform applies to it, at the
+    sensor's origin in the sensor frame S (axes parallel to P); it is carried to P's origin and
+    the base axes with the state's R_BP, then through the platform twist map (q̇ → v_P, ω, base
+    frame). A non-finite wrench (no sensor, a dropout) contributes nothing. Written so the
+    interpreted supervisor's ``contact_share.py_func`` gives the same bits."""
+    for i in range(3):
+        out[i] = 0.0
+    for k in range(6):
+        if not math.isfinite(wrench[k]):
+            return
+    r = STATE_ROT
+    ox, oy, oz = par[P_SENSOR_X], par[P_SENSOR_Y], par[P_SENSOR_Z]
+    fx = stb[r] * wrench[0] + stb[r + 1] * wrench[1] + stb[r + 2] * wrench[2]
+    fy = stb[r + 3] * wrench[0] + stb[r + 4] * wrench[1] + stb[r + 5] * wrench[2]
+    fz = stb[r + 6] * wrench[0] + stb[r + 7] * wrench[1] + stb[r + 8] * wrench[2]
+    mx = stb[r] * wrench[3] + stb[r + 1] * wrench[4] + stb[r + 2] * wrench[5]
+    my = stb[r + 3] * wrench[3] + stb[r + 4] * wrench[4] + stb[r + 5] * wrench[5]
+    mz = stb[r + 6] * wrench[3] + stb[r + 7] * wrench[4] + stb[r + 8] * wrench[5]
+    # The sensor's origin from P's, in the base axes; the moment carried to P: m + r × f.
+    rx = stb[r] * ox + stb[r + 1] * oy + stb[r + 2] * oz
+    ry = stb[r + 3] * ox + stb[r + 4] * oy + stb[r + 5] * oz
+    rz = stb[r + 6] * ox + stb[r + 7] * oy + stb[r + 8] * oz
+    mx = mx + (ry * fz - rz * fy)
+    my = my + (rz * fx - rx * fz)
+    mz = mz + (rx * fy - ry * fx)
+    w = STATE_TWIST                     # 6×3, row-major: (v_P, ω) per unit q̇_i
+    for i in range(3):
+        out[i] = -(stb[w + i] * fx + stb[w + 3 + i] * fy + stb[w + 6 + i] * fz
+                   + stb[w + 9 + i] * mx + stb[w + 12 + i] * my + stb[w + 15 + i] * mz)
+
+
 @njit(cache=True, inline="always", error_model="numpy")
-def _carry(mem, i, tau, dt):
+def _carry(par, mem, i, load, dt):
+    """Axis ``i``'s carried (static) load follows ``load`` first-order (CARRY_TAU_S) while
+    quasi-static, by at most the friction band per CARRY_TAU_S (the interpreted
+    ``_track_carry_force``'s arithmetic)."""
     c = mem[M_CARRY + i]
     if math.isnan(c):
-        mem[M_CARRY + i] = tau
-    else:
-        mem[M_CARRY + i] = c + (tau - c) * dt / (CARRY_TAU_S + dt)
+        mem[M_CARRY + i] = load
+    elif mem[M_QUIET + i] >= QUASI_STATIC_S:
+        step = (load - c) * dt / (CARRY_TAU_S + dt)
+        cap = par[P_HOLDING] * dt / CARRY_TAU_S
+        mem[M_CARRY + i] = c + (cap if step > cap else (-cap if -cap > step else step))  # noqa: FURB136
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def applied_force(tau, limit):
+    """The force a drive applies for the command ``tau`` (N): the command saturated at the
+    force of the DAC's command limit, ``limit`` (N; inf: none), as :func:`outputs` saturates
+    the volts. Spelled out so a NaN command stays NaN (as the interpreted check's)."""
+    return limit if tau > limit else (-limit if -limit > tau else tau)  # noqa: FURB136
 
 
 @njit(cache=True, error_model="numpy")
 def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate, pitch_rate,
           q_ref, qd_ref, tau, force_n, wrench_stale, wrench_saturated, hw_estop, hand_stop,
-          drive_failed, fz_n):
+          drive_failed, fz_n, share):
     """Every numeric check of one cycle (the interpreted ``Supervisor.check``'s, same order,
     same arithmetic). Writes ``mem``; returns the number of new events (0: nothing for Python
-    to do). Units as the interpreted check's: m, m/s, m/s², rad, rad/s, N, s."""
+    to do). Units as the interpreted check's: m, m/s, m/s², rad, rad/s, N, s; ``share`` is the
+    measured contact's share of each actuator force (:func:`contact_share`, N)."""
     for c in range(N_CAUSES):
         mem[M_REACT + c] = 0.0
         mem[M_NEW + c] = 0.0
@@ -154,28 +211,47 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
     if est_status == JUMP_STATUS:
         new += _trip(mem, C_JUMP, R_HARD, q[0], q[1], q[2])
     free = not (force_n > par[P_CONTACT])          # NaN (no sensor) counts as free
+    if not free:
+        mem[M_CONTACT_UNTIL] = t + par[P_CONTACT_RELEASE]
+    # Free for the reference-speed criterion: nothing measured for the release time (contact
+    # hysteresis: the sensor's lag and the contact's unloading).
+    untouched = free and t >= mem[M_CONTACT_UNTIL]
     # Drives off in a hard stop: no frozen-encoder judgement (as the interpreted check).
     brakes_open = t >= mem[M_BRAKES_OPEN_AT] and mem[M_REACTION] < R_HARD
     for i in range(3):
         qi = q[i]
         base = C_AXIS + AXIS_SLOTS * i
+        # The axis' own load: the force its drive applies (the command, saturated at the DAC's
+        # limit) less what the measured contact takes of it.
+        load = applied_force(tau[i], par[P_APPLIED_MAX]) - share[i]
+        # Quasi-static: the estimated acceleration small for QUASI_STATIC_S (the estimate
+        # lags, so a brief zero crossing between an acceleration and a braking is not).
+        if abs(qdd[i]) <= QUASI_STATIC_ACCEL:
+            mem[M_QUIET + i] += dt
+        else:
+            mem[M_QUIET + i] = 0.0
+        last_share = mem[M_SHARE + i]
+        if math.isnan(last_share):
+            last_share = share[i]
+        # The sensor reads the contact late: the true share may be ahead of the measured one by
+        # its rate times the sensor's lag (impact onset), which the axis then holds unseen.
+        lag_allowance = abs(share[i] - last_share) / dt * par[P_FORCE_LAG]
+        mem[M_SHARE + i] = share[i]
         if qi == mem[M_LAST_Q + i] and brakes_open:
-            if abs(qd_ref[i]) >= par[P_FROZEN_MIN_REF]:
+            if abs(qd_ref[i]) >= par[P_FROZEN_MIN_REF] and untouched:
                 mem[M_FROZEN_TIME + i] += dt
             else:
                 mem[M_FROZEN_TIME + i] = 0.0
             carry = mem[M_CARRY + i]
             if math.isnan(carry):
                 carry = 0.0
-            net = abs(tau[i] - carry) - par[P_HOLDING]
-            if net > 0.0 and free:
+            net = abs(load - carry) - par[P_HOLDING] - lag_allowance
+            if net > 0.0:
                 mem[M_IMPULSE + i] += net * dt
                 mem[M_IMPULSE_TIME + i] += dt
             else:
                 mem[M_IMPULSE + i] = 0.0
                 mem[M_IMPULSE_TIME + i] = 0.0
-            if not free:
-                _carry(mem, i, tau[i], dt)
             moved = mem[M_IMPULSE + i] * mem[M_IMPULSE_TIME + i] / (2.0 * par[P_AXIS_MASS])
             if moved >= FROZEN_COUNTS * par[P_COUNT_M] or \
                     mem[M_FROZEN_TIME + i] >= par[P_FROZEN_S]:
@@ -185,7 +261,9 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
             mem[M_FROZEN_TIME + i] = 0.0
             mem[M_IMPULSE + i] = 0.0
             mem[M_IMPULSE_TIME + i] = 0.0
-            _carry(mem, i, tau[i], dt)
+            # The carried load is the static one (what holds the axis once it stops): the
+            # inertia's m·q̈ taken out, and learnt only while quasi-static.
+            _carry(par, mem, i, load - par[P_AXIS_MASS] * qdd[i], dt)
         mem[M_LAST_Q + i] = qi
         # -- stroke, speed, acceleration, tracking, actuator force
         if qi < par[P_STROKE_LO] or qi > par[P_STROKE_HI]:
@@ -298,10 +376,17 @@ def block_cycle(par, mem, t, dt, q, est_status, qd, qdd, stb, fk_ok_in, filled, 
         roll_rate = stb[s + 33] * stb[v] + stb[s + 34] * stb[v + 1] + stb[s + 35] * stb[v + 2]
         pitch_rate = stb[s + 30] * stb[v] + stb[s + 31] * stb[v + 1] + stb[s + 32] * stb[v + 2]
     force = math.sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1] + wrench[2] * wrench[2])
+    # The force at the DAC's command limit: what a saturated drive applies (the balance's τ).
+    par[P_APPLIED_MAX] = par[P_MAX_COMMAND_V] / volts_per_n
+    share = mem[M_SHARE_IN:M_SHARE_IN + 3]        # a view: nothing allocated
+    if fk_ok:                              # the twist map and R_BP are this cycle's
+        contact_share(stb, wrench, par, share)
+    else:
+        share[:] = 0.0
     new = check(par, mem, t, dt, q, int(est_status[0]), qd, qdd, fk_ok, roll, pitch, roll_rate,
                 pitch_rate, q_ref, qd_ref, tau, force, wrench_flags[0] > 0.5,
                 wrench_flags[1] > 0.5, inputs[0] > 0.5, inputs[1] > 0.5, drive_failed[0] > 0.5,
-                -wrench[2])
+                -wrench[2], share)
     outputs(par, int(mem[M_REACTION]), tau, volts_per_n, volts, enable, mode)
     return new
 
@@ -328,7 +413,8 @@ def warm_up() -> None:
 
     z3 = np.zeros(3)
     check(par, mem, 0.0, 1e-3, z3, 0, z3, z3, True, 0.0, 0.0, 0.0, 0.0, z3, z3, z3, 0.0, False,
-          False, False, False, False, 0.0)
+          False, False, False, False, 0.0, z3)
+    contact_share(np.zeros(STATE_SIZE), ro(6), par, np.zeros(3))
     block_cycle(par, new_mem(), 0.0, 1e-3, ro(3), ro(1), ro(3), ro(3), np.zeros(STATE_SIZE),
                 ro(1), True, ro(3), ro(3), ro(3), ro(6), ro(2), ro(2), ro(1), 1.0, np.zeros(3),
                 np.zeros(1), np.zeros(1))

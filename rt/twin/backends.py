@@ -119,6 +119,14 @@ class TwinDigitalInputs(DigitalInputs):
         out.hand_stop = self.twin.inputs.hand_stop
         return out
 
+    def read_array(self, out: np.ndarray) -> np.ndarray:
+        self._check_open()
+        self.twin.sync()
+        inputs = self.twin.inputs
+        out[0] = 1.0 if inputs.hardware_estop else 0.0
+        out[1] = 1.0 if inputs.hand_stop else 0.0
+        return out
+
     def _close(self) -> None:
         pass
 

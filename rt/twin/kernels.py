@@ -355,10 +355,12 @@ def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd
             return st
         if k > 0.0:
             physics.friction_force(xm, vm, friction_motor, frm)
+            physics.coulomb_step(M, qd, qdd, h_step,
+                                 physics.coulomb_level(q[0], qd[0], friction, 0),
+                                 physics.coulomb_level(q[1], qd[1], friction, 1),
+                                 physics.coulomb_level(q[2], qd[2], friction, 2))
         for i in range(3):
             if k > 0.0:
-                level = physics.coulomb_level(q[i], qd[i], friction, i)
-                qd[i] = physics._toward_zero(qd[i] + h_step * qdd[i], h_step * level / M[i, i])
                 q[i] += h_step * qd[i]
                 jr = real[physics.R_JR + i]
                 v = vm[i] + h_step * (fpa * current[i] - spring[i] - frm[i]) / jr

@@ -635,6 +635,66 @@ def coulomb_level(q, v, friction, i):
     return friction[14 + i] * level
 
 
+#: Projected Gauss-Seidel sweeps of :func:`coulomb_step` at most (the 3 × 3 problem converges
+#: by ≈ 10× per sweep: the slider side's mass matrix is diagonally dominant, off-diagonal ≤ 10 %).
+COULOMB_SWEEPS = 30
+
+
+@njit(cache=True)
+def _clamp(x, lim):
+    return lim if x > lim else max(x, -lim)
+
+
+@njit(cache=True)
+def coulomb_step(M, qd, qdd, h_step, l0, l1, l2):
+    """q̇ ← q̇ + h q̈ with the Coulomb/Stribeck friction of levels ``l0..l2`` (N) applied
+    implicitly, through the **coupled** mass matrix M: the friction impulses p (|p_i| ≤ h l_i)
+    change the velocities by M⁻¹ p, and an axis either slides with p_i = h l_i sign(q̇_i) or
+    sticks (q̇_i = 0 exactly, |p_i| < h l_i). A box-constrained problem with M⁻¹ symmetric
+    positive definite, solved by projected Gauss-Seidel.
+
+    Why coupled: a force on one slider accelerates all three through the rods and the platform
+    (M⁻¹ is not diagonal; the slider side alone, without the rotors behind the compliant screw,
+    has off-diagonal terms of 7-8 % of the diagonal). Applying axis i's impulse as p_i / M_ii to
+    axis i alone — what this step did first — is the generalised force M diag(1/M_ii) F: it
+    added 7-8 % of each *other* axis's slider-side Coulomb force to every axis, a cross-coupled
+    friction no rig has (it biased identification, issue 15: ``bench/identification.py``)."""
+    c00 = M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1]
+    c01 = M[1, 2] * M[2, 0] - M[1, 0] * M[2, 2]
+    c02 = M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]
+    det = M[0, 0] * c00 + M[0, 1] * c01 + M[0, 2] * c02
+    a00 = c00 / det
+    a01 = (M[0, 2] * M[2, 1] - M[0, 1] * M[2, 2]) / det
+    a02 = (M[0, 1] * M[1, 2] - M[0, 2] * M[1, 1]) / det
+    a11 = (M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0]) / det
+    a12 = (M[0, 2] * M[1, 0] - M[0, 0] * M[1, 2]) / det
+    a22 = (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]) / det
+    v0 = qd[0] + h_step * qdd[0]
+    v1 = qd[1] + h_step * qdd[1]
+    v2 = qd[2] + h_step * qdd[2]
+    b0 = h_step * l0
+    b1 = h_step * l1
+    b2 = h_step * l2
+    p0 = 0.0
+    p1 = 0.0
+    p2 = 0.0
+    tol = 1e-12 * (b0 + b1 + b2)
+    for _ in range(COULOMB_SWEEPS):
+        n0 = _clamp((v0 - a01 * p1 - a02 * p2) / a00, b0)
+        n1 = _clamp((v1 - a01 * n0 - a12 * p2) / a11, b1)
+        n2 = _clamp((v2 - a02 * n0 - a12 * n1) / a22, b2)
+        change = abs(n0 - p0) + abs(n1 - p1) + abs(n2 - p2)
+        p0 = n0
+        p1 = n1
+        p2 = n2
+        if change <= tol:
+            break
+    # An axis whose impulse is inside its bound sticks: exactly at rest.
+    qd[0] = 0.0 if abs(p0) < b0 else v0 - a00 * p0 - a01 * p1 - a02 * p2
+    qd[1] = 0.0 if abs(p1) < b1 else v1 - a01 * p0 - a11 * p1 - a12 * p2
+    qd[2] = 0.0 if abs(p2) < b2 else v2 - a02 * p0 - a12 * p1 - a22 * p2
+
+
 @njit(cache=True)
 def _toward_zero(v, dv):
     """A Coulomb force that can remove at most ``dv`` of velocity this step: sticks at 0."""
@@ -660,8 +720,8 @@ def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi
     and ``friction_motor`` the motor side's (screw bearings, nut drag), acting on v_m. The
     slider is light (a few kg) and its stiction is sharp (≈ 1e5-1e6 N s/m near zero), beyond
     what an explicit step can integrate at 5 kHz: its Coulomb/Stribeck part is applied
-    implicitly (the velocity update it can remove, with exact stick), its viscous part
-    explicitly. Brakes remove at most hold·h/m of velocity per substep
+    implicitly through the coupled mass matrix (:func:`coulomb_step`, with exact stick), its
+    viscous part explicitly. Brakes remove at most hold·h/m of velocity per substep
     (exact stick when the net force is below the holding force).
     """
     cmd_new = np.empty(3)
@@ -720,10 +780,11 @@ def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi
             return st
         if k > 0.0:
             friction_force(xm, vm, friction_motor, frm)
+            coulomb_step(M, qd, qdd, h_step, coulomb_level(q[0], qd[0], friction, 0),
+                         coulomb_level(q[1], qd[1], friction, 1),
+                         coulomb_level(q[2], qd[2], friction, 2))
         for i in range(3):
             if k > 0.0:
-                level = coulomb_level(q[i], qd[i], friction, i)
-                qd[i] = _toward_zero(qd[i] + h_step * qdd[i], h_step * level / M[i, i])
                 q[i] += h_step * qd[i]
                 jr = real[R_JR + i]
                 v = vm[i] + h_step * (fpa * current[i] - spring[i] - frm[i]) / jr

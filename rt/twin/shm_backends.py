@@ -270,7 +270,7 @@ class ShmEncoders(EncoderBank):
             mpc = self.rig.m_per_count if m_per_count is None else float(m_per_count)
             self.m_per_count = mpc
             self._counts = self.rig.sensors.counts     # view of the private snapshot
-            self._offset = [0, 0, 0]                   # counts added by reset(), mod 2**24
+            self._offset = np.zeros(3, dtype=np.int64)  # counts added by reset(), mod 2**24
             self._port = FakePcl833Port(m_per_count=mpc)
             self._load_counts()
             # reset_on_open=False: the driver starts from the counters' current (homed) values.
@@ -283,9 +283,7 @@ class ShmEncoders(EncoderBank):
 
     def _load_counts(self) -> None:
         self.rig.read_sensors()
-        counts, offset, port = self._counts, self._offset, self._port
-        for axis in range(3):
-            port.set_count(axis, int(counts[axis]) + offset[axis])
+        self._port.set_counts(self._counts, self._offset)      # one compiled call
 
     def read_counts(self) -> tuple[int, ...]:
         self._check_open()

@@ -114,6 +114,7 @@ class Twin:
                  clock: Callable[[], float] | None = None,
                  imperfections: RigImperfections | None = None, compiled: bool = True):
         self.compiled = compiled
+        self._plant_args = (physics_rate_hz, integrator, frictionless)   # a warm-up twin's
         self.imperfections = imperfections if imperfections is not None else RigImperfections()
         self.description = description or default_truth()
         self.environment = environment or FreeMotion()
@@ -209,6 +210,32 @@ class Twin:
                 and np.max(np.abs(qd)) <= a.speed_m_s):
             self.set_environment(a.make(q.copy()))      # clears self._arrival
 
+    def warm_session_paths(self, q: np.ndarray | None = None) -> None:
+        """Load every compiled kernel a session's start calls, before a real-time loop runs.
+
+        Why: numba loads a kernel from its cache (or compiles it) at its first call with a
+        given signature, holding the GIL for tens of ms. A strapped foot's contact is the first
+        use of the plant's general period with a compliant contact: the RT process's first
+        session stalled one cycle by 30-54 ms at the strap (measured on the twin, FIFO, fast
+        mode; ``docs/worklog/2026-11-26``). Runs on a throwaway twin of the same truth and
+        imperfections at ``q`` (default: this twin's sliders), so this one is untouched."""
+        from rt.twin.environment import patient_foot
+
+        rate_hz, integrator, frictionless = self._plant_args
+        w = Twin(self.description, None, physics_rate_hz=rate_hz, integrator=integrator,
+                 frictionless=frictionless, clock=None, imperfections=self.imperfections,
+                 compiled=self.compiled)
+        w.place(self.plant.q.copy() if q is None else np.asarray(q, dtype=float))
+        w.sync(w.t + 0.002)                                  # the fused period
+        w.set_environment(FreeMotion())
+        c = w.plant.kin.fk(w.plant.q, check=False)
+        foot = patient_foot(w.plant.kin, c.z, c.roll, c.pitch)
+        w.set_environment_on_arrival(lambda _q: foot, w.plant.q.copy())
+        w.sync(w.t + 0.002)                                  # arrival: the general period
+        w.sync(w.t + 0.002)                                  # with the foot's contact
+        w.set_environment(FreeMotion())
+        w.sync(w.t + 0.002)
+
     def home_encoders(self) -> None:
         """Preset the counters so the decoded positions are absolute (the rig's homing)."""
         for axis in range(3):
@@ -226,6 +253,10 @@ class Twin:
             if self.clock is None:
                 return
             t = self.clock()
+        if t - self.plant.t <= 1e-12:
+            # Already there (every device backend syncs before it reads, after the loop's
+            # twin block advanced the physics): nothing to integrate, as below, at less cost.
+            return
         if (self.fused_period and self.compiled and not self.faults.faults
                 and not self.ati._faults_possible and self._arrival is None
                 and (self._payload_applied or not isinstance(self.environment, PayloadStep))):
@@ -260,7 +291,6 @@ class Twin:
             pp = self._port_params = np.array([*port.sign, *port.m_per_count, 0.0, 0.0, 0.0],
                                               dtype=np.float64)
             self._port_params_of = port
-        index = port._encoder_index
         while t - plant.t > 1e-12:
             chunk = min(_MAX_CHUNK_S, t - plant.t)
             self._update_amplifier_input()
@@ -269,12 +299,7 @@ class Twin:
             bits = plant.advance_sensed(chunk, self.amp_volts, pp, block, row, ati._kparams,
                                         ati._state.drift, ati._out, ati._dt_to(t_end),
                                         _ATI_OVERLOAD)
-            new = pp[kernels.PORT_INDEX:].tolist()          # floats holding integers
-            for axis in range(3):
-                delta = int(new[axis]) - index[axis]
-                if delta:
-                    index[axis] += delta
-                    port.move_counts(axis, delta)
+            port.move_to_indices(pp[kernels.PORT_INDEX:])   # floats holding integers
             self.ati_sample = ati._commit_compiled(bits, plant.t)
 
     def _update_amplifier_input(self) -> None:

@@ -1,0 +1,161 @@
+"""Which of the realistic twin's unmodelled forces biases which identified parameter.
+
+Records the optimised excitation through the product's position loop on the realistic twin
+(as ``talus identify run`` does) together with the twin's internal states at every cycle:
+slider positions and speeds (behind the screw), motor positions and speeds (what the encoders
+count), motor currents. Each force the identification model leaves out is then computed from
+those states and projected onto the estimator's filtered regressor: its least-squares image
+is the bias it puts on each base parameter (the biases add up, the fit being linear). Twin
+figures.
+
+Components:
+* amplifier: the commanded force minus the force the current loop delivered (lag, delay);
+* screw, total: the delivered force minus the truth's rigid-body inverse dynamics at the motor
+  states (everything the screw, its friction split and backlash, the ripple, the warming
+  grease, the ATI tool and cable add);
+* slider inertia: the slider side's rigid-body forces at the slider vs the motor states
+  (compliance and backlash seen as a position/acceleration difference);
+* friction split: the slider side's friction at the slider's vs the motor's speed;
+* cross-coupled Coulomb: what a per-axis implicit Coulomb step (each axis's impulse over its
+  own M_ii) would add — M diag(1/M_ii) F_c − F_c — the twin's step before it used the coupled
+  mass matrix (``rt.twin.physics.coulomb_step``);
+* ripple: the screw's Coulomb ripple with position (both sides), modelled by the estimator's
+  nuisance columns by default (so its image here is ≈ 0 unless ``--no-ripple``).
+
+    .venv/bin/python bench/identification_bias.py [--seconds 40] [--no-ripple]
+"""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+import rt.identification.estimate as E
+from rt.identification.excitation import optimize_excitation
+from rt.identification.workflow import RATE_HZ, truth_base
+from rt.model import RobotModel
+from rt.model.description import description_from_dict, load_description
+from rt.model.regressor import Regressor
+from rt.position_loop import build_sim_position_loop
+from rt.twin.realism import RigImperfections, default_truth
+from rt.twin.twin import Twin
+
+KEY = [f"{p}{i}" for p in ("Jr", "fv", "fc") for i in range(3)]
+
+
+def record_with_states(excitation, seconds: float, model: RobotModel, truth):
+    """(q encoders, τ commanded, states (n, 5, 3): slider q, q̇, motor x, v, current A)."""
+    twin = Twin(truth, seed=0)
+    twin.place((excitation.q0,) * 3)
+    pl = build_sim_position_loop("paden_panja", None, excitation, seconds, rate_hz=RATE_HZ,
+                                 model=model, twin=twin)
+    while pl.reference.phase.data[0] != 1.0:
+        pl.loop.run(cycles=1)
+    _, start = pl.recorder.drain(0)
+    n = round(seconds * RATE_HZ)
+    p = twin.plant
+    st = np.empty((n, 5, 3))
+    for j in range(n):
+        pl.loop.run(cycles=1)
+        st[j] = (p.q, p.qd, p.xm, p.vm, p.current)
+    if pl.reference.phase.data[0] == 3.0:
+        raise SystemExit("the supervisor stopped the excitation")
+    rows, _ = pl.recorder.drain(start)
+    rows = rows[:n]
+    return (rows[:, 1:4].copy(), rows[:, 13:16] * model.description.drive.force_per_volt_n, st,
+            float(p.bodies[32]))
+
+
+def _inverse_dynamics(model: RobotModel, q, qd, qdd) -> np.ndarray:
+    out = np.empty_like(q)
+    s = None
+    for j in range(len(q)):
+        s = model.dyn.state(q[j], qd[j], out=s)
+        out[j] = model.dyn.inverse_dynamics(s, qdd[j])
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=40.0)
+    ap.add_argument("--no-ripple", action="store_true",
+                    help="fit without the screw-ripple nuisance columns")
+    args = ap.parse_args()
+    ripple = not args.no_ripple
+    nominal = load_description()
+    model = RobotModel.from_description(nominal)
+    truth = default_truth()
+    q, tau, st, fpa = record_with_states(optimize_excitation(model), args.seconds, model, truth)
+    qs, qds, xm, vm, cur = (st[:, k] for k in range(5))
+    reg = Regressor(model.dyn)
+    tb = truth_base(truth, reg.base.names)
+    data = E.prepare(q, tau, RATE_HZ)
+    est = E.estimate_base(reg, data, ripple=ripple)
+    w_std, nuisance, _y = E._system(reg, data, ripple)
+    keep = E._sliding(data)
+    w = np.hstack((w_std[:, reg.base.base_index], nuisance))
+    nb = len(reg.base.base_index)
+
+    def image(component: np.ndarray) -> np.ndarray:
+        y = E._parallel(data, component).reshape(-1)[keep]
+        theta, *_ = np.linalg.lstsq(w, y, rcond=None)
+        return theta[:nb]
+
+    idx = [reg.base.names.index(k) for k in KEY]
+    print(f"realistic twin, {args.seconds:g} s optimised excitation (twin figures); "
+          f"ripple columns {'on' if ripple else 'off'}; residual {est.residual_rms_n:.2f} N")
+    print(f"{'':34s}" + "".join(f"{k:>8s}" for k in KEY))
+    print(f"{'identified: error %':34s}"
+          + "".join(f"{100 * (est.theta[k] - tb[k]) / tb[k]:+8.2f}" for k in idx))
+    print(f"{'identified: error / σ':34s}"
+          + "".join(f"{(est.theta[k] - tb[k]) / est.sigma[k]:+8.1f}" for k in idx))
+    dt = 1.0 / RATE_HZ
+    am = np.gradient(vm, dt, axis=0)
+    aqs = np.gradient(qds, dt, axis=0)
+    f_app = fpa * cur
+    slider_side = truth.model_dump()
+    slider_side["drive"]["rotor_inertia_per_axis_kg_m2"] = [1e-12] * 3
+    for k in ("viscous_per_axis_n_s_per_m", "coulomb_per_axis_n", "static_per_axis_n"):
+        slider_side["friction"][k] = [0.0] * 3
+    ms = RobotModel.from_description(description_from_dict(slider_side, "slider side"))
+    imp = RigImperfections()
+    split = imp.motor_side_friction
+    fv = np.array(truth.friction.viscous_axes)
+    fc = np.array(truth.friction.coulomb_axes)
+    vsm = truth.friction.stiction_smoothing_m_s
+    cross = np.empty_like(q)
+    s = None
+    for j in range(len(q)):
+        s = ms.dyn.state(qs[j], qds[j], out=s)
+        m = ms.dyn.mass_matrix(s)
+        f = (1.0 - split) * fc * np.sign(qds[j])
+        cross[j] = m @ (f / np.diag(m)) - f
+    phase = 2.0 * np.pi * np.arange(3) / 3.0
+    per = imp.friction_ripple_period_m
+    rip = 0.5 * imp.friction_ripple * fc * (np.sin(2 * np.pi * qs / per + phase) * np.sign(qds)
+                                            + np.sin(2 * np.pi * xm / per + phase)
+                                            * np.sign(vm))
+    components = {
+        # The commands at the positions' instants (held half a period), as the fit sees them.
+        "amplifier (τ cmd − delivered)": data.tau - f_app,
+        "screw, total (delivered − τ(xm))": f_app - _inverse_dynamics(
+            RobotModel.from_description(truth), xm, vm, am),
+        "slider inertia at slider vs motor": (_inverse_dynamics(ms, qs, qds, aqs)
+                                              - _inverse_dynamics(ms, xm, vm, am)),
+        "friction split (slider vs motor v)": (1.0 - split) * (
+            fv * (qds - vm) + fc * (np.tanh(qds / vsm) - np.tanh(vm / vsm))),
+        "cross-coupled Coulomb (M_ii step)": cross,
+        "screw ripple with position": rip,
+    }
+    print("bias each component puts on the estimate, % of the truth:")
+    for label, comp in components.items():
+        th = image(comp)
+        print(f"  {label:32s}" + "".join(f"{100 * th[k] / tb[k]:+8.2f}" for k in idx)
+              + f"   (RMS {np.sqrt(np.mean(comp ** 2)):.1f} N)")
+    print("backlash: share of cycles with the motor inside the gap, per axis: "
+          + ", ".join(f"{v:.3f}" for v in np.mean(np.abs(xm - qs) < 0.99 * 0.5
+                                                 * imp.backlash_m, axis=0)))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,208 @@
+"""The drivers' per-cycle arithmetic compiled (issue 16): one call per device block and cycle.
+
+The loop reads the encoder card and writes the DAC card every cycle. In Python that was nine
+``inb`` calls and their byte decoding, and a validation loop and three code conversions per
+write: tens of interpreted operations per cycle for what is integer and float arithmetic on a
+handful of numbers. These kernels do the same operations, in the same order, on preallocated
+arrays, so their results are bit for bit the interpreted ones (``tests/test_device_compiled.py``
+replays recorded cycles through both):
+
+* :func:`fake_pcl833_read`: the emulated PCL-833 answering a block of byte reads
+  (``FakePcl833Port.read_block``), latch included;
+* :func:`fake_pcl833_move`, :func:`fake_pcl833_positions`: the emulated card's counters fed
+  with the encoders' new indices (the twin's encoder model, ``set_positions_m``);
+* :func:`pcl833_decode`: the driver's decoding of the latched bytes (24-bit count, unwrap,
+  slider position: ``Pcl833Encoders.read_positions_m``);
+* :func:`pci1720_codes`: the PCI-1720 driver's validation, clamp and 12-bit codes
+  (``Pci1720Outputs.write_volts``); the comedilib calls themselves stay behind the driver's
+  ``lib`` (ctypes on the rig, the fake in the twin).
+
+The real port I/O and comedilib calls are not here: they stay behind ``PortIO`` and the
+driver's ``lib``, as on the rig.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+# --- the emulated PCL-833's state (int64 array; rt.drivers.fake_pcl833) ---------------------
+FAKE_REG = 0            # 16: last byte written to each write register
+FAKE_COUNT = 16         # 3: live counters
+FAKE_LATCHED = 19       # 3: latched counters (what the count bytes read)
+FAKE_INDEX = 22         # 3: encoder position in counts from q = 0
+FAKE_FROZEN = 25        # 3: fault injection, 1 = frozen
+FAKE_BASE = 28          # the card's base port (read by the block read: one argument less)
+FAKE_STRICT = 29        # 1: an undecoded port is an error (else it reads 0xFF)
+FAKE_SIZE = 30
+
+_COUNTER_MASK = (1 << 24) - 1
+_HALF_RANGE = 1 << 23
+_REG_COUNTER_RESET = 7
+_REG_STATUS = 14
+_LATCH_SOURCE_MASK = 0x07
+_LATCH_SOURCE_SOFTWARE_READ = 0
+
+# --- PCI-1720 write outcome (``pci1720_codes``' answer) --------------------------------------
+DAC_NOT_FINITE = -1         # a command is NaN or infinite: nothing written
+DAC_DISABLED = -2           # a non-zero command while disabled: nothing written
+#: Otherwise the three codes packed in one integer, 16 bits each (channel i at bits 16·i):
+#: the caller reads them with shifts instead of going through an array (maxdata ≤ 0xFFFF).
+DAC_CODE_BITS = 16
+DAC_CODE_MASK = (1 << DAC_CODE_BITS) - 1
+
+
+@njit(cache=True)
+def fake_pcl833_read(st, ports, out):
+    """``inb`` of each of ``ports`` in order into ``out`` (``FakePcl833Port.inb``): a high
+    byte read latches its channel (software-read latch source), count bytes read the latch,
+    overflow and status read 0. Returns -1, or the index of the first port the card does not
+    decode when the card is strict (the reads before it happened); an undecoded port reads
+    0xFF otherwise. The base port and strictness are read from ``st``."""
+    base = st[FAKE_BASE]
+    strict = st[FAKE_STRICT] != 0
+    for k in range(ports.shape[0]):
+        offset = ports[k] - base
+        if 0 <= offset < 12 and offset % 4 != 3:
+            channel = offset // 4
+            byte = offset % 4
+            if byte == 2 and (st[FAKE_REG + 3 + channel] & _LATCH_SOURCE_MASK) \
+                    == _LATCH_SOURCE_SOFTWARE_READ:
+                st[FAKE_LATCHED + channel] = st[FAKE_COUNT + channel]
+            out[k] = (st[FAKE_LATCHED + channel] >> (8 * byte)) & 0xFF
+        elif 0 <= offset < 12 or offset == _REG_STATUS:
+            out[k] = 0
+        elif strict:
+            return k
+        else:
+            out[k] = 0xFF
+    return -1
+
+
+@njit(cache=True)
+def _counting(st, axis):
+    mode = st[FAKE_REG + axis] & 0x07
+    held = (st[FAKE_REG + _REG_COUNTER_RESET] >> axis) & 1
+    return mode != 0 and held == 0 and st[FAKE_FROZEN + axis] == 0
+
+
+@njit(cache=True)
+def fake_pcl833_move(st, new_index):
+    """The encoders now at ``new_index`` (counts from q = 0, floats holding integers): each
+    axis' change since the last call goes to its counter as pulses (dropped while the channel
+    is disabled, held in reset or frozen), wrapping modulo 2**24."""
+    for axis in range(3):
+        new = int(new_index[axis])
+        delta = new - st[FAKE_INDEX + axis]
+        if delta != 0:
+            st[FAKE_INDEX + axis] = new
+            if _counting(st, axis):
+                st[FAKE_COUNT + axis] = (st[FAKE_COUNT + axis] + delta) & _COUNTER_MASK
+
+
+@njit(cache=True)
+def fake_pcl833_positions(st, sign_mpc, positions_m):
+    """``FakePcl833Port.set_positions_m``: the encoder index ``floor(sign·q/mpc + 0.5)`` per
+    axis (``sign_mpc``: the three signs, then the three m per count), fed as pulses. Returns
+    -1, or the first axis whose position is not finite (nothing after it is moved)."""
+    for axis in range(3):
+        if not math.isfinite(positions_m[axis]):
+            return axis
+        new = math.floor(sign_mpc[axis] * positions_m[axis] / sign_mpc[3 + axis] + 0.5)
+        delta = new - st[FAKE_INDEX + axis]
+        if delta != 0:
+            st[FAKE_INDEX + axis] = new
+            if _counting(st, axis):
+                st[FAKE_COUNT + axis] = (st[FAKE_COUNT + axis] + delta) & _COUNTER_MASK
+    return -1
+
+
+@njit(cache=True)
+def fake_pcl833_set_counts(st, counts, offsets):
+    """``FakePcl833Port.set_count`` for the three axes: each live counter preset to
+    ``counts + offsets`` modulo 2**24, then the reset hold (a held channel keeps its reset
+    value: 0x800000 with the mode register's "middle" bit, else 0)."""
+    for axis in range(3):
+        st[FAKE_COUNT + axis] = (int(counts[axis]) + offsets[axis]) & _COUNTER_MASK
+    for axis in range(3):
+        if (st[FAKE_REG + _REG_COUNTER_RESET] >> axis) & 1:
+            st[FAKE_COUNT + axis] = _HALF_RANGE if st[FAKE_REG + axis] & 0x08 else 0
+
+
+# --- the PCL-833 driver's read buffer (int64 array; rt.drivers.pcl833) ------------------------
+PCL_RAW = 0             # 9: each axis' bytes in read order (high, low, middle)
+PCL_UNWRAP = 9          # 6: each axis' last count and displacement (``CountUnwrapper``)
+PCL_IO_SIZE = 15
+
+
+@njit(cache=True)
+def pcl833_decode(io, dec, out):
+    """Slider positions (m) into ``out`` from one read of the three channels: ``io`` holds the
+    bytes read and each axis' (last count, displacement), updated in place
+    (``CountUnwrapper.update``; layout ``PCL_*``), ``dec`` the signs, the origins (m) and the
+    m per count. ``origin + sign·displacement·mpc``, as the driver computes it."""
+    for i in range(3):
+        r = PCL_RAW + 3 * i
+        count = ((io[r] << 16) | (io[r + 2] << 8) | io[r + 1]) & _COUNTER_MASK
+        u = PCL_UNWRAP + 2 * i
+        step = ((count - io[u] + _HALF_RANGE) & _COUNTER_MASK) - _HALF_RANGE
+        displacement = io[u + 1] + step
+        io[u] = count
+        io[u + 1] = displacement
+        out[i] = dec[3 + i] + (dec[i] * displacement) * dec[6 + i]
+
+
+# --- the PCI-1720 driver's output state (float64 array; rt.drivers.pci1720) ------------------
+DAC_CODES = 0           # 3: codes of the last write (floats holding integers)
+DAC_VOLTS = 3           # 3: the voltages they produce (V)
+DAC_CLAMPED = 6         # 3: 1 where the last write hit the command limit
+DAC_BACKUP = 9          # 9: the three above before the last write (restored on a failed write)
+DAC_ENABLED = 18        # 1 when the driver is enabled (non-zero commands allowed)
+DAC_LIMIT = 19          # the command limit (V)
+DAC_RANGES = 20         # 9: (v_min, v_max, maxdata) per channel
+DAC_STATE_SIZE = 29
+
+
+@njit(cache=True)
+def pci1720_codes(volts, dac):
+    """``Pci1720Outputs.write_volts``' arithmetic for the three axes: every command finite
+    (else :data:`DAC_NOT_FINITE`), no non-zero command while disabled (else
+    :data:`DAC_DISABLED`); nothing is changed then. Otherwise, per channel: the clamp flag,
+    the command clamped to ±``limit``, its code ``floor((V − v_min)/(v_max − v_min)·maxdata +
+    0.5)`` clamped to 0..maxdata (``volts_to_code``) and the voltage the code produces
+    (``code_to_volts``), into ``dac`` (layout ``DAC_*``; the previous values go to its backup;
+    the enable flag, the limit and the channels' ranges are read from it: one array argument,
+    as numba's dispatch costs per argument). Returns the codes packed (``DAC_CODE_BITS`` per
+    channel), or a refusal (< 0)."""
+    enabled = dac[DAC_ENABLED] != 0.0
+    limit = dac[DAC_LIMIT]
+    nonzero = False
+    for i in range(3):
+        v = volts[i]
+        if not math.isfinite(v):
+            return DAC_NOT_FINITE
+        if v != 0.0:
+            nonzero = True
+    if nonzero and not enabled:
+        return DAC_DISABLED
+    for k in range(9):
+        dac[DAC_BACKUP + k] = dac[k]
+    packed = 0
+    for i in range(3):
+        v = volts[i]
+        dac[DAC_CLAMPED + i] = 0.0 if -limit <= v <= limit else 1.0
+        v = min(limit, max(-limit, v))
+        v_min = dac[DAC_RANGES + 3 * i]
+        v_max = dac[DAC_RANGES + 3 * i + 1]
+        maxdata = dac[DAC_RANGES + 3 * i + 2]
+        s = (v - v_min) / (v_max - v_min) * maxdata
+        if s <= 0.0:
+            code = 0.0
+        elif s >= maxdata:
+            code = maxdata
+        else:
+            code = float(math.floor(s + 0.5))
+        dac[DAC_CODES + i] = code
+        dac[DAC_VOLTS + i] = v_min + code / maxdata * (v_max - v_min)
+        packed |= int(code) << (DAC_CODE_BITS * i)
+    return packed
