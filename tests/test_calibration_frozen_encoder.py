@@ -85,7 +85,7 @@ def test_a_fast_tilt_under_load_is_not_taken_for_a_frozen_encoder(fast_tilt) -> 
 
 @pytest.mark.xfail(strict=True, raises=AssertionError,
                    reason="the hybrid force/angle loop falls into a limit cycle during a roll "
-                          "against the plate's stuck tip with the amplifier offsets on (the "
+                          "against the plate's stuck tip, amplifier offsets on or off (the "
                           "force law's problem, not the supervisor's: issue 15)")
 def test_the_contact_holds_through_a_fast_tilt(fast_tilt) -> None:
     """While loaded the ATI force stays within a quarter of the 600 N (no bounce)."""
