@@ -46,11 +46,14 @@ def test_converges_on_a_step(name):
 
 
 @pytest.mark.parametrize("name, bound_mm", [
-    # Mean absolute error over 2-6 s of the benchmark trajectory (no payload). The model-based
-    # laws see only the Stribeck-vs-smooth friction mismatch and encoder quantization (mean abs
-    # of a uniform ±10 µm error is 5 µm); PID/PD pay for the unmodelled inertia and friction.
-    ("pid", 0.3), ("pd_g", 0.6), ("pd_g0", 0.6), ("paden_panja", 0.03),
-    ("computed_torque", 0.03), ("adaptive", 0.03), ("computed_torque_ptp", 10.0),
+    # Mean absolute error over 2-6 s of the benchmark trajectory (no payload), on the realistic
+    # twin (its perturbed truth against the nominal model the laws use, the screw, friction
+    # varying with temperature and position, encoder quantization: mean abs of a uniform ±10 µm
+    # error is 5 µm); PID/PD pay for the unmodelled inertia and friction. Measured since the
+    # twin's slider friction acts through the coupled mass matrix (2026-11-26): Paden-Panja
+    # 27.2 µm, computed torque 30.2, adaptive 20.3 (deterministic, simulated time).
+    ("pid", 0.3), ("pd_g", 0.6), ("pd_g0", 0.6), ("paden_panja", 0.035),
+    ("computed_torque", 0.035), ("adaptive", 0.03), ("computed_torque_ptp", 10.0),
 ])
 def test_tracks_the_benchmark_trajectory(name, bound_mm):
     log = run_tracking(name, 6.0, benchmark_reference())
