@@ -60,7 +60,9 @@ VARIANTS: dict[str, str] = {
     "guard200": "the loop's GIL guard 200 µs before each deadline (RtConfig gil_guard_us)",
     "si50": "a 50 µs GIL switch interval (instead of 200 µs)",
     "qos": "every CPU's wake-up latency bounded to 0 µs through PM QoS while the loop runs "
-           "(RtConfig cpu_latency_us=0: idle vCPUs poll instead of halting)",
+           "(RtConfig cpu_latency_us=0: idle vCPUs poll instead of halting; the default since "
+           "2026-11-26)",
+    "no_qos": "no PM QoS request (RtConfig cpu_latency_us=None: the default before 2026-11-26)",
     "unaligned": "telemetry and the session pump on free-running timers (as before branch "
                  "rtloop3), not woken by the loop right after a cycle",
     "no_hb": "the bench client sends no heartbeat while idle (only from the session start)",
@@ -121,6 +123,8 @@ def _apply(variant: str, config: Any, holder: dict[str, Any], ext: dict[str, Any
         config = config.model_copy(update={"gil_guard_us": 400.0})
     if "qos" in tokens:
         config = config.model_copy(update={"cpu_latency_us": 0})
+    if "no_qos" in tokens:
+        config = config.model_copy(update={"cpu_latency_us": None})
     if "unaligned" in tokens:
         from rt.engine import loop as loopmod
 

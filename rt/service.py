@@ -175,9 +175,11 @@ class RtConfig(BaseModel):
     gil_guard_us: float | None = Field(default=400.0, ge=0.0, le=500.0)
     #: Bound on every CPU's wake-up latency while the loop runs, through the kernel's PM QoS
     #: (µs; 0: idle CPUs poll rather than halt; realtime mode; ``rt_hygiene``): an idle vCPU
-    #: otherwise halts and the loop's wake-up waits for the host to run it again. None: not
-    #: requested.
-    cpu_latency_us: int | None = Field(default=None, ge=0, le=10_000)
+    #: otherwise halts and the loop's wake-up waits for the host to run it again. 0 by default
+    #: since the quiet machine's 3 interleaved pairs (``bench/rt_deadlines.py --variants
+    #: base,qos --reps 3``, docs/worklog/2026-11-26): session misses 14-26 against 45-154 per
+    #: 1000, no session soft-stopped against 2 of 3. None: not requested.
+    cpu_latency_us: int | None = Field(default=0, ge=0, le=10_000)
 
     def limits_of_robot(self) -> RobotLimits:
         return self.robot_limits.model_copy(

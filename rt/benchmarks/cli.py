@@ -75,9 +75,10 @@ def register_loop(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--mode", choices=("realtime", "fast"), default="realtime",
                    help="realtime: paced by the clock (deadline misses meaningful); fast: "
                         "back-to-back in simulated time")
-    p.add_argument("--cpu-latency-us", type=int, default=None, metavar="US",
-                   help="bound every CPU's wake-up latency through PM QoS while the loop runs "
-                        "(0: idle CPUs poll; needs root; default: not requested)")
+    p.add_argument("--cpu-latency-us", type=int, default=0, metavar="US",
+                   help="bound every CPU's wake-up latency through PM QoS while the loop runs, "
+                        "as the RT process does (0, the default: idle CPUs poll; needs root; "
+                        "-1: not requested)")
     p.add_argument("--json", action="store_true")
     add_robot_option(p)
     p.set_defaults(func=_loop)
@@ -92,10 +93,12 @@ def _model(args):
 def _loop(args) -> int:
     from rt.benchmarks.loop import run_loop_benchmark
 
-    if args.cpu_latency_us is not None and not 0 <= args.cpu_latency_us <= 10_000:
-        raise SystemExit(f"--cpu-latency-us: a bound in [0, 10000] µs, got {args.cpu_latency_us}")
+    if not -1 <= args.cpu_latency_us <= 10_000:
+        raise SystemExit(f"--cpu-latency-us: a bound in [0, 10000] µs or -1, got "
+                         f"{args.cpu_latency_us}")
+    qos = None if args.cpu_latency_us < 0 else args.cpu_latency_us
     result = run_loop_benchmark(args.controller, args.seconds, args.rate, args.mode,
-                                model=_model(args), cpu_latency_us=args.cpu_latency_us)
+                                model=_model(args), cpu_latency_us=qos)
     if args.json:
         print(json.dumps(result))
     else:
