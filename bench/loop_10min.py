@@ -2,7 +2,7 @@
 lateness and execution time (twin figures, this machine; DESIGN §10, issue 16).
 
     .venv/bin/python bench/loop_10min.py [--seconds 600] [--rates 1000 2000]
-        [--controller paden_panja] [--out DIR] [--force]
+        [--controller paden_panja] [--cpu-latency-us 0] [--out DIR] [--force]
 
 Runs ``build_sim_position_loop`` in realtime mode (the product's loop: sleep, then spin to
 each deadline) for ``--seconds`` per rate, in chunks of ``--chunk`` seconds so the timing rings
@@ -55,9 +55,12 @@ def _summary(hist: np.ndarray, max_ns: float) -> dict:
             "count": int(hist.sum()), "above_histogram": int(hist[-1])}
 
 
-def run_rate(rate_hz: float, seconds: float, chunk_s: float, controller: str) -> dict:
+def run_rate(rate_hz: float, seconds: float, chunk_s: float, controller: str,
+             cpu_latency_us: int | None = 0) -> dict:
+    # PM QoS as the RT process has it by default (RtConfig.cpu_latency_us 0); None: not asked.
+    extra = {} if cpu_latency_us is None else {"cpu_latency_us": cpu_latency_us}
     pl = build_sim_position_loop(controller, duration_s=seconds + 10.0, rate_hz=rate_hz,
-                                 mode="realtime")
+                                 mode="realtime", **extra)
     hists = {k: np.zeros(N_BINS, dtype=np.int64) for k in ("lateness", "cycle", "without_twin")}
     maxes = dict.fromkeys(hists, 0.0)
     # Warm-up, not counted: the first cycles load numba's cached kernels (the twin's too) and
@@ -86,7 +89,9 @@ def run_rate(rate_hz: float, seconds: float, chunk_s: float, controller: str) ->
     pl.graph.stop()
     cycles = int(stats.lateness.count - warm.lateness.count)
     misses = int(stats.misses - warm.misses)
+    hyg = pl.loop.hygiene
     return {"rate_hz": rate_hz, "controller": controller, "seconds": seconds,
+            "cpu_latency_us": None if hyg is None else hyg.cpu_latency_us,
             "wall_s": time.monotonic() - wall0, "cycles": cycles,
             "deadline_misses": misses,
             "miss_percent": 100.0 * misses / cycles if cycles else float("nan"),
@@ -144,8 +149,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--chunk", type=float, default=20.0, help="seconds per timing chunk")
     p.add_argument("--controller", default="paden_panja")
     p.add_argument("--out", type=Path, default=Path("."))
+    p.add_argument("--cpu-latency-us", type=int, default=0,
+                   help="PM QoS wake-up bound while the loop runs, as the RT process's default "
+                        "(0); -1: not requested")
     p.add_argument("--force", action="store_true", help="replace existing outputs")
     args = p.parse_args(argv)
+    if not -1 <= args.cpu_latency_us <= 10_000:
+        p.error(f"--cpu-latency-us must be in [-1, 10000], got {args.cpu_latency_us}")
     if not (args.seconds > 0 and np.isfinite(args.seconds)):
         p.error(f"--seconds must be > 0, got {args.seconds}")
     if not (0 < args.chunk <= 30.0):
@@ -160,7 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     results = []
     for rate in args.rates:
-        r = run_rate(rate, args.seconds, args.chunk, args.controller)
+        r = run_rate(rate, args.seconds, args.chunk, args.controller,
+                     None if args.cpu_latency_us < 0 else args.cpu_latency_us)
         results.append(r)
         print(f"{rate:g} Hz, {args.seconds:g} s ({r['cycles']} cycles, {args.controller}, "
               f"twin): misses {r['deadline_misses']} ({r['miss_percent']:.3f} %, "
