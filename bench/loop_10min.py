@@ -10,6 +10,8 @@ each deadline) for ``--seconds`` per rate, in chunks of ``--chunk`` seconds so t
 chunk restarts its timing at once, its first dt is the nominal period). Prints, per rate,
 median / p99 / max of lateness, whole cycle and cycle without the twin block (the rig has no
 twin), and the deadline misses (cycles later than 20 % of the period). Writes
+the host's steal time per chunk beside that chunk's misses (``/proc/stat``; ``--chunk 1`` for a
+finer split: on this VM a miss usually comes with the hypervisor taking the vCPU). Writes
 ``loop_10min.json`` (figures and histograms) and ``loop_10min.png`` into ``--out`` (default:
 the current directory); an existing file is refused unless ``--force`` (then replaced only once
 the new one is complete).
@@ -55,6 +57,17 @@ def _summary(hist: np.ndarray, max_ns: float) -> dict:
             "count": int(hist.sum()), "above_histogram": int(hist[-1])}
 
 
+def _steal_jiffies() -> int:
+    """The host's steal time over every CPU (USER_HZ ticks, /proc/stat's 8th field): time this
+    VM's vCPUs were ready to run and the hypervisor ran something else. 0 where not reported."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+        return int(fields[8]) if fields[0] == "cpu" and len(fields) > 8 else 0
+    except (OSError, ValueError):
+        return 0
+
+
 def run_rate(rate_hz: float, seconds: float, chunk_s: float, controller: str,
              cpu_latency_us: int | None = 0) -> dict:
     # PM QoS as the RT process has it by default (RtConfig.cpu_latency_us 0); None: not asked.
@@ -69,10 +82,20 @@ def run_rate(rate_hz: float, seconds: float, chunk_s: float, controller: str,
     warm = pl.loop.stats()
     remaining = seconds
     wall0 = time.monotonic()
+    # Per chunk: the loop's misses beside the host's steal time over the same span, so a run
+    # says whether its misses come with the hypervisor taking the vCPU (nothing the loop can do).
+    chunks: list[dict] = []
+    misses_before = warm.misses
     while remaining > 1e-9:
         span = min(chunk_s, remaining)
+        steal0 = _steal_jiffies()
         n = pl.loop.run(seconds=span)
+        steal1 = _steal_jiffies()
         remaining -= span
+        now_misses = pl.loop.stats().misses
+        chunks.append({"cycles": int(n), "misses": int(now_misses - misses_before),
+                       "steal_ms": 1000.0 * (steal1 - steal0) / os.sysconf("SC_CLK_TCK")})
+        misses_before = now_misses
         if n == 0:
             continue
         rings = pl.graph.timing_samples()
@@ -97,11 +120,23 @@ def run_rate(rate_hz: float, seconds: float, chunk_s: float, controller: str,
             "miss_percent": 100.0 * misses / cycles if cycles else float("nan"),
             "miss_tolerance_us": stats.miss_tolerance_us,
             "rephases": int(stats.rephases - warm.rephases), "warm_up_s": WARM_UP_S,
+            "chunks": chunks, "steal": _steal_summary(chunks),
             "lateness": _summary(hists["lateness"], maxes["lateness"]),
             "cycle": _summary(hists["cycle"], maxes["cycle"]),
             "cycle_without_twin": _summary(hists["without_twin"], maxes["without_twin"]),
             "histograms_us": {k: {"bin_us": BIN_US, "counts": h.tolist()}
                               for k, h in hists.items()}}
+
+
+def _steal_summary(chunks: list[dict]) -> dict:
+    """How the misses split between chunks with and without host steal time."""
+    stolen = [c for c in chunks if c["steal_ms"] > 0]
+    clean = [c for c in chunks if c["steal_ms"] == 0]
+    return {"chunks": len(chunks), "chunks_with_steal": len(stolen),
+            "steal_ms_total": sum(c["steal_ms"] for c in chunks),
+            "misses_in_chunks_with_steal": sum(c["misses"] for c in stolen),
+            "misses_in_chunks_without_steal": sum(c["misses"] for c in clean),
+            "cycles_in_chunks_without_steal": sum(c["cycles"] for c in clean)}
 
 
 def _write_atomic(path: Path, write) -> None:
@@ -176,6 +211,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{rate:g} Hz, {args.seconds:g} s ({r['cycles']} cycles, {args.controller}, "
               f"twin): misses {r['deadline_misses']} ({r['miss_percent']:.3f} %, "
               f"> {r['miss_tolerance_us']:.0f} µs late), re-phased {r['rephases']}x")
+        st = r["steal"]
+        print(f"  host steal: {st['steal_ms_total']:.0f} ms over {st['chunks_with_steal']} of "
+              f"{st['chunks']} chunks; misses in those chunks {st['misses_in_chunks_with_steal']}, "
+              f"in the others {st['misses_in_chunks_without_steal']} "
+              f"(of {st['cycles_in_chunks_without_steal']} cycles)")
         for key in ("lateness", "cycle", "cycle_without_twin"):
             s = r[key]
             print(f"  {key:20s} median {s['median_us']:7.0f}  p99 {s['p99_us']:7.0f}  "
