@@ -9,7 +9,7 @@ each deadline) for ``--seconds`` per rate, in chunks of ``--chunk`` seconds so t
 (65536 cycles) never wrap: between chunks the rings are folded into 1 µs histograms (the next
 chunk restarts its timing at once, its first dt is the nominal period). Prints, per rate,
 median / p99 / max of lateness, whole cycle and cycle without the twin block (the rig has no
-twin), and the deadline misses (cycles later than 20 % of the period). Writes
+twin), and the deadline misses (cycles later than 20 % of the period), and
 the host's steal time per chunk beside that chunk's misses (``/proc/stat``; ``--chunk 1`` for a
 finer split: on this VM a miss usually comes with the hypervisor taking the vCPU). Writes
 ``loop_10min.json`` (figures and histograms) and ``loop_10min.png`` into ``--out`` (default:
