@@ -41,10 +41,12 @@ RETRY_CAUSES = ("encoder_frozen", "force_limit", "force_saturated")
 def gui(qtbot, tmp_path):
     rec = tmp_path / "recordings"
     rec.mkdir()
-    # The calibration's force limit (1000 N) as tests/test_calibration_rt.py serves it, with
-    # the GUI tests' heartbeat timeout for a loaded machine.
+    # An RT process configured as one serving a calibration (force limit 1800 N, as
+    # tests/test_calibration_rt.py serves its off-centre pushes: a 600 N hold at a grid site
+    # overshot the 1000 N limit on the realistic twin, issue 15's force-loop margin), with the
+    # GUI tests' heartbeat timeout for a loaded machine.
     proc, endpoint, _pub = gui_support.start_rt(
-        "--config", _config(tmp_path, 1000.0),
+        "--config", _config(tmp_path, 1800.0),
         "--heartbeat-timeout", str(gui_support.LOADED_HEARTBEAT_TIMEOUT_S),
         "--recordings-dir", str(rec))
     link = RtLink(endpoint, name="GUI calibration test")
