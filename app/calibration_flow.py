@@ -1,6 +1,7 @@
 """The calibration wizard's steps (Qt-free; each runs on a worker): plan → register the plate
-with the camera → run on the twin → fit → verify → certificate, over the ``calibration``
-package as ``talus calibrate`` drives it.
+with the camera → run (on the twin, the plate alone, or through the RT process the GUI is
+connected to) → fit → verify → certificate, over the ``calibration`` package as ``talus
+calibrate`` drives it.
 
 Everything goes into a new work folder (``campaign/``, ``calibration_record.json``,
 ``verification/``); the certificate goes where the engineer chooses, never over a file. Each
