@@ -6,13 +6,14 @@ the twin, the real C3D files of ``../shared/data/c3d``."""
 from __future__ import annotations
 
 import gui_support
+import numpy as np
 import pytest
 from PySide6.QtCore import QLocale, Qt
 from test_gait_real_files import DATA, _bench
 
 from app.i18n import install_language
 from app.main_window import MainWindow
-from app.pages.prescribe import beyond_words
+from app.pages.prescribe import beyond_words, clinical_limits
 from app.patient_context import PatientContext
 from app.rt_link import RtLink
 from app.settings import GuiSettings
@@ -28,7 +29,7 @@ HEEL_STRIKE_FILE = "type2_vicon.c3d"
 def test_beyond_words_say_what_the_patient_gets():
     """The words of each limit, with its figures in the language's number format."""
     entry = {"what": "actuator force", "limit": 2000.0, "unit": "N", "longest_s": 0.004,
-             "from_s": 1.2345, "peak": 2951.7}
+             "from_s": 1.3345, "from_play_s": 1.2345, "peak": 2951.7}
     saved = QLocale()
     QLocale.setDefault(QLocale(QLocale.Language.English, QLocale.Country.UnitedStates))
     try:
@@ -41,11 +42,19 @@ def test_beyond_words_say_what_the_patient_gets():
         assert beyond_words(volts) == (
             "the drives run at full power (their 6.0 V command limit) for 13 ms from "
             "t = 0.50 s: there the platform follows the protocol less closely")
+        # An older RT process gives the session's time only.
+        assert "from t = 1.33 s" in beyond_words({**entry, "from_play_s": None})
         # What it does not understand (a newer RT process's entry, a broken one) says nothing.
         assert beyond_words({**entry, "what": "slider speed"}) == ""
         assert beyond_words({**entry, "peak": None}) == ""
-        assert beyond_words({**entry, "from_s": float("nan")}) == ""
+        assert beyond_words({**entry, "from_play_s": float("nan")}) == ""
         assert beyond_words("actuator force") == ""
+        # The drive command clipped at the moment the force is beyond the drive is the same
+        # moment said twice: one line; a command at its limit elsewhere is its own line.
+        same = {**volts, "from_s": 1.336, "longest_s": 0.003}
+        assert clinical_limits([entry, same]) == [entry]
+        assert clinical_limits([entry, volts]) == [entry, volts]
+        assert clinical_limits([volts]) == [volts]
     finally:
         QLocale.setDefault(saved)
 
@@ -105,16 +114,28 @@ def test_prescribe_warns_where_a_heel_strike_asks_more_than_the_drives(gui, qtbo
     hit = beyond["actuator force"]
     assert hit["peak"] > hit["limit"] == 2000.0 and 0.0 < hit["longest_s"] <= 0.02
     assert 0.0 < hit["from_s"] < page.last_preflight["predicted"]["duration_s"]
+    # On the protocol's own time, the preview's axis: the drives reach their limit as the
+    # heel strikes, where the preview's force first rises (20 N: the record's contact), within
+    # 10 ms (the force law reads the protocol 5 ms ahead) and a preview step. Measured: 40 ms
+    # into the replay, 172 ms into the session (its approach and tare come first).
+    preview = page.preview
+    assert preview is not None and preview.force_protocol
+    contact = float(preview.t[int(np.argmax(preview.fz_n > 20.0))])
+    step = float(preview.t[1] - preview.t[0])
+    assert abs(hit["from_play_s"] - contact) <= 0.010 + step, (hit, contact)
+    assert hit["from_play_s"] < hit["from_s"]
     # ... and the page shows each of them in the patient's terms, under the passed verdict.
     assert page.beyond.isVisible() and "passed" in page.verdict.text()
     text = page.beyond.text()
     assert text.startswith("Warning: this protocol asks more than the robot can give")
-    for entry in beyond.values():
+    shown = clinical_limits(list(beyond.values()))
+    assert hit in shown and text.count("•") == len(shown)
+    for entry in shown:
         assert beyond_words(entry) in text
     locale = QLocale()
     for figure in (locale.toString(hit["limit"], "f", 0), locale.toString(hit["peak"], "f", 0),
                    locale.toString(hit["longest_s"] * 1e3, "f", 0),
-                   locale.toString(hit["from_s"], "f", 2)):
+                   locale.toString(hit["from_play_s"], "f", 2)):
         assert figure in text, (figure, text)
     # A warning, not a refusal: Start is enabled.
     assert page.start_button.isEnabled()

@@ -261,7 +261,8 @@ class PrescribePage(QWidget):
 
     def _show_beyond(self, limits: list[Any]) -> None:
         """The pre-flight's ``at_robot_limit`` in the patient's terms, or nothing."""
-        lines = [line for line in (beyond_words(lim) for lim in limits) if line]
+        lines = [line for line in (beyond_words(lim) for lim in clinical_limits(limits))
+                 if line]
         if not lines:
             self.beyond.clear()
             self.beyond.hide()
@@ -289,15 +290,40 @@ def _number(value: float, decimals: int) -> str:
     return QLocale().toString(float(value), "f", decimals)
 
 
+def clinical_limits(limits: list[Any]) -> list[Any]:
+    """The entries worth a clinician's line: a drive command at its limit while the drive's
+    force is at its own is the same moment said twice (the command clips because the force
+    asked is beyond the drive), so only the force is kept then; a command at its limit alone
+    (a fast motion the drives cannot follow) stays."""
+    forces = [e for e in limits if isinstance(e, dict) and e.get("what") == "actuator force"]
+
+    def same_moment(e: dict[str, Any]) -> bool:
+        try:
+            a0, a1 = float(e["from_s"]), float(e["from_s"]) + float(e["longest_s"])
+            return any(a0 <= float(f["from_s"]) + float(f["longest_s"])
+                       and float(f["from_s"]) <= a1 for f in forces)
+        except (KeyError, TypeError, ValueError):
+            return False
+
+    return [e for e in limits if not (isinstance(e, dict) and e.get("what") == "drive command"
+                                      and same_moment(e))]
+
+
 def beyond_words(limit: Any) -> str:
     """One entry of the pre-flight's ``at_robot_limit`` (``SessionFigures.at_limit``: what,
     limit, unit, peak asked, its longest stretch ``longest_s`` from ``from_s``) in a clinician's
-    words: what the robot will deliver where the protocol asks more, and for how long. "" for
-    an entry it does not understand (a newer RT process's): the verdict above stays right."""
+    words: what the robot will deliver where the protocol asks more, for how long, and when on
+    the protocol's time axis (``from_play_s``). "" for an entry it does not understand (a newer
+    RT process's): the verdict above stays right."""
     if not isinstance(limit, dict):
         return ""
     what, lim, peak = limit.get("what"), limit.get("limit"), limit.get("peak")
-    longest, start = limit.get("longest_s"), limit.get("from_s")
+    # The protocol's own time (its preview's axis) when the RT process gives it; else the
+    # session's (an older RT process: the approach and the tare included).
+    longest = limit.get("longest_s")
+    start = limit.get("from_play_s")
+    if not isinstance(start, (int, float)):
+        start = limit.get("from_s")
     if not all(isinstance(v, (int, float)) and math.isfinite(v)
                for v in (lim, peak, longest, start)):
         return ""
