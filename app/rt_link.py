@@ -22,10 +22,12 @@ threads):
 
 The owner's heartbeat comes from a child process (:mod:`app.heartbeat`) that the GUI thread
 ticks: GUI stalls do not starve it, a hung GUI stops it, and when this process dies (SIGKILL
-included) it sends a soft stop at once. It runs whenever the RT process says this GUI owns the
-robot, whatever became of the ``control_acquire`` reply: a reply lost on a loaded machine (the
-RT process took the request, the 5 s wait ran out) used to leave an owner without a heartbeat,
-whose first motion the RT process would soft-stop.
+included) it sends a soft stop at once. It is started with the link and stays silent until
+ticked (its start-up took 1-4.5 s on a loaded machine: paid before control, not after). It
+beats whenever the RT process says this GUI owns the robot, whatever became of the
+``control_acquire`` reply: a reply lost on a loaded machine (the RT process took the request,
+the 5 s wait ran out) used to leave an owner without a heartbeat, whose first motion the RT
+process would soft-stop.
 """
 from __future__ import annotations
 
@@ -101,9 +103,12 @@ class RtLink(QObject):
     # ------------------------------------------------------------------ lifecycle
 
     def start(self) -> None:
-        """Start watching the connection and receiving telemetry."""
+        """Start watching the connection and receiving telemetry, and the heartbeat child
+        (silent until ticked: started now so that its start-up is paid before control is
+        taken; on a worker, forking a process the GUI's size takes tens of ms)."""
         for t in self._threads:
             t.start()
+        self._pool.submit(self._ensure_heartbeat)
 
     def close(self) -> None:
         """Stop the threads and close the clients (the heartbeat stops: if this GUI owned a
@@ -161,12 +166,18 @@ class RtLink(QObject):
     def _on_control(self, tag: str, result: object, error: str) -> None:
         if tag != "control" or error or self._quit.is_set():
             return
-        self._tick_timer.start()
+        self._start_ticking()
 
     def _on_status(self, status: object) -> None:
         """This GUI owns the robot (however it came to): its heartbeat is ticked."""
-        if isinstance(status, dict) and status.get("you_own") and not self._quit.is_set() \
-                and not self._tick_timer.isActive():
+        if isinstance(status, dict) and status.get("you_own") and not self._quit.is_set():
+            self._start_ticking()
+
+    def _start_ticking(self) -> None:
+        """Tick the heartbeat child now and every 200 ms (GUI thread): it beats from the first
+        tick on."""
+        if not self._tick_timer.isActive():
+            self._tick()
             self._tick_timer.start()
 
     def _tick(self) -> None:

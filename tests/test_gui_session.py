@@ -91,7 +91,8 @@ def test_clinician_flow_refusal_run_stop_acknowledge_review(gui, qtbot):
     qtbot.waitUntil(run.start_button.isEnabled, timeout=ENABLED_MS)
     click(qtbot, run.start_button)
     qtbot.waitUntil(lambda: run.session_id is not None or bool(run.last_error), timeout=WAIT_MS)
-    assert run.session_id is not None, run.last_error
+    assert run.session_id is not None, (run.last_error, (run.link.last_status or {}).get(
+        "latched"))
     frames = run.frames
     qtbot.waitUntil(lambda: run.frames > frames + 20 and run.samples_shown > 50,
                     timeout=30_000)
@@ -178,8 +179,11 @@ def test_a_lost_control_reply_still_leaves_a_heartbeating_owner(gui, qtbot, monk
         qtbot.waitUntil(run.start_button.isEnabled, timeout=ENABLED_MS)
         assert run.message.text() == "You control the robot."
         assert link.heartbeat is not None and link.heartbeat.alive()
-        # Heartbeats arrive (every 50 ms from the child, ticked by the GUI): over 2 s of
-        # statuses the owner's silence stays below the RT process's timeout.
+        # Heartbeats arrive (every 50 ms from the child, ticked by the GUI) once the child has
+        # started (its imports took 1-4.5 s at load ≈ 9); from then on, over 2 s of statuses,
+        # the owner's silence stays below the RT process's timeout.
+        qtbot.waitUntil(lambda: (link.last_status or {}).get("heartbeat_age_s", 9.0) < 0.5,
+                        timeout=ENABLED_MS)
         ages: list[float] = []
         link.status_changed.connect(lambda st: ages.append(st.get("heartbeat_age_s")))
         qtbot.wait(2_000)
