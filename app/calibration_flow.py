@@ -1,6 +1,7 @@
 """The calibration wizard's steps (Qt-free; each runs on a worker): plan → register the plate
-with the camera → run on the twin → fit → verify → certificate, over the ``calibration``
-package as ``talus calibrate`` drives it.
+with the camera → run (on the twin, the plate alone, or through the RT process the GUI is
+connected to) → fit → verify → certificate, over the ``calibration`` package as ``talus
+calibrate`` drives it.
 
 Everything goes into a new work folder (``campaign/``, ``calibration_record.json``,
 ``verification/``); the certificate goes where the engineer chooses, never over a file. Each
@@ -37,9 +38,11 @@ PLOT_RATE_HZ = 50.0
 #: BGR colours drawn into the camera frame: detected markers, the registered plate outline.
 MARKER_BGR = (0, 200, 0)
 OUTLINE_BGR = (0, 0, 230)
-#: The backends the wizard offers: the robot twin (realistic, minutes) or the plate driven
-#: directly with the planned forces (no robot dynamics; seconds — a dry run of the workflow).
-BACKENDS = ("twin", "direct")
+#: The backends the wizard offers: the robot twin (realistic, minutes), the plate driven
+#: directly with the planned forces (no robot dynamics; seconds — a dry run of the workflow),
+#: or the RT process the GUI is connected to (``rt``: its loop plays each trial under its
+#: supervisor, on its twin or on the rig; :class:`calibration.rt_runner.RtTrialRunner`).
+BACKENDS = ("twin", "direct", "rt")
 
 
 @dataclass(frozen=True)
@@ -147,13 +150,19 @@ class LiveDecimator:
 
 @dataclass
 class CalibrationFlow:
-    """One calibration in ``folder`` (created empty) for the plate described in ``plate_file``."""
+    """One calibration in ``folder`` (created empty) for the plate described in ``plate_file``.
+
+    ``backend`` ``rt``: the trials are played by the RT process at ``endpoint`` as its client
+    ``client_id`` (the GUI's own: the GUI's control of the robot is borrowed when it has it,
+    else taken for the campaign and given back; ``calibration.rt_runner.RtTrialRunner``)."""
 
     folder: Path
     plate_file: Path
     backend: str = "twin"
     seed: int = 1
     operator: str = "talus GUI"
+    endpoint: str | None = None
+    client_id: str | None = None
     plan: Any = None
     trials: list[Any] = field(default_factory=list)
     record: dict[str, Any] | None = None
@@ -177,6 +186,9 @@ class CalibrationFlow:
 
         if self.backend not in BACKENDS:
             raise InputError(f"unknown backend {self.backend!r}: one of {', '.join(BACKENDS)}")
+        if self.backend == "rt" and not self.endpoint:
+            raise InputError("the rt backend plays the trials in the RT process the GUI is "
+                             "connected to: connect to one first (Settings: RT endpoint)")
         plate = load_plate(self.plate_file)
         if plan_text:
             try:
@@ -294,7 +306,7 @@ class CalibrationFlow:
         self.folder.mkdir(parents=True, exist_ok=True)
         plate = load_plate(self.plate_file)
         runner, truth = make_runner(self.backend, plate, self.seed, self.plan.registration,
-                                    self.plan.level_sigma_rad())
+                                    self.plan.level_sigma_rad(), **self._runner_kw())
         previous: list[tuple[int, int, str]] = []
 
         def each(k: int, n: int, trial_id: str) -> None:
@@ -305,8 +317,16 @@ class CalibrationFlow:
             if progress is not None:
                 progress(k, n, trial_id)
 
-        index = run_campaign(self.plan, self.plate_file, runner, self.campaign, truth, each,
-                             samples=None if samples is None else LiveDecimator(samples))
+        sink: SamplesLive | None = None
+        if samples is not None:
+            # The RT process's runner hands over its telemetry, already ≈ 60 samples a second
+            # (the plot's rate); the in-process runners hand over every 1 kHz sample.
+            sink = samples if self.backend == "rt" else LiveDecimator(samples)
+        try:
+            index = run_campaign(self.plan, self.plate_file, runner, self.campaign, truth, each,
+                                 trials=self.trials, samples=sink)
+        finally:
+            runner.close()       # the RT runner's heartbeat and control of the robot
         if trial_done is not None and previous:
             trial_done(trial_series(self.campaign, previous[-1][2], *previous[-1][:2]))
         return {"trials": len(index["trials"]), "robot_time_s": index["robot_time_s"]}
@@ -335,8 +355,18 @@ class CalibrationFlow:
             raise InputError("fit the calibration first")
         self.verification = verify(self.record_path, self.folder / "verification",
                                    self.backend, self.seed + 100, load_n, Thresholds(),
-                                   progress, plate_file=self.plate_file)
+                                   progress, plate_file=self.plate_file,
+                                   runner_kw={k: v for k, v in self._runner_kw().items()
+                                              if k in ("endpoint", "client_id")})
         return self.verification
+
+    def _runner_kw(self) -> dict[str, Any]:
+        """``make_runner``'s keywords for this flow's backend: the campaign's plan and trials,
+        the RT process and the GUI's client id for ``rt``; nothing for the in-process ones."""
+        if self.backend != "rt":
+            return {}
+        return {"plan": self.plan, "trials": self.trials, "endpoint": self.endpoint,
+                "client_id": self.client_id}
 
     def certificate(self, out: Path, settings: Any = None, record: Any = None,
                     actor: Any = None) -> dict[str, Any]:

@@ -66,7 +66,7 @@ class MainWindow(QMainWindow):
         self.settings_page = SettingsPage(settings, settings_path)
         from app.pages.calibrate import CalibratePage
         self.calibrate = CalibratePage(settings=settings, record=record,
-                                       actor=lambda: self.actor)
+                                       actor=lambda: self.actor, link=link)
         self.pages: dict[str, QWidget] = {}
         self.stack = QStackedWidget()
         self.rail = QVBoxLayout()

@@ -8,9 +8,13 @@ threads):
   ``replied(tag, result, error)``;
 * STOP and E-STOP have a client and a thread of their own, so a long request (a pre-flight
   takes seconds) never delays a stop;
-* a watcher thread asks ``status`` every :attr:`status_period_s` on its own client; a missed
-  reply or telemetry older than ``stale_after_s`` is ``connection_changed(False, reason)`` at
-  once, and the pages disable motion;
+* a watcher thread asks ``status`` every :attr:`status_period_s` on its own client; no reply
+  within ``stale_after_s``, or telemetry older than that, is ``connection_changed(False,
+  reason)`` at once, and the pages disable motion. A reply that is merely late (up to
+  ``stale_after_s``) is not a lost connection: with a 0.5 s cut-off a machine at load ≈ 9
+  flagged a live RT process "lost" about once a minute for half a second, which greyed out the
+  clinician's buttons (a click on "Take control" in that instant did nothing) and flashed the
+  band red;
 * a subscriber thread decodes the telemetry into a preallocated ring of numpy columns
   (:class:`app.telemetry.TelemetryRing`, also counting repetitions); the Run page reads it at
   its own frame rate, so 60 Hz telemetry never floods the event loop nor costs the GUI thread
@@ -18,7 +22,12 @@ threads):
 
 The owner's heartbeat comes from a child process (:mod:`app.heartbeat`) that the GUI thread
 ticks: GUI stalls do not starve it, a hung GUI stops it, and when this process dies (SIGKILL
-included) it sends a soft stop at once.
+included) it sends a soft stop at once. It is started with the link and stays silent until
+ticked (its start-up took 1-4.5 s on a loaded machine: paid before control, not after). It
+beats whenever the RT process says this GUI owns the robot, whatever became of the
+``control_acquire`` reply: a reply lost on a loaded machine (the RT process took the request,
+the 5 s wait ran out) used to leave an owner without a heartbeat, whose first motion the RT
+process would soft-stop.
 """
 from __future__ import annotations
 
@@ -87,15 +96,19 @@ class RtLink(QObject):
         self._tick_timer.setInterval(200)
         self._tick_timer.timeout.connect(self._tick)
         self.replied.connect(self._on_control)
+        self.status_changed.connect(self._on_status)
         self._threads = [threading.Thread(target=self._watch, name="gui-rt-watch", daemon=True),
                          threading.Thread(target=self._listen, name="gui-rt-sub", daemon=True)]
 
     # ------------------------------------------------------------------ lifecycle
 
     def start(self) -> None:
-        """Start watching the connection and receiving telemetry."""
+        """Start watching the connection and receiving telemetry, and the heartbeat child
+        (silent until ticked: started now so that its start-up is paid before control is
+        taken; on a worker, forking a process the GUI's size takes tens of ms)."""
         for t in self._threads:
             t.start()
+        self._pool.submit(self._ensure_heartbeat)
 
     def close(self) -> None:
         """Stop the threads and close the clients (the heartbeat stops: if this GUI owned a
@@ -137,20 +150,35 @@ class RtLink(QObject):
         milliseconds the GUI thread must not spend)."""
         def acquire(c: RtClient) -> dict[str, Any]:
             reply = c.control_acquire(self.name)
-            with self._beat_lock:
-                if (self.heartbeat is None or not self.heartbeat.alive()) \
-                        and not self._quit.is_set():
-                    beat = HeartbeatProcess(self.endpoint, self.client_id,
-                                            self.heartbeat_period_s)
-                    beat.start()
-                    self.heartbeat = beat
+            self._ensure_heartbeat()
             return reply
         self.call("control", acquire)
+
+    def _ensure_heartbeat(self) -> None:
+        """Start the heartbeat child unless it runs (any thread but the GUI's)."""
+        with self._beat_lock:
+            if (self.heartbeat is None or not self.heartbeat.alive()) \
+                    and not self._quit.is_set():
+                beat = HeartbeatProcess(self.endpoint, self.client_id, self.heartbeat_period_s)
+                beat.start()
+                self.heartbeat = beat
 
     def _on_control(self, tag: str, result: object, error: str) -> None:
         if tag != "control" or error or self._quit.is_set():
             return
-        self._tick_timer.start()
+        self._start_ticking()
+
+    def _on_status(self, status: object) -> None:
+        """This GUI owns the robot (however it came to): its heartbeat is ticked."""
+        if isinstance(status, dict) and status.get("you_own") and not self._quit.is_set():
+            self._start_ticking()
+
+    def _start_ticking(self) -> None:
+        """Tick the heartbeat child now and every 200 ms (GUI thread): it beats from the first
+        tick on."""
+        if not self._tick_timer.isActive():
+            self._tick()
+            self._tick_timer.start()
 
     def _tick(self) -> None:
         if self.heartbeat is not None:
@@ -197,8 +225,10 @@ class RtLink(QObject):
     # ------------------------------------------------------------------ connection
 
     def _watch(self) -> None:
+        # A reply later than the period is late, not lost: lost is nothing for stale_after_s
+        # (module docstring).
         watcher = RtClient(self.endpoint, client_id=default_client_id("gui-watch"),
-                           timeout_s=max(0.5, self.status_period_s * 2))
+                           timeout_s=max(self.stale_after_s, self.status_period_s * 2))
         try:
             while not self._quit.is_set():
                 reason = ""
@@ -209,6 +239,10 @@ class RtLink(QObject):
                     st["you_own"] = isinstance(owner, dict) and owner.get("client") == \
                         self.client_id
                     self.last_status = st
+                    if st["you_own"]:
+                        # The owner heartbeats even when the control reply was lost (module
+                        # docstring); its ticks start on the GUI thread (_on_status).
+                        self._ensure_heartbeat()
                     if not self._quit.is_set():
                         self.status_changed.emit(st)
                     with self._tlock:

@@ -78,6 +78,15 @@ class RtTrialRunner(TrialRunner):
 
     ``trials``: the trials that may be run (default: the plan's; a verification passes its
     own).
+
+    ``client_id``: act as that client of the RT process (a GUI connected to it runs its
+    calibration through this runner under its own id): when that client already controls the
+    robot the runner borrows its control (no ``control_acquire``, which would rename the owner,
+    and no ``control_release`` at the end: the client keeps what it had); otherwise the runner
+    takes control under that id and gives it back when it closes, as it does under its own.
+    Either way it heartbeats while it runs (the borrowed owner's own heartbeat may be a GUI's,
+    which stops when that GUI stalls; the runner's thread keeps the robot's owner present while
+    its trials move it).
     """
 
     def __init__(self, plate: PlateDescription, twin_plate: TwinPlate | None, plan: Plan,
@@ -86,7 +95,8 @@ class RtTrialRunner(TrialRunner):
                  level_sigma_rad: float | None = math.radians(0.1),
                  timeout_s: float = 5.0, daq: ForcePlate | TwinPlateDaq | None = None,
                  moves: SiteMoves | None = None,
-                 trials: list[Trial] | None = None) -> None:
+                 trials: list[Trial] | None = None, client_id: str | None = None,
+                 name: str = "talus calibrate run") -> None:
         from rt.ipc.client import RtClient, default_client_id
 
         if daq is None and twin_plate is None:
@@ -109,10 +119,16 @@ class RtTrialRunner(TrialRunner):
             self.acquisition = PlateAcquisition(device, plate.n_channels, plate.sample_rate_hz,
                                                 clock)
         self.folder = Path(tempfile.mkdtemp(prefix="talus-calibration-"))
-        self.client = RtClient(endpoint, client_id=default_client_id("calibrate"),
+        self.client = RtClient(endpoint, client_id=client_id or default_client_id("calibrate"),
                                timeout_s=timeout_s)
+        #: True when the runner took control (and gives it back on close); False when it
+        #: borrowed the control its ``client_id`` already had.
+        self.took_control = True
         try:
-            self.client.control_acquire("talus calibrate run")
+            if client_id is not None and _owner_id(self.client.status()) == client_id:
+                self.took_control = False
+            else:
+                self.client.control_acquire(name)
         except RtUnavailableError:
             self.close(release=False)
             raise RtUnavailableError(f"no RT process answers at {endpoint}; start one with "
@@ -233,13 +249,17 @@ class RtTrialRunner(TrialRunner):
                                     "pose in time")
 
     def close(self, release: bool = True) -> None:
+        """Stop heartbeating and give control back (``release``, and only when the runner
+        took it: a borrowed control stays with its client); the temporary folder, the DAQ
+        and the site moves are closed."""
         try:
             if release:
                 self.client.stop_heartbeat()
-                try:
-                    self.client.control_release()
-                except (InputError, RtUnavailableError):
-                    pass        # still moving or gone: control lapses with the heartbeat
+                if self.took_control:
+                    try:
+                        self.client.control_release()
+                    except (InputError, RtUnavailableError):
+                        pass    # still moving or gone: control lapses with the heartbeat
         finally:
             try:
                 self.client.close()
@@ -255,6 +275,13 @@ class RtTrialRunner(TrialRunner):
                 close_moves = getattr(self.moves, "close", None)
                 if close_moves is not None:
                     close_moves()
+
+
+def _owner_id(status: dict) -> str | None:
+    """The client id of the robot's owner in a ``status`` reply (None: nobody)."""
+    owner = status.get("owner")
+    client = owner.get("client") if isinstance(owner, dict) else None
+    return client if isinstance(client, str) else None
 
 
 def _common_instants(trial_id: str, robot: np.ndarray, contact: np.ndarray

@@ -353,8 +353,8 @@ def make_runner(backend: str, plate: PlateDescription, seed: int, registration: 
                 level_sigma_rad: float | None = math.radians(0.1), plan: Plan | None = None,
                 endpoint: str | None = None, plate_daq: str | None = None,
                 operator: Operator | None = None, camera: str | None = None,
-                tolerance: MoveTolerance | None = None, trials: list | None = None
-                ) -> tuple[TrialRunner, PlateTruth | None]:
+                tolerance: MoveTolerance | None = None, trials: list | None = None,
+                client_id: str | None = None) -> tuple[TrialRunner, PlateTruth | None]:
     """The runner named ``backend``: ``twin`` (the robot twin in this process), ``direct`` (no
     robot) or ``rt`` (the RT process at ``endpoint`` plays each trial; ``plan`` is the
     campaign's plan, sent with each trial; ``trials`` the ones it may run, default the plan's).
@@ -363,9 +363,14 @@ def make_runner(backend: str, plate: PlateDescription, seed: int, registration: 
     (``rt`` only) names a real DAQ's file (:mod:`calibration.plate_daq`): then the client
     acquires that plate, ``operator`` moves it between sites and ``camera`` (``opencv[:N]``,
     a registry camera backend) confirms each move; no truth. ``plate_daq="twin"``: the twin
-    plate behind the same driver (:mod:`calibration.twin_plate_daq`), moves simulated."""
+    plate behind the same driver (:mod:`calibration.twin_plate_daq`), moves simulated.
+    ``client_id`` (``rt`` only): the RT process's client the runner acts as (a GUI's, whose
+    control it borrows: :class:`calibration.rt_runner.RtTrialRunner`)."""
     if backend not in ("twin", "direct", "rt"):
         raise InputError(f"unknown backend {backend!r}: use twin, direct or rt")
+    if client_id is not None and backend != "rt":
+        raise InputError("a client id goes with the rt backend (the twin and direct backends "
+                         "do not talk to an RT process)")
     if plate_daq is not None and backend != "rt":
         raise InputError("--plate-daq goes with --backend rt (the twin and direct backends "
                          "simulate the plate in this process)")
@@ -378,7 +383,7 @@ def make_runner(backend: str, plate: PlateDescription, seed: int, registration: 
         ep = endpoint or DEFAULT_ENDPOINT
         if plate_daq is not None and plate_daq != "twin":
             return _real_plate_runner(plate, plan, ep, plate_daq, registration, level_sigma_rad,
-                                      operator, camera, tolerance, trials), None
+                                      operator, camera, tolerance, trials, client_id), None
     truth = draw_truth(plate, seed=seed)
     twin_plate = TwinPlate(plate, truth, seed=seed + 1)
     if backend == "direct":
@@ -395,7 +400,7 @@ def make_runner(backend: str, plate: PlateDescription, seed: int, registration: 
         try:
             return RtTrialRunner(plate, twin_plate, plan, ep, registration, seed, model=model,
                                  level_sigma_rad=level_sigma_rad, daq=daq, moves=moves,
-                                 trials=trials), truth
+                                 trials=trials, client_id=client_id), truth
         except BaseException:
             if daq is not None:
                 daq.close()
@@ -409,7 +414,8 @@ def make_runner(backend: str, plate: PlateDescription, seed: int, registration: 
 def _real_plate_runner(plate: PlateDescription, plan: Plan, endpoint: str, daq_file: str,
                        registration: str, level_sigma_rad: float | None,
                        operator: Operator | None, camera: str | None,
-                       tolerance: MoveTolerance | None, trials: list | None) -> TrialRunner:
+                       tolerance: MoveTolerance | None, trials: list | None,
+                       client_id: str | None = None) -> TrialRunner:
     """A real plate's DAQ and camera, the RT process pushing (``make_runner``)."""
     from calibration.plate_daq import load_daq_config, open_plate_device
     from calibration.rt_runner import RtTrialRunner
@@ -427,7 +433,8 @@ def _real_plate_runner(plate: PlateDescription, plan: Plan, endpoint: str, daq_f
             cam = registry.create("camera", name, **kw)
         moves = CameraSiteMoves(operator, cam, registration, level_sigma_rad, tolerance)
         return RtTrialRunner(plate, None, plan, endpoint, registration, daq=device,
-                             moves=moves, trials=trials, level_sigma_rad=level_sigma_rad)
+                             moves=moves, trials=trials, level_sigma_rad=level_sigma_rad,
+                             client_id=client_id)
     except BaseException:
         device.close()
         if cam is not None:

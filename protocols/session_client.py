@@ -96,6 +96,8 @@ def print_summary(s: dict) -> None:
     for lim in pre.get("at_robot_limit") or ():
         # Beyond the robot, if briefly: the force there is what the drives give, not the
         # protocol's.
+        play = lim.get("from_play_s")
         w(f"  beyond the robot  {lim['what']} {lim['peak']:.4g} {lim['unit']} asked, limit "
           f"{lim['limit']:g} {lim['unit']}, {lim['longest_s'] * 1e3:.0f} ms from t = "
-          f"{lim['from_s']:.3f} s\n")
+          f"{lim['from_s']:.3f} s"
+          + ("" if play is None else f" ({play:.3f} s into the protocol)") + "\n")

@@ -195,6 +195,9 @@ class SessionFigures:
         self._on = False
         self._force_mode_last = False
         self._min_contact = (math.inf, math.nan)             # (force N, t s)
+        # The session time of the first PLAY sample: where the protocol's own time starts
+        # (the approach, a tare, a force ramp come before it).
+        self._t_play0 = math.nan
         # Longest run at the limit: [current start t, current length, longest length, its t,
         # its peak] for the actuator force and the drive command (None: never known).
         self._runs: dict[str, list[float]] = {"actuator force": [math.nan, 0, 0, math.nan, 0.0],
@@ -248,6 +251,8 @@ class SessionFigures:
             return AngleSamples(np.empty(0), np.empty(0), np.empty(0))
         self.samples += n
         play = b.phase == Phase.PLAY
+        if math.isnan(self._t_play0) and play.any():
+            self._t_play0 = float(b.t[int(np.argmax(play))])
         tracked = play & b.force_mode
         if tracked.any():
             e = (np.maximum(b.force_ref_n, self.preload_n) - b.force_n)[tracked]
@@ -416,15 +421,19 @@ class SessionFigures:
         """Where the protocol asked more than the robot gives, however briefly (a heel strike
         asks 2.7-3 kN of ≈ 2 kN drives for a few ms): per limit reached, its longest stretch
         (s), when it began (s) and the peak asked, so the clinician sees it even when it is
-        short enough to be allowed (:meth:`saturation` refuses the long ones)."""
+        short enough to be allowed (:meth:`saturation` refuses the long ones). ``from_s`` is
+        the session's time; ``from_play_s`` the protocol's own (its preview's time axis: from
+        the first sample it played; None when it never played)."""
         dt = self.dt if dt is None else dt
         out = []
         for what, limit, unit in (("actuator force", self.robot.max_actuator_force_n, "N"),
                                   ("drive command", self.robot.max_command_v, "V")):
             _, _, longest, t0, peak = self._runs[what]
             if longest > 0:
+                play0 = self._t_play0
                 out.append({"what": what, "limit": limit, "unit": unit,
-                            "longest_s": longest * dt, "from_s": t0, "peak": peak})
+                            "longest_s": longest * dt, "from_s": t0, "peak": peak,
+                            "from_play_s": None if math.isnan(play0) else t0 - play0})
         return out
 
     def unloading(self) -> list[str]:

@@ -309,3 +309,51 @@ def test_rt_trials_publish_the_telemetrys_samples_while_they_run(rt_calibration)
     assert np.max(np.abs(ref[inside] - file_ref)) < 40.0
     assert np.median(np.abs(load[inside] - file_load)) < 10.0
     assert ref.max() == pytest.approx(600.0, abs=1.0)
+
+
+def test_a_runner_acting_for_a_client_borrows_its_control(rt_calibration) -> None:
+    """``client_id`` (the calibration wizard runs trials as the GUI's own client): when that
+    client controls the robot the runner borrows its control, its owner's name unchanged, and
+    leaves it with it on close; when nobody does, the runner takes control under that id and
+    gives it back; when another client does, it is refused with the holder's name."""
+    from calibration.twin_runner import make_runner
+
+    endpoint, _ = rt_calibration
+    plate = load_plate(TWIN_PLATE_FILE)
+
+    def runner_for(client_id: str):
+        return make_runner("rt", plate, 0, PLAN.registration, PLAN.level_sigma_rad(),
+                           plan=PLAN, endpoint=endpoint, client_id=client_id)[0]
+
+    def owner(client: RtClient) -> dict | None:
+        return client.status()["owner"]
+
+    with RtClient(endpoint, timeout_s=5.0) as gui:
+        gui.control_acquire("GUI (engineer)")
+        runner = runner_for(gui.client_id)
+        try:
+            assert not runner.took_control
+            assert owner(gui)["client"] == gui.client_id
+            assert owner(gui)["name"] == "GUI (engineer)"
+        finally:
+            runner.close()
+        assert owner(gui)["client"] == gui.client_id          # still the GUI's
+        gui.control_release()
+        assert owner(gui) is None
+
+        runner = runner_for("gui-test-borrower")
+        try:
+            assert runner.took_control and owner(gui)["client"] == "gui-test-borrower"
+        finally:
+            runner.close()
+        assert owner(gui) is None                              # given back
+
+        gui.control_acquire("GUI (clinician)")
+        gui.start_heartbeat(0.05)
+        try:
+            with pytest.raises(InputError, match="'GUI \\(clinician\\)' controls the robot"):
+                runner_for("gui-test-other")
+            assert owner(gui)["client"] == gui.client_id
+        finally:
+            gui.stop_heartbeat()
+            gui.control_release()

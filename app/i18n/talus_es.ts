@@ -385,138 +385,154 @@
         <translation>Rearme rechazado: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="71"/>
+        <location filename="../pages/prescribe.py" line="75"/>
         <source>Protocols</source>
         <translation>Protocolos</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="106"/>
+        <location filename="../pages/prescribe.py" line="110"/>
         <location filename="../pages/review.py" line="105"/>
         <source>time (s)</source>
         <translation>tiempo (s)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="110"/>
-        <location filename="../pages/prescribe.py" line="167"/>
+        <location filename="../pages/prescribe.py" line="114"/>
+        <location filename="../pages/prescribe.py" line="180"/>
         <source>Pre-flight not run yet.</source>
         <translation>Comprobación previa aún no realizada.</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="114"/>
+        <location filename="../pages/prescribe.py" line="125"/>
         <source>Check on the robot model (pre-flight)</source>
+        <extracomment>Where the protocol asks more than the robot gives (a warning: Start stays enabled).</extracomment>
         <translation>Comprobación previa en el modelo del robot</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="115"/>
+        <location filename="../pages/prescribe.py" line="126"/>
         <source>Start on the Run page</source>
         <translation>Iniciar en la página Ejecutar</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="168"/>
+        <location filename="../pages/prescribe.py" line="181"/>
         <source>Correct the fields marked in red first.</source>
         <translation>Corrija primero los campos marcados en rojo.</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="177"/>
+        <location filename="../pages/prescribe.py" line="190"/>
         <source>Computing the preview…</source>
         <translation>Calculando la vista previa…</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="194"/>
+        <location filename="../pages/prescribe.py" line="207"/>
         <source>No preview: %1</source>
         <translation>Sin vista previa: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="197"/>
+        <location filename="../pages/prescribe.py" line="210"/>
         <source>This protocol cannot be played: %1</source>
         <translation>Este protocolo no se puede ejecutar: %1</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="190"/>
-        <location filename="../pages/prescribe.py" line="201"/>
+        <location filename="../pages/calibrate.py" line="198"/>
+        <location filename="../pages/prescribe.py" line="214"/>
         <source>force (N)</source>
         <translation>fuerza (N)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="203"/>
+        <location filename="../pages/prescribe.py" line="216"/>
         <source>force reference</source>
         <translation>referencia de fuerza</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="205"/>
+        <location filename="../pages/prescribe.py" line="218"/>
         <source>angle (°)</source>
         <translation>ángulo (°)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="207"/>
+        <location filename="../pages/prescribe.py" line="220"/>
         <location filename="../pages/review.py" line="226"/>
-        <location filename="../pages/run.py" line="176"/>
+        <location filename="../pages/run.py" line="178"/>
         <source>plantar(+)/dorsi(−) flexion</source>
         <translation>flexión plantar(+)/dorsal(−)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="209"/>
+        <location filename="../pages/prescribe.py" line="222"/>
         <location filename="../pages/review.py" line="229"/>
         <source>roll (+ is inversion of a right foot)</source>
         <translation>balanceo (+ es inversión del pie derecho)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="179"/>
+        <location filename="../pages/run.py" line="181"/>
         <source>inversion(+)/eversion(−)</source>
         <translation>inversión(+)/eversión(−)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="210"/>
+        <location filename="../pages/prescribe.py" line="223"/>
         <source>Duration: %1 s</source>
         <translation>Duración: %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="221"/>
+        <location filename="../pages/prescribe.py" line="234"/>
         <source>Pre-flight running on the robot model…</source>
         <translation>Comprobación previa en curso en el modelo del robot…</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="234"/>
+        <location filename="../pages/prescribe.py" line="248"/>
         <source>REFUSED: %1</source>
         <translation>RECHAZADO: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="240"/>
+        <location filename="../pages/prescribe.py" line="255"/>
         <source>Pre-flight passed. Predicted peaks: %1</source>
         <translation>Comprobación previa superada. Picos previstos: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="251"/>
+        <location filename="../pages/prescribe.py" line="271"/>
+        <source>Warning: this protocol asks more than the robot can give (the session may still start):</source>
+        <translation>Aviso: este protocolo pide más de lo que el robot puede dar (la sesión puede iniciarse igualmente):</translation>
+    </message>
+    <message>
+        <location filename="../pages/prescribe.py" line="281"/>
         <source>Choose a patient first</source>
         <translation>Elija primero un paciente</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="264"/>
+        <location filename="../pages/prescribe.py" line="336"/>
+        <source>the robot will deliver at most %1 N per drive where the protocol asks up to %2 N, for %3 ms from t = %4 s: there the force on the foot falls short of the prescribed one</source>
+        <translation>el robot dará como máximo %1 N por accionamiento donde el protocolo pide hasta %2 N, durante %3 ms desde t = %4 s: ahí la fuerza sobre el pie queda por debajo de la prescrita</translation>
+    </message>
+    <message>
+        <location filename="../pages/prescribe.py" line="343"/>
+        <source>the drives run at full power (their %1 V command limit) for %2 ms from t = %3 s: there the platform follows the protocol less closely</source>
+        <translation>los accionamientos trabajan a plena potencia (su límite de consigna de %1 V) durante %2 ms desde t = %3 s: ahí la plataforma sigue el protocolo con menos precisión</translation>
+    </message>
+    <message>
+        <location filename="../pages/prescribe.py" line="355"/>
         <source>platform force %1 N</source>
         <translation>fuerza en la plataforma %1 N</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="266"/>
+        <location filename="../pages/prescribe.py" line="357"/>
         <source>dorsi/plantarflexion</source>
         <translation>dorsi/plantarflexión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="266"/>
+        <location filename="../pages/prescribe.py" line="357"/>
         <source>inversion/eversion</source>
         <translation>inversión/eversión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="275"/>
+        <location filename="../pages/prescribe.py" line="366"/>
         <source>the ankle centre moves at most %1 mm (RMS %2 mm; comfort limit %3 mm)</source>
         <translation>el centro del tobillo se desplaza como máximo %1 mm (RMS %2 mm; límite de confort %3 mm)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="280"/>
+        <location filename="../pages/prescribe.py" line="371"/>
         <source>force tracking error %1 %</source>
         <translation>error de seguimiento de fuerza %1 %</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="283"/>
+        <location filename="../pages/prescribe.py" line="374"/>
         <source>duration %1 s</source>
         <translation>duración %1 s</translation>
     </message>
@@ -543,14 +559,14 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="99"/>
-        <location filename="../pages/run.py" line="145"/>
+        <location filename="../pages/run.py" line="147"/>
         <source>Force (N)</source>
         <translation>Fuerza (N)</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="100"/>
-        <location filename="../pages/run.py" line="146"/>
-        <location filename="../pages/run.py" line="510"/>
+        <location filename="../pages/run.py" line="148"/>
+        <location filename="../pages/run.py" line="525"/>
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
@@ -576,13 +592,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="206"/>
-        <location filename="../pages/run.py" line="171"/>
+        <location filename="../pages/run.py" line="173"/>
         <source>reference</source>
         <translation>referencia</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="208"/>
-        <location filename="../pages/run.py" line="173"/>
+        <location filename="../pages/run.py" line="175"/>
         <source>measured</source>
         <translation>medida</translation>
     </message>
@@ -598,13 +614,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="220"/>
-        <location filename="../pages/run.py" line="524"/>
+        <location filename="../pages/run.py" line="539"/>
         <source>platform pitch (engineers)</source>
         <translation>cabeceo de la plataforma (ingeniería)</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="222"/>
-        <location filename="../pages/run.py" line="525"/>
+        <location filename="../pages/run.py" line="540"/>
         <source>platform roll (engineers)</source>
         <translation>alabeo de la plataforma (ingeniería)</translation>
     </message>
@@ -654,150 +670,151 @@
         <translation>en reposo</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="132"/>
+        <location filename="../pages/run.py" line="134"/>
         <source>No protocol prescribed: choose one in Prescribe.</source>
-        <extracomment>False for roles that may not move the robot (viewer, engineer, admin) the clinical record&apos;s journal of sessions (None: no record) frames drawn, and the samples on the plots at the last one (monotonic time, seconds spent, CPU seconds of this thread) of the recent frames drawn (bench/gui.py&apos;s figures)</extracomment>
+        <extracomment>False for roles that may not move the robot (viewer, engineer, admin) the last &quot;Take control&quot; failed and the status has not shown this GUI as the owner the clinical record&apos;s journal of sessions (None: no record) frames drawn, and the samples on the plots at the last one (monotonic time, seconds spent, CPU seconds of this thread) of the recent frames drawn (bench/gui.py&apos;s figures)</extracomment>
         <translation>Ningún protocolo prescrito: elija uno en Prescribir.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="134"/>
+        <location filename="../pages/run.py" line="136"/>
         <source>Take control of the robot</source>
         <translation>Tomar el control del robot</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="135"/>
+        <location filename="../pages/run.py" line="137"/>
         <source>Start session</source>
         <translation>Iniciar sesión</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="162"/>
+        <location filename="../pages/run.py" line="164"/>
         <source>seconds before now</source>
         <translation>segundos antes de ahora</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="185"/>
+        <location filename="../pages/run.py" line="187"/>
         <source>ankle: plantar(+)/dorsi(−) flexion from neutral</source>
         <translation>tobillo: flexión plantar(+)/dorsal(−) desde la posición neutra</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="190"/>
+        <location filename="../pages/run.py" line="192"/>
         <source>ankle: inversion(+)/eversion(−) from neutral</source>
         <translation>tobillo: inversión(+)/eversión(−) desde la posición neutra</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="229"/>
+        <location filename="../pages/run.py" line="231"/>
         <source>Platform angles (engineers)</source>
         <extracomment>True while the angle plot shows the ankle view (the telemetry&apos;s ankle fields)</extracomment>
         <translation>Ángulos de la plataforma (ingeniería)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="313"/>
+        <location filename="../pages/run.py" line="315"/>
         <source>Protocol: %1</source>
         <translation>Protocolo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="328"/>
+        <location filename="../pages/run.py" line="330"/>
         <source>Checking the protocol on the robot model, then starting…</source>
         <translation>Comprobando el protocolo en el modelo del robot; después se inicia…</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="341"/>
+        <location filename="../pages/run.py" line="345"/>
         <source>Could not take control: %1</source>
         <translation>No se pudo tomar el control: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="342"/>
+        <location filename="../pages/run.py" line="344"/>
+        <location filename="../pages/run.py" line="411"/>
         <source>You control the robot.</source>
         <translation>Usted controla el robot.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="346"/>
+        <location filename="../pages/run.py" line="350"/>
         <source>The session did not start: %1</source>
         <translation>La sesión no se inició: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="361"/>
+        <location filename="../pages/run.py" line="365"/>
         <source>Session running.</source>
         <translation>Sesión en curso.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="375"/>
+        <location filename="../pages/run.py" line="379"/>
         <source>Session ended: %1</source>
         <translation>Sesión terminada: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="380"/>
+        <location filename="../pages/run.py" line="384"/>
         <source>Stopped: %1</source>
         <translation>Detenido: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="383"/>
+        <location filename="../pages/run.py" line="387"/>
         <source>Session stopping: %1</source>
         <translation>La sesión se está deteniendo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="388"/>
+        <location filename="../pages/run.py" line="392"/>
         <source>The clinical record did not take the session: %1</source>
         <translation>La historia clínica no registró la sesión: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="458"/>
+        <location filename="../pages/run.py" line="473"/>
         <source>%1 s left</source>
         <translation>quedan %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="509"/>
+        <location filename="../pages/run.py" line="524"/>
         <source>Ankle angles from neutral (°)</source>
         <translation>Ángulos del tobillo desde la posición neutra (°)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="560"/>
-        <location filename="../pages/run.py" line="613"/>
+        <location filename="../pages/run.py" line="575"/>
+        <location filename="../pages/run.py" line="628"/>
         <source>Ankle torque: —</source>
         <translation>Par en el tobillo: —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="570"/>
+        <location filename="../pages/run.py" line="585"/>
         <source>Ankle torque: %1 %2 N·m, %3 %4 N·m</source>
         <translation>Par en el tobillo: %1 %2 N·m, %3 %4 N·m</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="589"/>
+        <location filename="../pages/run.py" line="604"/>
         <source>Ankle from neutral: %1 %2°, %3 %4°</source>
         <translation>Tobillo desde la posición neutra: %1 %2°, %3 %4°</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="595"/>
+        <location filename="../pages/run.py" line="610"/>
         <source>Ankle from neutral: —</source>
         <translation>Tobillo desde la posición neutra: —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="598"/>
+        <location filename="../pages/run.py" line="613"/>
         <source>the ankle centre moved %1 mm (comfort limit %2 mm)</source>
         <translation>el centro del tobillo se ha desplazado %1 mm (límite de confort %2 mm)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="605"/>
+        <location filename="../pages/run.py" line="620"/>
         <source>Hold %1: %2 %3 N·m (target now %4 N·m)</source>
         <translation>Mantenimiento %1: %2 %3 N·m (objetivo ahora %4 N·m)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="621"/>
+        <location filename="../pages/run.py" line="636"/>
         <source>Platform (engineers): roll %1°, pitch %2°</source>
         <translation>Plataforma (ingeniería): alabeo %1°, cabeceo %2°</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="625"/>
+        <location filename="../pages/run.py" line="640"/>
         <source>Platform (engineers): —</source>
         <translation>Plataforma (ingeniería): —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="635"/>
+        <location filename="../pages/run.py" line="650"/>
         <source>Repetitions: %1</source>
         <translation>Repeticiones: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="637"/>
+        <location filename="../pages/run.py" line="652"/>
         <source>Repetitions: %1 of %2</source>
         <translation>Repeticiones: %1 de %2</translation>
     </message>
@@ -1478,16 +1495,16 @@
     <message>
         <location filename="../pages/patients.py" line="503"/>
         <location filename="../pages/run.py" line="84"/>
-        <location filename="../pages/run.py" line="571"/>
-        <location filename="../pages/run.py" line="590"/>
+        <location filename="../pages/run.py" line="586"/>
+        <location filename="../pages/run.py" line="605"/>
         <source>dorsiflexion</source>
         <translation>dorsiflexión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="504"/>
         <location filename="../pages/run.py" line="84"/>
-        <location filename="../pages/run.py" line="571"/>
-        <location filename="../pages/run.py" line="590"/>
+        <location filename="../pages/run.py" line="586"/>
+        <location filename="../pages/run.py" line="605"/>
         <source>plantarflexion</source>
         <extracomment>Redraw rate of the live plots, Hz: the issue asks ≥ 30 fps; a 33 ms timer gives at most 30.3 and any late tick drops below, so the timer runs a little faster (frames with no new telemetry, 60 Hz, are skipped). Seconds of history on the live plots. The angle curves of the ankle view (from neutral) and of the platform (absolute).</extracomment>
         <translation>plantarflexión</translation>
@@ -1495,16 +1512,16 @@
     <message>
         <location filename="../pages/patients.py" line="505"/>
         <location filename="../pages/run.py" line="85"/>
-        <location filename="../pages/run.py" line="573"/>
-        <location filename="../pages/run.py" line="592"/>
+        <location filename="../pages/run.py" line="588"/>
+        <location filename="../pages/run.py" line="607"/>
         <source>inversion</source>
         <translation>inversión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="505"/>
         <location filename="../pages/run.py" line="85"/>
-        <location filename="../pages/run.py" line="573"/>
-        <location filename="../pages/run.py" line="592"/>
+        <location filename="../pages/run.py" line="588"/>
+        <location filename="../pages/run.py" line="607"/>
         <source>eversion</source>
         <translation>eversión</translation>
     </message>
@@ -1621,246 +1638,261 @@
         <translation>activa</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="137"/>
+        <location filename="../pages/calibrate.py" line="142"/>
         <source>empty: the default plan</source>
-        <extracomment>The right side&apos;s tabs, and the one each step&apos;s result shows.</extracomment>
+        <extracomment>The right side&apos;s tabs, and the one each step&apos;s result shows. The RT process the GUI is connected to: offered as the ``rt`` backend while the connection holds (its loop plays the trials; the GUI&apos;s control is borrowed).</extracomment>
         <translation>vacío: el plan por defecto</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="139"/>
+        <location filename="../pages/calibrate.py" line="144"/>
         <source>robot twin (realistic)</source>
         <translation>gemelo del robot (realista)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="140"/>
+        <location filename="../pages/calibrate.py" line="145"/>
         <source>plate only (quick dry run)</source>
         <translation>solo la plataforma (ensayo rápido)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="144"/>
+        <location filename="../pages/calibrate.py" line="146"/>
+        <source>the robot (the RT process this GUI is connected to)</source>
+        <translation>el robot (el proceso de tiempo real al que está conectada esta interfaz)</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="152"/>
         <source>1. Plan the loads</source>
         <translation>1. Planificar las cargas</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="145"/>
+        <location filename="../pages/calibrate.py" line="153"/>
         <source>2. Register the plate (camera)</source>
         <translation>2. Registrar la plataforma (cámara)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="146"/>
+        <location filename="../pages/calibrate.py" line="154"/>
         <source>3. Run the trials</source>
         <translation>3. Ejecutar los ensayos</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="147"/>
+        <location filename="../pages/calibrate.py" line="155"/>
         <source>4. Fit the calibration</source>
         <translation>4. Ajustar la calibración</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="148"/>
+        <location filename="../pages/calibrate.py" line="156"/>
         <source>5. Verify at check sites</source>
         <translation>5. Verificar en los puntos de control</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="149"/>
+        <location filename="../pages/calibrate.py" line="157"/>
         <source>6. Certificate (PDF)</source>
         <translation>6. Certificado (PDF)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="157"/>
+        <location filename="../pages/calibrate.py" line="165"/>
         <source>Choose the plate description and a new work folder, then plan.</source>
         <translation>Elija la descripción de la plataforma y una carpeta de trabajo nueva; después, planifique.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="169"/>
+        <location filename="../pages/calibrate.py" line="177"/>
         <source>Plate (top view, m)</source>
         <translation>Plataforma (vista superior, m)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="178"/>
-        <location filename="../pages/calibrate.py" line="376"/>
+        <location filename="../pages/calibrate.py" line="186"/>
+        <location filename="../pages/calibrate.py" line="404"/>
         <source>The camera&apos;s view of the plate appears when the plate is registered.</source>
         <translation>La vista de la plataforma desde la cámara aparece al registrar la plataforma.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="188"/>
+        <location filename="../pages/calibrate.py" line="196"/>
         <source>Vertical force on the plate</source>
         <translation>Fuerza vertical sobre la plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="191"/>
+        <location filename="../pages/calibrate.py" line="199"/>
         <source>robot time (s)</source>
         <translation>tiempo del robot (s)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="196"/>
+        <location filename="../pages/calibrate.py" line="204"/>
         <source>reference (ATI)</source>
         <translation>referencia (ATI)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="199"/>
+        <location filename="../pages/calibrate.py" line="207"/>
         <source>plate (nominal matrix)</source>
         <translation>plataforma (matriz nominal)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="205"/>
+        <location filename="../pages/calibrate.py" line="213"/>
         <source>commanded</source>
         <extracomment>the running trial, sample by sample while it runs (calibration&apos;s LiveSamples blocks): the commanded force and the load the ATI measures along the tool</extracomment>
         <translation>ordenada</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="207"/>
+        <location filename="../pages/calibrate.py" line="215"/>
         <source>reference (ATI), trial running</source>
         <translation>referencia (ATI), ensayo en curso</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="221"/>
+        <location filename="../pages/calibrate.py" line="229"/>
         <source>Plate</source>
         <extracomment>the running trial&apos;s blocks (cleared when its file&apos;s forces arrive) the live plot&apos;s data: per curve, the trials&apos; segments (x, y) in arrival order</extracomment>
         <translation>Plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="222"/>
+        <location filename="../pages/calibrate.py" line="230"/>
         <source>Camera</source>
         <translation>Cámara</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="223"/>
+        <location filename="../pages/calibrate.py" line="231"/>
         <source>Trials</source>
         <translation>Ensayos</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="228"/>
+        <location filename="../pages/calibrate.py" line="236"/>
         <source>Plate description</source>
         <translation>Descripción de la plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="229"/>
+        <location filename="../pages/calibrate.py" line="237"/>
         <source>Work folder (new)</source>
         <translation>Carpeta de trabajo (nueva)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="230"/>
+        <location filename="../pages/calibrate.py" line="238"/>
         <source>Loading plan (YAML)</source>
         <translation>Plan de cargas (YAML)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="231"/>
+        <location filename="../pages/calibrate.py" line="239"/>
         <source>Run on</source>
         <translation>Ejecutar en</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="261"/>
+        <location filename="../pages/calibrate.py" line="272"/>
+        <source>Not connected to the RT process</source>
+        <translation>Sin conexión con el proceso de tiempo real</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="281"/>
         <source>%1 is not empty: choose a new work folder.</source>
         <translation>%1 no está vacía: elija una carpeta de trabajo nueva.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="299"/>
+        <location filename="../pages/calibrate.py" line="287"/>
+        <source>Not connected to the RT process: choose another backend or connect first.</source>
+        <translation>Sin conexión con el proceso de tiempo real: elija otro modo de ejecución o conéctese primero.</translation>
+    </message>
+    <message>
+        <location filename="../pages/calibrate.py" line="327"/>
         <source>Save the calibration certificate</source>
         <translation>Guardar el certificado de calibración</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="311"/>
+        <location filename="../pages/calibrate.py" line="339"/>
         <source>Working…</source>
         <translation>Trabajando…</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="318"/>
+        <location filename="../pages/calibrate.py" line="346"/>
         <source>Trial %1 of %2: %3</source>
         <translation>Ensayo %1 de %2: %3</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="325"/>
+        <location filename="../pages/calibrate.py" line="353"/>
         <source>Step failed: %1</source>
         <translation>El paso falló: %1</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="333"/>
+        <location filename="../pages/calibrate.py" line="361"/>
         <source>%1 trials at %2 sites (%3 held out for validation), loads %4 N.</source>
         <translation>%1 ensayos en %2 puntos (%3 reservados para validación), cargas %4 N.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="341"/>
+        <location filename="../pages/calibrate.py" line="369"/>
         <source>%1 trials run (%2 s of robot time).</source>
         <translation>%1 ensayos ejecutados (%2 s de tiempo del robot).</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="347"/>
+        <location filename="../pages/calibrate.py" line="375"/>
         <source>PASS</source>
         <translation>APTO</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="347"/>
+        <location filename="../pages/calibrate.py" line="375"/>
         <source>FAIL</source>
         <translation>NO APTO</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="350"/>
+        <location filename="../pages/calibrate.py" line="378"/>
         <source>COP error RMS: %1 mm before, %2 mm after.</source>
         <translation>Error RMS del COP: %1 mm antes, %2 mm después.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="355"/>
+        <location filename="../pages/calibrate.py" line="383"/>
         <source>Not within the thresholds: %1.</source>
         <translation>Fuera de los umbrales: %1.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="360"/>
+        <location filename="../pages/calibrate.py" line="388"/>
         <source>Verification passed: COP error RMS %1 mm.</source>
         <translation>Verificación superada: error RMS del COP %1 mm.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="361"/>
+        <location filename="../pages/calibrate.py" line="389"/>
         <source>Verification failed: COP error RMS %1 mm.</source>
         <translation>Verificación no superada: error RMS del COP %1 mm.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="365"/>
+        <location filename="../pages/calibrate.py" line="393"/>
         <source>Certificate written: %1 (%2 pages)</source>
         <translation>Certificado escrito: %1 (%2 páginas)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="398"/>
+        <location filename="../pages/calibrate.py" line="426"/>
         <source>Vertical force on the plate — trial running: %1</source>
         <translation>Fuerza vertical sobre la plataforma — ensayo en curso: %1</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="406"/>
+        <location filename="../pages/calibrate.py" line="434"/>
         <source>This plan places the plate by hand to its marks (nominal registration): no camera.</source>
         <translation>Este plan coloca la plataforma a mano sobre sus marcas (registro nominal): sin cámara.</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="410"/>
+        <location filename="../pages/calibrate.py" line="438"/>
         <source>%1 of %2 markers detected (green). The plate outline (red) is where the camera puts it: %3 mm, %4 mm from the planned place, turned %5°; uncertainty %6 mm, %7° (1 σ).</source>
         <translation>%1 de %2 marcadores detectados (verde). El contorno de la plataforma (rojo) está donde la cámara la sitúa: a %3 mm, %4 mm del lugar previsto, girada %5°; incertidumbre %6 mm, %7° (1 σ).</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="439"/>
+        <location filename="../pages/calibrate.py" line="467"/>
         <source>Vertical force on the plate — trial %1 of %2: %3</source>
         <translation>Fuerza vertical sobre la plataforma — ensayo %1 de %2: %3</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="447"/>
+        <location filename="../pages/calibrate.py" line="475"/>
         <source>plate</source>
         <translation>plataforma</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="452"/>
+        <location filename="../pages/calibrate.py" line="480"/>
         <source>training sites</source>
         <translation>puntos de ajuste</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="453"/>
+        <location filename="../pages/calibrate.py" line="481"/>
         <source>validation sites</source>
         <translation>puntos de validación</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="465"/>
+        <location filename="../pages/calibrate.py" line="493"/>
         <source>COP error before (mm)</source>
         <translation>Error del COP antes (mm)</translation>
     </message>
     <message>
-        <location filename="../pages/calibrate.py" line="466"/>
+        <location filename="../pages/calibrate.py" line="494"/>
         <source>COP error after (mm)</source>
         <translation>Error del COP después (mm)</translation>
     </message>

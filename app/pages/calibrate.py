@@ -1,12 +1,12 @@
 """Calibrate (calibration engineer): a wizard over the calibration workflow — plate file and
 work folder → plan (the sites drawn on the plate) → register the plate with the camera (the
 camera's image with the detected ArUco markers and the registered plate outline drawn) → run
-the trials on the twin (live plot: the running trial's commanded force and ATI load sample by
-sample, then each trial's vertical force as the ATI reference and the plate recorded it, with
-the progress) → fit (PASS/FAIL, the COP error map
-before/after drawn on the plate) → verify at check sites → certificate (PDF where the engineer
-chooses, never over a file; stored in the clinical record when there is one). Each step is
-enabled once the one before it is done; every step runs on a worker
+the trials on the twin, or through the RT process the GUI is connected to (live plot: the
+running trial's commanded force and ATI load sample by sample, then each trial's vertical force
+as the ATI reference and the plate recorded it, with the progress) → fit (PASS/FAIL, the COP
+error map before/after drawn on the plate) → verify at check sites → certificate (PDF where the
+engineer chooses, never over a file; stored in the clinical record when there is one). Each
+step is enabled once the one before it is done; every step runs on a worker
 (:mod:`app.calibration_flow`); the right side's tabs (plate, camera, trials) follow the step."""
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QObject, Qt, Signal
-from PySide6.QtGui import QImage, QPixmap
+from PySide6.QtGui import QImage, QPixmap, QStandardItemModel
 from PySide6.QtWidgets import (
     QComboBox,
     QFormLayout,
@@ -43,6 +43,7 @@ from app.calibration_flow import (
 )
 from app.i18n import tr
 from app.report_export import ask_pdf_path, choose_report_target
+from app.rt_link import RtLink
 from app.settings import GuiSettings
 from app.style import TARGET_PX
 from rt.errors import InputError, TalusError
@@ -110,8 +111,12 @@ class CalibratePage(QWidget):
     """The calibration wizard."""
 
     def __init__(self, parent: QWidget | None = None, settings: GuiSettings | None = None,
-                 record: Any = None, actor: Callable[[], Any] = lambda: None) -> None:
+                 record: Any = None, actor: Callable[[], Any] = lambda: None,
+                 link: RtLink | None = None) -> None:
         super().__init__(parent)
+        #: The RT process the GUI is connected to: offered as the ``rt`` backend while the
+        #: connection holds (its loop plays the trials; the GUI's control is borrowed).
+        self.link = link
         from calibration.plate import TWIN_PLATE_FILE
 
         self.settings = settings or GuiSettings()
@@ -137,9 +142,12 @@ class CalibratePage(QWidget):
         self.plan_file.setPlaceholderText(tr("empty: the default plan"))
         self.backend = QComboBox()
         for key, label in (("twin", tr("robot twin (realistic)")),
-                           ("direct", tr("plate only (quick dry run)"))):
+                           ("direct", tr("plate only (quick dry run)")),
+                           ("rt", tr("the robot (the RT process this GUI is connected to)"))):
+            if key == "rt" and link is None:
+                continue        # no RT process to offer
             self.backend.addItem(label, key)
-        assert {self.backend.itemData(i) for i in range(self.backend.count())} == set(BACKENDS)
+        assert {self.backend.itemData(i) for i in range(self.backend.count())} <= set(BACKENDS)
         self.buttons = {
             "plan": QPushButton(tr("1. Plan the loads")),
             "register": QPushButton(tr("2. Register the plate (camera)")),
@@ -240,6 +248,8 @@ class CalibratePage(QWidget):
         layout = QHBoxLayout(self)
         layout.addLayout(left, 2)
         layout.addWidget(self.tabs, 3)
+        if link is not None:
+            link.connection_changed.connect(lambda *_: self._enable())
         self._enable()
 
     # ------------------------------------------------------------------ steps
@@ -250,6 +260,16 @@ class CalibratePage(QWidget):
             self.buttons[key].setEnabled(not self.busy and ready)
         for w in (self.plate_file, self.work_folder, self.plan_file, self.backend):
             w.setEnabled(not self.busy and "run" not in self.done)
+        rt = self.backend.findData("rt")
+        if rt >= 0:
+            # Offered while the GUI is connected to its RT process (a lost connection greys
+            # it out; a campaign already running there reports its own failure).
+            connected = self.link is not None and self.link.connected
+            model = self.backend.model()
+            assert isinstance(model, QStandardItemModel)
+            item = model.item(rt)
+            item.setEnabled(connected)
+            item.setToolTip("" if connected else tr("Not connected to the RT process"))
 
     def step(self, key: str) -> None:
         """Run step ``key`` on the worker (its button's slot)."""
@@ -261,8 +281,16 @@ class CalibratePage(QWidget):
                 self.status.setText(tr("%1 is not empty: choose a new work folder.")
                                     .replace("%1", str(folder)))
                 return
-            self.flow = CalibrationFlow(folder, Path(self.plate_file.text().strip()),
-                                        str(self.backend.currentData()))
+            backend = str(self.backend.currentData())
+            link = self.link
+            if backend == "rt" and (link is None or not link.connected):
+                self.status.setText(tr("Not connected to the RT process: choose another "
+                                       "backend or connect first."))
+                return
+            self.flow = CalibrationFlow(
+                folder, Path(self.plate_file.text().strip()), backend,
+                endpoint=None if link is None or backend != "rt" else link.endpoint,
+                client_id=None if link is None or backend != "rt" else link.client_id)
             self.done.clear()
             self.verdict.setText("")
             self._clear_views()

@@ -1,16 +1,19 @@
 """Prescribe: the protocol library as cards, the parameter form generated from the schema,
 a preview of the reference, and the pre-flight verdict from the RT process (predicted peaks,
 or the refusal and its reason). Start is enabled only when the pre-flight of exactly this
-document for exactly this patient passed."""
+document for exactly this patient passed. Where the protocol asks more than the robot can give
+(the pre-flight's ``at_robot_limit``, e.g. a heel strike's few ms beyond the drives), a warning
+says so in the patient's terms; it does not block Start."""
 from __future__ import annotations
 
 import json
+import math
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import pyqtgraph as pg
-from PySide6.QtCore import Qt, Signal
+from PySide6.QtCore import QLocale, Qt, Signal
 from PySide6.QtWidgets import (
     QButtonGroup,
     QHBoxLayout,
@@ -27,6 +30,7 @@ from app.preview import Preview, compute_preview
 from app.protocol_form import ProtocolForm
 from app.rt_link import RtLink
 from app.style import LARGE_PX, TARGET_PX
+from app.words import STATE_COLOURS
 from protocols.library import LIBRARY_DIR
 from protocols.rt_session import protocol_document
 from rt.errors import TalusError
@@ -111,6 +115,13 @@ class PrescribePage(QWidget):
         self.verdict.setObjectName("verdict")
         self.verdict.setWordWrap(True)
         self.verdict.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        #: Where the protocol asks more than the robot gives (a warning: Start stays enabled).
+        self.beyond = QLabel()
+        self.beyond.setObjectName("beyond_robot")
+        self.beyond.setWordWrap(True)
+        self.beyond.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.beyond.setStyleSheet(f"color: {STATE_COLOURS['soft_stop']}; font-weight: bold;")
+        self.beyond.hide()
         self.check_button = QPushButton(tr("Check on the robot model (pre-flight)"))
         self.start_button = QPushButton(tr("Start on the Run page"))
         for b in (self.check_button, self.start_button):
@@ -121,6 +132,7 @@ class PrescribePage(QWidget):
         right.addWidget(self.plot, 3)
         right.addWidget(self.preview_label)
         right.addWidget(self.verdict, 1)
+        right.addWidget(self.beyond)
         right.addWidget(self.check_button)
         right.addWidget(self.start_button)
 
@@ -164,6 +176,7 @@ class PrescribePage(QWidget):
         self.preflight_ok_for = None
         self.last_preflight = None
         self.last_refusal = None
+        self._show_beyond([])
         self.verdict.setText(tr("Pre-flight not run yet.") if valid
                              else tr("Correct the fields marked in red first."))
         self.verdict.setStyleSheet("")
@@ -220,6 +233,7 @@ class PrescribePage(QWidget):
         key = _key(doc, patient)
         self.verdict.setText(tr("Pre-flight running on the robot model…"))
         self.verdict.setStyleSheet("")
+        self._show_beyond([])
         self.link.call(f"preflight:{key}",
                        lambda c: c.session_preflight(doc, patient.rt_patient()))
 
@@ -233,6 +247,7 @@ class PrescribePage(QWidget):
             self.last_refusal = error
             self.verdict.setText(tr("REFUSED: %1").replace("%1", error))
             self.verdict.setStyleSheet("color: #c0262d; font-weight: bold;")
+            self._show_beyond([])
         else:
             assert isinstance(result, dict)
             self.last_preflight = result
@@ -240,7 +255,22 @@ class PrescribePage(QWidget):
             self.verdict.setText(tr("Pre-flight passed. Predicted peaks: %1").replace(
                 "%1", _peaks(result.get("predicted") or {})))
             self.verdict.setStyleSheet("color: #1e8a3c; font-weight: bold;")
+            predicted = result.get("predicted") or {}
+            self._show_beyond(predicted.get("at_robot_limit") or [])
         self._update_buttons()
+
+    def _show_beyond(self, limits: list[Any]) -> None:
+        """The pre-flight's ``at_robot_limit`` in the patient's terms, or nothing."""
+        lines = [line for line in (beyond_words(lim) for lim in clinical_limits(limits))
+                 if line]
+        if not lines:
+            self.beyond.clear()
+            self.beyond.hide()
+            return
+        self.beyond.setText("\n".join(
+            [tr("Warning: this protocol asks more than the robot can give (the session may "
+                "still start):"), *("• " + line for line in lines)]))
+        self.beyond.show()
 
     def _update_buttons(self) -> None:
         connected = self.link is not None and self.link.connected
@@ -253,6 +283,67 @@ class PrescribePage(QWidget):
     def _start(self) -> None:
         if self.preflight_ok_for == _key(self.form.document, self.patient):
             self.start_requested.emit(dict(self.form.document))
+
+
+def _number(value: float, decimals: int) -> str:
+    """``value`` with ``decimals`` decimals in the language's number format (GUI.md)."""
+    return QLocale().toString(float(value), "f", decimals)
+
+
+def clinical_limits(limits: list[Any]) -> list[Any]:
+    """The entries worth a clinician's line: a drive command at its limit while the drive's
+    force is at its own is the same moment said twice (the command clips because the force
+    asked is beyond the drive), so only the force is kept then; a command at its limit alone
+    (a fast motion the drives cannot follow) stays."""
+    forces = [e for e in limits if isinstance(e, dict) and e.get("what") == "actuator force"]
+
+    def same_moment(e: dict[str, Any]) -> bool:
+        try:
+            a0, a1 = float(e["from_s"]), float(e["from_s"]) + float(e["longest_s"])
+            return any(a0 <= float(f["from_s"]) + float(f["longest_s"])
+                       and float(f["from_s"]) <= a1 for f in forces)
+        except (KeyError, TypeError, ValueError):
+            return False
+
+    return [e for e in limits if not (isinstance(e, dict) and e.get("what") == "drive command"
+                                      and same_moment(e))]
+
+
+def beyond_words(limit: Any) -> str:
+    """One entry of the pre-flight's ``at_robot_limit`` (``SessionFigures.at_limit``: what,
+    limit, unit, peak asked, its longest stretch ``longest_s`` from ``from_s``) in a clinician's
+    words: what the robot will deliver where the protocol asks more, for how long, and when on
+    the protocol's time axis (``from_play_s``). "" for an entry it does not understand (a newer
+    RT process's): the verdict above stays right."""
+    if not isinstance(limit, dict):
+        return ""
+    what, lim, peak = limit.get("what"), limit.get("limit"), limit.get("peak")
+    # The protocol's own time (its preview's axis) when the RT process gives it; else the
+    # session's (an older RT process: the approach and the tare included).
+    longest = limit.get("longest_s")
+    start = limit.get("from_play_s")
+    if not isinstance(start, (int, float)):
+        start = limit.get("from_s")
+    if not all(isinstance(v, (int, float)) and math.isfinite(v)
+               for v in (lim, peak, longest, start)):
+        return ""
+    assert isinstance(lim, (int, float)) and isinstance(peak, (int, float))
+    assert isinstance(longest, (int, float)) and isinstance(start, (int, float))
+    ms, at = _number(longest * 1e3, 0), _number(start, 2)
+    if what == "actuator force":
+        # The drives' force is cut at their limit: the platform cannot push as hard or as
+        # fast as prescribed there (a heel strike's peak arrives blunted).
+        return (tr("the robot will deliver at most %1 N per drive where the protocol asks "
+                   "up to %2 N, for %3 ms from t = %4 s: there the force on the foot falls "
+                   "short of the prescribed one")
+                .replace("%1", _number(lim, 0)).replace("%2", _number(peak, 0))
+                .replace("%3", ms).replace("%4", at))
+    if what == "drive command":
+        # The amplifiers' command is clipped at its limit: the motion lags the protocol there.
+        return (tr("the drives run at full power (their %1 V command limit) for %2 ms from "
+                   "t = %3 s: there the platform follows the protocol less closely")
+                .replace("%1", _number(lim, 1)).replace("%2", ms).replace("%3", at))
+    return ""
 
 
 def _peaks(predicted: dict[str, Any]) -> str:

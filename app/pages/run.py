@@ -115,6 +115,8 @@ class RunPage(QWidget):
         self.start_clicked_at: float | None = None
         #: False for roles that may not move the robot (viewer, engineer, admin)
         self.may_run = True
+        #: the last "Take control" failed and the status has not shown this GUI as the owner
+        self._control_error = False
         #: the clinical record's journal of sessions (None: no record)
         self.journal: SessionJournal | None = None
         self._journal_pool = Background("gui-journal", self)
@@ -338,8 +340,10 @@ class RunPage(QWidget):
 
     def _replied(self, tag: str, result: object, error: str) -> None:
         if tag == "control":
-            self.message.setText(tr("Could not take control: %1").replace("%1", error)
-                                 if error else tr("You control the robot."))
+            owned = self._owned()
+            self.message.setText(tr("You control the robot.") if not error or owned
+                                 else tr("Could not take control: %1").replace("%1", error))
+            self._control_error = bool(error) and not owned
         elif tag == "session_start":
             if error:
                 self.last_error = error
@@ -388,12 +392,23 @@ class RunPage(QWidget):
             self.message.setText(tr("The clinical record did not take the session: %1")
                                  .replace("%1", error))
 
+    def _owned(self) -> bool:
+        """The latest status says this GUI controls the robot."""
+        link = self.link
+        status = None if link is None else link.last_status
+        return bool(status and isinstance(status.get("owner"), dict)
+                    and link is not None and status["owner"].get("client") == link.client_id)
+
     def update_buttons(self) -> None:
         link = self.link
         connected = link is not None and link.connected
         status = None if link is None else link.last_status
-        owned = bool(status and isinstance(status.get("owner"), dict)
-                     and link is not None and status["owner"].get("client") == link.client_id)
+        owned = self._owned()
+        if owned and self._control_error:
+            # The control reply was lost but the RT process took the request (a loaded
+            # machine): the status is the truth.
+            self._control_error = False
+            self.message.setText(tr("You control the robot."))
         stopped = bool(status and status.get("state") != "run")
         running = bool(status and status.get("session"))
         self.control_button.setEnabled(self.may_run and connected and not owned)
