@@ -145,54 +145,64 @@ class FakeComedi:
         plan = self._insn_plan
         if plan is None or plan[0] is not insnlist or not _unchanged(plan[1]):
             plan = self._insn_plan = self._decode_insnlist(insnlist)
+        _, _, reads, samples, stop, n_insns = plan
+        codes = reads[0][:] if len(reads) == 1 else [c for r in reads for c in r[:]]
         # Each sample as comedi_data_write writes it (same checks, same record), inline: a
         # method call per sample would double the double's cost in the twin's cycle.
-        done = 0
         last, log, dead = self.last_code, self.writes if self.keep_log else None, \
             self.fail_channels
-        for subdevice, channel, rng, aref, samples, valid in plan[2]:
-            if not valid:
+        for (insn, subdevice, channel, rng, aref), code in zip(samples, codes):
+            if self.fail_writes or channel in dead:
+                self._errno = EIO
+                return insn if insn else -1
+            if not 0 <= code <= 4095:
                 self._errno = EINVAL
-                return done if done else -1
-            for code in samples[:]:
-                if self.fail_writes or channel in dead:
-                    self._errno = EIO
-                    return done if done else -1
-                if not 0 <= code <= 4095:
-                    self._errno = EINVAL
-                    return done if done else -1
-                last[channel] = code                 # analog outputs: subdevice 0
-                if log is not None:
-                    log.append((handle, subdevice, channel, rng, aref, code))
-            done += 1
-        return done
+                return insn if insn else -1
+            last[channel] = code                     # analog outputs: subdevice 0
+            if log is not None:
+                log.append((handle, subdevice, channel, rng, aref, code))
+        if stop < n_insns:                           # an instruction this card refuses
+            self._errno = EINVAL
+            return stop if stop else -1
+        return n_insns
 
     def _decode_insnlist(self, insnlist) -> tuple:
-        """(the pointer, [(a live view, its bytes now)] of the pointer, the list and its
-        instructions, per instruction (subdevice, channel, range, aref, its samples as a live
-        ctypes array, valid)). Valid: an ``INSN_WRITE`` to an analog output channel and range
-        the card has (the kernel refuses a chanspec outside the subdevice with EINVAL; this
-        double writes analog outputs only)."""
+        """(the pointer; [(a live view, its bytes now)] of the pointer, the list and its
+        instructions; the samples' memory as live ctypes arrays (one when they are
+        contiguous, as the driver's are); per sample (instruction, subdevice, channel, range,
+        aref); the first instruction this double refuses (or the count); the count). Refused
+        (EINVAL): anything but an ``INSN_WRITE`` to an analog output channel and range the card
+        has (the kernel refuses a chanspec outside the subdevice; this double writes analog
+        outputs only); the samples of the instructions after it are never read."""
         lst = insnlist.contents
         n = lst.n_insns
         watched = [(ctypes.addressof(insnlist), ctypes.sizeof(insnlist)),
                    (ctypes.addressof(lst), ctypes.sizeof(lst))]
-        decoded = []
+        samples: list[tuple[int, int, int, int, int]] = []
+        spans: list[tuple[int, int]] = []            # (address, count) of each data array
+        stop = n
         if n:
             watched.append((ctypes.addressof(lst.insns.contents),
                             n * ctypes.sizeof(ComediInsn)))
-            for i in range(n):
-                insn = lst.insns[i]
-                spec = insn.chanspec
-                channel, rng = cr_chan(spec), cr_range(spec)
-                valid = insn.insn == INSN_WRITE and self._is_ao(insn.subdev) \
-                    and 0 <= channel < self.AO_CHANNELS and 0 <= rng < len(self.RANGES)
-                samples = (ctypes.c_uint * insn.n).from_address(
-                    ctypes.cast(insn.data, ctypes.c_void_p).value) if insn.n and insn.data \
-                    else []
-                decoded.append((insn.subdev, channel, rng, cr_aref(spec), samples, valid))
+        for i in range(n):
+            insn = lst.insns[i]
+            spec = insn.chanspec
+            channel, rng = cr_chan(spec), cr_range(spec)
+            if not (insn.insn == INSN_WRITE and self._is_ao(insn.subdev)
+                    and 0 <= channel < self.AO_CHANNELS and 0 <= rng < len(self.RANGES)):
+                stop = i
+                break
+            if insn.n:
+                address = ctypes.cast(insn.data, ctypes.c_void_p).value or 0
+                word = ctypes.sizeof(ctypes.c_uint)
+                if spans and spans[-1][0] + spans[-1][1] * word == address:
+                    spans[-1] = (spans[-1][0], spans[-1][1] + insn.n)
+                else:
+                    spans.append((address, insn.n))
+                samples += [(i, insn.subdev, channel, rng, cr_aref(spec))] * insn.n
+        reads = [(ctypes.c_uint * count).from_address(address) for address, count in spans]
         views = [(ctypes.c_char * size).from_address(a) for a, size in watched]
-        return insnlist, [(view, view.raw) for view in views], decoded
+        return insnlist, [(view, view.raw) for view in views], reads or [[]], samples, stop, n
 
     def _dio_ok(self, subdevice: int, channel: int) -> bool:
         if subdevice not in self.dio_subdevices or not 0 <= channel < self.DIO_CHANNELS:
