@@ -2,7 +2,8 @@
 the DAC's validation and codes, the force reader with its tare and the stop inputs give, cycle
 by cycle, bit for bit what their interpreted references give on the same recorded inputs, with
 faults spliced in (encoder jump, frozen counter, counter wrap, reset hold, stale / dropped /
-saturated / non-finite force readings, refused tares, refused DAC commands, failing writes)."""
+saturated / non-finite force readings, refused tares, refused DAC commands, failing writes and
+dead channels stopping the instruction list part-way)."""
 from __future__ import annotations
 
 import math
@@ -152,6 +153,12 @@ def test_dac_write_equals_the_interpreted_write_bit_for_bit(recorded):
         if k == 83:
             for lib in libs:
                 lib.fail_writes = False
+        if k in (90, 93, 96):                           # one dead channel, each in turn: the
+            for lib in libs:                            # instruction list stops part-way
+                lib.fail_channels = {(k - 90) // 3}
+        if k == 99:
+            for lib in libs:
+                lib.fail_channels = set()
         a = _outcome(cards[0].write_volts, v)
         b = _outcome(cards[1].write_volts_interpreted, v)
         assert a == b, f"command {k}: {v}"

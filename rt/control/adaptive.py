@@ -70,6 +70,8 @@ class Adaptive(Controller):
     def _pack_gains(self) -> None:
         self._gain_array[0] = self.gains.lambda_per_s
         self._gain_array[1] = self.gains.kd_n_s_per_m
+        if hasattr(self, "_est"):              # the kernel reads them from its estimate array
+            self._est[self._gains_at:self._gains_at + 2] = self._gain_array[0:2]
 
     def _set_bounds(self) -> None:
         g = self.gains
@@ -156,34 +158,34 @@ class Adaptive(Controller):
             rigid_param.append(int(col) % rb.N_PARAMS)
         drive = [(int(pos), kind, axis) for pos, (kind, axis)
                  in zip(reg._base_drive_pos, reg._base_drive)]
-        self._amap = np.array([len(rigid_pos), len(drive), *rigid_pos, *rigid_joint,
+        self._amap = np.array([nb, len(rigid_pos), len(drive), *rigid_pos, *rigid_joint,
                                *rigid_param, *(d[0] for d in drive), *(d[1] for d in drive),
                                *(d[2] for d in drive)], dtype=np.int64)
-        est = np.zeros(5 * nb + rb.N_PARAMS * TREE_DOF + 9)
+        est = np.zeros(ck.adaptive_est_size(nb, TREE_DOF))
         est[0:nb] = theta
         est[nb:2 * nb] = self.gamma
         est[2 * nb:3 * nb] = self.theta_lo
         est[3 * nb:4 * nb] = self.theta_hi
+        self._gains_at = 5 * nb + rb.N_PARAMS * TREE_DOF + 9
+        est[self._gains_at:self._gains_at + 2] = self._gain_array[0:2]
         self._est = est
         self._nb = nb
         self.theta = est[0:nb]
 
     def _law_compiled(self, st, ref, dt, out, dry_run):
         d = self.dyn
-        ck.adaptive(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd, self._gain_array,
-                    self._amap, self._est, self._nb, dt, dry_run, self._work, out)
+        ck.adaptive(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd, self._amap, self._est,
+                    dt, dry_run, out)
         return STATUS_OK
 
     def _bound_kernel(self, st, ref, out):
         d = self.dyn
         kernel, ti, tf, stb, q, qd, qdd = ck.adaptive, d.tree_i, d.tree_f, st.buf, ref.q, \
             ref.qd, ref.qdd
-        g, work = self._gain_array, self._work
 
         def cycle(dt: float) -> int:
             # The estimate's arrays are rebuilt by a reset or new gains: read at call time.
-            kernel(ti, tf, stb, q, qd, qdd, g, self._amap, self._est, self._nb, dt, False, work,
-                   out)
+            kernel(ti, tf, stb, q, qd, qdd, self._amap, self._est, dt, False, out)
             return STATUS_OK
         return cycle
 

@@ -16,7 +16,7 @@ import math
 from numba import njit
 
 from rt.model import rigid_body as rb
-from rt.model.kernels import inv3, model_state
+from rt.model.kernels import MODEL_STATE_WORK, inv3, model_state
 
 #: ``gains`` layouts: PD-family [Kp (N/m), Kd (N s/m)]; computed torque [Kp (1/s²), Kd (1/s)];
 #: PID [Kp, Kd, Ki (N/(m s)), integral limit (N)]; adaptive [Λ (1/s), K_D (N s/m)].
@@ -59,25 +59,42 @@ def pd_gravity(ti, tf, stb, rq, rqd, gains, work, out):
         out[i] += g[i]
 
 
+#: PD+G0's state ``g0`` (float64): the q_d of the cached G (3), 1 when it is valid, G (3, N),
+#: the FK step tolerance (rad) and iteration limit, zeros (3, q̇ = 0 for the FK at q_d).
+G0_QD, G0_VALID, G0_G, G0_TOL, G0_MAXIT, G0_ZERO = 0, 3, 4, 7, 8, 9
+G0_SIZE = 12
+
+
+def g0_scratch_size(work_size: int) -> int:
+    """float64 scratch of :func:`pd_gravity_desired`: a State buffer for q_d, the FK's work
+    and the dynamics' ``work_size``."""
+    return rb.STATE_SIZE + MODEL_STATE_WORK + work_size
+
+
 @njit(cache=True)
-def pd_gravity_desired(ti, tf, geom, limits, phi, stb, rq, rqd, gains, gq, g, std, zero3,
-                       tol, maxit, mwork, work, out):
-    """τ = −Kp e − Kd ė + G(q_d) (PD+G0). G at the desired position is cached in ``g`` while
-    q_d holds (``gq`` = [q_d (3), valid]); a new q_d solves FK there into ``std`` (a State
-    buffer; ``model_state`` with the model's shared warm start ``phi``, q̇ = ``zero3``) and
-    computes G. Returns the FK status (< 0: no FK at q_d; τ is not written)."""
-    if not (gq[3] != 0.0 and rq[0] == gq[0] and rq[1] == gq[1] and rq[2] == gq[2]):
-        status = model_state(geom, limits, phi, rq, zero3, std, tol, maxit, mwork)
+def pd_gravity_desired(ti, tf, geom, limits, phi, stb, rq, rqd, gains, g0, scratch, out):
+    """τ = −Kp e − Kd ė + G(q_d) (PD+G0). G at the desired position is cached in ``g0``
+    (layout ``G0_*``) while q_d holds; a new q_d solves FK there into a State buffer at the
+    head of ``scratch`` (``model_state`` with the model's shared warm start ``phi``, q̇ = 0) and
+    computes G. Returns the FK status (< 0: no FK at q_d; τ is not written). Twelve arguments
+    (was eighteen): numba's dispatch costs per argument, more than this law's arithmetic."""
+    if not (g0[G0_VALID] != 0.0 and rq[0] == g0[G0_QD] and rq[1] == g0[G0_QD + 1]
+            and rq[2] == g0[G0_QD + 2]):
+        std = scratch[0:rb.STATE_SIZE]
+        mwork = scratch[rb.STATE_SIZE:rb.STATE_SIZE + MODEL_STATE_WORK]
+        work = scratch[rb.STATE_SIZE + MODEL_STATE_WORK:]
+        status = model_state(geom, limits, phi, rq, g0[G0_ZERO:G0_ZERO + 3], std,
+                             g0[G0_TOL], int(g0[G0_MAXIT]), mwork)
         if status < 0:
             return status
-        gravity(ti, tf, std, work, g)
-        gq[0] = rq[0]
-        gq[1] = rq[1]
-        gq[2] = rq[2]
-        gq[3] = 1.0
+        gravity(ti, tf, std, work, g0[G0_G:G0_G + 3])
+        g0[G0_QD] = rq[0]
+        g0[G0_QD + 1] = rq[1]
+        g0[G0_QD + 2] = rq[2]
+        g0[G0_VALID] = 1.0
     pd(stb, rq, rqd, gains[0], gains[1], out)
     for i in range(3):
-        out[i] += g[i]
+        out[i] += g0[G0_G + i]
     return 0
 
 
@@ -107,7 +124,8 @@ def computed_torque(ti, tf, stb, rq, rqd, rqdd, gains, trajectory, work, out):
             v[i] = rqdd[i] - kd * (qd[i] - rqd[i]) - kp * (q[i] - rq[i])
         else:
             v[i] = -kd * qd[i] - kp * (q[i] - rq[i])
-    rb.mixed_torque(ti, tf, pi, stb, v, qd, True, work[3:], out)
+    # M v + C(q, q̇) q̇ + G: one RNEA pass at the state's velocity (``rb.inverse_dynamics``).
+    rb.inverse_dynamics(ti, tf, pi, stb, v, work[3:], out)
     rb.friction(ti, tf, qd, out)
 
 
@@ -126,22 +144,30 @@ def pid(stb, rq, rqd, gains, integral, dt, dry_run, out):
         out[i] -= ki * integ
 
 
-# Adaptive law: ``amap`` (int64) = [n_rigid, n_drive, rigid_pos, rigid_joint, rigid_param,
-# drive_pos, drive_kind (0 J_r, 1 f_v, 2 f_c), drive_axis]; ``est`` (float64) = [θ̂, Γ, θ_lo,
-# θ_hi, Yᵀ s] (n_base each) followed by the n × 10 tree parameters of θ̂ and s, q̇_r, q̈_r.
+# Adaptive law: ``amap`` (int64) = [n_base, n_rigid, n_drive, rigid_pos, rigid_joint,
+# rigid_param, drive_pos, drive_kind (0 J_r, 1 f_v, 2 f_c), drive_axis]; ``est`` (float64) =
+# [θ̂, Γ, θ_lo, θ_hi, Yᵀ s] (n_base each), the n × 10 tree parameters of θ̂, s, q̇_r, q̈_r (3
+# each), the gains [Λ (1/s), K_D (N s/m)], then the dynamics' scratch (``adaptive_est_size``).
+# Two arrays for everything the law keeps: numba's dispatch costs per argument.
+AMAP_HEAD = 3
+
+
+def adaptive_est_size(nb: int, n: int) -> int:
+    """Length of the adaptive law's ``est`` array for ``nb`` base parameters on an n-joint
+    tree."""
+    return 5 * nb + rb.N_PARAMS * n + 9 + 2 + 8 + rb.work_size(n)
 
 
 @njit(cache=True)
-def adaptive(ti, tf, stb, rq, rqd, rqdd, gains, amap, est, nb, dt, dry_run, work, out):
+def adaptive(ti, tf, stb, rq, rqd, rqdd, amap, est, dt, dry_run, out):
     """Slotine-Li with projection: τ = Y θ̂ − K_D s; θ̂ −= Γ Yᵀ s dt, clipped to its box.
 
     Y θ̂ is an RNEA with θ̂'s parameters on the bodies (three passes, the mixed regressor's
     Christoffel form) and Yᵀ s the parameter gradient of those passes against the bodies'
-    velocities for joint rates S s."""
+    velocities for joint rates S s (``rb.param_gradient``, in closed form)."""
     parent, kind, axis, prot, ptrans, _, g, _, _, _, vs = rb.unpack_tree(ti, tf)
     n = parent.shape[0]
-    R, p, v, a, f, tau, V, A, tmp, u, ua, _, grad, e, zero3 = rb.unpack_work(work, n)
-    Q, Qd, qd, S, Sd, _, _, q, _ = rb.unpack_state(stb)
+    nb = amap[0]
     theta = est[0:nb]
     gamma = est[nb:2 * nb]
     lo = est[2 * nb:3 * nb]
@@ -153,17 +179,20 @@ def adaptive(ti, tf, stb, rq, rqd, rqdd, gains, amap, est, nb, dt, dry_run, work
     s = est[o:o + 3]
     qd_r = est[o + 3:o + 6]
     qdd_r = est[o + 6:o + 9]
-    lam = gains[0]
-    kd = gains[1]
+    lam = est[o + 9]
+    kd = est[o + 10]
+    work = est[o + 11:]
+    R, p, v, a, f, tau, V, A, tmp, u, ua, _, grad, e, zero3 = rb.unpack_work(work, n)
+    Q, Qd, qd, S, Sd, _, _, q, _ = rb.unpack_state(stb)
     for i in range(3):
         ei = q[i] - rq[i]
         edi = qd[i] - rqd[i]
         s[i] = edi + lam * ei
         qd_r[i] = rqd[i] - lam * ei
         qdd_r[i] = rqdd[i] - lam * edi
-    n_rigid = amap[0]
-    n_drive = amap[1]
-    o = 2
+    n_rigid = amap[1]
+    n_drive = amap[2]
+    o = AMAP_HEAD
     for k in range(n * rb.N_PARAMS):
         pith[k // rb.N_PARAMS, k % rb.N_PARAMS] = 0.0
     for r in range(n_rigid):
@@ -248,8 +277,8 @@ def warm_up(dyn) -> None:
     gains = np.ones(4)
     work = np.zeros(8 + rb.work_size(TREE_DOF))
     ti, tf = dyn.tree_i, dyn.tree_f
-    amap = np.array([0, 0], dtype=np.int64)
-    est = np.zeros(rb.N_PARAMS * TREE_DOF + 9)
+    amap = np.array([0, 0, 0], dtype=np.int64)
+    est = np.zeros(adaptive_est_size(0, TREE_DOF))
     writable = np.zeros(3)
     read_only = np.zeros(3)
     read_only.flags.writeable = False
@@ -260,15 +289,15 @@ def warm_up(dyn) -> None:
         pd_gravity(ti, tf, st.buf, z3, z3, gains, work, out)
         computed_torque(ti, tf, st.buf, z3, z3, z3, gains, True, work, out)
         pid(st.buf, z3, z3, gains, np.zeros(3), 1e-3, True, out)
-        adaptive(ti, tf, st.buf, z3, z3, z3, gains, amap, est, 0, 1e-3, True, work, out)
+        adaptive(ti, tf, st.buf, z3, z3, z3, amap, est, 1e-3, True, out)
     gravity(ti, tf, st.buf, work, out)
-    from rt.model.kernels import MODEL_STATE_WORK
-
     for z3 in (read_only, writable):
+        g0 = np.zeros(G0_SIZE)
+        g0[G0_TOL] = 1e-12
+        g0[G0_MAXIT] = 50
         pd_gravity_desired(ti, tf, kin.geom, kin.limits_array, kin._phi_guess.copy(), st.buf,
                            np.array(cfg.q) if z3 is writable else _ro(np.array(cfg.q)), z3,
-                           gains, np.zeros(4), np.zeros(3), State().buf, np.zeros(3), 1e-12, 50,
-                           np.zeros(MODEL_STATE_WORK), work, out)
+                           gains, g0, np.zeros(g0_scratch_size(work.shape[0])), out)
     fg = np.ones(14)
     fs = np.ones(FS_SIZE)
     explicit_force(ti, tf, st.buf, fg, fs, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,

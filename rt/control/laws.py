@@ -23,7 +23,6 @@ from rt.control import kernels as ck
 from rt.control.base import STATUS_OK, Controller, GainRange, Gains, Reference, register
 from rt.errors import KinematicsError
 from rt.model.dynamics import State
-from rt.model.kernels import MODEL_STATE_WORK
 from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
 
 Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
@@ -163,12 +162,14 @@ class PdG0(Controller):
 
     def reset(self) -> None:
         self._g_at = None
-        self._g = np.zeros(3)
         self._state_d = None
-        self._gq = np.zeros(4)          # the q_d of the cached G, and 1 when it is valid
-        self._std = State()
-        self._zero3 = np.zeros(3)
-        self._mwork = np.zeros(MODEL_STATE_WORK)
+        # The compiled law's cache and scratch (``ck.pd_gravity_desired``): G at q_d, the q_d
+        # it was computed at, the FK's tolerances, and one scratch array for the FK at q_d.
+        self._g0 = np.zeros(ck.G0_SIZE)
+        self._g0[ck.G0_TOL] = FK_STEP_TOL_RAD
+        self._g0[ck.G0_MAXIT] = FK_MAX_ITERATIONS
+        self._g = self._g0[ck.G0_G:ck.G0_G + 3]     # the interpreted law's cached G, too
+        self._g0_scratch = np.zeros(ck.g0_scratch_size(self._work.shape[0]))
         super().reset()
 
     def _law(self, st, ref, dt, out, dry_run):
@@ -187,27 +188,38 @@ class PdG0(Controller):
         self._gain_array[1] = self.gains.kd_n_s_per_m
 
     def _law_compiled(self, st, ref, dt, out, dry_run):
-        return self._g0_kernel(st, ref, out)
-
-    def _g0_kernel(self, st, ref, out) -> int:
-        # A new desired position: FK there (compiled; it shares the model's warm start like
-        # ``_law``), then G, all in the kernel; refused FK raises as ``_law`` does.
         d = self.dyn
         kin = d.kin
         status = ck.pd_gravity_desired(d.tree_i, d.tree_f, kin.geom, kin.limits_array,
                                        kin._phi_guess, st.buf, ref.q, ref.qd, self._gain_array,
-                                       self._gq, self._g, self._std.buf, self._zero3,
-                                       FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, self._mwork,
-                                       self._work, out)
+                                       self._g0, self._g0_scratch, out)
         if status < 0:
-            raise KinematicsError(f"PD+G0: no forward kinematics at the desired position "
-                                  f"{tuple(float(x) for x in ref.q)} m (status {status})")
+            _no_fk_at(ref.q, status)
         return STATUS_OK
 
     def _bound_kernel(self, st, ref, out):
+        # A new desired position: FK there (compiled; it shares the model's warm start like
+        # ``_law``), then G, all in the kernel; refused FK raises as ``_law`` does. Every
+        # array is bound here: the model's are fixed after construction, and a reset (which
+        # replaces the cache and scratch) rebinds.
+        d = self.dyn
+        kin = d.kin
+        kernel, ti, tf, geom, limits, phi = ck.pd_gravity_desired, d.tree_i, d.tree_f, \
+            kin.geom, kin.limits_array, kin._phi_guess
+        stb, q, qd, gains, g0, scratch = st.buf, ref.q, ref.qd, self._gain_array, self._g0, \
+            self._g0_scratch
+
         def cycle(dt: float) -> int:
-            return self._g0_kernel(st, ref, out)
+            status = kernel(ti, tf, geom, limits, phi, stb, q, qd, gains, g0, scratch, out)
+            if status < 0:
+                _no_fk_at(q, status)
+            return STATUS_OK
         return cycle
+
+
+def _no_fk_at(q_d: np.ndarray, status: int) -> None:
+    raise KinematicsError(f"PD+G0: no forward kinematics at the desired position "
+                          f"{tuple(float(x) for x in q_d)} m (status {status})")
 
 
 @register

@@ -8,7 +8,28 @@ import ctypes
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from rt.drivers.pci1720 import ComediRange, volts_to_code
+from rt.drivers.pci1720 import (
+    INSN_WRITE,
+    ComediInsn,
+    ComediRange,
+    cr_aref,
+    cr_chan,
+    cr_range,
+    volts_to_code,
+)
+
+#: errno values the double reports (Linux): an I/O error, an invalid argument.
+EIO = 5
+EINVAL = 22
+
+
+def _unchanged(watched: list) -> bool:
+    """Every watched memory still holds its bytes (``.raw`` of a cached ``c_char`` array
+    reads the memory now; ``ctypes.string_at`` costs ~2 µs a call here, this ~0.05)."""
+    for view, raw in watched:
+        if view.raw != raw:
+            return False
+    return True
 
 
 class FakeComedi:
@@ -21,7 +42,12 @@ class FakeComedi:
     ±0.625 V) is ``FakeComedi(ai_source=volts_of_channel)``, its inputs on subdevice 0.
 
     Records ``writes`` as (handle, subdevice, channel, range, aref, code) and ``dio`` as
-    (handle, subdevice, channel, bit). ``fail_open`` / ``fail_writes`` inject errors.
+    (handle, subdevice, channel, bit). ``fail_open`` / ``fail_writes`` inject errors;
+    ``fail_channels`` makes the analog outputs of those channels fail (a dead DAC channel:
+    its writes answer EIO, the others still work). ``comedi_do_insnlist`` runs ``INSN_WRITE``
+    instructions on the analog outputs in order, each sample as ``comedi_data_write`` would
+    write it, and stops at the first that fails: it answers the number done, -1 when the
+    first one failed (``comedi_do_insnlist(3)``); other instructions are refused (EINVAL).
     ``level(subdevice, channel)`` is a line's level (what an output drives, what the outside
     world puts on an input: ``set_input``); ``fail_dio_reads`` makes ``comedi_dio_read`` fail.
     """
@@ -30,6 +56,7 @@ class FakeComedi:
 
     RANGES = ((0.0, 5.0), (0.0, 10.0), (-5.0, 5.0), (-10.0, 10.0))
     AI_RANGES = ((-10.0, 10.0), (-5.0, 5.0), (-2.5, 2.5), (-1.25, 1.25), (-0.625, 0.625))
+    AO_CHANNELS = 4
     AI_SUBDEVICE = 0
     AI_CHANNELS = 16
 
@@ -45,6 +72,8 @@ class FakeComedi:
         self.closed: list[object] = []
         self.fail_open = False
         self.fail_writes = False
+        self.fail_channels: set[int] = set()
+        self._insn_plan: tuple | None = None
         self.fail_dio_reads = False
         self.dio_subdevices = tuple(dio_subdevices)
         self.ai_source = ai_source
@@ -68,6 +97,9 @@ class FakeComedi:
         self.closed.append(handle)
         return 0
 
+    def _is_ao(self, subdevice: int) -> bool:
+        return subdevice == 0 and not self._is_ai(0) and 0 not in self.dio_subdevices
+
     def _is_ai(self, subdevice: int) -> bool:
         return self.ai_source is not None and subdevice == self.AI_SUBDEVICE
 
@@ -76,7 +108,7 @@ class FakeComedi:
             return self.AI_CHANNELS
         if subdevice in self.dio_subdevices:
             return self.DIO_CHANNELS
-        return 4 if subdevice == 0 else -1
+        return self.AO_CHANNELS if subdevice == 0 else -1
 
     def comedi_get_maxdata(self, handle, subdevice: int, channel: int) -> int:
         return 4095 if subdevice == 0 and subdevice not in self.dio_subdevices else 1
@@ -91,17 +123,86 @@ class FakeComedi:
         return ctypes.pointer(self._ranges[rng])
 
     def comedi_data_write(self, handle, subdevice, channel, rng, aref, data) -> int:
-        if self.fail_writes:
-            self._errno = 5
+        if self.fail_writes or channel in self.fail_channels:
+            self._errno = EIO
             return -1
         if not 0 <= data <= 4095:
-            self._errno = 22
+            self._errno = EINVAL
             return -1
         if subdevice == 0:
             self.last_code[channel] = data
         if self.keep_log:
             self.writes.append((handle, subdevice, channel, rng, aref, data))
         return 1
+
+    def comedi_do_insnlist(self, handle, insnlist) -> int:
+        """``insnlist``: a ``POINTER(ComediInsnList)``, as ctypes passes ``comedi_insnlist *``.
+
+        The instructions are what the list's memory holds at this call, as the kernel copies
+        them in: the decoded list is reused only while the bytes of the pointer, the list and
+        its instructions are unchanged (the twin writes the same list every cycle, and
+        decoding ctypes structures costs microseconds); the samples are read every call."""
+        plan = self._insn_plan
+        if plan is None or plan[0] is not insnlist or not _unchanged(plan[1]):
+            plan = self._insn_plan = self._decode_insnlist(insnlist)
+        _, _, reads, samples, stop, n_insns = plan
+        codes = reads[0][:] if len(reads) == 1 else [c for r in reads for c in r[:]]
+        # Each sample as comedi_data_write writes it (same checks, same record), inline: a
+        # method call per sample would double the double's cost in the twin's cycle.
+        last, log, dead = self.last_code, self.writes if self.keep_log else None, \
+            self.fail_channels
+        for (insn, subdevice, channel, rng, aref), code in zip(samples, codes):
+            if self.fail_writes or channel in dead:
+                self._errno = EIO
+                return insn if insn else -1
+            if not 0 <= code <= 4095:
+                self._errno = EINVAL
+                return insn if insn else -1
+            last[channel] = code                     # analog outputs: subdevice 0
+            if log is not None:
+                log.append((handle, subdevice, channel, rng, aref, code))
+        if stop < n_insns:                           # an instruction this card refuses
+            self._errno = EINVAL
+            return stop if stop else -1
+        return n_insns
+
+    def _decode_insnlist(self, insnlist) -> tuple:
+        """(the pointer; [(a live view, its bytes now)] of the pointer, the list and its
+        instructions; the samples' memory as live ctypes arrays (one when they are
+        contiguous, as the driver's are); per sample (instruction, subdevice, channel, range,
+        aref); the first instruction this double refuses (or the count); the count). Refused
+        (EINVAL): anything but an ``INSN_WRITE`` to an analog output channel and range the card
+        has (the kernel refuses a chanspec outside the subdevice; this double writes analog
+        outputs only); the samples of the instructions after it are never read."""
+        lst = insnlist.contents
+        n = lst.n_insns
+        watched = [(ctypes.addressof(insnlist), ctypes.sizeof(insnlist)),
+                   (ctypes.addressof(lst), ctypes.sizeof(lst))]
+        samples: list[tuple[int, int, int, int, int]] = []
+        spans: list[tuple[int, int]] = []            # (address, count) of each data array
+        stop = n
+        if n:
+            watched.append((ctypes.addressof(lst.insns.contents),
+                            n * ctypes.sizeof(ComediInsn)))
+        for i in range(n):
+            insn = lst.insns[i]
+            spec = insn.chanspec
+            channel, rng = cr_chan(spec), cr_range(spec)
+            if not (insn.insn == INSN_WRITE and self._is_ao(insn.subdev)
+                    and 0 <= channel < self.AO_CHANNELS and 0 <= rng < len(self.RANGES)):
+                stop = i
+                break
+            if insn.n:
+                address = ctypes.cast(insn.data, ctypes.c_void_p).value or 0
+                word = ctypes.sizeof(ctypes.c_uint)
+                if spans and spans[-1][0] + spans[-1][1] * word == address:
+                    spans[-1] = (spans[-1][0], spans[-1][1] + insn.n)
+                else:
+                    spans.append((address, insn.n))
+                samples += [(i, insn.subdev, channel, rng, cr_aref(spec))] * insn.n
+        reads = [(ctypes.c_uint * count).from_address(address) for address, count in spans]
+        views = [(ctypes.c_char * size).from_address(a) for a, size in watched]
+        return insnlist, [(view, view.raw) for view in views], reads or [[]], samples, stop, n
 
     def _dio_ok(self, subdevice: int, channel: int) -> bool:
         if subdevice not in self.dio_subdevices or not 0 <= channel < self.DIO_CHANNELS:

@@ -14,8 +14,11 @@ replays recorded cycles through both):
 * :func:`pcl833_decode`: the driver's decoding of the latched bytes (24-bit count, unwrap,
   slider position: ``Pcl833Encoders.read_positions_m``);
 * :func:`pci1720_codes`: the PCI-1720 driver's validation, clamp and 12-bit codes
-  (``Pci1720Outputs.write_volts``); the comedilib calls themselves stay behind the driver's
-  ``lib`` (ctypes on the rig, the fake in the twin).
+  (``Pci1720Outputs.write_volts``), written straight into the samples of the driver's
+  instruction list; the one ``comedi_do_insnlist`` call itself stays behind the driver's
+  ``lib`` (ctypes on the rig, the fake in the twin);
+* :func:`dac_code`, :func:`dac_code_volts`: the volts → code quantizer and its inverse, shared
+  by the driver and the pre-flight's DAC stage (``rt.preflight.stages``).
 
 The real port I/O and comedilib calls are not here: they stay behind ``PortIO`` and the
 driver's ``lib``, as on the rig.
@@ -44,12 +47,9 @@ _LATCH_SOURCE_MASK = 0x07
 _LATCH_SOURCE_SOFTWARE_READ = 0
 
 # --- PCI-1720 write outcome (``pci1720_codes``' answer) --------------------------------------
+DAC_WRITTEN = 0             # the codes are in the instruction buffer, ready to write
 DAC_NOT_FINITE = -1         # a command is NaN or infinite: nothing written
 DAC_DISABLED = -2           # a non-zero command while disabled: nothing written
-#: Otherwise the three codes packed in one integer, 16 bits each (channel i at bits 16·i):
-#: the caller reads them with shifts instead of going through an array (maxdata ≤ 0xFFFF).
-DAC_CODE_BITS = 16
-DAC_CODE_MASK = (1 << DAC_CODE_BITS) - 1
 
 
 @njit(cache=True)
@@ -164,16 +164,40 @@ DAC_STATE_SIZE = 29
 
 
 @njit(cache=True)
-def pci1720_codes(volts, dac):
+def dac_code(volts, limit, v_min, v_max, maxdata):
+    """The DAC code (a float holding an integer) for a command of ``volts`` (V): clamped to
+    ±``limit``, scaled onto the channel's range [``v_min``, ``v_max``] V and rounded as
+    ``comedi_from_phys`` does, ``floor((V − v_min)/(v_max − v_min)·maxdata + 0.5)``, clamped
+    to 0..``maxdata``. The one quantizer of the drive path: the driver's compiled write
+    (:func:`pci1720_codes`) and the pre-flight's DAC stage (``rt.preflight.stages.dac_stage``)
+    both call it; ``rt.drivers.pci1720.volts_to_code`` is its interpreted reference (without
+    the limit, which the driver applies before calling it)."""
+    v = min(limit, max(-limit, volts))
+    s = (v - v_min) / (v_max - v_min) * maxdata
+    if s <= 0.0:
+        return 0.0
+    if s >= maxdata:
+        return maxdata
+    return float(math.floor(s + 0.5))
+
+
+@njit(cache=True)
+def dac_code_volts(code, v_min, v_max, maxdata):
+    """The voltage (V) DAC ``code`` produces (``comedi_to_phys``; ``code_to_volts``)."""
+    return v_min + code / maxdata * (v_max - v_min)
+
+
+@njit(cache=True)
+def pci1720_codes(volts, dac, data):
     """``Pci1720Outputs.write_volts``' arithmetic for the three axes: every command finite
     (else :data:`DAC_NOT_FINITE`), no non-zero command while disabled (else
     :data:`DAC_DISABLED`); nothing is changed then. Otherwise, per channel: the clamp flag,
-    the command clamped to ±``limit``, its code ``floor((V − v_min)/(v_max − v_min)·maxdata +
-    0.5)`` clamped to 0..maxdata (``volts_to_code``) and the voltage the code produces
-    (``code_to_volts``), into ``dac`` (layout ``DAC_*``; the previous values go to its backup;
-    the enable flag, the limit and the channels' ranges are read from it: one array argument,
-    as numba's dispatch costs per argument). Returns the codes packed (``DAC_CODE_BITS`` per
-    channel), or a refusal (< 0)."""
+    the code (:func:`dac_code`) and the voltage it produces into ``dac`` (layout ``DAC_*``; the
+    previous values go to its backup; the enable flag, the limit and the channels' ranges are
+    read from it: one array argument, as numba's dispatch costs per argument), and the code
+    into ``data`` (uint32[3]: the samples of the driver's three ``INSN_WRITE`` instructions,
+    which ``comedi_do_insnlist`` then writes in one call). Returns :data:`DAC_WRITTEN`, or a
+    refusal (< 0)."""
     enabled = dac[DAC_ENABLED] != 0.0
     limit = dac[DAC_LIMIT]
     nonzero = False
@@ -187,22 +211,14 @@ def pci1720_codes(volts, dac):
         return DAC_DISABLED
     for k in range(9):
         dac[DAC_BACKUP + k] = dac[k]
-    packed = 0
     for i in range(3):
         v = volts[i]
         dac[DAC_CLAMPED + i] = 0.0 if -limit <= v <= limit else 1.0
-        v = min(limit, max(-limit, v))
         v_min = dac[DAC_RANGES + 3 * i]
         v_max = dac[DAC_RANGES + 3 * i + 1]
         maxdata = dac[DAC_RANGES + 3 * i + 2]
-        s = (v - v_min) / (v_max - v_min) * maxdata
-        if s <= 0.0:
-            code = 0.0
-        elif s >= maxdata:
-            code = maxdata
-        else:
-            code = float(math.floor(s + 0.5))
+        code = dac_code(v, limit, v_min, v_max, maxdata)
         dac[DAC_CODES + i] = code
-        dac[DAC_VOLTS + i] = v_min + code / maxdata * (v_max - v_min)
-        packed |= int(code) << (DAC_CODE_BITS * i)
-    return packed
+        dac[DAC_VOLTS + i] = dac_code_volts(code, v_min, v_max, maxdata)
+        data[i] = int(code)
+    return DAC_WRITTEN

@@ -19,7 +19,22 @@ Sources, and what came from which:
   ``int comedi_get_n_channels(comedi_t *, unsigned subdevice)``, ``int comedi_dio_config(...,
   unsigned dir)``, ``int comedi_dio_write(..., unsigned bit)``, ``int comedi_errno(void)``,
   ``const char *comedi_strerror(int)``; ``AREF_GROUND = 0``, ``UNIT_volt = 0``,
-  ``COMEDI_OUTPUT = 1`` (``comedi.h``). ``comedi_from_phys`` computes
+  ``COMEDI_OUTPUT = 1`` (``comedi.h``).
+* The cycle's write is one ``int comedi_do_insnlist(comedi_t *, comedi_insnlist *)``
+  (``comedi_do_insnlist(3)``: "performs multiple Comedi instructions as part of one system
+  call"; returns "the number of successfully completed instructions", -1 if there is an error
+  before the first) with three ``INSN_WRITE`` instructions, one sample each, instead of three
+  ``comedi_data_write`` calls (each its own ioctl). The structures, from the kernel's uapi
+  header ``linux/comedi.h`` (checked by ``tests/test_pci1720_insnlist.py`` against the
+  installed header with a C compiler): ``struct comedi_insn {unsigned int insn; unsigned int
+  n; unsigned int *data; unsigned int subdev; unsigned int chanspec; unsigned int
+  unused[3];}``, ``struct comedi_insnlist {unsigned int n_insns; struct comedi_insn
+  *insns;}``, ``INSN_WRITE = 1 | INSN_MASK_WRITE (0x8000000)``, ``CR_PACK(chan, rng, aref) =
+  ((aref & 0x3) << 24) | ((rng & 0xff) << 16) | chan``. The Linux ioctl behind it
+  (``do_insnlist_ioctl`` in ``comedi_fops.c``) stops at the first failing instruction and
+  then answers an error (-1 from comedilib) even when instructions before it were done; the
+  man page's count covers a partial list too. Either way anything but 3 is a failed write
+  (``Pci1720Outputs.write_volts``). ``comedi_from_phys`` computes
   ``s = (v - min) / (max - min) * maxdata``, clamps to [0, maxdata] and returns
   ``floor(s + 0.5)``; we do the same arithmetic in Python (``volts_to_code``) so it costs no
   library call and the test double needs no converter.
@@ -62,10 +77,35 @@ RANGE_BIPOLAR_10V = 3
 #: Thesis 3.1.2: commands are saturated at ±6 V.
 DEFAULT_LIMIT_V = 6.0
 
+# comedi.h: instruction codes and the packed channel specification.
+INSN_MASK_WRITE = 0x8000000
+INSN_WRITE = 1 | INSN_MASK_WRITE
+
+
+def cr_pack(chan: int, rng: int, aref: int) -> int:
+    """comedi.h ``CR_PACK``: channel, range index and analog reference in one chanspec."""
+    return ((aref & 0x3) << 24) | ((rng & 0xFF) << 16) | chan
+
+
+def cr_chan(chanspec: int) -> int:
+    """comedi.h ``CR_CHAN``."""
+    return chanspec & 0xFFFF
+
+
+def cr_range(chanspec: int) -> int:
+    """comedi.h ``CR_RANGE``."""
+    return (chanspec >> 16) & 0xFF
+
+
+def cr_aref(chanspec: int) -> int:
+    """comedi.h ``CR_AREF``."""
+    return (chanspec >> 24) & 0x03
+
+
 _SHAPE = (3,)
 _F64 = np.dtype(np.float64)
-_BITS = kernels.DAC_CODE_BITS
-_MASK = kernels.DAC_CODE_MASK
+#: lsampl_t (``unsigned int``) as numpy sees it: the instruction samples' type.
+_LSAMPL = np.dtype(np.uintc)
 
 MISSING_LIBRARY_MESSAGE = "comedilib not found: install libcomedi0 or choose the 'sim' backend"
 
@@ -74,6 +114,42 @@ class ComediRange(ctypes.Structure):
     """``comedi_range`` from comedilib.h: physical limits of one range (V for UNIT_volt)."""
 
     _fields_ = [("min", ctypes.c_double), ("max", ctypes.c_double), ("unit", ctypes.c_uint)]
+
+
+class ComediInsn(ctypes.Structure):
+    """``struct comedi_insn`` (linux/comedi.h): one instruction; ``data`` points at ``n``
+    samples (``unsigned int``), written for ``INSN_WRITE``."""
+
+    _fields_ = [("insn", ctypes.c_uint), ("n", ctypes.c_uint),
+                ("data", ctypes.POINTER(ctypes.c_uint)), ("subdev", ctypes.c_uint),
+                ("chanspec", ctypes.c_uint), ("unused", ctypes.c_uint * 3)]
+
+
+class ComediInsnList(ctypes.Structure):
+    """``struct comedi_insnlist`` (linux/comedi.h): ``n_insns`` instructions at ``insns``."""
+
+    _fields_ = [("n_insns", ctypes.c_uint), ("insns", ctypes.POINTER(ComediInsn))]
+
+
+def comedilib_prototypes() -> dict[str, tuple[Any, tuple[Any, ...]]]:
+    """comedilib's functions this package calls: name → (restype, argtypes) for ctypes."""
+    u = ctypes.c_uint
+    p = ctypes.c_void_p
+    return {
+        "comedi_open": (p, (ctypes.c_char_p,)),
+        "comedi_close": (ctypes.c_int, (p,)),
+        "comedi_get_n_channels": (ctypes.c_int, (p, u)),
+        "comedi_get_maxdata": (u, (p, u, u)),
+        "comedi_get_range": (ctypes.POINTER(ComediRange), (p, u, u, u)),
+        "comedi_data_write": (ctypes.c_int, (p, u, u, u, u, u)),
+        "comedi_do_insnlist": (ctypes.c_int, (p, ctypes.POINTER(ComediInsnList))),
+        "comedi_data_read": (ctypes.c_int, (p, u, u, u, u, ctypes.POINTER(ctypes.c_uint))),
+        "comedi_dio_config": (ctypes.c_int, (p, u, u, u)),
+        "comedi_dio_write": (ctypes.c_int, (p, u, u, u)),
+        "comedi_dio_read": (ctypes.c_int, (p, u, u, ctypes.POINTER(ctypes.c_uint))),
+        "comedi_errno": (ctypes.c_int, ()),
+        "comedi_strerror": (ctypes.c_char_p, (ctypes.c_int,)),
+    }
 
 
 def load_comedilib() -> Any:
@@ -88,23 +164,7 @@ def load_comedilib() -> Any:
         lib = ctypes.CDLL(name, use_errno=True)
     except OSError as exc:
         raise BackendUnavailableError(f"{MISSING_LIBRARY_MESSAGE} ({exc})") from None
-    u = ctypes.c_uint
-    p = ctypes.c_void_p
-    prototypes = {
-        "comedi_open": (p, (ctypes.c_char_p,)),
-        "comedi_close": (ctypes.c_int, (p,)),
-        "comedi_get_n_channels": (ctypes.c_int, (p, u)),
-        "comedi_get_maxdata": (u, (p, u, u)),
-        "comedi_get_range": (ctypes.POINTER(ComediRange), (p, u, u, u)),
-        "comedi_data_write": (ctypes.c_int, (p, u, u, u, u, u)),
-        "comedi_data_read": (ctypes.c_int, (p, u, u, u, u, ctypes.POINTER(ctypes.c_uint))),
-        "comedi_dio_config": (ctypes.c_int, (p, u, u, u)),
-        "comedi_dio_write": (ctypes.c_int, (p, u, u, u)),
-        "comedi_dio_read": (ctypes.c_int, (p, u, u, ctypes.POINTER(ctypes.c_uint))),
-        "comedi_errno": (ctypes.c_int, ()),
-        "comedi_strerror": (ctypes.c_char_p, (ctypes.c_int,)),
-    }
-    for fname, (restype, argtypes) in prototypes.items():
+    for fname, (restype, argtypes) in comedilib_prototypes().items():
         fn = getattr(lib, fname)
         fn.restype = restype
         fn.argtypes = argtypes
@@ -233,16 +293,14 @@ class Pci1720Outputs(ActuatorOutputs):
             for i, ch in enumerate(self._channels):
                 r = kernels.DAC_RANGES + 3 * i
                 self._dac[r:r + 3] = (ch.v_min, ch.v_max, ch.maxdata)
-            self._numbers = tuple(ch.number for ch in self._channels)
-            # The compiled write packs the codes in 16-bit fields (every DAC card this driver
-            # knows has 12 bits); a wider card would take the interpreted write.
-            self._packable = all(ch.maxdata <= kernels.DAC_CODE_MASK for ch in self._channels)
-            self._write = self._lib.comedi_data_write
+            self._build_insnlist()
+            # A comedilib double without comedi_do_insnlist gets the channel-by-channel write.
+            self._do_insnlist = getattr(self._lib, "comedi_do_insnlist", None)
             # Compile (or load from numba's cache) now, not in a cycle: a read-only view, as
-            # the loop's port is, on a scratch state.
+            # the loop's port is, on a scratch state and scratch samples.
             probe = np.zeros(3)
             probe.flags.writeable = False
-            kernels.pci1720_codes(probe, self._dac.copy())
+            kernels.pci1720_codes(probe, self._dac.copy(), self._samples.copy())
             if enable_line is not None:
                 self._setup_enable_line(enable_line)
             self._write_zero()
@@ -283,6 +341,27 @@ class Pci1720Outputs(ActuatorOutputs):
                 f"command limit ±{self.limit_v} V does not fit range "
                 f"[{r.min}, {r.max}] V of channel {number}; pick a bipolar range")
         return _Channel(number, float(r.min), float(r.max), maxdata)
+
+    def _build_insnlist(self) -> None:
+        """The cycle's write as one instruction list, built once: an ``INSN_WRITE`` of one
+        sample per channel (its chanspec ``CR_PACK(channel, range, AREF_GROUND)``), the
+        samples in one ``unsigned int`` array that the compiled write fills
+        (``self._samples`` is a numpy view of it) and ``comedi_do_insnlist`` reads."""
+        n = len(self._channels)
+        word = ctypes.sizeof(ctypes.c_uint)
+        self._insn_data = (ctypes.c_uint * n)()
+        self._insns = (ComediInsn * n)()
+        for i, ch in enumerate(self._channels):
+            insn = self._insns[i]
+            insn.insn = INSN_WRITE
+            insn.n = 1
+            insn.data = ctypes.cast(ctypes.byref(self._insn_data, i * word),
+                                    ctypes.POINTER(ctypes.c_uint))
+            insn.subdev = self.subdevice
+            insn.chanspec = cr_pack(ch.number, self.range_index, AREF_GROUND)
+        self._insnlist = ComediInsnList(n, self._insns)
+        self._insnlist_ptr = ctypes.pointer(self._insnlist)
+        self._samples = np.frombuffer(memoryview(self._insn_data), dtype=_LSAMPL)
 
     def _setup_enable_line(self, line: EnableLine) -> None:
         if line.device is None or line.device == self.device:
@@ -378,26 +457,28 @@ class Pci1720Outputs(ActuatorOutputs):
         Refused (``HardwareError``, nothing written) with a non-zero value while disabled;
         refused (``InputError``, nothing written) for a wrong length or a non-finite value.
         A float64 array (the loop's port) is validated and converted in one compiled call
-        (``rt.drivers.kernels.pci1720_codes``), then the three codes go to comedilib; any
+        (``rt.drivers.kernels.pci1720_codes``) that puts the codes into the instruction list,
+        then one ``comedi_do_insnlist`` writes the three channels (one ioctl on the rig); any
         other sequence takes :meth:`write_volts_interpreted`, the reference. Same results.
+
+        A write that does not complete every instruction is a failed write (``HardwareError``
+        naming the channel that failed), whatever comedilib answers: the count of those done
+        (a partial list) or -1 (an error before the first; the Linux ioctl also answers -1
+        after a partial list). The driver's state is then what the channel-by-channel write
+        leaves (the channels before the failed one written); ``RedundantDrive`` fails over.
         """
         if type(volts) is not np.ndarray or volts.shape != _SHAPE or volts.dtype is not _F64 \
-                or not self._packable:
+                or self._do_insnlist is None:
             self.write_volts_interpreted(volts)
             return
         if self._closed:
             self._check_open()
-        packed = kernels.pci1720_codes(volts, self._dac)
-        if packed < 0:
-            self._refuse(packed, volts)
-        write, dev, sub, rng = self._write, self._dev, self.subdevice, self.range_index
-        n0, n1, n2 = self._numbers
-        if write(dev, sub, n0, rng, AREF_GROUND, packed & _MASK) < 0:
-            self._write_failed(0)
-        if write(dev, sub, n1, rng, AREF_GROUND, (packed >> _BITS) & _MASK) < 0:
-            self._write_failed(1)
-        if write(dev, sub, n2, rng, AREF_GROUND, packed >> (2 * _BITS)) < 0:
-            self._write_failed(2)
+        rc = kernels.pci1720_codes(volts, self._dac, self._samples)
+        if rc < 0:
+            self._refuse(rc, volts)
+        done = self._do_insnlist(self._dev, self._insnlist_ptr)
+        if done != 3:
+            self._write_failed(done if 0 < done < 3 else 0)
 
     def _refuse(self, rc: int, volts: np.ndarray) -> None:
         if rc == kernels.DAC_NOT_FINITE:
@@ -415,8 +496,8 @@ class Pci1720Outputs(ActuatorOutputs):
         dac[kernels.DAC_VOLTS + i:6] = dac[b + kernels.DAC_VOLTS + i:b + 6]
         dac[kernels.DAC_CLAMPED + i + 1:9] = dac[b + kernels.DAC_CLAMPED + i + 1:b + 9]
         raise HardwareError(
-            f"comedi_data_write on {self.device} channel {self._channels[i].number} "
-            f"failed: {self._error_text()}")
+            f"DAC write on {self.device} channel {self._channels[i].number} failed: "
+            f"{self._error_text()}")
 
     def write_volts_interpreted(self, volts: Sequence[float] | np.ndarray) -> None:
         """:meth:`write_volts` one value at a time in Python (the reference; any sequence)."""
@@ -449,12 +530,14 @@ class Pci1720Outputs(ActuatorOutputs):
                                          self.range_index, AREF_GROUND, code)
         if rc < 0:
             raise HardwareError(
-                f"comedi_data_write on {self.device} channel {ch.number} failed: "
+                f"DAC write on {self.device} channel {ch.number} failed: "
                 f"{self._error_text()}")
         self._dac[kernels.DAC_CODES + i] = code
         self._dac[kernels.DAC_VOLTS + i] = code_to_volts(code, ch.v_min, ch.v_max, ch.maxdata)
 
     def _write_zero(self) -> None:
+        # Channel by channel, not one instruction list: a list stops at its first failing
+        # instruction, and zeroing must still reach the channels after a dead one.
         error: HardwareError | None = None
         for i in range(self.n_channels):
             self._dac[kernels.DAC_CLAMPED + i] = 0.0

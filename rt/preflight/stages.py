@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from rt.drivers.fake_pcl833 import FakePcl833Port
+from rt.drivers.kernels import dac_code, dac_code_volts
 from rt.drivers.pci1720 import Pci1720Outputs
 from rt.drivers.pcl833 import Pcl833Encoders
 from rt.errors import ConfigurationError
@@ -74,9 +75,9 @@ def encoder_read(enc_q, enc, out):
 @njit(cache=True)
 def dac_stage(volts, dac, codes, amp):
     """The drive path for ``volts`` (V): the driver's clamp and code into ``codes``
-    (``Pci1720Outputs.write_volts`` → ``volts_to_code``), the amplifier input the twin makes
-    of each code into ``amp`` (``code_to_volts``, clamped at the amplifier's limit). Returns
-    the number of channels the driver clamped."""
+    (``rt.drivers.kernels.dac_code``, what ``Pci1720Outputs.write_volts`` calls), the
+    amplifier input the twin makes of each code into ``amp`` (``code_to_volts``, clamped at
+    the amplifier's limit). Returns the number of channels the driver clamped."""
     limit = dac[DAC_LIMIT_V]
     v_min = dac[DAC_V_MIN]
     v_max = dac[DAC_V_MAX]
@@ -87,16 +88,10 @@ def dac_stage(volts, dac, codes, amp):
         v = volts[i]
         if not -limit <= v <= limit:
             clamped += 1
-        v = min(limit, max(-limit, v))
-        s = (v - v_min) / (v_max - v_min) * maxdata
-        if s <= 0.0:
-            code = 0.0
-        elif s >= maxdata:
-            code = maxdata
-        else:
-            code = float(math.floor(s + 0.5))
+        # The driver's own quantizer and its inverse (one definition for both paths).
+        code = dac_code(v, limit, v_min, v_max, maxdata)
         codes[i] = code
-        a = v_min + code / maxdata * (v_max - v_min)
+        a = dac_code_volts(code, v_min, v_max, maxdata)
         amp[i] = max(-amp_limit, min(amp_limit, a))
     return clamped
 
