@@ -30,9 +30,10 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
   last ``saturation_window_s`` → soft stop (``drive_saturated_<axis>``): an unstable loop (a
   mis-tuned gain, a force loop's limit cycle against a stuck contact) or an obstruction the
   drives push against in vain; the force may stay under its limit and the foot loaded, so no
-  other check names it; still so a whole window into that soft stop → hard stop (a soft
-  stop in force control ramps the force down through the same law: an unstable one goes on
-  shaking). Counted while the drives are on, in a sliding window of
+  other check names it; so while a soft stop (whatever its cause) has been latched for a
+  whole window → hard stop (a soft stop in force control ramps the force down through the
+  same law: an unstable one goes on shaking, through the pull and speed checks' soft stops
+  too). Counted while the drives are on, in a sliding window of
   :data:`~rt.safety.supervisor_kernel.SAT_BUCKETS` buckets of loop time;
 * client heartbeat older than its timeout while a client drives the robot → soft stop;
 * both DAC cards failed on a channel → hard stop (a single card's failure is a failover).
@@ -274,7 +275,7 @@ def _saturation_text(i: int, reaction: int, saturated_s: float, window_s: float,
     """Message and values of ``drive_saturated_<i>`` (both supervisors')."""
     values = {"saturated_s": saturated_s, "window_s": window_s, "limit_n": limit_n}
     if reaction == sk.R_HARD:
-        return (f"drive {i} still at its force limit {window_s:g} s into the soft stop "
+        return (f"drive {i} still at its force limit {window_s:g} s into a soft stop "
                 "(sustained saturation the soft stop did not end)", values)
     return (f"drive {i} at its force limit for most of the last {window_s:g} s "
             "(sustained saturation: an unstable loop or an obstruction)", values)
@@ -649,7 +650,7 @@ class InterpretedSupervisor(Supervisor):
         self._brakes_open_at = self.brake_release_s      # drives enabled at t = 0
         self._restart_saturation_window()
         self._sat_peak = [0.0, 0.0, 0.0]
-        self._sat_soft_at = [0.0, 0.0, 0.0]           # when each saturation's soft stop latched
+        self._stop_since = math.nan                    # since when a stop is latched (s)
 
     def _restart_saturation_window(self) -> None:
         self._sat_k = math.nan                         # the window's current bucket
@@ -690,6 +691,10 @@ class InterpretedSupervisor(Supervisor):
         ``applied_force_max_n``) in the last ``saturation_window_s`` (s), counted while the
         drives are on: the window is ``SAT_BUCKETS`` buckets of loop time, those it left since
         the last cycle emptied (all of them after a gap longer than it, or at the start)."""
+        if self.reaction < Reaction.SOFT_STOP:
+            self._stop_since = math.nan
+        elif math.isnan(self._stop_since):
+            self._stop_since = t
         nb = sk.SAT_BUCKETS
         window = self.limits.saturation_window_s
         k = math.floor(t / (window / nb))
@@ -937,17 +942,13 @@ class InterpretedSupervisor(Supervisor):
         for i, saturated in enumerate(self._saturated_time(t, dt, tau)):
             window = lim.saturation_window_s
             if saturated > lim.max_saturated_fraction * window:
-                cause = f"drive_saturated_{i}"
-                reaction = Reaction.SOFT_STOP
-                if self.causes.get(cause, Reaction.NONE) < Reaction.SOFT_STOP:
-                    self._sat_soft_at[i] = t
-                elif t - self._sat_soft_at[i] >= window:
-                    # A whole window into its soft stop and still saturated: the soft stop
-                    # (an unstable law ramping its force down) does not end it.
-                    reaction = Reaction.HARD_STOP
+                # A whole window into a soft stop and still saturated: the stop (an unstable
+                # force law ramping its force down) does not end it.
+                reaction = Reaction.HARD_STOP if t - self._stop_since >= window \
+                    else Reaction.SOFT_STOP
                 message, values = _saturation_text(i, reaction, saturated, window,
                                                    self.applied_force_max_n)
-                trip(cause, reaction, message, **values)
+                trip(f"drive_saturated_{i}", reaction, message, **values)
         if self.heartbeat_required and self.heartbeat_age is not None:
             age = self.heartbeat_age()
             if age > lim.heartbeat_timeout_s:

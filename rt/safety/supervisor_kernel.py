@@ -95,8 +95,8 @@ M_QUIET = 26         # per axis: how long its estimated |q̈| has been quasi-sta
 M_SAT_K = 29         # the sustained-saturation window's current bucket: floor(t / bucket)
 M_SAT_PAST = 30      # per axis: saturated time in the window's completed buckets (s)
 M_SAT_PEAK = 33      # per axis: the most saturated time any window held since the reset (s)
-M_SAT_SOFT_AT = 36   # per axis: when its saturation's soft stop latched (loop time, s)
-M_SAT_BUCKETS = 39   # per axis SAT_BUCKETS buckets of saturated time (s), a ring
+M_STOP_SINCE = 36    # since when a soft (or hard) stop is latched (loop time, s; NaN: none)
+M_SAT_BUCKETS = 37   # per axis SAT_BUCKETS buckets of saturated time (s), a ring
 M_REACT = M_SAT_BUCKETS + 3 * SAT_BUCKETS
 M_LATCHED = M_REACT + N_CAUSES
 M_REPORTED = M_LATCHED + N_CAUSES
@@ -112,6 +112,7 @@ def new_mem() -> np.ndarray:
     mem[M_CARRY:M_CARRY + 3] = math.nan
     mem[M_SHARE:M_SHARE + 3] = math.nan
     mem[M_SAT_K] = math.nan
+    mem[M_STOP_SINCE] = math.nan
     return mem
 
 
@@ -201,10 +202,14 @@ def _saturation(par, mem, t, dt, tau):
     arithmetic): each axis' time with its command at the drive's limit (``|τ| ≥``
     ``P_APPLIED_MAX``, the force of the DAC's command limit) in the last ``P_SAT_WINDOW``
     seconds, kept in SAT_BUCKETS buckets of loop time; more than ``P_SAT_FRACTION`` of the
-    window → soft stop; still so a whole window after that soft stop (the saturation then is
-    the soft stop's own: an unstable law ramping its force down goes on shaking) → hard stop.
-    Counted only while the drives are on (not in a hard stop). Returns the number of new
-    events."""
+    window → soft stop; so while a soft stop has been latched for a whole window (whatever
+    latched it: the window's saturation is then the stop's own, an unstable force law ramping
+    its force down goes on shaking) → hard stop. Counted only while the drives are on (not in
+    a hard stop). Returns the number of new events."""
+    if mem[M_REACTION] < R_SOFT:
+        mem[M_STOP_SINCE] = math.nan
+    elif math.isnan(mem[M_STOP_SINCE]):
+        mem[M_STOP_SINCE] = t
     window = par[P_SAT_WINDOW]
     k = math.floor(t / (window / SAT_BUCKETS))
     kf = float(k)
@@ -240,14 +245,9 @@ def _saturation(par, mem, t, dt, tau):
         if saturated > mem[M_SAT_PEAK + i]:
             mem[M_SAT_PEAK + i] = saturated
         if saturated > par[P_SAT_FRACTION] * window:
-            c = C_DRIVE_SAT + i
-            if mem[M_LATCHED + c] < R_SOFT:
-                mem[M_SAT_SOFT_AT + i] = t
-                new += _trip(mem, c, R_SOFT, saturated, window, limit)
-            elif t - mem[M_SAT_SOFT_AT + i] >= window:
-                new += _trip(mem, c, R_HARD, saturated, window, limit)
-            else:
-                new += _trip(mem, c, R_SOFT, saturated, window, limit)
+            stopped = t - mem[M_STOP_SINCE] >= window          # NaN (no stop): False
+            new += _trip(mem, C_DRIVE_SAT + i, R_HARD if stopped else R_SOFT, saturated,
+                         window, limit)
     return new
 
 
