@@ -211,7 +211,10 @@ def scenarios(model: RobotModel) -> list[Scenario]:
         # The link starts lagging at t_f: nothing for 10 ms, then every reading 10 ms late
         # (scheduled then, the twin keeps no history from before).
         twin = _sim_twin(pl)
-        return [(t_f, lambda: twin.faults.schedule("latency", t_f, seconds=0.01))]
+
+        def lag() -> None:
+            twin.faults.schedule("latency", t_f, seconds=0.01)
+        return [(t_f, lag)]
 
     def gui_estop(pl: PositionLoop, t_f: float) -> list[Later]:
         return [(t_f, lambda: pl.supervisor.request_estop("gui"))]

@@ -275,10 +275,12 @@ def _saturation_text(i: int, reaction: int, saturated_s: float, window_s: float,
     """Message and values of ``drive_saturated_<i>`` (both supervisors')."""
     values = {"saturated_s": saturated_s, "window_s": window_s, "limit_n": limit_n}
     if reaction == sk.R_HARD:
-        return (f"drive {i} still at its force limit {window_s:g} s into a soft stop "
-                "(sustained saturation the soft stop did not end)", values)
-    return (f"drive {i} at its force limit for most of the last {window_s:g} s "
-            "(sustained saturation: an unstable loop or an obstruction)", values)
+        message = (f"drive {i} still at its force limit {window_s:g} s into a soft stop "
+                   "(sustained saturation the soft stop did not end)")
+    else:
+        message = (f"drive {i} at its force limit for most of the last {window_s:g} s "
+                   "(sustained saturation: an unstable loop or an obstruction)")
+    return message, values
 
 
 class Supervisor:
@@ -725,8 +727,7 @@ class InterpretedSupervisor(Supervisor):
             if drives_on and abs(tau[i]) >= limit:
                 buckets[i][cur] += dt
             saturated = self._sat_past[i] + buckets[i][cur]
-            if saturated > self._sat_peak[i]:
-                self._sat_peak[i] = saturated
+            self._sat_peak[i] = max(self._sat_peak[i], saturated)
             out.append(saturated)
         return out
 

@@ -242,8 +242,7 @@ def _saturation(par, mem, t, dt, tau):
         if drives_on and abs(tau[i]) >= limit:
             mem[b] += dt
         saturated = mem[M_SAT_PAST + i] + mem[b]
-        if saturated > mem[M_SAT_PEAK + i]:
-            mem[M_SAT_PEAK + i] = saturated
+        mem[M_SAT_PEAK + i] = max(mem[M_SAT_PEAK + i], saturated)
         if saturated > par[P_SAT_FRACTION] * window:
             stopped = t - mem[M_STOP_SINCE] >= window          # NaN (no stop): False
             new += _trip(mem, C_DRIVE_SAT + i, R_HARD if stopped else R_SOFT, saturated,
