@@ -73,7 +73,7 @@ def cause_words(cause: str) -> str:
     if fixed is not None:
         return fixed
     m = re.fullmatch(r"(stroke|stroke_margin|speed|accel|tracking|actuator_force|"
-                     r"encoder_frozen)_(\d)", cause)
+                     r"encoder_frozen|drive_saturated)_(\d)", cause)
     if m:
         kind, leg = m.group(1), int(m.group(2)) + 1
         text = {
@@ -84,6 +84,8 @@ def cause_words(cause: str) -> str:
             "tracking": tr("actuator %1 could not follow its path"),
             "actuator_force": tr("actuator %1 pushing too hard"),
             "encoder_frozen": tr("position sensor %1 stopped changing"),
+            "drive_saturated": tr("actuator %1 held at its force limit (blocked or "
+                                  "shaking)"),
         }[kind]
         return text.replace("%1", str(leg))
     m = re.fullmatch(r"dac_card_(\d)", cause)

@@ -266,11 +266,16 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
             "peak": report.ankle_peak_displacement_m * 1e3,
             "rms": report.ankle_rms_displacement_m * 1e3,
             "limit": report.ankle_displacement_limit_m * 1e3}
+    saturated = figures.saturation(1.0 / RATE_HZ)
     if stops:
+        # A stop for sustained drive saturation: the stretches at the robot's limit say where
+        # the protocol asked more than the drives give.
+        why = "; ".join(saturated) if stops[0].cause.startswith("drive_saturated_") else ""
         raise ProtocolValidationError(
             f"{setup.source}: refused by pre-flight: on the twin the supervisor stopped "
-            f"the robot at t = {stops[0].t:.3f} s ({stops[0].cause}: {stops[0].message})")
-    problems = figures.saturation(1.0 / RATE_HZ) + figures.unloading()
+            f"the robot at t = {stops[0].t:.3f} s ({stops[0].cause}: {stops[0].message})"
+            + (f"; {why}" if why else ""))
+    problems = saturated + figures.unloading()
     if problems:
         raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: on the twin "
                                       + "; ".join(problems))

@@ -114,6 +114,8 @@ _TRIGGERS: tuple[tuple[str, str, str], ...] = (
     ("fk_failed", "safety supervisor", "the platform's position could not be computed"),
     ("drive_channel", "safety supervisor", "a motor drive channel failed"),
     ("deadline_overruns", "safety supervisor", "the controller ran late repeatedly"),
+    ("drive_saturated", "safety supervisor",
+     "a motor was held at its force limit (blocked, or the control shaking)"),
 )
 
 

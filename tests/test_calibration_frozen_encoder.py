@@ -39,6 +39,7 @@ from calibration.plate import TWIN_PLATE_FILE, load_plate
 from calibration.trial import TrialData
 from calibration.twin_plate import TwinPlate, draw_truth
 from calibration.twin_runner import TwinTrialRunner
+from rt.errors import SafetyTrip
 from rt.twin.realism import RigImperfections
 
 DT = 1e-3
@@ -58,10 +59,13 @@ def _run(kind: ProfileKind, **shear) -> TrialData:
 
 
 @pytest.fixture(scope="module")
-def fast_tilt() -> TrialData:
-    """The shear push of the old strict xfail: 600 N, then a 2° roll in 1 s, held 0.5 s (a
-    SafetyTrip here fails the tests that use it)."""
-    return _run(ProfileKind.SHEAR, roll_deg=2.0, load_n=600.0, tilt_ramp_s=1.0, hold_s=0.5)
+def fast_tilt() -> TrialData | SafetyTrip:
+    """The shear push of the old strict xfail: 600 N, then a 2° roll in 1 s, held 0.5 s; or
+    the supervisor's stop (each test judges which stop it may be)."""
+    try:
+        return _run(ProfileKind.SHEAR, roll_deg=2.0, load_n=600.0, tilt_ramp_s=1.0, hold_s=0.5)
+    except SafetyTrip as stop:
+        return stop
 
 
 def test_a_push_through_its_contact_onset_is_not_taken_for_a_frozen_encoder() -> None:
@@ -75,8 +79,15 @@ def test_a_push_through_its_contact_onset_is_not_taken_for_a_frozen_encoder() ->
 
 
 def test_a_fast_tilt_under_load_is_not_taken_for_a_frozen_encoder(fast_tilt) -> None:
-    """Completed (no SafetyTrip): the load held on average through the tilt, and the
-    platform reached the 2° roll."""
+    """Completed: the load held on average through the tilt, and the platform reached the 2°
+    roll. Or, while the force law falls into its limit cycle against the stuck tip (main's
+    law, issue 15), stopped by the sustained-saturation check, which names the loop (twin
+    figures: the drives saturate from 2.516 s, 84-87 % of the time; soft stop
+    ``drive_saturated_*`` at 2.825 s; the runner, which looks every 0.5 s, raises then) —
+    never by the frozen-encoder check."""
+    if isinstance(fast_tilt, SafetyTrip):
+        assert "drive_saturated_" in str(fast_tilt) and "encoder_frozen" not in str(fast_tilt)
+        return
     loaded = fast_tilt.force_ref > 590.0
     assert np.median(-fast_tilt.ati[loaded, 2]) == pytest.approx(600.0, rel=0.05)
     rolls = [math.degrees(math.atan2(-R[5], R[8])) for R in fast_tilt.R_BS[loaded]]
@@ -89,6 +100,7 @@ def test_a_fast_tilt_under_load_is_not_taken_for_a_frozen_encoder(fast_tilt) -> 
                           "force law's problem, not the supervisor's: issue 15)")
 def test_the_contact_holds_through_a_fast_tilt(fast_tilt) -> None:
     """While loaded the ATI force stays within a quarter of the 600 N (no bounce)."""
+    assert not isinstance(fast_tilt, SafetyTrip), str(fast_tilt)   # the limit cycle stopped
     loaded = fast_tilt.force_ref > 590.0
     fz = -fast_tilt.ati[loaded, 2]
     assert float(np.min(fz)) > 450.0 and float(np.max(fz)) < 750.0

@@ -25,7 +25,7 @@ from rt.safety.limits import PatientLimits, RobotLimits, effective
 from rt.safety.supervisor import InterpretedSupervisor, Supervisor, supervisor_physics
 
 DT = 1e-3
-CYCLES = 2400
+CYCLES = 2700
 #: Inputs of the supervisor block: name → width.
 PORTS = {"q": 3, "est_status": 1, "qd": 3, "qdd": 3, "fk_ok": 1, "q_ref": 3, "qd_ref": 3,
          "tau": 3, "wrench": 6, "wrench_flags": 2, "inputs": 2, "drive_failed": 1}
@@ -115,6 +115,19 @@ def _stream(recorded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     s["qdd"][1460:1490, 1] = np.linspace(-9.0, 0.0, 30)
     s["tau"][1460:1490, 1] = -1450.0
     q[1490:1560, 1] = q[1490, 1]
+    # Sustained drive saturation (issue 15): axis 2's command beyond the drive's limit 3/4 of
+    # each 36 ms (a 28 Hz limit cycle's duty, both signs) from cycle 1570 to 1970: more than
+    # half of the 0.5 s window from ≈ 1904 on.
+    on = (np.arange(1570, 1970) % 36) < 27
+    s["tau"][1570:1970, 2] = np.where(on, np.where(np.arange(400) % 2 == 0, 1450.0, -1450.0),
+                                      100.0)
+    q[1570:1970, 2] += 1e-4 * np.sin(2.0 * np.pi * 28.0 * DT * np.arange(400))   # it moves
+    q_ref[1570:1970, 2] = q[1570:1970, 2]
+    # ... and axis 0's from 2150 to 2650 in a 0.3 s window (set at 2100): soft stop past
+    # 0.15 s, still saturated 0.3 s into it → hard stop.
+    s["tau"][2150:2650, 0] = np.where(np.arange(500) % 2 == 0, 1450.0, -1450.0)
+    q[2150:2650, 0] += 1e-4 * np.sin(2.0 * np.pi * 28.0 * DT * np.arange(500))
+    q_ref[2150:2650, 0] = q[2150:2650, 0]
     return s
 
 
@@ -124,7 +137,8 @@ ACTIONS = {150: "reset", 160: "reset", 205: "reset", 250: "reset", 450: "reset",
            770: "force_control_off", 780: "reset", 810: "reset", 830: "reset", 850: "reset",
            870: "stop", 880: "reset", 920: "heartbeat", 950: "reset", 960: "heartbeat_off",
            970: "reset", 1100: "reset", 1250: "reset", 1300: "stop", 1301: "estop",
-           1310: "reset", 1500: "limits", 1510: "reset"}
+           1310: "reset", 1500: "limits", 1510: "reset", 1930: "reset", 2100: "window",
+           2110: "reset"}
 
 
 def _block(sup: Supervisor, stream: dict[str, np.ndarray]) -> tuple[SupervisorBlock, dict]:
@@ -180,6 +194,10 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
             elif action == "limits":
                 sup.limits = effective(model.description.limits.stroke, RobotLimits(),
                                        PatientLimits(max_force_n=100.0))
+            elif action == "window":        # another window: it starts afresh
+                sup.limits = effective(model.description.limits.stroke,
+                                       RobotLimits(saturation_window_s=0.3),
+                                       PatientLimits(max_force_n=100.0))
         age[0] = 0.5 if 930 <= k < 940 else 0.01
         for blk, bufs in blocks:
             for name in PORTS:
@@ -205,6 +223,7 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
         assert mem[sk.M_QUIET:sk.M_QUIET + 3].tolist() == ref._quiet, k
         assert mem[sk.M_CONTACT_UNTIL] == ref._contact_until, k
         assert sups[0].applied_force_max_n == sups[1].applied_force_max_n == 480.0, k
+        assert sups[0].saturated_peak_s == sups[1].saturated_peak_s, k
     events = [[_event(e) for e in sup.log.snapshot()] for sup in sups]
     assert events[0] == events[1]
     for tc, ti in zip(*tickets, strict=True):
@@ -222,8 +241,39 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
     assert kinds == {"fault", "warn", "reset", "reset_refused"}
     # … at both reactions where a cause has two.
     reactions = {(e[2], e[3]) for e in events[0]}
-    for cause in ("tracking_0", "rom_roll", "force_limit"):
+    for cause in ("tracking_0", "rom_roll", "force_limit", "drive_saturated_0"):
         assert {(cause, Reaction.SOFT_STOP), (cause, Reaction.HARD_STOP)} <= reactions, cause
+    # The sustained saturation: tripped once its window held more than half of 0.5 s
+    # saturated; a reset refused while it did, taken once the window changed (restarted).
+    sat = [e for e in events[0] if e[2] == "drive_saturated_2" and e[1] == "fault"]
+    assert [e[3] for e in sat] == [Reaction.SOFT_STOP, Reaction.HARD_STOP]
+    # The hard stop: a whole window (0.5 s) after the soft stop then latched (another cause's,
+    # latched before the saturation began), the saturation still beyond half of it.
+    stop_at = next(e[0] for e in events[0] if e[1] == "fault" and e[3] >= Reaction.SOFT_STOP
+                   and e[0] > max(r[0] for r in events[0] if r[1] == "reset" and r[0] < sat[0][0]))
+    assert stop_at < sat[0][0] and round((sat[1][0] - stop_at) / DT) in (501, 502)
+    t_trip, values = sat[0][0], sat[0][5]
+    assert values["window_s"] == 0.5 and values["limit_n"] == 480.0
+    on = (np.arange(1570, 1970) % 36) < 27
+    k_trip = round(t_trip / DT) - 1
+    # Every saturated cycle since 1570 is inside the window at the trip: their time.
+    held = on[:k_trip - 1570 + 1].sum() * DT
+    assert values["saturated_s"] == pytest.approx(held, abs=1e-9)
+    assert 0.25 - 1e-9 <= held <= 0.25 + DT, held
+    # At 1930 the window still holds more than 0.25 s: refused; at 2110 it would too (1610-
+    # 1970 holds 0.27 s), but the window changed at 2100 and started afresh: taken.
+    refused = [e for e in events[0] if e[1] == "reset_refused" and "drive_saturated_2" in e[2]]
+    assert [round(e[0] / DT) - 1 for e in refused] == [1930]
+    resets = [e for e in events[0] if e[1] == "reset" and "drive_saturated_2" in e[2]]
+    assert [round(e[0] / DT) - 1 for e in resets] == [2110]
+    # Axis 0, saturated every cycle from 2150 in the 0.3 s window: soft stop once it held
+    # more than 0.15 s, hard stop 0.3 s into that soft stop (it did not end it).
+    soft, hard = [[round(e[0] / DT) - 1 for e in events[0] if e[2] == "drive_saturated_0"
+                   and e[3] == r] for r in (Reaction.SOFT_STOP, Reaction.HARD_STOP)]
+    # (± one cycle: 150 float steps of 1 ms sum to a hair above or below 0.15 s)
+    assert len(soft) == len(hard) == 1, (soft, hard)
+    assert abs(soft[0] - (2150 + 150)) <= 1 and hard[0] - soft[0] in (301, 302), (soft, hard)
+    assert sups[0].saturated_peak_s[0] == pytest.approx(0.3, abs=0.01)
 
 
 def test_steady_cycles_run_no_python_side(recorded, model, monkeypatch) -> None:

@@ -1149,12 +1149,17 @@
         <translation>el sensor de posición %1 dejó de cambiar</translation>
     </message>
     <message>
-        <location filename="../words.py" line="91"/>
+        <location filename="../words.py" line="87"/>
+        <source>actuator %1 held at its force limit (blocked or shaking)</source>
+        <translation>actuador %1 retenido en su límite de fuerza (bloqueado u oscilando)</translation>
+    </message>
+    <message>
+        <location filename="../words.py" line="93"/>
         <source>motor drive card %1 failed; the spare card took over</source>
         <translation>falló la tarjeta de accionamiento %1; la tarjeta de reserva tomó el control</translation>
     </message>
     <message>
-        <location filename="../words.py" line="95"/>
+        <location filename="../words.py" line="97"/>
         <source>E-STOP (%1)</source>
         <translation>PARADA DE EMERGENCIA (%1)</translation>
     </message>

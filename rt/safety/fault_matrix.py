@@ -21,11 +21,28 @@ from rt.control.base import Reference
 from rt.engine import Component
 from rt.errors import ConfigurationError, InputError, KinematicsError
 from rt.model import RobotModel
-from rt.position_loop import PositionLoop, build_sim_position_loop
+from rt.position_loop import (
+    PositionLoop,
+    build_protocol_loop,
+    build_sim_position_loop,
+    sim_devices,
+)
+from rt.references.program import (
+    FZ,
+    FZ_DOT,
+    POSE,
+    POSE_DOT,
+    QD,
+    QDD,
+    Mode,
+    ProgramStatus,
+    Q,
+    ReferenceOutput,
+)
 from rt.safety.events import Reaction, SupervisorMode
 from rt.safety.limits import PatientLimits
-from rt.twin.environment import CompliantAnkle, FreeMotion
-from rt.twin.twin import Twin
+from rt.twin.environment import CompliantAnkle, FreeMotion, patient_foot
+from rt.twin.twin import SimClock, Twin
 
 FAULT_AT_S = 3.0
 RUN_S = 5.0
@@ -81,6 +98,50 @@ class Scenario:
     trajectory: Callable | None = None
     patient: PatientLimits = field(default_factory=PatientLimits)
     mode: str = "fast"
+    #: A force hold (N) on the patient's foot at the home pose instead of the position
+    #: benchmark: the protocol loop's hybrid force law presses the foot from the start.
+    force_hold_n: float | None = None
+
+
+#: The pose of the matrix's force hold (z m; level): the benchmark's home.
+FORCE_HOLD_Z_M = 0.633
+
+
+class ForceHold:
+    """A force program for the matrix: press ``force_n`` up on what the platform touches at
+    the level pose ``z_m`` for ``duration_s``, the angles held (an isometric push: the least
+    a force session does)."""
+
+    def __init__(self, kinematics, z_m: float, force_n: float, duration_s: float, dt: float):
+        self.duration_s = float(duration_s)
+        self.n_samples = round(duration_s / dt) + 1
+        self.index = 0
+        self._q = np.asarray(kinematics.ik(z_m, 0.0, 0.0).q, dtype=np.float64)
+        self._pose = np.array([z_m, 0.0, 0.0])
+        self.force_n = float(force_n)
+
+    @staticmethod
+    def new_output() -> ReferenceOutput:
+        return ReferenceOutput()
+
+    def reset(self) -> None:
+        self.index = 0
+
+    def update(self, out: ReferenceOutput, inp=None) -> int:
+        b = out.buf
+        b[Q] = self._q
+        b[QD] = 0.0
+        b[QDD] = 0.0
+        b[POSE] = self._pose
+        b[POSE_DOT] = 0.0
+        b[FZ] = self.force_n
+        b[FZ_DOT] = 0.0
+        k = min(self.index, self.n_samples - 1)
+        out.mode = Mode.FORCE
+        out.index = k
+        out.done = k >= self.n_samples - 1
+        self.index += 1
+        return ProgramStatus.FINISHED if out.done else ProgramStatus.RUNNING
 
 
 def _fault(kind: str, **kw: Any) -> Callable[[PositionLoop, float], None]:
@@ -146,6 +207,15 @@ def scenarios(model: RobotModel) -> list[Scenario]:
             raise ConfigurationError("client_loss needs the twin's clock")
         pl.supervisor.heartbeat_age = lambda: max(0.0, clock() - t_f)
 
+    def lag_from_now(pl: PositionLoop, t_f: float) -> list[Later]:
+        # The link starts lagging at t_f: nothing for 10 ms, then every reading 10 ms late
+        # (scheduled then, the twin keeps no history from before).
+        twin = _sim_twin(pl)
+
+        def lag() -> None:
+            twin.faults.schedule("latency", t_f, seconds=0.01)
+        return [(t_f, lag)]
+
     def gui_estop(pl: PositionLoop, t_f: float) -> list[Later]:
         return [(t_f, lambda: pl.supervisor.request_estop("gui"))]
 
@@ -174,6 +244,15 @@ def scenarios(model: RobotModel) -> list[Scenario]:
         Scenario("force_overload", lambda pl, t: None,
                  environment=CompliantAnkle(neutral_z_m=0.713 - 0.001, limb_weight_n=0.0),
                  trajectory=_rise(0.005, model), patient=PatientLimits(max_force_n=400.0)),
+        # Sustained drive saturation (issue 15): a 200 N force hold on the strapped foot when
+        # the sensors' link starts lagging (nothing for 10 ms, then every reading 10 ms late)
+        # — the force loop, kicked by the gap, cannot settle with the lag: the drives saturate both ways, the foot is
+        # pushed and let go. The stale stream, the pull and the speed checks soft-stop it
+        # first, but a soft stop ramps the force down through the same unstable law: only
+        # the saturation check, a window into that soft stop, drops the drives.
+        Scenario("latency_force", lag_from_now,
+                 environment=patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0),
+                 force_hold_n=200.0),
     ]
 
 
@@ -182,9 +261,18 @@ def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
     holder: list = []
     probe = TruthProbe("truth", holder, int(seconds * 1000) + 10)
     # On the default, realistic twin (truth apart from the model, the rig's imperfections).
-    pl = build_sim_position_loop("paden_panja", trajectory=sc.trajectory, duration_s=60.0,
-                                 environment=sc.environment, patient_limits=sc.patient,
-                                 model=model, extra_blocks=[probe])
+    if sc.force_hold_n is None:
+        pl = build_sim_position_loop("paden_panja", trajectory=sc.trajectory, duration_s=60.0,
+                                     environment=sc.environment, patient_limits=sc.patient,
+                                     model=model, extra_blocks=[probe])
+    else:
+        clock = SimClock()
+        twin = Twin(None, sc.environment, seed=0, clock=clock)
+        twin.place(model.kin.ik(FORCE_HOLD_Z_M, 0.0, 0.0).q)
+        pl = build_protocol_loop(sim_devices(twin, clock),
+                                 ForceHold(model.kin, FORCE_HOLD_Z_M, sc.force_hold_n, 60.0,
+                                           1e-3),
+                                 model, patient_limits=sc.patient, extra_blocks=[probe])
     holder.append(pl)
     synthetic = sc.name in ("rom_limit_at_speed", "force_overload")
     pending = sc.inject(pl, t_fault) or []
@@ -219,6 +307,14 @@ def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
         if after.any():
             zero = round((t[after][0] - ref_t) * 1e3, 3)
     result["time_to_zero_output_ms"] = zero
+    # A hard stop that escalated a soft one (the first event a soft stop): when it came, and
+    # how fast the outputs followed it.
+    hard = next((e for e in events if e.reaction == Reaction.HARD_STOP), None)
+    if hard is not None and first.reaction < Reaction.HARD_STOP:
+        result["hard_stop_at_s"] = round(hard.t, 3)
+        after = (t >= hard.t) & np.all(np.abs(rows[:, 7:10]) < 1e-9, axis=1)
+        result["zero_output_after_hard_ms"] = \
+            round((t[after][0] - hard.t) * 1e3, 3) if after.any() else None
     rest = None
     if strongest in (Reaction.HARD_STOP, Reaction.SOFT_STOP):
         speed = np.abs(rows[:, 4:7]).max(axis=1)

@@ -40,6 +40,30 @@ class RobotLimits(_Limits):
     #: Pre-flight: the drives may saturate (command at max_command_v, or the actuator force
     #: asked beyond max_actuator_force_n) for at most this long at a time (s).
     max_saturation_s: Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False)] = 0.02
+    #: Sustained drive saturation (issue 15): a drive's command at its limit (the force of
+    #: ``max_command_v``) for more than ``max_saturated_fraction`` of the last
+    #: ``saturation_window_s`` → soft stop (``drive_saturated_<axis>``; hard stop when it goes
+    #: on a whole window into a soft stop): an unstable force loop, a stuck contact or an
+    #: obstruction the drives push against in vain. Legitimate saturation is brief (a heel
+    #: strike 3-4 ms, a pull's yank ~20 ms; pre-flight allows ``max_saturation_s`` at a time).
+    #: Twin figures (branch satwatch5's note): the most any 0.5 s window held in the library's
+    #: pre-flights, the fault matrix, the calibration steps push and the payload step is 0, in
+    #: the never-pull yank 32 ms (6.4 %); the shear push's limit cycle 82-87 %.
+    saturation_window_s: Annotated[float, Field(ge=0.05, le=5.0, allow_inf_nan=False)] = 0.5
+    max_saturated_fraction: Annotated[float, Field(gt=0.0, lt=1.0, allow_inf_nan=False)] = 0.5
+
+    @model_validator(mode="after")
+    def _saturation_beyond_preflight(self) -> RobotLimits:
+        # The window must tolerate what pre-flight lets a protocol do (one stretch at the
+        # drives' limit of max_saturation_s), else an accepted protocol would be stopped.
+        allowed = self.max_saturated_fraction * self.saturation_window_s
+        if not allowed > self.max_saturation_s:
+            raise ValueError(
+                f"max_saturated_fraction × saturation_window_s ({self.max_saturated_fraction:g}"
+                f" × {self.saturation_window_s:g} s = {allowed:g} s) must exceed "
+                f"max_saturation_s ({self.max_saturation_s:g} s), the saturation pre-flight "
+                "accepts at a time")
+        return self
 
 
 class PatientLimits(_Limits):
@@ -98,6 +122,8 @@ class EffectiveLimits:
     frozen_encoder_s: float
     frozen_min_ref_speed_m_s: float
     max_pull_s: float
+    saturation_window_s: float
+    max_saturated_fraction: float
 
 
 def effective(stroke_m: tuple[float, float], robot: RobotLimits, patient: PatientLimits,
@@ -134,4 +160,6 @@ def effective(stroke_m: tuple[float, float], robot: RobotLimits, patient: Patien
         frozen_encoder_s=robot.frozen_encoder_s,
         frozen_min_ref_speed_m_s=robot.frozen_min_ref_speed_m_s,
         max_pull_s=robot.max_pull_s,
+        saturation_window_s=robot.saturation_window_s,
+        max_saturated_fraction=robot.max_saturated_fraction,
     )

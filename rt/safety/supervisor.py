@@ -25,6 +25,16 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
   stop (only dropping the drive force is fast enough against a stiff contact); saturated or
   implausible → soft stop; stale → soft stop when force control depends on it, else warn;
 * consecutive deadline overruns (measured period > 1.5 × nominal) → soft stop;
+* sustained drive saturation: an axis' command (the law's force, before the DAC's clamp) at
+  the drive's limit (``applied_force_max_n``) for more than ``max_saturated_fraction`` of the
+  last ``saturation_window_s`` → soft stop (``drive_saturated_<axis>``): an unstable loop (a
+  mis-tuned gain, a force loop's limit cycle against a stuck contact) or an obstruction the
+  drives push against in vain; the force may stay under its limit and the foot loaded, so no
+  other check names it; so while a soft stop (whatever its cause) has been latched for a
+  whole window → hard stop (a soft stop in force control ramps the force down through the
+  same law: an unstable one goes on shaking, through the pull and speed checks' soft stops
+  too). Counted while the drives are on, in a sliding window of
+  :data:`~rt.safety.supervisor_kernel.SAT_BUCKETS` buckets of loop time;
 * client heartbeat older than its timeout while a client drives the robot → soft stop;
 * both DAC cards failed on a channel → hard stop (a single card's failure is a failover).
 
@@ -192,6 +202,7 @@ def _cause_names() -> tuple[str, ...]:
     names += ["rom_roll", "angular_speed_roll", "rom_pitch", "angular_speed_pitch",
               "force_saturated", "force_stale", "force_implausible", "force_limit", "pulling",
               "deadline_overruns"]
+    names += [f"drive_saturated_{i}" for i in range(3)]
     assert len(names) == sk.N_CAUSES
     return tuple(names)
 
@@ -253,7 +264,23 @@ def _event_text(c: int, reaction: int, v: np.ndarray) -> tuple[str, dict]:
     if c == sk.C_PULL:
         return ("the platform is pulling on the foot (measured Fz below 0 N)",
                 {"fz_n": float(v[0]), "for_s": float(v[1])})
-    return "consecutive deadline overruns", {"count": int(v[0]), "dt": float(v[1])}
+    if c == sk.C_DEADLINE:
+        return "consecutive deadline overruns", {"count": int(v[0]), "dt": float(v[1])}
+    return _saturation_text(c - sk.C_DRIVE_SAT, reaction, float(v[0]), float(v[1]),
+                            float(v[2]))
+
+
+def _saturation_text(i: int, reaction: int, saturated_s: float, window_s: float,
+                     limit_n: float) -> tuple[str, dict]:
+    """Message and values of ``drive_saturated_<i>`` (both supervisors')."""
+    values = {"saturated_s": saturated_s, "window_s": window_s, "limit_n": limit_n}
+    if reaction == sk.R_HARD:
+        message = (f"drive {i} still at its force limit {window_s:g} s into a soft stop "
+                   "(sustained saturation the soft stop did not end)")
+    else:
+        message = (f"drive {i} at its force limit for most of the last {window_s:g} s "
+                   "(sustained saturation: an unstable loop or an obstruction)")
+    return message, values
 
 
 class Supervisor:
@@ -362,9 +389,28 @@ class Supervisor:
                 (sk.P_DEADLINE_OVERRUNS, lim.deadline_overruns),
                 (sk.P_FROZEN_S, lim.frozen_encoder_s),
                 (sk.P_FROZEN_MIN_REF, lim.frozen_min_ref_speed_m_s),
-                (sk.P_MAX_PULL_S, lim.max_pull_s)):
+                (sk.P_MAX_PULL_S, lim.max_pull_s),
+                (sk.P_SAT_FRACTION, lim.max_saturated_fraction)):
             p[index] = value
+        if p[sk.P_SAT_WINDOW] != lim.saturation_window_s:
+            # Another window length: its buckets mean other times, the window starts afresh.
+            p[sk.P_SAT_WINDOW] = lim.saturation_window_s
+            self._restart_saturation_window()
         self._limits = lim
+
+    def _restart_saturation_window(self) -> None:
+        mem = getattr(self, "_mem", None)
+        if mem is not None:
+            mem[sk.M_SAT_K] = math.nan
+            mem[sk.M_SAT_PAST:sk.M_SAT_PAST + 3] = 0.0
+            mem[sk.M_SAT_BUCKETS:sk.M_SAT_BUCKETS + 3 * sk.SAT_BUCKETS] = 0.0
+
+    @property
+    def saturated_peak_s(self) -> list[float]:
+        """Per axis, the most saturated time any window held since the last reset of the
+        state (s; the sustained-saturation check trips beyond ``max_saturated_fraction`` ×
+        ``saturation_window_s``): how close a run came to it."""
+        return [float(x) for x in self._mem[sk.M_SAT_PEAK:sk.M_SAT_PEAK + 3]]
 
     def reset_state(self) -> None:
         self.reaction = Reaction.NONE
@@ -604,6 +650,18 @@ class InterpretedSupervisor(Supervisor):
         self._overruns = 0
         self._pull_time = 0.0
         self._brakes_open_at = self.brake_release_s      # drives enabled at t = 0
+        self._restart_saturation_window()
+        self._sat_peak = [0.0, 0.0, 0.0]
+        self._stop_since = math.nan                    # since when a stop is latched (s)
+
+    def _restart_saturation_window(self) -> None:
+        self._sat_k = math.nan                         # the window's current bucket
+        self._sat_past = [0.0, 0.0, 0.0]               # saturated time in its other buckets
+        self._sat_buckets = [[0.0] * sk.SAT_BUCKETS for _ in range(3)]
+
+    @property
+    def saturated_peak_s(self) -> list[float]:
+        return list(self._sat_peak)
 
     @property
     def carry_force_n(self) -> list[float]:
@@ -629,6 +687,49 @@ class InterpretedSupervisor(Supervisor):
             step = (load - c) * dt / (CARRY_TAU_S + dt)
             cap = self.holding_force_n * dt / CARRY_TAU_S
             self._carry[i] = c + (cap if step > cap else (-cap if -cap > step else step))  # noqa: FURB136
+
+    def _saturated_time(self, t: float, dt: float, tau) -> list[float]:
+        """Each axis' time with its command at the drive's limit (``|τ| ≥``
+        ``applied_force_max_n``) in the last ``saturation_window_s`` (s), counted while the
+        drives are on: the window is ``SAT_BUCKETS`` buckets of loop time, those it left since
+        the last cycle emptied (all of them after a gap longer than it, or at the start)."""
+        if self.reaction < Reaction.SOFT_STOP:
+            self._stop_since = math.nan
+        elif math.isnan(self._stop_since):
+            self._stop_since = t
+        nb = sk.SAT_BUCKETS
+        window = self.limits.saturation_window_s
+        k = math.floor(t / (window / nb))
+        kf = float(k)
+        last = self._sat_k
+        buckets = self._sat_buckets
+        if kf != last:
+            if kf > last and kf - last < nb:
+                for j in range(int(last) + 1, k + 1):
+                    for i in range(3):
+                        buckets[i][j % nb] = 0.0
+            else:
+                for i in range(3):
+                    buckets[i][:] = [0.0] * nb
+            self._sat_k = kf
+            cur = k % nb
+            for i in range(3):
+                past = 0.0
+                for s in range(nb):
+                    if s != cur:
+                        past += buckets[i][s]
+                self._sat_past[i] = past
+        cur = k % nb
+        limit = self.applied_force_max_n
+        drives_on = self.reaction < Reaction.HARD_STOP
+        out = []
+        for i in range(3):
+            if drives_on and abs(tau[i]) >= limit:
+                buckets[i][cur] += dt
+            saturated = self._sat_past[i] + buckets[i][cur]
+            self._sat_peak[i] = max(self._sat_peak[i], saturated)
+            out.append(saturated)
+        return out
 
     def _frozen_net_force(self, i: int, load: float, lag_allowance: float) -> float:
         """The part of axis ``i``'s command that must accelerate it although its count has not
@@ -838,6 +939,17 @@ class InterpretedSupervisor(Supervisor):
                      count=self._overruns, dt=dt)
         else:
             self._overruns = 0
+        # -- sustained drive saturation
+        for i, saturated in enumerate(self._saturated_time(t, dt, tau)):
+            window = lim.saturation_window_s
+            if saturated > lim.max_saturated_fraction * window:
+                # A whole window into a soft stop and still saturated: the stop (an unstable
+                # force law ramping its force down) does not end it.
+                reaction = Reaction.HARD_STOP if t - self._stop_since >= window \
+                    else Reaction.SOFT_STOP
+                message, values = _saturation_text(i, reaction, saturated, window,
+                                                   self.applied_force_max_n)
+                trip(f"drive_saturated_{i}", reaction, message, **values)
         if self.heartbeat_required and self.heartbeat_age is not None:
             age = self.heartbeat_age()
             if age > lim.heartbeat_timeout_s:

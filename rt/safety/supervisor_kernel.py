@@ -52,7 +52,8 @@ C_FORCE_IMPL = C_FORCE_SAT + 2
 C_FORCE_LIMIT = C_FORCE_SAT + 3
 C_PULL = C_FORCE_SAT + 4
 C_DEADLINE = C_FORCE_SAT + 5                  # 35
-N_CAUSES = C_DEADLINE + 1
+C_DRIVE_SAT = C_DEADLINE + 1                  # per axis i: C_DRIVE_SAT + i (36-38)
+N_CAUSES = C_DRIVE_SAT + 3
 N_VALUES = 3
 
 # Reactions as the kernel's numbers (rt.safety.events.Reaction).
@@ -63,6 +64,10 @@ QUASI_STATIC_ACCEL = 0.5
 QUASI_STATIC_S = 0.01
 FROZEN_COUNTS = 4
 FORCE_CUSHION = 0.9
+#: The sustained-saturation window is kept as this many buckets of saturated time per axis
+#: (a bucketed sliding window: the saturated time of the last ``window`` ± one bucket, 2 % of
+#: it; the state is fixed whatever the loop's rate).
+SAT_BUCKETS = 50
 
 # ------------------------------------------------------------------------- par layout
 (P_STROKE_LO, P_STROKE_HI, P_STROKE_MARGIN, P_MAX_SPEED, P_MAX_ACCEL, P_MAX_COMMAND_V,
@@ -70,8 +75,8 @@ FORCE_CUSHION = 0.9
  P_PITCH_MAX, P_MAX_ANGULAR, P_ROM_TOL, P_DEADLINE_OVERRUNS, P_FROZEN_S, P_FROZEN_MIN_REF,
  P_MAX_PULL_S, P_PERIOD, P_ALPHA_STOP, P_JERK_TIME, P_AXIS_MASS, P_HOLDING, P_COUNT_M,
  P_CONTACT, P_GRACE, P_FORCE_CONTROL, P_SENSOR_X, P_SENSOR_Y, P_SENSOR_Z, P_FORCE_LAG,
- P_CONTACT_RELEASE, P_APPLIED_MAX) = range(34)
-PAR_SIZE = 34
+ P_CONTACT_RELEASE, P_APPLIED_MAX, P_SAT_WINDOW, P_SAT_FRACTION) = range(36)
+PAR_SIZE = 36
 
 # ------------------------------------------------------------------------- mem layout
 M_FROZEN_TIME = 0
@@ -87,7 +92,12 @@ M_CONTACT_UNTIL = 19  # loop time until which the platform counts as touched (co
 M_SHARE = 20         # last cycle's contact share per axis (N): its rate sizes the sensor-lag allowance
 M_SHARE_IN = 23      # this cycle's contact share (N), computed by ``block_cycle`` (scratch)
 M_QUIET = 26         # per axis: how long its estimated |q̈| has been quasi-static (s)
-M_REACT = 29
+M_SAT_K = 29         # the sustained-saturation window's current bucket: floor(t / bucket)
+M_SAT_PAST = 30      # per axis: saturated time in the window's completed buckets (s)
+M_SAT_PEAK = 33      # per axis: the most saturated time any window held since the reset (s)
+M_STOP_SINCE = 36    # since when a soft (or hard) stop is latched (loop time, s; NaN: none)
+M_SAT_BUCKETS = 37   # per axis SAT_BUCKETS buckets of saturated time (s), a ring
+M_REACT = M_SAT_BUCKETS + 3 * SAT_BUCKETS
 M_LATCHED = M_REACT + N_CAUSES
 M_REPORTED = M_LATCHED + N_CAUSES
 M_NEW = M_REPORTED + N_CAUSES
@@ -101,6 +111,8 @@ def new_mem() -> np.ndarray:
     mem[M_LAST_Q:M_LAST_Q + 3] = math.nan
     mem[M_CARRY:M_CARRY + 3] = math.nan
     mem[M_SHARE:M_SHARE + 3] = math.nan
+    mem[M_SAT_K] = math.nan
+    mem[M_STOP_SINCE] = math.nan
     return mem
 
 
@@ -182,6 +194,60 @@ def applied_force(tau, limit):
     force of the DAC's command limit, ``limit`` (N; inf: none), as :func:`outputs` saturates
     the volts. Spelled out so a NaN command stays NaN (as the interpreted check's)."""
     return limit if tau > limit else (-limit if -limit > tau else tau)  # noqa: FURB136
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _saturation(par, mem, t, dt, tau):
+    """The sustained-saturation check (the interpreted ``Supervisor._check_saturation``'s
+    arithmetic): each axis' time with its command at the drive's limit (``|τ| ≥``
+    ``P_APPLIED_MAX``, the force of the DAC's command limit) in the last ``P_SAT_WINDOW``
+    seconds, kept in SAT_BUCKETS buckets of loop time; more than ``P_SAT_FRACTION`` of the
+    window → soft stop; so while a soft stop has been latched for a whole window (whatever
+    latched it: the window's saturation is then the stop's own, an unstable force law ramping
+    its force down goes on shaking) → hard stop. Counted only while the drives are on (not in
+    a hard stop). Returns the number of new events."""
+    if mem[M_REACTION] < R_SOFT:
+        mem[M_STOP_SINCE] = math.nan
+    elif math.isnan(mem[M_STOP_SINCE]):
+        mem[M_STOP_SINCE] = t
+    window = par[P_SAT_WINDOW]
+    k = math.floor(t / (window / SAT_BUCKETS))
+    kf = float(k)
+    last = mem[M_SAT_K]
+    if kf != last:
+        # Buckets the window left since the last cycle are emptied: all of them after a gap
+        # longer than the window, on the first cycle (NaN) or if time went back.
+        if kf > last and kf - last < SAT_BUCKETS:
+            for j in range(int(last) + 1, k + 1):
+                s = j % SAT_BUCKETS
+                for i in range(3):
+                    mem[M_SAT_BUCKETS + SAT_BUCKETS * i + s] = 0.0
+        else:
+            for j in range(3 * SAT_BUCKETS):
+                mem[M_SAT_BUCKETS + j] = 0.0
+        mem[M_SAT_K] = kf
+        cur = k % SAT_BUCKETS
+        for i in range(3):
+            past = 0.0
+            for s in range(SAT_BUCKETS):
+                if s != cur:
+                    past += mem[M_SAT_BUCKETS + SAT_BUCKETS * i + s]
+            mem[M_SAT_PAST + i] = past
+    cur = k % SAT_BUCKETS
+    limit = par[P_APPLIED_MAX]
+    drives_on = mem[M_REACTION] < R_HARD
+    new = 0
+    for i in range(3):
+        b = M_SAT_BUCKETS + SAT_BUCKETS * i + cur
+        if drives_on and abs(tau[i]) >= limit:
+            mem[b] += dt
+        saturated = mem[M_SAT_PAST + i] + mem[b]
+        mem[M_SAT_PEAK + i] = max(mem[M_SAT_PEAK + i], saturated)
+        if saturated > par[P_SAT_FRACTION] * window:
+            stopped = t - mem[M_STOP_SINCE] >= window          # NaN (no stop): False
+            new += _trip(mem, C_DRIVE_SAT + i, R_HARD if stopped else R_SOFT, saturated,
+                         window, limit)
+    return new
 
 
 @njit(cache=True, error_model="numpy")
@@ -330,6 +396,8 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
             new += _trip(mem, C_DEADLINE, R_SOFT, mem[M_OVERRUNS], dt, nan)
     else:
         mem[M_OVERRUNS] = 0.0
+    # -- sustained drive saturation
+    new += _saturation(par, mem, t, dt, tau)
     return new
 
 
