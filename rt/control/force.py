@@ -101,6 +101,11 @@ class ExplicitForceGains(BaseModel):
     #: 3.44 %). The loop's builder hands it to the sequencer (``preview_steps``); the law's
     #: arithmetic does not use it.
     preview_s: Annotated[float, Field(ge=0.0, le=0.05, allow_inf_nan=False)] = 0.005
+    #: Gain schedule on the contact's stiffness: against a contact stiffer than this (the
+    #: estimate k̂), (1 + Kp) and the integral's rate are scaled by k_s / k̂, so the loop's
+    #: gain from height to force, (1 + Kp) k, stays what it is at k_s (module docstring).
+    #: 0: no schedule.
+    schedule_stiffness_n_per_m: Annotated[float, Field(ge=0.0, le=1e8, allow_inf_nan=False)] = 2.5e5
 
 
 #: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
@@ -124,6 +129,9 @@ EXPLICIT_FORCE_RANGES = {
     # Preview of a reference known in advance: a few times the loop's lag at most (the lag
     # measured on the twin is 3-5 ms); 0 = none.
     "preview_s": GainRange(0.0, 0.05, "s"),
+    # The stiffness above which the force loop's gains are scaled down (0: never): above the
+    # foot's (the heel pad 1e5 N/m, k̂ 0.75-2.4e5 over a stance), below a plate's (≥ 1e6).
+    "schedule_stiffness_n_per_m": GainRange(0.0, 1.0e8, "N/m"),
 }
 #: Admittance: a virtual mass below 1 kg or a rate above 0.2 m/s would let the platform jump
 #: at a patient's push; above 500 kg / 1e5 N s/m it no longer yields to a person.
@@ -190,7 +198,7 @@ class ExplicitForce:
         #: ``_fs`` (the properties below and the RLS are views of it).
         self.compiled = compiled
         self._fs = np.zeros(ck.FS_SIZE)
-        self._fg = np.zeros(14)
+        self._fg = np.zeros(ck.FG_SIZE)
         drive = model.description.drive
         #: The force a drive gives at its limit (N at the slider): the amplifier's current limit
         #: or its command limit, whichever binds first. The law holds its integral while a
@@ -210,7 +218,7 @@ class ExplicitForce:
                        g.stiffness_guess_n_per_m, 1.0 if g.estimate_stiffness else 0.0,
                        g.forgetting, g.preload_n, g.max_feedforward_speed_m_s,
                        g.max_feedforward_accel_m_s2, self.axis_inertia,
-                       self.drive_force_limit_n)
+                       self.drive_force_limit_n, g.schedule_stiffness_n_per_m)
 
     @property
     def integral(self) -> float:
@@ -302,11 +310,15 @@ class ExplicitForce:
         amax = g.max_feedforward_accel_m_s2
         z_ddot_ff = max(-amax, min(amax, f_ddot / k)) if abs(f_dot / k) < vmax else 0.0
         integral = self.integral
+        # The same float operations as the kernel (bit for bit).
+        sched = ck.gain_schedule.py_func(g.schedule_stiffness_n_per_m, k)
+        kp = (1.0 + g.kp) * sched - 1.0 if sched < 1.0 else g.kp
+        kp = max(0.0, kp)
         if not math.isnan(force_n):
             e = f_d - force_n
             limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
             if not ref.transient:
-                integral = max(-limit, min(limit, integral + e * dt))
+                integral = max(-limit, min(limit, integral + sched * e * dt))
             if g.estimate_stiffness and force_n > 50.0:
                 # Learn the contact's stiffness only while clearly in contact and moving a
                 # little; the estimate stays within 1/5..20× the guess, so a poorly excited
@@ -336,7 +348,7 @@ class ExplicitForce:
         held = self.integral
 
         def task(integ: float) -> float:
-            return f_d + g.kp * e + g.ki_per_s * integ - g.damping_n_s_per_m * (zd - z_dot_ff)
+            return f_d + kp * e + g.ki_per_s * integ - g.damping_n_s_per_m * (zd - z_dot_ff)
 
         fz = task(integral)
         if fz < floor and not force_n > floor:
