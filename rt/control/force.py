@@ -87,6 +87,14 @@ class ExplicitForceGains(BaseModel):
     integral_limit_n: Pos = 1500.0
     angle_kp_n_m_per_rad: Pos = 4000.0
     angle_kd_n_m_s_per_rad: Pos = 200.0
+    #: Integral action on roll and pitch: a contact's steady torque (a tip dragged across a
+    #: plate at its friction cone, μ N h ≈ 58 N m under 600 N; an off-centre load) would
+    #: otherwise leave the angles short by torque / angle Kp (0.8° here). 2e4: its zero at
+    #: Ki/Kp = 5 rad/s, well under the angle loop's ≈ 22 rad/s; it winds 58 N m in ≈ 0.2 s.
+    angle_ki_n_m_per_rad_s: NonNeg = 2.0e4
+    #: The angle integral's clamp (N m per axis): well above such torques, a fifth of what
+    #: the drives give about the platform's axes.
+    angle_integral_limit_n_m: Pos = 100.0
     stiffness_guess_n_per_m: Annotated[float, Field(ge=1e3, le=1e8)] = 1.0e5
     estimate_stiffness: bool = True
     forgetting: Annotated[float, Field(gt=0.9, le=1.0)] = 0.999
@@ -119,6 +127,8 @@ EXPLICIT_FORCE_RANGES = {
     "integral_limit_n": GainRange(1.0, 2500.0, "N"),
     "angle_kp_n_m_per_rad": GainRange(100.0, 5.0e4, "N m/rad"),
     "angle_kd_n_m_s_per_rad": GainRange(1.0, 2000.0, "N m s/rad"),
+    "angle_ki_n_m_per_rad_s": GainRange(0.0, 1.0e5, "N m/(rad s)"),
+    "angle_integral_limit_n_m": GainRange(1.0, 500.0, "N m"),
     "stiffness_guess_n_per_m": GainRange(1.0e3, 1.0e8, "N/m"),
     "forgetting": GainRange(0.9, 1.0, ""),
     # The floor the reference never goes below: the platform only pushes on a foot.
@@ -218,7 +228,8 @@ class ExplicitForce:
                        g.stiffness_guess_n_per_m, 1.0 if g.estimate_stiffness else 0.0,
                        g.forgetting, g.preload_n, g.max_feedforward_speed_m_s,
                        g.max_feedforward_accel_m_s2, self.axis_inertia,
-                       self.drive_force_limit_n, g.schedule_stiffness_n_per_m)
+                       self.drive_force_limit_n, g.schedule_stiffness_n_per_m,
+                       g.angle_ki_n_m_per_rad_s, g.angle_integral_limit_n_m)
 
     @property
     def integral(self) -> float:
@@ -250,6 +261,7 @@ class ExplicitForce:
         g = self.gains
         self.integral = 0.0
         fs = self._fs
+        fs[ck.FS_ANGLE_I:ck.FS_ANGLE_I + 2] = 0.0
         self.rls = _Rls(fs[ck.FS_THETA:ck.FS_THETA + 2], fs[ck.FS_P:ck.FS_P + 4].reshape(2, 2))
         self.rls.P[:] = np.eye(2)
         self.rls.theta[:] = 0.0
@@ -330,10 +342,15 @@ class ExplicitForce:
                 self._last_z = cfg.z
         else:
             e = 0.0
+        ki_a = g.angle_ki_n_m_per_rad_s
+        a_lim = g.angle_integral_limit_n_m / ki_a if ki_a > 0 else 0.0
+        ai = self._fs[ck.FS_ANGLE_I:ck.FS_ANGLE_I + 2]
+        ai[0] = max(-a_lim, min(a_lim, ai[0] + (ref.roll - cfg.roll) * dt))
+        ai[1] = max(-a_lim, min(a_lim, ai[1] + (ref.pitch - cfg.pitch) * dt))
         q_roll = (-g.angle_kp_n_m_per_rad * (cfg.roll - ref.roll)
-                  - g.angle_kd_n_m_s_per_rad * (rd - ref.roll_rate))
+                  - g.angle_kd_n_m_s_per_rad * (rd - ref.roll_rate) + ki_a * ai[0])
         q_pitch = (-g.angle_kp_n_m_per_rad * (cfg.pitch - ref.pitch)
-                   - g.angle_kd_n_m_s_per_rad * (pd - ref.pitch_rate))
+                   - g.angle_kd_n_m_s_per_rad * (pd - ref.pitch_rate) + ki_a * ai[1])
         # Everything but the z task force: τ = G + J_fkᵀ (0, Q_roll, Q_pitch), J_fk = rows
         # (z, roll, pitch) of S, plus the feedforward of the motion the force profile implies
         # (slider space via J_ik).

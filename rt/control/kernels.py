@@ -286,11 +286,12 @@ def _ro(a):
 # Explicit force law (``rt.control.force.ExplicitForce``). ``fg`` (float64) = [Kp, Ki, D,
 # integral limit, angle Kp, angle Kd, stiffness guess, estimate stiffness (0/1), forgetting,
 # preload, max ż_ff, max z̈_ff, axis inertia, drive force limit (N; ≤ 0: none), gain-schedule
-# stiffness k_s (N/m)]; ``fs``
-# (float64) = [∫e, last z, k̂, RLS θ (2), RLS P (2×2 row-major)]; the reference as scalars.
-FS_INTEGRAL, FS_LAST_Z, FS_K, FS_THETA, FS_P = 0, 1, 2, 3, 5
-FS_SIZE = 9
-FG_SIZE = 15
+# stiffness k_s (N/m), angle Ki (N m/(rad s)), angle integral limit (N m)]; ``fs``
+# (float64) = [∫e, last z, k̂, RLS θ (2), RLS P (2×2 row-major), ∫ roll error, ∫ pitch error];
+# the reference as scalars.
+FS_INTEGRAL, FS_LAST_Z, FS_K, FS_THETA, FS_P, FS_ANGLE_I = 0, 1, 2, 3, 5, 9
+FS_SIZE = 11
+FG_SIZE = 17
 
 
 @njit(cache=True)
@@ -356,8 +357,14 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
             fs[FS_LAST_Z] = z
     else:
         e = 0.0
-    q_roll = -fg[4] * (roll - roll_ref) - fg[5] * (rd - roll_rate_ref)
-    q_pitch = -fg[4] * (pitch - pitch_ref) - fg[5] * (pd_ - pitch_rate_ref)
+    ki_a = fg[15]
+    a_lim = fg[16] / ki_a if ki_a > 0 else 0.0
+    i_roll = max(-a_lim, min(a_lim, fs[FS_ANGLE_I] + (roll_ref - roll) * dt))
+    i_pitch = max(-a_lim, min(a_lim, fs[FS_ANGLE_I + 1] + (pitch_ref - pitch) * dt))
+    fs[FS_ANGLE_I] = i_roll
+    fs[FS_ANGLE_I + 1] = i_pitch
+    q_roll = -fg[4] * (roll - roll_ref) - fg[5] * (rd - roll_rate_ref) + ki_a * i_roll
+    q_pitch = -fg[4] * (pitch - pitch_ref) - fg[5] * (pd_ - pitch_rate_ref) + ki_a * i_pitch
     grav = work[0:3]
     zero = work[3:6]
     zero[0] = 0.0
