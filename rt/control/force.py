@@ -12,7 +12,8 @@ and the explicit law never commands a task force below F_min (its integral does 
 further down while the command is held there). The supervisor soft-stops if the measured F
 stays below 0 N anyway (``rt.safety.supervisor``).
 
-* ``ExplicitForce`` — Q_z = F_d + Kp (F_d − F) + Ki ∫(F_d − F) − D (ż − ż_ff), plus the
+* ``ExplicitForce`` — Q_z = F_d + Kp (F_d − F) + Ki ∫(F_d − F) − D (ż − ż_ff) (Kp, Ki
+  scheduled on the contact's stiffness, below), plus the
   feedforward of the motion the force profile implies through the contact stiffness k:
   ż_ff = Ḟ_d / k, z̈_ff = F̈_d / k, compensated with the model (friction F(q̇_ff), inertia).
   k is estimated online (recursive least squares on F against z, with forgetting) from an
@@ -20,12 +21,27 @@ stays below 0 N anyway (``rt.safety.supervisor``).
   0.5 BW in ~5 ms, which through a 1e5 N/m heel would ask 0.4 m/s of the platform, far beyond
   what its actuators can reach in that time; the bounded feedforward (z̈_ff too, by
   ``max_feedforward_accel_m_s2``) leaves the rest to the feedback instead of demanding
-  kilonewtons. Roll/pitch: PD on the angles with gravity compensation G(q).
+  kilonewtons. Roll/pitch: PID on the angles (integral below) with gravity compensation G(q).
   The integral is held (conditional integration) while a drive would be at its force limit
   in the direction the integral pushes (``drive_force_limit_n``: the amplifier's current or
   command limit), and while the reference is a rise beyond what the robot follows
   (``ForceReference.transient``): a heel strike asks 2.7-3 kN of ≈ 2 kN drives for a few ms,
   and an integral wound up there overshoots for tens of ms afterwards.
+  Gain schedule on the contact's stiffness (``schedule_stiffness_n_per_m``, k_s): through a
+  contact of stiffness k the force error moves the platform with the gain (1 + Kp) k (the 1 is
+  the contact pushing back), and the integral's loop runs at Ki / (1 + Kp). Tuned on the foot
+  (1e5 N/m), the same gains against the calibration plate (2e6 N/m) put the contact mode at
+  ≈ 57 Hz with ζ ≈ 0.05 (a 20 N step rings at 53 Hz on the twin), with less damping than the
+  sensor's filter and the loop's delay take away: only the sliders' Coulomb friction kept small
+  oscillations from growing, and a tip sliding at its friction cone grew them into a 28-33 Hz
+  limit cycle, the tip leaving the plate each cycle (ATI 0-1.1 kN, commands ±8.7 kN against
+  ≈ 2 kN drives). Above k_s both (1 + Kp) and the integral's rate are scaled by k_s / k̂ (k̂:
+  the online estimate below), so a stiffer contact has the loop's poles of k_s. k_s = 2.5e5:
+  above the foot's k̂ (0.75-2.4e5 over a stance: its figures unchanged); at 5e5 the shear
+  push under a fast roll still bounced (tests/test_force_stiff_contact.py).
+  Roll and pitch: PD plus an integral (``angle_ki_n_m_per_rad_s``, clamped): a tip dragged
+  across a plate at its friction cone resists with μ N h (≈ 60 N m under 600 N), which the PD
+  alone leaves 0.8° short.
   Preview (``preview_s``): a reference known in advance (a protocol's table) is read that far
   ahead by the sequencer; the hybrid controller tracks the read-ahead reference while the
   program asks more than the robot follows (``rt.components.protocol_blocks``), so the push
