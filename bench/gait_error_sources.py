@@ -66,6 +66,13 @@ def _before(pl: Any) -> None:
     c.force_law._pack_gains()
 
 
+def _unscheduled(pl: Any) -> None:
+    """The law before the stiffness gain schedule and the angle integral (issue 15's stuck
+    contact): the shipped law otherwise."""
+    pl.graph.component("controller").force_law.set_gains(schedule_stiffness_n_per_m=0.0,
+                                                          angle_ki_n_m_per_rad_s=0.0)
+
+
 def run_case(case: gf.Case, data: Path, law: str, model: RobotModel) -> dict[str, Any]:
     pl_of: dict[str, Any] = {}
     probe = _Probe("probe", pl_of)
@@ -76,6 +83,8 @@ def run_case(case: gf.Case, data: Path, law: str, model: RobotModel) -> dict[str
         pl = pl_of["pl"] = build(*args, **kwargs)
         if law == "before":
             _before(pl)
+        elif law == "unscheduled":
+            _unscheduled(pl)
         return pl
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -128,7 +137,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default=None, help="folder of the real C3D files")
     ap.add_argument("--cases", nargs="*", default=None, help="FILE:PLATE (default: every plate)")
-    ap.add_argument("--law", choices=("shipped", "before", "both"), default="both")
+    ap.add_argument("--law", choices=("shipped", "before", "unscheduled", "both", "stiff"),
+                    default="both",
+                    help="both: before and shipped; stiff: unscheduled (no stiffness gain "
+                         "schedule, no angle integral) and shipped")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     data = gf.data_dir(args.data)
@@ -140,19 +152,20 @@ def main() -> int:
     if args.cases:
         wanted = {(c.split(":")[0], int(c.split(":")[1])) for c in args.cases}
         cases = [c for c in cases if (c.file, c.plate) in wanted]
-    laws = ("before", "shipped") if args.law == "both" else (args.law,)
+    laws = {"both": ("before", "shipped"),
+            "stiff": ("unscheduled", "shipped")}.get(args.law, (args.law,))
     model = RobotModel.load()
     out = [run_case(c, data, law, model) for c in cases for law in laws]
     if args.json:
         print(json.dumps({"twin": True, "rows": out}))
         return 0
     print("gait replay error sources on the twin (twin figures, simulated time)")
-    print(f"{'file':22s} {'pl':>2s} {'law':8s} {'RMS %':>6s} {'least N':>7s} {'sensor':>6s} "
+    print(f"{'file':22s} {'pl':>2s} {'law':11s} {'RMS %':>6s} {'least N':>7s} {'sensor':>6s} "
           f"{'gov.':>5s} {'shift':>9s} {'@limit':>6s}  top windows")
     for r in out:
         tops = ", ".join(f"{w['from_s']:.1f} s {w['share'] * 100:.0f} %"
                          for w in r["top_windows"])
-        print(f"{r['file']:22s} {r['plate']:2d} {r['law']:8s} {r['rms_error_pct']:6.3f} "
+        print(f"{r['file']:22s} {r['plate']:2d} {r['law']:11s} {r['rms_error_pct']:6.3f} "
               f"{r['least_force_n']:7.2f} {r['sensor_pct']:6.2f} {r['governor_pct']:5.2f} "
               f"{r['best_shift_ms']:2d} ms {r['best_shift_pct']:4.2f} "
               f"{r['near_limit_share'] * 100:5.0f}%  {tops}")

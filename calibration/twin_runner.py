@@ -168,10 +168,14 @@ class TwinTrialRunner(TrialRunner):
                  model: RobotModel | None = None,
                  level_sigma_rad: float | None = math.radians(0.1),
                  moves: _SiteMoves | None = None,
-                 imperfections: RigImperfections | None = None) -> None:
-        """``imperfections``: the robot twin's rig effects (None: the default twin's)."""
+                 imperfections: RigImperfections | None = None,
+                 force_gains: dict | None = None) -> None:
+        """``imperfections``: the robot twin's rig effects (None: the default twin's);
+        ``force_gains``: the explicit-force law's gains (None: its defaults,
+        ``rt.control.force.ExplicitForceGains``)."""
         self.plate = plate
         self.imperfections = imperfections
+        self.force_gains = force_gains
         self.twin_plate = twin_plate
         self.model = model or RobotModel.load()
         self.seed = seed
@@ -210,7 +214,7 @@ class TwinTrialRunner(TrialRunner):
                                roll_min_deg=-10.0, roll_max_deg=10.0, pitch_min_deg=-10.0,
                                pitch_max_deg=10.0)
         pl = build_protocol_loop(sim_devices(twin, clock), gen, model, 1.0 / dt, "fast",
-                                 patient_limits=limits,
+                                 patient_limits=limits, force_gains=self.force_gains,
                                  extra_blocks=[tap, truth],
                                  extra_connections=[("force.wrench", "cal.wrench"),
                                                     ("encoders.q", "cal.q"),

@@ -245,11 +245,11 @@ def test_verify_plays_its_check_through_the_rt_process(rt_calibration_1800, tmp_
                      endpoint, "--load", "600"])
         out = json.loads(capsys.readouterr().out)
         # Acknowledged and run once more, as the operator would: a loaded machine's late loop
-        # (encoder_frozen), and the explicit-force loop's thin margin on the realistic twin,
-        # which overshot a 600 N hold into the force limit once in three full-suite runs
-        # (force_limit, force_saturated; issue 15's force-loop limit cycle, lead's note of
-        # 2026-11-26). The second attempt must pass.
-        retry = ("encoder_frozen", "force_limit", "force_saturated")
+        # (encoder_frozen). The second attempt must pass. A force_limit stop is not retried:
+        # the explicit-force law's margin against the plate's stiff contact is real now (its
+        # gains scheduled on the contact's stiffness: the fast-mode twin holds 600 N with
+        # 8 ms of added sensor latency, the unscheduled law stopped on force_limit at 2 ms).
+        retry = ("encoder_frozen",)
         if code == 0 or not any(c in out.get("error", "") for c in retry) or attempt:
             break
         _acknowledge(endpoint)
@@ -257,6 +257,12 @@ def test_verify_plays_its_check_through_the_rt_process(rt_calibration_1800, tmp_
     assert len(out["sites"]) == 3 and out["robot_time_s"] > 10.0
     index = read_campaign(tmp_path / f"check-{attempt}")
     assert index["runner"] == "RtTrialRunner"
+    # The 600 N holds, played by the RT process: no overshoot towards the force limit.
+    peaks = [float(np.max(-TrialData.load(tmp_path / f"check-{attempt}" / "trials"
+                                          / f"{e['id']}.npz").ati[:, 2]))
+             for e in index["trials"]]
+    print("verify 600 N holds, ATI peaks (N):", [round(p, 1) for p in peaks])
+    assert max(peaks) < 700.0, peaks
     m = out["metrics"]
     # Near the corners the twin plate's bending moves the COP by millimetres; the record's
     # correction takes most of it away.

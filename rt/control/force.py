@@ -12,7 +12,8 @@ and the explicit law never commands a task force below F_min (its integral does 
 further down while the command is held there). The supervisor soft-stops if the measured F
 stays below 0 N anyway (``rt.safety.supervisor``).
 
-* ``ExplicitForce`` — Q_z = F_d + Kp (F_d − F) + Ki ∫(F_d − F) − D (ż − ż_ff), plus the
+* ``ExplicitForce`` — Q_z = F_d + Kp (F_d − F) + Ki ∫(F_d − F) − D (ż − ż_ff) (Kp, Ki
+  scheduled on the contact's stiffness, below), plus the
   feedforward of the motion the force profile implies through the contact stiffness k:
   ż_ff = Ḟ_d / k, z̈_ff = F̈_d / k, compensated with the model (friction F(q̇_ff), inertia).
   k is estimated online (recursive least squares on F against z, with forgetting) from an
@@ -20,12 +21,27 @@ stays below 0 N anyway (``rt.safety.supervisor``).
   0.5 BW in ~5 ms, which through a 1e5 N/m heel would ask 0.4 m/s of the platform, far beyond
   what its actuators can reach in that time; the bounded feedforward (z̈_ff too, by
   ``max_feedforward_accel_m_s2``) leaves the rest to the feedback instead of demanding
-  kilonewtons. Roll/pitch: PD on the angles with gravity compensation G(q).
+  kilonewtons. Roll/pitch: PID on the angles (integral below) with gravity compensation G(q).
   The integral is held (conditional integration) while a drive would be at its force limit
   in the direction the integral pushes (``drive_force_limit_n``: the amplifier's current or
   command limit), and while the reference is a rise beyond what the robot follows
   (``ForceReference.transient``): a heel strike asks 2.7-3 kN of ≈ 2 kN drives for a few ms,
   and an integral wound up there overshoots for tens of ms afterwards.
+  Gain schedule on the contact's stiffness (``schedule_stiffness_n_per_m``, k_s): through a
+  contact of stiffness k the force error moves the platform with the gain (1 + Kp) k (the 1 is
+  the contact pushing back), and the integral's loop runs at Ki / (1 + Kp). Tuned on the foot
+  (1e5 N/m), the same gains against the calibration plate (2e6 N/m) put the contact mode at
+  ≈ 57 Hz with ζ ≈ 0.05 (a 20 N step rings at 53 Hz on the twin), with less damping than the
+  sensor's filter and the loop's delay take away: only the sliders' Coulomb friction kept small
+  oscillations from growing, and a tip sliding at its friction cone grew them into a 28-33 Hz
+  limit cycle, the tip leaving the plate each cycle (ATI 0-1.1 kN, commands ±8.7 kN against
+  ≈ 2 kN drives). Above k_s both (1 + Kp) and the integral's rate are scaled by k_s / k̂ (k̂:
+  the online estimate below), so a stiffer contact has the loop's poles of k_s. k_s = 2.5e5:
+  above the foot's k̂ (0.75-2.4e5 over a stance: its figures unchanged); at 5e5 the shear
+  push under a fast roll still bounced (tests/test_force_stiff_contact.py).
+  Roll and pitch: PD plus an integral (``angle_ki_n_m_per_rad_s``, clamped): a tip dragged
+  across a plate at its friction cone resists with μ N h (≈ 60 N m under 600 N), which the PD
+  alone leaves 0.8° short.
   Preview (``preview_s``): a reference known in advance (a protocol's table) is read that far
   ahead by the sequencer; the hybrid controller tracks the read-ahead reference while the
   program asks more than the robot follows (``rt.components.protocol_blocks``), so the push
@@ -87,6 +103,14 @@ class ExplicitForceGains(BaseModel):
     integral_limit_n: Pos = 1500.0
     angle_kp_n_m_per_rad: Pos = 4000.0
     angle_kd_n_m_s_per_rad: Pos = 200.0
+    #: Integral action on roll and pitch: a contact's steady torque (a tip dragged across a
+    #: plate at its friction cone, μ N h ≈ 58 N m under 600 N; an off-centre load) would
+    #: otherwise leave the angles short by torque / angle Kp (0.8° here). 2e4: its zero at
+    #: Ki/Kp = 5 rad/s, well under the angle loop's ≈ 22 rad/s; it winds 58 N m in ≈ 0.2 s.
+    angle_ki_n_m_per_rad_s: NonNeg = 2.0e4
+    #: The angle integral's clamp (N m per axis): well above such torques, a fifth of what
+    #: the drives give about the platform's axes.
+    angle_integral_limit_n_m: Pos = 100.0
     stiffness_guess_n_per_m: Annotated[float, Field(ge=1e3, le=1e8)] = 1.0e5
     estimate_stiffness: bool = True
     forgetting: Annotated[float, Field(gt=0.9, le=1.0)] = 0.999
@@ -101,6 +125,11 @@ class ExplicitForceGains(BaseModel):
     #: 3.44 %). The loop's builder hands it to the sequencer (``preview_steps``); the law's
     #: arithmetic does not use it.
     preview_s: Annotated[float, Field(ge=0.0, le=0.05, allow_inf_nan=False)] = 0.005
+    #: Gain schedule on the contact's stiffness: against a contact stiffer than this (the
+    #: estimate k̂), (1 + Kp) and the integral's rate are scaled by k_s / k̂, so the loop's
+    #: gain from height to force, (1 + Kp) k, stays what it is at k_s (module docstring).
+    #: 0: no schedule.
+    schedule_stiffness_n_per_m: Annotated[float, Field(ge=0.0, le=1e8, allow_inf_nan=False)] = 2.5e5
 
 
 #: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
@@ -114,6 +143,8 @@ EXPLICIT_FORCE_RANGES = {
     "integral_limit_n": GainRange(1.0, 2500.0, "N"),
     "angle_kp_n_m_per_rad": GainRange(100.0, 5.0e4, "N m/rad"),
     "angle_kd_n_m_s_per_rad": GainRange(1.0, 2000.0, "N m s/rad"),
+    "angle_ki_n_m_per_rad_s": GainRange(0.0, 1.0e5, "N m/(rad s)"),
+    "angle_integral_limit_n_m": GainRange(1.0, 500.0, "N m"),
     "stiffness_guess_n_per_m": GainRange(1.0e3, 1.0e8, "N/m"),
     "forgetting": GainRange(0.9, 1.0, ""),
     # The floor the reference never goes below: the platform only pushes on a foot.
@@ -124,6 +155,9 @@ EXPLICIT_FORCE_RANGES = {
     # Preview of a reference known in advance: a few times the loop's lag at most (the lag
     # measured on the twin is 3-5 ms); 0 = none.
     "preview_s": GainRange(0.0, 0.05, "s"),
+    # The stiffness above which the force loop's gains are scaled down (0: never): above the
+    # foot's (the heel pad 1e5 N/m, k̂ 0.75-2.4e5 over a stance), below a plate's (≥ 1e6).
+    "schedule_stiffness_n_per_m": GainRange(0.0, 1.0e8, "N/m"),
 }
 #: Admittance: a virtual mass below 1 kg or a rate above 0.2 m/s would let the platform jump
 #: at a patient's push; above 500 kg / 1e5 N s/m it no longer yields to a person.
@@ -190,7 +224,7 @@ class ExplicitForce:
         #: ``_fs`` (the properties below and the RLS are views of it).
         self.compiled = compiled
         self._fs = np.zeros(ck.FS_SIZE)
-        self._fg = np.zeros(14)
+        self._fg = np.zeros(ck.FG_SIZE)
         drive = model.description.drive
         #: The force a drive gives at its limit (N at the slider): the amplifier's current limit
         #: or its command limit, whichever binds first. The law holds its integral while a
@@ -210,7 +244,8 @@ class ExplicitForce:
                        g.stiffness_guess_n_per_m, 1.0 if g.estimate_stiffness else 0.0,
                        g.forgetting, g.preload_n, g.max_feedforward_speed_m_s,
                        g.max_feedforward_accel_m_s2, self.axis_inertia,
-                       self.drive_force_limit_n)
+                       self.drive_force_limit_n, g.schedule_stiffness_n_per_m,
+                       g.angle_ki_n_m_per_rad_s, g.angle_integral_limit_n_m)
 
     @property
     def integral(self) -> float:
@@ -242,6 +277,7 @@ class ExplicitForce:
         g = self.gains
         self.integral = 0.0
         fs = self._fs
+        fs[ck.FS_ANGLE_I:ck.FS_ANGLE_I + 2] = 0.0
         self.rls = _Rls(fs[ck.FS_THETA:ck.FS_THETA + 2], fs[ck.FS_P:ck.FS_P + 4].reshape(2, 2))
         self.rls.P[:] = np.eye(2)
         self.rls.theta[:] = 0.0
@@ -302,11 +338,15 @@ class ExplicitForce:
         amax = g.max_feedforward_accel_m_s2
         z_ddot_ff = max(-amax, min(amax, f_ddot / k)) if abs(f_dot / k) < vmax else 0.0
         integral = self.integral
+        # The same float operations as the kernel (bit for bit).
+        sched = ck.gain_schedule.py_func(g.schedule_stiffness_n_per_m, k)
+        kp = (1.0 + g.kp) * sched - 1.0 if sched < 1.0 else g.kp
+        kp = max(0.0, kp)
         if not math.isnan(force_n):
             e = f_d - force_n
             limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
             if not ref.transient:
-                integral = max(-limit, min(limit, integral + e * dt))
+                integral = max(-limit, min(limit, integral + sched * e * dt))
             if g.estimate_stiffness and force_n > 50.0:
                 # Learn the contact's stiffness only while clearly in contact and moving a
                 # little; the estimate stays within 1/5..20× the guess, so a poorly excited
@@ -318,10 +358,15 @@ class ExplicitForce:
                 self._last_z = cfg.z
         else:
             e = 0.0
+        ki_a = g.angle_ki_n_m_per_rad_s
+        a_lim = g.angle_integral_limit_n_m / ki_a if ki_a > 0 else 0.0
+        ai = self._fs[ck.FS_ANGLE_I:ck.FS_ANGLE_I + 2]
+        ai[0] = max(-a_lim, min(a_lim, ai[0] + (ref.roll - cfg.roll) * dt))
+        ai[1] = max(-a_lim, min(a_lim, ai[1] + (ref.pitch - cfg.pitch) * dt))
         q_roll = (-g.angle_kp_n_m_per_rad * (cfg.roll - ref.roll)
-                  - g.angle_kd_n_m_s_per_rad * (rd - ref.roll_rate))
+                  - g.angle_kd_n_m_s_per_rad * (rd - ref.roll_rate) + ki_a * ai[0])
         q_pitch = (-g.angle_kp_n_m_per_rad * (cfg.pitch - ref.pitch)
-                   - g.angle_kd_n_m_s_per_rad * (pd - ref.pitch_rate))
+                   - g.angle_kd_n_m_s_per_rad * (pd - ref.pitch_rate) + ki_a * ai[1])
         # Everything but the z task force: τ = G + J_fkᵀ (0, Q_roll, Q_pitch), J_fk = rows
         # (z, roll, pitch) of S, plus the feedforward of the motion the force profile implies
         # (slider space via J_ik).
@@ -336,7 +381,7 @@ class ExplicitForce:
         held = self.integral
 
         def task(integ: float) -> float:
-            return f_d + g.kp * e + g.ki_per_s * integ - g.damping_n_s_per_m * (zd - z_dot_ff)
+            return f_d + kp * e + g.ki_per_s * integ - g.damping_n_s_per_m * (zd - z_dot_ff)
 
         fz = task(integral)
         if fz < floor and not force_n > floor:

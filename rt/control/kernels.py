@@ -298,7 +298,7 @@ def warm_up(dyn) -> None:
         pd_gravity_desired(ti, tf, kin.geom, kin.limits_array, kin._phi_guess.copy(), st.buf,
                            np.array(cfg.q) if z3 is writable else _ro(np.array(cfg.q)), z3,
                            gains, g0, np.zeros(g0_scratch_size(work.shape[0])), out)
-    fg = np.ones(14)
+    fg = np.ones(FG_SIZE)
     fs = np.ones(FS_SIZE)
     explicit_force(ti, tf, st.buf, fg, fs, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
                    1e-3, np.zeros(30 + rb.work_size(TREE_DOF)), out)
@@ -314,10 +314,13 @@ def _ro(a):
 
 # Explicit force law (``rt.control.force.ExplicitForce``). ``fg`` (float64) = [Kp, Ki, D,
 # integral limit, angle Kp, angle Kd, stiffness guess, estimate stiffness (0/1), forgetting,
-# preload, max ż_ff, max z̈_ff, axis inertia, drive force limit (N; ≤ 0: none)]; ``fs``
-# (float64) = [∫e, last z, k̂, RLS θ (2), RLS P (2×2 row-major)]; the reference as scalars.
-FS_INTEGRAL, FS_LAST_Z, FS_K, FS_THETA, FS_P = 0, 1, 2, 3, 5
-FS_SIZE = 9
+# preload, max ż_ff, max z̈_ff, axis inertia, drive force limit (N; ≤ 0: none), gain-schedule
+# stiffness k_s (N/m), angle Ki (N m/(rad s)), angle integral limit (N m)]; ``fs``
+# (float64) = [∫e, last z, k̂, RLS θ (2), RLS P (2×2 row-major), ∫ roll error, ∫ pitch error];
+# the reference as scalars.
+FS_INTEGRAL, FS_LAST_Z, FS_K, FS_THETA, FS_P, FS_ANGLE_I = 0, 1, 2, 3, 5, 9
+FS_SIZE = 11
+FG_SIZE = 17
 
 
 @njit(cache=True)
@@ -347,11 +350,14 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
     z_ddot_ff = max(-amax, min(amax, f_ddot / k)) if abs(f_dot / k) < vmax else 0.0
     integral = fs[FS_INTEGRAL]
     ki = fg[1]
+    sched = gain_schedule(fg[14], k)
+    kp = (1.0 + fg[0]) * sched - 1.0 if sched < 1.0 else fg[0]
+    kp = max(0.0, kp)
     if not math.isnan(force_n):
         e = f_d - force_n
         limit = fg[3] / ki if ki > 0 else 0.0
         if hold == 0.0:
-            integral = max(-limit, min(limit, integral + e * dt))
+            integral = max(-limit, min(limit, integral + sched * e * dt))
         if fg[7] != 0.0 and force_n > 50.0:
             last_z = fs[FS_LAST_Z]
             if not math.isnan(last_z) and abs(z - last_z) > 1e-7:
@@ -380,8 +386,14 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
             fs[FS_LAST_Z] = z
     else:
         e = 0.0
-    q_roll = -fg[4] * (roll - roll_ref) - fg[5] * (rd - roll_rate_ref)
-    q_pitch = -fg[4] * (pitch - pitch_ref) - fg[5] * (pd_ - pitch_rate_ref)
+    ki_a = fg[15]
+    a_lim = fg[16] / ki_a if ki_a > 0 else 0.0
+    i_roll = max(-a_lim, min(a_lim, fs[FS_ANGLE_I] + (roll_ref - roll) * dt))
+    i_pitch = max(-a_lim, min(a_lim, fs[FS_ANGLE_I + 1] + (pitch_ref - pitch) * dt))
+    fs[FS_ANGLE_I] = i_roll
+    fs[FS_ANGLE_I + 1] = i_pitch
+    q_roll = -fg[4] * (roll - roll_ref) - fg[5] * (rd - roll_rate_ref) + ki_a * i_roll
+    q_pitch = -fg[4] * (pitch - pitch_ref) - fg[5] * (pd_ - pitch_rate_ref) + ki_a * i_pitch
     grav = work[0:3]
     zero = work[3:6]
     zero[0] = 0.0
@@ -410,7 +422,7 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
         out[i] = (grav[i] + S[11, i] * q_roll + S[10, i] * q_pitch
                   + fric[i] + fg[12] * (jik[i, 0] * z_ddot_ff))
     held = fs[FS_INTEGRAL]
-    fz = _task_fz(fg, f_d, e, integral, zd, z_dot_ff, force_n)
+    fz = _task_fz(fg, kp, f_d, e, integral, zd, z_dot_ff)
     if fz < floor and not force_n > floor:
         fz = floor
         integral = max(held, integral)
@@ -419,16 +431,27 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
         # (conditional integration), so a heel strike the drives cannot follow does not
         # leave ∫e wound up to overshoot for tens of ms once they catch up.
         integral = held
-        fz = _task_fz(fg, f_d, e, integral, zd, z_dot_ff, force_n)
+        fz = _task_fz(fg, kp, f_d, e, integral, zd, z_dot_ff)
     fs[FS_INTEGRAL] = integral
     for i in range(3):
         out[i] += S[8, i] * fz
 
 
 @njit(cache=True)
-def _task_fz(fg, f_d, e, integral, zd, z_dot_ff, force_n):
-    """Q_z = F_d + Kp e + Ki ∫e − D (ż − ż_ff) (N)."""
-    return f_d + fg[0] * e + fg[1] * integral - fg[2] * (zd - z_dot_ff)
+def gain_schedule(k_s, k_est):
+    """The force loop's gain scale s = min(1, k_s / k̂) against a contact stiffer than ``k_s``
+    (N/m; ≤ 0: none). Through a contact of stiffness k the force error acts on the platform's
+    height with the gain (1 + Kp) k: scaling (1 + Kp) and the integral's rate by s keeps the
+    loop's poles where they are at k_s (``rt.control.force`` explains why)."""
+    if k_s <= 0.0 or not k_est > k_s:
+        return 1.0
+    return k_s / k_est
+
+
+@njit(cache=True)
+def _task_fz(fg, kp, f_d, e, integral, zd, z_dot_ff):
+    """Q_z = F_d + Kp e + Ki ∫e − D (ż − ż_ff) (N), Kp the scheduled gain."""
+    return f_d + kp * e + fg[1] * integral - fg[2] * (zd - z_dot_ff)
 
 
 @njit(cache=True)

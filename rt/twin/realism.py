@@ -56,11 +56,11 @@ Two things separate a real rig from the model its controllers use:
      On by default (±15 mV, the identification engineer's value). It was off for a while: the
      supervisor's frozen-encoder check stopped the calibration's shear pushes with it; the
      check now balances each axis' applied force against the measured contact's share and
-     the static load (``rt.safety.supervisor``, issue 15). The offset does tip the hybrid
+     the static load (``rt.safety.supervisor``, issue 15). The offset used to tip the hybrid
      force/angle loop into a limit cycle during a shear push's roll against the plate's stuck
-     tip (twin figures: 28 Hz, drives saturated both ways, ATI 0-1.4 kN; without it the same
-     roll holds 600-712 N): a margin problem of that force law, which a real rig's offsets
-     would meet too (``tests/test_calibration_frozen_encoder.py``'s strict xfail).
+     tip (twin figures: 28 Hz, drives saturated both ways, ATI 0-1.4 kN): a margin problem of
+     that force law against the plate's stiffness, which its gain schedule on the contact's
+     stiffness removed (``rt.control.force``; ``tests/test_force_stiff_contact.py``).
 
 ``RigImperfections.none()`` switches every effect off (an ideal twin: for tests of the ideal
 physics). Units: SI throughout.
