@@ -13,7 +13,6 @@ from calibration.plan import ProfileKind, Trial, default_plan, force_profile
 from calibration.plate import TWIN_PLATE_FILE, cop_F, load_plate
 from calibration.twin_plate import TruthSettings, TwinPlate, draw_truth, expected_matrix
 from calibration.twin_runner import TwinTrialRunner
-from rt.errors import SafetyTrip
 
 
 @pytest.fixture(scope="module")
