@@ -11,8 +11,10 @@ figures.
 Components:
 * amplifier: the commands as the fit aligns them (held half period, then the description's
   amplifier delay and current loop: ``estimate.amplifier_to_positions``) minus the force the
-  twin's current loop delivered; ``--half-period-only`` aligns by the held half period alone
-  (the estimator before the description had the amplifier);
+  twin's amplifiers delivered (the held commands plus their input offsets through the truth's
+  current loop, band-limited; see ``main``); ``--half-period-only`` aligns by the held half
+  period alone (the estimator before the description had the amplifier); of which the input
+  offsets (a constant force per axis: read as gravity, i.e. as masses);
 * screw, total: the delivered force minus the truth's rigid-body inverse dynamics at the motor
   states (everything the screw, its friction split and backlash, the ripple, the warming
   grease, the ATI tool and cable add);
@@ -101,8 +103,8 @@ def main() -> None:
     nominal = load_description()
     model = RobotModel.from_description(nominal)
     truth = default_truth()
-    q, tau, st, fpa = record_with_states(optimize_excitation(model), args.seconds, model, truth)
-    qs, qds, xm, vm, cur, cable, sv, sc = (st[:, k] for k in range(8))
+    q, tau, st, _fpa = record_with_states(optimize_excitation(model), args.seconds, model, truth)
+    qs, qds, xm, vm, _cur, cable, sv, sc = (st[:, k] for k in range(8))
     reg = Regressor(model.dyn)
     tb = truth_base(truth, reg.base.names)
     imp = RigImperfections()
@@ -140,7 +142,18 @@ def main() -> None:
     dt = 1.0 / RATE_HZ
     am = np.gradient(vm, dt, axis=0)
     aqs = np.gradient(qds, dt, axis=0)
-    f_app = fpa * cur
+    # What the amplifiers delivered, band-limited: the held commands plus the input offsets
+    # through the truth's current loop and delay, which the twin realises exactly (the mean
+    # current over each substep; ``tests/test_amplifier_description.py``). The current the
+    # twin ends each period with is not that: after a held period it has all but reached that
+    # period's command, i.e. it lags the commands by about a whole period, where the force's
+    # band-limited equivalent lags them by T/2 + the amplifier's lag; comparing the aligned
+    # commands with it (as this bench did) put a fictitious 0.2-0.4 ms shift, read as
+    # −0.2…−0.9 % of fv, on the amplifier's row, and its opposite on the screw's.
+    offsets_n = RigImperfections().amplifier_offsets_v() * truth.drive.force_per_volt_n
+    f_app = E.amplifier_to_positions(tau + offsets_n, RATE_HZ,
+                                     truth.drive.current_loop_bandwidth_hz,
+                                     truth.drive.amplifier_delay_s)
     slider_side = truth.model_dump()
     slider_side["drive"]["rotor_inertia_per_axis_kg_m2"] = [1e-12] * 3
     for k in ("viscous_per_axis_n_s_per_m", "coulomb_per_axis_n", "static_per_axis_n"):
@@ -164,7 +177,8 @@ def main() -> None:
                                             * np.sign(vm))
     components = {
         # The commands at the positions' instants (held half a period), as the fit sees them.
-        "amplifier (τ cmd − delivered)": data.tau - f_app,
+        "amplifier (aligned τ − delivered)": data.tau - f_app,
+        "of which: its input offsets": np.tile(-offsets_n, (len(tau), 1)),
         "screw, total (delivered − τ(xm))": f_app - _inverse_dynamics(
             RobotModel.from_description(truth), xm, vm, am),
         "slider inertia at slider vs motor": (_inverse_dynamics(ms, qs, qds, aqs)

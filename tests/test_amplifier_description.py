@@ -75,7 +75,7 @@ def test_round_trip_through_a_file(tmp_path, raw):
 
 def test_the_twin_runs_its_truths_amplifier_and_has_no_second_number(raw):
     with pytest.raises(ValidationError):                       # no bandwidth of its own
-        RigImperfections(current_loop_bandwidth_hz=1000.0)  # type: ignore[call-arg]
+        RigImperfections(current_loop_bandwidth_hz=1000.0)
     truth = description_from_dict(_amplifier(raw, 200.0, 3.0e-4))
     plant = TwinPlant(truth)                                    # 5 kHz substeps
     h = 1.0 / plant.physics_rate_hz
