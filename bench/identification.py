@@ -58,7 +58,7 @@ def slowed(exc: FourierExcitation, factor: float) -> FourierExcitation:
 
 
 def identify_run(q, tau, val, reg, nominal, truth) -> dict[str, Any]:
-    data = prepare(q, tau, RATE_HZ)
+    data = prepare(q, tau, RATE_HZ, amplifier=nominal.drive)
     est = estimate_base(reg, data)
     tb = truth_base(truth, est.names)
     rows = [{"name": n, "truth": float(t), "estimate": float(e), "sigma": float(s),
@@ -95,7 +95,7 @@ def main() -> None:
         def __call__(self, t, out):
             benchmark_reference(self.q0)(t, out)
     vq, vtau = raw_record(_Bench(), args.seconds, model, truth, imp, seed=1)
-    val = prepare(vq, vtau, RATE_HZ)
+    val = prepare(vq, vtau, RATE_HZ, amplifier=model.description.drive)
     reg = Regressor(model.dyn)
     runs = {"at the limits": exc}
     if args.slow > 0.0:

@@ -13,7 +13,7 @@ NONE = RigImperfections.none()
 
 def test_offset_drives_current_with_a_zero_command_only_while_enabled():
     imp = NONE.model_copy(update={"amplifier_offset_v": 0.015,
-                                  "current_loop_bandwidth_hz": 1000.0})
+                                  "amplifier_dynamics": True})   # the file's 1 kHz
     offsets = imp.amplifier_offsets_v()
     assert np.all(np.abs(offsets) <= 0.015) and len(set(offsets.tolist())) == 3
     assert np.array_equal(offsets, imp.amplifier_offsets_v())              # seeded

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rt.model import RobotModel
-from rt.model.description import load_description
+from rt.model.description import RobotDescription, load_description
 from rt.model.dynamics import Payload
 from rt.twin.plant import TwinPlant
 from rt.twin.realism import RigImperfections, default_truth, perturbed_truth
@@ -65,9 +65,17 @@ def test_backlash_adds_half_its_width_to_the_deflection():
     np.testing.assert_allclose(diff, 1.0e-5, rtol=0.02)    # gravity takes up one side
 
 
+def _with_amplifier(bandwidth_hz: float, delay_s: float):
+    data = load_description().model_dump()
+    data["drive"].update(current_loop_bandwidth_hz=bandwidth_hz, amplifier_delay_s=delay_s)
+    return RobotDescription.model_validate(data)
+
+
 def test_current_loop_lags_and_is_delayed():
-    imp = only(current_loop_bandwidth_hz=1000.0, amplifier_delay_s=2.0e-4)
-    plant = TwinPlant(load_description(), physics_rate_hz=50_000.0, imperfections=imp)
+    # The amplifier is the truth description's (its datasheet), switched on by the twin.
+    imp = only(amplifier_dynamics=True)
+    plant = TwinPlant(_with_amplifier(1000.0, 2.0e-4), physics_rate_hz=50_000.0,
+                      imperfections=imp)
     plant.set_state((0.2, 0.2, 0.2))
     plant.advance(2.0e-4, (1.0, 1.0, 1.0))                  # within the transport delay
     assert np.all(plant.current == 0.0)

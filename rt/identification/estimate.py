@@ -2,8 +2,10 @@
 
 Data: slider positions from the encoders and the actuator forces the drives were commanded
 (current-mode amplifiers: force = command V × force per volt), recorded at the loop rate. Each
-command is held by the DAC for one period after its row's positions were read, so the forces
-are first aligned to the positions' instants (:func:`held_to_positions`: half a period).
+command is held by the DAC for one period after its row's positions were read, and the
+amplifier's current loop delivers it late and filtered, so the forces are first aligned to the
+positions' instants (:func:`held_to_positions`: half a period; :func:`amplifier_to_positions`:
+that and the amplifier's response, from the description's ``drive`` datasheet figures).
 
 Filtering (Gautier's *parallel filtering*): the model is linear in the parameters, τ = W θ, but
 W is a nonlinear function of the states — the Coulomb column is sign(q̇) smoothed over
@@ -68,7 +70,7 @@ import scipy.signal
 
 from rt.errors import ConfigurationError, TalusError
 from rt.model import RobotModel
-from rt.model.description import RobotDescription, description_from_dict
+from rt.model.description import Drive, RobotDescription, description_from_dict
 from rt.model.regressor import INERTIAL_NAMES, N_RIGID, STANDARD_NAMES, Regressor
 
 #: Parallel filter (regressor columns and forces alike), Hz.
@@ -134,12 +136,54 @@ def held_to_positions(tau: np.ndarray) -> np.ndarray:
     return out
 
 
+def amplifier_to_positions(tau: np.ndarray, rate_hz: float, bandwidth_hz: float,
+                           delay_s: float) -> np.ndarray:
+    """The force current-mode amplifiers deliver for held commands, at the positions' instants.
+
+    Row j's command is held over [t_j, t_j + T] (:func:`held_to_positions`), reaches the
+    current loop ``delay_s`` later (DAC settling, one PWM period) and is followed by it as a
+    first-order lag of ``bandwidth_hz`` (time constant τ_c = 1/(2π bandwidth)). At the
+    excitation's frequencies the hold and the delay are a pure delay of T/2 + delay, applied
+    here as a fractional delay (linear interpolation between rows: the half period alone gives
+    exactly :func:`held_to_positions`' mean); the lag is applied as its bilinear (Tustin)
+    discretization, whose phase and gain match the continuous lag's below a tenth of the rate
+    (its low-frequency delay is τ_c). Left out, the lag and the delay are a shift between τ and
+    W beyond the half period (0.26 ms at the nominal 1 kHz / 100 µs), which least squares reads
+    as J_r δ ω² of negative viscous friction: on a realistic twin that realises the documented
+    amplifier (branch ident5-exact-amp; 40 s, one recording, ``bench/identification_bias.py``)
+    fv −0.29 / −0.83 / −1.02 % with the half period alone, −0.06 / −0.36 / −0.91 % aligned;
+    a 100 Hz amplifier (2.1 ms) left out reads fv1 −3.8 % (``tests/test_ident_amplifier.py``)."""
+    out = np.array(tau, float)
+    if rate_hz <= 0.0 or bandwidth_hz < 0.0 or delay_s < 0.0:
+        raise IdentificationError(f"amplifier alignment needs a positive rate and a non-negative "
+                                  f"bandwidth and delay (got {rate_hz}, {bandwidth_hz}, "
+                                  f"{delay_s})")
+    period = 1.0 / rate_hz
+    whole, frac = divmod((0.5 * period + delay_s) / period, 1.0)
+    k = int(whole)
+    if k or frac:
+        # out[j] = (1 − f) τ[j − k] + f τ[j − k − 1]; the first rows repeat the first command
+        # (the edges are left out of the fit, EDGE_S).
+        padded = np.concatenate((np.repeat(out[:1], k + 1, axis=0), out))
+        n = len(out)
+        out = ((1.0 - frac) * padded[1:n + 1] + frac * padded[:n])
+    if bandwidth_hz > 0.0:
+        wc = 2.0 * math.pi * bandwidth_hz
+        b, a = scipy.signal.bilinear([1.0], [1.0 / wc, 1.0], fs=rate_hz)
+        zi = scipy.signal.lfilter_zi(b, a)
+        out = np.column_stack([scipy.signal.lfilter(b, a, out[:, i], zi=zi * out[0, i])[0]
+                               for i in range(out.shape[1])])
+    return out
+
+
 def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float,
-            filtering: str = "parallel", held: bool = True) -> IdentificationData:
+            filtering: str = "parallel", held: bool = True,
+            amplifier: Drive | None = None) -> IdentificationData:
     """Filter and differentiate a recording (see module docstring). ``held``: ``tau`` are the
     commands of a sampled loop, each held for one period after its row's positions were read
-    (:func:`held_to_positions` aligns them); ``False``: forces sampled at the positions'
-    instants (synthetic data)."""
+    (:func:`held_to_positions` aligns them; with ``amplifier``, the description's drive, also
+    by the amplifier's delay and current loop: :func:`amplifier_to_positions`); ``False``:
+    forces sampled at the positions' instants (synthetic data)."""
     q = np.asarray(q, float)
     tau = np.asarray(tau, float)
     if filtering not in FILTERING:
@@ -165,8 +209,14 @@ def prepare(q: np.ndarray, tau: np.ndarray, rate_hz: float,
     qf = scipy.signal.sosfiltfilt(sos, q, axis=0)
     qd = np.gradient(qf, dt, axis=0)
     qdd = np.gradient(qd, dt, axis=0)
-    return IdentificationData(qf, qd, qdd, held_to_positions(tau) if held else tau,
-                              float(rate_hz))
+    if not held:
+        applied = tau
+    elif amplifier is None:
+        applied = held_to_positions(tau)
+    else:
+        applied = amplifier_to_positions(tau, rate_hz, amplifier.current_loop_bandwidth_hz,
+                                         amplifier.amplifier_delay_s)
+    return IdentificationData(qf, qd, qdd, applied, float(rate_hz))
 
 
 def _parallel(data: IdentificationData, per_sample: np.ndarray) -> np.ndarray:

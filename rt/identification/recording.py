@@ -75,7 +75,7 @@ class ExcitationRecording:
         # Zero-order hold: the last command written at or before each grid instant.
         k = np.clip(np.searchsorted(self.t, grid + 1e-9, side="right") - 1, 0, len(self.t) - 1)
         tau = self.volts[k] * description.drive.force_per_volt_n
-        return prepare(q, tau, rate)
+        return prepare(q, tau, rate, amplifier=description.drive)
 
 
 def load_excitation_recording(path: str | Path) -> ExcitationRecording:

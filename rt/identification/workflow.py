@@ -24,6 +24,18 @@ def record(excitation: FourierExcitation, seconds: float, model: RobotModel,
            truth: RobotDescription | None = None,
            imperfections: RigImperfections | None = None, seed: int = 0) -> IdentificationData:
     """Run the excitation on the twin for ``seconds`` and return the prepared data."""
+    q, tau = record_commands(excitation, seconds, model, truth, imperfections, seed)
+    # Aligned by the amplifier the lab believes (its datasheet, in the description).
+    return prepare(q, tau, RATE_HZ, amplifier=model.description.drive)
+
+
+def record_commands(excitation: FourierExcitation, seconds: float, model: RobotModel,
+                    truth: RobotDescription | None = None,
+                    imperfections: RigImperfections | None = None,
+                    seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Run the excitation on the twin for ``seconds``: the encoder positions (m) and the
+    commanded actuator forces (N, the supervisor's volts × the model's force per volt), one
+    row per loop cycle, before :func:`rt.identification.estimate.prepare`."""
     twin = Twin(truth, seed=seed, imperfections=imperfections)
     twin.place((excitation.q0,) * 3)
     pl = build_sim_position_loop("paden_panja", None, excitation, seconds, rate_hz=RATE_HZ,
@@ -43,10 +55,9 @@ def record(excitation: FourierExcitation, seconds: float, model: RobotModel,
         raise IdentificationError(f"the supervisor stopped the excitation: {events}")
     rows, _ = pl.recorder.drain(start)
     rows = rows[:n]
-    q = rows[:, 1:4]
+    q = rows[:, 1:4].copy()
     volts = rows[:, 13:16]
-    tau = volts * model.description.drive.force_per_volt_n
-    return prepare(q, tau, RATE_HZ)
+    return q, volts * model.description.drive.force_per_volt_n
 
 
 def truth_base(truth: RobotDescription, reg_names: list[str]) -> np.ndarray:

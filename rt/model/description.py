@@ -106,6 +106,10 @@ class SensorMount(_Strict):
 
 
 PositiveVector3 = Annotated[list[PositiveFloat], Field(min_length=3, max_length=3)]
+#: Bounds of the amplifier's fields: a current loop is closed below its PWM frequency (tens of
+#: kHz), and a delay beyond a millisecond is not an amplifier's (it would be the loop's own).
+CURRENT_LOOP_MAX_HZ = 50_000.0
+AMPLIFIER_DELAY_MAX_S = 1.0e-3
 NonNegativeVector3 = Annotated[list[NonNegativeFloat], Field(min_length=3, max_length=3)]
 
 
@@ -119,6 +123,16 @@ class Drive(_Strict):
     amplifier_gain_a_per_v: PositiveFloat
     command_limit_v: PositiveFloat
     current_limit_a: PositiveFloat
+    #: The current-mode amplifiers' response to a command step (the amplifier's datasheet; the
+    #: thesis does not name its amplifiers): the current loop's −3 dB bandwidth (Hz; analog
+    #: servo amplifiers in current mode close it at 1-3 kHz, the default takes the slow end)
+    #: after a transport delay (s; DAC settling plus one PWM period of a 10-20 kHz amplifier
+    #: ≈ 100 µs). Optional in a file (the defaults below). The twin runs its truth's values;
+    #: identification aligns the commanded forces by the believed ones (``rt.identification``).
+    current_loop_bandwidth_hz: Annotated[float, Field(gt=0.0, le=CURRENT_LOOP_MAX_HZ,
+                                                      allow_inf_nan=False)] = 1000.0
+    amplifier_delay_s: Annotated[float, Field(ge=0.0, le=AMPLIFIER_DELAY_MAX_S,
+                                              allow_inf_nan=False)] = 1.0e-4
 
     @property
     def reflected_inertia_kg(self) -> float:
@@ -138,6 +152,11 @@ class Drive(_Strict):
         """Screw force per motor current: Kt η 2π / lead (N/A)."""
         return (self.torque_constant_n_m_per_a * self.screw_efficiency * 2.0 * math.pi
                 / self.screw_lead_m)
+
+    @property
+    def current_loop_time_constant_s(self) -> float:
+        """The current loop's first-order time constant 1 / (2π bandwidth) (s)."""
+        return 1.0 / (2.0 * math.pi * self.current_loop_bandwidth_hz)
 
     @property
     def force_per_volt_n(self) -> float:

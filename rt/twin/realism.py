@@ -12,9 +12,14 @@ Two things separate a real rig from the model its controllers use:
    and datasheet orders of magnitude *before* any comparison with the thesis (none of them is
    fitted to the thesis's figures):
 
-   * current loop: a first-order lag of bandwidth ``current_loop_bandwidth_hz`` (analog servo
-     amplifiers in current mode close their loop at 1-3 kHz; 1 kHz taken) after a transport
-     delay ``amplifier_delay_s`` (DAC settling + one 10-20 kHz PWM period ≈ 100 µs);
+   * current loop (``amplifier_dynamics``): a first-order lag of the truth description's
+     ``drive.current_loop_bandwidth_hz`` (analog servo amplifiers in current mode close their
+     loop at 1-3 kHz; the nominal file takes 1 kHz) after its transport delay
+     ``drive.amplifier_delay_s`` (DAC settling + one 10-20 kHz PWM period ≈ 100 µs). They are
+     the amplifier's datasheet figures, so they live in the robot description (the lab's
+     model knows them too, and identification uses them); the twin runs its truth's, so a
+     truth file with another amplifier is another rig. Off, the current follows the command
+     at once;
    * ball-screw transmission: axial stiffness ``screw_stiffness_n_per_m`` between the motor
      (rotor inertia) and the slider: screw shaft E·A/L (16 mm shaft, 0.4 m: ≈ 1e8 N/m) in
      series with nut (≈ 3e8) and support bearings (≈ 4e8), ≈ 6e7 N/m; structural damping ratio
@@ -89,8 +94,7 @@ class RigImperfections(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    current_loop_bandwidth_hz: NonNeg = 1000.0
-    amplifier_delay_s: Annotated[float, Field(ge=0.0, le=0.001)] = 1.0e-4
+    amplifier_dynamics: bool = True
     screw_stiffness_n_per_m: NonNeg = 6.0e7
     screw_damping_ratio: NonNeg = 0.05
     backlash_m: Annotated[float, Field(ge=0.0, le=0.001)] = 2.0e-5
@@ -122,7 +126,7 @@ class RigImperfections(BaseModel):
     @classmethod
     def none(cls) -> RigImperfections:
         """Every effect off: the ideal twin (rigid, instantaneous, no brake, no cable)."""
-        return cls(current_loop_bandwidth_hz=0.0, amplifier_delay_s=0.0, motor_side_friction=0.0,
+        return cls(amplifier_dynamics=False, motor_side_friction=0.0,
                    screw_stiffness_n_per_m=0.0, backlash_m=0.0, friction_ripple=0.0,
                    viscous_per_k=0.0, coulomb_per_k=0.0, encoder_latency_s=0.0,
                    ati_filter_hz=0.0, brake_holding_force_n=0.0, ati_tool_mass_kg=0.0,
