@@ -200,9 +200,14 @@ class PdG0(Controller):
                                        FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, self._mwork,
                                        self._work, out)
         if status < 0:
-            raise KinematicsError(f"PD+G0: no forward kinematics at the desired position "
-                                  f"{tuple(float(x) for x in ref.q)} m (status {status})")
+            self.refuse_desired(ref.q, status)
         return STATUS_OK
+
+    @staticmethod
+    def refuse_desired(q_d: np.ndarray, status: int) -> None:
+        """Raise what a refused FK at the desired position raises (the fused cycle too)."""
+        raise KinematicsError(f"PD+G0: no forward kinematics at the desired position "
+                              f"{tuple(float(x) for x in q_d)} m (status {status})")
 
     def _bound_kernel(self, st, ref, out):
         def cycle(dt: float) -> int:
