@@ -38,12 +38,11 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from llvmlite import ir
-from numba import njit, typeof, types
+from numba import carray, njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
@@ -104,59 +103,125 @@ def ticks_now() -> int:
     return _ticks()
 
 
-# ---- the laws: ``L`` one tuple of the same types whatever the law (unused fields hold
-# placeholders), so one kernel serves every law and is cached on disk like every kernel of
-# the loop; each law's kernel is called exactly as its bound cycle calls it (``_bound_kernel``).
+# ---- the buffers: one table of addresses (and shapes) instead of ~57 array arguments.
+# numba's dispatch unboxes each array argument (≈ 0.5 µs apiece here): passing the blocks'
+# buffers one by one cost more than the five blocks' own Python. The kernel rebuilds each
+# buffer as a view of the same memory (``carray``); :class:`FusedChain` holds a reference to
+# every buffer whose address is in the table and re-reads the addresses whenever one of them
+# may have been replaced (a reset, new gains, a new program's table), before the call.
+(B_EST_C, B_EST_S, B_EST_Q, B_EST_OUT, B_EST_IO,
+ B_GEOM, B_LIMITS, B_PHI, B_MOD_Q, B_MOD_QD, B_STB, B_MOD_WORK, B_FK,
+ B_REF_IO, B_SEQ, B_REF_Q, B_REF_MODE, B_TABLE, B_CTRL_MODE,
+ B_TI, B_TF, B_LAW_STB, B_LQ, B_LQD, B_LQDD, B_GAINS, B_WORK, B_OUT, B_INTEGRAL, B_AMAP,
+ B_EST, B_LGEOM, B_LLIMITS, B_LPHI, B_GQ, B_G, B_STD, B_ZERO3, B_MWORK,
+ B_PAR, B_MEM, B_SQ, B_SEST, B_SQD, B_SQDD, B_SSTB, B_SFK, B_SQREF, B_SQDREF, B_STAU,
+ B_WRENCH, B_WFLAGS, B_INPUTS, B_DFAILED, B_VOLTS, B_ENABLE, B_MODE, N_BUFFERS) = range(58)
+_INT_BUFFERS = (B_TI, B_AMAP)
+_MATRIX_BUFFERS = (B_TABLE,)
+
 LAW_PADEN_PANJA, LAW_COMPUTED_TORQUE, LAW_PD_GRAVITY, LAW_PD_G0, LAW_PID, LAW_ADAPTIVE = range(6)
-(L_ID, L_TI, L_TF, L_STB, L_Q, L_QD, L_QDD, L_GAINS, L_WORK, L_OUT, L_TRAJECTORY, L_INTEGRAL,
- L_AMAP, L_EST, L_NB, L_GEOM, L_LIMITS, L_PHI, L_GQ, L_G, L_STD, L_ZERO3, L_MWORK) = range(23)
+
+
+@intrinsic
+def _f64_at(typingctx, addr):  # type: ignore[no-untyped-def]
+    sig = types.CPointer(types.float64)(types.int64)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
+    return sig, codegen
+
+
+@intrinsic
+def _i64_at(typingctx, addr):  # type: ignore[no-untyped-def]
+    sig = types.CPointer(types.int64)(types.int64)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.int64)))
+    return sig, codegen
+
+
+@njit(cache=True, inline="always")
+def _v(addr, dims, i):
+    return carray(_f64_at(addr[i]), dims[i, 0])
+
+
+@njit(cache=True, inline="always")
+def _vi(addr, dims, i):
+    return carray(_i64_at(addr[i]), dims[i, 0])
 
 
 @njit(cache=True)
-def _law(dt, L):
-    """The law's kernel (``L[L_ID]``); returns its status (< 0: PD+G0's FK refused)."""
-    law = L[0]
+def _law(dt, law, trajectory, nb, a, d):
+    """The law's kernel (``LAW_*``), called as its bound cycle calls it; returns its status
+    (< 0: PD+G0's FK at the desired position refused)."""
+    ti, tf, stb = _vi(a, d, B_TI), _v(a, d, B_TF), _v(a, d, B_LAW_STB)
+    q, qd, qdd = _v(a, d, B_LQ), _v(a, d, B_LQD), _v(a, d, B_LQDD)
+    gains, work, out = _v(a, d, B_GAINS), _v(a, d, B_WORK), _v(a, d, B_OUT)
     if law == LAW_PADEN_PANJA:
-        ck.paden_panja(L[1], L[2], L[3], L[4], L[5], L[6], L[7], L[8], L[9])
+        ck.paden_panja(ti, tf, stb, q, qd, qdd, gains, work, out)
     elif law == LAW_COMPUTED_TORQUE:
-        ck.computed_torque(L[1], L[2], L[3], L[4], L[5], L[6], L[7], L[10], L[8], L[9])
+        ck.computed_torque(ti, tf, stb, q, qd, qdd, gains, trajectory, work, out)
     elif law == LAW_PD_GRAVITY:
-        ck.pd_gravity(L[1], L[2], L[3], L[4], L[5], L[7], L[8], L[9])
+        ck.pd_gravity(ti, tf, stb, q, qd, gains, work, out)
     elif law == LAW_PD_G0:
-        return ck.pd_gravity_desired(L[1], L[2], L[15], L[16], L[17], L[3], L[4], L[5], L[7],
-                                     L[18], L[19], L[20], L[21], FK_STEP_TOL_RAD,
-                                     FK_MAX_ITERATIONS, L[22], L[8], L[9])
+        return ck.pd_gravity_desired(ti, tf, _v(a, d, B_LGEOM), _v(a, d, B_LLIMITS),
+                                     _v(a, d, B_LPHI), stb, q, qd, gains, _v(a, d, B_GQ),
+                                     _v(a, d, B_G), _v(a, d, B_STD), _v(a, d, B_ZERO3),
+                                     FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, _v(a, d, B_MWORK),
+                                     work, out)
     elif law == LAW_PID:
-        ck.pid(L[3], L[4], L[5], L[7], L[11], dt, False, L[9])
+        ck.pid(stb, q, qd, gains, _v(a, d, B_INTEGRAL), dt, False, out)
     elif law == LAW_ADAPTIVE:
-        ck.adaptive(L[1], L[2], L[3], L[4], L[5], L[6], L[7], L[12], L[13], L[14], dt, False,
-                    L[8], L[9])
+        ck.adaptive(ti, tf, stb, q, qd, qdd, gains, _vi(a, d, B_AMAP), _v(a, d, B_EST), nb, dt,
+                    False, work, out)
     return 0
 
 
 @njit(cache=True)
-def fused_chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, E, M, fk_out, R,
-                ctrl_mode, L, S):
+def fused_chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb,
+                a, d, rings, idx, ns_per_tick):
+    """:func:`_chain`, then each stage after the first timed into its slot's ring (``rings``:
+    the graph's timing rings' addresses, int64, at ``idx``). Returns (stages run, whether the
+    last needs Python, the ns those later stages took, the law's or supervisor's answer)."""
+    _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d)
+    ran = info[I_RAN]
+    others = 0
+    for j in range(1, ran):
+        ns = np.int64((stamps[j + 1] - stamps[j]) * ns_per_tick)
+        carray(_i64_at(rings[j]), idx + 1)[idx] = ns
+        others += ns
+    aux = info[I_SUP] if ran == 5 else info[I_LAW]
+    return ran, info[I_PYTHON], others, aux, info[I_FK]
+
+
+@njit(cache=True)
+def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d):
     """The five stages (module docstring) up to stage ``upto`` (exclusive), stopping where
-    Python must run; ``stamps`` the cycle counter before the first and after each stage."""
+    Python must run; ``stamps`` the cycle counter before the first and after each stage;
+    ``a``/``d`` the buffers' addresses and shapes (``B_*``)."""
     info[I_RAN] = 0
     info[I_PYTHON] = 0
     stamps[0] = _ticks()
-    status = block_update(E[0], E[1], E[2], dt, E[3], E[4])
+    status = block_update(_v(a, d, B_EST_C), _v(a, d, B_EST_S), _v(a, d, B_EST_Q), dt,
+                          _v(a, d, B_EST_OUT), _v(a, d, B_EST_IO))
     stamps[1] = _ticks()
     info[I_RAN] = 1
     info[I_EST] = status
     if status < 0 and status != _EST_JUMP:
         info[I_PYTHON] = 1                  # the block returns STATUS_SENSOR: a fault
         return
-    fk = model_state(M[0], M[1], M[2], M[3], M[4], M[5], M[6], M[7], M[8])
-    fk_out[0] = 1.0 if fk >= 0 else 0.0
+    fk = model_state(_v(a, d, B_GEOM), _v(a, d, B_LIMITS), _v(a, d, B_PHI), _v(a, d, B_MOD_Q),
+                     _v(a, d, B_MOD_QD), _v(a, d, B_STB), FK_STEP_TOL_RAD, FK_MAX_ITERATIONS,
+                     _v(a, d, B_MOD_WORK))
+    _v(a, d, B_FK)[0] = 1.0 if fk >= 0 else 0.0
     stamps[2] = _ticks()
     info[I_RAN] = 2
     info[I_FK] = fk
     if upto <= 2:
         return
-    r = rk.cycle(R[0], R[1], R[2], R[3], R[4], dt)
+    table = carray(_f64_at(a[B_TABLE]), (d[B_TABLE, 0], d[B_TABLE, 1]))
+    r = rk.cycle(_v(a, d, B_REF_IO), _v(a, d, B_SEQ), _v(a, d, B_REF_Q), _v(a, d, B_REF_MODE),
+                 table, dt)
     info[I_REF] = r
     if r == rk.NEED_PYTHON:                 # nothing written: the block runs its cycle
         return
@@ -166,9 +231,9 @@ def fused_chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, E, M, fk
         info[I_PYTHON] = 1
         return
     # The hybrid controller's position mode only (its force law and switches are Python).
-    if upto <= 3 or (hybrid and (ctrl_mode[0] > 0.5)):
+    if upto <= 3 or (hybrid and (_v(a, d, B_CTRL_MODE)[0] > 0.5)):
         return
-    ls = _law(dt, L)
+    ls = _law(dt, law, trajectory, nb, a, d)
     stamps[4] = _ticks()
     info[I_RAN] = 4
     info[I_LAW] = ls
@@ -177,62 +242,67 @@ def fused_chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, E, M, fk
         return
     if upto <= 4:
         return
-    new = svk.block_cycle(S[0], S[1], t, dt, S[2], S[3], S[4], S[5], S[6], S[7],
-                          filled or fk >= 0, S[8], S[9], S[10], S[11], S[12], S[13], S[14],
-                          volts_per_n, S[15], S[16], S[17])
+    new = svk.block_cycle(_v(a, d, B_PAR), _v(a, d, B_MEM), t, dt, _v(a, d, B_SQ),
+                          _v(a, d, B_SEST), _v(a, d, B_SQD), _v(a, d, B_SQDD),
+                          _v(a, d, B_SSTB), _v(a, d, B_SFK), filled or fk >= 0,
+                          _v(a, d, B_SQREF), _v(a, d, B_SQDREF), _v(a, d, B_STAU),
+                          _v(a, d, B_WRENCH), _v(a, d, B_WFLAGS), _v(a, d, B_INPUTS),
+                          _v(a, d, B_DFAILED), volts_per_n, _v(a, d, B_VOLTS),
+                          _v(a, d, B_ENABLE), _v(a, d, B_MODE))
     stamps[5] = _ticks()
     info[I_RAN] = 5
     info[I_SUP] = new
 
 
-LawArgs = Callable[[], tuple]
 _NO_F = np.zeros(1)
 _NO_I = np.zeros(1, dtype=np.int64)
 
 
-def law_binding(law: Controller, st: Any, ref: Any, out: np.ndarray
-                ) -> LawArgs | None:
-    """A function giving ``L`` for ``law`` now (arrays a reset or new gains replace are read
-    through the law at each call, as its bound cycle reads them), or None: only these exact
-    classes (a subclass may change the law)."""
+class LawBinding:
+    """What the fused kernel needs of a law: its ``LAW_*`` id and flag, its fixed buffers
+    (``B_*`` → array) and ``dynamic()``: the buffers a reset or new gains replace (read
+    through the law at each cycle, as its bound cycle reads them) and the adaptive law's
+    parameter count."""
+
+    def __init__(self, law_id: int, fixed: dict[int, np.ndarray], trajectory: bool = False,
+                 dynamic: Callable[[], tuple[dict[int, np.ndarray], int]] | None = None):
+        self.law_id = law_id
+        self.fixed = fixed
+        self.trajectory = trajectory
+        self.dynamic = dynamic
+
+
+def law_binding(law: Controller, st: Any, ref: Any, out: np.ndarray) -> LawBinding | None:
+    """``law``'s :class:`LawBinding` on these buffers, or None: only these exact classes (a
+    subclass may change the law)."""
     cls = type(law)
     d = getattr(law, "dyn", None)
     if d is None:
         return None
     kin = d.kin
-    ti, tf, stb, q, qd, qdd, out_ = d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd, out
-    geom, limits, phi = kin.geom, kin.limits_array, kin._phi_guess
-    std = np.zeros_like(stb)
-
-    def pack(law_id: int, gains: np.ndarray, work: np.ndarray, trajectory: bool = False,
-             integral: np.ndarray = _NO_F, amap: np.ndarray = _NO_I, est: np.ndarray = _NO_F,
-             nb: int = 0, gq: np.ndarray = _NO_F, g: np.ndarray = _NO_F,
-             std_: np.ndarray = std, zero3: np.ndarray = _NO_F, mwork: np.ndarray = _NO_F
-             ) -> tuple:
-        return (law_id, ti, tf, stb, q, qd, qdd, gains, work, out_, trajectory, integral, amap,
-                est, nb, geom, limits, phi, gq, g, std_, zero3, mwork)
-
+    fixed = {B_TI: d.tree_i, B_TF: d.tree_f, B_LAW_STB: st.buf, B_LQ: ref.q, B_LQD: ref.qd,
+             B_LQDD: ref.qdd, B_GAINS: law._gain_array, B_WORK: law._work, B_OUT: out,
+             B_INTEGRAL: _NO_F, B_AMAP: _NO_I, B_EST: _NO_F, B_LGEOM: kin.geom,
+             B_LLIMITS: kin.limits_array, B_LPHI: kin._phi_guess, B_GQ: _NO_F, B_G: _NO_F,
+             B_STD: _NO_F, B_ZERO3: _NO_F, B_MWORK: _NO_F}
     if cls is PadenPanja:
-        a = pack(LAW_PADEN_PANJA, law._gain_array, law._work)
-        return lambda: a
+        return LawBinding(LAW_PADEN_PANJA, fixed)
     if cls is ComputedTorqueTrajectory or cls is ComputedTorquePtp:
-        b = pack(LAW_COMPUTED_TORQUE, law._gain_array, law._work,
-                 cls is ComputedTorqueTrajectory)
-        return lambda: b
+        return LawBinding(LAW_COMPUTED_TORQUE, fixed, cls is ComputedTorqueTrajectory)
     if cls is PdG:
-        c = pack(LAW_PD_GRAVITY, law._gain_array, law._work)
-        return lambda: c
+        return LawBinding(LAW_PD_GRAVITY, fixed)
     if cls is PdG0:
         g0 = law
-        return lambda: pack(LAW_PD_G0, g0._gain_array, g0._work, gq=g0._gq, g=g0._g,
-                            std_=g0._std.buf, zero3=g0._zero3, mwork=g0._mwork)
+        return LawBinding(LAW_PD_G0, fixed, dynamic=lambda: (
+            {B_GQ: g0._gq, B_G: g0._g, B_STD: g0._std.buf, B_ZERO3: g0._zero3,
+             B_MWORK: g0._mwork, B_LPHI: g0.dyn.kin._phi_guess}, 0))
     if cls is Pid:
         pid = law
-        return lambda: pack(LAW_PID, pid._gain_array, law._work, integral=pid.integral)
+        return LawBinding(LAW_PID, fixed, dynamic=lambda: ({B_INTEGRAL: pid.integral}, 0))
     if cls is Adaptive:
         ad = law
-        return lambda: pack(LAW_ADAPTIVE, ad._gain_array, ad._work, amap=ad._amap,
-                            est=ad._est, nb=ad._nb)
+        return LawBinding(LAW_ADAPTIVE, fixed, dynamic=lambda: (
+            {B_AMAP: ad._amap, B_EST: ad._est}, ad._nb))
     return None
 
 
@@ -251,17 +321,6 @@ def ns_per_tick() -> float:
     return _NS_PER_TICK
 
 
-def _scratch(x: Any) -> Any:
-    """A copy of ``x`` of the same numba type (arrays keep their read-only flag)."""
-    if isinstance(x, tuple):
-        return tuple(_scratch(v) for v in x)
-    if isinstance(x, np.ndarray):
-        c = x.copy()
-        c.flags.writeable = x.flags.writeable
-        return c
-    return x
-
-
 class FusedChain:
     """The graph's fused segment over :data:`CHAIN` (:meth:`rt.engine.graph.Graph.fuse`).
 
@@ -273,7 +332,6 @@ class FusedChain:
     slots = CHAIN
 
     def __init__(self) -> None:
-        self.ns = [0] * N_STAGES
         self.pending: Callable[[float, float], int] | None = None
         self._graph: Any = None
         self._gen = -1
@@ -281,23 +339,54 @@ class FusedChain:
         self._tick_ns = 0.0
         self._stamps = np.zeros(N_STAGES + 1, dtype=np.int64)
         self._info = np.zeros(INFO_SIZE, dtype=np.int64)
-        self._warm: set = set()
+        self._addr = np.zeros(N_BUFFERS, dtype=np.int64)
+        self._dims = np.zeros((N_BUFFERS, 2), dtype=np.int64)
+        #: The buffer behind each address (kept alive: the kernel writes through them).
+        self._bufs: list[np.ndarray] = [_NO_F] * N_BUFFERS
+        self._dyn_ids: tuple = ()
         #: Why the chain runs per block (the last binding's reason), "" when fused.
         self.why_not = "not bound yet"
 
-    def attach(self, graph: Any) -> None:
+    def attach(self, graph: Any, rings: list[int]) -> None:
+        """Called by ``Graph.fuse``: the graph and its slots' timing rings (addresses of
+        int64 stores that live as long as the graph)."""
         self._graph = graph
         self._gen = -1
+        self._rings = np.array(rings, dtype=np.int64)
+        self.others_ns = 0
+        self._aux = 0
 
     # ------------------------------------------------------------------ binding
+    def prepare(self) -> None:
+        """Bind now (the graph starts: off the cycle, so the kernel compiles or loads here)."""
+        self._bind()
+
+    def prepare_swap(self, slot: str, new: Any) -> None:
+        """Nothing to compile for a new law (one kernel serves every law); kept for the
+        graph's protocol."""
+
     def _bind(self) -> None:
-        """Check the chain and bind its buffers (at a lifecycle change of the graph, never in
-        a steady cycle)."""
+        """Check the chain and bind its buffers (at a lifecycle change of the graph, or when a
+        buffer was replaced outside it; never in a steady cycle)."""
         g = self._graph
         self._gen = g.generation
         self._ok = False
         self.why_not = self._check_and_bind(g)
         self._ok = not self.why_not
+
+    def _set(self, k: int, buf: np.ndarray) -> str:
+        """Buffer ``k`` of the table; "" or why it cannot be (not C-contiguous float64 or
+        int64 of the rank the kernel views it as)."""
+        want = np.int64 if k in _INT_BUFFERS else np.float64
+        ndim = 2 if k in _MATRIX_BUFFERS else 1
+        if (not isinstance(buf, np.ndarray) or buf.dtype != want or buf.ndim != ndim
+                or not buf.flags.c_contiguous):
+            return f"buffer {k} is not a contiguous {want.__name__}[{ndim}-D] array"
+        self._bufs[k] = buf
+        self._addr[k] = buf.__array_interface__["data"][0]
+        self._dims[k, 0] = buf.shape[0]
+        self._dims[k, 1] = buf.shape[1] if ndim == 2 else 0
+        return ""
 
     def _check_and_bind(self, g: Any) -> str:
         comps = [g.component(s) for s in CHAIN]
@@ -324,91 +413,92 @@ class FusedChain:
             self._tick_ns = ns_per_tick()
         if not self._tick_ns:
             return "the CPU cycle counter does not advance here"
-        self._comps = comps
-        self._est_state = est.state
-        self._law = law
-        self._hybrid = hybrid
-        self._law_args = binding
-        self._law_cycle = law.cycle
         e = est.state
-        self._E = (e._c, e._s, est.q_meas.data, e._out, est._io)
         kin = mod.model.kin
         st = mod.state_out.data
-        self._state = st
-        self._M = (kin.geom, kin.limits_array, kin._phi_guess, mod.q_meas.data, mod.qd.data,
-                   st.buf, FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, mod._work)
-        self._fk = mod.fk_ok.data
-        self._table = ref._table
-        self._R = (ref._io, ref._seq, ref.q_meas.data, ref.mode.data, ref._table)
-        self._ctrl_mode = ctl.ctrl_mode.data if hybrid else np.zeros(1)
         s = sup.sup
-        self._S = (s._par, s._mem, sup.q.data, sup.est_status.data, sup.qd.data, sup.qdd.data,
-                   sup.state_in.data.buf, sup.fk_ok.data, sup.q_ref.data, sup.qd_ref.data,
-                   sup.tau.data, sup.wrench.data, sup.wrench_flags.data, sup.stops.data,
-                   sup.drive_failed.data, sup.volts.data, sup.enable.data, sup.mode.data)
+        bufs = {B_EST_C: e._c, B_EST_S: e._s, B_EST_Q: est.q_meas.data, B_EST_OUT: e._out,
+                B_EST_IO: est._io,
+                B_GEOM: kin.geom, B_LIMITS: kin.limits_array, B_PHI: kin._phi_guess,
+                B_MOD_Q: mod.q_meas.data, B_MOD_QD: mod.qd.data, B_STB: st.buf,
+                B_MOD_WORK: mod._work, B_FK: mod.fk_ok.data,
+                B_REF_IO: ref._io, B_SEQ: ref._seq, B_REF_Q: ref.q_meas.data,
+                B_REF_MODE: ref.mode.data, B_TABLE: ref._table,
+                B_CTRL_MODE: ctl.ctrl_mode.data if hybrid else _NO_F,
+                **binding.fixed,
+                B_PAR: s._par, B_MEM: s._mem, B_SQ: sup.q.data, B_SEST: sup.est_status.data,
+                B_SQD: sup.qd.data, B_SQDD: sup.qdd.data, B_SSTB: sup.state_in.data.buf,
+                B_SFK: sup.fk_ok.data, B_SQREF: sup.q_ref.data, B_SQDREF: sup.qd_ref.data,
+                B_STAU: sup.tau.data, B_WRENCH: sup.wrench.data,
+                B_WFLAGS: sup.wrench_flags.data, B_INPUTS: sup.stops.data,
+                B_DFAILED: sup.drive_failed.data, B_VOLTS: sup.volts.data,
+                B_ENABLE: sup.enable.data, B_MODE: sup.mode.data}
+        if len(bufs) != N_BUFFERS:
+            return "internal: the buffer table is incomplete"
+        for k, buf in bufs.items():
+            why = self._set(k, buf)
+            if why:
+                return why
+        self._comps = comps
+        self._est_state = e
+        self._law = law
+        self._hybrid = hybrid
+        self._binding = binding
+        self._nb = 0
+        self._dyn_ids = ()
+        why = self._refresh_law()
+        if why:
+            return why
+        self._table = ref._table
+        self._state = st
         self._sup = s
+        self._mem, self._par = s._mem, s._par
         self._vpn = float(sup.k)
         return self._warm_up()
 
-    def prepare(self) -> None:
-        """Bind now (the graph starts: off the cycle, so a kernel compiles or loads here)."""
-        self._bind()
-
-    def prepare_swap(self, slot: str, new: Any) -> None:
-        """A block is being prepared for ``slot`` off the cycle (``Graph.prepare_swap``): warm
-        the fused kernel of its law now, so the binding at the swap's cycle compiles nothing."""
-        if slot != CHAIN[3] or not self._ok:
-            return
-        if type(new) is ControllerBlock:
-            law = new.controller
-        elif type(new) is HybridController:
-            law = new.position
-        else:
-            return
-        ref = SimpleNamespace(q=new.q_ref.data, qd=new.qd_ref.data, qdd=new.qdd_ref.data)
-        binding = law_binding(law, new.state_in.data, ref, new.tau.data)
-        if binding is None:
-            return
-        law_args = self._law_args
-        try:
-            self._law_args = binding
-            self._warm_up()
-        finally:
-            self._law_args = law_args
-
-    def _args(self, upto: int, t: float, dt: float, filled: bool, L: tuple) -> tuple:
-        return (self._stamps, self._info, t, dt, upto, filled, self._vpn, self._hybrid,
-                self._E, self._M, self._fk, self._R, self._ctrl_mode, L, self._S)
+    def _refresh_law(self) -> str:
+        """The law's buffers a reset or new gains replace, when they changed (by identity;
+        the replaced ones stay referenced until then, so an id is never reused meanwhile)."""
+        dyn = self._binding.dynamic
+        if dyn is None:
+            return ""
+        bufs, nb = dyn()
+        ids = tuple(id(b) for b in bufs.values())
+        self._nb = nb
+        if ids != self._dyn_ids:
+            for k, buf in bufs.items():
+                why = self._set(k, buf)
+                if why:
+                    return why
+            self._dyn_ids = ids
+        return ""
 
     def _warm_up(self) -> str:
-        """Compile (or load from numba's cache) the kernel for these buffers' types, on
-        copies (nothing of the loop changes), for writable and read-only tables (a prepared
-        session's arrive read-only through shared memory); never in a cycle."""
-        args = self._args(N_STAGES, 0.0, 1e-3, False, self._law_args())
-        key = (tuple(str(typeof(a)) for a in args[8:]))
-        if key in self._warm:
+        """Compile (or load from numba's cache) the kernel now, never in a cycle: on copies
+        of every buffer (nothing of the loop changes). One kernel for every law and block."""
+        global _WARM
+        if _WARM:
             return ""
-        scratch = _scratch(args)
-        if [str(typeof(a)) for a in scratch] != [str(typeof(a)) for a in args]:
-            return "the buffers' types cannot be reproduced for the warm-up"
-        for ro in (False, True):
-            r = list(scratch[11])
-            table = np.zeros((1, 9))
-            table.flags.writeable = not ro
-            r[4] = table
-            a = list(scratch)
-            a[11] = tuple(r)
-            try:
-                fused_chain(*a)
-            except Exception as exc:  # noqa: BLE001 - refused: the chain runs per block
-                return f"the fused kernel failed its warm-up: {type(exc).__name__}: {exc}"
-        self._warm.add(key)
+        bufs = [b.copy() for b in self._bufs]
+        addr = np.array([b.__array_interface__["data"][0] for b in bufs], dtype=np.int64)
+        try:
+            scratch_rings = np.zeros((N_STAGES, 1), dtype=np.int64)
+            rings = np.array([r.__array_interface__["data"][0] for r in scratch_rings],
+                             dtype=np.int64)
+            fused_chain(np.zeros(N_STAGES + 1, dtype=np.int64),
+                        np.zeros(INFO_SIZE, dtype=np.int64), 0.0, 1e-3, 2, False, self._vpn,
+                        False, LAW_PADEN_PANJA, False, 0, addr, self._dims.copy(), rings, 0,
+                        1.0)
+        except Exception as exc:  # noqa: BLE001 - refused: the chain runs per block
+            return f"the fused kernel failed its warm-up: {type(exc).__name__}: {exc}"
+        _WARM = True
         return ""
 
     # ------------------------------------------------------------------ the cycle
-    def run(self, t: float, dt: float) -> int:
+    def run(self, t: float, dt: float, idx: int) -> int:
         """One cycle of the chain, as far as the kernel may go (module docstring); returns
-        the number of stages run (0: run the five blocks)."""
+        the number of stages run (0: run the five blocks). The stages after the first are
+        timed into their slots' rings at ``idx`` by the kernel; ``others_ns`` is their sum."""
         if self._gen != self._graph.generation:
             self._bind()
         if not self._ok:
@@ -416,67 +506,70 @@ class FusedChain:
         est, mod, ref, ctl, sup = self._comps
         if not (est._active and mod._active and ref._active and ctl._active and sup._active):
             return 0
-        if est.state is not self._est_state:
-            self._gen = -1            # rebuilt outside the graph's lifecycle: bind again
+        s = self._sup
+        if est.state is not self._est_state or s._mem is not self._mem \
+                or s._par is not self._par:
+            self._bind()              # rebuilt outside the graph's lifecycle (a reset)
+            if not self._ok:
+                return 0
+        if self._binding.dynamic is not None and self._refresh_law():
+            self._gen = -1
             return 0
-        law = self._law
         upto = N_STAGES
         if ref._pending is not None or ref._abort:
             upto = 2                  # the sequencer's event: its cycle is Python's
         else:
             if ref._table is not self._table:
-                r = self._R
-                self._table = ref._table
-                self._R = (r[0], r[1], r[2], r[3], ref._table)
+                if self._set(B_TABLE, ref._table):
+                    upto = 2          # a table the kernel cannot view: the block plays it
+                else:
+                    self._table = ref._table
+            cyc = self._law.cycle
             raw = ctl.mode.data[0]
-            cyc = law.cycle
             if cyc is None or raw != (ctl._sup_raw if self._hybrid else ctl._mode_raw) or (
                     self._hybrid and ctl._in_force):
-                upto = 3              # the controller block runs (mode change, fade, force)
-            elif cyc is not self._law_cycle:
-                self._law_cycle = cyc
+                upto = min(upto, 3)   # the controller block runs (mode change, fade, force)
         st = self._state
-        info = self._info
-        fused_chain(self._stamps, info, t, dt, upto, st.filled, self._vpn, self._hybrid,
-                     self._E, self._M, self._fk, self._R, self._ctrl_mode, self._law_args(),
-                     self._S)
-        ran = int(info[I_RAN])
-        if ran >= 2 and info[I_FK] >= 0:
+        b = self._binding
+        g = self._graph
+        ran, python, self.others_ns, aux, fk = fused_chain(
+            self._stamps, self._info, t, dt, upto, st._filled, self._vpn, self._hybrid,
+            b.law_id, b.trajectory, self._nb, self._addr, self._dims, self._rings, idx,
+            self._tick_ns)
+        if ran >= 2 and fk >= 0:
             st.buffer_filled()
         if ran >= 4:
             ctl._dt = dt              # what the block's update records (for a handover)
+        self._aux = aux
         pending: Callable[[float, float], int] | None = None
-        if info[I_PYTHON]:
+        if python:
             if ran == 1:
                 pending = _sensor_fault
             elif ran == 3:
                 pending = self._play_done
             elif ran == 4:
-                q_d = self._comps[3]._ref.q
-                status = int(info[I_LAW])
-
-                def pending(t: float, dt: float) -> int:
-                    PdG0.refuse_desired(q_d, status)
-                    return 0
-        elif ran == 5 and (info[I_SUP] or self._sup.python_side_pending(
-                self._graph.failed_components())):
+                pending = self._law_refused
+        elif ran == 5 and (aux or s.python_side_pending(
+                None if not g.failed else g.failed_components())):
             pending = self._finish_supervisor
         self.pending = pending
-        stamps = self._stamps
-        k = self._tick_ns
-        ns = self.ns
-        for j in range(1, ran):
-            ns[j] = int((stamps[j + 1] - stamps[j]) * k)
         return ran
 
     def _play_done(self, t: float, dt: float) -> int:
         return self._comps[2].play_done()
 
+    def _law_refused(self, t: float, dt: float) -> int:
+        PdG0.refuse_desired(self._comps[3]._ref.q, int(self._aux))
+        return 0
+
     def _finish_supervisor(self, t: float, dt: float) -> int:
         sup = self._comps[4]
-        self._sup.finish_block(t, int(self._info[I_SUP]), sup.tau.data, sup.k, sup.volts.data,
+        self._sup.finish_block(t, int(self._aux), sup.tau.data, sup.k, sup.volts.data,
                                sup.enable.data, sup.mode.data)
         return 0
+
+
+_WARM = False
 
 
 def _sensor_fault(t: float, dt: float) -> int:

@@ -385,8 +385,10 @@ class Graph:
     def fuse(self, segment: Any, enabled: bool = True) -> None:
         """Let ``segment`` run its consecutive slots (``segment.slots``, in execution order)
         in one call per cycle (e.g. ``rt.components.fused.FusedChain``): each cycle
-        ``segment.run(t, dt)`` returns how many of those slots it ran (0: none), their times
-        (ns) in ``segment.ns``, and in ``segment.pending`` None or the Python that completes
+        ``segment.run(t, dt, idx)`` returns how many of those slots it ran (0: none), having
+        written the times (ns) of those after the first into their rings (``attach`` gives it
+        the rings' addresses) at ``idx`` and their sum in ``segment.others_ns``, and in
+        ``segment.pending`` None or the Python that completes
         the last one (timed into its ring; its exception or non-zero status is that slot's
         fault, as an ``update``'s). The slots it did not run run their ``update`` in the same
         cycle. ``enabled`` (also :attr:`fused`) False keeps every slot's ``update``."""
@@ -399,7 +401,7 @@ class Graph:
                                      f"execution order {self._order}")
         self._segment = segment
         self._seg_first = i
-        segment.attach(self)
+        segment.attach(self, [self._stores[i + j].buffer_info()[0] for j in range(len(slots))])
         self._split_run()
         self.fused = enabled
         if self._running:
@@ -612,17 +614,11 @@ class Graph:
         t0 = pc()
         faults, prev = self._blocks(self._pre, t, dt, idx, t0)
         seg = self._segment
-        n = seg.run(t, dt)
+        n = seg.run(t, dt, idx)
         if n:
             now = pc()
-            ns = seg.ns
             seg_run = self._seg
-            first = now - prev
-            for j in range(1, n):
-                ring = seg_run[j][3]
-                ring[idx] = ns[j]
-                first -= ns[j]
-            seg_run[0][3][idx] = first
+            seg_run[0][3][idx] = now - prev - seg.others_ns
             prev = now
             pending = seg.pending
             if pending is not None:
