@@ -38,10 +38,10 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
-from llvmlite import ir
+from llvmlite import ir  # type: ignore[import-untyped]
 from numba import carray, njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
@@ -86,12 +86,12 @@ def enabled_by_environment() -> bool:
 
 
 @intrinsic
-def _ticks(typingctx):  # type: ignore[no-untyped-def]
+def _ticks(typingctx: Any) -> Any:
     """The CPU's cycle counter (x86: rdtsc) read inside a kernel: a stage's time costs no
     clock call (``perf_counter_ns`` costs ≈ 0.3 µs on this VM)."""
     sig = types.int64()
 
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
         fnty = ir.FunctionType(ir.IntType(64), [])
         fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.readcyclecounter")
         return builder.call(fn, [])
@@ -100,7 +100,7 @@ def _ticks(typingctx):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def ticks_now() -> int:
-    return _ticks()
+    return _ticks()  # type: ignore[call-arg]
 
 
 # ---- the buffers: one table of addresses (and shapes) instead of ~57 array arguments.
@@ -123,19 +123,19 @@ LAW_PADEN_PANJA, LAW_COMPUTED_TORQUE, LAW_PD_GRAVITY, LAW_PD_G0, LAW_PID, LAW_AD
 
 
 @intrinsic
-def _f64_at(typingctx, addr):  # type: ignore[no-untyped-def]
+def _f64_at(typingctx: Any, addr: Any) -> Any:
     sig = types.CPointer(types.float64)(types.int64)
 
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
         return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
     return sig, codegen
 
 
 @intrinsic
-def _i64_at(typingctx, addr):  # type: ignore[no-untyped-def]
+def _i64_at(typingctx: Any, addr: Any) -> Any:
     sig = types.CPointer(types.int64)(types.int64)
 
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
         return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.int64)))
     return sig, codegen
 
@@ -292,15 +292,15 @@ def law_binding(law: Controller, st: Any, ref: Any, out: np.ndarray) -> LawBindi
     if cls is PdG:
         return LawBinding(LAW_PD_GRAVITY, fixed)
     if cls is PdG0:
-        g0 = law
+        g0 = cast(PdG0, law)
         return LawBinding(LAW_PD_G0, fixed, dynamic=lambda: (
             {B_GQ: g0._gq, B_G: g0._g, B_STD: g0._std.buf, B_ZERO3: g0._zero3,
              B_MWORK: g0._mwork, B_LPHI: g0.dyn.kin._phi_guess}, 0))
     if cls is Pid:
-        pid = law
+        pid = cast(Pid, law)
         return LawBinding(LAW_PID, fixed, dynamic=lambda: ({B_INTEGRAL: pid.integral}, 0))
     if cls is Adaptive:
-        ad = law
+        ad = cast(Adaptive, law)
         return LawBinding(LAW_ADAPTIVE, fixed, dynamic=lambda: (
             {B_AMAP: ad._amap, B_EST: ad._est}, ad._nb))
     return None
@@ -549,8 +549,10 @@ class FusedChain:
                 pending = self._play_done
             elif ran == 4:
                 pending = self._law_refused
-        elif ran == 5 and (aux or s.python_side_pending(
-                None if not g.failed else g.failed_components())):
+        elif ran == 5 and (s.python_side_pending(
+                None if not g.failed else g.failed_components()) or aux):
+            # As check_block: the failed blocks recorded every cycle (first), then new events
+            # or a pending request send the cycle to Python.
             pending = self._finish_supervisor
         self.pending = pending
         return ran
