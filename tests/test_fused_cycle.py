@@ -18,6 +18,8 @@ import numpy as np
 import pytest
 
 from rt.components import fused
+from rt.engine import STATUS_EXCEPTION, Array, Component, GraphBuilder
+from rt.errors import ConfigurationError
 from rt.model import RobotModel
 from rt.position_loop import (
     PositionLoop,
@@ -193,3 +195,84 @@ def test_the_environment_flag_turns_fusion_off(model, monkeypatch):
     monkeypatch.setenv(fused.ENV_FLAG, "0")
     pl = build_sim_position_loop("paden_panja", duration_s=1.0, model=model)
     assert pl.graph.segment is not None and not pl.graph.fused
+
+
+class _Count(Component):
+    """Ports: out ``y``: float64[1] — how many times its ``update`` ran."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.y = self.declare_output("y", Array(1))
+
+    def update(self, t: float, dt: float) -> int:
+        self.y.data[0] += 1.0
+        return 0
+
+
+class _Segment:
+    """A fake fused segment over b, c, d: runs ``n`` of them (by hand), then ``pending``."""
+
+    slots = ("b", "c", "d")
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.pending = None
+        self.others_ns = 0
+        self.prepared = 0
+
+    def attach(self, graph, rings) -> None:
+        self.graph = graph
+        self.rings = rings
+
+    def prepare(self) -> None:
+        self.prepared += 1
+
+    def prepare_swap(self, slot, new) -> None:
+        pass
+
+    def run(self, t: float, dt: float, idx: int) -> int:
+        for s in self.slots[:self.n]:
+            self.graph.component(s).y.data[0] += 10.0
+        return self.n
+
+
+def test_the_graph_runs_a_fused_segment_then_the_blocks_it_left():
+    b = GraphBuilder()
+    for s in "abcde":
+        b.add(_Count(s))
+    g = b.build()
+    g.configure()
+    seg = _Segment()
+    with pytest.raises(ConfigurationError, match="not consecutive"):
+        bad = _Segment()
+        bad.slots = ("b", "d")
+        g.fuse(bad)
+    g.fuse(seg)
+    g.start()
+    assert g.fused and seg.prepared == 1
+
+    def counts() -> list[float]:
+        return [float(g.component(s).y.data[0]) for s in "abcde"]
+
+    g.step(0.0, 1e-3)                             # the segment runs none: every block
+    assert counts() == [1, 1, 1, 1, 1]
+    seg.n = 2
+    g.step(0.0, 1e-3)                             # b, c by the segment, d its own update
+    assert counts() == [2, 11, 11, 2, 2]
+    seg.n = 3
+
+    def refuse(t: float, dt: float) -> int:
+        raise RuntimeError("no FK there")
+
+    seg.pending = refuse                          # d's completion raises: d's fault
+    g.step(0.0, 1e-3)
+    assert counts() == [3, 21, 21, 12, 3]
+    assert [(f.slot, f.code, f.reason) for f in g.faults()] == [
+        ("d", STATUS_EXCEPTION, "update raised RuntimeError: no FK there")]
+    seg.pending = lambda t, dt: 10               # a status: the slot's fault, as update's
+    g.step(0.0, 1e-3)
+    assert g.faults()[-1].reason == "update returned status 10"
+    g.fused = False                               # the per-block reference
+    g.step(0.0, 1e-3)
+    assert counts() == [5, 32, 32, 22, 5]
+    assert all(g.stats().components[s].count == 5 for s in "abce")
