@@ -177,12 +177,29 @@ def _law(dt, law, trajectory, nb, a, d):
     return 0
 
 
+# ``tab`` (int64), everything the kernel reads or writes besides the blocks' buffers, in one
+# argument: the buffers' addresses and shapes, the timing rings' addresses, the stamps and
+# the info.
+T_ADDR = 0
+T_DIMS = T_ADDR + N_BUFFERS
+T_RINGS = T_DIMS + 2 * N_BUFFERS
+T_STAMPS = T_RINGS + N_STAGES
+T_INFO = T_STAMPS + N_STAGES + 1
+T_SIZE = T_INFO + INFO_SIZE
+
+
 @njit(cache=True)
-def fused_chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb,
-                a, d, rings, idx, ns_per_tick):
-    """:func:`_chain`, then each stage after the first timed into its slot's ring (``rings``:
-    the graph's timing rings' addresses, int64, at ``idx``). Returns (stages run, whether the
-    last needs Python, the ns those later stages took, the law's or supervisor's answer)."""
+def fused_chain(tab, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, idx,
+                ns_per_tick):
+    """:func:`_chain`, then each stage after the first timed into its slot's ring (the
+    graph's timing rings' addresses, in ``tab``, at ``idx``). Returns (stages run, whether the
+    last needs Python, the ns those later stages took, the supervisor's or the law's answer,
+    FK's status)."""
+    a = tab[T_ADDR:T_ADDR + N_BUFFERS]
+    d = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
+    rings = tab[T_RINGS:T_RINGS + N_STAGES]
+    stamps = tab[T_STAMPS:T_STAMPS + N_STAGES + 1]
+    info = tab[T_INFO:T_INFO + INFO_SIZE]
     _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d)
     ran = info[I_RAN]
     others = 0
@@ -337,10 +354,10 @@ class FusedChain:
         self._gen = -1
         self._ok = False
         self._tick_ns = 0.0
-        self._stamps = np.zeros(N_STAGES + 1, dtype=np.int64)
-        self._info = np.zeros(INFO_SIZE, dtype=np.int64)
-        self._addr = np.zeros(N_BUFFERS, dtype=np.int64)
-        self._dims = np.zeros((N_BUFFERS, 2), dtype=np.int64)
+        self._tab = tab = np.zeros(T_SIZE, dtype=np.int64)
+        self._addr = tab[T_ADDR:T_ADDR + N_BUFFERS]
+        self._dims = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
+        self._rings = tab[T_RINGS:T_RINGS + N_STAGES]
         #: The buffer behind each address (kept alive: the kernel writes through them).
         self._bufs: list[np.ndarray] = [_NO_F] * N_BUFFERS
         self._dyn_ids: tuple = ()
@@ -352,7 +369,7 @@ class FusedChain:
         int64 stores that live as long as the graph)."""
         self._graph = graph
         self._gen = -1
-        self._rings = np.array(rings, dtype=np.int64)
+        self._rings[:] = rings
         self.others_ns = 0
         self._aux = 0
 
@@ -480,15 +497,14 @@ class FusedChain:
         if _WARM:
             return ""
         bufs = [b.copy() for b in self._bufs]
-        addr = np.array([b.__array_interface__["data"][0] for b in bufs], dtype=np.int64)
+        scratch_rings = np.zeros((N_STAGES, 1), dtype=np.int64)
+        tab = self._tab.copy()
+        tab[T_ADDR:T_ADDR + N_BUFFERS] = [b.__array_interface__["data"][0] for b in bufs]
+        tab[T_RINGS:T_RINGS + N_STAGES] = [r.__array_interface__["data"][0]
+                                           for r in scratch_rings]
         try:
-            scratch_rings = np.zeros((N_STAGES, 1), dtype=np.int64)
-            rings = np.array([r.__array_interface__["data"][0] for r in scratch_rings],
-                             dtype=np.int64)
-            fused_chain(np.zeros(N_STAGES + 1, dtype=np.int64),
-                        np.zeros(INFO_SIZE, dtype=np.int64), 0.0, 1e-3, 2, False, self._vpn,
-                        False, LAW_PADEN_PANJA, False, 0, addr, self._dims.copy(), rings, 0,
-                        1.0)
+            fused_chain(tab, 0.0, 1e-3, 2, False, self._vpn, False, LAW_PADEN_PANJA, False, 0,
+                        0, 1.0)
         except Exception as exc:  # noqa: BLE001 - refused: the chain runs per block
             return f"the fused kernel failed its warm-up: {type(exc).__name__}: {exc}"
         _WARM = True
@@ -533,9 +549,8 @@ class FusedChain:
         b = self._binding
         g = self._graph
         ran, python, self.others_ns, aux, fk = fused_chain(
-            self._stamps, self._info, t, dt, upto, st._filled, self._vpn, self._hybrid,
-            b.law_id, b.trajectory, self._nb, self._addr, self._dims, self._rings, idx,
-            self._tick_ns)
+            self._tab, t, dt, upto, st._filled, self._vpn, self._hybrid, b.law_id,
+            b.trajectory, self._nb, idx, self._tick_ns)
         if ran >= 2 and fk >= 0:
             st.buffer_filled()
         if ran >= 4:
