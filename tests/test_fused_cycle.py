@@ -96,6 +96,10 @@ def test_a_position_session_with_swaps_and_trips_is_the_per_block_cycle_bit_for_
     for law in ("pd_g0", "adaptive", "pid", "computed_torque"):
         h.both(lambda pl, law=law: swap_controller(pl, law))
         h.run(250)                                      # the swap, its fade, then fused
+        if law == "adaptive":                           # new gains replace its estimate
+            lam = h.f.controller.gains.lambda_per_s
+            h.both(lambda pl, lam=lam: pl.loop.set_params("controller", lambda_per_s=1.2 * lam))
+            h.run(100)
     h.both(lambda pl: setattr(pl.twin.inputs, "hand_stop", True))   # a trip in the kernel
     h.run(60)
     h.both(lambda pl: setattr(pl.twin.inputs, "hand_stop", False))

@@ -4,7 +4,7 @@ Estimator → model → reference → controller → supervisor: each block's cy
 numba kernel on its port buffers, but a block still costs its ``update``'s Python and a numba
 dispatch (with caches cold between 1 kHz cycles, several times its arithmetic: ref4's
 ``bench/fused_cycle.py``). :class:`FusedChain` binds those blocks' own buffers once and runs
-the five **existing** kernels (``rt.estimation.compiled.block_update``,
+(:func:`rt.components.fused_kernel.fused_chain`) the five **existing** kernels (``rt.estimation.compiled.block_update``,
 ``rt.model.kernels.model_state``, ``rt.references.sequencer_kernel.cycle``, the law's kernel
 in ``rt.control.kernels``, ``rt.safety.supervisor_kernel.block_cycle``) from one kernel,
 reading the CPU's cycle counter between stages, so the graph's per-slot timing rings keep
@@ -41,15 +41,85 @@ from collections.abc import Callable
 from typing import Any, cast
 
 import numpy as np
-from llvmlite import ir  # type: ignore[import-untyped]
-from numba import carray, njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
 
 from rt.components.blocks import STATUS_SENSOR, ControllerBlock, ModelState, VelocityEstimation
+from rt.components.fused_kernel import (
+    _INT_BUFFERS,
+    _MATRIX_BUFFERS,
+    B_AMAP,
+    B_CTRL_MODE,
+    B_DFAILED,
+    B_ENABLE,
+    B_EST,
+    B_EST_C,
+    B_EST_IO,
+    B_EST_OUT,
+    B_EST_Q,
+    B_EST_S,
+    B_FK,
+    B_G,
+    B_GAINS,
+    B_GEOM,
+    B_GQ,
+    B_INPUTS,
+    B_INTEGRAL,
+    B_LAW_STB,
+    B_LGEOM,
+    B_LIMITS,
+    B_LLIMITS,
+    B_LPHI,
+    B_LQ,
+    B_LQD,
+    B_LQDD,
+    B_MEM,
+    B_MOD_Q,
+    B_MOD_QD,
+    B_MOD_WORK,
+    B_MODE,
+    B_MWORK,
+    B_OUT,
+    B_PAR,
+    B_PHI,
+    B_REF_IO,
+    B_REF_MODE,
+    B_REF_Q,
+    B_SEQ,
+    B_SEST,
+    B_SFK,
+    B_SQ,
+    B_SQD,
+    B_SQDD,
+    B_SQDREF,
+    B_SQREF,
+    B_SSTB,
+    B_STAU,
+    B_STB,
+    B_STD,
+    B_TABLE,
+    B_TF,
+    B_TI,
+    B_VOLTS,
+    B_WFLAGS,
+    B_WORK,
+    B_WRENCH,
+    B_ZERO3,
+    LAW_ADAPTIVE,
+    LAW_COMPUTED_TORQUE,
+    LAW_PADEN_PANJA,
+    LAW_PD_G0,
+    LAW_PD_GRAVITY,
+    LAW_PID,
+    N_BUFFERS,
+    N_STAGES,
+    T_ADDR,
+    T_DIMS,
+    T_RINGS,
+    T_SIZE,
+    fused_chain,
+    ticks_now,
+)
 from rt.components.protocol_blocks import HybridController
 from rt.components.safety_blocks import SupervisorBlock
-from rt.control import kernels as ck
 from rt.control.adaptive import Adaptive
 from rt.control.base import Controller
 from rt.control.laws import (
@@ -60,215 +130,20 @@ from rt.control.laws import (
     PdG0,
     Pid,
 )
-from rt.estimation.compiled import CompiledKalmanEstimator, block_update
-from rt.model.kernels import model_state
-from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
-from rt.references import sequencer_kernel as rk
+from rt.estimation.compiled import CompiledKalmanEstimator
 from rt.references.sequencer import ProgramReference
-from rt.safety import supervisor_kernel as svk
 
 #: The environment variable that turns the fused cycle off ("0") when a loop is assembled.
 ENV_FLAG = "TALUS_FUSED_CYCLE"
 
 #: The chain's slots, in the graph's order.
 CHAIN = ("estimator", "model", "reference", "controller", "supervisor")
-N_STAGES = len(CHAIN)
-
-# ``info`` (int64) the kernel fills: stages it ran, whether the last one needs Python, the
-# estimator's status, FK's status, the reference's answer, the law's status, the supervisor's.
-I_RAN, I_PYTHON, I_EST, I_FK, I_REF, I_LAW, I_SUP, INFO_SIZE = 0, 1, 2, 3, 4, 5, 6, 7
-_EST_JUMP = -3          # EstimatorStatus.JUMP: published, the supervisor's business
+assert len(CHAIN) == N_STAGES
 
 
 def enabled_by_environment() -> bool:
     """False when ``TALUS_FUSED_CYCLE=0`` (or ``false``/``off``/``no``) is set."""
     return os.environ.get(ENV_FLAG, "1").strip().lower() not in ("0", "false", "off", "no")
-
-
-@intrinsic
-def _ticks(typingctx: Any) -> Any:
-    """The CPU's cycle counter (x86: rdtsc) read inside a kernel: a stage's time costs no
-    clock call (``perf_counter_ns`` costs ≈ 0.3 µs on this VM)."""
-    sig = types.int64()
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        fnty = ir.FunctionType(ir.IntType(64), [])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.readcyclecounter")
-        return builder.call(fn, [])
-    return sig, codegen
-
-
-@njit(cache=True)
-def ticks_now() -> int:
-    return _ticks()  # type: ignore[call-arg]
-
-
-# ---- the buffers: one table of addresses (and shapes) instead of ~57 array arguments.
-# numba's dispatch unboxes each array argument (≈ 0.5 µs apiece here): passing the blocks'
-# buffers one by one cost more than the five blocks' own Python. The kernel rebuilds each
-# buffer as a view of the same memory (``carray``); :class:`FusedChain` holds a reference to
-# every buffer whose address is in the table and re-reads the addresses whenever one of them
-# may have been replaced (a reset, new gains, a new program's table), before the call.
-(B_EST_C, B_EST_S, B_EST_Q, B_EST_OUT, B_EST_IO,
- B_GEOM, B_LIMITS, B_PHI, B_MOD_Q, B_MOD_QD, B_STB, B_MOD_WORK, B_FK,
- B_REF_IO, B_SEQ, B_REF_Q, B_REF_MODE, B_TABLE, B_CTRL_MODE,
- B_TI, B_TF, B_LAW_STB, B_LQ, B_LQD, B_LQDD, B_GAINS, B_WORK, B_OUT, B_INTEGRAL, B_AMAP,
- B_EST, B_LGEOM, B_LLIMITS, B_LPHI, B_GQ, B_G, B_STD, B_ZERO3, B_MWORK,
- B_PAR, B_MEM, B_SQ, B_SEST, B_SQD, B_SQDD, B_SSTB, B_SFK, B_SQREF, B_SQDREF, B_STAU,
- B_WRENCH, B_WFLAGS, B_INPUTS, B_DFAILED, B_VOLTS, B_ENABLE, B_MODE, N_BUFFERS) = range(58)
-_INT_BUFFERS = (B_TI, B_AMAP)
-_MATRIX_BUFFERS = (B_TABLE,)
-
-LAW_PADEN_PANJA, LAW_COMPUTED_TORQUE, LAW_PD_GRAVITY, LAW_PD_G0, LAW_PID, LAW_ADAPTIVE = range(6)
-
-
-@intrinsic
-def _f64_at(typingctx: Any, addr: Any) -> Any:
-    sig = types.CPointer(types.float64)(types.int64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
-    return sig, codegen
-
-
-@intrinsic
-def _i64_at(typingctx: Any, addr: Any) -> Any:
-    sig = types.CPointer(types.int64)(types.int64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.int64)))
-    return sig, codegen
-
-
-@njit(cache=True, inline="always")
-def _v(addr, dims, i):
-    return carray(_f64_at(addr[i]), dims[i, 0])
-
-
-@njit(cache=True, inline="always")
-def _vi(addr, dims, i):
-    return carray(_i64_at(addr[i]), dims[i, 0])
-
-
-@njit(cache=True)
-def _law(dt, law, trajectory, nb, a, d):
-    """The law's kernel (``LAW_*``), called as its bound cycle calls it; returns its status
-    (< 0: PD+G0's FK at the desired position refused)."""
-    ti, tf, stb = _vi(a, d, B_TI), _v(a, d, B_TF), _v(a, d, B_LAW_STB)
-    q, qd, qdd = _v(a, d, B_LQ), _v(a, d, B_LQD), _v(a, d, B_LQDD)
-    gains, work, out = _v(a, d, B_GAINS), _v(a, d, B_WORK), _v(a, d, B_OUT)
-    if law == LAW_PADEN_PANJA:
-        ck.paden_panja(ti, tf, stb, q, qd, qdd, gains, work, out)
-    elif law == LAW_COMPUTED_TORQUE:
-        ck.computed_torque(ti, tf, stb, q, qd, qdd, gains, trajectory, work, out)
-    elif law == LAW_PD_GRAVITY:
-        ck.pd_gravity(ti, tf, stb, q, qd, gains, work, out)
-    elif law == LAW_PD_G0:
-        return ck.pd_gravity_desired(ti, tf, _v(a, d, B_LGEOM), _v(a, d, B_LLIMITS),
-                                     _v(a, d, B_LPHI), stb, q, qd, gains, _v(a, d, B_GQ),
-                                     _v(a, d, B_G), _v(a, d, B_STD), _v(a, d, B_ZERO3),
-                                     FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, _v(a, d, B_MWORK),
-                                     work, out)
-    elif law == LAW_PID:
-        ck.pid(stb, q, qd, gains, _v(a, d, B_INTEGRAL), dt, False, out)
-    elif law == LAW_ADAPTIVE:
-        ck.adaptive(ti, tf, stb, q, qd, qdd, gains, _vi(a, d, B_AMAP), _v(a, d, B_EST), nb, dt,
-                    False, work, out)
-    return 0
-
-
-# ``tab`` (int64), everything the kernel reads or writes besides the blocks' buffers, in one
-# argument: the buffers' addresses and shapes, the timing rings' addresses, the stamps and
-# the info.
-T_ADDR = 0
-T_DIMS = T_ADDR + N_BUFFERS
-T_RINGS = T_DIMS + 2 * N_BUFFERS
-T_STAMPS = T_RINGS + N_STAGES
-T_INFO = T_STAMPS + N_STAGES + 1
-T_SIZE = T_INFO + INFO_SIZE
-
-
-@njit(cache=True)
-def fused_chain(tab, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, idx,
-                ns_per_tick):
-    """:func:`_chain`, then each stage after the first timed into its slot's ring (the
-    graph's timing rings' addresses, in ``tab``, at ``idx``). Returns (stages run, whether the
-    last needs Python, the ns those later stages took, the supervisor's or the law's answer,
-    FK's status)."""
-    a = tab[T_ADDR:T_ADDR + N_BUFFERS]
-    d = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
-    rings = tab[T_RINGS:T_RINGS + N_STAGES]
-    stamps = tab[T_STAMPS:T_STAMPS + N_STAGES + 1]
-    info = tab[T_INFO:T_INFO + INFO_SIZE]
-    _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d)
-    ran = info[I_RAN]
-    others = 0
-    for j in range(1, ran):
-        ns = np.int64((stamps[j + 1] - stamps[j]) * ns_per_tick)
-        carray(_i64_at(rings[j]), idx + 1)[idx] = ns
-        others += ns
-    aux = info[I_SUP] if ran == 5 else info[I_LAW]
-    return ran, info[I_PYTHON], others, aux, info[I_FK]
-
-
-@njit(cache=True)
-def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d):
-    """The five stages (module docstring) up to stage ``upto`` (exclusive), stopping where
-    Python must run; ``stamps`` the cycle counter before the first and after each stage;
-    ``a``/``d`` the buffers' addresses and shapes (``B_*``)."""
-    info[I_RAN] = 0
-    info[I_PYTHON] = 0
-    stamps[0] = _ticks()
-    status = block_update(_v(a, d, B_EST_C), _v(a, d, B_EST_S), _v(a, d, B_EST_Q), dt,
-                          _v(a, d, B_EST_OUT), _v(a, d, B_EST_IO))
-    stamps[1] = _ticks()
-    info[I_RAN] = 1
-    info[I_EST] = status
-    if status < 0 and status != _EST_JUMP:
-        info[I_PYTHON] = 1                  # the block returns STATUS_SENSOR: a fault
-        return
-    fk = model_state(_v(a, d, B_GEOM), _v(a, d, B_LIMITS), _v(a, d, B_PHI), _v(a, d, B_MOD_Q),
-                     _v(a, d, B_MOD_QD), _v(a, d, B_STB), FK_STEP_TOL_RAD, FK_MAX_ITERATIONS,
-                     _v(a, d, B_MOD_WORK))
-    _v(a, d, B_FK)[0] = 1.0 if fk >= 0 else 0.0
-    stamps[2] = _ticks()
-    info[I_RAN] = 2
-    info[I_FK] = fk
-    if upto <= 2:
-        return
-    table = carray(_f64_at(a[B_TABLE]), (d[B_TABLE, 0], d[B_TABLE, 1]))
-    r = rk.cycle(_v(a, d, B_REF_IO), _v(a, d, B_SEQ), _v(a, d, B_REF_Q), _v(a, d, B_REF_MODE),
-                 table, dt)
-    info[I_REF] = r
-    if r == rk.NEED_PYTHON:                 # nothing written: the block runs its cycle
-        return
-    stamps[3] = _ticks()
-    info[I_RAN] = 3
-    if r == rk.PLAY_DONE:                   # the return is planned in Python
-        info[I_PYTHON] = 1
-        return
-    # The hybrid controller's position mode only (its force law and switches are Python).
-    if upto <= 3 or (hybrid and (_v(a, d, B_CTRL_MODE)[0] > 0.5)):
-        return
-    ls = _law(dt, law, trajectory, nb, a, d)
-    stamps[4] = _ticks()
-    info[I_RAN] = 4
-    info[I_LAW] = ls
-    if ls < 0:
-        info[I_PYTHON] = 1                  # PD+G0's refused FK raises in Python
-        return
-    if upto <= 4:
-        return
-    new = svk.block_cycle(_v(a, d, B_PAR), _v(a, d, B_MEM), t, dt, _v(a, d, B_SQ),
-                          _v(a, d, B_SEST), _v(a, d, B_SQD), _v(a, d, B_SQDD),
-                          _v(a, d, B_SSTB), _v(a, d, B_SFK), filled or fk >= 0,
-                          _v(a, d, B_SQREF), _v(a, d, B_SQDREF), _v(a, d, B_STAU),
-                          _v(a, d, B_WRENCH), _v(a, d, B_WFLAGS), _v(a, d, B_INPUTS),
-                          _v(a, d, B_DFAILED), volts_per_n, _v(a, d, B_VOLTS),
-                          _v(a, d, B_ENABLE), _v(a, d, B_MODE))
-    stamps[5] = _ticks()
-    info[I_RAN] = 5
-    info[I_SUP] = new
 
 
 _NO_F = np.zeros(1)
@@ -282,11 +157,16 @@ class LawBinding:
     parameter count."""
 
     def __init__(self, law_id: int, fixed: dict[int, np.ndarray], trajectory: bool = False,
-                 dynamic: Callable[[], tuple[dict[int, np.ndarray], int]] | None = None):
+                 dynamic: Callable[[], tuple[dict[int, np.ndarray], int]] | None = None,
+                 watch: Callable[[], object] | None = None):
         self.law_id = law_id
         self.fixed = fixed
         self.trajectory = trajectory
         self.dynamic = dynamic
+        #: When those buffers may have been replaced: the law's bound cycle changed (a reset
+        #: rebinds it after replacing them) or ``watch()`` changed (the adaptive law's new
+        #: gains replace its estimate without rebinding).
+        self.watch = watch
 
 
 def law_binding(law: Controller, st: Any, ref: Any, out: np.ndarray) -> LawBinding | None:
@@ -319,7 +199,7 @@ def law_binding(law: Controller, st: Any, ref: Any, out: np.ndarray) -> LawBindi
     if cls is Adaptive:
         ad = cast(Adaptive, law)
         return LawBinding(LAW_ADAPTIVE, fixed, dynamic=lambda: (
-            {B_AMAP: ad._amap, B_EST: ad._est}, ad._nb))
+            {B_AMAP: ad._amap, B_EST: ad._est}, ad._nb), watch=lambda: ad._est)
     return None
 
 
@@ -361,6 +241,8 @@ class FusedChain:
         #: The buffer behind each address (kept alive: the kernel writes through them).
         self._bufs: list[np.ndarray] = [_NO_F] * N_BUFFERS
         self._dyn_ids: tuple = ()
+        self._law_cycle: object = None
+        self._watched: object = None
         #: Why the chain runs per block (the last binding's reason), "" when fused.
         self.why_not = "not bound yet"
 
@@ -482,6 +364,8 @@ class FusedChain:
         bufs, nb = dyn()
         ids = tuple(id(b) for b in bufs.values())
         self._nb = nb
+        self._law_cycle = self._law.cycle
+        self._watched = None if self._binding.watch is None else self._binding.watch()
         if ids != self._dyn_ids:
             for k, buf in bufs.items():
                 why = self._set(k, buf)
@@ -528,7 +412,11 @@ class FusedChain:
             self._bind()              # rebuilt outside the graph's lifecycle (a reset)
             if not self._ok:
                 return 0
-        if self._binding.dynamic is not None and self._refresh_law():
+        b = self._binding
+        cyc = self._law.cycle
+        stale = b.dynamic is not None and (cyc is not self._law_cycle or (
+            b.watch is not None and b.watch() is not self._watched))
+        if stale and self._refresh_law():
             self._gen = -1
             return 0
         upto = N_STAGES
@@ -540,13 +428,11 @@ class FusedChain:
                     upto = 2          # a table the kernel cannot view: the block plays it
                 else:
                     self._table = ref._table
-            cyc = self._law.cycle
             raw = ctl.mode.data[0]
             if cyc is None or raw != (ctl._sup_raw if self._hybrid else ctl._mode_raw) or (
                     self._hybrid and ctl._in_force):
                 upto = min(upto, 3)   # the controller block runs (mode change, fade, force)
         st = self._state
-        b = self._binding
         g = self._graph
         ran, python, self.others_ns, aux, fk = fused_chain(
             self._tab, t, dt, upto, st._filled, self._vpn, self._hybrid, b.law_id,
