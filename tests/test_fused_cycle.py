@@ -280,3 +280,22 @@ def test_the_graph_runs_a_fused_segment_then_the_blocks_it_left():
     g.step(0.0, 1e-3)
     assert counts() == [5, 32, 32, 22, 5]
     assert all(g.stats().components[s].count == 5 for s in "abce")
+
+
+def test_a_segment_that_raises_leaves_the_blocks_to_run():
+    b = GraphBuilder()
+    for s in "abcde":
+        b.add(_Count(s))
+    g = b.build()
+    g.configure()
+    seg = _Segment()
+
+    def broken(t: float, dt: float, idx: int) -> int:
+        raise RuntimeError("bug")
+
+    seg.run = broken  # type: ignore[method-assign]
+    g.fuse(seg)
+    g.start()
+    assert g.step(0.0, 1e-3) == 0
+    assert [float(g.component(s).y.data[0]) for s in "abcde"] == [1, 1, 1, 1, 1]
+    assert not g.fused and isinstance(g.last_exception, RuntimeError)

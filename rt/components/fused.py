@@ -270,7 +270,10 @@ class FusedChain:
         g = self._graph
         self._gen = g.generation
         self._ok = False
-        self.why_not = self._check_and_bind(g)
+        try:
+            self.why_not = self._check_and_bind(g)
+        except Exception as exc:  # noqa: BLE001 - an unexpected block state: run per block
+            self.why_not = f"binding failed: {type(exc).__name__}: {exc}"
         self._ok = not self.why_not
 
     def _set(self, k: int, buf: np.ndarray) -> str:

@@ -614,7 +614,14 @@ class Graph:
         t0 = pc()
         faults, prev = self._blocks(self._pre, t, dt, idx, t0)
         seg = self._segment
-        n = seg.run(t, dt, idx)
+        try:
+            n = seg.run(t, dt, idx)
+        except Exception as exc:  # noqa: BLE001 - a bug of the segment must not kill the loop
+            # Its checks run before its kernel: the blocks run this cycle, and every cycle
+            # after it (the per-block path is the reference).
+            self._fused = False
+            self.last_exception = exc
+            n = 0
         if n:
             now = pc()
             seg_run = self._seg
