@@ -4,8 +4,8 @@ Estimator → model → reference → controller → supervisor: each block's cy
 numba kernel on its port buffers, but a block still costs its ``update``'s Python and a numba
 dispatch (with caches cold between 1 kHz cycles, several times its arithmetic: ref4's
 ``bench/fused_cycle.py``). :class:`FusedChain` binds those blocks' own buffers once and runs
-(:func:`rt.components.fused_kernel.fused_chain`) the five **existing** kernels (``rt.estimation.compiled.block_update``,
-``rt.model.kernels.model_state``, ``rt.references.sequencer_kernel.cycle``, the law's kernel
+the five **existing** kernels (:func:`rt.components.fused_kernel.fused_chain`:
+``rt.estimation.compiled.block_update``, ``rt.model.kernels.model_state``, ``rt.references.sequencer_kernel.cycle``, the law's kernel
 in ``rt.control.kernels``, ``rt.safety.supervisor_kernel.block_cycle``) from one kernel,
 reading the CPU's cycle counter between stages, so the graph's per-slot timing rings keep
 their meaning (:meth:`rt.engine.graph.Graph.fuse`). No arithmetic is copied here: the
@@ -28,9 +28,10 @@ Whatever needs Python stops the kernel exactly where the blocks would run Python
 * after the supervisor when something new tripped or a request, a heartbeat or a failed
   block is pending (:meth:`Supervisor.finish_block`).
 
-The blocks after the stop run their ``update`` in the same cycle. A swap, a non-standard
-block, a block not compiled or not active, or a law without a kernel here runs the whole
-chain per block. ``TALUS_FUSED_CYCLE=0`` in the environment (read when a loop is assembled)
+The blocks after the stop run their ``update`` in the same cycle. A non-standard block, a
+block not compiled or not active, or a law without a kernel here runs the whole chain per
+block; a swap rebinds the chain to the new block at its cycle (its fade runs the controller
+block, as above). ``TALUS_FUSED_CYCLE=0`` in the environment (read when a loop is assembled)
 or ``Graph.fused = False`` turns fusion off: the per-block path is the reference.
 """
 from __future__ import annotations
