@@ -23,6 +23,7 @@ from rt.components.blocks import (
     RecorderTap,
     VelocityEstimation,
 )
+from rt.components.fused import attach as attach_fused_cycle
 from rt.components.safety_blocks import ForceReader, RedundantDrive, StopInputs, SupervisorBlock
 from rt.components.twin_step import TwinStep
 from rt.control.base import Controller, create
@@ -296,6 +297,9 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
     sup_block = graph.component("supervisor")
     assert isinstance(sup_block, SupervisorBlock)
     sup_block.failed_components = graph.failed_components
+    # Estimator → supervisor as one compiled call per cycle (rt.components.fused;
+    # TALUS_FUSED_CYCLE=0 keeps the per-block cycle).
+    attach_fused_cycle(graph)
     loop = Loop(graph, rate_hz=rate_hz, mode=mode, **loop_kwargs)
     graph.start()
     return PositionLoop(loop, graph, model, devices.twin, rec, ref, supervisor, events, devices)

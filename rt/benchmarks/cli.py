@@ -79,6 +79,10 @@ def register_loop(commands: argparse._SubParsersAction) -> None:
                    help="bound every CPU's wake-up latency through PM QoS while the loop runs, "
                         "as the RT process does (0, the default: idle CPUs poll; needs root; "
                         "-1: not requested)")
+    p.add_argument("--no-fused", action="store_true",
+                   help="run the five middle blocks' update one by one (the per-block "
+                        "reference) instead of the fused compiled chain; also "
+                        "TALUS_FUSED_CYCLE=0")
     p.add_argument("--json", action="store_true")
     add_robot_option(p)
     p.set_defaults(func=_loop)
@@ -98,7 +102,8 @@ def _loop(args) -> int:
                          f"{args.cpu_latency_us}")
     qos = None if args.cpu_latency_us < 0 else args.cpu_latency_us
     result = run_loop_benchmark(args.controller, args.seconds, args.rate, args.mode,
-                                model=_model(args), cpu_latency_us=qos)
+                                model=_model(args), cpu_latency_us=qos,
+                                fused=False if args.no_fused else None)
     if args.json:
         print(json.dumps(result))
     else:

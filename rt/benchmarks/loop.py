@@ -21,11 +21,15 @@ def _summary(samples_ns: np.ndarray) -> dict[str, float]:
 
 def run_loop_benchmark(controller: str, seconds: float, rate_hz: float = 1000.0,
                        mode: str = "realtime", model=None,
-                       cpu_latency_us: int | None = None) -> dict:
+                       cpu_latency_us: int | None = None, fused: bool | None = None) -> dict:
+    """``fused``: None keeps the loop's default (the fused chain unless ``TALUS_FUSED_CYCLE=0``);
+    False runs every block's ``update`` (the per-block reference), True fuses."""
     extra: dict[str, Any] = {} if cpu_latency_us is None or mode != "realtime" else {
         "cpu_latency_us": cpu_latency_us}
     pl = build_sim_position_loop(controller, duration_s=max(1.0, seconds), rate_hz=rate_hz,
                                  mode=mode, model=model, **extra)
+    if fused is not None:
+        pl.graph.fused = fused
     cycles = pl.loop.run(seconds=seconds)
     stats = pl.loop.stats()
     graph = pl.graph
@@ -40,6 +44,7 @@ def run_loop_benchmark(controller: str, seconds: float, rate_hz: float = 1000.0,
     hyg = pl.loop.hygiene
     return {"controller": controller, "rate_hz": rate_hz, "mode": mode, "twin": True,
             "cpu_latency_us": None if hyg is None else hyg.cpu_latency_us,
+            "fused": graph.fused,
             "cycles": int(cycles), "deadline_misses": int(stats.misses),
             "cycle_us": _summary(cycle_ns), "cycle_without_twin_us": _summary(without),
             "components": components}

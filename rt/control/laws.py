@@ -197,6 +197,11 @@ class PdG0(Controller):
             _no_fk_at(ref.q, status)
         return STATUS_OK
 
+    @staticmethod
+    def refuse_desired(q_d: np.ndarray, status: int) -> None:
+        """Raise what a refused FK at the desired position raises (the fused cycle too)."""
+        _no_fk_at(q_d, status)
+
     def _bound_kernel(self, st, ref, out):
         # A new desired position: FK there (compiled; it shares the model's warm start like
         # ``_law``), then G, all in the kernel; refused FK raises as ``_law`` does. Every

@@ -312,6 +312,16 @@ class Graph:
         self.failed: dict[str, str] = {}
         """Total faults so far; a supervisor may poll it every cycle (a plain int read)."""
         self._running = False
+        #: Bumped at every lifecycle change (start, stop, reset, restart, swap): a fused
+        #: segment binds its buffers again when it changed.
+        self.generation = 0
+        self._segment: Any = None
+        self._fused = False
+        self._seg_first = 0
+        self._pre: list = []
+        self._seg: list = []
+        self._seg_tails: list = []
+        self._post: list = []
         for _, comp in slots:
             comp._graph = self
 
@@ -371,6 +381,56 @@ class Graph:
         """The most recent faults (up to FAULT_HISTORY), oldest first."""
         return list(self._faults)
 
+    # ------------------------------------------------------------------ fused segment
+    def fuse(self, segment: Any, enabled: bool = True) -> None:
+        """Let ``segment`` run its consecutive slots (``segment.slots``, in execution order)
+        in one call per cycle (e.g. ``rt.components.fused.FusedChain``): each cycle
+        ``segment.run(t, dt, idx)`` returns how many of those slots it ran (0: none), having
+        written the times (ns) of those after the first into their rings (``attach`` gives it
+        the rings' addresses) at ``idx`` and their sum in ``segment.others_ns``, and in
+        ``segment.pending`` None or the Python that completes
+        the last one (timed into its ring; its exception or non-zero status is that slot's
+        fault, as an ``update``'s). The slots it did not run run their ``update`` in the same
+        cycle. ``enabled`` (also :attr:`fused`) False keeps every slot's ``update``."""
+        slots = tuple(segment.slots)
+        if not slots or slots[0] not in self._order:
+            raise ConfigurationError(f"fused segment {slots!r}: no such slots in {self._order}")
+        i = self._order.index(slots[0])
+        if self._order[i:i + len(slots)] != slots:
+            raise ConfigurationError(f"fused segment {slots!r} is not consecutive in the "
+                                     f"execution order {self._order}")
+        self._segment = segment
+        self._seg_first = i
+        segment.attach(self, [self._stores[i + j].buffer_info()[0] for j in range(len(slots))])
+        self._split_run()
+        self.fused = enabled
+        if self._running:
+            segment.prepare()
+
+    @property
+    def fused(self) -> bool:
+        """True while a fused segment (:meth:`fuse`) runs its slots; settable between cycles
+        (False: every slot's ``update``, the per-block reference)."""
+        return self._fused
+
+    @fused.setter
+    def fused(self, on: bool) -> None:
+        self._fused = bool(on) and self._segment is not None
+
+    @property
+    def segment(self) -> Any:
+        """The fused segment (:meth:`fuse`), or None."""
+        return self._segment
+
+    def _split_run(self) -> None:
+        if self._segment is None:
+            return
+        i, n = self._seg_first, len(self._segment.slots)
+        self._pre = self._run[:i]
+        self._seg = self._run[i:i + n]
+        self._seg_tails = [self._seg[j:] for j in range(n + 1)]
+        self._post = self._run[i + n:]
+
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
         """Configure every unconfigured component, in execution order."""
@@ -402,10 +462,14 @@ class Graph:
                 comp.stop()
             raise
         self._running = True
+        self.generation += 1
+        if self._segment is not None:
+            self._segment.prepare()       # bound (and its kernel loaded) now, not in a cycle
 
     def stop(self) -> None:
         """Stop every active component (reverse order); all are attempted, failures reported."""
         self._running = False
+        self.generation += 1
         failures = []
         for slot in reversed(self._order):
             comp = self._components[slot]
@@ -434,6 +498,7 @@ class Graph:
         out) must not leave the loop without that component for the life of the process; the
         supervisor hard-stops while one is in error, and the operator's reset restarts it."""
         refused: dict[str, str] = {}
+        self.generation += 1
         for slot in list(self.failed) + [s for s in also if s not in self.failed]:
             comp = self._components[slot]
             try:
@@ -455,6 +520,7 @@ class Graph:
         must be stopped. Timing statistics are kept (see :meth:`reset_stats`)."""
         if self._running:
             raise LifecycleError("graph.reset(): stop the graph first")
+        self.generation += 1
         for slot in self._order:
             comp = self._components[slot]
             if comp.lifecycle in (Lifecycle.INACTIVE, Lifecycle.ERROR):
@@ -473,6 +539,8 @@ class Graph:
         Returns the number of components that faulted in this cycle (0 = all fine). Allocates
         nothing but transient ints; never raises for a component's failure.
         """
+        if self._fused:
+            return self._step_fused(t, dt)
         pc = perf_counter_ns
         idx = self._idx
         faults = 0
@@ -498,6 +566,91 @@ class Graph:
             else:
                 ring[idx] = -1
                 self._skips[k] += 1
+        for copy, latch, src in self._latches:
+            copy(latch, src)
+        elapsed = pc() - t0
+        self._cycle_store[idx] = elapsed
+        self._cycle_max = max(self._cycle_max, elapsed)
+        self._idx = (idx + 1) & self._mask
+        self._cycles += 1
+        return faults
+
+    def _blocks(self, run: list, t: float, dt: float, idx: int, prev: int) -> tuple[int, int]:
+        """``step``'s per-block body over ``run`` (a part of the slots); returns (faults, the
+        clock after the last)."""
+        pc = perf_counter_ns
+        faults = 0
+        for k, comp, update, ring in run:
+            if comp._active:
+                try:
+                    status = update(t, dt)
+                except Exception as exc:  # noqa: BLE001 - a component bug must not kill the loop
+                    now = pc()
+                    ring[idx] = now - prev
+                    prev = now
+                    self._fault(k, comp, STATUS_EXCEPTION,
+                                f"update raised {type(exc).__name__}: {exc}", t, exc)
+                    faults += 1
+                    continue
+                now = pc()
+                ring[idx] = now - prev
+                prev = now
+                if status:
+                    self._fault(k, comp, int(status), f"update returned status {status}", t, None)
+                    faults += 1
+            else:
+                ring[idx] = -1
+                self._skips[k] += 1
+        return faults, prev
+
+    def _step_fused(self, t: float, dt: float) -> int:
+        """:meth:`step` with the fused segment (:meth:`fuse`): the slots before it, then one
+        ``segment.run`` for as many of its slots as it runs, its completion (``pending``),
+        the segment's other slots and the slots after it, per block. The segment's first
+        slot's time is the call's whole time minus the other stages' (the call's own
+        overhead is charged to it), so the slots' times still add up to the cycle's."""
+        pc = perf_counter_ns
+        idx = self._idx
+        t0 = pc()
+        faults, prev = self._blocks(self._pre, t, dt, idx, t0)
+        seg = self._segment
+        try:
+            n = seg.run(t, dt, idx)
+        except Exception as exc:  # noqa: BLE001 - a bug of the segment must not kill the loop
+            # Its checks run before its kernel: the blocks run this cycle, and every cycle
+            # after it (the per-block path is the reference).
+            self._fused = False
+            self.last_exception = exc
+            n = 0
+        if n:
+            now = pc()
+            seg_run = self._seg
+            seg_run[0][3][idx] = now - prev - seg.others_ns
+            prev = now
+            pending = seg.pending
+            if pending is not None:
+                k, comp, _update, ring = seg_run[n - 1]
+                try:
+                    status = pending(t, dt)
+                except Exception as exc:  # noqa: BLE001 - as an update's exception
+                    now = pc()
+                    ring[idx] += now - prev
+                    prev = now
+                    self._fault(k, comp, STATUS_EXCEPTION,
+                                f"update raised {type(exc).__name__}: {exc}", t, exc)
+                    faults += 1
+                else:
+                    now = pc()
+                    ring[idx] += now - prev
+                    prev = now
+                    if status:
+                        self._fault(k, comp, int(status), f"update returned status {status}",
+                                    t, None)
+                        faults += 1
+        more, prev = self._blocks(self._seg_tails[n], t, dt, idx, prev)
+        faults += more
+        more, prev = self._blocks(self._post, t, dt, idx, prev)
+        faults += more
         for copy, latch, src in self._latches:
             copy(latch, src)
         elapsed = pc() - t0
@@ -607,6 +760,9 @@ class Graph:
             except ConfigurationError as exc:
                 new._graph = None
                 raise InputError(f"cannot swap {new.name!r} into slot {slot!r}: {exc}") from exc
+        if self._segment is not None and slot in self._segment.slots:
+            # Off the cycle: the fused kernel of the new block's law compiles or loads here.
+            self._segment.prepare_swap(slot, new)
         return SwapPlan(slot, old, new)
 
     def commit_swap(self, plan: SwapPlan) -> None:
@@ -642,6 +798,8 @@ class Graph:
         self._skips[k] = 0
         self._base[k] = self._cycles
         self._run[k] = (k, new, new.update, self._stores[k])
+        self._split_run()
+        self.generation += 1
         old._graph = None
         if old.lifecycle is Lifecycle.ACTIVE:
             try:

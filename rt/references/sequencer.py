@@ -372,15 +372,21 @@ class ProgramReference(Component):
             if result == sk.DONE:
                 return 0
             if result == sk.PLAY_DONE:          # the program's last sample: plan the return
-                self._end_play(self._seq[sk.S_PROGRAM_MODE] == 1.0)
-                # The kernel copied the force before _end_play zeroed it (as the
-                # interpreted cycle's last step does after it).
-                self.force_preview.data[:] = self.force.data
-                self._sync_hold()
-                return 0
+                return self.play_done()
         status = self._update(dt)
         self._sync_hold()
         return status
+
+    def play_done(self) -> int:
+        """The end of a compiled cycle that answered ``PLAY_DONE`` (the program's last sample
+        written): plan the return. Also run by the graph's fused cycle (``rt.components.
+        fused``) after its kernel's reference stage answered it."""
+        self._end_play(self._seq[sk.S_PROGRAM_MODE] == 1.0)
+        # The kernel copied the force before _end_play zeroed it (as the interpreted cycle's
+        # last step does after it).
+        self.force_preview.data[:] = self.force.data
+        self._sync_hold()
+        return 0
 
     def _sync_hold(self) -> None:
         """Tell the compiled cycle whether the approach now holds still, and where."""

@@ -514,11 +514,24 @@ class Supervisor:
                              fk_ok, filled, q_ref, qd_ref, tau, wrench, wrench_flags, inputs,
                              drive_failed, volts_per_n, volts, enable, mode)
         if new or self._python_side_pending():
-            before = self.reaction
-            self._after_checks(t, new)
-            if self.reaction != before:
-                sk.outputs(self._par, int(self.reaction), tau, volts_per_n, volts, enable, mode)
+            self.finish_block(t, new, tau, volts_per_n, volts, enable, mode)
         return self.reaction
+
+    def finish_block(self, t: float, new: int, tau: np.ndarray, volts_per_n: float,
+                     volts: np.ndarray, enable: np.ndarray, mode: np.ndarray) -> None:
+        """The Python side of :meth:`check_block` after its kernel (``new``: what
+        ``block_cycle`` answered), when something new tripped or a request is pending; also
+        run by the graph's fused cycle (``rt.components.fused``) after its supervisor stage."""
+        before = self.reaction
+        self._after_checks(t, new)
+        if self.reaction != before:
+            sk.outputs(self._par, int(self.reaction), tau, volts_per_n, volts, enable, mode)
+
+    def python_side_pending(self, failed_components: str | None) -> bool:
+        """Whether a cycle needs :meth:`finish_block` though its kernel found nothing new
+        (``failed_components`` as :meth:`check_block` takes it; recorded the same way)."""
+        self._failed_components = failed_components
+        return self._python_side_pending()
 
     def _python_side_pending(self) -> bool:
         return (self._estop_request is not None or self._stop_request

@@ -1,0 +1,494 @@
+"""The standard chain's five middle blocks as ONE compiled call per cycle (issue 16).
+
+Estimator → model → reference → controller → supervisor: each block's cycle is already one
+numba kernel on its port buffers, but a block still costs its ``update``'s Python and a numba
+dispatch (with caches cold between 1 kHz cycles, several times its arithmetic: ref4's
+``bench/fused_cycle.py``). :class:`FusedChain` binds those blocks' own buffers once and runs
+the five **existing** kernels (:func:`rt.components.fused_kernel.fused_chain`:
+``rt.estimation.compiled.block_update``, ``rt.model.kernels.model_state``, ``rt.references.sequencer_kernel.cycle``, the law's kernel
+in ``rt.control.kernels``, ``rt.safety.supervisor_kernel.block_cycle``) from one kernel,
+reading the CPU's cycle counter between stages, so the graph's per-slot timing rings keep
+their meaning (:meth:`rt.engine.graph.Graph.fuse`). No arithmetic is copied here: the
+kernels are called with the arguments the blocks pass, on the same buffers, so a fused cycle
+is the per-block cycle bit for bit (``tests/test_fused_cycle.py`` replays sessions through
+both).
+
+Whatever needs Python stops the kernel exactly where the blocks would run Python:
+
+* before the reference stage when a program is requested or aborted (the sequencer's event);
+* after the estimator when its status faults the block (the graph records the fault);
+* after the reference when it answers ``PLAY_DONE`` (the return is planned in Python:
+  :meth:`ProgramReference.play_done`); ``NEED_PYTHON`` writes nothing, and the reference
+  block then runs its own cycle;
+* before the controller when the supervisor's mode changed (the block may reset its law), a
+  bumpless offset fades (the law has no bound cycle), or the hybrid controller is in force
+  mode or switches to it this cycle (the force law and its mode switch are Python);
+* after the controller when PD+G0's FK at the desired position fails (it raises, as the
+  block does);
+* after the supervisor when something new tripped or a request, a heartbeat or a failed
+  block is pending (:meth:`Supervisor.finish_block`).
+
+The blocks after the stop run their ``update`` in the same cycle. A non-standard block, a
+block not compiled or not active, or a law without a kernel here runs the whole chain per
+block; a swap rebinds the chain to the new block at its cycle (its fade runs the controller
+block, as above). ``TALUS_FUSED_CYCLE=0`` in the environment (read when a loop is assembled)
+or ``Graph.fused = False`` turns fusion off: the per-block path is the reference.
+"""
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from typing import Any, cast
+
+import numpy as np
+
+from rt.components.blocks import STATUS_SENSOR, ControllerBlock, ModelState, VelocityEstimation
+from rt.components.fused_kernel import (
+    _INT_BUFFERS,
+    _MATRIX_BUFFERS,
+    B_AMAP,
+    B_CTRL_MODE,
+    B_DFAILED,
+    B_ENABLE,
+    B_EST,
+    B_EST_C,
+    B_EST_IO,
+    B_EST_OUT,
+    B_EST_Q,
+    B_EST_S,
+    B_FK,
+    B_G0,
+    B_G0_SCRATCH,
+    B_GAINS,
+    B_GEOM,
+    B_INPUTS,
+    B_INTEGRAL,
+    B_LAW_STB,
+    B_LGEOM,
+    B_LIMITS,
+    B_LLIMITS,
+    B_LPHI,
+    B_LQ,
+    B_LQD,
+    B_LQDD,
+    B_MEM,
+    B_MOD_Q,
+    B_MOD_QD,
+    B_MOD_WORK,
+    B_MODE,
+    B_OUT,
+    B_PAR,
+    B_PHI,
+    B_REF_IO,
+    B_REF_MODE,
+    B_REF_Q,
+    B_SEQ,
+    B_SEST,
+    B_SFK,
+    B_SQ,
+    B_SQD,
+    B_SQDD,
+    B_SQDREF,
+    B_SQREF,
+    B_SSTB,
+    B_STAU,
+    B_STB,
+    B_TABLE,
+    B_TF,
+    B_TI,
+    B_VOLTS,
+    B_WFLAGS,
+    B_WORK,
+    B_WRENCH,
+    LAW_ADAPTIVE,
+    LAW_COMPUTED_TORQUE,
+    LAW_PADEN_PANJA,
+    LAW_PD_G0,
+    LAW_PD_GRAVITY,
+    LAW_PID,
+    N_BUFFERS,
+    N_STAGES,
+    T_ADDR,
+    T_DIMS,
+    T_RINGS,
+    T_SIZE,
+    fused_chain,
+    ticks_now,
+)
+from rt.components.protocol_blocks import HybridController
+from rt.components.safety_blocks import SupervisorBlock
+from rt.control.adaptive import Adaptive
+from rt.control.base import Controller
+from rt.control.laws import (
+    ComputedTorquePtp,
+    ComputedTorqueTrajectory,
+    PadenPanja,
+    PdG,
+    PdG0,
+    Pid,
+)
+from rt.estimation.compiled import CompiledKalmanEstimator
+from rt.references.sequencer import ProgramReference
+
+#: The environment variable that turns the fused cycle off ("0") when a loop is assembled.
+ENV_FLAG = "TALUS_FUSED_CYCLE"
+
+#: The chain's slots, in the graph's order.
+CHAIN = ("estimator", "model", "reference", "controller", "supervisor")
+assert len(CHAIN) == N_STAGES
+
+
+def enabled_by_environment() -> bool:
+    """False when ``TALUS_FUSED_CYCLE=0`` (or ``false``/``off``/``no``) is set."""
+    return os.environ.get(ENV_FLAG, "1").strip().lower() not in ("0", "false", "off", "no")
+
+
+_NO_F = np.zeros(1)
+_NO_I = np.zeros(1, dtype=np.int64)
+
+
+class LawBinding:
+    """What the fused kernel needs of a law: its ``LAW_*`` id and flag, its fixed buffers
+    (``B_*`` → array) and ``dynamic()``: the buffers a reset or new gains replace (read
+    through the law at each cycle, as its bound cycle reads them) and the adaptive law's
+    parameter count."""
+
+    def __init__(self, law_id: int, fixed: dict[int, np.ndarray], trajectory: bool = False,
+                 dynamic: Callable[[], tuple[dict[int, np.ndarray], int]] | None = None,
+                 watch: Callable[[], object] | None = None):
+        self.law_id = law_id
+        self.fixed = fixed
+        self.trajectory = trajectory
+        self.dynamic = dynamic
+        #: When those buffers may have been replaced: the law's bound cycle changed (a reset
+        #: rebinds it after replacing them) or ``watch()`` changed (the adaptive law's new
+        #: gains replace its estimate without rebinding).
+        self.watch = watch
+
+
+def law_binding(law: Controller, st: Any, ref: Any, out: np.ndarray) -> LawBinding | None:
+    """``law``'s :class:`LawBinding` on these buffers, or None: only these exact classes (a
+    subclass may change the law)."""
+    cls = type(law)
+    d = getattr(law, "dyn", None)
+    if d is None:
+        return None
+    kin = d.kin
+    fixed = {B_TI: d.tree_i, B_TF: d.tree_f, B_LAW_STB: st.buf, B_LQ: ref.q, B_LQD: ref.qd,
+             B_LQDD: ref.qdd, B_GAINS: law._gain_array, B_WORK: law._work, B_OUT: out,
+             B_INTEGRAL: _NO_F, B_AMAP: _NO_I, B_EST: _NO_F, B_LGEOM: kin.geom,
+             B_LLIMITS: kin.limits_array, B_LPHI: kin._phi_guess, B_G0: _NO_F,
+             B_G0_SCRATCH: _NO_F}
+    if cls is PadenPanja:
+        return LawBinding(LAW_PADEN_PANJA, fixed)
+    if cls is ComputedTorqueTrajectory or cls is ComputedTorquePtp:
+        return LawBinding(LAW_COMPUTED_TORQUE, fixed, cls is ComputedTorqueTrajectory)
+    if cls is PdG:
+        return LawBinding(LAW_PD_GRAVITY, fixed)
+    if cls is PdG0:
+        g0 = cast(PdG0, law)
+        return LawBinding(LAW_PD_G0, fixed, dynamic=lambda: (
+            {B_G0: g0._g0, B_G0_SCRATCH: g0._g0_scratch, B_LPHI: g0.dyn.kin._phi_guess}, 0))
+    if cls is Pid:
+        pid = cast(Pid, law)
+        return LawBinding(LAW_PID, fixed, dynamic=lambda: ({B_INTEGRAL: pid.integral}, 0))
+    if cls is Adaptive:
+        ad = cast(Adaptive, law)
+        return LawBinding(LAW_ADAPTIVE, fixed, dynamic=lambda: (
+            {B_AMAP: ad._amap, B_EST: ad._est}, ad._nb), watch=lambda: ad._est)
+    return None
+
+
+_NS_PER_TICK: float | None = None
+
+
+def ns_per_tick() -> float:
+    """The cycle counter's period (ns), measured once per process against the monotonic
+    clock over 20 ms; 0 when the counter does not advance (no fusion then)."""
+    global _NS_PER_TICK
+    if _NS_PER_TICK is None:
+        c0, n0 = ticks_now(), time.perf_counter_ns()
+        time.sleep(0.02)
+        c1, n1 = ticks_now(), time.perf_counter_ns()
+        _NS_PER_TICK = (n1 - n0) / (c1 - c0) if c1 > c0 else 0.0
+    return _NS_PER_TICK
+
+
+class FusedChain:
+    """The graph's fused segment over :data:`CHAIN` (:meth:`rt.engine.graph.Graph.fuse`).
+
+    :meth:`run` is called by the graph in place of the five ``update`` calls; it returns how
+    many of them it ran (0: none, the graph runs every block), with each one's time (ns) in
+    ``ns`` and, in ``pending``, the Python that completes the last one (the graph times it
+    and turns its exception or status into the slot's fault, as for an ``update``)."""
+
+    slots = CHAIN
+
+    def __init__(self) -> None:
+        self.pending: Callable[[float, float], int] | None = None
+        self._graph: Any = None
+        self._gen = -1
+        self._ok = False
+        self._tick_ns = 0.0
+        self._tab = tab = np.zeros(T_SIZE, dtype=np.int64)
+        self._addr = tab[T_ADDR:T_ADDR + N_BUFFERS]
+        self._dims = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
+        self._rings = tab[T_RINGS:T_RINGS + N_STAGES]
+        #: The buffer behind each address (kept alive: the kernel writes through them).
+        self._bufs: list[np.ndarray] = [_NO_F] * N_BUFFERS
+        self._dyn_ids: tuple = ()
+        self._law_cycle: object = None
+        self._watched: object = None
+        #: Why the chain runs per block (the last binding's reason), "" when fused.
+        self.why_not = "not bound yet"
+
+    def attach(self, graph: Any, rings: list[int]) -> None:
+        """Called by ``Graph.fuse``: the graph and its slots' timing rings (addresses of
+        int64 stores that live as long as the graph)."""
+        self._graph = graph
+        self._gen = -1
+        self._rings[:] = rings
+        self.others_ns = 0
+        self._aux = 0
+
+    # ------------------------------------------------------------------ binding
+    def prepare(self) -> None:
+        """Bind now (the graph starts: off the cycle, so the kernel compiles or loads here)."""
+        self._bind()
+
+    def prepare_swap(self, slot: str, new: Any) -> None:
+        """Nothing to compile for a new law (one kernel serves every law); kept for the
+        graph's protocol."""
+
+    def _bind(self) -> None:
+        """Check the chain and bind its buffers (at a lifecycle change of the graph, or when a
+        buffer was replaced outside it; never in a steady cycle)."""
+        g = self._graph
+        self._gen = g.generation
+        self._ok = False
+        try:
+            self.why_not = self._check_and_bind(g)
+        except Exception as exc:  # noqa: BLE001 - an unexpected block state: run per block
+            self.why_not = f"binding failed: {type(exc).__name__}: {exc}"
+        self._ok = not self.why_not
+
+    def _set(self, k: int, buf: np.ndarray) -> str:
+        """Buffer ``k`` of the table; "" or why it cannot be (not C-contiguous float64 or
+        int64 of the rank the kernel views it as)."""
+        want = np.int64 if k in _INT_BUFFERS else np.float64
+        ndim = 2 if k in _MATRIX_BUFFERS else 1
+        if (not isinstance(buf, np.ndarray) or buf.dtype != want or buf.ndim != ndim
+                or not buf.flags.c_contiguous):
+            return f"buffer {k} is not a contiguous {want.__name__}[{ndim}-D] array"
+        self._bufs[k] = buf
+        self._addr[k] = buf.__array_interface__["data"][0]
+        self._dims[k, 0] = buf.shape[0]
+        self._dims[k, 1] = buf.shape[1] if ndim == 2 else 0
+        return ""
+
+    def _check_and_bind(self, g: Any) -> str:
+        comps = [g.component(s) for s in CHAIN]
+        est, mod, ref, ctl, sup = comps
+        if type(est) is not VelocityEstimation or not isinstance(est.state,
+                                                                 CompiledKalmanEstimator):
+            return "estimator: not the compiled VelocityEstimation"
+        if type(mod) is not ModelState or not mod.compiled:
+            return "model: not the compiled ModelState"
+        if type(ref) is not ProgramReference or not ref.compiled:
+            return "reference: not the compiled ProgramReference"
+        if type(sup) is not SupervisorBlock or not sup.sup.compiled:
+            return "supervisor: not the compiled SupervisorBlock"
+        if type(ctl) is ControllerBlock:
+            law, hybrid = ctl.controller, False
+        elif type(ctl) is HybridController:
+            law, hybrid = ctl.position, True
+        else:
+            return f"controller: {type(ctl).__name__} has no fused path"
+        binding = law_binding(law, ctl.state_in.data, ctl._ref, ctl.tau.data)
+        if binding is None:
+            return f"controller: law {type(law).__name__} has no fused path"
+        if not self._tick_ns:
+            self._tick_ns = ns_per_tick()
+        if not self._tick_ns:
+            return "the CPU cycle counter does not advance here"
+        e = est.state
+        kin = mod.model.kin
+        st = mod.state_out.data
+        s = sup.sup
+        bufs = {B_EST_C: e._c, B_EST_S: e._s, B_EST_Q: est.q_meas.data, B_EST_OUT: e._out,
+                B_EST_IO: est._io,
+                B_GEOM: kin.geom, B_LIMITS: kin.limits_array, B_PHI: kin._phi_guess,
+                B_MOD_Q: mod.q_meas.data, B_MOD_QD: mod.qd.data, B_STB: st.buf,
+                B_MOD_WORK: mod._work, B_FK: mod.fk_ok.data,
+                B_REF_IO: ref._io, B_SEQ: ref._seq, B_REF_Q: ref.q_meas.data,
+                B_REF_MODE: ref.mode.data, B_TABLE: ref._table,
+                B_CTRL_MODE: ctl.ctrl_mode.data if hybrid else _NO_F,
+                **binding.fixed,
+                B_PAR: s._par, B_MEM: s._mem, B_SQ: sup.q.data, B_SEST: sup.est_status.data,
+                B_SQD: sup.qd.data, B_SQDD: sup.qdd.data, B_SSTB: sup.state_in.data.buf,
+                B_SFK: sup.fk_ok.data, B_SQREF: sup.q_ref.data, B_SQDREF: sup.qd_ref.data,
+                B_STAU: sup.tau.data, B_WRENCH: sup.wrench.data,
+                B_WFLAGS: sup.wrench_flags.data, B_INPUTS: sup.stops.data,
+                B_DFAILED: sup.drive_failed.data, B_VOLTS: sup.volts.data,
+                B_ENABLE: sup.enable.data, B_MODE: sup.mode.data}
+        if len(bufs) != N_BUFFERS:
+            return "internal: the buffer table is incomplete"
+        for k, buf in bufs.items():
+            why = self._set(k, buf)
+            if why:
+                return why
+        self._comps = comps
+        self._est_state = e
+        self._law = law
+        self._hybrid = hybrid
+        self._binding = binding
+        self._nb = 0
+        self._dyn_ids = ()
+        why = self._refresh_law()
+        if why:
+            return why
+        self._table = ref._table
+        self._state = st
+        self._sup = s
+        self._mem, self._par = s._mem, s._par
+        self._vpn = float(sup.k)
+        return self._warm_up()
+
+    def _refresh_law(self) -> str:
+        """The law's buffers a reset or new gains replace, when they changed (by identity;
+        the replaced ones stay referenced until then, so an id is never reused meanwhile)."""
+        dyn = self._binding.dynamic
+        if dyn is None:
+            return ""
+        bufs, nb = dyn()
+        ids = tuple(id(b) for b in bufs.values())
+        self._nb = nb
+        self._law_cycle = self._law.cycle
+        self._watched = None if self._binding.watch is None else self._binding.watch()
+        if ids != self._dyn_ids:
+            for k, buf in bufs.items():
+                why = self._set(k, buf)
+                if why:
+                    return why
+            self._dyn_ids = ids
+        return ""
+
+    def _warm_up(self) -> str:
+        """Compile (or load from numba's cache) the kernel now, never in a cycle: on copies
+        of every buffer (nothing of the loop changes). One kernel for every law and block."""
+        global _WARM
+        if _WARM:
+            return ""
+        bufs = [b.copy() for b in self._bufs]
+        scratch_rings = np.zeros((N_STAGES, 1), dtype=np.int64)
+        tab = self._tab.copy()
+        tab[T_ADDR:T_ADDR + N_BUFFERS] = [b.__array_interface__["data"][0] for b in bufs]
+        tab[T_RINGS:T_RINGS + N_STAGES] = [r.__array_interface__["data"][0]
+                                           for r in scratch_rings]
+        try:
+            fused_chain(tab, 0.0, 1e-3, 2, False, self._vpn, False, LAW_PADEN_PANJA, False, 0,
+                        0, 1.0)
+        except Exception as exc:  # noqa: BLE001 - refused: the chain runs per block
+            return f"the fused kernel failed its warm-up: {type(exc).__name__}: {exc}"
+        _WARM = True
+        return ""
+
+    # ------------------------------------------------------------------ the cycle
+    def run(self, t: float, dt: float, idx: int) -> int:
+        """One cycle of the chain, as far as the kernel may go (module docstring); returns
+        the number of stages run (0: run the five blocks). The stages after the first are
+        timed into their slots' rings at ``idx`` by the kernel; ``others_ns`` is their sum."""
+        if self._gen != self._graph.generation:
+            self._bind()
+        if not self._ok:
+            return 0
+        est, mod, ref, ctl, sup = self._comps
+        if not (est._active and mod._active and ref._active and ctl._active and sup._active):
+            return 0
+        s = self._sup
+        if est.state is not self._est_state or s._mem is not self._mem \
+                or s._par is not self._par:
+            self._bind()              # rebuilt outside the graph's lifecycle (a reset)
+            if not self._ok:
+                return 0
+        b = self._binding
+        cyc = self._law.cycle
+        stale = b.dynamic is not None and (cyc is not self._law_cycle or (
+            b.watch is not None and b.watch() is not self._watched))
+        if stale and self._refresh_law():
+            self._gen = -1
+            return 0
+        upto = N_STAGES
+        if ref._pending is not None or ref._abort:
+            upto = 2                  # the sequencer's event: its cycle is Python's
+        else:
+            if ref._table is not self._table:
+                if self._set(B_TABLE, ref._table):
+                    upto = 2          # a table the kernel cannot view: the block plays it
+                else:
+                    self._table = ref._table
+            raw = ctl.mode.data[0]
+            if cyc is None or raw != (ctl._sup_raw if self._hybrid else ctl._mode_raw) or (
+                    self._hybrid and ctl._in_force):
+                upto = min(upto, 3)   # the controller block runs (mode change, fade, force)
+        st = self._state
+        g = self._graph
+        ran, python, self.others_ns, aux, fk = fused_chain(
+            self._tab, t, dt, upto, st._filled, self._vpn, self._hybrid, b.law_id,
+            b.trajectory, self._nb, idx, self._tick_ns)
+        if ran >= 2 and fk >= 0:
+            st.buffer_filled()
+        if ran >= 4:
+            ctl._dt = dt              # what the block's update records (for a handover)
+        self._aux = aux
+        pending: Callable[[float, float], int] | None = None
+        if python:
+            if ran == 1:
+                pending = _sensor_fault
+            elif ran == 3:
+                pending = self._play_done
+            elif ran == 4:
+                pending = self._law_refused
+        elif ran == 5 and (s.python_side_pending(
+                None if not g.failed else g.failed_components()) or aux):
+            # As check_block: the failed blocks recorded every cycle (first), then new events
+            # or a pending request send the cycle to Python.
+            pending = self._finish_supervisor
+        self.pending = pending
+        return ran
+
+    def _play_done(self, t: float, dt: float) -> int:
+        return self._comps[2].play_done()
+
+    def _law_refused(self, t: float, dt: float) -> int:
+        PdG0.refuse_desired(self._comps[3]._ref.q, int(self._aux))
+        return 0
+
+    def _finish_supervisor(self, t: float, dt: float) -> int:
+        sup = self._comps[4]
+        self._sup.finish_block(t, int(self._aux), sup.tau.data, sup.k, sup.volts.data,
+                               sup.enable.data, sup.mode.data)
+        return 0
+
+
+_WARM = False
+
+
+def _sensor_fault(t: float, dt: float) -> int:
+    return STATUS_SENSOR
+
+
+def attach(graph: Any, enabled: bool | None = None) -> FusedChain | None:
+    """Give ``graph`` the fused chain when its slots hold the standard chain's names in order
+    (the blocks themselves are checked at each binding); ``enabled`` None: the environment's
+    :data:`ENV_FLAG`. Returns the chain (None when the slots are not there)."""
+    order = list(graph.order)
+    if CHAIN[0] not in order:
+        return None
+    i = order.index(CHAIN[0])
+    if tuple(order[i:i + N_STAGES]) != CHAIN:
+        return None
+    chain = FusedChain()
+    graph.fuse(chain, enabled_by_environment() if enabled is None else enabled)
+    return chain

@@ -1,0 +1,217 @@
+"""The fused cycle's kernel (issue 16): the standard chain's five block kernels called from
+one numba function, on the blocks' own buffers reached through a table of addresses.
+
+Kept apart from :mod:`rt.components.fused` (the Python side: binding, checks, the graph's
+segment) so that editing that side does not invalidate numba's on-disk cache of this one
+(numba keys a cache on its source file). Every stage calls the existing kernel of its block
+with the arguments the block passes; nothing of their arithmetic is here.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from llvmlite import ir  # type: ignore[import-untyped]
+from numba import carray, njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+from rt.control import kernels as ck
+from rt.estimation.compiled import block_update
+from rt.model.kernels import model_state
+from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
+from rt.references import sequencer_kernel as rk
+from rt.safety import supervisor_kernel as svk
+
+#: The stages, in the graph's order (estimator, model, reference, controller, supervisor).
+N_STAGES = 5
+
+# ``info`` (int64) the kernel fills: stages it ran, whether the last one needs Python, the
+# estimator's status, FK's status, the reference's answer, the law's status, the supervisor's.
+I_RAN, I_PYTHON, I_EST, I_FK, I_REF, I_LAW, I_SUP, INFO_SIZE = 0, 1, 2, 3, 4, 5, 6, 7
+_EST_JUMP = -3          # EstimatorStatus.JUMP: published, the supervisor's business
+
+
+@intrinsic
+def _ticks(typingctx: Any) -> Any:
+    """The CPU's cycle counter (x86: rdtsc) read inside a kernel: a stage's time costs no
+    clock call (``perf_counter_ns`` costs ≈ 0.3 µs on this VM)."""
+    sig = types.int64()
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        fnty = ir.FunctionType(ir.IntType(64), [])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.readcyclecounter")
+        return builder.call(fn, [])
+    return sig, codegen
+
+
+@njit(cache=True)
+def ticks_now() -> int:
+    return _ticks()  # type: ignore[call-arg]
+
+
+# ---- the buffers: one table of addresses (and shapes) instead of ~57 array arguments.
+# numba's dispatch unboxes each array argument (≈ 0.5 µs apiece here): passing the blocks'
+# buffers one by one cost more than the five blocks' own Python. The kernel rebuilds each
+# buffer as a view of the same memory (``carray``); :class:`FusedChain` holds a reference to
+# every buffer whose address is in the table and re-reads the addresses whenever one of them
+# may have been replaced (a reset, new gains, a new program's table), before the call.
+(B_EST_C, B_EST_S, B_EST_Q, B_EST_OUT, B_EST_IO,
+ B_GEOM, B_LIMITS, B_PHI, B_MOD_Q, B_MOD_QD, B_STB, B_MOD_WORK, B_FK,
+ B_REF_IO, B_SEQ, B_REF_Q, B_REF_MODE, B_TABLE, B_CTRL_MODE,
+ B_TI, B_TF, B_LAW_STB, B_LQ, B_LQD, B_LQDD, B_GAINS, B_WORK, B_OUT, B_INTEGRAL, B_AMAP,
+ B_EST, B_LGEOM, B_LLIMITS, B_LPHI, B_G0, B_G0_SCRATCH,
+ B_PAR, B_MEM, B_SQ, B_SEST, B_SQD, B_SQDD, B_SSTB, B_SFK, B_SQREF, B_SQDREF, B_STAU,
+ B_WRENCH, B_WFLAGS, B_INPUTS, B_DFAILED, B_VOLTS, B_ENABLE, B_MODE, N_BUFFERS) = range(55)
+_INT_BUFFERS = (B_TI, B_AMAP)
+_MATRIX_BUFFERS = (B_TABLE,)
+
+LAW_PADEN_PANJA, LAW_COMPUTED_TORQUE, LAW_PD_GRAVITY, LAW_PD_G0, LAW_PID, LAW_ADAPTIVE = range(6)
+
+
+@intrinsic
+def _f64_at(typingctx: Any, addr: Any) -> Any:
+    sig = types.CPointer(types.float64)(types.int64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
+    return sig, codegen
+
+
+@intrinsic
+def _i64_at(typingctx: Any, addr: Any) -> Any:
+    sig = types.CPointer(types.int64)(types.int64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.int64)))
+    return sig, codegen
+
+
+@njit(cache=True, inline="always")
+def _v(addr, dims, i):
+    return carray(_f64_at(addr[i]), dims[i, 0])
+
+
+@njit(cache=True, inline="always")
+def _vi(addr, dims, i):
+    return carray(_i64_at(addr[i]), dims[i, 0])
+
+
+@njit(cache=True)
+def _law(dt, law, trajectory, nb, a, d):
+    """The law's kernel (``LAW_*``), called as its bound cycle calls it; returns its status
+    (< 0: PD+G0's FK at the desired position refused)."""
+    ti, tf, stb = _vi(a, d, B_TI), _v(a, d, B_TF), _v(a, d, B_LAW_STB)
+    q, qd, qdd = _v(a, d, B_LQ), _v(a, d, B_LQD), _v(a, d, B_LQDD)
+    gains, work, out = _v(a, d, B_GAINS), _v(a, d, B_WORK), _v(a, d, B_OUT)
+    if law == LAW_PADEN_PANJA:
+        ck.paden_panja(ti, tf, stb, q, qd, qdd, gains, work, out)
+    elif law == LAW_COMPUTED_TORQUE:
+        ck.computed_torque(ti, tf, stb, q, qd, qdd, gains, trajectory, work, out)
+    elif law == LAW_PD_GRAVITY:
+        ck.pd_gravity(ti, tf, stb, q, qd, gains, work, out)
+    elif law == LAW_PD_G0:
+        return ck.pd_gravity_desired(ti, tf, _v(a, d, B_LGEOM), _v(a, d, B_LLIMITS),
+                                     _v(a, d, B_LPHI), stb, q, qd, gains, _v(a, d, B_G0),
+                                     _v(a, d, B_G0_SCRATCH), out)
+    elif law == LAW_PID:
+        ck.pid(stb, q, qd, gains, _v(a, d, B_INTEGRAL), dt, False, out)
+    elif law == LAW_ADAPTIVE:
+        ck.adaptive(ti, tf, stb, q, qd, qdd, _vi(a, d, B_AMAP), _v(a, d, B_EST), dt, False, out)
+    return 0
+
+
+# ``tab`` (int64), everything the kernel reads or writes besides the blocks' buffers, in one
+# argument: the buffers' addresses and shapes, the timing rings' addresses, the stamps and
+# the info.
+T_ADDR = 0
+T_DIMS = T_ADDR + N_BUFFERS
+T_RINGS = T_DIMS + 2 * N_BUFFERS
+T_STAMPS = T_RINGS + N_STAGES
+T_INFO = T_STAMPS + N_STAGES + 1
+T_SIZE = T_INFO + INFO_SIZE
+
+
+@njit(cache=True)
+def fused_chain(tab, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, idx,
+                ns_per_tick):
+    """:func:`_chain`, then each stage after the first timed into its slot's ring (the
+    graph's timing rings' addresses, in ``tab``, at ``idx``). Returns (stages run, whether the
+    last needs Python, the ns those later stages took, the supervisor's or the law's answer,
+    FK's status)."""
+    a = tab[T_ADDR:T_ADDR + N_BUFFERS]
+    d = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
+    rings = tab[T_RINGS:T_RINGS + N_STAGES]
+    stamps = tab[T_STAMPS:T_STAMPS + N_STAGES + 1]
+    info = tab[T_INFO:T_INFO + INFO_SIZE]
+    _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d)
+    ran = info[I_RAN]
+    others = 0
+    for j in range(1, ran):
+        ns = np.int64((stamps[j + 1] - stamps[j]) * ns_per_tick)
+        carray(_i64_at(rings[j]), idx + 1)[idx] = ns
+        others += ns
+    aux = info[I_SUP] if ran == 5 else info[I_LAW]
+    return ran, info[I_PYTHON], others, aux, info[I_FK]
+
+
+@njit(cache=True)
+def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d):
+    """The five stages (module docstring) up to stage ``upto`` (exclusive), stopping where
+    Python must run; ``stamps`` the cycle counter before the first and after each stage;
+    ``a``/``d`` the buffers' addresses and shapes (``B_*``)."""
+    info[I_RAN] = 0
+    info[I_PYTHON] = 0
+    stamps[0] = _ticks()
+    status = block_update(_v(a, d, B_EST_C), _v(a, d, B_EST_S), _v(a, d, B_EST_Q), dt,
+                          _v(a, d, B_EST_OUT), _v(a, d, B_EST_IO))
+    stamps[1] = _ticks()
+    info[I_RAN] = 1
+    info[I_EST] = status
+    if status < 0 and status != _EST_JUMP:
+        info[I_PYTHON] = 1                  # the block returns STATUS_SENSOR: a fault
+        return
+    fk = model_state(_v(a, d, B_GEOM), _v(a, d, B_LIMITS), _v(a, d, B_PHI), _v(a, d, B_MOD_Q),
+                     _v(a, d, B_MOD_QD), _v(a, d, B_STB), FK_STEP_TOL_RAD, FK_MAX_ITERATIONS,
+                     _v(a, d, B_MOD_WORK))
+    _v(a, d, B_FK)[0] = 1.0 if fk >= 0 else 0.0
+    stamps[2] = _ticks()
+    info[I_RAN] = 2
+    info[I_FK] = fk
+    if upto <= 2:
+        return
+    table = carray(_f64_at(a[B_TABLE]), (d[B_TABLE, 0], d[B_TABLE, 1]))
+    r = rk.cycle(_v(a, d, B_REF_IO), _v(a, d, B_SEQ), _v(a, d, B_REF_Q), _v(a, d, B_REF_MODE),
+                 table, dt)
+    info[I_REF] = r
+    if r == rk.NEED_PYTHON:                 # nothing written: the block runs its cycle
+        return
+    stamps[3] = _ticks()
+    info[I_RAN] = 3
+    if r == rk.PLAY_DONE:                   # the return is planned in Python
+        info[I_PYTHON] = 1
+        return
+    # The hybrid controller's position mode only (its force law and switches are Python).
+    if upto <= 3 or (hybrid and (_v(a, d, B_CTRL_MODE)[0] > 0.5)):
+        return
+    ls = _law(dt, law, trajectory, nb, a, d)
+    stamps[4] = _ticks()
+    info[I_RAN] = 4
+    info[I_LAW] = ls
+    if ls < 0:
+        info[I_PYTHON] = 1                  # PD+G0's refused FK raises in Python
+        return
+    if upto <= 4:
+        return
+    new = svk.block_cycle(_v(a, d, B_PAR), _v(a, d, B_MEM), t, dt, _v(a, d, B_SQ),
+                          _v(a, d, B_SEST), _v(a, d, B_SQD), _v(a, d, B_SQDD),
+                          _v(a, d, B_SSTB), _v(a, d, B_SFK), filled or fk >= 0,
+                          _v(a, d, B_SQREF), _v(a, d, B_SQDREF), _v(a, d, B_STAU),
+                          _v(a, d, B_WRENCH), _v(a, d, B_WFLAGS), _v(a, d, B_INPUTS),
+                          _v(a, d, B_DFAILED), volts_per_n, _v(a, d, B_VOLTS),
+                          _v(a, d, B_ENABLE), _v(a, d, B_MODE))
+    stamps[5] = _ticks()
+    info[I_RAN] = 5
+    info[I_SUP] = new
+
+
