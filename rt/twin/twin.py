@@ -312,10 +312,12 @@ class Twin:
         while t - plant.t > 1e-12:
             chunk = min(_MAX_CHUNK_S, t - plant.t)
             t_end = plant.t + chunk                 # what plant.t is after the period
-            if st.block_pos >= st.block.shape[0]:
-                ati._next_block_row()               # refills the random block
+            block = st.block
+            if st.block_pos >= len(block):
+                block, _ = ati._next_block_row()    # refills the random block
+            assert isinstance(block, np.ndarray)    # the compiled model's state holds one
             t_last = st.t_last
-            bits = plant.period(chunk, port_state, codes, packed, st.block, st.block_pos,
+            bits = plant.period(chunk, port_state, codes, packed, block, st.block_pos,
                                 0.0 if t_last is None else t_end - t_last, _ATI_OVERLOAD)
             ati._commit_pending(bits, plant.t)
 
