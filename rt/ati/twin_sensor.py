@@ -320,7 +320,7 @@ class TwinAtiSensorModel:
         return self._commit_compiled(status, t)
 
     # The compiled sample in two halves around the kernel, so the twin can run the kernel
-    # inside its own compiled period (``rt.twin.kernels.advance_sensed``): one bookkeeping for
+    # inside its own compiled period (``rt.twin.kernels.period``): one bookkeeping for
     # both callers.
     def _next_block_row(self) -> tuple[np.ndarray, int]:
         """The random block and row the next compiled sample draws from (refilled when used
