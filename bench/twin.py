@@ -160,7 +160,7 @@ def compile_cost() -> float:
 
 def fused_ab(seconds: float, repeats: int, as_json: bool) -> None:
     """The compiled twin's period, general path (``plant.advance`` then the sensors in Python)
-    against the fused one (``kernels.advance_sensed``), interleaved run by run; CPU µs per
+    against the fused one (``kernels.period``), interleaved run by run; CPU µs per
     period, medians."""
     rows = []
     for env, integ, ideal in CONFIGS:

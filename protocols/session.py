@@ -236,6 +236,9 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     """
     model = model or RobotModel.load()
     protocol, _gen, report, pl, tap = build_twin_session(setup, model, "fast")
+    # Nobody drains the loop's recorder tap in a pre-flight (the session tap holds every row
+    # the verdict reads): stopped, the graph skips it (issue 16: a tap per cycle less).
+    pl.recorder.stop()
     problems = report.check_against(setup.patient_limits, setup.robot_limits)
     if problems:
         raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: "

@@ -242,3 +242,33 @@ def test_a_fault_plan_takes_the_general_path():
     twin.faults.schedule("encoder_freeze", 0.5, axis=0)
     twin.sync(0.002)
     assert called == [0.001] and twin.plant.t == pytest.approx(0.002)
+
+
+@pytest.mark.parametrize("kind", ["ati_dropout", "ati_stale"])
+def test_an_ati_fault_after_fused_periods_sees_their_last_sample(kind):
+    """The fused period leaves its ATI sample in the model's array and builds the
+    ``AtiSample`` only when asked (``Twin.ati_sample``, ``TwinForceTorque``'s reading): a
+    dropout or a stale sensor scheduled after fused periods must hold the same last sample as
+    on the general path, and the force reader must read the same numbers on both."""
+    from rt.devices.interfaces import FT_READ_SIZE
+    from rt.twin.backends import TwinForceTorque
+
+    stream = _record("plate:0.7128", ideal=False, seconds=0.3)
+    general = Twin(environment=parse_environment("plate:0.7128"), seed=3)
+    general.fused_period = False
+    fused = Twin(environment=parse_environment("plate:0.7128"), seed=3)
+    readers = [TwinForceTorque(general), TwinForceTorque(fused)]
+    for r in readers:
+        r.start()
+    reads = [np.zeros(FT_READ_SIZE), np.zeros(FT_READ_SIZE)]
+    for k, (t, codes, enabled) in enumerate(stream):
+        if k == 150:                     # 150 fused periods, then the fault from the next
+            for twin in (general, fused):
+                twin.faults.schedule(kind, t - 0.0005, t + 0.05)
+        for twin, reader, out in zip((general, fused), readers, reads):
+            _apply(twin, codes, enabled)
+            twin.sync(t)
+            reader.read_array(out)
+        assert reads[0].tolist() == reads[1].tolist(), f"period {k}"
+        assert general.ati_sample == fused.ati_sample, f"period {k}"
+    assert general.ati_sample is not None

@@ -126,6 +126,9 @@ class _State:
 
 #: Offsets of the compiled model's parameter array (6 values each, Fx..Tz).
 _P_RATE, _P_LIMIT, _P_BIAS, _P_SIGMA, _P_RANGE = 0, 6, 12, 18, 24
+#: The packed array of the compiled model: parameters, drift, last sample (``rt.twin.kernels``
+#: ``ATI_*`` name the same offsets).
+_A_PARAMS, _A_DRIFT, _A_OUT, _A_SIZE = 0, 30, 36, 42
 
 
 @njit(cache=True)
@@ -188,15 +191,24 @@ class TwinAtiSensorModel:
         self._drift_rate = tuple(p.drift_rate)
         self._drift_limit = tuple(p.drift_limit)
         self._ranges = tuple(p.ranges)
-        self._kparams = np.array(p.drift_rate + p.drift_limit + p.bias + p.noise_sigma
-                                 + p.ranges, dtype=np.float64)
-        self._out = np.zeros(6)
+        # The compiled model's parameters, drift and last sample in one array (views below),
+        # so the twin's compiled period takes them as one argument (``rt.twin.kernels.period``).
+        self._packed = np.zeros(_A_SIZE)
+        self._kparams = self._packed[_A_PARAMS:_A_DRIFT]
+        self._kparams[:] = (p.drift_rate + p.drift_limit + p.bias + p.noise_sigma + p.ranges)
+        self._out = self._packed[_A_OUT:_A_SIZE]
+        # A compiled sample committed by the twin's period whose ``AtiSample`` is not built
+        # yet (its status bits; −1: none): most readers take the wrench from ``_out``, so the
+        # object is built only when asked for (:meth:`last_sample`).
+        self._pending = -1
         self._state = self._new_state()
 
     def _new_state(self) -> _State:
         st = _State(rng=np.random.default_rng(self.seed))
+        self._pending = -1
         if self.compiled:
-            st.drift = np.zeros(6)
+            st.drift = self._packed[_A_DRIFT:_A_OUT]
+            st.drift[:] = 0.0
             st.block = np.empty((0, 12))
         return st
 
@@ -254,6 +266,8 @@ class TwinAtiSensorModel:
         if len(true_wrench) != 6:
             raise InputError(f"true_wrench needs 6 values (N, N m), got {len(true_wrench)}")
         st = self._state
+        if self._pending >= 0:
+            self.last_sample()                  # ``stale`` repeats it
         faults = self._faults_possible
         if faults and self.fault_active("dropout", t):
             return None
@@ -306,7 +320,7 @@ class TwinAtiSensorModel:
         return self._commit_compiled(status, t)
 
     # The compiled sample in two halves around the kernel, so the twin can run the kernel
-    # inside its own compiled period (``rt.twin.kernels.advance_sensed``): one bookkeeping for
+    # inside its own compiled period (``rt.twin.kernels.period``): one bookkeeping for
     # both callers.
     def _next_block_row(self) -> tuple[np.ndarray, int]:
         """The random block and row the next compiled sample draws from (refilled when used
@@ -333,10 +347,33 @@ class TwinAtiSensorModel:
         if self._faults_possible and self.fault_active("saturate", t):
             status |= STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE
         st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
+        self._pending = -1
         v = self._out.tolist()
         sample = AtiSample((v[0], v[1], v[2], v[3], v[4], v[5]), status, st.ft_sequence)
         st.last = sample
         return sample
+
+    def _commit_pending(self, status: int, t: float) -> None:
+        """:meth:`_commit_compiled` for the twin's fault-free period: the same bookkeeping,
+        the ``AtiSample`` left to :meth:`last_sample` (the period's caller checked that no
+        fault can be on)."""
+        st = self._state
+        st.block_pos += 1
+        if st.t_last is None or t > st.t_last:
+            st.t_last = t
+        st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
+        self._pending = status
+
+    def last_sample(self) -> AtiSample | None:
+        """The last sample reported (None before the first): built now if the twin's period
+        committed it without an object."""
+        st = self._state
+        if self._pending >= 0:
+            v = self._out.tolist()
+            st.last = AtiSample((v[0], v[1], v[2], v[3], v[4], v[5]), self._pending,
+                                st.ft_sequence)
+            self._pending = -1
+        return st.last
 
     def make_source(self, true_wrench: Sequence[float] | Callable[[], Sequence[float]],
                     clock: Callable[[], float] = time.monotonic) -> WrenchSource:

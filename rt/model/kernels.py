@@ -38,18 +38,21 @@ def constraint_terms(geom, q, p0, p1, p2):
     """Residuals f_p = |B_i - B_j|² - 3 R_p² (m²) for the pairs (0,1), (1,2), (2,0) and the
     non-zero entries of ∂f/∂φ (m²/rad), returned as (f0, f1, f2, a00, a01, a11, a12, a22, a20):
     row p of the Jacobian has its two entries in the columns of its pair."""
+    return constraint_terms_sc(geom, q, math.sin(p0), math.cos(p0), math.sin(p1),
+                               math.cos(p1), math.sin(p2), math.cos(p2))
+
+
+@njit(cache=True, inline="always")
+def constraint_terms_sc(geom, q, s0, c0, s1, c1, s2, c2):
+    """:func:`constraint_terms` from the rod angles' sines and cosines (the same arithmetic:
+    callers that already hold them, e.g. the twin's substep, skip the six transcendental
+    calls)."""
     rb = geom[0]
     rp = geom[1]
     ln = geom[2]
     ca = geom[9]
     cb = geom[10]
     cc = geom[11]
-    s0 = math.sin(p0)
-    c0 = math.cos(p0)
-    s1 = math.sin(p1)
-    c1 = math.cos(p1)
-    s2 = math.sin(p2)
-    c2 = math.cos(p2)
     r0 = rb + ln * s0
     r1 = rb + ln * s1
     r2 = rb + ln * s2
@@ -158,6 +161,17 @@ def tree_maps(geom, q, phi, rot, qd, S, Sd, twist):
 def tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work):
     """``tree_maps`` with caller-provided scratch (float64[TREE_MAPS_WORK]): no allocation,
     for the twin's inner loop."""
+    for i in range(3):
+        work[i] = math.sin(phi[i])
+        work[3 + i] = math.cos(phi[i])
+    return tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work)
+
+
+@njit(cache=True)
+def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
+    """:func:`tree_maps_work` with the rod angles' sines and cosines already in
+    ``work[0:3]`` and ``work[3:6]`` (the same arithmetic: the twin's substep computes them
+    once for the assembly, these maps and its mass matrix)."""
     rb = geom[0]
     rp = geom[1]
     ln = geom[2]
@@ -169,12 +183,11 @@ def tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work):
     rho = work[6:9]
     h = work[9:12]
     for i in range(3):
-        sphi[i] = math.sin(phi[i])
-        cphi[i] = math.cos(phi[i])
         rho[i] = rb + ln * sphi[i]
         h[i] = q[i] + ln * cphi[i]
     # Constraint Jacobians of f_p = |B_i - B_j|² - 3 R_p² for the pairs p = (i, j).
-    _, _, _, a00, a01, a11, a12, a22, a20 = constraint_terms(geom, q, phi[0], phi[1], phi[2])
+    _, _, _, a00, a01, a11, a12, a22, a20 = constraint_terms_sc(
+        geom, q, sphi[0], cphi[0], sphi[1], cphi[1], sphi[2], cphi[2])
     f_phi = work[12:21].reshape((3, 3))
     f_phi[:, :] = 0.0
     f_phi[0, 0] = a00
@@ -396,13 +409,22 @@ def assemble(geom, q, phi, rot, pos, spheres):
     Writes R_BP into ``rot`` (3×3), the platform origin (centroid of the spheres) into ``pos``
     and the sphere centres into ``spheres`` (3×3, one per row), all in the base frame (m).
     """
+    assemble_sc(geom, q, math.sin(phi[0]), math.cos(phi[0]), math.sin(phi[1]),
+                math.cos(phi[1]), math.sin(phi[2]), math.cos(phi[2]), rot, pos, spheres)
+
+
+@njit(cache=True)
+def assemble_sc(geom, q, s0, c0, s1, c1, s2, c2, rot, pos, spheres):
+    """:func:`assemble` from the rod angles' sines and cosines (the same arithmetic)."""
     rb = geom[0]
     ln = geom[2]
     for i in range(3):
-        rad = rb + ln * math.sin(phi[i])
+        s = s0 if i == 0 else (s1 if i == 1 else s2)
+        c = c0 if i == 0 else (c1 if i == 1 else c2)
+        rad = rb + ln * s
         spheres[i, 0] = rad * geom[3 + i]
         spheres[i, 1] = rad * geom[6 + i]
-        spheres[i, 2] = q[i] + ln * math.cos(phi[i])
+        spheres[i, 2] = q[i] + ln * c
     for c in range(3):
         pos[c] = (spheres[0, c] + spheres[1, c] + spheres[2, c]) / 3.0
     # Platform z axis: normal of the sphere triangle (legs counter-clockwise -> points up).

@@ -32,8 +32,11 @@ class TwinEncoders(EncoderBank):
 
     def read_positions_m(self, out: np.ndarray) -> np.ndarray:
         self._check_open()
-        self.twin.sync()
-        delayed, _ = self.twin.delayed()
+        twin = self.twin
+        twin.sync()
+        if not twin.faults.faults:                  # no latency fault: the card as it is
+            return self._driver.read_positions_m(out)
+        delayed, _ = twin.delayed()
         if delayed is None:
             return self._driver.read_positions_m(out)
         for i, count in enumerate(delayed):
@@ -99,11 +102,19 @@ class TwinForceTorque(SampledForceTorque):
         self.twin = twin
 
     def _sample(self):
-        self.twin.sync()
-        _, sample = self.twin.delayed()
+        twin = self.twin
+        twin.sync()
+        if not twin.faults.faults:
+            # No latency fault: the latest sample, read where the twin's period left it
+            # (no ``AtiSample`` built every cycle; the same numbers).
+            latest = twin.latest_ati()
+            if latest is None:
+                return None
+            return latest[0], latest[1], latest[2], twin.t
+        _, sample = twin.delayed()
         if sample is None:
             return None
-        return sample.wrench, sample.ft_sequence, sample.status, self.twin.t
+        return sample.wrench, sample.ft_sequence, sample.status, twin.t
 
 
 class TwinDigitalInputs(DigitalInputs):

@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit
 
 from rt.ati.twin_sensor import _measure_kernel
+from rt.drivers.kernels import fake_pcl833_move
 from rt.twin import physics
 from rt.twin.physics import (
     B_F_PER_A,
@@ -62,7 +63,12 @@ P_ENC_LATENCY = _PX + 9           # s
 P_ATI_TAU = _PX + 10              # s (0: no filter)
 P_TOOL_MG = _PX + 11              # N
 P_TOOL_COM = _PX + 12             # m
-P_SIZE = _PX + 13
+P_CMD_LIMIT = _PX + 13            # V, the amplifiers' input clamp (``command_limit_v``)
+P_WITH_OFFSET = _PX + 14          # 1.0 when an amplifier input offset is set
+P_AMP_OFFSET = _PX + 15           # 3, V, the amplifiers' input offsets
+P_PORT_SIGN = _PX + 18            # 3, the encoder card's count direction per axis
+P_PORT_MPC = _PX + 21             # 3, m per count per axis
+P_SIZE = _PX + 24
 
 # ---- state array S
 S_Q = 0
@@ -88,7 +94,9 @@ S_DELAY_LEFT = 80         # substeps the amplifiers still act on the previous co
 S_HEAT_TIME = 81          # s since the last temperature update
 S_DRIVES_ON = 82          # 1.0 while the amplifiers are enabled
 S_DRIVES_CHANGED_T = 83   # s, when they were last switched
-S_SIZE = 84
+S_AMP = 84                # 3, V: the amplifier inputs the DAC codes make (``Twin.amp_volts``)
+S_VOLTS_IN = 87           # 3, V: what the amplifiers integrate (inputs + offsets, drives on)
+S_SIZE = 90
 
 # ---- scratch array W
 _W_FORCE = 0
@@ -107,7 +115,8 @@ _W_CMD_NEW = 129
 _W_CMD_OLD = 132
 _W_VISCOUS = 135
 _W_WORK = _W_VISCOUS + N_FRICTION
-W_SIZE = _W_WORK + WORK_SIZE
+_W_PORT_INDEX = _W_WORK + WORK_SIZE     # 3, the encoder card's new index (floats)
+W_SIZE = _W_PORT_INDEX + 3
 
 
 @njit(cache=True)
@@ -253,35 +262,64 @@ def advance(geom, P, env, S, W, volts, dt, n, t, realistic, integrator):
     return status
 
 
-#: ``port`` layout of :func:`advance_sensed`: the encoder card's count direction and scale per
-#: axis (``FakePcl833Port.sign``, ``.m_per_count``), then the new encoder index it writes.
-PORT_SIGN, PORT_MPC, PORT_INDEX, PORT_SIZE = 0, 3, 6, 9
+#: ``ati`` layout of :func:`period` (``TwinAtiSensorModel``'s packed array): the model's
+#: parameters (``_measure_kernel``'s ``params``), its drift and the sample it writes.
+ATI_PARAMS, ATI_DRIFT, ATI_OUT, ATI_SIZE = 0, 30, 36, 42
+#: DAC codes meaning "no code written" (a channel never written, or no card enabled).
+NO_CODE = -1
 
 
 @njit(cache=True)
-def advance_sensed(geom, P, env, S, W, volts, dt, n, t, realistic, integrator, port,
-                   ati_block, ati_row, ati_params, ati_drift, ati_out, ati_dt, overload_bits):
-    """:func:`advance`, then the two readings the twin takes every period, in the same
-    dispatch (issue 16: each dispatch and its Python cost as much as a physics substep):
+def amplifier_input(P, S, codes):
+    """``Twin._update_amplifier_input`` without DAC faults: the enabled card's codes (``codes``
+    int64[3], ``NO_CODE`` for none) → volts (``pci1720.code_to_volts`` on ±10 V, 12 bit),
+    clamped at the amplifiers' limit, into ``S[S_AMP:]``; then the input held over the period
+    (``TwinPlant._held_input``): plus the offsets while the drives are on. Returns the offset
+    of the held input in ``S``."""
+    lim = P[P_CMD_LIMIT]
+    for ch in range(3):
+        v = 0.0
+        code = codes[ch]
+        if code != NO_CODE:
+            v = -10.0 + code / 4095 * 20.0
+        S[S_AMP + ch] = max(-lim, min(lim, v))
+    if P[P_WITH_OFFSET] > 0.5 and S[S_DRIVES_ON] > 0.5:
+        for ch in range(3):
+            S[S_VOLTS_IN + ch] = S[S_AMP + ch] + P[P_AMP_OFFSET + ch]
+        return S_VOLTS_IN
+    return S_AMP
 
-    * the encoder card's index per axis, ``floor(sign·x/mpc + 0.5)`` of the encoder reading
-      (``FakePcl833Port.set_positions_m``'s arithmetic), into ``port[PORT_INDEX:]``; the
-      caller feeds the change to the card's counters;
-    * the ATI sample (``rt.ati.twin_sensor._measure_kernel`` on the filtered wrench) into
-      ``ati_out``, from row ``ati_row`` of the random block.
 
-    Returns (physics status, ATI overload bits); on a physics failure nothing is read, as
-    when the interpreted path raises before its sensors.
+@njit(cache=True)
+def period(geom, P, env, S, W, port, codes, ati, ati_block, dt, n, t, realistic, integrator,
+           ati_row, ati_dt, overload_bits):
+    """The twin's fault-free period in one dispatch (issue 16: pre-flight's twin; each
+    dispatch and its Python cost as much as a physics substep, and numba unboxes every array
+    argument, so the state lives in few arrays):
+
+    * the amplifier input from the enabled card's DAC ``codes`` (:func:`amplifier_input`);
+    * :func:`advance` (physics, brakes, heat, encoder latency, the ATI's filter);
+    * the encoder card's counters (``port``: ``FakePcl833Port``'s int64 state) moved to the
+      index ``floor(sign·x/mpc + 0.5)`` of the encoder reading
+      (``rt.drivers.kernels.fake_pcl833_move``);
+    * the ATI sample (``rt.ati.twin_sensor._measure_kernel`` on the filtered wrench, from row
+      ``ati_row`` of the random block) into ``ati[ATI_OUT:]``.
+
+    The same arithmetic in the same order as the general path (``_update_amplifier_input``,
+    ``plant.advance``, ``_update_sensors``). Returns the ATI overload bits (≥ 0), or −1 when
+    the physics failed (then nothing is read, as when the general path raises).
     """
-    status = advance(geom, P, env, S, W, volts, dt, n, t, realistic, integrator)
+    vin = amplifier_input(P, S, codes)
+    status = advance(geom, P, env, S, W, S[vin:vin + 3], dt, n, t, realistic, integrator)
     if status != STATUS_OK:
-        return status, 0
+        return -1
+    index = W[_W_PORT_INDEX:_W_PORT_INDEX + 3]
     for i in range(3):
-        port[PORT_INDEX + i] = math.floor(port[PORT_SIGN + i] * S[S_ENC + i]
-                                          / port[PORT_MPC + i] + 0.5)
-    bits = _measure_kernel(S[S_W_MEAS:S_W_MEAS + 6], ati_block, ati_row, ati_params,
-                           ati_drift, ati_out, ati_dt, overload_bits)
-    return status, bits
+        index[i] = math.floor(P[P_PORT_SIGN + i] * S[S_ENC + i] / P[P_PORT_MPC + i] + 0.5)
+    fake_pcl833_move(port, index)
+    return _measure_kernel(S[S_W_MEAS:S_W_MEAS + 6], ati_block, ati_row,
+                           ati[ATI_PARAMS:ATI_DRIFT], ati[ATI_DRIFT:ATI_OUT],
+                           ati[ATI_OUT:ATI_SIZE], ati_dt, overload_bits)
 
 
 @njit(cache=True)

@@ -36,9 +36,9 @@ from numba import njit
 
 from rt.model.kernels import (
     TREE_MAPS_WORK,
-    assemble,
+    assemble_sc,
     fk_solve,
-    tree_maps_work,
+    tree_maps_sc,
 )
 
 ENV_FREE = 0.0
@@ -199,11 +199,18 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
     av = extra[27:36].reshape((3, 3))
     aw = extra[36:45].reshape((3, 3))
     tmp = extra[45:54].reshape((3, 3))
-    assemble(geom, q, phi, rot, pos, spheres)
+    # The rod angles' sines and cosines once per substep, where the tree maps keep them
+    # (work[0:6]): the assembly, the maps and the rods' inertia below all read them (the same
+    # values as each computing its own: issue 16, 24 transcendental calls per substep → 6).
+    for i in range(3):
+        work[i] = math.sin(phi[i])
+        work[3 + i] = math.cos(phi[i])
+    assemble_sc(geom, q, work[0], work[3], work[1], work[4], work[2], work[5], rot, pos,
+                spheres)
     sdq = extra[54:66]
     # S, Ṡ and the twist map from the model's one kernel (``rt.model.kernels``); the drift
     # Ṡ q̇ is what the bias needs.
-    tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, work)
+    tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work)
     for r in range(12):
         sdq[r] = Sd[r, 0] * qd[0] + Sd[r, 1] * qd[1] + Sd[r, 2] * qd[2]
     g = bodies[B_G]
@@ -218,8 +225,8 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
     for i in range(3):
         ct = geom[3 + i]
         st = geom[6 + i]
-        sp = math.sin(phi[i])
-        cp = math.cos(phi[i])
+        sp = work[i]
+        cp = work[3 + i]
         # R_rod = Rz(θ) Ry(φ); columns in the base frame.
         r00 = ct * cp
         r01 = -st

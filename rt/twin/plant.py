@@ -126,9 +126,14 @@ class TwinPlant:
         self._drives_on = False
         self._drives_changed_t = -1.0e9     # powered off since forever: brakes on
         # Amplifier input offsets (V), added to the commands while the drives are enabled.
-        self.amp_offset_v = self.imperfections.amplifier_offsets_v()
+        # (views into P and S: the twin's compiled period applies them in its kernel)
+        self.amp_offset_v = self.P[K.P_AMP_OFFSET:K.P_AMP_OFFSET + 3]
+        self.amp_offset_v[:] = self.imperfections.amplifier_offsets_v()
         self._with_offset = bool(np.any(self.amp_offset_v != 0.0))
-        self._volts_in = np.zeros(3)
+        self.P[K.P_WITH_OFFSET] = 1.0 if self._with_offset else 0.0
+        self.P[K.P_CMD_LIMIT] = self.description.drive.command_limit_v
+        self._volts_in = S[K.S_VOLTS_IN:K.S_VOLTS_IN + 3]
+        self._n_of_dt = (0.0, 1)       # the substeps of the last period length (dt, n)
         home = self.kin.ik(0.5 * sum(self.kin.stroke) + self._rise(), 0.0, 0.0)
         self._pack_real(home.z)
         self.set_state(home.q)
@@ -325,21 +330,31 @@ class TwinPlant:
         return KinematicsError(f"twin: forward kinematics failed at q = {self.q.tolist()} m "
                                f"(t = {self.t:.4f} s); the mechanism left its assembly range")
 
-    def advance_sensed(self, dt: float, volts: np.ndarray, port: np.ndarray, ati_block,
-                       ati_row: int, ati_params, ati_drift, ati_out, ati_dt: float,
-                       overload_bits: int) -> int:
-        """``advance(dt, volts)`` on the compiled path with the encoder index and the ATI
-        sample computed in the same dispatch (``kernels.advance_sensed``: the twin's period
-        without faults); returns the ATI overload bits."""
-        n = max(1, round(dt * self.physics_rate_hz))
-        status, bits = kernels.advance_sensed(
-            self.geom, self.P, self.env, self.S, self.W, self._held_input(volts), dt, n,
-            self.t, self.realistic, self.integrator, port, ati_block, ati_row, ati_params,
-            ati_drift, ati_out, ati_dt, overload_bits)
-        if status != physics.STATUS_OK:
+    def set_encoder_card(self, sign, m_per_count) -> None:
+        """The encoder card's count direction and scale per axis (``FakePcl833Port.sign``,
+        ``.m_per_count``), for :meth:`period`."""
+        K = kernels
+        self.P[K.P_PORT_SIGN:K.P_PORT_SIGN + 3] = sign
+        self.P[K.P_PORT_MPC:K.P_PORT_MPC + 3] = m_per_count
+
+    def period(self, dt: float, port: np.ndarray, codes: np.ndarray, ati: np.ndarray,
+               ati_block: np.ndarray, ati_row: int, ati_dt: float, overload_bits: int) -> int:
+        """The twin's fault-free period on the compiled path (``kernels.period``): the
+        amplifier input from the DAC ``codes``, ``advance(dt, ·)``, the encoder card's
+        counters (``port``, the card's int64 state; its scale from
+        :meth:`set_encoder_card`) and the ATI sample (``ati``: the model's packed array) in
+        one dispatch. Returns the ATI overload bits."""
+        last_dt, n = self._n_of_dt
+        if dt != last_dt:
+            n = max(1, round(dt * self.physics_rate_hz))
+            self._n_of_dt = (dt, n)
+        bits = kernels.period(self.geom, self.P, self.env, self.S, self.W, port, codes, ati,
+                              ati_block, dt, n, self.t, self.realistic, self.integrator,
+                              ati_row, ati_dt, overload_bits)
+        if bits < 0:
             raise self._fk_failed()
         self.t += dt
-        return int(bits)
+        return bits
 
     def advance(self, dt: float, volts) -> None:
         """Hold amplifier commands ``volts`` (V, after the DAC) for ``dt`` s and integrate."""

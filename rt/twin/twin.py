@@ -142,19 +142,21 @@ class Twin:
         self.card_enabled = [False, False]
         self._stuck_volts: dict[tuple[int, int], float] = {}
         self.command_limit_v = self.description.drive.command_limit_v
-        self.amp_volts = np.zeros(3)
+        # The amplifier inputs (V): a view into the plant's state, where the compiled period
+        # computes them from the DAC codes.
+        self.amp_volts = self.plant.S[kernels.S_AMP:kernels.S_AMP + 3]
         self._amp_key: tuple | None = None     # (card, codes) amp_volts was computed from
+        self._codes = np.full(3, kernels.NO_CODE, dtype=np.int64)  # the period's DAC codes
         self.ati = TwinAtiSensorModel(ati_params, seed=seed, compiled=compiled)
-        self.ati_sample: AtiSample | None = None
+        self._ati_sample: AtiSample | None = None
         self.inputs = DigitalInputState()
         self._payload_applied = False
         self._arrival: _Arrival | None = None
         self._jumps_done: set[int] = set()
         # Delayed sensor history for the latency fault: (t, positions, ATI sample).
         self._history: deque = deque(maxlen=512)
-        # The encoder card's sign and scale per axis for the fused period (built on first use,
-        # rebuilt if the port is replaced).
-        self._port_params = np.zeros(kernels.PORT_SIZE)
+        # The encoder card whose sign and scale the fused period holds (set on first use,
+        # again if the port is replaced).
         self._port_params_of: FakePcl833Port | None = None
         self.plant.set_payload(None)
 
@@ -262,6 +264,8 @@ class Twin:
                 and (self._payload_applied or not isinstance(self.environment, PayloadStep))):
             self._sync_fused(t)
             return
+        if self.ati._pending >= 0:          # a fused period's sample: the object now
+            self._ati_sample = self.ati.last_sample()
         while t - self.plant.t > 1e-12:
             chunk = min(_MAX_CHUNK_S, t - self.plant.t)
             if self._arrival is not None:
@@ -280,27 +284,71 @@ class Twin:
 
     def _sync_fused(self, t: float) -> None:
         """``sync`` without faults or a pending payload change (pre-flight's case): each held
-        command is one compiled call that also reads the encoders and the ATI
-        (``kernels.advance_sensed``); the same arithmetic and order as the general path, which
-        runs ``plant.advance`` and then ``_update_sensors``."""
+        command is one compiled call (``kernels.period``: the amplifier input from the DAC
+        codes, the physics, the encoder card's counters and the ATI sample), with the same
+        arithmetic in the same order as the general path (``_update_amplifier_input``,
+        ``plant.advance``, ``_update_sensors``). Python keeps only the ATI's bookkeeping; the
+        sample's object is built when someone asks for it (``ati_sample``)."""
         plant = self.plant
         port = self.encoder_port
         ati = self.ati
-        pp = self._port_params
+        st = ati._state
         if self._port_params_of is not port:
-            pp = self._port_params = np.array([*port.sign, *port.m_per_count, 0.0, 0.0, 0.0],
-                                              dtype=np.float64)
+            plant.set_encoder_card(port.sign, port.m_per_count)
             self._port_params_of = port
+        codes = self._codes
+        no_code = kernels.NO_CODE
+        dac_libs, enabled = self.dac_libs, self.card_enabled
+        port_state, packed = port._st, ati._packed
         while t - plant.t > 1e-12:
             chunk = min(_MAX_CHUNK_S, t - plant.t)
+            # The enabled card's codes, read every chunk as the general path does: a twin
+            # behind a real-time loop in another thread (tests/test_rig.py) catches up in
+            # many chunks while the loop writes new codes between them. Read from the
+            # comedilib double's dict, which tests also write.
+            card = 0 if enabled[0] else (1 if enabled[1] else -1)
+            if card >= 0:
+                last = dac_libs[card].last_code
+                codes[0] = last.get(0, no_code)
+                codes[1] = last.get(1, no_code)
+                codes[2] = last.get(2, no_code)
+            else:
+                codes[0] = codes[1] = codes[2] = no_code
+            # The same amp_volts the kernel computes, also set here as before (its cache,
+            # the rig's own call): without it tests/test_rig.py's threaded twin failed over on
+            # channel 0 at start in 2-3 of 5 runs (base 0 of 7); cause not found (2026-11-26,
+            # preflight5's note). It costs ≈ 0.3 µs when the codes did not change.
             self._update_amplifier_input()
             t_end = plant.t + chunk                 # what plant.t is after the period
-            block, row = ati._next_block_row()
-            bits = plant.advance_sensed(chunk, self.amp_volts, pp, block, row, ati._kparams,
-                                        ati._state.drift, ati._out, ati._dt_to(t_end),
-                                        _ATI_OVERLOAD)
-            port.move_to_indices(pp[kernels.PORT_INDEX:])   # floats holding integers
-            self.ati_sample = ati._commit_compiled(bits, plant.t)
+            block = st.block
+            if st.block_pos >= len(block):
+                block, _ = ati._next_block_row()    # refills the random block
+            assert isinstance(block, np.ndarray)    # the compiled model's state holds one
+            t_last = st.t_last
+            bits = plant.period(chunk, port_state, codes, packed, block, st.block_pos,
+                                0.0 if t_last is None else t_end - t_last, _ATI_OVERLOAD)
+            ati._commit_pending(bits, plant.t)
+
+    @property
+    def ati_sample(self) -> AtiSample | None:
+        """The ATI's last sample (None before the first)."""
+        if self.ati._pending >= 0:
+            self._ati_sample = self.ati.last_sample()
+        return self._ati_sample
+
+    @ati_sample.setter
+    def ati_sample(self, sample: AtiSample | None) -> None:
+        self._ati_sample = sample
+
+    def latest_ati(self) -> tuple[np.ndarray | tuple[float, ...], int, int] | None:
+        """The ATI's last sample as (wrench N/N·m, ft_sequence, status), None before the first,
+        without building an ``AtiSample`` when the fused period left it in the model's array
+        (the force reader's path every cycle). Undelayed: see :meth:`delayed`."""
+        ati = self.ati
+        if ati._pending >= 0:
+            return ati._out, ati._state.ft_sequence, ati._pending
+        s = self._ati_sample
+        return None if s is None else (s.wrench, s.ft_sequence, s.status)
 
     def _update_amplifier_input(self) -> None:
         t = self.plant.t
