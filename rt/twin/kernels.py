@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from rt.ati.twin_sensor import _measure_kernel
-from rt.drivers.kernels import fake_pcl833_move
+from rt.drivers.kernels import dac_code_volts, fake_pcl833_move
 from rt.twin import physics
 from rt.twin.physics import (
     B_F_PER_A,
@@ -281,7 +281,7 @@ def amplifier_input(P, S, codes):
         v = 0.0
         code = codes[ch]
         if code != NO_CODE:
-            v = -10.0 + code / 4095 * 20.0
+            v = dac_code_volts(code, -10.0, 10.0, 4095.0)    # the one DAC quantizer's inverse
         S[S_AMP + ch] = max(-lim, min(lim, v))
     if P[P_WITH_OFFSET] > 0.5 and S[S_DRIVES_ON] > 0.5:
         for ch in range(3):
