@@ -12,7 +12,7 @@ Components:
 * amplifier: the commands as the fit aligns them (held half period, then the description's
   amplifier delay and current loop: ``estimate.amplifier_to_positions``) minus the force the
   twin's amplifiers delivered (the held commands plus their input offsets through the truth's
-  current loop, band-limited; see ``main`` for how far the twin realises it); ``--half-period-only`` aligns by the held half
+  current loop, band-limited; see ``main``); ``--half-period-only`` aligns by the held half
   period alone (the estimator before the description had the amplifier); of which the input
   offsets (a constant force per axis: read as gravity, i.e. as masses);
 * screw, total: the delivered force minus the truth's rigid-body inverse dynamics at the motor
@@ -143,9 +143,8 @@ def main() -> None:
     am = np.gradient(vm, dt, axis=0)
     aqs = np.gradient(qds, dt, axis=0)
     # What the amplifiers delivered, band-limited: the held commands plus the input offsets
-    # through the truth's current loop and delay. The twin realises that exactly on branch
-    # ident5-exact-amp (the mean current over each substep); main's discretization realises
-    # 0.08 ms of the nominal 0.26 ms, so there this row holds the 0.18 ms difference. The current the
+    # through the truth's current loop and delay, which the twin realises exactly (the mean
+    # current over each substep; ``tests/test_amplifier_description.py``). The current the
     # twin ends each period with is not that: after a held period it has all but reached that
     # period's command, i.e. it lags the commands by about a whole period, where the force's
     # band-limited equivalent lags them by T/2 + the amplifier's lag; comparing the aligned

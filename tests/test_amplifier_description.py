@@ -13,7 +13,7 @@ from pydantic import ValidationError
 
 from rt.errors import ConfigurationError
 from rt.identification.estimate import amplifier_to_positions, held_to_positions
-from rt.model.description import description_from_dict, load_description
+from rt.model.description import RobotDescription, description_from_dict, load_description
 from rt.twin import physics
 from rt.twin.plant import TwinPlant
 from rt.twin.realism import RigImperfections, perturbed_truth
@@ -76,16 +76,37 @@ def test_round_trip_through_a_file(tmp_path, raw):
 def test_the_twin_runs_its_truths_amplifier_and_has_no_second_number(raw):
     with pytest.raises(ValidationError):                       # no bandwidth of its own
         RigImperfections(current_loop_bandwidth_hz=1000.0)
-    truth = description_from_dict(_amplifier(raw, 200.0, 4.0e-4))
+    truth = description_from_dict(_amplifier(raw, 200.0, 3.0e-4))
     plant = TwinPlant(truth)                                    # 5 kHz substeps
     h = 1.0 / plant.physics_rate_hz
     tau = 1.0 / (2.0 * math.pi * 200.0)
     r = plant.real
     assert r[physics.R_AMP_ALPHA] == pytest.approx(1.0 - math.exp(-h / tau))
-    assert r[physics.R_AMP_DELAY_STEPS] == 2                    # 0.4 ms of 0.2 ms substeps
+    assert r[physics.R_AMP_MEAN] == pytest.approx(tau / h * (1.0 - math.exp(-h / tau)))
+    # 0.3 ms = 1.5 substeps: one whole and half of the next (it was rounded to whole ones).
+    assert (r[physics.R_AMP_DELAY_STEPS], r[physics.R_AMP_DELAY_FRAC]) == pytest.approx((1, 0.5))
     off = TwinPlant(truth, imperfections=RigImperfections(amplifier_dynamics=False))
-    assert off.real[physics.R_AMP_ALPHA] == 1.0 and off.real[physics.R_AMP_DELAY_STEPS] == 0
+    assert off.real[physics.R_AMP_ALPHA] == 1.0 and off.real[physics.R_AMP_MEAN] == 0.0
+    assert off.real[physics.R_AMP_DELAY_STEPS] == 0.0
     assert RigImperfections.none().ideal and not RigImperfections.none().amplifier_dynamics
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_the_twins_current_follows_the_continuous_loop_at_its_substeps(raw, compiled):
+    # A 200 Hz loop after 0.3 ms at the default 5 kHz substeps: the current after a command
+    # step is the continuous 1 − exp(−(t − d)/τ) within 0.005 of the step. The previous
+    # discretization (lag applied from each substep's start, delay rounded to whole substeps)
+    # read 0.634 against 0.585 one period after the step.
+    truth = RobotDescription.model_validate(_amplifier(raw, 200.0, 3.0e-4))
+    imp = RigImperfections.none().model_copy(update={"amplifier_dynamics": True})
+    plant = TwinPlant(truth, imperfections=imp, compiled=compiled)
+    plant.set_state((0.2, 0.2, 0.2))
+    gain = truth.drive.amplifier_gain_a_per_v
+    tau = truth.drive.current_loop_time_constant_s
+    for k in range(1, 5):
+        plant.advance(1.0e-3, (1.0, 1.0, 1.0))
+        want = 1.0 - math.exp(-(k * 1.0e-3 - 3.0e-4) / tau)
+        np.testing.assert_allclose(plant.current / gain, want, atol=0.005)
 
 
 def test_the_alignment_delays_the_held_commands_by_the_amplifiers_response():

@@ -45,7 +45,7 @@ def test_a_slow_amplifier_in_the_description_is_aligned_out_of_the_fit():
         return err - (4.0 * est.sigma[idx] + 0.005 * np.abs(tb[idx]))
 
     # Measured (twin figures, on the twin realising the amplifier exactly: branch
-    # ident5-exact-amp): every Jr, fv, fc within 0.25 % and 1.2 σ.
+    # the shipped twin since 2026-11-26b): every Jr, fv, fc within 0.25 % and 1.2 σ.
     aligned = excess(model.description.drive)
     assert np.all(aligned <= 0.0), dict(zip(NAMES, aligned))
     # The held half period alone leaves 2.1 ms of shift, read as negative viscous friction

@@ -10,8 +10,11 @@ drives are switched off for 60 ms (the brakes engage) and back on. Every 25 ms t
 counts, the decoded positions, the ATI sample and the plant's whole packed state are compared
 with the values that commit produced, as float hex: equality, not a tolerance.
 
-``tests/data/twin_golden_2026-11-26.json`` was written by this file's ``__main__`` on the tree
-of commit 43b157e (``python tests/test_twin_golden.py OUT``). The replay tests of
+``tests/data/twin_golden_2026-11-26b.json`` was written by this file's ``__main__``
+(``python tests/test_twin_golden.py OUT``) once the twin realised its truth's amplifier exactly
+(the mean current over each substep and the fractional delay: 0.26 ms of lag for the nominal
+1 kHz / 100 µs, where it realised 0.08 ms; branch ident5-exact-amp); the first golden, from
+commit 43b157e, pinned the older discretization. The replay tests of
 ``tests/test_twin_compiled.py`` compare the twin's paths with each other; this one pins the
 substep kernels they share. A different libm (``sin``, ``exp``) would show here first.
 """
@@ -31,7 +34,7 @@ from rt.twin.environment import parse_environment
 from rt.twin.serve import holding_volts
 from rt.twin.twin import SimClock, Twin
 
-GOLDEN = Path(__file__).parent / "data" / "twin_golden_2026-11-26.json"
+GOLDEN = Path(__file__).parent / "data" / "twin_golden_2026-11-26b.json"
 ENVS = ("free", "plate:0.75", "ankle")
 DT = 0.001
 SECONDS = 0.6

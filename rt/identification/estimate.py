@@ -150,7 +150,7 @@ def amplifier_to_positions(tau: np.ndarray, rate_hz: float, bandwidth_hz: float,
     (its low-frequency delay is τ_c). Left out, the lag and the delay are a shift between τ and
     W beyond the half period (0.26 ms at the nominal 1 kHz / 100 µs), which least squares reads
     as J_r δ ω² of negative viscous friction: on a realistic twin that realises the documented
-    amplifier (branch ident5-exact-amp; 40 s, one recording, ``bench/identification_bias.py``)
+    amplifier (the twin since 2026-11-26b; 40 s, one recording, ``bench/identification_bias.py``)
     fv −0.29 / −0.83 / −1.02 % with the half period alone, −0.06 / −0.36 / −0.91 % aligned;
     a 100 Hz amplifier (2.1 ms) left out reads fv1 −3.8 % (``tests/test_ident_amplifier.py``)."""
     out = np.array(tau, float)

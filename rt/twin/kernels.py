@@ -114,7 +114,8 @@ _W_FRM = 126
 _W_CMD_NEW = 129
 _W_CMD_OLD = 132
 _W_VISCOUS = 135
-_W_WORK = _W_VISCOUS + N_FRICTION
+_W_APPLIED = _W_VISCOUS + N_FRICTION
+_W_WORK = _W_APPLIED + 3
 _W_PORT_INDEX = _W_WORK + WORK_SIZE     # 3, the encoder card's new index (floats)
 W_SIZE = _W_PORT_INDEX + 3
 
@@ -255,6 +256,11 @@ def advance(geom, P, env, S, W, volts, dt, n, t, realistic, integrator):
             S[S_CABLE_TAU:S_CABLE_TAU + 3], S[S_VOLTS:S_VOLTS + 3],
             S[S_VOLTS_PREV:S_VOLTS_PREV + 3], delay, n, h, env_state, qdd, wrench,
             S[S_ROT:S_ROT + 9].reshape((3, 3)), W)
+        if delay < n:
+            # The delay has ended (its fractional substep included): from now on the
+            # amplifiers' previous command is the present one.
+            for i in range(3):
+                S[S_VOLTS_PREV + i] = S[S_VOLTS + i]
         S[S_DELAY_LEFT] = float(max(0, delay - n))
         _heat(P, S, dt)
     if status == STATUS_OK:
@@ -351,13 +357,16 @@ def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd
     frm = W[_W_FRM:_W_FRM + 3]
     for i in range(3):
         frm[i] = 0.0
+    applied = W[_W_APPLIED:_W_APPLIED + 3]
     work = W[_W_WORK:_W_WORK + WORK_SIZE]
     viscous_only = W[_W_VISCOUS:_W_VISCOUS + N_FRICTION]
     for k in range(N_FRICTION):
         viscous_only[k] = friction[k]
     viscous_only[14:17] = 0.0
     fpa = bodies[B_F_PER_A]
-    alpha = real[physics.R_AMP_ALPHA]
+    decay = 1.0 - real[physics.R_AMP_ALPHA]
+    mean = real[physics.R_AMP_MEAN]
+    frac = real[physics.R_AMP_DELAY_FRAC]
     k = real[physics.R_SCREW_K]
     c = real[physics.R_SCREW_C]
     half_b = 0.5 * real[physics.R_BACKLASH]
@@ -369,7 +378,11 @@ def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd
     for s in range(n_steps):
         for i in range(3):
             target = cmd_old[i] if s < delay_steps else cmd_new[i]
-            current[i] += alpha * (target - current[i])
+            if s == delay_steps and frac > 0.0:
+                target = frac * cmd_old[i] + (1.0 - frac) * cmd_new[i]
+            gap = current[i] - target
+            applied[i] = target + mean * gap
+            current[i] = target + decay * gap
         if k > 0.0:
             for i in range(3):
                 d = xm[i] - q[i]
@@ -385,7 +398,7 @@ def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd
                 force[i] = fs + cable_tau[i]
         else:
             for i in range(3):
-                force[i] = fpa * current[i] + cable_tau[i]
+                force[i] = fpa * applied[i] + cable_tau[i]
         st = physics.acceleration(geom, bodies, viscous_only if k > 0.0 else friction, env, q,
                                   qd, phi, force, env_state, qdd, wrench_s, rot, pos, S, Sd,
                                   twist, M, hb, tau_env, fr, work)
@@ -401,7 +414,7 @@ def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd
             if k > 0.0:
                 q[i] += h_step * qd[i]
                 jr = real[physics.R_JR + i]
-                v = vm[i] + h_step * (fpa * current[i] - spring[i] - frm[i]) / jr
+                v = vm[i] + h_step * (fpa * applied[i] - spring[i] - frm[i]) / jr
                 if brake:
                     v = physics._toward_zero(v, h_step * hold / jr)
                 vm[i] = v

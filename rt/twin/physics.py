@@ -75,7 +75,7 @@ N_FRICTION = 19
 
 # The rig's imperfections (``real`` array), see rt.twin.realism.
 R_AMP_ALPHA = 0          # current-loop lag per substep: 1 − exp(−h/τ) (1 = instantaneous)
-R_AMP_DELAY_STEPS = 1    # transport delay in substeps
+R_AMP_DELAY_STEPS = 1    # transport delay: whole substeps (the fraction is R_AMP_DELAY_FRAC)
 R_SCREW_K = 2            # screw stiffness (N/m); 0 = rigid (rotor lumped with the slider)
 R_SCREW_C = 3            # screw damping (N s/m)
 R_BACKLASH = 4           # total backlash (m)
@@ -85,7 +85,9 @@ R_CABLE_W = 7            # cable weight share on the platform at z_ref (N)
 R_CABLE_K = 8            # cable stiffness (N/m of platform heave)
 R_CABLE_Z = 9            # z_ref (m)
 R_JR = 10                # per-axis rotor inertia at the slider (kg), 3 slots (compliant case)
-N_REAL = 14
+R_AMP_MEAN = 13          # the lag's mean over a substep: (τ/h)(1 − exp(−h/τ)) (0 = instantaneous)
+R_AMP_DELAY_FRAC = 14    # the transport delay's fraction of a substep beyond R_AMP_DELAY_STEPS
+N_REAL = 15
 
 STATUS_OK = 0
 STATUS_FK_FAILED = 1
@@ -721,7 +723,12 @@ def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi
     State beyond (q, q̇): motor positions/velocities at the slider ``xm``, ``vm`` (m, m/s; equal
     to q, q̇ when the screw is rigid), motor currents ``current`` (A), and the cable's actuator
     forces ``cable_tau`` (N, from the previous substep's pose: the cable changes slowly).
-    The amplifiers see ``volts_prev`` for the first ``delay_steps`` substeps, then ``volts``.
+    The amplifiers see ``volts_prev`` for the first ``delay_steps`` substeps, then ``volts``
+    (the substep in which the delay ends sees both, weighted by ``R_AMP_DELAY_FRAC``: the
+    fraction of a substep the delay lasts beyond ``delay_steps``). The current loop is the
+    exact first-order lag over each substep of constant input: the drive applies the current's
+    *mean* over the substep and ``current`` ends at its value at the substep's end (applying
+    the value at the substep's start, as before, realised half the loop's lag).
     With a compliant screw, ``bodies`` must carry zero rotor inertia (the rotors are integrated
     here with ``real[R_JR:R_JR+3]``), ``friction`` is the slider side's share (guides, seals)
     and ``friction_motor`` the motor side's (screw bearings, nut drag), acting on v_m. The
@@ -747,11 +754,14 @@ def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi
     tau_env = np.empty(3)
     fr = np.empty(3)
     frm = np.zeros(3)
+    applied = np.empty(3)
     work = np.empty(WORK_SIZE)
     viscous_only = friction.copy()
     viscous_only[14:17] = 0.0
     fpa = bodies[B_F_PER_A]
-    alpha = real[R_AMP_ALPHA]
+    decay = 1.0 - real[R_AMP_ALPHA]
+    mean = real[R_AMP_MEAN]
+    frac = real[R_AMP_DELAY_FRAC]
     k = real[R_SCREW_K]
     c = real[R_SCREW_C]
     half_b = 0.5 * real[R_BACKLASH]
@@ -763,7 +773,11 @@ def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi
     for s in range(n_steps):
         for i in range(3):
             target = cmd_old[i] if s < delay_steps else cmd_new[i]
-            current[i] += alpha * (target - current[i])
+            if s == delay_steps and frac > 0.0:
+                target = frac * cmd_old[i] + (1.0 - frac) * cmd_new[i]
+            gap = current[i] - target
+            applied[i] = target + mean * gap
+            current[i] = target + decay * gap
         if k > 0.0:
             for i in range(3):
                 d = xm[i] - q[i]
@@ -779,7 +793,7 @@ def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi
                 force[i] = fs + cable_tau[i]
         else:
             for i in range(3):
-                force[i] = fpa * current[i] + cable_tau[i]
+                force[i] = fpa * applied[i] + cable_tau[i]
         st = acceleration(geom, bodies, viscous_only if k > 0.0 else friction, env, q, qd, phi,
                           force, env_state, qdd, wrench_s, rot, pos, S, Sd, twist, M, hb,
                           tau_env, fr, work)
@@ -794,7 +808,7 @@ def integrate_real(geom, bodies, friction, friction_motor, env, real, q, qd, phi
             if k > 0.0:
                 q[i] += h_step * qd[i]
                 jr = real[R_JR + i]
-                v = vm[i] + h_step * (fpa * current[i] - spring[i] - frm[i]) / jr
+                v = vm[i] + h_step * (fpa * applied[i] - spring[i] - frm[i]) / jr
                 if brake:
                     v = _toward_zero(v, h_step * hold / jr)
                 vm[i] = v

@@ -146,13 +146,18 @@ class TwinPlant:
         drive = self.description.drive
         bw = drive.current_loop_bandwidth_hz if imp.amplifier_dynamics else 0.0
         delay = drive.amplifier_delay_s if imp.amplifier_dynamics else 0.0
-        # Discretized per substep: the lag applied from each substep's start, the delay rounded
-        # to whole substeps. This realises less lag than the description states (0.08 ms of the
-        # nominal 0.26 ms at 5 kHz: 100 µs rounds to no substep); the exact discretization is
-        # on branch ident5-exact-amp, held back because the explicit-force loop's margin does
-        # not take the documented lag (two calibration tests; the closing note of ident5).
-        r[physics.R_AMP_ALPHA] = 1.0 if bw <= 0.0 else 1.0 - math.exp(-2.0 * math.pi * bw * h)
-        r[physics.R_AMP_DELAY_STEPS] = round(delay * self.physics_rate_hz)
+        # The exact first-order lag over a substep: what it keeps of the gap to its input at
+        # the substep's end (1 − alpha) and on average over it (mean; the drive applies the
+        # mean). The delay in whole substeps and the fraction of one beyond (it was rounded
+        # to whole substeps: 100 µs at 5 kHz rounded to none).
+        h_over_tau = 2.0 * math.pi * bw * h
+        r[physics.R_AMP_ALPHA] = 1.0 if bw <= 0.0 else 1.0 - math.exp(-h_over_tau)
+        r[physics.R_AMP_MEAN] = 0.0 if bw <= 0.0 else -math.expm1(-h_over_tau) / h_over_tau
+        steps, frac = divmod(delay * self.physics_rate_hz, 1.0)
+        if frac > 1.0 - 1e-9:                    # round-off of a whole number of substeps
+            steps, frac = steps + 1.0, 0.0
+        r[physics.R_AMP_DELAY_STEPS] = steps
+        r[physics.R_AMP_DELAY_FRAC] = frac
         r[physics.R_SCREW_K] = imp.screw_stiffness_n_per_m
         # Damping ratio referred to the slider's own share of the moving mass (slider + rod).
         d = self.description.bodies
@@ -385,6 +390,10 @@ class TwinPlant:
                 self.real, self.q, self.qd,
                 self.phi, self.xm, self.vm, self.current, self.cable_tau, v, self._volts_prev,
                 self._delay_left, n, dt / n, self.env_state, self.qdd, self.wrench_s, self.rot)
+            if self._delay_left < n:
+                # The delay has ended (its fractional substep included): from now on the
+                # amplifiers' previous command is the present one.
+                self._volts_prev[:] = v
             self._delay_left = max(0, self._delay_left - n)
             self._heat(dt)
         if status != physics.STATUS_OK:
