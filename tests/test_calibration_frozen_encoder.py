@@ -63,7 +63,7 @@ def _run(kind: ProfileKind, **shear) -> TrialData:
 @pytest.fixture(scope="module")
 def fast_tilt() -> TrialData | SafetyTrip:
     """The shear push of the old strict xfail: 600 N, then a 2° roll in 1 s, held 0.5 s; or
-    the supervisor's stop (each test judges which stop it may be)."""
+    the supervisor's stop, returned so that each test fails naming it (the push must complete)."""
     try:
         return _run(ProfileKind.SHEAR, roll_deg=2.0, load_n=600.0, tilt_ramp_s=1.0, hold_s=0.5)
     except SafetyTrip as stop:
