@@ -541,34 +541,18 @@ class Graph:
         """
         if self._fused:
             return self._step_fused(t, dt)
-        pc = perf_counter_ns
         idx = self._idx
-        faults = 0
-        t0 = prev = pc()
-        for k, comp, update, ring in self._run:
-            if comp._active:
-                try:
-                    status = update(t, dt)
-                except Exception as exc:  # noqa: BLE001 - a component bug must not kill the loop
-                    now = pc()
-                    ring[idx] = now - prev
-                    prev = now
-                    self._fault(k, comp, STATUS_EXCEPTION,
-                                f"update raised {type(exc).__name__}: {exc}", t, exc)
-                    faults += 1
-                    continue
-                now = pc()
-                ring[idx] = now - prev
-                prev = now
-                if status:
-                    self._fault(k, comp, int(status), f"update returned status {status}", t, None)
-                    faults += 1
-            else:
-                ring[idx] = -1
-                self._skips[k] += 1
+        t0 = perf_counter_ns()
+        faults, _ = self._blocks(self._run, t, dt, idx, t0)
+        return self._end_cycle(idx, t0, faults)
+
+    def _end_cycle(self, idx: int, t0: int, faults: int) -> int:
+        """The cycle's end, per block or fused: the delay latches, the cycle's time (from
+        ``t0``, ns) into its ring and maximum, the ring index and the count; returns
+        ``faults``."""
         for copy, latch, src in self._latches:
             copy(latch, src)
-        elapsed = pc() - t0
+        elapsed = perf_counter_ns() - t0
         self._cycle_store[idx] = elapsed
         self._cycle_max = max(self._cycle_max, elapsed)
         self._idx = (idx + 1) & self._mask
@@ -651,14 +635,7 @@ class Graph:
         faults += more
         more, prev = self._blocks(self._post, t, dt, idx, prev)
         faults += more
-        for copy, latch, src in self._latches:
-            copy(latch, src)
-        elapsed = pc() - t0
-        self._cycle_store[idx] = elapsed
-        self._cycle_max = max(self._cycle_max, elapsed)
-        self._idx = (idx + 1) & self._mask
-        self._cycles += 1
-        return faults
+        return self._end_cycle(idx, t0, faults)
 
     def _fault(self, k: int, comp: Component, code: int, reason: str, t: float,
                exc: BaseException | None) -> None:
