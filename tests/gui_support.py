@@ -6,6 +6,8 @@ import os
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from test_rt_process import start_rt, stop_rt, tolerant_config
@@ -23,4 +25,27 @@ def start_rt_for_gui(recordings_dir: str):
                     "--recordings-dir", recordings_dir)
 
 
-__all__ = ["LOADED_HEARTBEAT_TIMEOUT_S", "start_rt_for_gui", "stop_rt"]
+@contextmanager
+def window_on_rt(qtbot, proc, endpoint: str, recordings_dir: str,
+                 name: str = "GUI test") -> Iterator:
+    """The main window linked to the RT process ``proc`` at ``endpoint``, shown, once the link
+    is connected (30 s bound); on exit the window and the link close and ``proc`` stops."""
+    from app.main_window import MainWindow
+    from app.rt_link import RtLink
+    from app.settings import GuiSettings
+
+    link = RtLink(endpoint, name=name)
+    window = MainWindow(link, GuiSettings(recordings_dir=recordings_dir))
+    qtbot.addWidget(window)
+    link.start()
+    window.show()
+    try:
+        qtbot.waitUntil(lambda: link.connected, timeout=30_000)
+        yield window
+    finally:
+        window.close()
+        link.close()
+        stop_rt(proc)
+
+
+__all__ = ["LOADED_HEARTBEAT_TIMEOUT_S", "start_rt_for_gui", "stop_rt", "window_on_rt"]

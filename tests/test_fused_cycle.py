@@ -240,12 +240,18 @@ class _Segment:
         return self.n
 
 
-def test_the_graph_runs_a_fused_segment_then_the_blocks_it_left():
+def _counting_graph():
+    """Five counting blocks a-e in a chain, configured."""
     b = GraphBuilder()
     for s in "abcde":
         b.add(_Count(s))
     g = b.build()
     g.configure()
+    return g
+
+
+def test_the_graph_runs_a_fused_segment_then_the_blocks_it_left():
+    g = _counting_graph()
     seg = _Segment()
     with pytest.raises(ConfigurationError, match="not consecutive"):
         bad = _Segment()
@@ -283,11 +289,7 @@ def test_the_graph_runs_a_fused_segment_then_the_blocks_it_left():
 
 
 def test_a_segment_that_raises_leaves_the_blocks_to_run():
-    b = GraphBuilder()
-    for s in "abcde":
-        b.add(_Count(s))
-    g = b.build()
-    g.configure()
+    g = _counting_graph()
     seg = _Segment()
 
     def broken(t: float, dt: float, idx: int) -> int:

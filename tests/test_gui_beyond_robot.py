@@ -12,11 +12,8 @@ from PySide6.QtCore import QLocale, Qt
 from test_gait_real_files import DATA, _bench
 
 from app.i18n import install_language
-from app.main_window import MainWindow
 from app.pages.prescribe import beyond_words, clinical_limits
 from app.patient_context import PatientContext
-from app.rt_link import RtLink
-from app.settings import GuiSettings
 from protocols.rt_session import protocol_document
 
 #: The bench's patient (75 kg: gait replay scales the record to 60 % of it).
@@ -74,18 +71,8 @@ def gui(qtbot, tmp_path):
     rec = tmp_path / "recordings"
     rec.mkdir()
     proc, endpoint, _pub = gui_support.start_rt_for_gui(str(rec))
-    link = RtLink(endpoint, name="GUI test")
-    window = MainWindow(link, GuiSettings(recordings_dir=str(rec)))
-    qtbot.addWidget(window)
-    link.start()
-    window.show()
-    try:
-        qtbot.waitUntil(lambda: link.connected, timeout=30_000)
+    with gui_support.window_on_rt(qtbot, proc, endpoint, str(rec)) as window:
         yield window
-    finally:
-        window.close()
-        link.close()
-        gui_support.stop_rt(proc)
 
 
 @pytest.mark.skipif(DATA is None, reason="the real C3D files (../shared/data/c3d) are absent")

@@ -11,9 +11,7 @@ import pytest
 from PySide6.QtCore import Qt
 from test_calibration_rt import _config
 
-from app.main_window import MainWindow
 from app.rt_link import RtLink
-from app.settings import GuiSettings
 from calibration.trial import TRIALS_DIR, TrialData, read_campaign
 from rt.ipc.client import RtClient
 
@@ -49,18 +47,9 @@ def gui(qtbot, tmp_path):
         "--config", _config(tmp_path, 1800.0),
         "--heartbeat-timeout", str(gui_support.LOADED_HEARTBEAT_TIMEOUT_S),
         "--recordings-dir", str(rec))
-    link = RtLink(endpoint, name="GUI calibration test")
-    window = MainWindow(link, GuiSettings(recordings_dir=str(rec)))
-    qtbot.addWidget(window)
-    link.start()
-    window.show()
-    try:
-        qtbot.waitUntil(lambda: link.connected, timeout=30_000)
+    with gui_support.window_on_rt(qtbot, proc, endpoint, str(rec),
+                                  name="GUI calibration test") as window:
         yield window
-    finally:
-        window.close()
-        link.close()
-        gui_support.stop_rt(proc)
 
 
 def _owner(link: RtLink) -> str | None:

@@ -10,10 +10,7 @@ import gui_support
 import pytest
 from PySide6.QtCore import Qt
 
-from app.main_window import MainWindow
 from app.patient_context import PatientContext
-from app.rt_link import RtLink
-from app.settings import GuiSettings
 
 #: A patient whose dorsi/plantarflexion range is ±5°: the library's ankle ROM (±10°) is beyond.
 NARROW = PatientContext("P-NARROW", 70.0, {"pitch_min_deg": -5.0, "pitch_max_deg": 5.0,
@@ -40,18 +37,8 @@ def gui(qtbot, tmp_path):
     rec = tmp_path / "recordings"
     rec.mkdir()
     proc, endpoint, _pub = gui_support.start_rt_for_gui(str(rec))
-    link = RtLink(endpoint, name="GUI test")
-    window = MainWindow(link, GuiSettings(recordings_dir=str(rec)))
-    qtbot.addWidget(window)
-    link.start()
-    window.show()
-    try:
-        qtbot.waitUntil(lambda: link.connected, timeout=30_000)
+    with gui_support.window_on_rt(qtbot, proc, endpoint, str(rec)) as window:
         yield window, proc
-    finally:
-        window.close()
-        link.close()
-        gui_support.stop_rt(proc)
 
 
 def test_clinician_flow_refusal_run_stop_acknowledge_review(gui, qtbot):
