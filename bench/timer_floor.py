@@ -35,7 +35,7 @@ from rt.engine import Loop
 from rt.engine.rt_hygiene import release_cpu_latency_bound, try_cpu_latency_bound
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from loop_overhead import Nop, make_graph  # noqa: E402
+from loop_overhead import Nop, make_graph
 
 SOURCE = Path(__file__).with_suffix(".c")
 SPIN_US = 150.0                 # Loop's default spin before each deadline
