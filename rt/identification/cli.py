@@ -67,9 +67,11 @@ def _write_description(desc, out: Path, force: bool, inputs: tuple[str, ...] = (
         fh.write(text)
 
 
-def identify(data, validation, nominal, truth=None) -> tuple[Any, dict[str, Any]]:
+def identify(data, validation, nominal, truth=None,
+             truth_offsets_n=None) -> tuple[Any, dict[str, Any]]:
     """Base and physical estimates on ``data``, validation on ``validation``: the identified
-    description and the figures (truth only on the twin)."""
+    description and the figures (truth only on the twin; ``truth_offsets_n``, the twin's
+    amplifier offsets in N, when known: else the rows holding an offset have no truth)."""
     from rt.identification.estimate import (
         description_from_physical,
         estimate_base,
@@ -86,12 +88,12 @@ def identify(data, validation, nominal, truth=None) -> tuple[Any, dict[str, Any]
     rows = []
     true_base = None
     if truth is not None:
-        from rt.identification.workflow import truth_base
-        true_base = truth_base(truth, base.names)
+        true_base = base.truth(Regressor(RobotModel.from_description(truth).dyn).theta_base(),
+                               truth_offsets_n)
     for k, (n, e, s) in enumerate(zip(base.names, base.theta, base.sigma)):
         row = {"name": n, "estimate": float(e), "sigma": float(s),
                "rel_sigma": float(s / max(abs(e), 1e-12))}
-        if true_base is not None:
+        if true_base is not None and (truth_offsets_n is not None or "offset" not in n):
             t = float(true_base[k])
             row.update({"truth": t, "rel_error": float(abs(e - t) / max(abs(t), 1e-12)),
                         "error_sigmas": float(abs(e - t) / max(s, 1e-300))})
@@ -100,6 +102,18 @@ def identify(data, validation, nominal, truth=None) -> tuple[Any, dict[str, Any]
     if base.ripple_n is not None:
         # The screw's friction ripple per axis (N), estimated as nuisance parameters.
         result["friction_ripple_n"] = [float(v) for v in base.ripple_n]
+    if base.offset_n is not None and base.offset_sigma_n is not None:
+        # The amplifiers' input offsets (N at the slider, V at the amplifier), given the leg
+        # masses the lab believes (the nominal description): estimate.py's docstring, 5.
+        per_volt = nominal.drive.force_per_volt_n
+        offsets: dict[str, Any] = {
+            "estimate_n": [float(v) for v in base.offset_n],
+            "sigma_n": [float(v) for v in base.offset_sigma_n],
+            "estimate_v": [float(v / per_volt) for v in base.offset_n],
+            "written_v": list(ident.drive.amplifier_offset_v)}
+        if truth_offsets_n is not None:
+            offsets["truth_n"] = [float(v) for v in truth_offsets_n]
+        result["amplifier_offsets"] = offsets
     if validation is not None:
         result["validation"] = {"nominal": force_prediction_error(nominal, validation),
                                 "identified": force_prediction_error(ident, validation)}
@@ -131,7 +145,13 @@ def _run(args) -> int:
     excitation = optimize_excitation(model)
     data = record(excitation, args.seconds, model, truth, imp)
     validation = record_benchmark(args.seconds, model, truth, imp)
-    ident, result = identify(data, validation, nominal, truth)
+    from rt.twin.realism import RigImperfections
+
+    # The twin's amplifier offsets (its imperfections', volts × the truth's drive), the
+    # figure the identified ones are compared with.
+    truth_offsets = ((imp or RigImperfections()).amplifier_offsets_v()
+                     * truth.drive.force_per_volt_n)
+    ident, result = identify(data, validation, nominal, truth, truth_offsets)
     _write_description(ident, out, args.force)
     result = {"out": str(out), "backend": "twin", "excitation_peaks": excitation.peaks(),
               **result}
@@ -217,6 +237,13 @@ def _print(result: dict[str, Any], as_json: bool) -> int:
             line += (f" {b['truth']:11.4g} {100 * b['rel_error']:7.2f}% "
                      f"{b['error_sigmas']:6.1f}")
         print(line)
+    if "amplifier_offsets" in result:
+        o = result["amplifier_offsets"]
+        print("amplifier input offsets (given the believed leg masses), per axis: "
+              + ", ".join(f"{v:+.2f} ± {s:.2f} N" for v, s in zip(o["estimate_n"],
+                                                                  o["sigma_n"]))
+              + (" (truth " + ", ".join(f"{v:+.2f}" for v in o["truth_n"]) + " N)"
+                 if "truth_n" in o else ""))
     if "friction_ripple_n" in result:
         print("screw friction ripple (once per revolution), amplitude per axis: "
               + ", ".join(f"{v:.2f} N" for v in result["friction_ripple_n"]))
