@@ -110,7 +110,7 @@ def test_noisy_fit_reads_offsets_as_offsets_not_as_mass(reg, truth_base):
 
     truth_legs = leg_masses(truth)
     # Without the offset columns the offsets (−2.7/−4.3/−1.5 N) are read as weight: axis 1's
-    # leg mass 7 % low, beyond 5 %.
+    # leg mass +7.5 % (39 σ), beyond 5 %.
     old = estimate_base(reg, data, offsets=False)
     old_legs = np.array([old.theta[old.names.index(n)] for n in LEG_MASSES])
     assert np.max(np.abs(old_legs / truth_legs - 1.0)) > 0.05, old_legs / truth_legs

@@ -43,6 +43,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--compare-tracking", action="store_true",
                    help="also run Paden-Panja and computed torque with the nominal vs the "
                         "identified model (13 s each)")
+    p.add_argument("--no-offsets", dest="offsets", action="store_false",
+                   help="do not estimate the amplifiers' input offsets: their constant force is then read as the leg masses' weight (the fit before 2026-11-26c; a controller that does not compensate the offsets tracks better with it)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_run)
 
@@ -54,6 +56,8 @@ def register(commands: argparse._SubParsersAction) -> None:
                                    "(default: the one recorded in the file)")
     f.add_argument("--out", required=True, help="description file to write (YAML)")
     f.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    f.add_argument("--no-offsets", dest="offsets", action="store_false",
+                   help="do not estimate the amplifiers' input offsets: their constant force is then read as the leg masses' weight (the fit before 2026-11-26c; a controller that does not compensate the offsets tracks better with it)")
     f.add_argument("--json", action="store_true")
     f.set_defaults(func=_fit)
 
@@ -67,8 +71,8 @@ def _write_description(desc, out: Path, force: bool, inputs: tuple[str, ...] = (
         fh.write(text)
 
 
-def identify(data, validation, nominal, truth=None,
-             truth_offsets_n=None) -> tuple[Any, dict[str, Any]]:
+def identify(data, validation, nominal, truth=None, truth_offsets_n=None,
+             offsets: bool = True) -> tuple[Any, dict[str, Any]]:
     """Base and physical estimates on ``data``, validation on ``validation``: the identified
     description and the figures (truth only on the twin; ``truth_offsets_n``, the twin's
     amplifier offsets in N, when known: else the rows holding an offset have no truth)."""
@@ -82,9 +86,9 @@ def identify(data, validation, nominal, truth=None,
     from rt.model.regressor import Regressor
 
     reg = Regressor(RobotModel.from_description(nominal).dyn)
-    base = estimate_base(reg, data)
-    ident = description_from_physical(estimate_physical(reg, data, nominal), nominal,
-                                      f"{nominal.name}-identified")
+    base = estimate_base(reg, data, offsets=offsets)
+    ident = description_from_physical(estimate_physical(reg, data, nominal, offsets=offsets),
+                                      nominal, f"{nominal.name}-identified")
     rows = []
     true_base = None
     if truth is not None:
@@ -106,14 +110,14 @@ def identify(data, validation, nominal, truth=None,
         # The amplifiers' input offsets (N at the slider, V at the amplifier), given the leg
         # masses the lab believes (the nominal description): estimate.py's docstring, 5.
         per_volt = nominal.drive.force_per_volt_n
-        offsets: dict[str, Any] = {
+        amp: dict[str, Any] = {
             "estimate_n": [float(v) for v in base.offset_n],
             "sigma_n": [float(v) for v in base.offset_sigma_n],
             "estimate_v": [float(v / per_volt) for v in base.offset_n],
             "written_v": list(ident.drive.amplifier_offset_v)}
         if truth_offsets_n is not None:
-            offsets["truth_n"] = [float(v) for v in truth_offsets_n]
-        result["amplifier_offsets"] = offsets
+            amp["truth_n"] = [float(v) for v in truth_offsets_n]
+        result["amplifier_offsets"] = amp
     if validation is not None:
         result["validation"] = {"nominal": force_prediction_error(nominal, validation),
                                 "identified": force_prediction_error(ident, validation)}
@@ -151,7 +155,7 @@ def _run(args) -> int:
     # figure the identified ones are compared with.
     truth_offsets = ((imp or RigImperfections()).amplifier_offsets_v()
                      * truth.drive.force_per_volt_n)
-    ident, result = identify(data, validation, nominal, truth, truth_offsets)
+    ident, result = identify(data, validation, nominal, truth, truth_offsets, args.offsets)
     _write_description(ident, out, args.force)
     result = {"out": str(out), "backend": "twin", "excitation_peaks": excitation.peaks(),
               **result}
@@ -187,20 +191,21 @@ def _run_rt(args, out: Path) -> int:
                         [("excitation", excitation, args.seconds),
                          ("validation", benchmark_excitation(excitation.q0), args.seconds)],
                         record_dir)
-    result = _fit_recordings(recs[0], recs[1], nominal, out, args.force)
+    result = _fit_recordings(recs[0], recs[1], nominal, out, args.force, args.offsets)
     result = {"backend": "rt", "excitation_peaks": excitation.peaks(), **result}
     return _print(result, args.json)
 
 
 def _fit_recordings(recording: Path, validation: Path | None, nominal, out: Path,
-                    force: bool) -> dict[str, Any]:
+                    force: bool, offsets: bool = True) -> dict[str, Any]:
     from rt.identification.recording import load_excitation_recording
 
     rec = load_excitation_recording(recording)
     nominal = nominal or rec.robot()
     val = load_excitation_recording(validation) if validation else None
     ident, result = identify(rec.data(nominal),
-                             None if val is None else val.data(nominal), nominal, rec.truth())
+                             None if val is None else val.data(nominal), nominal, rec.truth(),
+                             offsets=offsets)
     _write_description(ident, out, force,
                        (str(recording),) + ((str(validation),) if validation else ()))
     return {"out": str(out), "recordings": {"excitation": str(recording),
@@ -219,7 +224,7 @@ def _fit(args) -> int:
     nominal = load_description(args.robot) if args.robot else None
     result = _fit_recordings(Path(args.recording),
                              Path(args.validation) if args.validation else None,
-                             nominal, out, args.force)
+                             nominal, out, args.force, args.offsets)
     return _print(result, args.json)
 
 
