@@ -47,7 +47,8 @@ def _fv(recording, filtering, monkeypatch):
     reg = Regressor(RobotModel.load().dyn)
     # The forces are sampled at the positions' instants, not commands held by a DAC.
     est = estimate_base(reg, prepare(*recording, RATE_HZ, filtering=filtering, held=False))
-    truth = Regressor(RobotModel.from_description(default_truth()).dyn).theta_base()
+    truth = est.truth(Regressor(RobotModel.from_description(default_truth()).dyn).theta_base(),
+                      None)                                 # no amplifier offset here
     idx = [est.names.index(f"fv{i}") for i in range(3)]
     return est.theta[idx], est.sigma[idx], truth[idx]
 

@@ -43,6 +43,8 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--compare-tracking", action="store_true",
                    help="also run Paden-Panja and computed torque with the nominal vs the "
                         "identified model (13 s each)")
+    p.add_argument("--no-offsets", dest="offsets", action="store_false",
+                   help="do not estimate the amplifiers' input offsets: their constant force is then read as the leg masses' weight (the fit before 2026-11-26c; a controller that does not compensate the offsets tracks better with it)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_run)
 
@@ -54,6 +56,8 @@ def register(commands: argparse._SubParsersAction) -> None:
                                    "(default: the one recorded in the file)")
     f.add_argument("--out", required=True, help="description file to write (YAML)")
     f.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    f.add_argument("--no-offsets", dest="offsets", action="store_false",
+                   help="do not estimate the amplifiers' input offsets: their constant force is then read as the leg masses' weight (the fit before 2026-11-26c; a controller that does not compensate the offsets tracks better with it)")
     f.add_argument("--json", action="store_true")
     f.set_defaults(func=_fit)
 
@@ -67,9 +71,11 @@ def _write_description(desc, out: Path, force: bool, inputs: tuple[str, ...] = (
         fh.write(text)
 
 
-def identify(data, validation, nominal, truth=None) -> tuple[Any, dict[str, Any]]:
+def identify(data, validation, nominal, truth=None, truth_offsets_n=None,
+             offsets: bool = True) -> tuple[Any, dict[str, Any]]:
     """Base and physical estimates on ``data``, validation on ``validation``: the identified
-    description and the figures (truth only on the twin)."""
+    description and the figures (truth only on the twin; ``truth_offsets_n``, the twin's
+    amplifier offsets in N, when known: else the rows holding an offset have no truth)."""
     from rt.identification.estimate import (
         description_from_physical,
         estimate_base,
@@ -80,18 +86,18 @@ def identify(data, validation, nominal, truth=None) -> tuple[Any, dict[str, Any]
     from rt.model.regressor import Regressor
 
     reg = Regressor(RobotModel.from_description(nominal).dyn)
-    base = estimate_base(reg, data)
-    ident = description_from_physical(estimate_physical(reg, data, nominal), nominal,
-                                      f"{nominal.name}-identified")
+    base = estimate_base(reg, data, offsets=offsets)
+    ident = description_from_physical(estimate_physical(reg, data, nominal, offsets=offsets),
+                                      nominal, f"{nominal.name}-identified")
     rows = []
     true_base = None
     if truth is not None:
-        from rt.identification.workflow import truth_base
-        true_base = truth_base(truth, base.names)
+        true_base = base.truth(Regressor(RobotModel.from_description(truth).dyn).theta_base(),
+                               truth_offsets_n)
     for k, (n, e, s) in enumerate(zip(base.names, base.theta, base.sigma)):
         row = {"name": n, "estimate": float(e), "sigma": float(s),
                "rel_sigma": float(s / max(abs(e), 1e-12))}
-        if true_base is not None:
+        if true_base is not None and (truth_offsets_n is not None or "offset" not in n):
             t = float(true_base[k])
             row.update({"truth": t, "rel_error": float(abs(e - t) / max(abs(t), 1e-12)),
                         "error_sigmas": float(abs(e - t) / max(s, 1e-300))})
@@ -100,6 +106,18 @@ def identify(data, validation, nominal, truth=None) -> tuple[Any, dict[str, Any]
     if base.ripple_n is not None:
         # The screw's friction ripple per axis (N), estimated as nuisance parameters.
         result["friction_ripple_n"] = [float(v) for v in base.ripple_n]
+    if base.offset_n is not None and base.offset_sigma_n is not None:
+        # The amplifiers' input offsets (N at the slider, V at the amplifier), given the leg
+        # masses the lab believes (the nominal description): estimate.py's docstring, 5.
+        per_volt = nominal.drive.force_per_volt_n
+        amp: dict[str, Any] = {
+            "estimate_n": [float(v) for v in base.offset_n],
+            "sigma_n": [float(v) for v in base.offset_sigma_n],
+            "estimate_v": [float(v / per_volt) for v in base.offset_n],
+            "written_v": list(ident.drive.amplifier_offset_v)}
+        if truth_offsets_n is not None:
+            amp["truth_n"] = [float(v) for v in truth_offsets_n]
+        result["amplifier_offsets"] = amp
     if validation is not None:
         result["validation"] = {"nominal": force_prediction_error(nominal, validation),
                                 "identified": force_prediction_error(ident, validation)}
@@ -131,7 +149,13 @@ def _run(args) -> int:
     excitation = optimize_excitation(model)
     data = record(excitation, args.seconds, model, truth, imp)
     validation = record_benchmark(args.seconds, model, truth, imp)
-    ident, result = identify(data, validation, nominal, truth)
+    from rt.twin.realism import RigImperfections
+
+    # The twin's amplifier offsets (its imperfections', volts × the truth's drive), the
+    # figure the identified ones are compared with.
+    truth_offsets = ((imp or RigImperfections()).amplifier_offsets_v()
+                     * truth.drive.force_per_volt_n)
+    ident, result = identify(data, validation, nominal, truth, truth_offsets, args.offsets)
     _write_description(ident, out, args.force)
     result = {"out": str(out), "backend": "twin", "excitation_peaks": excitation.peaks(),
               **result}
@@ -167,20 +191,21 @@ def _run_rt(args, out: Path) -> int:
                         [("excitation", excitation, args.seconds),
                          ("validation", benchmark_excitation(excitation.q0), args.seconds)],
                         record_dir)
-    result = _fit_recordings(recs[0], recs[1], nominal, out, args.force)
+    result = _fit_recordings(recs[0], recs[1], nominal, out, args.force, args.offsets)
     result = {"backend": "rt", "excitation_peaks": excitation.peaks(), **result}
     return _print(result, args.json)
 
 
 def _fit_recordings(recording: Path, validation: Path | None, nominal, out: Path,
-                    force: bool) -> dict[str, Any]:
+                    force: bool, offsets: bool = True) -> dict[str, Any]:
     from rt.identification.recording import load_excitation_recording
 
     rec = load_excitation_recording(recording)
     nominal = nominal or rec.robot()
     val = load_excitation_recording(validation) if validation else None
     ident, result = identify(rec.data(nominal),
-                             None if val is None else val.data(nominal), nominal, rec.truth())
+                             None if val is None else val.data(nominal), nominal, rec.truth(),
+                             offsets=offsets)
     _write_description(ident, out, force,
                        (str(recording),) + ((str(validation),) if validation else ()))
     return {"out": str(out), "recordings": {"excitation": str(recording),
@@ -199,7 +224,7 @@ def _fit(args) -> int:
     nominal = load_description(args.robot) if args.robot else None
     result = _fit_recordings(Path(args.recording),
                              Path(args.validation) if args.validation else None,
-                             nominal, out, args.force)
+                             nominal, out, args.force, args.offsets)
     return _print(result, args.json)
 
 
@@ -217,6 +242,13 @@ def _print(result: dict[str, Any], as_json: bool) -> int:
             line += (f" {b['truth']:11.4g} {100 * b['rel_error']:7.2f}% "
                      f"{b['error_sigmas']:6.1f}")
         print(line)
+    if "amplifier_offsets" in result:
+        o = result["amplifier_offsets"]
+        print("amplifier input offsets (given the believed leg masses), per axis: "
+              + ", ".join(f"{v:+.2f} ± {s:.2f} N" for v, s in zip(o["estimate_n"],
+                                                                  o["sigma_n"]))
+              + (" (truth " + ", ".join(f"{v:+.2f}" for v in o["truth_n"]) + " N)"
+                 if "truth_n" in o else ""))
     if "friction_ripple_n" in result:
         print("screw friction ripple (once per revolution), amplitude per axis: "
               + ", ".join(f"{v:.2f} N" for v in result["friction_ripple_n"]))

@@ -45,6 +45,25 @@ fc under-estimated, the bias of issue 15). Now:
    description (which has no place for it), reported as an amplitude per axis. With them
    the residual fell to 0.3 N and the identified amplitudes match the twin's ±8 % of f_c.
 
+5. each amplifier adds a constant input offset to its commands while the drives are on (the
+   DAC's zero-scale error and the amplifier's residual offset: millivolts, i.e. a few N at
+   the slider; the twin's ±15 mV are up to ±5 N): the commands fall short of the dynamics by
+   a constant force per axis. Without a column for it least squares reads it as weight, i.e.
+   as the leg masses (+3.5…+8.3 %, 100-290 σ, on the realistic twin). With one constant
+   column per axis (``offsets=True``, the default) the base reduction changes: a leg's mass
+   base parameter M_i (slider, rod and the platform's share; ``slider0.m``, ``rod1.m``,
+   ``slider2.m`` in ``rt.model.regressor``'s set) has the column M_i (q̈_i + g) on its axis
+   alone — the rotor inertia's column q̈_i plus g times the offset's — so *no* motion
+   separates it from J_r,i and o_i (:func:`offset_reduction` finds this numerically). What is
+   identified is J_r,i + M_i and o_i − g M_i per axis; the offsets alone follow from the leg
+   masses the lab believes (weighed parts, CAD: the description), each wrong kilogram
+   putting 9.81 N on its offset. The configuration-dependent terms (rods' first moments and
+   inertias, the platform's) are unaffected. In the description's parameters
+   (:func:`estimate_physical`) the offsets are free unknowns and the masses' direction the
+   data leave open follows the weak prior toward the believed description, inside the
+   feasibility bounds (positive masses, physical inertias): the identified slider and rod
+   masses stay the believed ones, the rotor inertias take the rest.
+
 Two estimates from the same data:
 
 * **base parameters** (``rt.model.regressor``): ordinary least squares W θ = τ, with standard
@@ -68,7 +87,7 @@ import pinocchio as pin
 import scipy.optimize
 import scipy.signal
 
-from rt.errors import ConfigurationError, TalusError
+from rt.errors import ConfigurationError, KinematicsError, TalusError
 from rt.model import RobotModel
 from rt.model.description import Drive, RobotDescription, description_from_dict
 from rt.model.regressor import INERTIAL_NAMES, N_RIGID, STANDARD_NAMES, Regressor
@@ -88,6 +107,8 @@ MIN_SPEED_M_S = 0.02
 PRIOR_WEIGHT = 1e-3
 #: Nuisance columns per axis for the ball screw's friction ripple (module docstring, 4.).
 RIPPLE_COLUMNS = 2
+#: Relative threshold of the offset reduction's rank test (as the base reduction's).
+_OFFSET_RANK_TOL = 1e-8
 
 PHYSICAL_NAMES = (["slider.m"] + [f"rod.{n}" for n in INERTIAL_NAMES]
                   + [f"platform.{n}" for n in INERTIAL_NAMES]
@@ -270,17 +291,117 @@ def _ripple_rows(reg: Regressor, data: IdentificationData) -> np.ndarray:
     return _parallel(data, rows).reshape(-1, 3 * RIPPLE_COLUMNS)
 
 
-def _system(reg: Regressor, data: IdentificationData,
-            ripple: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(W standard, ripple columns, τ) of the sliding equations, all through the parallel
-    filter; the ripple columns are empty (0 wide) without ``ripple``."""
+def _offset_rows(n_samples: int) -> np.ndarray:
+    """The amplifiers' input-offset columns (module docstring, 5.): −1 on axis i's equations
+    (the offset o_i adds to the delivered force, so the commands fall short of the dynamics
+    by it: τ_cmd = W θ − o), flattened like the rows, (3n, 3). Constant, so the parallel
+    filter leaves them as they are."""
+    rows = np.zeros((n_samples, 3, 3))
+    for i in range(3):
+        rows[:, i, i] = -1.0
+    return rows.reshape(-1, 3)
+
+
+def _system(reg: Regressor, data: IdentificationData, ripple: bool = True,
+            offsets: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(W standard, nuisance columns, τ) of the sliding equations, all through the parallel
+    filter. The nuisance columns are the screw's ripple (``ripple``, 3 × RIPPLE_COLUMNS) then
+    the amplifiers' offsets (``offsets``, 3); 0 wide without either."""
     keep = _sliding(data)
     if keep.sum() < 2 * len(STANDARD_NAMES):
         raise IdentificationError(f"only {int(keep.sum())} samples slide faster than "
                                   f"{MIN_SPEED_M_S * 1e3:.0f} mm/s: the excitation is too slow")
-    nuisance = (_ripple_rows(reg, data)[keep] if ripple
-                else np.zeros((int(keep.sum()), 0)))
-    return _standard_rows(reg, data)[keep], nuisance, _forces(data)[keep]
+    y = _forces(data)
+    parts = [np.zeros((int(keep.sum()), 0))]
+    if ripple:
+        parts.append(_ripple_rows(reg, data)[keep])
+    if offsets:
+        parts.append(_offset_rows(len(y) // 3)[keep])
+    return _standard_rows(reg, data)[keep], np.hstack(parts), y[keep]
+
+
+@dataclass(frozen=True)
+class OffsetReduction:
+    """The base parameters once the amplifiers' offsets are unknowns too (module docstring,
+    5.): which base parameters stay (``keep``, positions in ``Regressor.base``), which become
+    combinations of the others (``dropped``), and how they fold in: the column of a dropped
+    parameter is ``[W_keep, offset columns] @ combination[:, j]``, so the identified values
+    are θ_keep + K_keep θ_dropped and o + K_offset θ_dropped."""
+
+    keep: np.ndarray
+    dropped: np.ndarray
+    combination: np.ndarray          # (len(keep) + 3, len(dropped))
+    names: list[str]                 # the identified quantities, kept ones then offsets
+
+    def reduce(self, theta_base: np.ndarray, offsets_n: np.ndarray) -> np.ndarray:
+        """The identified quantities' values for base parameters ``theta_base`` and offsets
+        ``offsets_n`` (N, per axis): the truth's, on the twin."""
+        full = np.concatenate((np.asarray(theta_base, float)[self.keep],
+                               np.asarray(offsets_n, float)))
+        return full + self.combination @ np.asarray(theta_base, float)[self.dropped]
+
+
+def offset_reduction(reg: Regressor, samples: int = 40, seed: int = 20121) -> OffsetReduction:
+    """Find which base parameters the offsets make unidentifiable, numerically, as the base
+    reduction does (``rt.model.regressor``): the base regressor and the offset columns stacked
+    over random states in the workspace; columns are taken in the order offsets, drive terms
+    (Jr, fv, fc), rigid-body terms, and a column is dropped when it adds no rank (relative
+    residual below ``_OFFSET_RANK_TOL``) to those taken before it. On this robot the three
+    leg-mass base parameters drop out: each is m (q̈_i + g) on its axis, i.e. the rotor
+    inertia's column q̈_i plus g times an offset's."""
+    kin = reg.dyn.kin
+    rng = np.random.default_rng(seed)
+    rows: list[np.ndarray] = []
+    st = None
+    while len(rows) < samples:
+        z = rng.uniform(kin.stroke[0] + 0.45, kin.stroke[1] + 0.40)
+        roll = rng.uniform(-0.8, 0.8) * kin.roll_max
+        pitch = rng.uniform(-0.8, 0.8) * kin.pitch_max
+        try:
+            cfg = kin.ik(z, roll, pitch)
+        except KinematicsError:
+            continue
+        st = reg.dyn.state(cfg.q, rng.normal(0.0, 0.1, 3), out=st, cfg=cfg)
+        rows.append(reg(st, rng.normal(0.0, 1.0, 3)).copy())
+    nb = len(reg.base.base_index)
+    w = np.hstack((np.vstack(rows), _offset_rows(len(rows))))
+    scale = np.linalg.norm(w, axis=0)
+    scale[scale == 0.0] = 1.0
+    ws = w / scale
+    names = reg.base.names
+    drive = [k for k in range(nb) if names[k] in _DRIVE_SET]
+    rigid = [k for k in range(nb) if names[k] not in _DRIVE_SET]
+    order = [nb + i for i in range(3)] + drive + rigid
+    taken: list[int] = []
+    dropped: list[int] = []
+    for col in order:
+        if taken:
+            coef, *_ = np.linalg.lstsq(ws[:, taken], ws[:, col], rcond=None)
+            resid = float(np.linalg.norm(ws[:, col] - ws[:, taken] @ coef))
+        else:
+            resid = float(np.linalg.norm(ws[:, col]))
+        (taken if resid > _OFFSET_RANK_TOL * np.linalg.norm(ws[:, col]) else dropped).append(col)
+    keep = np.array(sorted(k for k in taken if k < nb), dtype=int)
+    cols = np.concatenate((keep, np.arange(nb, nb + 3)))
+    drop = np.array(sorted(dropped), dtype=int)
+    if len(drop):
+        k, *_ = np.linalg.lstsq(w[:, cols], w[:, drop], rcond=None)
+        k[np.abs(k) < 1e-9] = 0.0
+    else:
+        k = np.zeros((len(cols), 0))
+    out_names = []
+    for row, c in enumerate(cols):
+        name = names[c] if c < nb else f"offset{c - nb}"
+        for j, d in enumerate(drop):
+            if k[row, j] != 0.0:
+                coef = float(k[row, j])
+                name += (f" {'+' if coef > 0 else '−'} "
+                         f"{'' if abs(abs(coef) - 1.0) < 1e-9 else f'{abs(coef):.4g}·'}{names[d]}")
+        out_names.append(name)
+    return OffsetReduction(keep, drop, k, out_names)
+
+
+_DRIVE_SET = {f"{p}{i}" for p in ("Jr", "fv", "fc") for i in range(3)}
 
 
 @dataclass
@@ -291,25 +412,57 @@ class BaseEstimate:
     residual_rms_n: float
     #: The screw's friction-ripple amplitude per axis (N; None without ``ripple``).
     ripple_n: np.ndarray | None = None
+    #: With ``offsets``: the reduction (``names`` are then its quantities, the last three the
+    #: offsets folded with the leg masses' weight), and the offsets themselves (N, per axis,
+    #: with σ) given the believed leg masses (module docstring, 5.).
+    reduction: OffsetReduction | None = None
+    offset_n: np.ndarray | None = None
+    offset_sigma_n: np.ndarray | None = None
+
+    def truth(self, truth_base: np.ndarray, offsets_n: np.ndarray | None) -> np.ndarray:
+        """The identified quantities' true values from the truth's base parameters (and, with
+        offsets, its amplifiers' offsets in N)."""
+        if self.reduction is None:
+            return np.asarray(truth_base, float)
+        return self.reduction.reduce(truth_base, np.zeros(3) if offsets_n is None
+                                     else offsets_n)
 
 
-def estimate_base(reg: Regressor, data: IdentificationData,
-                  ripple: bool = True) -> BaseEstimate:
+def estimate_base(reg: Regressor, data: IdentificationData, ripple: bool = True,
+                  offsets: bool = True,
+                  believed: RobotDescription | None = None) -> BaseEstimate:
     """OLS on the base parameters with their standard deviations (and, with ``ripple``, the
-    screw's friction ripple as nuisance parameters: module docstring, 4.)."""
-    w_std, nuisance, y = _system(reg, data, ripple)
-    nb = len(reg.base.base_index)
-    w = np.hstack((w_std[:, reg.base.base_index], nuisance))
+    screw's friction ripple as nuisance parameters: module docstring, 4.; with ``offsets``, a
+    constant force per axis, the amplifiers' input offsets: module docstring, 5. — then the
+    leg masses fold into the rotor inertias and the offsets, and the offsets alone are
+    reported given the leg masses of ``believed``, default the regressor's description)."""
+    red = offset_reduction(reg) if offsets else None
+    w_std, nuisance, y = _system(reg, data, ripple, offsets)
+    w_base = w_std[:, reg.base.base_index]
+    if red is not None:
+        w_base = w_base[:, red.keep]
+    nb = w_base.shape[1]
+    w = np.hstack((w_base, nuisance))
     theta, *_ = np.linalg.lstsq(w, y, rcond=None)
     r = y - w @ theta
     dof = max(1, len(y) - len(theta))
     var = float(r @ r) / dof
     cov = var * np.linalg.pinv(w.T @ w)
     sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    amp = (np.hypot(theta[nb::RIPPLE_COLUMNS], theta[nb + 1::RIPPLE_COLUMNS]) if ripple
-           else None)
-    return BaseEstimate(reg.base.names, theta[:nb], sigma[:nb],
-                        float(np.sqrt(np.mean(r ** 2))), amp)
+    amp = (np.hypot(theta[nb:nb + 3 * RIPPLE_COLUMNS:RIPPLE_COLUMNS],
+                    theta[nb + 1:nb + 3 * RIPPLE_COLUMNS:RIPPLE_COLUMNS]) if ripple else None)
+    if red is None:
+        return BaseEstimate(reg.base.names, theta[:nb], sigma[:nb],
+                            float(np.sqrt(np.mean(r ** 2))), amp)
+    theta_r = np.concatenate((theta[:nb], theta[-3:]))
+    sigma_r = np.concatenate((sigma[:nb], sigma[-3:]))
+    believed_base = (reg.theta_base() if believed is None
+                     else Regressor(RobotModel.from_description(believed).dyn).theta_base())
+    # o_i = (o_i + K θ_dropped) − K θ_dropped(believed): σ is the fit's (the believed masses
+    # taken as exact; their error enters as g × mass error, module docstring 5.).
+    offset = theta[-3:] - red.combination[-3:] @ believed_base[red.dropped]
+    return BaseEstimate(red.names, theta_r, sigma_r, float(np.sqrt(np.mean(r ** 2))), amp,
+                        red, offset, sigma[-3:])
 
 
 def _physical_columns(std_rows: np.ndarray) -> np.ndarray:
@@ -339,10 +492,13 @@ def nominal_physical(description: RobotDescription) -> np.ndarray:
 
 
 def estimate_physical(reg: Regressor, data: IdentificationData,
-                      nominal: RobotDescription, ripple: bool = True) -> np.ndarray:
+                      nominal: RobotDescription, ripple: bool = True,
+                      offsets: bool = True) -> np.ndarray:
     """Bounded LS in the description's parameters with a weak prior (module docstring); the
-    screw's friction ripple (``ripple``) is estimated alongside, free, and not returned."""
-    w_std, nuisance, y = _system(reg, data, ripple)
+    screw's friction ripple (``ripple``) is estimated alongside, free, and not returned; the
+    amplifiers' offsets (``offsets``, module docstring 5.) too, free, and returned after the
+    description's parameters (N, per axis: ``len(PHYSICAL_NAMES) + 3`` values)."""
+    w_std, nuisance, y = _system(reg, data, ripple, offsets)
     a = _physical_columns(w_std)
     p0 = nominal_physical(nominal)
     scale = np.maximum(np.abs(p0), 1e-3)
@@ -366,6 +522,8 @@ def estimate_physical(reg: Regressor, data: IdentificationData,
     lo[21:30] = 0.0                                     # rotor inertia, friction
     lo[21:24] = 1e-3
     res = scipy.optimize.lsq_linear(lhs, rhs, bounds=(lo, hi), method="trf")
+    if offsets:
+        return np.concatenate((res.x[:len(p0)], res.x[-3:]))
     return res.x[:len(p0)]
 
 
@@ -374,10 +532,16 @@ def description_from_physical(p: np.ndarray, nominal: RobotDescription,
     """Build (and validate) the identified description; physically impossible sets are
     refused with IdentificationError naming the body."""
     p = np.asarray(p, float)
-    if p.shape != (len(PHYSICAL_NAMES),) or not np.all(np.isfinite(p)):
-        raise IdentificationError(f"identified parameters must be {len(PHYSICAL_NAMES)} finite "
-                                  f"values")
+    n = len(PHYSICAL_NAMES)
+    if p.shape not in ((n,), (n + 3,)) or not np.all(np.isfinite(p)):
+        raise IdentificationError(f"identified parameters must be {n} finite values, or "
+                                  f"{n + 3} with the amplifiers' offsets (N)")
     data = nominal.model_dump()
+    if len(p) == n + 3:
+        # The offsets go to the description in volts, validated there (|v| ≤ 1 V, finite).
+        data["drive"]["amplifier_offset_v"] = [float(v / nominal.drive.force_per_volt_n)
+                                               for v in p[n:]]
+        p = p[:n]
     if p[0] <= 0.0:
         raise IdentificationError(f"identified slider mass {p[0]:.4g} kg is not positive")
     data["bodies"]["slider"]["mass_kg"] = float(p[0])
@@ -417,6 +581,9 @@ def force_prediction_error(description: RobotDescription, data: IdentificationDa
     for j in range(len(data.q)):
         st = model.dyn.state(data.q[j], data.qd[j], out=st)
         pred[j] = model.dyn.inverse_dynamics(st, data.qdd[j])
+    # The measurement is the commands: the delivered force less the amplifiers' offsets
+    # (module docstring, 5.), which the description knows once identified (zero before).
+    pred -= np.asarray(description.drive.amplifier_offsets_n)
     # Prediction and measurement through the same (parallel) filter.
     pred = _parallel(data, pred)
     tau = _parallel(data, data.tau)

@@ -60,13 +60,20 @@ def record_commands(excitation: FourierExcitation, seconds: float, model: RobotM
     return q, volts * model.description.drive.force_per_volt_n
 
 
-def truth_base(truth: RobotDescription, reg_names: list[str]) -> np.ndarray:
-    """The truth's base parameters (for the report on the twin)."""
+def truth_base(truth: RobotDescription, reg_names: list[str],
+               offsets_n: np.ndarray | None = None) -> np.ndarray:
+    """The truth's base parameters (for the report on the twin); for an estimate with the
+    amplifiers' offsets (its names those of ``estimate.offset_reduction``), the truth of its
+    quantities, with the twin's offsets ``offsets_n`` (N, per axis; zero if not given)."""
+    from rt.identification.estimate import offset_reduction
     from rt.model.regressor import Regressor
 
     reg = Regressor(RobotModel.from_description(truth).dyn)
-    assert reg.base.names == reg_names
-    return reg.theta_base()
+    if reg.base.names == reg_names:
+        return reg.theta_base()
+    red = offset_reduction(reg)
+    assert red.names == reg_names, (red.names, reg_names)
+    return red.reduce(reg.theta_base(), np.zeros(3) if offsets_n is None else offsets_n)
 
 
 def record_benchmark(seconds: float, model: RobotModel, truth: RobotDescription | None = None,

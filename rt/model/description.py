@@ -110,6 +110,13 @@ PositiveVector3 = Annotated[list[PositiveFloat], Field(min_length=3, max_length=
 #: kHz), and a delay beyond a millisecond is not an amplifier's (it would be the loop's own).
 CURRENT_LOOP_MAX_HZ = 50_000.0
 AMPLIFIER_DELAY_MAX_S = 1.0e-3
+#: Bound of an amplifier's input offset (V): 10 % of a servo amplifier's ±10 V input range
+#: (340 N at the slider on the nominal drive). Real ones are millivolts after the balance trim
+#: (the twin's ±15 mV); one beyond this is a faulty amplifier or a wrong identification, not an
+#: imperfection to compensate, and is refused.
+AMPLIFIER_OFFSET_MAX_V = 1.0
+OffsetVolts = Annotated[float, Field(ge=-AMPLIFIER_OFFSET_MAX_V, le=AMPLIFIER_OFFSET_MAX_V,
+                                     allow_inf_nan=False)]
 NonNegativeVector3 = Annotated[list[NonNegativeFloat], Field(min_length=3, max_length=3)]
 
 
@@ -133,6 +140,21 @@ class Drive(_Strict):
                                                       allow_inf_nan=False)] = 1000.0
     amplifier_delay_s: Annotated[float, Field(ge=0.0, le=AMPLIFIER_DELAY_MAX_S,
                                               allow_inf_nan=False)] = 1.0e-4
+    #: Each axis' amplifier input offset (V): what the amplifier adds to every command while
+    #: the drives are enabled (the DAC's zero-scale error plus the amplifier's residual input
+    #: offset), so the force delivered is (command + offset) × force per volt. Measured by
+    #: identification (``talus identify``, ``rt.identification.estimate``: a constant force
+    #: per axis), for the lab to report and to compensate at the DAC stage. Optional (zero:
+    #: unknown or trimmed out); bounded by ``AMPLIFIER_OFFSET_MAX_V``.
+    amplifier_offset_v: Annotated[list[OffsetVolts],
+                                  Field(min_length=3, max_length=3)] = [0.0, 0.0, 0.0]
+
+    @property
+    def amplifier_offsets_n(self) -> tuple[float, float, float]:
+        """The amplifiers' input offsets as forces at the sliders (N), per axis."""
+        k = self.force_per_volt_n
+        v = self.amplifier_offset_v
+        return (v[0] * k, v[1] * k, v[2] * k)
 
     @property
     def reflected_inertia_kg(self) -> float:
