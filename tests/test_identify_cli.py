@@ -14,7 +14,7 @@ from rt.model.description import load_description
 def test_identify_writes_a_loadable_description_and_refuses_to_overwrite(tmp_path):
     out = tmp_path / "identified.yaml"
     cmd = [sys.executable, "-m", "talus", "identify", "run", "--out", str(out), "--seconds",
-           "20", "--json"]
+           "20", "--offsets", "--json"]
     proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)

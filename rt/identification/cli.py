@@ -21,6 +21,15 @@ import yaml
 
 from rt.twin.realism import add_twin_arguments
 
+#: Off by default: no controller compensates the offsets yet, and with them as unknowns the leg
+#: masses stay the believed ones (the data cannot separate them, estimate.py's docstring 5.), so
+#: the written description tracks worse (twin, 40 s: Paden-Panja 10.4 vs 7.4 µm mean, computed
+#: torque 13.9 vs 10.8) than the fit whose masses absorb the offsets' constant force.
+OFFSETS_HELP = ("also estimate each amplifier's input offset (a constant force per axis, "
+                "reported given the believed leg masses and written as drive.amplifier_offset_v)"
+                "; off by default: the controllers do not compensate offsets, and the fit "
+                "whose masses absorb them tracks better")
+
 
 def register(commands: argparse._SubParsersAction) -> None:
     p = commands.add_parser(
@@ -43,8 +52,7 @@ def register(commands: argparse._SubParsersAction) -> None:
     p.add_argument("--compare-tracking", action="store_true",
                    help="also run Paden-Panja and computed torque with the nominal vs the "
                         "identified model (13 s each)")
-    p.add_argument("--no-offsets", dest="offsets", action="store_false",
-                   help="do not estimate the amplifiers' input offsets: their constant force is then read as the leg masses' weight (the fit before 2026-11-26c; a controller that does not compensate the offsets tracks better with it)")
+    p.add_argument("--offsets", action="store_true", help=OFFSETS_HELP)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_run)
 
@@ -56,8 +64,7 @@ def register(commands: argparse._SubParsersAction) -> None:
                                    "(default: the one recorded in the file)")
     f.add_argument("--out", required=True, help="description file to write (YAML)")
     f.add_argument("--force", action="store_true", help="overwrite --out if it exists")
-    f.add_argument("--no-offsets", dest="offsets", action="store_false",
-                   help="do not estimate the amplifiers' input offsets: their constant force is then read as the leg masses' weight (the fit before 2026-11-26c; a controller that does not compensate the offsets tracks better with it)")
+    f.add_argument("--offsets", action="store_true", help=OFFSETS_HELP)
     f.add_argument("--json", action="store_true")
     f.set_defaults(func=_fit)
 
@@ -72,7 +79,7 @@ def _write_description(desc, out: Path, force: bool, inputs: tuple[str, ...] = (
 
 
 def identify(data, validation, nominal, truth=None, truth_offsets_n=None,
-             offsets: bool = True) -> tuple[Any, dict[str, Any]]:
+             offsets: bool = False) -> tuple[Any, dict[str, Any]]:
     """Base and physical estimates on ``data``, validation on ``validation``: the identified
     description and the figures (truth only on the twin; ``truth_offsets_n``, the twin's
     amplifier offsets in N, when known: else the rows holding an offset have no truth)."""
@@ -197,7 +204,7 @@ def _run_rt(args, out: Path) -> int:
 
 
 def _fit_recordings(recording: Path, validation: Path | None, nominal, out: Path,
-                    force: bool, offsets: bool = True) -> dict[str, Any]:
+                    force: bool, offsets: bool = False) -> dict[str, Any]:
     from rt.identification.recording import load_excitation_recording
 
     rec = load_excitation_recording(recording)
