@@ -58,15 +58,16 @@ def _bench_loop(model, rate_hz: float):
     return twin, pl
 
 
-@pytest.mark.parametrize(("rate_hz", "bound_ms"), [(100.0, 120.0), (1000.0, 40.0)])
+@pytest.mark.parametrize(("rate_hz", "bound_ms"), [(100.0, 300.0), (1000.0, 60.0)])
 def test_an_encoder_frozen_right_after_the_payload_step_is_caught(model, rate_hz,
                                                                    bound_ms) -> None:
-    """Axis 0 frozen 20 ms after the 100 kg land (its carried load still the unloaded one):
-    caught by the force balance (the bench's limits leave the reference-speed criterion a
-    1 s window) within ``bound_ms`` — measured 80 ms at 100 Hz (8 cycles), 14 ms at 1 kHz
-    (``/tmp/frozen6/latency.py``, twin figures; the same fault unloaded: 20 ms / 7 ms)."""
+    """Axis 0 frozen 20 ms after the 100 kg land at the bench's 13 s (its carried load still
+    the unloaded one, its count just stopped by the payload): caught by the force balance
+    (the bench's limits leave the reference-speed criterion a 1 s window) within
+    ``bound_ms`` — measured 190 ms at 100 Hz, 31 ms at 1 kHz (twin figures, the closing
+    note's ``latency.py``; the command must leave the band of where it stood at the freeze)."""
     twin, pl = _bench_loop(model, rate_hz)
-    pl.loop.run(cycles=round(12.8 * rate_hz))         # into the trajectory, short of the step
+    pl.loop.run(cycles=round(T.STEP_S * rate_hz))     # the trajectory up to the step
     twin.plant.set_payload(Payload(T.PAYLOAD_KG, T.PAYLOAD_COM_M))
     t_fault = twin.plant.t + 0.02
     twin.faults.schedule("encoder_freeze", t_fault, axis=0)
