@@ -14,7 +14,6 @@ still caught right after one. Twin, fast (simulated-time) mode, deterministic.
 """
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 import rt.benchmarks.tracking as T
@@ -80,9 +79,11 @@ def test_an_encoder_frozen_right_after_the_payload_step_is_caught(model, rate_hz
 
 
 def test_500_kg_under_a_force_hold_is_not_read_as_a_frozen_encoder(model) -> None:
-    """The sliders sink at the drives' limit under the unmeasured 500 kg; what stops the run
-    then is the sustained drive saturation (the drives cannot carry it), never a frozen
-    encoder."""
+    """Under the unmeasured 500 kg the sliders sink ~1.1 mm at the drives' limit (35 ms
+    saturated), then the drives carry it (≈ 1.7 kN of their 2.04 kN per axis) and the axes
+    stand still under a load 1.5 kN beyond the carried one, never learnt (never quasi-static
+    while moving). Nothing else trips either: the saturation is far from half of the 0.5 s
+    window, the ATI's force falls (200 → 118 N: the platform sank under the foot)."""
     clock = SimClock()
     twin = Twin(None, patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0), seed=0, clock=clock)
     twin.place(model.kin.ik(FORCE_HOLD_Z_M, 0.0, 0.0).q)
@@ -93,5 +94,8 @@ def test_500_kg_under_a_force_hold_is_not_read_as_a_frozen_encoder(model) -> Non
     twin.plant.set_payload(Payload(500.0, (0.0, 0.0, 0.10)))
     pl.loop.run(seconds=1.5)
     causes = [e.cause for e in _faults(pl)]
-    assert not any(c.startswith("encoder_frozen") for c in causes), causes
-    assert np.all(np.isfinite(pl.supervisor.carry_force_n))
+    assert causes == [], causes
+    assert max(pl.supervisor.saturated_peak_s) < 0.1
+    # The carried load is stale by the payload's share, and the axes are still: the force
+    # balance holds only because a constant load holds their still stretch.
+    assert min(pl.supervisor.carry_force_n) < 300.0
