@@ -25,7 +25,7 @@ from rt.safety.limits import PatientLimits, RobotLimits, effective
 from rt.safety.supervisor import InterpretedSupervisor, Supervisor, supervisor_physics
 
 DT = 1e-3
-CYCLES = 2700
+CYCLES = 3250
 #: Inputs of the supervisor block: name → width.
 PORTS = {"q": 3, "est_status": 1, "qd": 3, "qdd": 3, "fk_ok": 1, "q_ref": 3, "qd_ref": 3,
          "tau": 3, "wrench": 6, "wrench_flags": 2, "inputs": 2, "drive_failed": 1}
@@ -128,6 +128,22 @@ def _stream(recorded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     s["tau"][2150:2650, 0] = np.where(np.arange(500) % 2 == 0, 1450.0, -1450.0)
     q[2150:2650, 0] += 1e-4 * np.sin(2.0 * np.pi * 28.0 * DT * np.arange(500))
     q_ref[2150:2650, 0] = q[2150:2650, 0]
+    # An unmeasured load change (issue 15: a payload landing): axis 1 moves one count a cycle
+    # carrying −200 N, then a load stops it: still while its command rises 40 → 180 N (240-380
+    # N from the carried load, beyond the 225 N band; within 140 N of itself: a constant load
+    # holds it); it breaks away and moves under 180 N; then its encoder freezes under a
+    # command running away to the drive's limit (480 N here).
+    q[2800:3250, 1] = 0.2 + 2e-5 * np.arange(450)
+    q[2900:2960, 1] = q[2900, 1]
+    q[2960:3000, 1] = q[2900, 1] + 2e-5 * np.arange(1, 41)
+    q[3000:3250, 1] = q[2999, 1]
+    q_ref[2800:3250, 1] = q[2800:3250, 1]
+    s["qdd"][2800:3250, 1] = 0.0
+    s["qd_ref"][2800:3250, 1] = 0.0
+    s["tau"][2800:2900, 1] = -200.0
+    s["tau"][2900:2960, 1] = np.linspace(40.0, 180.0, 60)
+    s["tau"][2960:3000, 1] = 180.0
+    s["tau"][3000:3250, 1] = np.minimum(np.linspace(180.0, 680.0, 250), 480.0)
     return s
 
 
@@ -138,7 +154,7 @@ ACTIONS = {150: "reset", 160: "reset", 205: "reset", 250: "reset", 450: "reset",
            870: "stop", 880: "reset", 920: "heartbeat", 950: "reset", 960: "heartbeat_off",
            970: "reset", 1100: "reset", 1250: "reset", 1300: "stop", 1301: "estop",
            1310: "reset", 1500: "limits", 1510: "reset", 1930: "reset", 2100: "window",
-           2110: "reset"}
+           2110: "reset", 2760: "reset"}
 
 
 def _block(sup: Supervisor, stream: dict[str, np.ndarray]) -> tuple[SupervisorBlock, dict]:
@@ -224,6 +240,10 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
         assert mem[sk.M_CONTACT_UNTIL] == ref._contact_until, k
         assert sups[0].applied_force_max_n == sups[1].applied_force_max_n == 480.0, k
         assert sups[0].saturated_peak_s == sups[1].saturated_peak_s, k
+        for m, r in ((sk.M_STILL_LO, ref._still_lo), (sk.M_STILL_HI, ref._still_hi)):
+            assert mem[m:m + 3].tolist() == pytest.approx(r, nan_ok=True, rel=0.0, abs=0.0), k
+        if k == 2799:
+            assert sups[0].reaction == Reaction.NONE          # the load-change splice runs
     events = [[_event(e) for e in sup.log.snapshot()] for sup in sups]
     assert events[0] == events[1]
     for tc, ti in zip(*tickets, strict=True):
@@ -274,6 +294,14 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
     assert len(soft) == len(hard) == 1, (soft, hard)
     assert abs(soft[0] - (2150 + 150)) <= 1 and hard[0] - soft[0] in (301, 302), (soft, hard)
     assert sups[0].saturated_peak_s[0] == pytest.approx(0.3, abs=0.01)
+    # The unmeasured load change: the stall under a command 240-380 N from the carried load
+    # is not a frozen encoder (it moved within 140 N: a constant load holds it); the encoder
+    # frozen after it is, once its command (2 N a cycle) left the band of where it stood at
+    # the freeze (180 N + 225 N: cycle 3112) and the excess carried the axis' 207 kg over 4
+    # counts (x = J T / 2m with a ramp's J: ≈ 32 cycles more).
+    frozen = [round(e[0] / DT) - 1 for e in events[0] if e[2] == "encoder_frozen_1"
+              and e[0] > 2800 * DT]
+    assert len(frozen) == 1 and 3112 < frozen[0] < 3160, frozen
 
 
 def test_steady_cycles_run_no_python_side(recorded, model, monkeypatch) -> None:

@@ -59,7 +59,21 @@ The frozen-encoder criterion (issue 15). A still count is judged against physics
   zero between an acceleration and its braking) and the slew (a force step it has not caught
   up with yet). A contact needs no special case: what it holds of the applied force is
   measured and taken out, so a slider stalled by what it presses balances, and a frozen one
-  under a runaway command does not, in contact as in free motion. The excess must accelerate
+  under a runaway command does not, in contact as in free motion.
+  **An unmeasured load change** (a payload landing, a patient stepping on beside the ATI)
+  makes ``carry`` stale exactly when it stops a moving slider (the 100 kg payload step at
+  100 Hz stalls the rising axis 0 at once: no motion left to learn the new load from) or
+  makes the sliders sink at the drives' limit (500 kg under a force hold: never quasi-static,
+  so never learnt). The still axis is then held by a load the supervisor does not know, but
+  one it cannot escape: whatever constant load holds a still axis, its own load stays within
+  the friction band of it, so the loads of one still stretch stay within ``holding_force_n``
+  of each other. The excess is therefore the *smaller* of the load's distance from ``carry``
+  and its distance from the farthest load the axis held since its count stopped (the
+  stretch's range, ``M_STILL_LO``/``M_STILL_HI``): the most benign explanation, a constant
+  load, must fail too. A frozen encoder fails both: the reference runs away from the stuck
+  count and the command with it, beyond the carry and beyond where it stood at the freeze.
+  A braking that ends in a stop (kilonewtons at the stop, then the hold) fails only the
+  range and is judged by the carry, as before. The excess must accelerate
   the axis' inertia; once ``∫excess dt · T / (2 m)`` reaches ``FROZEN_COUNTS`` counts the
   encoder is frozen. The sensor reads the
   contact ``force_lag_s`` late (its filter and sample age): while the share changes, the true
@@ -73,7 +87,8 @@ The frozen-encoder criterion (issue 15). A still count is judged against physics
   balance judges it there.
 
 State per axis: last count, carried load, excess impulse and its duration, reference-speed
-time, last contact share, quasi-static time; and one contact-release time. Judged only while
+time, last contact share, quasi-static time, the load's range since the count stopped; and one
+contact-release time. Judged only while
 the drives are on and the brakes open.
 
 The numeric checks run compiled (:mod:`rt.safety.supervisor_kernel`, one call per cycle that
@@ -659,6 +674,9 @@ class InterpretedSupervisor(Supervisor):
         self._carry = [math.nan, math.nan, math.nan]
         self._share = [math.nan, math.nan, math.nan]   # last cycle's contact share (N)
         self._quiet = [0.0, 0.0, 0.0]                  # quasi-static for this long (s)
+        # The least and largest load since each count stopped (N; NaN: moving).
+        self._still_lo = [math.nan, math.nan, math.nan]
+        self._still_hi = [math.nan, math.nan, math.nan]
         self._contact_until = 0.0                      # touched until this loop time (s)
         self._overruns = 0
         self._pull_time = 0.0
@@ -755,14 +773,36 @@ class InterpretedSupervisor(Supervisor):
         (``carry_force_n``), so a heavy payload is not read as a frozen encoder; a truly
         frozen encoder makes the controller push ever further from that force (the reference
         runs away from a count that does not move), and the excess beyond the friction band
-        (``holding_force_n``) must move the axis. ``load`` is the command less the measured
+        (``holding_force_n``) must move the axis. A load that changed unmeasured as the count
+        stopped (a payload landing) is not in the carry, but it is constant: whatever it is,
+        the still axis's loads stay within the friction band of each other. The distance
+        taken is the smaller of the two (``_still_range``): a frozen encoder's runaway
+        command leaves both. ``load`` is the command less the measured
         contact's share (what presses the platform holds that much of it); ``lag_allowance``
         what the sensor's lag may hide of that share (N).
         """
         carry = self._carry[i]
         if math.isnan(carry):
             carry = 0.0
-        return abs(load - carry) - self.holding_force_n - lag_allowance
+        off = abs(load - carry)
+        spread = self._still_range(i, load)
+        off = off if off < spread else spread  # noqa: FURB136
+        return off - self.holding_force_n - lag_allowance
+
+    def _still_range(self, i: int, load: float) -> float:
+        """How far axis ``i``'s ``load`` is from the farthest load it held since its count
+        stopped (N), the stretch's range updated with it."""
+        lo = self._still_lo[i]
+        hi = self._still_hi[i]
+        if math.isnan(lo):
+            lo = load
+            hi = load
+        else:
+            lo = load if load < lo else lo  # noqa: FURB136
+            hi = load if load > hi else hi  # noqa: FURB136
+        self._still_lo[i] = lo
+        self._still_hi[i] = hi
+        return hi - load if hi - load > load - lo else load - lo  # noqa: FURB136
 
     def check(self, t: float, dt: float, q, est_status: int, qd, qdd, fk_ok: bool, roll: float,
               pitch: float, roll_rate: float, pitch_rate: float, q_ref, qd_ref, tau,
@@ -876,6 +916,8 @@ class InterpretedSupervisor(Supervisor):
                 self._frozen_time[i] = 0.0
                 self._impulse[i] = 0.0
                 self._impulse_time[i] = 0.0
+                self._still_lo[i] = math.nan
+                self._still_hi[i] = math.nan
                 # The static load (what holds the axis once it stops): the inertia taken out.
                 self._track_carry_force(i, load - self.axis_mass_kg * float(qdd[i]), dt)
             self._last_q[i] = qi

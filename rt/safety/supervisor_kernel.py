@@ -96,7 +96,9 @@ M_SAT_K = 29         # the sustained-saturation window's current bucket: floor(t
 M_SAT_PAST = 30      # per axis: saturated time in the window's completed buckets (s)
 M_SAT_PEAK = 33      # per axis: the most saturated time any window held since the reset (s)
 M_STOP_SINCE = 36    # since when a soft (or hard) stop is latched (loop time, s; NaN: none)
-M_SAT_BUCKETS = 37   # per axis SAT_BUCKETS buckets of saturated time (s), a ring
+M_STILL_LO = 37      # per axis: the least load (N) since its count stopped (NaN: moving)
+M_STILL_HI = 40      # per axis: the largest load (N) since its count stopped (NaN: moving)
+M_SAT_BUCKETS = 43   # per axis SAT_BUCKETS buckets of saturated time (s), a ring
 M_REACT = M_SAT_BUCKETS + 3 * SAT_BUCKETS
 M_LATCHED = M_REACT + N_CAUSES
 M_REPORTED = M_LATCHED + N_CAUSES
@@ -113,6 +115,8 @@ def new_mem() -> np.ndarray:
     mem[M_SHARE:M_SHARE + 3] = math.nan
     mem[M_SAT_K] = math.nan
     mem[M_STOP_SINCE] = math.nan
+    mem[M_STILL_LO:M_STILL_LO + 3] = math.nan
+    mem[M_STILL_HI:M_STILL_HI + 3] = math.nan
     return mem
 
 
@@ -311,7 +315,25 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
             carry = mem[M_CARRY + i]
             if math.isnan(carry):
                 carry = 0.0
-            net = abs(load - carry) - par[P_HOLDING] - lag_allowance
+            # The load's range since the count stopped (the interpreted ``_still_range``;
+            # spelled out as it is there, so a NaN load gives the same NaN).
+            lo = mem[M_STILL_LO + i]
+            hi = mem[M_STILL_HI + i]
+            if math.isnan(lo):
+                lo = load
+                hi = load
+            else:
+                lo = load if load < lo else lo  # noqa: FURB136
+                hi = load if load > hi else hi  # noqa: FURB136
+            mem[M_STILL_LO + i] = lo
+            mem[M_STILL_HI + i] = hi
+            # What must move the axis: its load's distance from the carried one, or, if an
+            # unmeasured load changed as the count stopped, from every load it held since;
+            # the smaller (the interpreted ``_frozen_net_force``).
+            off = abs(load - carry)
+            spread = hi - load if hi - load > load - lo else load - lo  # noqa: FURB136
+            off = off if off < spread else spread  # noqa: FURB136
+            net = off - par[P_HOLDING] - lag_allowance
             if net > 0.0:
                 mem[M_IMPULSE + i] += net * dt
                 mem[M_IMPULSE_TIME + i] += dt
@@ -327,6 +349,8 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
             mem[M_FROZEN_TIME + i] = 0.0
             mem[M_IMPULSE + i] = 0.0
             mem[M_IMPULSE_TIME + i] = 0.0
+            mem[M_STILL_LO + i] = nan
+            mem[M_STILL_HI + i] = nan
             # The carried load is the static one (what holds the axis once it stops): the
             # inertia's m·q̈ taken out, and learnt only while quasi-static.
             _carry(par, mem, i, load - par[P_AXIS_MASS] * qdd[i], dt)
