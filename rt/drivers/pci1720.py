@@ -296,11 +296,21 @@ class Pci1720Outputs(ActuatorOutputs):
             self._build_insnlist()
             # A comedilib double without comedi_do_insnlist gets the channel-by-channel write.
             self._do_insnlist = getattr(self._lib, "comedi_do_insnlist", None)
+            # The comedilib double (the twin's cards) runs the list compiled: the codes and
+            # the list in one call on its state array (``FakeComedi.preplanned``).
+            preplanned = getattr(self._lib, "preplanned", None)
+            self._fake_st: np.ndarray | None = None
+            if preplanned is not None and self._do_insnlist is not None:
+                self._fake_st = preplanned(self._insnlist_ptr)
+            self._owner = ctypes.addressof(self._insnlist_ptr)
             # Compile (or load from numba's cache) now, not in a cycle: a read-only view, as
             # the loop's port is, on a scratch state and scratch samples.
             probe = np.zeros(3)
             probe.flags.writeable = False
             kernels.pci1720_codes(probe, self._dac.copy(), self._samples.copy())
+            if self._fake_st is not None:
+                kernels.pci1720_write_fake(probe, self._dac.copy(), self._samples.copy(),
+                                           np.zeros_like(self._fake_st), 0)
             if enable_line is not None:
                 self._setup_enable_line(enable_line)
             self._write_zero()
@@ -473,6 +483,19 @@ class Pci1720Outputs(ActuatorOutputs):
             return
         if self._closed:
             self._check_open()
+        st = self._fake_st
+        if st is not None:                     # the double: codes and list in one call
+            rc, done = kernels.pci1720_write_fake(volts, self._dac, self._samples, st,
+                                                  self._owner)
+            if rc < 0:
+                self._refuse(rc, volts)
+            if done == kernels.FC_STALE:       # not its plan now: the double decodes again
+                done = self._do_insnlist(self._dev, self._insnlist_ptr)
+            elif self._lib.keep_log:
+                self._lib.log_last(self._dev)
+            if done != 3:
+                self._write_failed(done if 0 < done < 3 else 0)
+            return
         rc = kernels.pci1720_codes(volts, self._dac, self._samples)
         if rc < 0:
             self._refuse(rc, volts)
