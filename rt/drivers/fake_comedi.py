@@ -145,8 +145,6 @@ class FakeComedi:
 
     def __init__(self, keep_log: bool = True, dio_subdevices: tuple[int, ...] = (2,),
                  ai_source: Callable[[int], float] | None = None) -> None:
-        # The twin keeps no log (it runs for hours); tests keep every write.
-        self.keep_log = keep_log
         # The analog outputs' codes, the fault switches, errno and the decoded instruction
         # list in one int64 array (layout ``kernels.FC_*``): the compiled
         # ``comedi_do_insnlist`` takes it as its one argument, the twin reads ``ao``.
@@ -154,6 +152,8 @@ class FakeComedi:
         #: Each analog output's last code (int64[4], ``FC_NO_CODE`` = never written).
         self.ao = self._st[kernels.FC_CODES:kernels.FC_CODES + self.AO_CHANNELS]
         self.ao[:] = kernels.FC_NO_CODE
+        # The twin keeps no log (it runs for hours); tests keep every write.
+        self.keep_log = keep_log
         #: Channels 0-2's codes (the twin's amplifiers), a view of ``ao``.
         self.codes3 = self.ao[:3]
         self._last_code = _CodeView(self.ao)
@@ -187,6 +187,15 @@ class FakeComedi:
     @fail_channels.setter
     def fail_channels(self, channels: Any) -> None:
         self._fail_channels = _ChannelSet(self._st, channels)
+
+    @property
+    def keep_log(self) -> bool:
+        """Every write is recorded in ``writes`` (tests; the twin keeps none)."""
+        return self._st[kernels.FC_KEEP_LOG] != 0
+
+    @keep_log.setter
+    def keep_log(self, value: bool) -> None:
+        self._st[kernels.FC_KEEP_LOG] = 1 if value else 0
 
     @property
     def fail_writes(self) -> bool:

@@ -242,6 +242,7 @@ FC_STOP = 8             # its first refused instruction (FC_N_INSNS when none)
 FC_N_SAMPLES = 9        # samples in the plan (those of the instructions before FC_STOP)
 FC_N_WATCHED = 10       # watched words
 FC_DONE = 11            # samples the last call wrote (for the Python side's log)
+FC_KEEP_LOG = 12        # 1: the double records every write (Python must log this call's)
 FC_PLAN = 16            # FC_MAX_SAMPLES × (instruction, channel, sample address)
 FC_MAX_SAMPLES = 32
 FC_WATCH = FC_PLAN + 3 * FC_MAX_SAMPLES   # FC_MAX_WATCHED × (address, the word it held)

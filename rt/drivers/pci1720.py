@@ -487,19 +487,36 @@ class Pci1720Outputs(ActuatorOutputs):
         if st is not None:                     # the double: codes and list in one call
             rc, done = kernels.pci1720_write_fake(volts, self._dac, self._samples, st,
                                                   self._owner)
-            if rc < 0:
-                self._refuse(rc, volts)
-            if done == kernels.FC_STALE:       # not its plan now: the double decodes again
-                done = self._do_insnlist(self._dev, self._insnlist_ptr)
-            elif self._lib.keep_log:
-                self._lib.log_last(self._dev)
-            if done != 3:
-                self._write_failed(done if 0 < done < 3 else 0)
+            self.finish_compiled_write(volts, rc, done)
             return
         rc = kernels.pci1720_codes(volts, self._dac, self._samples)
         if rc < 0:
             self._refuse(rc, volts)
         done = self._do_insnlist(self._dev, self._insnlist_ptr)
+        if done != 3:
+            self._write_failed(done if 0 < done < 3 else 0)
+
+    def compiled_write(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+        """What ``kernels.pci1720_write_fake`` takes after the command — (the driver's state,
+        the list's samples, the double's state, the list pointer's address) — when this
+        driver writes to the compiled comedilib double and is open, else None: a caller that
+        runs the write inside its own compiled call (``RedundantDrive``) then calls
+        :meth:`finish_compiled_write` with the answers, as :meth:`write_volts` does."""
+        if self._fake_st is None or self._closed:
+            return None
+        return self._dac, self._samples, self._fake_st, self._owner
+
+    def finish_compiled_write(self, volts: np.ndarray, rc: int, done: int) -> None:
+        """The rest of :meth:`write_volts` after ``kernels.pci1720_write_fake`` answered
+        (``rc``, ``done``): a refusal raises; a plan not the driver's list's (``FC_STALE``)
+        has the double decode and write it; a log is kept; an incomplete list is a failed
+        write (``HardwareError``, the state as the channel-by-channel write leaves it)."""
+        if rc < 0:
+            self._refuse(rc, volts)
+        if done == kernels.FC_STALE:           # not its plan now: the double decodes again
+            done = self._do_insnlist(self._dev, self._insnlist_ptr)
+        elif self._lib.keep_log:
+            self._lib.log_last(self._dev)
         if done != 3:
             self._write_failed(done if 0 < done < 3 else 0)
 
