@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 
 from rt.drivers import kernels
-
 from rt.drivers.pci1720 import (
     INSN_WRITE,
     ComediInsn,
@@ -101,7 +100,7 @@ class _Plan:
     (address, size), per sample (instruction, subdevice, channel, range, aref, address), the
     first instruction the double refuses (or the count), the count."""
 
-    __slots__ = ("insnlist", "watched", "samples", "stop", "n", "compiled", "words")
+    __slots__ = ("compiled", "insnlist", "n", "samples", "stop", "watched", "words")
 
     def __init__(self, insnlist: Any, watched: list[tuple[int, int]],
                  samples: list[tuple[int, int, int, int, int, int]], stop: int, n: int) -> None:

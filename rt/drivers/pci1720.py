@@ -514,6 +514,7 @@ class Pci1720Outputs(ActuatorOutputs):
         if rc < 0:
             self._refuse(rc, volts)
         if done == kernels.FC_STALE:           # not its plan now: the double decodes again
+            assert self._do_insnlist is not None      # a double with a plan has the call
             done = self._do_insnlist(self._dev, self._insnlist_ptr)
         elif self._lib.keep_log:
             self._lib.log_last(self._dev)
