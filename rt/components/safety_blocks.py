@@ -314,6 +314,7 @@ class RedundantDrive(Component):
         self.failed = self.declare_output("failed", Array(1))
         self.active_card = self.declare_output("active_card", Array(1))
         self._card = 0
+        self._compiled_writes = [getattr(c, "compiled_write", None) for c in self.cards]
         self._st = np.zeros(_DRIVE_SIZE)
         self._st[_TOLERANCE] = self.tolerance_v
         self._st[_CONFIRM] = self.confirm_cycles
@@ -336,6 +337,8 @@ class RedundantDrive(Component):
                           self.tolerance_v, self.confirm_cycles)
 
     def on_start(self) -> None:
+        # Each card's compiled write (None for a card that has none, e.g. a duck-typed one).
+        self._compiled_writes = [getattr(c, "compiled_write", None) for c in self.cards]
         self._card = 0
         self.cards[0].enable()
         self._enabled = True
@@ -397,7 +400,9 @@ class RedundantDrive(Component):
         # The twin's cards (a compiled comedilib double): the monitor check, the command
         # stored as the last one and the card's write in one compiled call; the answers that
         # need Python (a failed channel, a refused or failed write) take the same steps below.
-        fast = card.compiled_write() if enabled and self._enabled else None
+        compiled_write = self._compiled_writes[self._card]
+        fast = compiled_write() if compiled_write is not None and enabled and self._enabled \
+            else None
         if fast is not None:
             i, rc, done, python = _drive_cycle_write(m, has, v, self._st, *fast)
             if i < 0:

@@ -5,6 +5,7 @@ their device files, as one comedilib sees a machine's cards."""
 from __future__ import annotations
 
 import ctypes
+import operator
 from collections.abc import Callable, Iterator, Mapping, MutableMapping
 from typing import Any
 
@@ -36,9 +37,13 @@ class _CodeView(MutableMapping[int, int]):
         self._codes = codes
 
     def __getitem__(self, channel: int) -> int:
-        if not (type(channel) is int and 0 <= channel < len(self._codes)):
+        try:
+            c = operator.index(channel)
+        except TypeError:
+            raise KeyError(channel) from None
+        if not 0 <= c < len(self._codes):
             raise KeyError(channel)
-        code = int(self._codes[channel])
+        code = int(self._codes[c])
         if code == kernels.FC_NO_CODE:
             raise KeyError(channel)
         return code
