@@ -128,6 +128,11 @@ class FakeComedi:
     analog-input card (PCI-1711-like: 16 inputs, 12 bit, ranges ±10, ±5, ±2.5, ±1.25,
     ±0.625 V) is ``FakeComedi(ai_source=volts_of_channel)``, its inputs on subdevice 0.
 
+    The analog outputs' last codes are the int64 array ``ao`` (``codes3``: channels 0-2, what
+    the twin's amplifiers read; ``last_code`` is a mapping view of it); the list runs compiled
+    (``rt.drivers.kernels.fake_insnlist``) with the interpreted reference
+    :meth:`comedi_do_insnlist_interpreted` beside it.
+
     Records ``writes`` as (handle, subdevice, channel, range, aref, code) and ``dio`` as
     (handle, subdevice, channel, bit). ``fail_open`` / ``fail_writes`` inject errors;
     ``fail_channels`` makes the analog outputs of those channels fail (a dead DAC channel:

@@ -18,7 +18,10 @@ replays recorded cycles through both):
   instruction list; the one ``comedi_do_insnlist`` call itself stays behind the driver's
   ``lib`` (ctypes on the rig, the fake in the twin);
 * :func:`dac_code`, :func:`dac_code_volts`: the volts → code quantizer and its inverse, shared
-  by the driver and the pre-flight's DAC stage (``rt.preflight.stages``).
+  by the driver and the pre-flight's DAC stage (``rt.preflight.stages``);
+* :func:`fake_insnlist`: the comedilib double's ``comedi_do_insnlist`` (the twin's DAC cards)
+  on its decoded plan, its codes in an array the twin reads; :func:`pci1720_write_fake`: the
+  driver's codes and that list in one call (the twin's whole DAC write).
 
 The real port I/O and comedilib calls are not here: they stay behind ``PortIO`` and the
 driver's ``lib``, as on the rig.
