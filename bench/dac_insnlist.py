@@ -2,7 +2,8 @@
 ``comedi_do_insnlist`` (issue 16), with C stubs in place of comedilib (no card here): what the
 Python side of the cycle pays to cross into C. On the rig each comedilib call is also one
 ioctl into the comedi driver, so the list saves two system calls more, which this machine
-cannot measure. Prints median / p99 (µs) per way. Needs a C compiler.
+cannot measure. Also the twin's write on the comedilib double, compiled and interpreted.
+Prints median / p99 (µs) per way. Needs a C compiler.
 
     .venv/bin/python bench/dac_insnlist.py [--calls 20000]
 """
@@ -84,6 +85,20 @@ def main(argv: list[str] | None = None) -> int:
         volts.flags.writeable = False
         rows.append(("write_volts (kernel + list)", *_time(lambda: dac.write_volts(volts),
                                                            args.calls)))
+        # The twin's card: the comedilib double, compiled (codes and list in one call) and
+        # with its interpreted reference in place of the compiled list (as the double was).
+        twin_dac = Pci1720Outputs(lib=FakeComedi(keep_log=False))
+        twin_dac.enable()
+
+        class _Interpreted(FakeComedi):
+            comedi_do_insnlist = FakeComedi.comedi_do_insnlist_interpreted
+
+        ref_dac = Pci1720Outputs(lib=_Interpreted(keep_log=False))
+        ref_dac.enable()
+        rows.append(("twin: write_volts, compiled", *_time(lambda: twin_dac.write_volts(volts),
+                                                           args.calls)))
+        rows.append(("twin: write_volts, interpreted", *_time(
+            lambda: ref_dac.write_volts(volts), args.calls)))
     print(f"{'call':30s} {'median µs':>10s} {'p99 µs':>10s}")
     for name, med, p99 in rows:
         print(f"{name:30s} {med:10.2f} {p99:10.2f}")

@@ -67,7 +67,7 @@ def run(seconds: float, env: str, integrator: str, ideal: bool, compiled: bool =
         card.enable()
     else:
         twin.set_card_enabled(0, True)
-        codes = twin.dac_libs[0].last_code
+        codes = twin.dac_libs[0].codes3           # the double's code array
         truth = twin.plant.q
     gc.collect()
     gc.disable()

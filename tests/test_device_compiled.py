@@ -245,6 +245,47 @@ def test_redundant_drive_equals_the_interpreted_block_on_recorded_commands(recor
     assert drives[0][0].failed.data[0] == 1.0
 
 
+@pytest.mark.parametrize("dead", [0, 2])
+def test_redundant_drive_one_call_write_fails_over_on_a_dead_dac_channel(recorded, dead):
+    """The drive's one compiled call (monitor check + the card's write on the compiled
+    comedilib double) against the interpreted block when a DAC channel of card 0 dies
+    mid-run (its list stops part-way: a failed write, failover to card 1 in the same cycle)
+    and later one of card 1 (the last card: hard stop, every card off). Every cycle: outputs,
+    state, codes, writes and events equal; the fast path ran before the fault."""
+    drives = [_drive(c) for c in (True, False)]
+    assert drives[0][0].cards[0].compiled_write() is not None
+    for k, v in enumerate(recorded[2][:300]):
+        outcomes = []
+        for blk, libs, amps, _ in drives:
+            amps.k = 5                       # no newer reading: the write path alone
+            command = np.array(v)
+            command.flags.writeable = False
+            blk.volts.data = command
+            if k == 100:
+                libs[0].fail_channels.add(dead)
+            if k == 200:
+                libs[1].fail_channels = {dead}
+            try:
+                blk.update(k * 1e-3, 1e-3)
+                outcomes.append(None)
+            except HardwareError as exc:
+                outcomes.append(str(exc))
+        (c, lc, _, ec), (i, li, _, ei) = drives
+        assert outcomes[0] == outcomes[1], f"cycle {k}"
+        assert c.failed.data.tolist() == i.failed.data.tolist(), f"cycle {k}"
+        assert c.active_card.data.tolist() == i.active_card.data.tolist(), f"cycle {k}"
+        assert c._last.tolist() == i._last.tolist(), f"cycle {k}"
+        assert [lib.ao.tolist() for lib in lc] == [lib.ao.tolist() for lib in li], f"cycle {k}"
+        assert [w[1:] for w in lc[0].writes + lc[1].writes] == \
+            [w[1:] for w in li[0].writes + li[1].writes], f"cycle {k}"
+        assert [(e.t, e.kind, e.cause, e.message) for e in ec.snapshot()] == \
+            [(e.t, e.kind, e.cause, e.message) for e in ei.snapshot()], f"cycle {k}"
+    events = drives[0][3].snapshot()
+    assert [(e.t, e.cause) for e in events] == [(0.1, "dac_card_0"), (0.2, "drive_channel")]
+    assert f"channel {dead} failed" in events[0].message
+    assert drives[0][0].failed.data[0] == 1.0
+
+
 # --- force reader, tare, stop inputs --------------------------------------------------------
 
 class _Replayed(SampledForceTorque):

@@ -271,3 +271,110 @@ def test_insnlist_prototype_is_declared_for_the_real_library():
     restype, argtypes = comedilib_prototypes()["comedi_do_insnlist"]
     assert restype is ctypes.c_int
     assert argtypes == (ctypes.c_void_p, ctypes.POINTER(ComediInsnList))
+
+
+def _random_specs(rng: np.random.Generator) -> list[tuple[int, int, int, list[int]]]:
+    """A random instruction list: mostly analog-output writes, sometimes a refused one (a
+    read, another subdevice, a channel or range the card lacks), 0-3 samples each, now and
+    then a code beyond 12 bits."""
+    specs = []
+    for _ in range(int(rng.integers(0, 6))):
+        kind = rng.random()
+        insn, sub = INSN_WRITE, 0
+        chan, rng_i = int(rng.integers(0, 4)), int(rng.integers(0, 4))
+        if kind < 0.05:
+            insn = 0x4000000                           # INSN_READ
+        elif kind < 0.10:
+            sub = 2
+        elif kind < 0.15:
+            chan = 4
+        elif kind < 0.20:
+            rng_i = 4
+        samples = [int(c) for c in rng.integers(0, 4096, int(rng.integers(0, 4)))]
+        if samples and rng.random() < 0.05:
+            samples[-1] = 4096 + int(rng.integers(0, 100))
+        specs.append((insn, sub, cr_pack(chan, rng_i, int(rng.integers(0, 4))), samples))
+    return specs
+
+
+def test_the_compiled_double_answers_as_the_interpreted_one_on_random_lists():
+    """``comedi_do_insnlist`` (compiled: ``kernels.fake_insnlist`` on the double's plan) and
+    ``comedi_do_insnlist_interpreted`` (the reference) on 400 random lists, with random dead
+    channels and whole-card failures switched between them: the same answers, errno, codes and
+    log, every call."""
+    rng = np.random.default_rng(16)
+    libs = (FakeComedi(), FakeComedi())
+    handles = [lib.comedi_open(b"/dev/comedi0") for lib in libs]
+    calls = (FakeComedi.comedi_do_insnlist, FakeComedi.comedi_do_insnlist_interpreted)
+    partial = refused = 0
+    for k in range(400):
+        dead = {int(c) for c in rng.integers(0, 5, int(rng.integers(0, 3)))} \
+            if rng.random() < 0.3 else set()
+        fail_all = rng.random() < 0.03
+        specs = _random_specs(rng)
+        answers = []
+        for lib, h, call in zip(libs, handles, calls):
+            lib.fail_channels = set(dead)
+            lib.fail_writes = fail_all
+            answers.append((call_list(lib, h, specs, call), lib.comedi_errno()))
+        assert answers[0] == answers[1], f"list {k}: {specs}"
+        assert libs[0].ao.tolist() == libs[1].ao.tolist(), f"list {k}"
+        assert [w[1:] for w in libs[0].writes] == [w[1:] for w in libs[1].writes], f"list {k}"
+        partial += 0 < answers[0][0] < len(specs) or answers[0][0] == -1
+        refused += answers[0][1] == EINVAL
+    assert partial > 20 and refused > 20                # both kinds of stop were exercised
+
+
+def call_list(lib: FakeComedi, handle, specs, call) -> int:
+    """``call`` (either implementation) on the instruction list ``specs``, built as
+    :func:`_write_list` builds it."""
+    insns = (ComediInsn * max(1, len(specs)))()
+    keep = []
+    for i, (insn, sub, spec, samples) in enumerate(specs):
+        data = (ctypes.c_uint * max(1, len(samples)))(*samples)
+        keep.append(data)
+        insns[i].insn, insns[i].n, insns[i].subdev, insns[i].chanspec = \
+            insn, len(samples), sub, spec
+        insns[i].data = ctypes.cast(data, ctypes.POINTER(ctypes.c_uint))
+    return call(lib, handle, ctypes.pointer(ComediInsnList(len(specs), insns)))
+
+
+def test_the_double_sees_a_list_changed_in_place_and_new_dead_channels():
+    """The driver's own list, reused every cycle: a dead channel added in place (the set's
+    ``add``) fails the next write; an instruction edited in place (another channel) is
+    decoded again (the plan's words changed), as the kernel copies the list at each call."""
+    lib = FakeComedi(keep_log=False)
+    card = Pci1720Outputs(lib=lib)
+    card.enable()
+    card.write_volts(np.array([1.0, 2.0, 3.0]))
+    assert lib.codes() == [volts_to_code(v) for v in (1.0, 2.0, 3.0)]
+    lib.fail_channels.add(2)
+    with pytest.raises(HardwareError, match="channel 2 failed"):
+        card.write_volts(np.array([0.5, 0.5, 0.5]))
+    assert lib.codes() == [volts_to_code(0.5), volts_to_code(0.5), volts_to_code(3.0)]
+    lib.fail_channels.discard(2)
+    card.write_volts(np.array([0.25, 0.25, 0.25]))
+    assert lib.codes() == [volts_to_code(0.25)] * 3
+    card._insns[2].chanspec = cr_pack(3, RANGE_BIPOLAR_10V, AREF_GROUND)
+    card.write_volts(np.array([-1.0, -1.0, -1.0]))
+    assert lib.codes(4) == [volts_to_code(-1.0)] * 2 + [volts_to_code(0.25),
+                                                        volts_to_code(-1.0)]
+    # Another driver on the same double takes the plan; the first one's write still lands.
+    other = Pci1720Outputs(lib=lib)
+    other.enable()
+    other.write_volts(np.array([0.0, 0.0, 0.0]))
+    card.write_volts(np.array([2.0, 2.0, 2.0]))
+    assert lib.codes(4) == [volts_to_code(2.0)] * 2 + [volts_to_code(0.0), volts_to_code(2.0)]
+
+
+def test_last_code_is_a_view_of_the_code_array():
+    lib = FakeComedi()
+    assert dict(lib.last_code) == {} and lib.codes() == [None, None, None]
+    lib.last_code[1] = 4000
+    assert lib.ao.tolist() == [-1, 4000, -1, -1] and lib.last_code.get(1) == 4000
+    assert lib.last_code.pop(1) == 4000 and lib.last_code.pop(1, None) is None
+    with pytest.raises(KeyError):
+        lib.last_code[4] = 1
+    with pytest.raises(ValueError):
+        lib.last_code[0] = 4096
+    assert lib.ao.tolist() == [-1] * 4

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -16,6 +17,14 @@ from rt.devices.interfaces import (
     ForceTorqueSensor,
     Wrench,
     new_ft_reading,
+)
+from rt.drivers.kernels import (
+    DAC_RANGES,
+    DAC_STATE_SIZE,
+    DAC_WRITTEN,
+    FC_KEEP_LOG,
+    FC_SIZE,
+    pci1720_write_fake,
 )
 from rt.engine import Array, Component, Struct
 from rt.errors import HardwareError
@@ -255,6 +264,29 @@ def _drive_cycle(measured, has_measured, volts, enabled, st):
     return -1
 
 
+def _scratch_dac() -> np.ndarray:
+    """A PCI-1720 driver state (``rt.drivers.kernels`` ``DAC_*``) on ±10 V, 12 bit, disabled:
+    what warming the compiled write needs."""
+    dac = np.zeros(DAC_STATE_SIZE)
+    for i in range(3):
+        dac[DAC_RANGES + 3 * i:DAC_RANGES + 3 * i + 3] = (-10.0, 10.0, 4095.0)
+    return dac
+
+
+@njit(cache=True)
+def _drive_cycle_write(measured, has_measured, volts, st, dac, samples, fake_st, owner):
+    """:func:`_drive_cycle` of an enabled drive, then (no channel confirmed failed) the active
+    card's whole write on the twin's compiled comedilib double
+    (``rt.drivers.kernels.pci1720_write_fake``): one call for the drive block's cycle. Returns
+    (the failed channel or -1, the codes' answer, the list's answer, whether the answers need
+    the driver's Python: a refusal, an incomplete list, or a double that keeps a log)."""
+    i = _drive_cycle(measured, has_measured, volts, True, st)
+    if i >= 0:
+        return i, 0, 0, False
+    rc, done = pci1720_write_fake(volts, dac, samples, fake_st, owner)
+    return -1, rc, done, rc != DAC_WRITTEN or done != 3 or fake_st[FC_KEEP_LOG] != 0
+
+
 class RedundantDrive(Component):
     """Ports: in ``volts``: float64[3] V; in ``enable``: float64[1]; out ``failed``: float64[1]
     (1 when a channel has failed on both cards); out ``active_card``: float64[1].
@@ -282,6 +314,7 @@ class RedundantDrive(Component):
         self.failed = self.declare_output("failed", Array(1))
         self.active_card = self.declare_output("active_card", Array(1))
         self._card = 0
+        self._compiled_writes = [getattr(c, "compiled_write", None) for c in self.cards]
         self._st = np.zeros(_DRIVE_SIZE)
         self._st[_TOLERANCE] = self.tolerance_v
         self._st[_CONFIRM] = self.confirm_cycles
@@ -296,11 +329,16 @@ class RedundantDrive(Component):
         probe.flags.writeable = False
         for measured in (self._measured, probe):
             _drive_cycle(measured, True, probe, True, self._st.copy())
+            # An int64 scratch with no watched words: the codes only, answer FC_STALE.
+            _drive_cycle_write(measured, True, probe, self._st.copy(), _scratch_dac(),
+                               np.zeros(3, np.uintc), np.zeros(FC_SIZE, np.int64), 0)
         if not compiled:
             _disagreement(self._measured, self._last.copy(), self._mismatch.copy(),
                           self.tolerance_v, self.confirm_cycles)
 
     def on_start(self) -> None:
+        # Each card's compiled write (None for a card that has none, e.g. a duck-typed one).
+        self._compiled_writes = [getattr(c, "compiled_write", None) for c in self.cards]
         self._card = 0
         self.cards[0].enable()
         self._enabled = True
@@ -359,6 +397,22 @@ class RedundantDrive(Component):
         else:
             m, has = self._measured, True
             m[0], m[1], m[2] = measured[0], measured[1], measured[2]   # any sequence
+        # The twin's cards (a compiled comedilib double): the monitor check, the command
+        # stored as the last one and the card's write in one compiled call; the answers that
+        # need Python (a failed channel, a refused or failed write) take the same steps below.
+        compiled_write = self._compiled_writes[self._card]
+        fast = compiled_write() if compiled_write is not None and enabled and self._enabled \
+            else None
+        if fast is not None:
+            i, rc, done, python = _drive_cycle_write(m, has, v, self._st, *fast)
+            if i < 0:
+                if python:
+                    self._finish_write(t, card, v, rc, done)
+                return 0
+            if not self._fail_over(t, i, "amplifier input disagrees with the command"):
+                self._all_off()
+                return 0
+            return self._finish_cycle(t, v, enabled)
         # One compiled call: the monitor check, and the command stored as the last one.
         i = _drive_cycle(m, has, v, enabled, self._st)
         if i >= 0:
@@ -388,6 +442,19 @@ class RedundantDrive(Component):
             self.cards[self._card].write_volts(v)
             self._last[:] = v
         return 0
+
+    def _finish_write(self, t: float, card: Any, v: np.ndarray, rc: int, done: int) -> None:
+        """The compiled write's answer that needs Python: what ``card.write_volts`` raising
+        leads to in :meth:`update` (a refusal propagates; a failed write fails over)."""
+        try:
+            card.finish_compiled_write(v, rc, done)
+        except HardwareError as exc:
+            self._last[:] = self._st[_BACKUP:_BACKUP + 3]         # nothing was written
+            if not self._fail_over(t, -1, f"write failed: {exc}"):
+                self._all_off()
+                return
+            self.cards[self._card].write_volts(v)
+            self._last[:] = v
 
     def _finish_cycle(self, t: float, v: np.ndarray, enabled: bool) -> int:
         """The rest of a cycle after the monitor check, in Python (the previous code): the

@@ -139,6 +139,17 @@ class ActuatorOutputs(Device):
     def write_volts(self, volts: Sequence[float] | np.ndarray) -> None:
         """Command one voltage (V) per channel."""
 
+    def compiled_write(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+        """The arguments of ``rt.drivers.kernels.pci1720_write_fake`` after the command when
+        this card's write can run inside a caller's compiled call (the twin's PCI-1720 on the
+        compiled comedilib double), else None (the default: call :meth:`write_volts`)."""
+        return None
+
+    def finish_compiled_write(self, volts: np.ndarray, rc: int, done: int) -> None:
+        """What :meth:`write_volts` does after the compiled write answered (``rc``, ``done``):
+        only cards whose :meth:`compiled_write` is not None are asked."""
+        raise NotImplementedError(f"{type(self).__name__} has no compiled write")
+
 
 class ForceTorqueSensor(Device):
     """A 6-axis force/torque sensor (the ATI reference)."""

@@ -18,7 +18,10 @@ replays recorded cycles through both):
   instruction list; the one ``comedi_do_insnlist`` call itself stays behind the driver's
   ``lib`` (ctypes on the rig, the fake in the twin);
 * :func:`dac_code`, :func:`dac_code_volts`: the volts → code quantizer and its inverse, shared
-  by the driver and the pre-flight's DAC stage (``rt.preflight.stages``).
+  by the driver and the pre-flight's DAC stage (``rt.preflight.stages``);
+* :func:`fake_insnlist`: the comedilib double's ``comedi_do_insnlist`` (the twin's DAC cards)
+  on its decoded plan, its codes in an array the twin reads; :func:`pci1720_write_fake`: the
+  driver's codes and that list in one call (the twin's whole DAC write).
 
 The real port I/O and comedilib calls are not here: they stay behind ``PortIO`` and the
 driver's ``lib``, as on the rig.
@@ -26,8 +29,11 @@ driver's ``lib``, as on the rig.
 from __future__ import annotations
 
 import math
+from typing import Any
 
-from numba import njit
+import numpy as np
+from numba import njit, types
+from numba.extending import intrinsic
 
 # --- the emulated PCL-833's state (int64 array; rt.drivers.fake_pcl833) ---------------------
 FAKE_REG = 0            # 16: last byte written to each write register
@@ -222,3 +228,103 @@ def pci1720_codes(volts, dac, data):
         dac[DAC_VOLTS + i] = dac_code_volts(code, v_min, v_max, maxdata)
         data[i] = int(code)
     return DAC_WRITTEN
+
+
+# --- the comedilib double's analog outputs and instruction lists (int64 array; fake_comedi) ---
+# ``FakeComedi`` keeps its DAC codes here, not in a dict, so the twin's amplifier input (and the
+# rig process) read them as an array, and ``comedi_do_insnlist`` runs compiled: the list is
+# decoded once in Python into a plan (per sample: instruction, channel, the sample's address),
+# and every call checks, here, that the memory the plan was decoded from still holds the same
+# words (as the kernel copies the list in at each call) before writing the samples it reads now.
+FC_CODES = 0            # 4: each analog output's last code (FC_NO_CODE: never written)
+FC_FAIL_ALL = 4         # 1: every write fails (``fail_writes``)
+FC_FAIL_MASK = 5        # bit c set: channel c's writes fail (``fail_channels``)
+FC_ERRNO = 6            # the double's errno (``comedi_errno``)
+FC_N_INSNS = 7          # the planned list's instruction count
+FC_STOP = 8             # its first refused instruction (FC_N_INSNS when none)
+FC_N_SAMPLES = 9        # samples in the plan (those of the instructions before FC_STOP)
+FC_N_WATCHED = 10       # watched words
+FC_DONE = 11            # samples the last call wrote (for the Python side's log)
+FC_KEEP_LOG = 12        # 1: the double records every write (Python must log this call's)
+FC_PLAN = 16            # FC_MAX_SAMPLES × (instruction, channel, sample address)
+FC_MAX_SAMPLES = 32
+FC_WATCH = FC_PLAN + 3 * FC_MAX_SAMPLES   # FC_MAX_WATCHED × (address, the word it held)
+FC_MAX_WATCHED = 128
+FC_SIZE = FC_WATCH + 2 * FC_MAX_WATCHED
+FC_NO_CODE = -1
+FC_MAXDATA = 4095
+#: ``fake_insnlist``'s answer when the list's memory changed since the plan: decode again.
+FC_STALE = -1000
+_EIO = 5
+_EINVAL = 22
+
+
+@intrinsic
+def _i64_ptr(typingctx: Any, addr: Any) -> Any:
+    sig = types.CPointer(types.int64)(types.int64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.int64)))
+    return sig, codegen
+
+
+@intrinsic
+def _u32_ptr(typingctx: Any, addr: Any) -> Any:
+    sig = types.CPointer(types.uint32)(types.int64)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.uint32)))
+    return sig, codegen
+
+
+@njit(cache=True)
+def fake_insnlist(st):
+    """``FakeComedi.comedi_do_insnlist`` on its plan in ``st`` (layout ``FC_*``): returns
+    :data:`FC_STALE` (nothing done) when a watched word of the list's memory changed since the
+    plan was decoded. Otherwise each planned sample, in order, as ``comedi_data_write`` writes
+    it: a failing channel (``FC_FAIL_ALL``, ``FC_FAIL_MASK``) answers EIO, a code beyond
+    ``FC_MAXDATA`` EINVAL, and the list stops there (answer: the instructions done before it, -1
+    when none); else the code is the channel's. Then a refused instruction (``FC_STOP``) answers
+    EINVAL the same way; a list done whole answers its count. ``FC_DONE``: samples written."""
+    for k in range(st[FC_N_WATCHED]):
+        w = FC_WATCH + 2 * k
+        if _i64_ptr(st[w])[0] != st[w + 1]:
+            return FC_STALE
+    st[FC_DONE] = 0
+    fail_all = st[FC_FAIL_ALL] != 0
+    dead = st[FC_FAIL_MASK]
+    for s in range(st[FC_N_SAMPLES]):
+        p = FC_PLAN + 3 * s
+        insn = st[p]
+        channel = st[p + 1]
+        if fail_all or (dead >> channel) & 1:
+            st[FC_ERRNO] = _EIO
+            return insn if insn else -1
+        code = np.int64(_u32_ptr(st[p + 2])[0])
+        if code > FC_MAXDATA:
+            st[FC_ERRNO] = _EINVAL
+            return insn if insn else -1
+        st[FC_CODES + channel] = code
+        st[FC_DONE] = s + 1
+    stop = st[FC_STOP]
+    if stop < st[FC_N_INSNS]:
+        st[FC_ERRNO] = _EINVAL
+        return stop if stop else -1
+    return st[FC_N_INSNS]
+
+
+@njit(cache=True)
+def pci1720_write_fake(volts, dac, data, st, owner):
+    """``Pci1720Outputs.write_volts`` on the comedilib double in one call: :func:`pci1720_codes`
+    then :func:`fake_insnlist` (the driver's ``comedi_do_insnlist``) on the double's state
+    ``st``, if its plan is of the driver's list (its first watched word is at ``owner``, the
+    address of the driver's list pointer). Returns (the codes' answer, the list's answer):
+    the list is not run after a refusal, and answers :data:`FC_STALE` (nothing done) when the
+    plan is not the driver's or its list's memory changed: the driver then calls the double's
+    ``comedi_do_insnlist``, which decodes it again."""
+    rc = pci1720_codes(volts, dac, data)
+    if rc < 0:
+        return rc, 0
+    if st[FC_N_WATCHED] == 0 or st[FC_WATCH] != owner:
+        return rc, FC_STALE
+    return rc, fake_insnlist(st)

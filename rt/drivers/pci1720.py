@@ -296,11 +296,21 @@ class Pci1720Outputs(ActuatorOutputs):
             self._build_insnlist()
             # A comedilib double without comedi_do_insnlist gets the channel-by-channel write.
             self._do_insnlist = getattr(self._lib, "comedi_do_insnlist", None)
+            # The comedilib double (the twin's cards) runs the list compiled: the codes and
+            # the list in one call on its state array (``FakeComedi.preplanned``).
+            preplanned = getattr(self._lib, "preplanned", None)
+            self._fake_st: np.ndarray | None = None
+            if preplanned is not None and self._do_insnlist is not None:
+                self._fake_st = preplanned(self._insnlist_ptr)
+            self._owner = ctypes.addressof(self._insnlist_ptr)
             # Compile (or load from numba's cache) now, not in a cycle: a read-only view, as
             # the loop's port is, on a scratch state and scratch samples.
             probe = np.zeros(3)
             probe.flags.writeable = False
             kernels.pci1720_codes(probe, self._dac.copy(), self._samples.copy())
+            if self._fake_st is not None:
+                kernels.pci1720_write_fake(probe, self._dac.copy(), self._samples.copy(),
+                                           np.zeros_like(self._fake_st), 0)
             if enable_line is not None:
                 self._setup_enable_line(enable_line)
             self._write_zero()
@@ -473,10 +483,41 @@ class Pci1720Outputs(ActuatorOutputs):
             return
         if self._closed:
             self._check_open()
+        st = self._fake_st
+        if st is not None:                     # the double: codes and list in one call
+            rc, done = kernels.pci1720_write_fake(volts, self._dac, self._samples, st,
+                                                  self._owner)
+            self.finish_compiled_write(volts, rc, done)
+            return
         rc = kernels.pci1720_codes(volts, self._dac, self._samples)
         if rc < 0:
             self._refuse(rc, volts)
         done = self._do_insnlist(self._dev, self._insnlist_ptr)
+        if done != 3:
+            self._write_failed(done if 0 < done < 3 else 0)
+
+    def compiled_write(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+        """What ``kernels.pci1720_write_fake`` takes after the command — (the driver's state,
+        the list's samples, the double's state, the list pointer's address) — when this
+        driver writes to the compiled comedilib double and is open, else None: a caller that
+        runs the write inside its own compiled call (``RedundantDrive``) then calls
+        :meth:`finish_compiled_write` with the answers, as :meth:`write_volts` does."""
+        if self._fake_st is None or self._closed:
+            return None
+        return self._dac, self._samples, self._fake_st, self._owner
+
+    def finish_compiled_write(self, volts: np.ndarray, rc: int, done: int) -> None:
+        """The rest of :meth:`write_volts` after ``kernels.pci1720_write_fake`` answered
+        (``rc``, ``done``): a refusal raises; a plan not the driver's list's (``FC_STALE``)
+        has the double decode and write it; a log is kept; an incomplete list is a failed
+        write (``HardwareError``, the state as the channel-by-channel write leaves it)."""
+        if rc < 0:
+            self._refuse(rc, volts)
+        if done == kernels.FC_STALE:           # not its plan now: the double decodes again
+            assert self._do_insnlist is not None      # a double with a plan has the call
+            done = self._do_insnlist(self._dev, self._insnlist_ptr)
+        elif self._lib.keep_log:
+            self._lib.log_last(self._dev)
         if done != 3:
             self._write_failed(done if 0 < done < 3 else 0)
 

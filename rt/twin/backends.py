@@ -86,6 +86,14 @@ class TwinActuators(ActuatorOutputs):
         """The quantized voltages the last write produced (V)."""
         return list(self._driver.last_volts)
 
+    def compiled_write(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+        """The driver's compiled write on the twin's comedilib double
+        (``Pci1720Outputs.compiled_write``); None once closed."""
+        return None if self._closed else self._driver.compiled_write()
+
+    def finish_compiled_write(self, volts: np.ndarray, rc: int, done: int) -> None:
+        self._driver.finish_compiled_write(volts, rc, done)
+
     def _close(self) -> None:
         self.twin.set_card_enabled(self.card, False)
         self._driver.close()

@@ -202,13 +202,11 @@ class RigProcess:
         allowed = self.wd_state == layout.WD_FED
         codes = self._cmd_codes
         for k in range(2):
-            last_code = twin.dac_libs[k].last_code
+            # Into the double's code array (``FakeComedi.codes3``; NO_CODE: never written).
+            ao = twin.dac_libs[k].codes3
             for ch in range(3):
                 code = codes[3 * k + ch]
-                if code >= 0:
-                    last_code[ch] = code
-                else:
-                    last_code.pop(ch, None)
+                ao[ch] = code if code >= 0 else layout.NO_CODE
             twin.set_card_enabled(k, allowed and self._cmd_enabled[k])
         # Now, not at the next sync: the published amplifier state is what physics applies.
         twin._update_amplifier_input()

@@ -335,10 +335,10 @@ class ShmActuators(ActuatorOutputs):
             raise
 
     def _publish(self) -> None:
-        last = self._lib.last_code
+        ao = self._lib.codes3.tolist()          # NO_CODE (-1) where never written
         codes = self._codes
         for ch in range(3):
-            codes[ch] = last.get(ch, layout.NO_CODE)
+            codes[ch] = ao[ch]
         self.rig.write_card(self.card, self._driver.enabled, codes)
 
     def enable(self) -> None:

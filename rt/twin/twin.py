@@ -146,7 +146,7 @@ class Twin:
         # computes them from the DAC codes.
         self.amp_volts = self.plant.S[kernels.S_AMP:kernels.S_AMP + 3]
         self._amp_key: tuple | None = None     # (card, codes) amp_volts was computed from
-        self._codes = np.full(3, kernels.NO_CODE, dtype=np.int64)  # the period's DAC codes
+        self._codes = np.full(3, kernels.NO_CODE, dtype=np.int64)  # the codes of no card
         self.ati = TwinAtiSensorModel(ati_params, seed=seed, compiled=compiled)
         self._ati_sample: AtiSample | None = None
         self.inputs = DigitalInputState()
@@ -296,8 +296,7 @@ class Twin:
         if self._port_params_of is not port:
             plant.set_encoder_card(port.sign, port.m_per_count)
             self._port_params_of = port
-        codes = self._codes
-        no_code = kernels.NO_CODE
+        no_codes = self._codes
         dac_libs, enabled = self.dac_libs, self.card_enabled
         port_state, packed = port._st, ati._packed
         while t - plant.t > 1e-12:
@@ -307,13 +306,9 @@ class Twin:
             # many chunks while the loop writes new codes between them. Read from the
             # comedilib double's dict, which tests also write.
             card = 0 if enabled[0] else (1 if enabled[1] else -1)
-            if card >= 0:
-                last = dac_libs[card].last_code
-                codes[0] = last.get(0, no_code)
-                codes[1] = last.get(1, no_code)
-                codes[2] = last.get(2, no_code)
-            else:
-                codes[0] = codes[1] = codes[2] = no_code
+            # The card's own code array (``FakeComedi.codes3``, NO_CODE where never written),
+            # passed as it is; no card enabled: this twin's array of NO_CODE.
+            codes = dac_libs[card].codes3 if card >= 0 else no_codes
             # The same amp_volts the kernel computes, also set here as before (its cache,
             # the rig's own call): without it tests/test_rig.py's threaded twin failed over on
             # channel 0 at start in 2-3 of 5 runs (base 0 of 7); cause not found (2026-11-26,
@@ -356,19 +351,18 @@ class Twin:
         if self.compiled and not self.faults.faults:
             # Without DAC faults the input is a function of the card's codes: recompute it
             # only when they changed (most chunks of a catch-up hold the same codes).
-            codes = self.dac_libs[card].last_code if card >= 0 else None
-            key = (card, codes.get(0), codes.get(1), codes.get(2)) if codes is not None \
-                else (card,)
+            key = (card, self.dac_libs[card].codes3.tobytes()) if card >= 0 else (card,)
             if key == self._amp_key:
                 return
             self._amp_key = key
         else:
             self._amp_key = None
+        codes = self.dac_libs[card].codes3.tolist() if card >= 0 else None
         for ch in range(3):
             v = 0.0
-            if card >= 0:
-                code = self.dac_libs[card].last_code.get(ch)
-                v = code_to_volts(code) if code is not None else 0.0
+            if codes is not None:
+                code = codes[ch]
+                v = code_to_volts(code) if code != kernels.NO_CODE else 0.0
             if self.faults.faults:
                 for f in self.faults.active("dac_dead", t):
                     if f.card == card and f.channel == ch:
