@@ -308,7 +308,7 @@ class Twin:
         period, commit = plant.period, ati._commit_pending
         left = t - plant.t
         while left > 1e-12:
-            chunk = _MAX_CHUNK_S if left > _MAX_CHUNK_S else left
+            chunk = min(_MAX_CHUNK_S, left)
             # The enabled card's codes, read every chunk as the general path does: a twin
             # behind a real-time loop in another thread (tests/test_rig.py) catches up in
             # many chunks while the loop writes new codes between them. Read from the
