@@ -277,6 +277,9 @@ class SignalTap(Component):
         """Rows written since ``start`` (a copy, oldest first) and the new start index."""
         end = self.written
         start = max(start, end - self.capacity)
+        first, n = start % self.capacity, max(0, end - start)
+        if first + n <= self.capacity:          # not wrapped: one slice, no index array
+            return self.ring[first:first + n].copy(), end
         idx = np.arange(start, end) % self.capacity
         return self.ring[idx].copy(), end
 
