@@ -342,6 +342,27 @@ class TwinPlant:
         self.P[K.P_PORT_SIGN:K.P_PORT_SIGN + 3] = sign
         self.P[K.P_PORT_MPC:K.P_PORT_MPC + 3] = m_per_count
 
+    def warm_period(self, port: np.ndarray, ati: np.ndarray) -> None:
+        """Load :meth:`period`'s kernel (numba's cache, or compile) now, on copies of the
+        state: this plant, the card and the ATI are untouched.
+
+        Why: the first call of a kernel holds the GIL for tens of ms while numba loads it, and
+        reads the cache's files with it released. A twin behind a real-time loop in another
+        thread (``tests/test_rig.py``) then left its amplifier input stale while the loop
+        wrote three cycles of new commands, and the drive's monitor failed the channel over
+        (preflight5's note, 2026-11-26b): loaded here, at construction, the period never
+        pays that in a loop."""
+        if not self.compiled:
+            return
+        codes = np.full(3, kernels.NO_CODE, dtype=np.int64)
+        P = self.P.copy()
+        K = kernels
+        P[K.P_PORT_SIGN:K.P_PORT_SIGN + 3] = 1.0     # a card's scale (set_encoder_card's,
+        P[K.P_PORT_MPC:K.P_PORT_MPC + 3] = 1e-6      # unset until the first period)
+        kernels.period(self.geom, P, self.env.copy(), self.S.copy(), self.W.copy(),
+                       port.copy(), codes, ati.copy(), np.zeros((1, 12)), 1e-3, 5, self.t,
+                       self.realistic, self.integrator, 0, 0.0, 0)
+
     def period(self, dt: float, port: np.ndarray, codes: np.ndarray, ati: np.ndarray,
                ati_block: np.ndarray, ati_row: int, ati_dt: float, overload_bits: int) -> int:
         """The twin's fault-free period on the compiled path (``kernels.period``): the
@@ -353,12 +374,13 @@ class TwinPlant:
         if dt != last_dt:
             n = max(1, round(dt * self.physics_rate_hz))
             self._n_of_dt = (dt, n)
+        t = self.t
         bits = kernels.period(self.geom, self.P, self.env, self.S, self.W, port, codes, ati,
-                              ati_block, dt, n, self.t, self.realistic, self.integrator,
-                              ati_row, ati_dt, overload_bits)
+                              ati_block, dt, n, t, self.realistic, self.integrator, ati_row,
+                              ati_dt, overload_bits)
         if bits < 0:
             raise self._fk_failed()
-        self.t += dt
+        self.t = t + dt
         return bits
 
     def advance(self, dt: float, volts) -> None:

@@ -159,6 +159,8 @@ class Twin:
         # again if the port is replaced).
         self._port_params_of: FakePcl833Port | None = None
         self.plant.set_payload(None)
+        # The fault-free period's kernel loaded now, not in a loop's cycle (see warm_period).
+        self.plant.warm_period(self.encoder_port._st, self.ati._packed)
 
     # ------------------------------------------------------------------ setup
     @classmethod
@@ -299,30 +301,31 @@ class Twin:
         no_codes = self._codes
         dac_libs, enabled = self.dac_libs, self.card_enabled
         port_state, packed = port._st, ati._packed
-        while t - plant.t > 1e-12:
-            chunk = min(_MAX_CHUNK_S, t - plant.t)
+        # The kernel computes amp_volts from the codes: the general path's cache of the key
+        # it last computed them from is void now.
+        self._amp_key = None
+        period, commit = plant.period, ati._commit_pending
+        left = t - plant.t
+        while left > 1e-12:
+            chunk = min(_MAX_CHUNK_S, left)
             # The enabled card's codes, read every chunk as the general path does: a twin
             # behind a real-time loop in another thread (tests/test_rig.py) catches up in
-            # many chunks while the loop writes new codes between them. Read from the
-            # comedilib double's dict, which tests also write.
+            # many chunks while the loop writes new codes between them.
             card = 0 if enabled[0] else (1 if enabled[1] else -1)
             # The card's own code array (``FakeComedi.codes3``, NO_CODE where never written),
-            # passed as it is; no card enabled: this twin's array of NO_CODE.
+            # passed as it is; no card enabled: this twin's array of NO_CODE. The kernel
+            # computes amp_volts from it (the period's kernel is loaded at construction, so no
+            # cycle runs against a stale input while it compiles: preflight6).
             codes = dac_libs[card].codes3 if card >= 0 else no_codes
-            # The same amp_volts the kernel computes, also set here as before (its cache,
-            # the rig's own call): without it tests/test_rig.py's threaded twin failed over on
-            # channel 0 at start in 2-3 of 5 runs (base 0 of 7); cause not found (2026-11-26,
-            # preflight5's note). It costs ≈ 0.3 µs when the codes did not change.
-            self._update_amplifier_input()
             t_end = plant.t + chunk                 # what plant.t is after the period
-            block = st.block
-            if st.block_pos >= len(block):
-                block, _ = ati._next_block_row()    # refills the random block
-            assert isinstance(block, np.ndarray)    # the compiled model's state holds one
+            block: np.ndarray = st.block            # type: ignore[assignment]  # an array
+            row = st.block_pos                      # when compiled
+            if row >= len(block):
+                block, row = ati._next_block_row()  # refills the random block
             t_last = st.t_last
-            bits = plant.period(chunk, port_state, codes, packed, block, st.block_pos,
-                                0.0 if t_last is None else t_end - t_last, _ATI_OVERLOAD)
-            ati._commit_pending(bits, plant.t)
+            commit(period(chunk, port_state, codes, packed, block, row,
+                          0.0 if t_last is None else t_end - t_last, _ATI_OVERLOAD), t_end)
+            left = t - plant.t
 
     @property
     def ati_sample(self) -> AtiSample | None:
