@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from rt.components import hybrid_kernel as hk
 from rt.control.base import Controller, Reference
 from rt.control.force import ExplicitForce, ForceReference
 from rt.engine import Array, Component, Struct
@@ -11,6 +14,29 @@ from rt.errors import InputError, TalusError
 from rt.model.dynamics import State
 from rt.safety.events import SupervisorMode
 from rt.safety.supervisor import Supervisor
+
+
+class _Slot:
+    """An attribute of :class:`HybridController` kept in its state array ``_hs`` (the compiled
+    force cycle, ``rt.components.hybrid_kernel``, reads and writes the same numbers)."""
+
+    def __init__(self, index: int, kind: type = float):
+        self.index = index
+        self.kind = kind
+
+    def __get__(self, obj, owner=None):  # type: ignore[no-untyped-def]
+        if obj is None:
+            return self
+        return self.kind(obj._hs[self.index])
+
+    def __set__(self, obj, value) -> None:  # type: ignore[no-untyped-def]
+        obj._hs[self.index] = float(value)
+
+
+class _EntryTime(_Slot):
+    def __set__(self, obj, value) -> None:  # type: ignore[no-untyped-def]
+        obj._hs[self.index] = float(value)
+        obj._hs[hk.H_ENTRY_TIME_SQ] = float(value) ** 2
 
 
 class HybridController(Component):
@@ -28,7 +54,20 @@ class HybridController(Component):
     supervisor is told when the loop depends on the force sensor. The force reference handed
     to the law is never below the law's preload (``preload_n``, N): the platform only pushes
     on a foot (``rt.control.force``).
+
+    The force-mode cycle's state is in ``_hs`` (``rt.components.hybrid_kernel``): the fused
+    cycle (``rt.components.fused``) runs the steady force-mode cycle compiled from it; this
+    interpreted ``update`` is its reference and runs every switch.
     """
+
+    _offset = _Slot(hk.H_OFFSET)
+    _ahead_weight = _Slot(hk.H_AHEAD_WEIGHT)
+    _rising = _Slot(hk.H_RISING, bool)
+    _f_gov = _Slot(hk.H_F_GOV)
+    entry_time_s = _EntryTime(hk.H_ENTRY_TIME)
+    _decay_per_s = _Slot(hk.H_DECAY_PER_S)
+    unload_decel_m_s2 = _Slot(hk.H_UNLOAD_DECEL)
+    preview_release_s = _Slot(hk.H_RELEASE_S)
 
     def __init__(self, name: str, position: Controller, force: ExplicitForce,
                  supervisor: Supervisor):
@@ -51,6 +90,7 @@ class HybridController(Component):
         self.controller = position
         self._ref = Reference()
         self._fref = ForceReference()
+        self._hs = np.zeros(hk.H_SIZE)
         self._in_force = False
         self._sup_mode = SupervisorMode.RUN
         self._sup_raw = float(SupervisorMode.RUN)
@@ -126,6 +166,11 @@ class HybridController(Component):
         fr.f, fr.f_dot, fr.f_ddot = self._f_gov, -step / dt, 0.0
 
     @property
+    def law_force_ref_n(self) -> float:
+        """The force reference (N) the law got in the last force-mode cycle."""
+        return float(self._hs[hk.H_REF_F])
+
+    @property
     def preload_n(self) -> float:
         """The force reference's floor (N): the force law's preload."""
         return float(self.force_law.gains.preload_n)
@@ -177,6 +222,7 @@ class HybridController(Component):
             fr.f_dot -= off / self.entry_time_s
             fr.f_ddot += off / self.entry_time_s ** 2
             self._govern(fr, dt)
+            self._hs[hk.H_REF_F] = fr.f
             fr.roll, fr.pitch = self.pose.data[1], self.pose.data[2]
             fr.roll_rate = fr.pitch_rate = 0.0
             return self.force_law.update(st, measured, fr, dt, self.tau.data)
