@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -24,17 +25,17 @@ class _Slot:
         self.index = index
         self.kind = kind
 
-    def __get__(self, obj, owner=None):  # type: ignore[no-untyped-def]
+    def __get__(self, obj: Any, owner: Any = None) -> Any:
         if obj is None:
             return self
         return self.kind(obj._hs[self.index])
 
-    def __set__(self, obj, value) -> None:  # type: ignore[no-untyped-def]
+    def __set__(self, obj: Any, value: float) -> None:
         obj._hs[self.index] = float(value)
 
 
 class _EntryTime(_Slot):
-    def __set__(self, obj, value) -> None:  # type: ignore[no-untyped-def]
+    def __set__(self, obj: Any, value: float) -> None:
         obj._hs[self.index] = float(value)
         obj._hs[hk.H_ENTRY_TIME_SQ] = float(value) ** 2
 
