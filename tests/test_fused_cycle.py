@@ -197,35 +197,34 @@ def test_a_force_then_a_position_protocol_are_the_per_block_cycle_bit_for_bit(mo
     assert h.ran[5] > 0.3 * h.cycles and h.ran[2] + h.ran[3] > 0, h.ran
 
 
-def test_a_soft_stop_and_an_e_stop_in_force_mode_are_the_per_block_cycle_bit_for_bit(model):
-    """Mid-sine: the operator's soft stop (the force ramps down in the reference, the hybrid
-    controller still in force mode for those cycles, then position), its reset and a new
-    sine; then an e-stop in force mode (drives off: the next cycles' hard-stop hand-over) and
-    its reset. Every cycle compared."""
+@pytest.mark.parametrize("stop", ["soft", "estop"])
+def test_a_stop_in_force_mode_is_the_per_block_cycle_bit_for_bit(model, stop):
+    """Mid-sine, in force mode: the operator's soft stop (the force ramps down in the
+    reference, the hybrid controller still in force mode for those cycles, then holds in
+    position where the loaded platform is) or an e-stop (drives off, the hard stop's
+    hand-over); then its reset and the hold. Every cycle compared."""
     h = _Lockstep(lambda: _sine_loop(model))
     _to_play(h)
     h.run(700)
-    ctl_f = h.f.graph.component("controller")
-    assert ctl_f._in_force
-    fused_before = h.force_fused
-    h.both(lambda pl: pl.supervisor.request_stop())
-    h.run(40)
-    assert ctl_f._in_force                              # still ramping the force down
-    _to_rest(h)
-    assert int(Reaction.SOFT_STOP) in [e[3] for e in _events(h.f)], _events(h.f)
-    h.both(lambda pl: pl.supervisor.request_reset())
-    h.run(100)
-    h.both(lambda pl: pl.reference.request(_short_sine(model)))
-    _to_play(h)
-    h.run(500)
-    assert ctl_f._in_force and h.force_fused > fused_before + 400
-    h.both(lambda pl: pl.supervisor.request_estop("operator"))
-    h.run(300)
-    assert h.f.events.first("estop_operator") is not None
+    ctl = h.f.graph.component("controller")
+    assert ctl._in_force and h.force_fused > 600, (h.force_fused, h.ran)
+    if stop == "soft":
+        h.both(lambda pl: setattr(pl.reference, "force_ramp_s", 0.05))   # a shorter test
+        h.both(lambda pl: pl.supervisor.request_stop())
+        h.run(40)
+        assert ctl._in_force                            # still ramping the force down
+    else:
+        h.both(lambda pl: pl.supervisor.request_estop("operator"))
+        h.run(40)
+        assert h.f.events.first("estop_operator") is not None
+    h.run(600)
+    assert not ctl._in_force
+    reactions = [e[3] for e in _events(h.f)]
+    assert int(Reaction.SOFT_STOP if stop == "soft" else Reaction.HARD_STOP) in reactions
     h.both(lambda pl: pl.supervisor.request_reset())
     h.run(300)
-    _to_rest(h)
-    assert h.ran[5] > 0 and h.ran[3] > 0, h.ran
+    assert h.f.supervisor.latched() == []
+    assert h.ran[5] > 0 and h.ran[2] > 0, h.ran
 
 
 def test_a_real_gait_file_replay_is_the_per_block_cycle_bit_for_bit(tmp_path):
@@ -234,6 +233,7 @@ def test_a_real_gait_file_replay_is_the_per_block_cycle_bit_for_bit(tmp_path):
     (``protocols.session.build_twin_session``, the patient's foot on the twin)."""
     import importlib.util
     import os
+    import sys
     from pathlib import Path
 
     from protocols.session import SessionSetup, build_twin_session
@@ -250,6 +250,7 @@ def test_a_real_gait_file_replay_is_the_per_block_cycle_bit_for_bit(tmp_path):
         "bench_gait_files_fused", Path(__file__).parents[1] / "bench" / "gait_files.py")
     assert spec is not None and spec.loader is not None
     bench = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = bench                      # its dataclasses look it up
     spec.loader.exec_module(bench)
     case = next(c for c in bench.CASES if c.file == "type2_vicon.c3d")
     path = tmp_path / "gait.yaml"
@@ -263,7 +264,7 @@ def test_a_real_gait_file_replay_is_the_per_block_cycle_bit_for_bit(tmp_path):
         h.run(50)
         transient += int(ctl._ahead_weight > 0.0)
     _to_rest(h)
-    assert h.force_fused > 1000 and transient > 0, (h.force_fused, transient, h.ran)
+    assert h.force_fused > 600 and transient > 0, (h.force_fused, transient, h.ran)
 
 
 def test_a_calibration_push_on_the_stiff_plate_is_the_per_block_cycle_bit_for_bit():
@@ -317,6 +318,24 @@ def test_a_calibration_push_on_the_stiff_plate_is_the_per_block_cycle_bit_for_bi
                                pitch_max_deg=10.0)
         return build_protocol_loop(sim_devices(twin, clock), gen, m, 1.0 / dt, "fast",
                                    patient_limits=limits)
+
+    # The trial's table (what the compiled sequencer plays) is its ``update``, row by row.
+    from rt.references.program import ReferenceOutput
+
+    m = RobotModel.load()
+    gen = ForceTableGenerator(trial.id, force_profile(plan, trial, dt), pose, dt, m.kin,
+                              tilt_profile(plan, trial, dt))
+    assert gen.validate().ok
+    view = gen.table_view()
+    assert view is not None and view.col0 == 0
+    out = ReferenceOutput()
+    rows = []
+    while True:
+        status = gen.update(out)
+        rows.append(out.buf.copy())
+        if out.done:
+            break
+    assert status >= 0 and np.array_equal(np.array(rows), view.table)
 
     h = _Lockstep(build)
     _to_play(h)

@@ -147,6 +147,7 @@ from rt.control.laws import (
 )
 from rt.estimation.compiled import CompiledKalmanEstimator
 from rt.references.sequencer import ProgramReference
+from rt.safety.events import SupervisorMode
 
 #: The environment variable that turns the fused cycle off ("0") when a loop is assembled.
 ENV_FLAG = "TALUS_FUSED_CYCLE"
@@ -167,6 +168,7 @@ def enabled_by_environment() -> bool:
 
 
 _NO_F = np.zeros(1)
+_RUN = float(SupervisorMode.RUN)
 _NO_I = np.zeros(1, dtype=np.int64)
 
 #: The methods whose arithmetic the compiled force cycle mirrors: patched (a bench, a test's
@@ -456,6 +458,10 @@ class FusedChain:
         if not inf:
             self._seen_in_force = False
             return HYBRID_POSITION
+        if ctl._sup_raw != _RUN:
+            # A stop's cycles are the block's (a stop may hand the force mode over: the
+            # interpreted block decides; the sequencer's ramp-down is Python's anyway).
+            return HYBRID_FORCE_PYTHON
         if self._seen_in_force is not True or ctl.force_law.tau is not self._ftau:
             self._seen_in_force = True
             self.why_not_force = self._bind_force(ctl)
