@@ -466,7 +466,11 @@ class FusedChain:
             self._seen_in_force = True
             self.why_not_force = self._bind_force(ctl)
             self._force_ok = not self.why_not_force
-        return HYBRID_FORCE if self._force_ok else HYBRID_FORCE_PYTHON
+        if not self._force_ok:
+            return HYBRID_FORCE_PYTHON
+        if not ctl._hs_live:
+            ctl._push()               # the kernel takes over the block's force-mode state
+        return HYBRID_FORCE
 
     def _warm_up(self) -> str:
         """Compile (or load from numba's cache) the kernel now, never in a cycle: on copies

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
@@ -15,29 +14,6 @@ from rt.errors import InputError, TalusError
 from rt.model.dynamics import State
 from rt.safety.events import SupervisorMode
 from rt.safety.supervisor import Supervisor
-
-
-class _Slot:
-    """An attribute of :class:`HybridController` kept in its state array ``_hs`` (the compiled
-    force cycle, ``rt.components.hybrid_kernel``, reads and writes the same numbers)."""
-
-    def __init__(self, index: int, kind: type = float):
-        self.index = index
-        self.kind = kind
-
-    def __get__(self, obj: Any, owner: Any = None) -> Any:
-        if obj is None:
-            return self
-        return self.kind(obj._hs[self.index])
-
-    def __set__(self, obj: Any, value: float) -> None:
-        obj._hs[self.index] = float(value)
-
-
-class _EntryTime(_Slot):
-    def __set__(self, obj: Any, value: float) -> None:
-        obj._hs[self.index] = float(value)
-        obj._hs[hk.H_ENTRY_TIME_SQ] = float(value) ** 2
 
 
 class HybridController(Component):
@@ -56,19 +32,12 @@ class HybridController(Component):
     to the law is never below the law's preload (``preload_n``, N): the platform only pushes
     on a foot (``rt.control.force``).
 
-    The force-mode cycle's state is in ``_hs`` (``rt.components.hybrid_kernel``): the fused
-    cycle (``rt.components.fused``) runs the steady force-mode cycle compiled from it; this
-    interpreted ``update`` is its reference and runs every switch.
+    The fused cycle (``rt.components.fused``) runs the steady force-mode cycle compiled
+    (``rt.components.hybrid_kernel``) on a copy of this block's force-mode state in ``_hs``
+    (:meth:`_push` when it takes over, ``_hs_live`` set while the copy is the current one);
+    this interpreted ``update`` is its reference, runs every switch, and takes the state back
+    first (:meth:`_pull`).
     """
-
-    _offset = _Slot(hk.H_OFFSET)
-    _ahead_weight = _Slot(hk.H_AHEAD_WEIGHT)
-    _rising = _Slot(hk.H_RISING, bool)
-    _f_gov = _Slot(hk.H_F_GOV)
-    entry_time_s = _EntryTime(hk.H_ENTRY_TIME)
-    _decay_per_s = _Slot(hk.H_DECAY_PER_S)
-    unload_decel_m_s2 = _Slot(hk.H_UNLOAD_DECEL)
-    preview_release_s = _Slot(hk.H_RELEASE_S)
 
     def __init__(self, name: str, position: Controller, force: ExplicitForce,
                  supervisor: Supervisor):
@@ -91,7 +60,9 @@ class HybridController(Component):
         self.controller = position
         self._ref = Reference()
         self._fref = ForceReference()
-        self._hs = np.zeros(hk.H_SIZE)
+        self._hs = np.full(hk.H_SIZE, math.nan)
+        #: True while ``_hs`` holds the force-mode state (compiled cycles ran since _push).
+        self._hs_live = False
         self._in_force = False
         self._sup_mode = SupervisorMode.RUN
         self._sup_raw = float(SupervisorMode.RUN)
@@ -169,7 +140,33 @@ class HybridController(Component):
     @property
     def law_force_ref_n(self) -> float:
         """The force reference (N) the law got in the last force-mode cycle."""
-        return float(self._hs[hk.H_REF_F])
+        return float(self._hs[hk.H_REF_F]) if self._hs_live else float(self._fref.f)
+
+    def _push(self) -> None:
+        """The force-mode state and parameters into ``_hs`` for the compiled cycle (the
+        parameters as they are now: ``entry_time_s`` etc. are read at each take-over)."""
+        hs = self._hs
+        hs[hk.H_OFFSET] = self._offset
+        hs[hk.H_AHEAD_WEIGHT] = self._ahead_weight
+        hs[hk.H_RISING] = 1.0 if self._rising else 0.0
+        hs[hk.H_F_GOV] = self._f_gov
+        hs[hk.H_ENTRY_TIME] = self.entry_time_s
+        hs[hk.H_ENTRY_TIME_SQ] = self.entry_time_s ** 2
+        hs[hk.H_DECAY_PER_S] = self._decay_per_s
+        hs[hk.H_UNLOAD_DECEL] = self.unload_decel_m_s2
+        hs[hk.H_RELEASE_S] = self.preview_release_s
+        hs[hk.H_REF_F] = self._fref.f
+        self._hs_live = True
+
+    def _pull(self) -> None:
+        """The state back from ``_hs`` after compiled cycles (the next cycle is this block's)."""
+        hs = self._hs
+        self._offset = float(hs[hk.H_OFFSET])
+        self._ahead_weight = float(hs[hk.H_AHEAD_WEIGHT])
+        self._rising = bool(hs[hk.H_RISING] != 0.0)
+        self._f_gov = float(hs[hk.H_F_GOV])
+        self._fref.f = float(hs[hk.H_REF_F])
+        self._hs_live = False
 
     @property
     def preload_n(self) -> float:
@@ -191,6 +188,8 @@ class HybridController(Component):
         self.position.bind_cycle(self.state_in.data, r, self.tau.data)
 
     def update(self, t: float, dt: float) -> int:
+        if self._hs_live:
+            self._pull()
         raw = self.mode.data[0]
         # The enum is built only when the mode changed.
         if raw != self._sup_raw:
@@ -223,7 +222,6 @@ class HybridController(Component):
             fr.f_dot -= off / self.entry_time_s
             fr.f_ddot += off / self.entry_time_s ** 2
             self._govern(fr, dt)
-            self._hs[hk.H_REF_F] = fr.f
             fr.roll, fr.pitch = self.pose.data[1], self.pose.data[2]
             fr.roll_rate = fr.pitch_rate = 0.0
             return self.force_law.update(st, measured, fr, dt, self.tau.data)
