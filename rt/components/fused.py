@@ -462,7 +462,8 @@ class FusedChain:
             # A stop's cycles are the block's (a stop may hand the force mode over: the
             # interpreted block decides; the sequencer's ramp-down is Python's anyway).
             return HYBRID_FORCE_PYTHON
-        if self._seen_in_force is not True or ctl.force_law.tau is not self._ftau:
+        if self._seen_in_force is not True or (self._force_ok
+                                               and ctl.force_law.tau is not self._ftau):
             self._seen_in_force = True
             self.why_not_force = self._bind_force(ctl)
             self._force_ok = not self.why_not_force
