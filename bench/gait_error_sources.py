@@ -52,7 +52,7 @@ class _Probe(Component):
 
     def update(self, t: float, dt: float) -> int:
         pl = self.pl_of["pl"]
-        law_ref = pl.graph.component("controller")._fref.f
+        law_ref = pl.graph.component("controller").law_force_ref_n
         self.rows.append((-float(pl.twin.plant.wrench_s[2]), float(law_ref)))
         return 0
 

@@ -15,7 +15,7 @@ from protocols.base import ForceGenerator, GeneratorInput
 from protocols.output import ValidationReport
 from protocols.schema import Pose
 from rt.errors import KinematicsError
-from rt.references.program import ReferenceOutput
+from rt.references.program import FORCE_BLOCK, POSE, ProgramTable, Q, ReferenceOutput
 
 #: Tool (load applicator) length above the ATI's origin along its z axis (m).
 TOOL_LENGTH_M = 0.02
@@ -85,6 +85,20 @@ class ForceTableGenerator(ForceGenerator):
         report.roll_range_rad = (float(pose[:, 1].min()), float(pose[:, 1].max()))
         report.pitch_range_rad = (float(pose[:, 2].min()), float(pose[:, 2].max()))
         return True
+
+    def table_view(self) -> ProgramTable | None:
+        """The validated trial as the loop's compiled sequencer plays it: each sample's whole
+        row as :meth:`update` writes it (the force columns; with a tilt, that sample's slider
+        and pose references too), so a push's PLAY, read-ahead included, runs compiled."""
+        if not self._ready or type(self).update is not ForceTableGenerator.update:
+            return None
+        rows = np.tile(self._const, (self.n_samples, 1))
+        rows[:, FORCE_BLOCK] = self._table
+        if self._tilt is not None:
+            rows[:, Q] = self._q
+            rows[:, POSE] = self._pose
+        return ProgramTable(np.ascontiguousarray(rows, dtype=np.float64), 0,
+                            self._const.copy(), self.mode)
 
     def update(self, out: ReferenceOutput, inp: GeneratorInput | None = None) -> int:
         k = self.index

@@ -368,6 +368,13 @@ class ForceGenerator(TableGenerator):
         out[0] = table[k, 0]
         out[1] = table[k, 1]
 
+    def force_at_reads_table(self) -> bool:
+        """True when :meth:`force_at` is the table's F_d, Ḟ_d columns (those of
+        ``table_view()``) at the index clamped: the loop's compiled sequencer then reads ahead
+        itself (``rt.references.sequencer_kernel.read_ahead``). A subclass that overrides
+        ``force_at`` is read through it."""
+        return type(self).force_at is ForceGenerator.force_at
+
     def _hold_pose(self, report: ValidationReport) -> bool:
         pose = self.protocol.pose  # type: ignore[union-attr]
         roll, pitch = math.radians(pose.roll_deg), math.radians(pose.pitch_deg)

@@ -545,9 +545,11 @@ def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -
     assert played > 0.4 * h.k, (played, h.k)
 
     # The force law's preview (gait4): a force program known in advance is read ahead
-    # (``force_preview``); the compiled cycle hands its PLAY to the interpreted read-ahead, and
-    # every output, ``force_preview`` included, is still the interpreted sequencer's bit for
-    # bit, through the play, its last sample, a soft stop mid-play and the return.
+    # (``force_preview``); the compiled cycle reads a table program ahead itself
+    # (``sequencer_kernel.read_ahead``, issue 16) and hands a Python program's PLAY to the
+    # interpreted read-ahead, and every output, ``force_preview`` included, is still the
+    # interpreted sequencer's bit for bit, through the play, its last sample, a soft stop
+    # mid-play and the return.
     from rt.references import sequencer_kernel as sk
     from rt.references.program import ForcePreview
 
@@ -568,10 +570,10 @@ def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -
     h.request(sine, rest_q=tuple(q_mid))
     assert isinstance(h.refs[0]._pending.program, ForcePreview)
     h.until(Phase.PLAY)
-    assert h.refs[0]._seq[sk.S_PREVIEW] == 1.0
+    assert h.refs[0]._seq[sk.S_PREVIEW] == 1.0 and h.refs[0]._seq[sk.S_AHEAD] == 1.0
     before = h.interpreted_cycles
     ahead += count_ahead(500)
-    assert h.interpreted_cycles - before == 500            # PLAY read ahead: interpreted
+    assert h.interpreted_cycles == before                  # PLAY read ahead: the kernel's
     for _ in range(10_000):
         if Phase(int(h.refs[0].phase.data[0])) == Phase.REST:
             break
@@ -584,7 +586,10 @@ def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -
     start = h.q.copy()
     h.request(lambda: _PythonForcePreview(start, 1.0))
     h.until(Phase.PLAY)
+    assert h.refs[0]._seq[sk.S_AHEAD] == 0.0
+    before = h.interpreted_cycles
     ahead += count_ahead(400)
+    assert h.interpreted_cycles - before == 400            # its read-ahead: interpreted
     h.mode[0] = SupervisorMode.SOFT_STOP
     h.run(1500)
     h.mode[0] = SupervisorMode.RUN

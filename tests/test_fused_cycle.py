@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from rt.components import fused
+from rt.components import fused, hybrid_kernel
 from rt.engine import STATUS_EXCEPTION, Array, Component, GraphBuilder
 from rt.errors import ConfigurationError
 from rt.model import RobotModel
@@ -28,6 +28,7 @@ from rt.position_loop import (
     sim_devices,
     swap_controller,
 )
+from rt.safety.events import Reaction
 
 
 @pytest.fixture(scope="module")
@@ -41,19 +42,28 @@ def _events(pl: PositionLoop) -> list[tuple]:
 
 
 class _Lockstep:
-    """A fused loop and a per-block loop built by ``build``, stepped together."""
+    """A fused loop and a per-block loop built by ``build``, stepped together. The per-block
+    loop is the interpreted reference of everything the fused one compiles beyond the blocks'
+    own kernels: its sequencer reads a previewed force program ahead in Python
+    (``compiled_read_ahead = False``) and its hybrid controller runs its interpreted force
+    mode (``HybridController.update``)."""
 
     def __init__(self, build: Callable[[], PositionLoop]):
         self.f, self.p = build(), build()
         self.p.graph.fused = False
+        self.p.reference.compiled_read_ahead = False
         assert self.f.graph.fused and self.f.graph.segment.why_not == ""
         self.ran: Counter[int] = Counter()
+        #: Cycles the fused kernel ran whole with the hybrid controller in force mode.
+        self.force_fused = 0
         seg = self.f.graph.segment
         run = seg.run
+        ctl = self.f.graph.component("controller")
 
         def counted(t: float, dt: float, idx: int) -> int:
             n = run(t, dt, idx)
             self.ran[n] += 1
+            self.force_fused += int(n == 5 and bool(getattr(ctl, "_in_force", False)))
             return n
 
         seg.run = counted
@@ -117,57 +127,228 @@ def test_a_position_session_with_swaps_and_trips_is_the_per_block_cycle_bit_for_
     assert h.ran[5] > 0.2 * h.cycles and h.ran[2] > 0 and h.ran[3] > 0, h.ran
 
 
-def test_a_force_then_a_position_protocol_are_the_per_block_cycle_bit_for_bit(model):
+def _library_protocol(model: RobotModel, name: str, *replace: tuple[str, str]):
     from protocols.generators import make_generator
     from protocols.library import LIBRARY_DIR, parse_protocol_text
-    from rt.references.sequencer import Phase
+
+    text = (LIBRARY_DIR / name).read_text()
+    for old, new in replace:
+        assert old in text
+        text = text.replace(old, new)
+    gen = make_generator(parse_protocol_text(text), dt=1e-3, kinematics=model.kin)
+    assert gen.validate().ok
+    return gen
+
+
+def _short_sine(model: RobotModel):
+    return _library_protocol(model, "sine_fz.yaml", ("cycles: 20", "cycles: 1"),
+                             ("ramp_in_s: 2.0", "ramp_in_s: 0.3"),
+                             ("ramp_out_s: 2.0", "ramp_out_s: 0.3"))
+
+
+def _sine_loop(model: RobotModel) -> PositionLoop:
+    """A protocol loop on a twin foot (compliant ankle) with a one-cycle sine Fz requested."""
+    from protocols.library import LIBRARY_DIR, parse_protocol_text
     from rt.twin.environment import CompliantAnkle
     from rt.twin.twin import SimClock, Twin
 
-    def protocol(name: str, *replace: tuple[str, str]):
-        text = (LIBRARY_DIR / name).read_text()
-        for old, new in replace:
-            assert old in text
-            text = text.replace(old, new)
-        gen = make_generator(parse_protocol_text(text), dt=1e-3, kinematics=model.kin)
-        assert gen.validate().ok
-        return gen
-
-    def sine():
-        return protocol("sine_fz.yaml", ("cycles: 20", "cycles: 1"),
-                        ("ramp_in_s: 2.0", "ramp_in_s: 0.3"),
-                        ("ramp_out_s: 2.0", "ramp_out_s: 0.3"))
-
     proto_z = parse_protocol_text((LIBRARY_DIR / "sine_fz.yaml").read_text()).pose.z_m
     sensor_z = proto_z + model.description.sensor.offset_m[2]
+    clock = SimClock()
+    twin = Twin(model.description, CompliantAnkle(neutral_z_m=sensor_z, limb_weight_n=0.0),
+                clock=clock)
+    twin.place(model.kin.ik(proto_z, 0.0, 0.0).q)
+    return build_protocol_loop(sim_devices(twin, clock), _short_sine(model), RobotModel.load())
 
-    def build() -> PositionLoop:
-        clock = SimClock()
-        twin = Twin(model.description, CompliantAnkle(neutral_z_m=sensor_z, limb_weight_n=0.0),
-                    clock=clock)
-        twin.place(model.kin.ik(proto_z, 0.0, 0.0).q)
-        return build_protocol_loop(sim_devices(twin, clock), sine(), RobotModel.load())
 
-    h = _Lockstep(build)
-    for _ in range(40):                                 # approach, tare, force play
+def _to_play(h: _Lockstep) -> None:
+    from rt.references.sequencer import Phase
+
+    for _ in range(60):                                 # approach, tare, then PLAY
         h.run(100)
         if h.f.reference.current_phase == Phase.PLAY:
-            break
-    assert h.f.reference.current_phase == Phase.PLAY
-    h.run(1500)
-    for _ in range(60):                                 # to its end and the return
+            return
+    raise AssertionError("never reached PLAY")
+
+
+def _to_rest(h: _Lockstep, cycles: int = 100, most: int = 200) -> None:
+    for _ in range(most):
         if not h.f.reference.busy:
-            break
-        h.run(100)
-    assert not h.f.reference.busy
+            return
+        h.run(cycles)
+    raise AssertionError("the program never ended")
+
+
+def test_a_force_then_a_position_protocol_are_the_per_block_cycle_bit_for_bit(model):
+    h = _Lockstep(lambda: _sine_loop(model))
+    _to_play(h)
+    h.run(1500)
+    _to_rest(h)                                         # to its end and the return
+    # The hybrid controller's steady force mode ran in the kernel (read-ahead included).
+    assert h.force_fused > 1000, (h.force_fused, h.ran)
+    assert h.f.graph.segment.why_not_force == ""
     rom = ("ankle_rom.yaml", ("repetitions: 3", "repetitions: 1"),
            ("sequence: [dorsi_plantar, inversion_eversion]", "sequence: [dorsi_plantar]"),
            ("dorsiflexion: 10.0", "dorsiflexion: 3.0"),
            ("plantarflexion: 10.0", "plantarflexion: 3.0"), ("hold_s: 1.0", "hold_s: 0.1"))
-    h.both(lambda pl: pl.reference.request(protocol(*rom)))
+    h.both(lambda pl: pl.reference.request(_library_protocol(model, *rom)))
     h.run(1500)
     assert h.f.reference.epoch == 2
     assert h.ran[5] > 0.3 * h.cycles and h.ran[2] + h.ran[3] > 0, h.ran
+
+
+@pytest.mark.parametrize("stop", ["soft", "estop"])
+def test_a_stop_in_force_mode_is_the_per_block_cycle_bit_for_bit(model, stop):
+    """Mid-sine, in force mode: the operator's soft stop (the force ramps down in the
+    reference, the hybrid controller still in force mode for those cycles, then holds in
+    position where the loaded platform is) or an e-stop (drives off, the hard stop's
+    hand-over); then its reset and the hold. Every cycle compared."""
+    h = _Lockstep(lambda: _sine_loop(model))
+    _to_play(h)
+    h.run(700)
+    ctl = h.f.graph.component("controller")
+    assert ctl._in_force and h.force_fused > 600, (h.force_fused, h.ran)
+    if stop == "soft":
+        h.both(lambda pl: setattr(pl.reference, "force_ramp_s", 0.05))   # a shorter test
+        h.both(lambda pl: pl.supervisor.request_stop())
+        h.run(40)
+        assert ctl._in_force                            # still ramping the force down
+    else:
+        h.both(lambda pl: pl.supervisor.request_estop("operator"))
+        h.run(40)
+        assert h.f.events.first("estop_operator") is not None
+    h.run(600)
+    assert not ctl._in_force
+    reactions = [e[3] for e in _events(h.f)]
+    assert int(Reaction.SOFT_STOP if stop == "soft" else Reaction.HARD_STOP) in reactions
+    h.both(lambda pl: pl.supervisor.request_reset())
+    h.run(300)
+    assert h.f.supervisor.latched() == []
+    assert h.ran[5] > 0 and h.ran[2] > 0, h.ran
+
+
+def test_a_real_gait_file_replay_is_the_per_block_cycle_bit_for_bit(tmp_path):
+    """A real C3D record (heel strikes beyond the drives: the preview's transients, the
+    integral held, the unloading governor) replayed through the pre-flight's own loop
+    (``protocols.session.build_twin_session``, the patient's foot on the twin)."""
+    import importlib.util
+    import os
+    import sys
+    from pathlib import Path
+
+    from protocols.session import SessionSetup, build_twin_session
+
+    pytest.importorskip("ezc3d")
+    data = None
+    for d in (os.environ.get("TALUS_C3D_DIR"),
+              Path(__file__).parents[2] / "shared/data/c3d"):
+        if d and (Path(d) / "type2_vicon.c3d").is_file():
+            data = Path(d)
+    if data is None:
+        pytest.skip("the real C3D files ($TALUS_C3D_DIR) are not present")
+    spec = importlib.util.spec_from_file_location(
+        "bench_gait_files_fused", Path(__file__).parents[1] / "bench" / "gait_files.py")
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = bench                      # its dataclasses look it up
+    spec.loader.exec_module(bench)
+    case = next(c for c in bench.CASES if c.file == "type2_vicon.c3d")
+    path = tmp_path / "gait.yaml"
+    path.write_text(bench.protocol_text(case, data))
+    setup = SessionSetup(path, patient_weight_kg=bench.PATIENT_KG)
+    h = _Lockstep(lambda: build_twin_session(setup, RobotModel.load(), "fast")[3])
+    _to_play(h)
+    ctl = h.f.graph.component("controller")
+    transient = 0
+    for _ in range(40):
+        h.run(50)
+        weight = ctl._hs[hybrid_kernel.H_AHEAD_WEIGHT] if ctl._hs_live else ctl._ahead_weight
+        transient += int(weight > 0.0)
+    _to_rest(h)
+    assert h.force_fused > 600 and transient > 0, (h.force_fused, transient, h.ran)
+
+
+def test_a_calibration_push_on_the_stiff_plate_is_the_per_block_cycle_bit_for_bit():
+    """The calibration's shear push (600 N through the tool tip on the twin plate, 2e6 N/m,
+    then a 2° roll under load): the gain schedule on the stiffness engaged (k̂ above k_s),
+    the angle integral at work, every cycle compared."""
+    from calibration.plan import (
+        ProfileKind,
+        default_plan,
+        expand,
+        force_profile,
+        tilt_profile,
+        trial_pose,
+    )
+    from calibration.plate import TWIN_PLATE_FILE, load_plate
+    from calibration.push import (
+        TIP_FRICTION_COEFFICIENT,
+        TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+        TOOL_LENGTH_M,
+        ForceTableGenerator,
+    )
+    from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
+    from rt.safety.limits import PatientLimits, RobotLimits
+    from rt.twin.environment import ForcePlateContact
+    from rt.twin.twin import SimClock, Twin
+
+    dt = 1e-3
+    plan = default_plan(shear=[{"roll_deg": 2.0, "load_n": 600.0, "tilt_ramp_s": 0.5,
+                                "hold_s": 0.2}], registration="nominal", baseline_s=0.3)
+    plate = load_plate(TWIN_PLATE_FILE)
+    trial = next(t for t in expand(plan, plate.size_m) if t.profile == ProfileKind.SHEAR)
+    pose = trial_pose(plan, trial)
+
+    def build() -> PositionLoop:
+        m = RobotModel.load()
+        z0, roll, pitch = pose
+        p_lvl, r_lvl = sensor_poses(m, np.array([m.kin.ik(z0, 0.0, 0.0).q]))
+        tip = tip_points_B(p_lvl, r_lvl, TOOL_LENGTH_M)[0]
+        env = ForcePlateContact(plate_height_m=float(tip[2]) + START_GAP_M,
+                                tool_length_m=TOOL_LENGTH_M,
+                                tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+                                friction_coefficient=TIP_FRICTION_COEFFICIENT)
+        clock = SimClock()
+        twin = Twin(m.description, env, seed=7, clock=clock)
+        twin.place(np.array(m.kin.ik(z0, roll, pitch).q))
+        gen = ForceTableGenerator(trial.id, force_profile(plan, trial, dt), pose, dt, m.kin,
+                                  tilt_profile(plan, trial, dt))
+        assert gen.validate().ok
+        limits = PatientLimits(max_force_n=RobotLimits().max_platform_force_n,
+                               roll_min_deg=-10.0, roll_max_deg=10.0, pitch_min_deg=-10.0,
+                               pitch_max_deg=10.0)
+        return build_protocol_loop(sim_devices(twin, clock), gen, m, 1.0 / dt, "fast",
+                                   patient_limits=limits)
+
+    # The trial's table (what the compiled sequencer plays) is its ``update``, row by row.
+    from rt.references.program import ReferenceOutput
+
+    m = RobotModel.load()
+    gen = ForceTableGenerator(trial.id, force_profile(plan, trial, dt), pose, dt, m.kin,
+                              tilt_profile(plan, trial, dt))
+    assert gen.validate().ok
+    view = gen.table_view()
+    assert view is not None and view.col0 == 0
+    out = ReferenceOutput()
+    rows = []
+    while True:
+        status = gen.update(out)
+        rows.append(out.buf.copy())
+        if out.done:
+            break
+    assert status >= 0 and np.array_equal(np.array(rows), view.table)
+
+    h = _Lockstep(build)
+    _to_play(h)
+    law = h.f.graph.component("controller").force_law
+    k_s = law.gains.schedule_stiffness_n_per_m
+    scheduled = 0
+    for _ in range(30):
+        h.run(50)
+        scheduled += int(law.k_est > k_s > 0.0)
+    _to_rest(h)
+    assert scheduled > 5 and h.force_fused > 800, (scheduled, h.force_fused, h.ran)
+    assert not [e for e in _events(h.f) if e[3] >= int(Reaction.SOFT_STOP)], _events(h.f)
 
 
 def test_the_fused_chain_refuses_what_it_does_not_cover(model):

@@ -57,11 +57,23 @@ from rt.components.fused_kernel import (
     B_EST_OUT,
     B_EST_Q,
     B_EST_S,
+    B_FG,
     B_FK,
+    B_FREF,
+    B_FS,
+    B_FTAU,
+    B_FTF,
+    B_FTI,
+    B_FWORK,
     B_G0,
     B_G0_SCRATCH,
     B_GAINS,
     B_GEOM,
+    B_HFORCE,
+    B_HPOSE,
+    B_HPREVIEW,
+    B_HS,
+    B_HWRENCH,
     B_INPUTS,
     B_INTEGRAL,
     B_LAW_STB,
@@ -101,6 +113,9 @@ from rt.components.fused_kernel import (
     B_WFLAGS,
     B_WORK,
     B_WRENCH,
+    HYBRID_FORCE,
+    HYBRID_FORCE_PYTHON,
+    HYBRID_POSITION,
     LAW_ADAPTIVE,
     LAW_COMPUTED_TORQUE,
     LAW_PADEN_PANJA,
@@ -109,6 +124,7 @@ from rt.components.fused_kernel import (
     LAW_PID,
     N_BUFFERS,
     N_STAGES,
+    NOT_HYBRID,
     T_ADDR,
     T_DIMS,
     T_RINGS,
@@ -120,6 +136,7 @@ from rt.components.protocol_blocks import HybridController
 from rt.components.safety_blocks import SupervisorBlock
 from rt.control.adaptive import Adaptive
 from rt.control.base import Controller
+from rt.control.force import ExplicitForce
 from rt.control.laws import (
     ComputedTorquePtp,
     ComputedTorqueTrajectory,
@@ -130,6 +147,7 @@ from rt.control.laws import (
 )
 from rt.estimation.compiled import CompiledKalmanEstimator
 from rt.references.sequencer import ProgramReference
+from rt.safety.events import SupervisorMode
 
 #: The environment variable that turns the fused cycle off ("0") when a loop is assembled.
 ENV_FLAG = "TALUS_FUSED_CYCLE"
@@ -139,13 +157,40 @@ CHAIN = ("estimator", "model", "reference", "controller", "supervisor")
 assert len(CHAIN) == N_STAGES
 
 
+#: ``TALUS_FUSED_FORCE=0`` (read when a chain binds): the hybrid controller's force mode runs
+#: its block even when fused (the state before the force stage; before/after benchmarks).
+FORCE_ENV_FLAG = "TALUS_FUSED_FORCE"
+
+
 def enabled_by_environment() -> bool:
     """False when ``TALUS_FUSED_CYCLE=0`` (or ``false``/``off``/``no``) is set."""
     return os.environ.get(ENV_FLAG, "1").strip().lower() not in ("0", "false", "off", "no")
 
 
 _NO_F = np.zeros(1)
+_RUN = float(SupervisorMode.RUN)
 _NO_I = np.zeros(1, dtype=np.int64)
+
+#: The methods whose arithmetic the compiled force cycle mirrors: patched (a bench, a test's
+#: recorder), the hybrid controller's force mode runs its block.
+_MIRRORED = ((HybridController, ("update", "_lead", "_govern", "_beyond")),
+             (ExplicitForce, ("update",)))
+_ORIGINALS = {(cls, n): cls.__dict__[n] for cls, names in _MIRRORED for n in names}
+
+
+def _force_unbindable(ctl: HybridController) -> str:
+    """"" when the hybrid controller's force mode may run compiled (the exact classes, the
+    compiled law, nothing of what the kernel mirrors patched), else why not."""
+    if os.environ.get(FORCE_ENV_FLAG, "1").strip().lower() in ("0", "false", "off", "no"):
+        return f"{FORCE_ENV_FLAG} is off"
+    fl = ctl.force_law
+    if type(fl) is not ExplicitForce or not fl.compiled:
+        return f"force law {type(fl).__name__} has no compiled force cycle here"
+    for obj, (cls, names) in ((ctl, _MIRRORED[0]), (fl, _MIRRORED[1])):
+        for n in names:
+            if cls.__dict__.get(n) is not _ORIGINALS[(cls, n)] or n in vars(obj):
+                return f"{cls.__name__}.{n} is replaced"
+    return ""
 
 
 class LawBinding:
@@ -240,6 +285,13 @@ class FusedChain:
         self._dyn_ids: tuple = ()
         self._law_cycle: object = None
         self._watched: object = None
+        self._fref = np.zeros(4)
+        #: The hybrid controller's mode its force binding was last checked in (None: never).
+        self._seen_in_force: bool | None = None
+        self._force_ok = False
+        self._ftau: object = None
+        #: Why the hybrid controller's force mode runs its block ("" when compiled).
+        self.why_not_force = ""
         #: Why the chain runs per block (the last binding's reason), "" when fused.
         self.why_not = "not bound yet"
 
@@ -331,7 +383,16 @@ class FusedChain:
                 B_STAU: sup.tau.data, B_WRENCH: sup.wrench.data,
                 B_WFLAGS: sup.wrench_flags.data, B_INPUTS: sup.stops.data,
                 B_DFAILED: sup.drive_failed.data, B_VOLTS: sup.volts.data,
-                B_ENABLE: sup.enable.data, B_MODE: sup.mode.data}
+                B_ENABLE: sup.enable.data, B_MODE: sup.mode.data,
+                B_HS: _NO_F, B_HFORCE: _NO_F, B_HPREVIEW: _NO_F, B_HPOSE: _NO_F,
+                B_HWRENCH: _NO_F, B_FTI: _NO_I, B_FTF: _NO_F, B_FG: _NO_F, B_FS: _NO_F,
+                B_FWORK: _NO_F, B_FTAU: _NO_F, B_FREF: self._fref}
+        if hybrid:
+            bufs.update({B_HS: ctl._hs, B_HFORCE: ctl.force.data,
+                         B_HPREVIEW: ctl.force_preview.data, B_HPOSE: ctl.pose.data,
+                         B_HWRENCH: ctl.wrench.data})
+        self._seen_in_force = None
+        self._force_ok = False
         if len(bufs) != N_BUFFERS:
             return "internal: the buffer table is incomplete"
         for k, buf in bufs.items():
@@ -374,6 +435,44 @@ class FusedChain:
             self._dyn_ids = ids
         return ""
 
+    def _bind_force(self, ctl: HybridController) -> str:
+        """The explicit-force law's buffers (checked when the block enters force mode, and
+        when a reset replaced its ``tau``): "" or why its force mode runs the block."""
+        why = _force_unbindable(ctl)
+        if why:
+            return why
+        fl = ctl.force_law
+        d = fl.dyn
+        for k, buf in ((B_FTI, d.tree_i), (B_FTF, d.tree_f), (B_FG, fl._fg), (B_FS, fl._fs),
+                       (B_FWORK, fl._work), (B_FTAU, fl.tau)):
+            why = self._set(k, buf)
+            if why:
+                return why
+        self._ftau = fl.tau
+        return ""
+
+    def _hybrid_code(self, ctl: HybridController) -> int:
+        """``HYBRID_*`` for this cycle (the force binding re-checked at each entry into force
+        mode: whatever was patched or replaced meanwhile is seen there)."""
+        inf = ctl._in_force
+        if not inf:
+            self._seen_in_force = False
+            return HYBRID_POSITION
+        if ctl._sup_raw != _RUN:
+            # A stop's cycles are the block's (a stop may hand the force mode over: the
+            # interpreted block decides; the sequencer's ramp-down is Python's anyway).
+            return HYBRID_FORCE_PYTHON
+        if self._seen_in_force is not True or (self._force_ok
+                                               and ctl.force_law.tau is not self._ftau):
+            self._seen_in_force = True
+            self.why_not_force = self._bind_force(ctl)
+            self._force_ok = not self.why_not_force
+        if not self._force_ok:
+            return HYBRID_FORCE_PYTHON
+        if not ctl._hs_live:
+            ctl._push()               # the kernel takes over the block's force-mode state
+        return HYBRID_FORCE
+
     def _warm_up(self) -> str:
         """Compile (or load from numba's cache) the kernel now, never in a cycle: on copies
         of every buffer (nothing of the loop changes). One kernel for every law and block."""
@@ -387,8 +486,8 @@ class FusedChain:
         tab[T_RINGS:T_RINGS + N_STAGES] = [r.__array_interface__["data"][0]
                                            for r in scratch_rings]
         try:
-            fused_chain(tab, 0.0, 1e-3, 2, False, self._vpn, False, LAW_PADEN_PANJA, False, 0,
-                        0, 1.0)
+            fused_chain(tab, 0.0, 1e-3, 2, False, self._vpn, NOT_HYBRID, LAW_PADEN_PANJA, False,
+                        0, 0, 1.0)
         except Exception as exc:  # noqa: BLE001 - refused: the chain runs per block
             return f"the fused kernel failed its warm-up: {type(exc).__name__}: {exc}"
         _WARM = True
@@ -429,13 +528,13 @@ class FusedChain:
                 else:
                     self._table = ref._table
             raw = ctl.mode.data[0]
-            if cyc is None or raw != (ctl._sup_raw if self._hybrid else ctl._mode_raw) or (
-                    self._hybrid and ctl._in_force):
-                upto = min(upto, 3)   # the controller block runs (mode change, fade, force)
+            if cyc is None or raw != (ctl._sup_raw if self._hybrid else ctl._mode_raw):
+                upto = min(upto, 3)   # the controller block runs (mode change, fade)
+        hybrid = self._hybrid_code(ctl) if self._hybrid else NOT_HYBRID
         st = self._state
         g = self._graph
         ran, python, self.others_ns, aux, fk = fused_chain(
-            self._tab, t, dt, upto, st._filled, self._vpn, self._hybrid, b.law_id,
+            self._tab, t, dt, upto, st._filled, self._vpn, hybrid, b.law_id,
             b.trajectory, self._nb, idx, self._tick_ns)
         if ran >= 2 and fk >= 0:
             st.buffer_filled()

@@ -16,6 +16,7 @@ from numba import carray, njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from rt.components import hybrid_kernel as hyk
 from rt.control import kernels as ck
 from rt.estimation.compiled import block_update
 from rt.model.kernels import model_state
@@ -62,11 +63,21 @@ def ticks_now() -> int:
  B_TI, B_TF, B_LAW_STB, B_LQ, B_LQD, B_LQDD, B_GAINS, B_WORK, B_OUT, B_INTEGRAL, B_AMAP,
  B_EST, B_LGEOM, B_LLIMITS, B_LPHI, B_G0, B_G0_SCRATCH,
  B_PAR, B_MEM, B_SQ, B_SEST, B_SQD, B_SQDD, B_SSTB, B_SFK, B_SQREF, B_SQDREF, B_STAU,
- B_WRENCH, B_WFLAGS, B_INPUTS, B_DFAILED, B_VOLTS, B_ENABLE, B_MODE, N_BUFFERS) = range(55)
-_INT_BUFFERS = (B_TI, B_AMAP)
+ B_WRENCH, B_WFLAGS, B_INPUTS, B_DFAILED, B_VOLTS, B_ENABLE, B_MODE,
+ # The hybrid controller's force mode (``force_stage``): its state, its input ports, the
+ # explicit-force law's tree, gains, state, work, its own copy of the command, the reference.
+ B_HS, B_HFORCE, B_HPREVIEW, B_HPOSE, B_HWRENCH, B_FTI, B_FTF, B_FG, B_FS, B_FWORK, B_FTAU,
+ B_FREF, N_BUFFERS) = range(67)
+_INT_BUFFERS = (B_TI, B_AMAP, B_FTI)
 _MATRIX_BUFFERS = (B_TABLE,)
 
 LAW_PADEN_PANJA, LAW_COMPUTED_TORQUE, LAW_PD_GRAVITY, LAW_PD_G0, LAW_PID, LAW_ADAPTIVE = range(6)
+
+# ``hybrid``: what the controller slot holds. A ControllerBlock (NOT_HYBRID); a hybrid
+# controller in position mode (HYBRID_POSITION); in force mode with its compiled force cycle
+# bound (HYBRID_FORCE) or not (HYBRID_FORCE_PYTHON: its block runs). A switch between the
+# modes (``ctrl_mode`` against the mode the block is in) always runs the block.
+NOT_HYBRID, HYBRID_POSITION, HYBRID_FORCE, HYBRID_FORCE_PYTHON = range(4)
 
 
 @intrinsic
@@ -118,6 +129,17 @@ def _law(dt, law, trajectory, nb, a, d):
         ck.pid(stb, q, qd, gains, _v(a, d, B_INTEGRAL), dt, False, out)
     elif law == LAW_ADAPTIVE:
         ck.adaptive(ti, tf, stb, q, qd, qdd, _vi(a, d, B_AMAP), _v(a, d, B_EST), dt, False, out)
+    return 0
+
+
+@njit(cache=True)
+def force_stage(dt, a, d):
+    """The hybrid controller's steady force-mode cycle
+    (:func:`rt.components.hybrid_kernel.force_cycle`) on its block's buffers."""
+    hyk.force_cycle(_v(a, d, B_HS), _v(a, d, B_HFORCE), _v(a, d, B_HPREVIEW), _v(a, d, B_HPOSE),
+                    _v(a, d, B_HWRENCH), _vi(a, d, B_FTI), _v(a, d, B_FTF), _v(a, d, B_LAW_STB),
+                    _v(a, d, B_FG), _v(a, d, B_FS), _v(a, d, B_FWORK), _v(a, d, B_OUT),
+                    _v(a, d, B_FTAU), _v(a, d, B_FREF), dt)
     return 0
 
 
@@ -191,10 +213,19 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
     if r == rk.PLAY_DONE:                   # the return is planned in Python
         info[I_PYTHON] = 1
         return
-    # The hybrid controller's position mode only (its force law and switches are Python).
-    if upto <= 3 or (hybrid and (_v(a, d, B_CTRL_MODE)[0] > 0.5)):
+    if upto <= 3:
         return
-    ls = _law(dt, law, trajectory, nb, a, d)
+    if hybrid == NOT_HYBRID:
+        ls = _law(dt, law, trajectory, nb, a, d)
+    else:
+        # The hybrid controller's steady cycles; a switch of mode is its block's (Python).
+        force = _v(a, d, B_CTRL_MODE)[0] > 0.5
+        if force != (hybrid != HYBRID_POSITION) or hybrid == HYBRID_FORCE_PYTHON:
+            return
+        if force:
+            ls = force_stage(dt, a, d)
+        else:
+            ls = _law(dt, law, trajectory, nb, a, d)
     stamps[4] = _ticks()
     info[I_RAN] = 4
     info[I_LAW] = ls

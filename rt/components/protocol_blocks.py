@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from rt.components import hybrid_kernel as hk
 from rt.control.base import Controller, Reference
 from rt.control.force import ExplicitForce, ForceReference
 from rt.engine import Array, Component, Struct
@@ -28,6 +31,12 @@ class HybridController(Component):
     supervisor is told when the loop depends on the force sensor. The force reference handed
     to the law is never below the law's preload (``preload_n``, N): the platform only pushes
     on a foot (``rt.control.force``).
+
+    The fused cycle (``rt.components.fused``) runs the steady force-mode cycle compiled
+    (``rt.components.hybrid_kernel``) on a copy of this block's force-mode state in ``_hs``
+    (:meth:`_push` when it takes over, ``_hs_live`` set while the copy is the current one);
+    this interpreted ``update`` is its reference, runs every switch, and takes the state back
+    first (:meth:`_pull`).
     """
 
     def __init__(self, name: str, position: Controller, force: ExplicitForce,
@@ -51,6 +60,9 @@ class HybridController(Component):
         self.controller = position
         self._ref = Reference()
         self._fref = ForceReference()
+        self._hs = np.full(hk.H_SIZE, math.nan)
+        #: True while ``_hs`` holds the force-mode state (compiled cycles ran since _push).
+        self._hs_live = False
         self._in_force = False
         self._sup_mode = SupervisorMode.RUN
         self._sup_raw = float(SupervisorMode.RUN)
@@ -126,6 +138,37 @@ class HybridController(Component):
         fr.f, fr.f_dot, fr.f_ddot = self._f_gov, -step / dt, 0.0
 
     @property
+    def law_force_ref_n(self) -> float:
+        """The force reference (N) the law got in the last force-mode cycle."""
+        return float(self._hs[hk.H_REF_F]) if self._hs_live else float(self._fref.f)
+
+    def _push(self) -> None:
+        """The force-mode state and parameters into ``_hs`` for the compiled cycle (the
+        parameters as they are now: ``entry_time_s`` etc. are read at each take-over)."""
+        hs = self._hs
+        hs[hk.H_OFFSET] = self._offset
+        hs[hk.H_AHEAD_WEIGHT] = self._ahead_weight
+        hs[hk.H_RISING] = 1.0 if self._rising else 0.0
+        hs[hk.H_F_GOV] = self._f_gov
+        hs[hk.H_ENTRY_TIME] = self.entry_time_s
+        hs[hk.H_ENTRY_TIME_SQ] = self.entry_time_s ** 2
+        hs[hk.H_DECAY_PER_S] = self._decay_per_s
+        hs[hk.H_UNLOAD_DECEL] = self.unload_decel_m_s2
+        hs[hk.H_RELEASE_S] = self.preview_release_s
+        hs[hk.H_REF_F] = self._fref.f
+        self._hs_live = True
+
+    def _pull(self) -> None:
+        """The state back from ``_hs`` after compiled cycles (the next cycle is this block's)."""
+        hs = self._hs
+        self._offset = float(hs[hk.H_OFFSET])
+        self._ahead_weight = float(hs[hk.H_AHEAD_WEIGHT])
+        self._rising = bool(hs[hk.H_RISING] != 0.0)
+        self._f_gov = float(hs[hk.H_F_GOV])
+        self._fref.f = float(hs[hk.H_REF_F])
+        self._hs_live = False
+
+    @property
     def preload_n(self) -> float:
         """The force reference's floor (N): the force law's preload."""
         return float(self.force_law.gains.preload_n)
@@ -145,6 +188,8 @@ class HybridController(Component):
         self.position.bind_cycle(self.state_in.data, r, self.tau.data)
 
     def update(self, t: float, dt: float) -> int:
+        if self._hs_live:
+            self._pull()
         raw = self.mode.data[0]
         # The enum is built only when the mode changed.
         if raw != self._sup_raw:

@@ -46,14 +46,9 @@ from rt.references.program import (
     ProgramTable,
     ReferenceOutput,
 )
-from rt.references.sequencer_kernel import F_DDOT_SMOOTHING
+from rt.references.sequencer_kernel import F_DDOT_SMOOTHING, PREVIEW_F_DDOT_HALF_WIDTH
 from rt.safety.events import SupervisorMode
 
-#: Half-width (samples) of the centred difference that gives the previewed F̈_d: the table is
-#: known on both sides of the sample read ahead, so the derivative is smoothed without lag
-#: (a recorded gait force's 1 kHz noise through a one-sample difference asks metres per
-#: second squared of the platform; ±5 samples at 1 kHz: first zero at 100 Hz).
-PREVIEW_F_DDOT_HALF_WIDTH = 5
 #: Component status codes (non-zero = the cycle's block failed).
 STATUS_APPROACH_FAILED = 20
 STATUS_PROGRAM_FAILED = 21
@@ -228,6 +223,11 @@ class ProgramReference(Component):
         self.refused = 0
         self.last_error = ""
 
+    #: False (on the class or a block): a previewed program's PLAY reads ahead in Python even
+    #: where the compiled cycle could (the reference, for tests and before/after benchmarks;
+    #: takes effect at the next program or ``preview_steps``).
+    compiled_read_ahead = True
+
     @property
     def preview_steps(self) -> int:
         """How far ahead ``force_preview`` reads a previewable force program (samples; 0: no
@@ -242,9 +242,20 @@ class ProgramReference(Component):
         self._sync_preview()
 
     def _sync_preview(self) -> None:
-        """Tell the compiled cycle whether the current program is read ahead: its PLAY cycles
-        are then the interpreted ones (the read-ahead is Python's)."""
-        self._seq[sk.S_PREVIEW] = float(self._preview is not None and self._preview_steps > 0)
+        """Tell the compiled cycle whether the current program is read ahead, and whether it
+        reads ahead itself: when the program's ``force_at`` is its table's F_d, Ḟ_d columns
+        (``force_at_reads_table()``: a ``protocols`` force table) the kernel reads them
+        (``sequencer_kernel.read_ahead``), else its PLAY cycles are the interpreted ones."""
+        seq = self._seq
+        previewing = self._preview is not None and self._preview_steps > 0
+        seq[sk.S_PREVIEW] = float(previewing)
+        reads_table = getattr(self._preview, "force_at_reads_table", None)
+        c = FZ - int(seq[sk.S_COL0])
+        seq[sk.S_AHEAD] = float(
+            previewing and self.compiled_read_ahead and self._table is not self._no_table
+            and callable(reads_table)
+            and bool(reads_table()) and 0 <= c and c + 1 < self._table.shape[1])
+        seq[sk.S_AHEAD_STEPS] = float(self._preview_steps)
 
     # ------------------------------------------------------------------ any thread
     def request(self, program: Program, *, approach_min_s: float | None = None,

@@ -53,8 +53,16 @@ S_LAST = 15            # the table's last sample index
 S_CONST = 16           # N_FIELDS: the row's columns outside the table's
 S_ROW = S_CONST + N_FIELDS   # N_FIELDS: scratch, the row of this cycle's sample
 S_PREVIEW = S_ROW + N_FIELDS  # 1 while the program is a ForcePreview read ahead (preview
-                              # steps > 0): its PLAY cycles are Python's (the read-ahead)
-SEQ_SIZE = S_PREVIEW + 1
+                              # steps > 0): its PLAY cycles are Python's unless S_AHEAD
+S_AHEAD = S_PREVIEW + 1       # 1: the read-ahead is the table's (``read_ahead``), compiled
+S_AHEAD_STEPS = S_AHEAD + 1   # how far ahead (samples)
+SEQ_SIZE = S_AHEAD_STEPS + 1
+
+#: Half-width (samples) of the centred difference that gives the previewed F̈_d: the table is
+#: known on both sides of the sample read ahead, so the derivative is smoothed without lag
+#: (a recorded gait force's 1 kHz noise through a one-sample difference asks metres per
+#: second squared of the platform; ±5 samples at 1 kHz: first zero at 100 Hz).
+PREVIEW_F_DDOT_HALF_WIDTH = 5
 
 # Phase and SupervisorMode values (rt.references.sequencer.Phase, rt.safety.events).
 APPROACH, PLAY, RETURN, STOPPED, REST = 0.0, 1.0, 2.0, 3.0, 4.0
@@ -110,16 +118,37 @@ def play_table(io, seq, table, dt):
 
 
 @njit(cache=True)
-def finish(io, seq, emitted):
+def read_ahead(io, seq, table, index, dt):
+    """``force_preview`` = the program's force ``S_AHEAD_STEPS`` samples after ``index`` (the
+    sample just played), read from its table as ``ForcePreview.force_at`` reads it (the index
+    clamped to the table) with F̈_d the centred difference of Ḟ_d over ±
+    :data:`PREVIEW_F_DDOT_HALF_WIDTH` samples (``ProgramReference._read_ahead``, the
+    interpreted reference: the same operations)."""
+    k = index + int(seq[S_AHEAD_STEPS])
+    h = PREVIEW_F_DDOT_HALF_WIDTH
+    last = int(seq[S_LAST])
+    c = FZ - int(seq[S_COL0])
+    f_dot_next = table[min(max(k + h, 0), last), c + 1]
+    f_dot_prev = table[min(max(k - h, 0), last), c + 1]
+    ka = min(max(k, 0), last)
+    io[IO_FORCE_PREVIEW] = table[ka, c]
+    io[IO_FORCE_PREVIEW + 1] = table[ka, c + 1]
+    io[IO_FORCE_PREVIEW + 2] = (f_dot_next - f_dot_prev) / (2.0 * h * dt)
+
+
+@njit(cache=True)
+def finish(io, seq, emitted, ahead=False):
     """Every cycle's last outputs: no tare request outside APPROACH (a stop or an abort ends a
     tare in progress), the force preview (the force itself: the compiled cycle never reads
-    ahead, a previewed program's PLAY is Python's), the phase (the one that produced this
+    ahead, a previewed program's PLAY is Python's, or ``ahead``: :func:`read_ahead` wrote it),
+    the phase (the one that produced this
     cycle's reference while approaching or playing) and the progress."""
     phase = seq[S_PHASE]
     if phase != APPROACH:
         io[IO_TARE_REQUEST] = 0.0
-    for i in range(3):
-        io[IO_FORCE_PREVIEW + i] = io[IO_FORCE + i]
+    if not ahead:
+        for i in range(3):
+            io[IO_FORCE_PREVIEW + i] = io[IO_FORCE + i]
     io[IO_PHASE] = emitted if (emitted == APPROACH or emitted == PLAY) else phase
     p = seq[S_K] / seq[S_N]
     io[IO_PROGRESS] = min(1.0, p)
@@ -133,6 +162,7 @@ def cycle(io, seq, q_meas, mode, table, dt):
         return NEED_PYTHON
     phase = seq[S_PHASE]
     result = DONE
+    ahead = False
     if mode[0] == HARD_STOP:
         for i in range(3):
             io[IO_Q + i] = q_meas[i]
@@ -149,12 +179,18 @@ def cycle(io, seq, q_meas, mode, table, dt):
             io[IO_Q + i] = seq[S_HOLD + i]
             io[IO_QD + i] = 0.0
             io[IO_QDD + i] = 0.0
-    elif phase == PLAY and seq[S_TABLE] != 0.0 and seq[S_PREVIEW] == 0.0:
+    elif phase == PLAY and seq[S_TABLE] != 0.0 and (seq[S_PREVIEW] == 0.0
+                                                    or seq[S_AHEAD] != 0.0):
         if play_table(io, seq, table, dt):
             result = PLAY_DONE
+        elif (seq[S_PREVIEW] != 0.0 and io[IO_CTRL_MODE] > 0.5
+              and not math.isnan(seq[S_ROW + FZ])):
+            # The sample just played: k counts the samples played (ProgramReference._play).
+            read_ahead(io, seq, table, int(seq[S_K]) - 1, dt)
+            ahead = True
     else:
         return NEED_PYTHON
-    finish(io, seq, phase)
+    finish(io, seq, phase, ahead)
     return result
 
 
@@ -179,3 +215,5 @@ def warm_up() -> None:
         play_table(io, seq, table, 1e-3)
     emit(io, seq, np.zeros(N_FIELDS), 0.0, 1e-3)
     finish(io, seq, REST)
+    for table in (np.zeros((1, 9)), table_ro):
+        read_ahead(io, seq, table, 0, 1e-3)
