@@ -24,10 +24,15 @@ class HybridController(Component):
     asks a force rate the robot cannot follow (a heel strike, a fast toe off: ``_lead``) the
     law tracks the reference read ahead (``force_preview``), and during such a rise its
     integral holds. Switching between
-    them resets the force law's integral so the force starts from its feedforward. The
-    supervisor is told when the loop depends on the force sensor. The force reference handed
-    to the law is never below the law's preload (``preload_n``, N): the platform only pushes
-    on a foot (``rt.control.force``).
+    them resets the force law's integrals so the force starts from its feedforward; its
+    contact-stiffness estimate starts from the last contact's (:meth:`forget_contact` and a
+    recovery from a hard stop forget it: the contact may then have changed), so a second
+    push on the same plate is gain-scheduled from its first cycle. Roll and pitch are held
+    at ``pose`` with its rate (the backward difference of the pose reference: a tilt under
+    load is tracked, not resisted by the angle PD's damping). The supervisor is told when the
+    loop depends on the force sensor. The force reference handed to the law is never below
+    the law's preload (``preload_n``, N): the platform only pushes on a foot
+    (``rt.control.force``).
     """
 
     def __init__(self, name: str, position: Controller, force: ExplicitForce,
@@ -66,6 +71,14 @@ class HybridController(Component):
         self.preview_release_s = 0.02
         self._ahead_weight = 0.0
         self._rising = False
+        #: The last contact's stiffness estimate (N/m; NaN: none known), the force law's
+        #: prior at the next force-mode entry.
+        self._k_contact = math.nan
+        self._k_entry = math.nan
+        self._forget = False
+        #: The pose reference's roll and pitch one cycle earlier (NaN: none yet).
+        self._roll_prev = math.nan
+        self._pitch_prev = math.nan
 
     def _beyond(self, f_dot: float) -> bool:
         """True when a force rate (N/s) asks the platform, through the contact's stiffness,
@@ -125,6 +138,19 @@ class HybridController(Component):
         self._f_gov = g - step
         fr.f, fr.f_dot, fr.f_ddot = self._f_gov, -step / dt, 0.0
 
+    def forget_contact(self) -> None:
+        """The contact may have changed (a new session, another patient): the next force-mode
+        entry starts the stiffness estimate from the gains' guess again. Any thread: taken at
+        the next cycle."""
+        self._forget = True
+
+    def _leave_force(self) -> None:
+        """Remember the contact's stiffness if the estimate learned it (it moved from the
+        prior it started from: it only learns while the contact is loaded)."""
+        k = self.force_law.k_est
+        if k != self._k_entry:
+            self._k_contact = k
+
     @property
     def preload_n(self) -> float:
         """The force reference's floor (N): the force law's preload."""
@@ -152,14 +178,23 @@ class HybridController(Component):
             mode = SupervisorMode.from_port(raw)
             if mode != self._sup_mode:
                 if self._sup_mode == SupervisorMode.HARD_STOP:
-                    # Drives back after a hard stop: integrators and estimates start afresh.
+                    # Drives back after a hard stop: integrators and estimates start afresh
+                    # (the foot may have been taken off meanwhile).
                     self.position.reset()
                     self.force_law.reset()
+                    self._k_contact = math.nan
                 self._sup_mode = mode
+        if self._forget:
+            self._forget = False
+            self._k_contact = math.nan
         force_mode = self.ctrl_mode.data[0] > 0.5
         measured = -self.wrench.data[2]
         if force_mode != self._in_force:
-            self.force_law.reset()
+            if self._in_force:
+                self._leave_force()
+            self.force_law.reset(self._k_contact)
+            self._k_entry = self.force_law.k_est
+            self._roll_prev = self._pitch_prev = math.nan
             self._in_force = force_mode
             self.supervisor.force_control = force_mode
             # Bumpless entry: the reference starts from the force the contact already carries
@@ -177,8 +212,15 @@ class HybridController(Component):
             fr.f_dot -= off / self.entry_time_s
             fr.f_ddot += off / self.entry_time_s ** 2
             self._govern(fr, dt)
-            fr.roll, fr.pitch = self.pose.data[1], self.pose.data[2]
-            fr.roll_rate = fr.pitch_rate = 0.0
+            roll, pitch = self.pose.data[1], self.pose.data[2]
+            fr.roll, fr.pitch = roll, pitch
+            # The pose's rate: the backward difference of its reference (exact on a ramp; 0 at
+            # the entry). Without it the angle PD's damping resists a tilt under load and its
+            # integral stores that torque: 0.1° overshoot at a 2°-in-1 s ramp's end.
+            fr.roll_rate = 0.0 if math.isnan(self._roll_prev) else (roll - self._roll_prev) / dt
+            fr.pitch_rate = (0.0 if math.isnan(self._pitch_prev)
+                             else (pitch - self._pitch_prev) / dt)
+            self._roll_prev, self._pitch_prev = roll, pitch
             return self.force_law.update(st, measured, fr, dt, self.tau.data)
         cycle = self.position.cycle
         if cycle is not None:
