@@ -13,8 +13,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.push import TIP_FRICTION_COEFFICIENT, TIP_TANGENTIAL_STIFFNESS_N_PER_M
-from calibration.push import TOOL_LENGTH_M, ForceTableGenerator
+from calibration.push import (
+    TIP_FRICTION_COEFFICIENT,
+    TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+    TOOL_LENGTH_M,
+    ForceTableGenerator,
+)
 from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
 from rt.control import force as force_mod
 from rt.control import kernels as ck

@@ -62,8 +62,19 @@ class HybridController(Component):
         self._offset = 0.0
         self.entry_time_s = 0.3
         self._decay_per_s = math.exp(-1.0 / self.entry_time_s)
-        #: Deceleration the platform can give when the force falls to the preload (m/s²).
-        self.unload_decel_m_s2 = 0.5
+        #: Deceleration (m/s²) the unloading governor plans for the platform's fall as the
+        #: force comes down to the preload. 1 m/s²: the force law's own bound on the motion it
+        #: commands by feedforward (``max_feedforward_accel_m_s2``), a ninth of what the drives
+        #: give in z (3 × 2036 N less the moving parts' ≈ 180 N weight over ≈ 630 kg at the
+        #: sliders: ≈ 9 m/s²). It was 0.5 without the lag allowance below: at 0.75-1 m/s² the
+        #: platform, following late, overshot the preload into a pull (−2.9 N at 1 m/s² on
+        #: functional_walk plate 0).
+        self.unload_decel_m_s2 = 1.0
+        #: How late (s) the platform follows the unloading reference's motion (the force
+        #: loop's lag); the governor brakes that much earlier (``_govern``). 10 ms: a 20 kN/s
+        #: step lags 6-11 ms on the twin (``ExplicitForceGains.preview_s``), and the 2.9 N
+        #: overshoot at 0.75 m/s² without it is k a τ²/2 for τ = 8.8 ms. 0: no allowance.
+        self.unload_lag_s = 0.01
         self._f_gov = math.nan
         #: How long (s) the law takes to come back from the previewed reference to the
         #: program's own once the transient is over: the reference's time runs at
@@ -119,10 +130,11 @@ class HybridController(Component):
         """The force reference as the law gets it: never below the preload, and falling to it
         no faster than the platform can brake. Unloading at rate Ḟ moves the platform down at
         Ḟ/k through a contact of stiffness k; stopping that motion within the force left above
-        the preload, (F − F_min)/k of travel, needs Ḟ² ≤ 2 a k (F − F_min). A toe off that
-        unloads faster (≈ 8 kN/s in real records) would carry the platform past the preload
-        into pulling on the foot; the reference is slowed there instead (rising is followed
-        as it is)."""
+        the preload, (F − F_min)/k of travel, needs Ḟ² ≤ 2 a k (F − F_min); the platform
+        follows ``unload_lag_s`` (τ) late, so it travels v τ more: v²/(2a) + v τ ≤
+        (F − F_min)/k. A toe off that unloads faster (≈ 8 kN/s in real records) would carry
+        the platform past the preload into pulling on the foot; the reference is slowed there
+        instead (rising is followed as it is)."""
         floor = self.preload_n
         target = max(floor, fr.f)
         g = self._f_gov
@@ -133,7 +145,16 @@ class HybridController(Component):
             fr.f = target
             return
         k = self.force_law.k_est
-        max_rate = math.sqrt(2.0 * self.unload_decel_m_s2 * k * (g - floor))
+        a, lag = self.unload_decel_m_s2, self.unload_lag_s
+        if lag > 0.0:
+            # The platform follows the reference's motion ``lag`` late, so it stops that much
+            # later: v²/(2a) + v·lag ≤ (F − F_min)/k, i.e. v = −a·lag + √((a·lag)² +
+            # 2a (F − F_min)/k). Near the preload the fall becomes an exponential approach
+            # with time constant ``lag`` instead of a stop the platform overshoots.
+            al = a * lag
+            max_rate = k * (math.sqrt(al * al + 2.0 * a * (g - floor) / k) - al)
+        else:
+            max_rate = math.sqrt(2.0 * a * k * (g - floor))
         step = min(g - target, max_rate * dt)
         self._f_gov = g - step
         fr.f, fr.f_dot, fr.f_ddot = self._f_gov, -step / dt, 0.0
