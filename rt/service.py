@@ -791,7 +791,7 @@ class RtService:
             # A new session: another foot (or none) on the platform, so the force law's
             # remembered contact stiffness (from a calibration's pushes, an earlier patient)
             # no longer applies.
-            forget = getattr(pl.graph.components().get("controller"), "forget_contact", None)
+            forget = getattr(pl.graph.components.get("controller"), "forget_contact", None)
             if forget is not None:
                 forget()
             if strap is not None and pl.twin is not None:
