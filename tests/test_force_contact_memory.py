@@ -108,6 +108,7 @@ def test_the_second_push_is_scheduled_from_its_first_cycle(first_cycles) -> None
     pl = _plate_loop()
     try:
         ctl = pl.graph.component("controller")
+        ctl.remember_contact = True
         law = ctl.force_law
         guess = law.gains.stiffness_guess_n_per_m
         k_s = law.gains.schedule_stiffness_n_per_m
