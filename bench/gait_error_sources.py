@@ -3,7 +3,7 @@ with the law as it was before its preview (``--law before``: no preview, no lead
 not held at the drives' limit nor through a heel strike), in one run.
 
 Run:  .venv/bin/python bench/gait_error_sources.py [--data DIR] [--cases FILE:PLATE ...]
-      [--law shipped|before|both] [--json]
+      [--law shipped|before|both|stiff|governor] [--json]
 
 Each plate's protocol (``bench/gait_files.py``: 60 % of a 75 kg patient) is played on the
 in-process twin in simulated time (``protocols.session.build_twin_session``: the run
@@ -73,6 +73,14 @@ def _unscheduled(pl: Any) -> None:
                                                           angle_ki_n_m_per_rad_s=0.0)
 
 
+def _lagless(pl: Any) -> None:
+    """The unloading governor before its lag allowance: 0.5 m/s², no lag (the law otherwise
+    shipped)."""
+    c = pl.graph.component("controller")
+    c.unload_decel_m_s2 = 0.5
+    c.unload_lag_s = 0.0
+
+
 def run_case(case: gf.Case, data: Path, law: str, model: RobotModel) -> dict[str, Any]:
     pl_of: dict[str, Any] = {}
     probe = _Probe("probe", pl_of)
@@ -85,6 +93,8 @@ def run_case(case: gf.Case, data: Path, law: str, model: RobotModel) -> dict[str
             _before(pl)
         elif law == "unscheduled":
             _unscheduled(pl)
+        elif law == "lagless":
+            _lagless(pl)
         return pl
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -137,10 +147,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default=None, help="folder of the real C3D files")
     ap.add_argument("--cases", nargs="*", default=None, help="FILE:PLATE (default: every plate)")
-    ap.add_argument("--law", choices=("shipped", "before", "unscheduled", "both", "stiff"),
+    ap.add_argument("--law", choices=("shipped", "before", "unscheduled", "lagless", "both",
+                                      "stiff", "governor"),
                     default="both",
                     help="both: before and shipped; stiff: unscheduled (no stiffness gain "
-                         "schedule, no angle integral) and shipped")
+                         "schedule, no angle integral) and shipped; governor: lagless (the "
+                         "unloading governor at 0.5 m/s² without its lag allowance) and "
+                         "shipped")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     data = gf.data_dir(args.data)
@@ -153,7 +166,8 @@ def main() -> int:
         wanted = {(c.split(":")[0], int(c.split(":")[1])) for c in args.cases}
         cases = [c for c in cases if (c.file, c.plate) in wanted]
     laws = {"both": ("before", "shipped"),
-            "stiff": ("unscheduled", "shipped")}.get(args.law, (args.law,))
+            "stiff": ("unscheduled", "shipped"),
+            "governor": ("lagless", "shipped")}.get(args.law, (args.law,))
     model = RobotModel.load()
     out = [run_case(c, data, law, model) for c in cases for law in laws]
     if args.json:

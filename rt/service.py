@@ -788,6 +788,12 @@ class RtService:
 
         def begin(loop: Any) -> float:
             pl.supervisor.limits = limits
+            # A new session: another foot (or none) on the platform, so the force law's
+            # remembered contact stiffness (from a calibration's pushes, an earlier patient)
+            # no longer applies.
+            forget = getattr(pl.graph.components.get("controller"), "forget_contact", None)
+            if forget is not None:
+                forget()
             if strap is not None and pl.twin is not None:
                 # The previous session's foot is unstrapped; this one's is strapped once the
                 # approach has brought the platform to the protocol's start.

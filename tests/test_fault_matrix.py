@@ -15,7 +15,7 @@ EXPECTED = {
     "ati_saturation": "soft_stop", "latency": "hard_stop", "hardware_estop": "hard_stop",
     "hand_stop": "soft_stop", "gui_estop": "hard_stop", "client_loss": "soft_stop",
     "rom_limit_at_speed": "soft_stop", "force_overload": "soft_stop",
-    "latency_force": "hard_stop",
+    "latency_force": "soft_stop",
 }
 
 
@@ -38,19 +38,16 @@ def test_fault_is_caught_within_its_targets(name):
         # The frozen encoder itself, free or with the foot on (and nothing tripped before it).
         assert r["cause"] == "encoder_frozen_0", r
     if name == "latency_force":
-        # An unstable force loop (issue 15): soft-stopped at once (the stale stream), but a soft
-        # stop ramps the force down through the same law, which goes on saturating the drives
-        # both ways; the sustained-saturation check hard-stops it once a whole window (0.5 s)
-        # into that soft stop more than half of it was saturated — within two windows of the
-        # fault — and the outputs are zero within 20 ms of that hard stop. Twin figures (fast
-        # mode, deterministic): soft stop 1 ms after the fault, hard stop 523 ms, zero output
-        # 1 ms after it, at rest 546 ms after the fault.
-        assert r["cause"].startswith("drive_saturated_"), r
+        # An unstable force loop (issue 15): soft-stopped at once (the stale stream), and the
+        # soft stop in force control hands over to the position law's hold at once, which
+        # needs neither the lagging sensor nor the contact: at rest within a few ms (twin
+        # figures, fast mode: soft stop 1 ms after the fault, at rest 6 ms after it). Before,
+        # the soft stop ramped the force down through the same unstable law and only the
+        # sustained-saturation check's hard stop (523 ms) ended it, at rest after 546 ms.
+        assert r["cause"] == "force_stale", r
         assert r["latency_ms"] is not None and r["latency_ms"] <= 20.0, r
-        assert 0.0 < r["hard_stop_at_s"] - 3.0 <= 2 * 0.5 + 0.05, r
-        assert r["zero_output_after_hard_ms"] is not None
-        assert r["zero_output_after_hard_ms"] <= 20.0, r
-    elif r["reaction"] == "hard_stop":
+        assert r["time_to_rest_ms"] is not None and r["time_to_rest_ms"] <= 50.0, r
+    if r["reaction"] == "hard_stop":
         # Hard stop: zero drive output within 20 ms of the fault (issue 5).
         assert r["time_to_zero_output_ms"] is not None and r["time_to_zero_output_ms"] <= 20.0
     if r["reaction"] == "soft_stop":

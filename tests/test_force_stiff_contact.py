@@ -87,16 +87,23 @@ def test_the_old_law_falls_into_the_limit_cycle(monkeypatch) -> None:
 
 
 def test_the_push_holds_its_force_and_its_roll_against_the_sticking_tip(monkeypatch) -> None:
-    """The shipped law: the ATI within 600 ± 30 N through the roll (measured 583-613 N), the
+    """The shipped law: the ATI within 600 ± 30 N through the roll (measured 586-609 N), the
     commands never at the drives' limit (≈ 2 kN; the highest, 1.5 kN, is the contact onset's,
-    the hold's ≤ 0.5 kN), the 2° roll reached."""
+    the hold's ≤ 0.5 kN), the 2° roll reached without overshoot beyond 0.04°. The hybrid
+    controller hands the law the roll's rate: before, the angle PD's damping resisted the
+    ramp and the angle integral stored that torque (kd ω ≈ 7 N m) on top of the tip's
+    friction (μ N h ≈ 58 N m): 2.10° at the ramp's end. Now 2.028° (twin, deterministic):
+    the integral holds only the friction torque (59 N m at the ramp's end), and the tip, at
+    rest, sticks where the platform's deceleration left it (the roll's encoder quantum here
+    is 0.002°)."""
     data, taus = _fast_tilt(monkeypatch, None)
     fz, rolls = _loaded(data)
     assert float(np.min(fz)) > 570.0 and float(np.max(fz)) < 630.0
     limit = ExplicitForce(MODEL, compiled=False).drive_force_limit_n
     assert float(np.max(taus)) < limit
     assert float(np.percentile(taus, 99)) < 0.5 * limit
-    assert float(np.max(rolls)) == pytest.approx(2.0, abs=0.2)
+    assert float(np.max(rolls)) == pytest.approx(2.0, abs=0.04)
+    assert float(np.max(rolls)) >= 1.99
 
 
 def _pressed_state():

@@ -143,9 +143,11 @@ def _bench():
 
 
 #: Each file's (first plate's) force RMS error bound, % of the peak: the figure measured on the
-#: twin (type2 2.48, type4 2.45, type3 0.37, functional_walk 3.22, eb015pi 0.33) with margin.
+#: twin (type2 2.39, type4 2.39, type3 0.35, functional_walk 2.60, eb015pi 0.33) with margin;
+#: functional_walk's is DESIGN's 3 % itself (it was 3.22 % before the unloading governor
+#: allowed for the force loop's lag and braked at 1 m/s² instead of 0.5).
 RMS_BOUND_PCT = {"type2_vicon.c3d": 2.8, "type4_vicon.c3d": 2.8, "type3_kistler_fp1.c3d": 0.6,
-                 "functional_walk.c3d": 3.5, "eb015pi_offset.c3d": 0.6}
+                 "functional_walk.c3d": 3.0, "eb015pi_offset.c3d": 0.6}
 HEEL_STRIKES = {"type2_vicon.c3d", "type4_vicon.c3d", "functional_walk.c3d"}
 
 
@@ -166,9 +168,10 @@ def test_each_real_file_replays_on_the_twin_without_pulling(tmp_path, name):
     assert s["min_force_n"] >= 0.0
     # Twin figures (bench/gait_files.py --in-process; deterministic): heel strikes rise by
     # 0.5 BW in ~5 ms, beyond what the actuators can follow. The force law's preview and its
-    # integral held through such a rise took them from 3.9-4.5 % to 2.4-3.2 % of the peak
-    # (functional_walk plate 0 is the one still above the 3 % target: its toe off is slowed by
-    # the unloading governor); the slow 200 Hz and quasi-static records track within 0.4 %.
+    # integral held through such a rise took them from 3.9-4.5 % to 2.4-3.2 % of the peak,
+    # the unloading governor's lag allowance to 2.3-2.6 % (functional_walk plate 0's toe off
+    # was the one above the 3 % target); the slow 200 Hz and quasi-static records track
+    # within 0.4 %.
     assert s["rms_error_pct"] <= RMS_BOUND_PCT[name], s["rms_error_pct"]
     # Where the protocol was beyond the robot is reported, not hidden: the heel strikes ask
     # the drives more than their ≈ 2 kN for a few ms (allowed: under 20 ms).

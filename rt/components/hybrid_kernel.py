@@ -1,8 +1,9 @@
 """The hybrid controller's force-mode cycle as one numba kernel (issue 16): the reference the
 explicit-force law tracks (``HybridController._lead``: the read-ahead while the program asks
 more than the robot follows; the bumpless entry's decaying offset; ``_govern``: the preload
-floor and the braked unloading), then the law's own kernel (``rt.control.kernels
-.explicit_force``, called with the arguments ``ExplicitForce.update`` passes).
+floor and the braked unloading, allowing for the platform's lag; the pose's rate), then the
+law's own kernel (``rt.control.kernels.explicit_force``, called with the arguments
+``ExplicitForce.update`` passes).
 
 ``rt.components.protocol_blocks.HybridController`` keeps the interpreted cycle: it is the
 reference, and it runs every cycle the kernel does not cover (a mode switch, a supervisor mode
@@ -33,7 +34,10 @@ from rt.control import kernels as ck
  H_UNLOAD_DECEL,    # ``unload_decel_m_s2`` (m/s²)
  H_RELEASE_S,       # ``preview_release_s`` (s)
  H_REF_F,           # the reference the law got this cycle (N, F_d; read by benches)
- H_SIZE) = range(11)
+ H_UNLOAD_LAG,      # ``unload_lag_s``: how late the platform follows the unloading (s)
+ H_ROLL_PREV,       # the pose reference's roll one cycle earlier (rad; NaN: none yet)
+ H_PITCH_PREV,      # its pitch one cycle earlier (rad; NaN: none yet)
+ H_SIZE) = range(14)
 
 # ExplicitForce's gains (``ExplicitForce._pack_gains``) this cycle reads.
 _FG_PRELOAD, _FG_VMAX = 9, 10
@@ -89,7 +93,14 @@ def force_reference(hs, fg, fs, force, preview, dt, fr):
         f = target
     else:
         k = fs[ck.FS_K]
-        max_rate = math.sqrt(2.0 * hs[H_UNLOAD_DECEL] * k * (g - floor))
+        a = hs[H_UNLOAD_DECEL]
+        lag = hs[H_UNLOAD_LAG]
+        if lag > 0.0:
+            # The platform follows ``lag`` late: v²/(2a) + v·lag ≤ (F − F_min)/k.
+            al = a * lag
+            max_rate = k * (math.sqrt(al * al + 2.0 * a * (g - floor) / k) - al)
+        else:
+            max_rate = math.sqrt(2.0 * a * k * (g - floor))
         step = _pymin(g - target, max_rate * dt)
         hs[H_F_GOV] = g - step
         f = hs[H_F_GOV]
@@ -107,11 +118,21 @@ def force_cycle(hs, force, preview, pose, wrench, ti, tf, stb, fg, fs, work, out
                 fr, dt):
     """One force-mode cycle of the hybrid controller (steady: no switch this cycle): the
     reference (:func:`force_reference`), then the law's kernel as ``ExplicitForce.update``
-    calls it (the measured F = −w_S.fz; roll and pitch held at the program's pose), the
+    calls it (the measured F = −w_S.fz; roll and pitch held at the program's pose with its rate), the
     command copied to the law's ``tau`` as it does."""
     force_reference(hs, fg, fs, force, preview, dt, fr)
     measured = -wrench[2]
-    ck.explicit_force(ti, tf, stb, fg, fs, measured, fr[0], fr[1], fr[2], pose[1], pose[2],
-                      0.0, 0.0, fr[3], dt, work, out)
+    # The pose's rate: the backward difference of its reference (0 on the first force-mode
+    # cycle), as the interpreted block computes it.
+    roll = pose[1]
+    pitch = pose[2]
+    prev = hs[H_ROLL_PREV]
+    roll_rate = 0.0 if math.isnan(prev) else (roll - prev) / dt
+    prev = hs[H_PITCH_PREV]
+    pitch_rate = 0.0 if math.isnan(prev) else (pitch - prev) / dt
+    hs[H_ROLL_PREV] = roll
+    hs[H_PITCH_PREV] = pitch
+    ck.explicit_force(ti, tf, stb, fg, fs, measured, fr[0], fr[1], fr[2], roll, pitch,
+                      roll_rate, pitch_rate, fr[3], dt, work, out)
     for i in range(3):
         law_tau[i] = out[i]

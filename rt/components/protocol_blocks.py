@@ -27,7 +27,12 @@ class HybridController(Component):
     asks a force rate the robot cannot follow (a heel strike, a fast toe off: ``_lead``) the
     law tracks the reference read ahead (``force_preview``), and during such a rise its
     integral holds. Switching between
-    them resets the force law's integral so the force starts from its feedforward. The
+    them resets the force law's integrals so the force starts from its feedforward; with
+    ``remember_contact`` its contact-stiffness estimate starts from the last contact's
+    (:meth:`forget_contact` and a recovery from a hard stop forget it: the contact may then
+    have changed), so a second push on the same plate is gain-scheduled from its first cycle.
+    Roll and pitch are held at ``pose`` with its rate (the backward difference of the pose
+    reference: a tilt under load is tracked, not resisted by the angle PD's damping). The
     supervisor is told when the loop depends on the force sensor. The force reference handed
     to the law is never below the law's preload (``preload_n``, N): the platform only pushes
     on a foot (``rt.control.force``).
@@ -69,8 +74,19 @@ class HybridController(Component):
         self._offset = 0.0
         self.entry_time_s = 0.3
         self._decay_per_s = math.exp(-1.0 / self.entry_time_s)
-        #: Deceleration the platform can give when the force falls to the preload (m/s²).
-        self.unload_decel_m_s2 = 0.5
+        #: Deceleration (m/s²) the unloading governor plans for the platform's fall as the
+        #: force comes down to the preload. 1 m/s²: the force law's own bound on the motion it
+        #: commands by feedforward (``max_feedforward_accel_m_s2``), a ninth of what the drives
+        #: give in z (3 × 2036 N less the moving parts' ≈ 180 N weight over ≈ 630 kg at the
+        #: sliders: ≈ 9 m/s²). It was 0.5 without the lag allowance below: at 0.75-1 m/s² the
+        #: platform, following late, overshot the preload into a pull (−2.9 N at 1 m/s² on
+        #: functional_walk plate 0).
+        self.unload_decel_m_s2 = 1.0
+        #: How late (s) the platform follows the unloading reference's motion (the force
+        #: loop's lag); the governor brakes that much earlier (``_govern``). 10 ms: a 20 kN/s
+        #: step lags 6-11 ms on the twin (``ExplicitForceGains.preview_s``), and the 2.9 N
+        #: overshoot at 0.75 m/s² without it is k a τ²/2 for τ = 8.8 ms. 0: no allowance.
+        self.unload_lag_s = 0.01
         self._f_gov = math.nan
         #: How long (s) the law takes to come back from the previewed reference to the
         #: program's own once the transient is over: the reference's time runs at
@@ -78,6 +94,19 @@ class HybridController(Component):
         self.preview_release_s = 0.02
         self._ahead_weight = 0.0
         self._rising = False
+        #: Start each force-mode entry's stiffness estimate from the last contact's (off by
+        #: default: with a plate's k̂ remembered the unscheduled-gap phase before contact is
+        #: slower, 74 ms against 31 ms on the twin, and an RT calibration run saw "pulling"
+        #: soft stops (20 ms of F < 0 before contact) that were not ruled out as its effect).
+        self.remember_contact = False
+        #: The last contact's stiffness estimate (N/m; NaN: none known), the force law's
+        #: prior at the next force-mode entry.
+        self._k_contact = math.nan
+        self._k_entry = math.nan
+        self._forget = False
+        #: The pose reference's roll and pitch one cycle earlier (NaN: none yet).
+        self._roll_prev = math.nan
+        self._pitch_prev = math.nan
 
     def _beyond(self, f_dot: float) -> bool:
         """True when a force rate (N/s) asks the platform, through the contact's stiffness,
@@ -118,10 +147,11 @@ class HybridController(Component):
         """The force reference as the law gets it: never below the preload, and falling to it
         no faster than the platform can brake. Unloading at rate Ḟ moves the platform down at
         Ḟ/k through a contact of stiffness k; stopping that motion within the force left above
-        the preload, (F − F_min)/k of travel, needs Ḟ² ≤ 2 a k (F − F_min). A toe off that
-        unloads faster (≈ 8 kN/s in real records) would carry the platform past the preload
-        into pulling on the foot; the reference is slowed there instead (rising is followed
-        as it is)."""
+        the preload, (F − F_min)/k of travel, needs Ḟ² ≤ 2 a k (F − F_min); the platform
+        follows ``unload_lag_s`` (τ) late, so it travels v τ more: v²/(2a) + v τ ≤
+        (F − F_min)/k. A toe off that unloads faster (≈ 8 kN/s in real records) would carry
+        the platform past the preload into pulling on the foot; the reference is slowed there
+        instead (rising is followed as it is)."""
         floor = self.preload_n
         target = max(floor, fr.f)
         g = self._f_gov
@@ -132,10 +162,32 @@ class HybridController(Component):
             fr.f = target
             return
         k = self.force_law.k_est
-        max_rate = math.sqrt(2.0 * self.unload_decel_m_s2 * k * (g - floor))
+        a, lag = self.unload_decel_m_s2, self.unload_lag_s
+        if lag > 0.0:
+            # The platform follows the reference's motion ``lag`` late, so it stops that much
+            # later: v²/(2a) + v·lag ≤ (F − F_min)/k, i.e. v = −a·lag + √((a·lag)² +
+            # 2a (F − F_min)/k). Near the preload the fall becomes an exponential approach
+            # with time constant ``lag`` instead of a stop the platform overshoots.
+            al = a * lag
+            max_rate = k * (math.sqrt(al * al + 2.0 * a * (g - floor) / k) - al)
+        else:
+            max_rate = math.sqrt(2.0 * a * k * (g - floor))
         step = min(g - target, max_rate * dt)
         self._f_gov = g - step
         fr.f, fr.f_dot, fr.f_ddot = self._f_gov, -step / dt, 0.0
+
+    def forget_contact(self) -> None:
+        """The contact may have changed (a new session, another patient): the next force-mode
+        entry starts the stiffness estimate from the gains' guess again. Any thread: taken at
+        the next cycle."""
+        self._forget = True
+
+    def _leave_force(self) -> None:
+        """Remember the contact's stiffness if the estimate learned it (it moved from the
+        prior it started from: it only learns while the contact is loaded)."""
+        k = self.force_law.k_est
+        if self.remember_contact and k != self._k_entry:
+            self._k_contact = k
 
     @property
     def law_force_ref_n(self) -> float:
@@ -156,6 +208,9 @@ class HybridController(Component):
         hs[hk.H_UNLOAD_DECEL] = self.unload_decel_m_s2
         hs[hk.H_RELEASE_S] = self.preview_release_s
         hs[hk.H_REF_F] = self._fref.f
+        hs[hk.H_UNLOAD_LAG] = self.unload_lag_s
+        hs[hk.H_ROLL_PREV] = self._roll_prev
+        hs[hk.H_PITCH_PREV] = self._pitch_prev
         self._hs_live = True
 
     def _pull(self) -> None:
@@ -166,6 +221,8 @@ class HybridController(Component):
         self._rising = bool(hs[hk.H_RISING] != 0.0)
         self._f_gov = float(hs[hk.H_F_GOV])
         self._fref.f = float(hs[hk.H_REF_F])
+        self._roll_prev = float(hs[hk.H_ROLL_PREV])
+        self._pitch_prev = float(hs[hk.H_PITCH_PREV])
         self._hs_live = False
 
     @property
@@ -197,14 +254,23 @@ class HybridController(Component):
             mode = SupervisorMode.from_port(raw)
             if mode != self._sup_mode:
                 if self._sup_mode == SupervisorMode.HARD_STOP:
-                    # Drives back after a hard stop: integrators and estimates start afresh.
+                    # Drives back after a hard stop: integrators and estimates start afresh
+                    # (the foot may have been taken off meanwhile).
                     self.position.reset()
                     self.force_law.reset()
+                    self._k_contact = math.nan
                 self._sup_mode = mode
+        if self._forget:
+            self._forget = False
+            self._k_contact = math.nan
         force_mode = self.ctrl_mode.data[0] > 0.5
         measured = -self.wrench.data[2]
         if force_mode != self._in_force:
-            self.force_law.reset()
+            if self._in_force:
+                self._leave_force()
+            self.force_law.reset(self._k_contact)
+            self._k_entry = self.force_law.k_est
+            self._roll_prev = self._pitch_prev = math.nan
             self._in_force = force_mode
             self.supervisor.force_control = force_mode
             # Bumpless entry: the reference starts from the force the contact already carries
@@ -222,8 +288,15 @@ class HybridController(Component):
             fr.f_dot -= off / self.entry_time_s
             fr.f_ddot += off / self.entry_time_s ** 2
             self._govern(fr, dt)
-            fr.roll, fr.pitch = self.pose.data[1], self.pose.data[2]
-            fr.roll_rate = fr.pitch_rate = 0.0
+            roll, pitch = self.pose.data[1], self.pose.data[2]
+            fr.roll, fr.pitch = roll, pitch
+            # The pose's rate: the backward difference of its reference (exact on a ramp; 0 at
+            # the entry). Without it the angle PD's damping resists a tilt under load and its
+            # integral stores that torque: 0.1° overshoot at a 2°-in-1 s ramp's end.
+            fr.roll_rate = 0.0 if math.isnan(self._roll_prev) else (roll - self._roll_prev) / dt
+            fr.pitch_rate = (0.0 if math.isnan(self._pitch_prev)
+                             else (pitch - self._pitch_prev) / dt)
+            self._roll_prev, self._pitch_prev = roll, pitch
             return self.force_law.update(st, measured, fr, dt, self.tau.data)
         cycle = self.position.cycle
         if cycle is not None:

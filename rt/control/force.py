@@ -273,20 +273,29 @@ class ExplicitForce:
     def _last_z(self, value: float) -> None:
         self._fs[ck.FS_LAST_Z] = value
 
-    def reset(self) -> None:
+    def reset(self, stiffness_n_per_m: float | None = None) -> None:
+        """Integrals to zero, the stiffness estimate back to its prior: the gains' guess, or
+        ``stiffness_n_per_m`` (N/m) when the contact is known (the last contact's estimate,
+        ``rt.components.protocol_blocks.HybridController``), held within the estimate's own
+        bounds (1/5..20× the guess). The offset of F ≈ k z + c is relearned either way: a
+        contact starts wherever the pose puts it."""
         g = self.gains
+        guess = g.stiffness_guess_n_per_m
+        k0 = guess
+        if stiffness_n_per_m is not None and math.isfinite(stiffness_n_per_m):
+            k0 = min(20.0 * guess, max(0.2 * guess, float(stiffness_n_per_m)))
         self.integral = 0.0
         fs = self._fs
         fs[ck.FS_ANGLE_I:ck.FS_ANGLE_I + 2] = 0.0
         self.rls = _Rls(fs[ck.FS_THETA:ck.FS_THETA + 2], fs[ck.FS_P:ck.FS_P + 4].reshape(2, 2))
         self.rls.P[:] = np.eye(2)
         self.rls.theta[:] = 0.0
-        self.rls.theta[0] = g.stiffness_guess_n_per_m
+        self.rls.theta[0] = k0
         # Prior: the guess is good to about ±50 %; the offset c (= −k z_contact) is unknown.
-        self.rls.theta[1] = -g.stiffness_guess_n_per_m * 0.7
-        self.rls.P[:] = np.diag([(0.5 * g.stiffness_guess_n_per_m) ** 2 / 1e-4, 1e10])
+        self.rls.theta[1] = -k0 * 0.7
+        self.rls.P[:] = np.diag([(0.5 * k0) ** 2 / 1e-4, 1e10])
         self._last_z = math.nan
-        self.k_est = g.stiffness_guess_n_per_m
+        self.k_est = k0
         self.tau = np.zeros(3)
 
     def set_gains(self, **changes) -> None:

@@ -368,11 +368,17 @@ class ProgramReference(Component):
                 if f[0] > 1.0 else 0.0
             f[1] = f[2] = 0.0
             if f[0] == 0.0:
-                self.ctrl_mode.data[0] = float(Mode.POSITION)
-                self.q_ref.data[:] = self.q_meas.data
-                self.qd_ref.data[:] = 0.0
-                self.qdd_ref.data[:] = 0.0
-                self.approach.reset(self.q_meas.data)
+                self._hold_here()
+
+    def _hold_here(self) -> None:
+        """Leave force control: the position law holds where the robot is (not where the
+        contact started: under load the platform had moved into it)."""
+        self.ctrl_mode.data[0] = float(Mode.POSITION)
+        self.force.data[:] = 0.0
+        self.q_ref.data[:] = self.q_meas.data
+        self.qd_ref.data[:] = 0.0
+        self.qdd_ref.data[:] = 0.0
+        self.approach.reset(self.q_meas.data)
 
     def update(self, t: float, dt: float) -> int:
         if not self.compiled:
@@ -416,7 +422,14 @@ class ProgramReference(Component):
         if mode != st.mode:
             if mode == SupervisorMode.SOFT_STOP and st.phase in (Phase.APPROACH, Phase.PLAY,
                                                                  Phase.RETURN):
-                self._brake()
+                if self.ctrl_mode.data[0] > 0.5:
+                    # In force control: the position law holds where the robot is, at once.
+                    # Ramping the force down instead would run the force law on, and a soft
+                    # stop may be the sign that it is unstable (a lagging sensor, a contact it
+                    # does not suit): the hold needs neither the sensor nor the contact.
+                    self._hold_here()
+                else:
+                    self._brake()
                 st.phase = Phase.STOPPED
             elif mode == SupervisorMode.HARD_STOP:
                 st.phase = Phase.STOPPED
