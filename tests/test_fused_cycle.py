@@ -199,20 +199,18 @@ def test_a_force_then_a_position_protocol_are_the_per_block_cycle_bit_for_bit(mo
 
 @pytest.mark.parametrize("stop", ["soft", "estop"])
 def test_a_stop_in_force_mode_is_the_per_block_cycle_bit_for_bit(model, stop):
-    """Mid-sine, in force mode: the operator's soft stop (the force ramps down in the
-    reference, the hybrid controller still in force mode for those cycles, then holds in
-    position where the loaded platform is) or an e-stop (drives off, the hard stop's
-    hand-over); then its reset and the hold. Every cycle compared."""
+    """Mid-sine, in force mode: the operator's soft stop (the reference hands over to the
+    position law's hold where the loaded platform is, at once: force6) or an e-stop (drives
+    off, the hard stop's hand-over); then its reset and the hold. Every cycle compared."""
     h = _Lockstep(lambda: _sine_loop(model))
     _to_play(h)
     h.run(700)
     ctl = h.f.graph.component("controller")
     assert ctl._in_force and h.force_fused > 600, (h.force_fused, h.ran)
     if stop == "soft":
-        h.both(lambda pl: setattr(pl.reference, "force_ramp_s", 0.05))   # a shorter test
         h.both(lambda pl: pl.supervisor.request_stop())
         h.run(40)
-        assert ctl._in_force                            # still ramping the force down
+        assert not ctl._in_force                        # holding in position already
     else:
         h.both(lambda pl: pl.supervisor.request_estop("operator"))
         h.run(40)

@@ -246,10 +246,13 @@ def scenarios(model: RobotModel) -> list[Scenario]:
                  trajectory=_rise(0.005, model), patient=PatientLimits(max_force_n=400.0)),
         # Sustained drive saturation (issue 15): a 200 N force hold on the strapped foot when
         # the sensors' link starts lagging (nothing for 10 ms, then every reading 10 ms late)
-        # — the force loop, kicked by the gap, cannot settle with the lag: the drives saturate both ways, the foot is
-        # pushed and let go. The stale stream, the pull and the speed checks soft-stop it
-        # first, but a soft stop ramps the force down through the same unstable law: only
-        # the saturation check, a window into that soft stop, drops the drives.
+        # — the force loop, kicked by the gap, cannot settle with the lag. The stale stream's
+        # soft stop hands over to the position law's hold where the robot is, at once (the
+        # hold needs neither the sensor nor the contact: soft stop at 1 ms, at rest at 6 ms,
+        # force6). Before that hand-over a soft stop ramped the force down through the same
+        # unstable law: the drives saturated both ways and only the saturation check, a
+        # window into that soft stop, dropped them (hard stop at 523 ms). The saturation
+        # check stays the net for any other law or contact (tests/test_drive_saturation.py).
         Scenario("latency_force", lag_from_now,
                  environment=patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0),
                  force_hold_n=200.0),
