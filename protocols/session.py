@@ -225,6 +225,18 @@ def summarize(pl: PositionLoop, tap: SignalTap, protocol, model: RobotModel,
     return figures_of(pl, tap, protocol, model, ankle=ankle).result(pl.events.snapshot())
 
 
+def drive_saturation_margin(peak_per_axis_s: list[float], limits: RobotLimits) -> dict:
+    """The most saturated time any of the supervisor's sliding windows held, per axis and the
+    largest (s), beside what stops the robot: more than ``stops_beyond_s`` at the drives' limit
+    within any ``window_s`` (``RobotLimits.max_saturated_fraction`` × ``saturation_window_s``).
+    A heel strike's few ms are far from it; a protocol close to it would be stopped by a
+    slightly heavier patient or a stiffer contact."""
+    peaks = [float(x) for x in peak_per_axis_s]
+    return {"peak_s": max(peaks, default=0.0), "per_axis_s": peaks,
+            "window_s": limits.saturation_window_s,
+            "stops_beyond_s": limits.max_saturated_fraction * limits.saturation_window_s}
+
+
 def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     """Check and simulate the protocol; raises ``ProtocolValidationError`` with the reason.
 
@@ -258,6 +270,9 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
         "rms_error_pct": summary["rms_error_pct"],
         # Where the protocol was beyond the robot (the drives at their limit), even briefly.
         "at_robot_limit": figures.at_limit(1.0 / RATE_HZ),
+        # How close it came to the sustained-saturation stop (``drive_saturated_<axis>``).
+        "drive_saturation": drive_saturation_margin(pl.supervisor.saturated_peak_s,
+                                                    setup.robot_limits),
     }
     holds = summary.get("ankle", {}).get("torque_holds")
     if holds is not None:

@@ -101,3 +101,9 @@ def print_summary(s: dict) -> None:
           f"{lim['limit']:g} {lim['unit']}, {lim['longest_s'] * 1e3:.0f} ms from t = "
           f"{lim['from_s']:.3f} s"
           + ("" if play is None else f" ({play:.3f} s into the protocol)") + "\n")
+    sat = pre.get("drive_saturation")
+    if isinstance(sat, dict) and sat.get("peak_s", 0.0) > 0.0:
+        # How close that came to the sustained-saturation stop.
+        w(f"  drives saturated  at most {sat['peak_s'] * 1e3:.0f} ms in any "
+          f"{sat['window_s']:g} s (the robot stops beyond {sat['stops_beyond_s'] * 1e3:.0f} ms)"
+          "\n")

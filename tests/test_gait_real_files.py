@@ -176,12 +176,19 @@ def test_each_real_file_replays_on_the_twin_without_pulling(tmp_path, name):
     # Where the protocol was beyond the robot is reported, not hidden: the heel strikes ask
     # the drives more than their ≈ 2 kN for a few ms (allowed: under 20 ms).
     beyond = {b["what"]: b for b in s["preflight"]["at_robot_limit"]}
+    # And how close that came to the supervisor's sustained-saturation stop (more than half of
+    # any 0.5 s window at the drives' limit): a heel strike's few ms per window, far from it.
+    sat = s["preflight"]["drive_saturation"]
+    assert sat["window_s"] == 0.5 and sat["stops_beyond_s"] == 0.25
+    assert sat["peak_s"] == max(sat["per_axis_s"])
     if name in HEEL_STRIKES:
         hit = beyond["actuator force"]
         assert hit["peak"] > hit["limit"] == 2000.0 and 0.0 < hit["longest_s"] <= 0.02
         assert 0.0 < hit["from_s"] < s["duration_s"]
+        assert 0.0 < sat["peak_s"] <= 0.05, sat
     else:
         assert beyond == {}
+        assert sat["peak_s"] == 0.0, sat
     src = s["source"]
     assert src["source_sha256"] == hashlib.sha256((DATA / name).read_bytes()).hexdigest()
     assert src["plate_index"] == case.plate and src["scale_factor"] > 0.0

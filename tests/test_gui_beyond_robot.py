@@ -12,7 +12,7 @@ from PySide6.QtCore import QLocale, Qt
 from test_gait_real_files import DATA, _bench
 
 from app.i18n import install_language
-from app.pages.prescribe import beyond_words, clinical_limits
+from app.pages.prescribe import beyond_words, clinical_limits, saturation_words
 from app.patient_context import PatientContext
 from protocols.rt_session import protocol_document
 
@@ -53,6 +53,30 @@ def test_beyond_words_say_what_the_patient_gets():
         assert clinical_limits([entry, volts]) == [entry, volts]
         assert clinical_limits([volts]) == [volts]
     finally:
+        QLocale.setDefault(saved)
+
+
+def test_saturation_words_say_how_close_the_drives_came_to_the_stop(qtbot):
+    """The sustained-saturation margin (``drive_saturation``) in words and the language's
+    numbers; nothing when nothing saturated or the entry is not understood."""
+    sat = {"peak_s": 0.0043, "per_axis_s": [0.0043, 0.001, 0.0], "window_s": 0.5,
+           "stops_beyond_s": 0.25}
+    saved = QLocale()
+    QLocale.setDefault(QLocale(QLocale.Language.English, QLocale.Country.UnitedStates))
+    try:
+        assert saturation_words(sat) == (
+            "The drives stay at their limit for at most 4 ms in any 0.5 s; the robot stops "
+            "itself beyond 250 ms.")
+        assert saturation_words({**sat, "peak_s": 0.0}) == ""
+        assert saturation_words({**sat, "window_s": float("nan")}) == ""
+        assert saturation_words({**sat, "stops_beyond_s": "250"}) == ""
+        assert saturation_words(None) == ""
+        install_language("es")
+        QLocale.setDefault(QLocale(QLocale.Language.Spanish, QLocale.Country.Spain))
+        text = saturation_words(sat)
+        assert "como máximo 4 ms" in text and "0,5 s" in text and "250 ms" in text
+    finally:
+        install_language("en")
         QLocale.setDefault(saved)
 
 
@@ -119,6 +143,11 @@ def test_prescribe_warns_where_a_heel_strike_asks_more_than_the_drives(gui, qtbo
     assert hit in shown and text.count("•") == len(shown)
     for entry in shown:
         assert beyond_words(entry) in text
+    # How close the heel strikes came to the sustained-saturation stop: a few ms of the
+    # 250 ms (half the 0.5 s window) that stop the robot, said under the lines.
+    sat = page.last_preflight["predicted"]["drive_saturation"]
+    assert 0.0 < sat["peak_s"] <= 0.05 and sat["stops_beyond_s"] == 0.25
+    assert saturation_words(sat) and text.endswith(saturation_words(sat))
     locale = QLocale()
     for figure in (locale.toString(hit["limit"], "f", 0), locale.toString(hit["peak"], "f", 0),
                    locale.toString(hit["longest_s"] * 1e3, "f", 0),

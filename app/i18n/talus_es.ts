@@ -487,52 +487,57 @@
         <translation>Comprobación previa superada. Picos previstos: %1</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="271"/>
+        <location filename="../pages/prescribe.py" line="274"/>
         <source>Warning: this protocol asks more than the robot can give (the session may still start):</source>
         <translation>Aviso: este protocolo pide más de lo que el robot puede dar (la sesión puede iniciarse igualmente):</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="281"/>
+        <location filename="../pages/prescribe.py" line="285"/>
         <source>Choose a patient first</source>
         <translation>Elija primero un paciente</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="336"/>
+        <location filename="../pages/prescribe.py" line="340"/>
         <source>the robot will deliver at most %1 N per drive where the protocol asks up to %2 N, for %3 ms from t = %4 s: there the force on the foot falls short of the prescribed one</source>
         <translation>el robot dará como máximo %1 N por accionamiento donde el protocolo pide hasta %2 N, durante %3 ms desde t = %4 s: ahí la fuerza sobre el pie queda por debajo de la prescrita</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="343"/>
+        <location filename="../pages/prescribe.py" line="347"/>
         <source>the drives run at full power (their %1 V command limit) for %2 ms from t = %3 s: there the platform follows the protocol less closely</source>
         <translation>los accionamientos trabajan a plena potencia (su límite de consigna de %1 V) durante %2 ms desde t = %3 s: ahí la plataforma sigue el protocolo con menos precisión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="355"/>
+        <location filename="../pages/prescribe.py" line="368"/>
+        <source>The drives stay at their limit for at most %1 ms in any %2 s; the robot stops itself beyond %3 ms.</source>
+        <translation>Los accionamientos permanecen en su límite como máximo %1 ms en cualquier intervalo de %2 s; el robot se detiene por sí mismo a partir de %3 ms.</translation>
+    </message>
+    <message>
+        <location filename="../pages/prescribe.py" line="380"/>
         <source>platform force %1 N</source>
         <translation>fuerza en la plataforma %1 N</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="357"/>
+        <location filename="../pages/prescribe.py" line="382"/>
         <source>dorsi/plantarflexion</source>
         <translation>dorsi/plantarflexión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="357"/>
+        <location filename="../pages/prescribe.py" line="382"/>
         <source>inversion/eversion</source>
         <translation>inversión/eversión</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="366"/>
+        <location filename="../pages/prescribe.py" line="391"/>
         <source>the ankle centre moves at most %1 mm (RMS %2 mm; comfort limit %3 mm)</source>
         <translation>el centro del tobillo se desplaza como máximo %1 mm (RMS %2 mm; límite de confort %3 mm)</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="371"/>
+        <location filename="../pages/prescribe.py" line="396"/>
         <source>force tracking error %1 %</source>
         <translation>error de seguimiento de fuerza %1 %</translation>
     </message>
     <message>
-        <location filename="../pages/prescribe.py" line="374"/>
+        <location filename="../pages/prescribe.py" line="399"/>
         <source>duration %1 s</source>
         <translation>duración %1 s</translation>
     </message>

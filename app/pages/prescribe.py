@@ -256,20 +256,24 @@ class PrescribePage(QWidget):
                 "%1", _peaks(result.get("predicted") or {})))
             self.verdict.setStyleSheet("color: #1e8a3c; font-weight: bold;")
             predicted = result.get("predicted") or {}
-            self._show_beyond(predicted.get("at_robot_limit") or [])
+            self._show_beyond(predicted.get("at_robot_limit") or [],
+                              predicted.get("drive_saturation"))
         self._update_buttons()
 
-    def _show_beyond(self, limits: list[Any]) -> None:
-        """The pre-flight's ``at_robot_limit`` in the patient's terms, or nothing."""
+    def _show_beyond(self, limits: list[Any], saturation: Any = None) -> None:
+        """The pre-flight's ``at_robot_limit`` in the patient's terms, and how close the
+        drives came to the sustained-saturation stop (``drive_saturation``), or nothing."""
         lines = [line for line in (beyond_words(lim) for lim in clinical_limits(limits))
                  if line]
         if not lines:
             self.beyond.clear()
             self.beyond.hide()
             return
+        margin = saturation_words(saturation)
         self.beyond.setText("\n".join(
             [tr("Warning: this protocol asks more than the robot can give (the session may "
-                "still start):"), *("• " + line for line in lines)]))
+                "still start):"), *("• " + line for line in lines), *([margin] if margin
+                                                                      else [])]))
         self.beyond.show()
 
     def _update_buttons(self) -> None:
@@ -344,6 +348,27 @@ def beyond_words(limit: Any) -> str:
                    "t = %3 s: there the platform follows the protocol less closely")
                 .replace("%1", _number(lim, 1)).replace("%2", ms).replace("%3", at))
     return ""
+
+
+def saturation_words(saturation: Any) -> str:
+    """The pre-flight's ``drive_saturation`` (``protocols.session.drive_saturation_margin``)
+    in a clinician's words: the longest the drives stay at their limit within the
+    supervisor's window beside what stops the robot, so a protocol close to that stop is seen
+    as such (a heavier patient or a stiffer contact would be stopped). "" when nothing was
+    saturated or the entry is not understood (a newer RT process's)."""
+    if not isinstance(saturation, dict):
+        return ""
+    peak, window, stops = (saturation.get(k) for k in ("peak_s", "window_s", "stops_beyond_s"))
+    if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (peak, window, stops)):
+        return ""
+    assert isinstance(peak, (int, float)) and isinstance(window, (int, float))
+    assert isinstance(stops, (int, float))
+    if peak <= 0.0:
+        return ""
+    return (tr("The drives stay at their limit for at most %1 ms in any %2 s; the robot "
+               "stops itself beyond %3 ms.")
+            .replace("%1", _number(peak * 1e3, 0)).replace("%2", _number(window, 1))
+            .replace("%3", _number(stops * 1e3, 0)))
 
 
 def _peaks(predicted: dict[str, Any]) -> str:
