@@ -87,10 +87,16 @@ import pinocchio as pin
 import scipy.optimize
 import scipy.signal
 
-from rt.errors import ConfigurationError, KinematicsError, TalusError
+from rt.errors import ConfigurationError, TalusError
 from rt.model import RobotModel
 from rt.model.description import Drive, RobotDescription, description_from_dict
-from rt.model.regressor import INERTIAL_NAMES, N_RIGID, STANDARD_NAMES, Regressor
+from rt.model.regressor import (
+    INERTIAL_NAMES,
+    N_RIGID,
+    STANDARD_NAMES,
+    Regressor,
+    workspace_rows,
+)
 
 #: Parallel filter (regressor columns and forces alike), Hz.
 FILTER_HZ = 8.0
@@ -349,22 +355,9 @@ def offset_reduction(reg: Regressor, samples: int = 40, seed: int = 20121) -> Of
     residual below ``_OFFSET_RANK_TOL``) to those taken before it. On this robot the three
     leg-mass base parameters drop out: each is m (q̈_i + g) on its axis, i.e. the rotor
     inertia's column q̈_i plus g times an offset's."""
-    kin = reg.dyn.kin
-    rng = np.random.default_rng(seed)
-    rows: list[np.ndarray] = []
-    st = None
-    while len(rows) < samples:
-        z = rng.uniform(kin.stroke[0] + 0.45, kin.stroke[1] + 0.40)
-        roll = rng.uniform(-0.8, 0.8) * kin.roll_max
-        pitch = rng.uniform(-0.8, 0.8) * kin.pitch_max
-        try:
-            cfg = kin.ik(z, roll, pitch)
-        except KinematicsError:
-            continue
-        st = reg.dyn.state(cfg.q, rng.normal(0.0, 0.1, 3), out=st, cfg=cfg)
-        rows.append(reg(st, rng.normal(0.0, 1.0, 3)).copy())
+    rows = workspace_rows(reg.dyn, reg, samples, seed)
     nb = len(reg.base.base_index)
-    w = np.hstack((np.vstack(rows), _offset_rows(len(rows))))
+    w = np.hstack((rows, _offset_rows(samples)))
     scale = np.linalg.norm(w, axis=0)
     scale[scale == 0.0] = 1.0
     ws = w / scale

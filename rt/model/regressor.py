@@ -16,6 +16,7 @@ documented set (also printed by ``talus model describe``).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -178,20 +179,7 @@ class Regressor:
         return out
 
     def _find_base(self, samples: int, seed: int) -> BaseParameters:
-        rng = np.random.default_rng(seed)
-        kin = self.dyn.kin
-        rows: list[np.ndarray] = []
-        while len(rows) < samples:
-            z = rng.uniform(kin.stroke[0] + 0.45, kin.stroke[1] + 0.40)
-            roll = rng.uniform(-0.8, 0.8) * kin.roll_max
-            pitch = rng.uniform(-0.8, 0.8) * kin.pitch_max
-            try:
-                cfg = kin.ik(z, roll, pitch)
-            except KinematicsError:                       # outside the workspace: draw again
-                continue
-            st = self.dyn.state(cfg.q, rng.normal(0.0, 0.1, 3), out=self._state, cfg=cfg)
-            rows.append(self.standard(st, rng.normal(0.0, 1.0, 3)).copy())
-        w = np.vstack(rows)
+        w = workspace_rows(self.dyn, self.standard, samples, seed, self._state)
         # Scale columns so the rank decision does not depend on units.
         scale = np.linalg.norm(w, axis=0)
         scale[scale == 0.0] = 1.0
@@ -206,3 +194,28 @@ class Regressor:
         k[np.abs(k) < 1e-10] = 0.0
         order = np.argsort(base_idx)
         return BaseParameters(base_idx[order], dep_idx, k[order])
+
+
+def workspace_rows(dyn: Dynamics, row: Callable[[State, np.ndarray], np.ndarray],
+                   samples: int, seed: int, out: State | None = None) -> np.ndarray:
+    """``samples`` regressor rows ``row(state, q̈)`` stacked, at random states of the
+    workspace (heights within the stroke, roll and pitch within 80 % of their limits, random
+    velocities and accelerations; draws outside the workspace drawn again): the sample on
+    which a numerical rank decides which parameters the data can identify (the base
+    reduction here, the offsets' in ``rt.identification.estimate``). Deterministic for a
+    ``seed``; ``out`` a state to reuse."""
+    rng = np.random.default_rng(seed)
+    kin = dyn.kin
+    rows: list[np.ndarray] = []
+    st = out
+    while len(rows) < samples:
+        z = rng.uniform(kin.stroke[0] + 0.45, kin.stroke[1] + 0.40)
+        roll = rng.uniform(-0.8, 0.8) * kin.roll_max
+        pitch = rng.uniform(-0.8, 0.8) * kin.pitch_max
+        try:
+            cfg = kin.ik(z, roll, pitch)
+        except KinematicsError:                           # outside the workspace: draw again
+            continue
+        st = dyn.state(cfg.q, rng.normal(0.0, 0.1, 3), out=st, cfg=cfg)
+        rows.append(row(st, rng.normal(0.0, 1.0, 3)).copy())
+    return np.vstack(rows)
