@@ -11,10 +11,12 @@ import numpy as np
 import pytest
 import yaml
 
+# The rich trajectory's exact forces (as commands the amplifiers add the offsets to).
+from test_identification import _synthetic as synthetic_data
+
 from rt.errors import ConfigurationError
 from rt.identification.estimate import (
     PHYSICAL_NAMES,
-    IdentificationData,
     IdentificationError,
     description_from_physical,
     estimate_base,
@@ -23,7 +25,6 @@ from rt.identification.estimate import (
     nominal_physical,
     offset_reduction,
 )
-from rt.identification.excitation import N_HARMONICS, FourierExcitation
 from rt.model import RobotModel
 from rt.model.description import description_from_dict, load_description
 from rt.model.regressor import Regressor
@@ -45,23 +46,6 @@ def truth_base() -> np.ndarray:
     return Regressor(RobotModel.from_description(default_truth()).dyn).theta_base()
 
 
-def _synthetic(noise_n: float, offsets_n: np.ndarray, seed: int = 3) -> IdentificationData:
-    """The truth's exact inverse-dynamics forces along a rich trajectory, as *commands*: the
-    amplifiers add ``offsets_n``, so the commands are the dynamics' forces less them."""
-    rng = np.random.default_rng(seed)
-    exc = FourierExcitation(rng.uniform(-0.02, 0.02, (3, N_HARMONICS)),
-                            rng.uniform(-0.02, 0.02, (3, N_HARMONICS)))
-    t = np.linspace(0.0, 10.0, 600, endpoint=False)
-    q, qd, qdd = exc.evaluate(t)
-    truth = RobotModel.from_description(default_truth())
-    tau = np.empty_like(q)
-    st = None
-    for j in range(len(t)):
-        st = truth.dyn.state(q[j], qd[j], out=st)
-        tau[j] = truth.dyn.inverse_dynamics(st, qdd[j])
-    tau -= offsets_n
-    tau += rng.normal(0.0, noise_n, tau.shape) if noise_n else 0.0
-    return IdentificationData(q, qd, qdd, tau)
 
 
 def test_the_reduction_folds_each_leg_mass_into_its_rotor_inertia_and_offset(reg):
@@ -79,7 +63,7 @@ def test_the_reduction_folds_each_leg_mass_into_its_rotor_inertia_and_offset(reg
 
 
 def test_noiseless_offsets_recovered_within_their_sigma(reg, truth_base):
-    data = _synthetic(0.0, OFFSETS_N)
+    data = synthetic_data(0.0, offsets_n=OFFSETS_N)
     # Given the true leg masses (a lab that weighed its parts), the offsets themselves.
     est = estimate_base(reg, data, believed=default_truth())
     want = est.truth(truth_base, OFFSETS_N)
@@ -102,7 +86,7 @@ def test_noiseless_offsets_recovered_within_their_sigma(reg, truth_base):
 def test_noisy_fit_reads_offsets_as_offsets_not_as_mass(reg, truth_base):
     nominal = load_description()
     truth = default_truth()
-    data = _synthetic(2.0, OFFSETS_N)                     # 2 N noise on ~100-300 N forces
+    data = synthetic_data(2.0, offsets_n=OFFSETS_N)   # 2 N noise on ~100-300 N forces
 
     def leg_masses(desc) -> np.ndarray:
         theta = Regressor(RobotModel.from_description(desc).dyn).theta_base()

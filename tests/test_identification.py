@@ -22,8 +22,11 @@ from rt.model.regressor import Regressor
 from rt.twin.realism import default_truth
 
 
-def _synthetic(noise_n: float, seed: int = 3) -> IdentificationData:
-    """Samples of a rich trajectory with the truth's exact inverse-dynamics forces."""
+def _synthetic(noise_n: float, seed: int = 3,
+               offsets_n: np.ndarray | None = None) -> IdentificationData:
+    """Samples of a rich trajectory with the truth's exact inverse-dynamics forces; with
+    ``offsets_n`` (N per axis) as *commands*: the amplifiers add the offsets, so the commands
+    are the dynamics' forces less them (tests/test_ident_offsets.py)."""
     rng = np.random.default_rng(seed)
     exc = FourierExcitation(rng.uniform(-0.02, 0.02, (3, N_HARMONICS)),
                             rng.uniform(-0.02, 0.02, (3, N_HARMONICS)))
@@ -35,6 +38,8 @@ def _synthetic(noise_n: float, seed: int = 3) -> IdentificationData:
     for j in range(len(t)):
         st = truth.dyn.state(q[j], qd[j], out=st)
         tau[j] = truth.dyn.inverse_dynamics(st, qdd[j])
+    if offsets_n is not None:
+        tau -= offsets_n
     tau += rng.normal(0.0, noise_n, tau.shape) if noise_n else 0.0
     return IdentificationData(q, qd, qdd, tau)
 
