@@ -11,7 +11,6 @@ from collections.abc import Callable
 import numpy as np
 from numba import carray, njit
 
-from rt.components.fused_kernel import _f64_at
 from rt.control.base import Controller, Reference
 from rt.devices.interfaces import EncoderBank
 from rt.engine import Array, Component, Struct
@@ -22,6 +21,7 @@ from rt.model import RobotModel
 from rt.model.dynamics import State
 from rt.model.kernels import MODEL_STATE_WORK, model_state
 from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
+from rt.pointers import f64_at
 from rt.safety.events import SupervisorMode
 
 STATUS_SENSOR = 10
@@ -219,7 +219,7 @@ def tap_row(ring, row, t, addr, lens):
     k = 1
     for j in range(addr.shape[0]):
         n = lens[j]
-        a = carray(_f64_at(addr[j]), n)
+        a = carray(f64_at(addr[j]), n)
         for i in range(n):
             r[k + i] = a[i]
         k += n

@@ -21,6 +21,7 @@ from rt.control import kernels as ck
 from rt.estimation.compiled import block_update
 from rt.model.kernels import model_state
 from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
+from rt.pointers import f64_at, i64_at
 from rt.references import sequencer_kernel as rk
 from rt.safety import supervisor_kernel as svk
 
@@ -80,32 +81,14 @@ LAW_PADEN_PANJA, LAW_COMPUTED_TORQUE, LAW_PD_GRAVITY, LAW_PD_G0, LAW_PID, LAW_AD
 NOT_HYBRID, HYBRID_POSITION, HYBRID_FORCE, HYBRID_FORCE_PYTHON = range(4)
 
 
-@intrinsic
-def _f64_at(typingctx: Any, addr: Any) -> Any:
-    sig = types.CPointer(types.float64)(types.int64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.float64)))
-    return sig, codegen
-
-
-@intrinsic
-def _i64_at(typingctx: Any, addr: Any) -> Any:
-    sig = types.CPointer(types.int64)(types.int64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.int64)))
-    return sig, codegen
-
-
 @njit(cache=True, inline="always")
 def _v(addr, dims, i):
-    return carray(_f64_at(addr[i]), dims[i, 0])
+    return carray(f64_at(addr[i]), dims[i, 0])
 
 
 @njit(cache=True, inline="always")
 def _vi(addr, dims, i):
-    return carray(_i64_at(addr[i]), dims[i, 0])
+    return carray(i64_at(addr[i]), dims[i, 0])
 
 
 @njit(cache=True)
@@ -171,7 +154,7 @@ def fused_chain(tab, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, 
     others = 0
     for j in range(1, ran):
         ns = np.int64((stamps[j + 1] - stamps[j]) * ns_per_tick)
-        carray(_i64_at(rings[j]), idx + 1)[idx] = ns
+        carray(i64_at(rings[j]), idx + 1)[idx] = ns
         others += ns
     aux = info[I_SUP] if ran == 5 else info[I_LAW]
     return ran, info[I_PYTHON], others, aux, info[I_FK]
@@ -202,7 +185,7 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
     info[I_FK] = fk
     if upto <= 2:
         return
-    table = carray(_f64_at(a[B_TABLE]), (d[B_TABLE, 0], d[B_TABLE, 1]))
+    table = carray(f64_at(a[B_TABLE]), (d[B_TABLE, 0], d[B_TABLE, 1]))
     r = rk.cycle(_v(a, d, B_REF_IO), _v(a, d, B_SEQ), _v(a, d, B_REF_Q), _v(a, d, B_REF_MODE),
                  table, dt)
     info[I_REF] = r

@@ -29,11 +29,11 @@ driver's ``lib``, as on the rig.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit
+
+from rt.pointers import i64_at, u32_at
 
 # --- the emulated PCL-833's state (int64 array; rt.drivers.fake_pcl833) ---------------------
 FAKE_REG = 0            # 16: last byte written to each write register
@@ -259,24 +259,6 @@ _EIO = 5
 _EINVAL = 22
 
 
-@intrinsic
-def _i64_ptr(typingctx: Any, addr: Any) -> Any:
-    sig = types.CPointer(types.int64)(types.int64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.int64)))
-    return sig, codegen
-
-
-@intrinsic
-def _u32_ptr(typingctx: Any, addr: Any) -> Any:
-    sig = types.CPointer(types.uint32)(types.int64)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        return builder.inttoptr(args[0], context.get_value_type(types.CPointer(types.uint32)))
-    return sig, codegen
-
-
 @njit(cache=True)
 def fake_insnlist(st):
     """``FakeComedi.comedi_do_insnlist`` on its plan in ``st`` (layout ``FC_*``): returns
@@ -288,7 +270,7 @@ def fake_insnlist(st):
     EINVAL the same way; a list done whole answers its count. ``FC_DONE``: samples written."""
     for k in range(st[FC_N_WATCHED]):
         w = FC_WATCH + 2 * k
-        if _i64_ptr(st[w])[0] != st[w + 1]:
+        if i64_at(st[w])[0] != st[w + 1]:
             return FC_STALE
     st[FC_DONE] = 0
     fail_all = st[FC_FAIL_ALL] != 0
@@ -300,7 +282,7 @@ def fake_insnlist(st):
         if fail_all or (dead >> channel) & 1:
             st[FC_ERRNO] = _EIO
             return insn if insn else -1
-        code = np.int64(_u32_ptr(st[p + 2])[0])
+        code = np.int64(u32_at(st[p + 2])[0])
         if code > FC_MAXDATA:
             st[FC_ERRNO] = _EINVAL
             return insn if insn else -1

@@ -1,0 +1,39 @@
+"""Raw pointers for compiled code: an int64 address (``ndarray.ctypes.data``) as a typed
+pointer that ``numba.carray`` wraps into an array view without a copy.
+
+Why: the fused cycle (:mod:`rt.components.fused_kernel`), the signal tap
+(:mod:`rt.components.blocks`) and the fake comedi card's instruction list
+(:mod:`rt.drivers.kernels`) bind many buffers once, as a table of addresses, so a cycle is
+one compiled call with a handful of arguments instead of dozens of arrays (numba's dispatch
+of each array argument costs ≈ 0.1-0.2 µs). The addresses are only valid while their
+buffers live: the binder keeps them referenced.
+
+Changing this module invalidates the numba caches of every module that uses it (numba
+checks only a function's own file): clear them, ``find . -name '*.nbi' -o -name '*.nbc'``.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+from numba import types
+from numba.extending import intrinsic
+
+
+def _pointer_to(element: Any) -> Any:
+    """An intrinsic ``f(addr: int64) -> CPointer(element)``."""
+    pointer = types.CPointer(element)
+
+    def typer(typingctx: Any, addr: Any) -> Any:
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            return builder.inttoptr(args[0], context.get_value_type(pointer))
+        return pointer(types.int64), codegen
+
+    return intrinsic(typer)
+
+
+#: float64* at an address.
+f64_at = _pointer_to(types.float64)
+#: int64* at an address.
+i64_at = _pointer_to(types.int64)
+#: uint32* at an address (comedi's ``lsampl_t``).
+u32_at = _pointer_to(types.uint32)
