@@ -125,7 +125,8 @@ def main() -> None:
                     "--save-recordings; keys q, tau, vq, vtau): the at-the-limits run only")
     ap.add_argument("--save-recordings", help="write the raw recordings to this .npz")
     ap.add_argument("--compare-tracking", action="store_true",
-                    help="also track with the nominal and each identified model (13 s each)")
+                    help="also track with the nominal and each identified model (13 s each; "
+                         "a model with offsets also without their compensation)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     nominal = load_description()
@@ -171,6 +172,12 @@ def main() -> None:
             robots[key] = description_from_dict(r.pop("description"), key)
             out["runs"][key] = {"peaks": e.peaks(), "f0_hz": e.f0_hz, **r}
     if args.compare_tracking:
+        # Each description with offsets is also tracked with its offsets zeroed: the same
+        # model without the supervisor's compensation, so the table shows what it brings.
+        for key in [k for k, r in robots.items() if any(r.drive.amplifier_offset_v)]:
+            data = robots[key].model_dump()
+            data["drive"]["amplifier_offset_v"] = [0.0, 0.0, 0.0]
+            robots[f"{key}, not compensated"] = description_from_dict(data, key)
         out["tracking"] = _tracking(truth, robots)
     if args.json:
         print(json.dumps(out))

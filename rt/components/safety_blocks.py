@@ -125,7 +125,8 @@ class SupervisorBlock(Component):
     float64[3]; ``state``: model ``State``; ``fk_ok``: float64[1]; ``q_ref``, ``qd_ref``:
     float64[3]; ``tau``: float64[3] N; ``wrench``: float64[6]; ``wrench_flags``: float64[2];
     ``inputs``: float64[2]; ``drive_failed``: float64[1] (delayed one cycle).
-    Out ``volts``: float64[3] V — the commands, saturated, zero in a hard stop; ``enable``:
+    Out ``volts``: float64[3] V — the commands less the believed amplifier offsets
+    (``drive.amplifier_offset_v``), saturated, zero in a hard stop; ``enable``:
     float64[1] — drives enabled (0 in a hard stop); ``mode``: float64[1] — the latched
     :class:`SupervisorMode` (run, soft stop, hard stop).
 
@@ -206,8 +207,11 @@ class SupervisorBlock(Component):
             self.mode.data[0] = float(SupervisorMode.HARD_STOP)
             return 0
         limit = self.sup.limits.max_command_v
+        # Less the believed amplifier offsets while the drives are enabled, clamped on the
+        # written volts; the checks above stay on τ (``supervisor_kernel.outputs`` says why).
+        offset = self.sup.amplifier_offset_v
         for i in range(3):
-            x = self.tau.data[i] * self.k
+            x = self.tau.data[i] * self.k - offset[i]
             v[i] = limit if x > limit else (max(x, -limit))
         self.enable.data[0] = 1.0
         self.mode.data[0] = float(SupervisorMode.of(reaction))

@@ -107,7 +107,8 @@ from typing import Any
 
 import numpy as np
 
-from rt.model.description import RobotDescription
+from rt.errors import ConfigurationError
+from rt.model.description import AMPLIFIER_OFFSET_MAX_V, RobotDescription
 from rt.safety import supervisor_kernel as sk
 from rt.safety.events import EventLog, Reaction, SafetyEvent
 from rt.safety.limits import EffectiveLimits
@@ -159,14 +160,17 @@ def supervisor_physics(d: RobotDescription) -> dict[str, Any]:
     * ``count_m``: one encoder count;
     * ``lever_m_per_rad``: slider travel per radian of tilt (the soft stop's braking cushion);
     * ``sensor_offset_m``: the ATI's origin in the platform frame P (its wrench is carried to P
-      for the contact's share of each actuator force).
+      for the contact's share of each actuator force);
+    * ``amplifier_offset_v``: each axis' believed amplifier input offset (V,
+      ``drive.amplifier_offset_v``, from identification), which the outputs compensate.
     """
     b = d.bodies
     return {"axis_mass_kg": b.slider.mass_kg + d.drive.reflected_inertia_kg,
             "holding_force_n": HOLDING_MARGIN * 2.0 * d.friction.static_n,
             "count_m": d.encoder.m_per_count,
             "lever_m_per_rad": LEVER_PER_PLATFORM_RADIUS * d.geometry.platform_radius_m,
-            "sensor_offset_m": tuple(float(x) for x in d.sensor.offset_m)}
+            "sensor_offset_m": tuple(float(x) for x in d.sensor.offset_m),
+            "amplifier_offset_v": tuple(float(x) for x in d.drive.amplifier_offset_v)}
 
 
 @dataclass
@@ -325,7 +329,8 @@ class Supervisor:
                  soft_stop_accel_m_s2: float = 0.5, soft_stop_jerk_m_s3: float = 5.0,
                  lever_m_per_rad: float = 0.27, axis_mass_kg: float = 207.3,
                  holding_force_n: float = 225.0, count_m: float = 2e-5,
-                 sensor_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.08)):
+                 sensor_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.08),
+                 amplifier_offset_v: Iterable[float] = (0.0, 0.0, 0.0)):
         """The defaults are the nominal robot's (:func:`supervisor_physics`); the loop passes
         the values of the robot it drives."""
         self._par = np.zeros(sk.PAR_SIZE)
@@ -355,6 +360,7 @@ class Supervisor:
         self.applied_force_max_n = math.inf
         self.sensor_offset_m = (float(sensor_offset_m[0]), float(sensor_offset_m[1]),
                                 float(sensor_offset_m[2]))
+        self.amplifier_offset_v = amplifier_offset_v
         # The force sensor's first samples arrive a few cycles after the loop starts.
         self.startup_grace_s = 0.1
         # The motors' spring-applied holding brakes close when the drives are off and open
@@ -374,6 +380,35 @@ class Supervisor:
     @sensor_offset_m.setter
     def sensor_offset_m(self, offset: tuple[float, float, float]) -> None:
         self._par[sk.P_SENSOR_X:sk.P_SENSOR_Z + 1] = offset
+
+    @property
+    def amplifier_offset_v(self) -> tuple[float, float, float]:
+        """Each axis' believed amplifier input offset (V): the outputs write τ·k minus it
+        while the drives are enabled (:func:`rt.safety.supervisor_kernel.outputs`), so the
+        amplifier, which adds its offset, delivers the commanded force."""
+        p = self._par
+        k = sk.P_AMP_OFFSET
+        return (float(p[k]), float(p[k + 1]), float(p[k + 2]))
+
+    @amplifier_offset_v.setter
+    def amplifier_offset_v(self, offsets: Iterable[float]) -> None:
+        # Checked here as the description checks it (a Supervisor can be built without one):
+        # a bad value is refused by name and the compensation in use stays as it was.
+        try:
+            v = [float(x) for x in offsets]
+        except (TypeError, ValueError) as exc:
+            raise ConfigurationError(f"amplifier_offset_v must be 3 numbers (V), got "
+                                     f"{offsets!r}") from exc
+        if len(v) != 3:
+            raise ConfigurationError(f"amplifier_offset_v must be one offset per axis (3, V), "
+                                     f"got {len(v)}: {v}")
+        for i, x in enumerate(v):
+            if not (math.isfinite(x) and abs(x) <= AMPLIFIER_OFFSET_MAX_V):
+                raise ConfigurationError(
+                    f"amplifier_offset_v[{i}] = {x} V is not within ±{AMPLIFIER_OFFSET_MAX_V} V "
+                    "(a faulty amplifier or a wrong identification, not an offset to "
+                    "compensate)")
+        self._par[sk.P_AMP_OFFSET:sk.P_AMP_OFFSET + 3] = v
 
     def contact_share(self, state_buf: np.ndarray, wrench) -> np.ndarray:
         """The measured contact's share of each actuator force (N) for a model state buffer

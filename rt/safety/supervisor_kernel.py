@@ -76,7 +76,10 @@ SAT_BUCKETS = 50
  P_MAX_PULL_S, P_PERIOD, P_ALPHA_STOP, P_JERK_TIME, P_AXIS_MASS, P_HOLDING, P_COUNT_M,
  P_CONTACT, P_GRACE, P_FORCE_CONTROL, P_SENSOR_X, P_SENSOR_Y, P_SENSOR_Z, P_FORCE_LAG,
  P_CONTACT_RELEASE, P_APPLIED_MAX, P_SAT_WINDOW, P_SAT_FRACTION) = range(36)
-PAR_SIZE = 36
+#: Each axis' believed amplifier input offset (V, ``drive.amplifier_offset_v``): 3 slots,
+#: subtracted from the commands by :func:`outputs` while the drives are enabled.
+P_AMP_OFFSET = 36
+PAR_SIZE = P_AMP_OFFSET + 3
 
 # ------------------------------------------------------------------------- mem layout
 M_FROZEN_TIME = 0
@@ -428,8 +431,21 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
 @njit(cache=True, error_model="numpy")
 def outputs(par, reaction, tau, volts_per_n, volts, enable, mode):
     """The supervisor block's outputs for a latched ``reaction``: hard stop → 0 V, drives
-    disabled; otherwise τ (N) times ``volts_per_n`` saturated at ± max_command_v, drives
-    enabled, the mode (:class:`SupervisorMode` value: soft stop 2, else run 0)."""
+    disabled; otherwise τ (N) times ``volts_per_n`` less the axis' believed amplifier offset
+    (``par[P_AMP_OFFSET + i]``, V) saturated at ± max_command_v, drives enabled, the mode
+    (:class:`SupervisorMode` value: soft stop 2, else run 0).
+
+    The offset compensation. An amplifier adds its input offset o to every command while the
+    drives are enabled, so it delivers (V + o) × force per volt: writing V = τ·k − o makes
+    it deliver the commanded τ. Only while enabled: a hard stop writes exactly 0 V (the DAC
+    refuses a non-zero command on disabled drives, and a disabled amplifier adds nothing).
+    The clamp is on the written volts: ``max_command_v`` bounds what reaches the DAC (the
+    driver clamps there too), so the compensation never writes beyond it. Every check stays
+    on the commanded force τ (``check``: actuator force, sustained saturation at
+    ``P_APPLIED_MAX`` = max_command_v / k, the frozen-encoder force balance): compensated,
+    the force the drive applies *is* τ (up to the clamp, which moves by o/k — 5 N of 2 kN
+    at the twin's 15 mV — so a check on the volts would only put the offset back into the
+    supervisor's physics). With zero offsets x − 0.0 is x, bit for bit (−0.0 and NaN too)."""
     if reaction >= R_HARD:
         volts[0] = 0.0
         volts[1] = 0.0
@@ -439,7 +455,7 @@ def outputs(par, reaction, tau, volts_per_n, volts, enable, mode):
         return
     limit = par[P_MAX_COMMAND_V]
     for i in range(3):
-        x = tau[i] * volts_per_n
+        x = tau[i] * volts_per_n - par[P_AMP_OFFSET + i]
         # Spelled out as Python's max(x, -limit) behaves (numba's max may differ on NaN): a
         # NaN command stays NaN (the drive refuses it).
         volts[i] = limit if x > limit else (-limit if -limit > x else x)  # noqa: FURB136
