@@ -11,7 +11,7 @@ peak) for the nominal, identified and true descriptions. Twin figures.
 
     .venv/bin/python bench/identification.py [--seconds 40] [--slow 0.33] [--ideal-twin]
         [--offsets both|on|off] [--save-recordings F.npz | --recordings F.npz]
-        [--compare-tracking] [--json]
+        [--compare-tracking [--controllers pid,pd_g,...]] [--json]
 
 Each run is fitted without and with the amplifiers' offset columns (``--offsets both``): with
 them, the leg masses fold into the rotor inertias and the offsets (``estimate.py``, 5.).
@@ -98,13 +98,15 @@ def identify_run(q, tau, val, reg, nominal, truth, offsets: bool = True,
     return out
 
 
-def _tracking(truth, robots: dict[str, Any]) -> dict[str, Any]:
-    """Paden-Panja and computed torque on the realistic twin (13 s of the pid-vs-paden
-    experiment, 1 kHz) with each model: mean |e| and RMS (m)."""
+def _tracking(truth, robots: dict[str, Any],
+              controllers: tuple[str, ...] = ("paden_panja", "computed_torque")
+              ) -> dict[str, Any]:
+    """Each controller (default Paden-Panja and computed torque) on the realistic twin (13 s
+    of the pid-vs-paden experiment, 1 kHz) with each model: mean |e| and RMS (m)."""
     from rt.benchmarks.tracking import run_one
 
     out = {}
-    for ctrl in ("paden_panja", "computed_torque"):
+    for ctrl in controllers:
         for label, robot in robots.items():
             _t, e, _ = run_one("pid-vs-paden", ctrl, 13.0, 1000.0, truth, robot, False)
             out[f"{ctrl}/{label}"] = {"mean_abs_m": float(abs(e).mean()),
@@ -127,6 +129,8 @@ def main() -> None:
     ap.add_argument("--compare-tracking", action="store_true",
                     help="also track with the nominal and each identified model (13 s each; "
                          "a model with offsets also without their compensation)")
+    ap.add_argument("--controllers", default="paden_panja,computed_torque",
+                    help="the controllers --compare-tracking runs (comma-separated)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     nominal = load_description()
@@ -178,7 +182,7 @@ def main() -> None:
             data = robots[key].model_dump()
             data["drive"]["amplifier_offset_v"] = [0.0, 0.0, 0.0]
             robots[f"{key}, not compensated"] = description_from_dict(data, key)
-        out["tracking"] = _tracking(truth, robots)
+        out["tracking"] = _tracking(truth, robots, tuple(args.controllers.split(",")))
     if args.json:
         print(json.dumps(out))
         return

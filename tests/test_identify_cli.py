@@ -64,6 +64,19 @@ def test_identify_writes_a_loadable_description_and_refuses_to_overwrite(tmp_pat
     assert np.all((residual > -1.5) & (residual < 0.3)), residual
     assert desc.drive.amplifier_offset_v == off["written_v"]
     np.testing.assert_allclose(desc.drive.amplifier_offsets_n, off["estimate_n"], atol=0.2)
+    # … and a loop built from the file (what --robot loads) compensates them at its outputs:
+    # every cycle's volts are the command's less the written offsets (the signature on the
+    # twin: tests/test_offset_compensation.py).
+    from rt.position_loop import build_sim_position_loop
+
+    pl = build_sim_position_loop("paden_panja", model=RobotModel.load(out), start_program=False)
+    pl.loop.run(cycles=200)
+    rows, _ = pl.recorder.drain(0)
+    pl.graph.stop()
+    assert pl.supervisor.amplifier_offset_v == tuple(off["written_v"])
+    per_volt = desc.drive.force_per_volt_n
+    np.testing.assert_allclose(rows[:, 13:16], rows[:, 10:13] / per_volt - off["written_v"],
+                               rtol=0.0, atol=1e-12)
     # The file exists now: a second run without --force is refused and changes nothing.
     before = out.read_bytes()
     proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=120)

@@ -84,7 +84,8 @@ def _steady_hold(model: RobotModel, truth: RobotDescription, imp: RigImperfectio
         tau = r[:, 10:13].mean(axis=0)
         gravity = model.dyn.gravity(model.dyn.state(tuple(q)))
         return {"error_n": tau - gravity, "tau": r[:, 10:13], "volts": r[:, 13:16],
-                "offset_v": np.array(pl.supervisor.amplifier_offset_v)}
+                "offset_v": np.array(pl.supervisor.amplifier_offset_v),
+                "fused": bool(pl.graph.fused)}
     finally:
         pl.graph.stop()
 
@@ -269,7 +270,7 @@ def test_a_robot_file_with_an_absurd_offset_is_refused_by_name(tmp_path):
 # ------------------------------------------------------------------ the signature on the twin
 
 
-def test_a_still_axis_holds_with_the_offset_in_its_command_unless_compensated():
+def test_a_still_axis_holds_with_the_offset_in_its_command_unless_compensated(monkeypatch):
     """An axis at rest in position hold (Paden-Panja, exact masses, no stiction, only the
     amplifiers' offsets as unmodelled effect): without compensation its steady command falls
     short of its static load by the offset's force (the amplifier adds o·K: the command
@@ -290,6 +291,13 @@ def test_a_still_axis_holds_with_the_offset_in_its_command_unless_compensated():
     # Every cycle: volts = τ/K − o (well inside the clamp here).
     np.testing.assert_allclose(comp["volts"], comp["tau"] / K - TWIN_OFFSETS_V, rtol=0.0,
                                atol=1e-12)
+    # The loop ran the fused cycle (its supervisor stage reads the offsets from the same
+    # bound buffer); the per-block cycle writes the same volts, bit for bit.
+    monkeypatch.setenv("TALUS_FUSED_CYCLE", "0")
+    per_block = _steady_hold(RobotModel.from_description(believed), truth, IMP)
+    assert comp["fused"] and not per_block["fused"]
+    assert np.array_equal(per_block["volts"], comp["volts"])
+    assert np.array_equal(per_block["tau"], comp["tau"])
 
 
 def test_identified_offsets_reach_the_compensation_through_the_robot_file(tmp_path):

@@ -144,8 +144,10 @@ class Drive(_Strict):
     #: the drives are enabled (the DAC's zero-scale error plus the amplifier's residual input
     #: offset), so the force delivered is (command + offset) × force per volt. Measured by
     #: identification (``talus identify``, ``rt.identification.estimate``: a constant force
-    #: per axis), for the lab to report and to compensate at the DAC stage. Optional (zero:
-    #: unknown or trimmed out); bounded by ``AMPLIFIER_OFFSET_MAX_V``.
+    #: per axis), for the lab to report; every loop built from the description compensates
+    #: it where force becomes volts (the supervisor writes τ·k − offset while the drives are
+    #: enabled: ``rt.safety.supervisor_kernel.outputs``). Optional (zero: unknown or trimmed
+    #: out, nothing compensated); bounded by ``AMPLIFIER_OFFSET_MAX_V``.
     amplifier_offset_v: Annotated[list[OffsetVolts],
                                   Field(min_length=3, max_length=3)] = [0.0, 0.0, 0.0]
 
