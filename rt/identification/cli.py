@@ -21,14 +21,21 @@ import yaml
 
 from rt.twin.realism import add_twin_arguments
 
-#: Off by default: no controller compensates the offsets yet, and with them as unknowns the leg
-#: masses stay the believed ones (the data cannot separate them, estimate.py's docstring 5.), so
-#: the written description tracks worse (twin, 40 s: Paden-Panja 10.4 vs 7.4 µm mean, computed
-#: torque 13.9 vs 10.8) than the fit whose masses absorb the offsets' constant force.
+#: Off by default. Every loop compensates the written offsets (the supervisor's outputs write
+#: τ·k − offset: ``rt.safety.supervisor_kernel.outputs``), and so compensated the offsets fit
+#: tracks as well as the default fit, not better (twin, one 40 s recording, 13 s pid-vs-paden
+#: at 1 kHz, mean |e|: Paden-Panja 7.43 vs 7.41 µm, computed torque 10.92 vs 10.75, adaptive
+#: 6.51 vs 6.46; validation force error 1.56 vs 1.55 % of peak): both put the same constant
+#: force on each axis, the default fit through its leg masses' weight (which absorbs the
+#: offset), the offsets fit through the compensation, since the data cannot tell a leg mass's
+#: weight from an offset (estimate.py's docstring, 5.). With --offsets the description keeps
+#: the believed leg masses and carries the offsets (a lab that weighed its parts, or wants
+#: its amplifiers' offsets reported and compensated).
 OFFSETS_HELP = ("also estimate each amplifier's input offset (a constant force per axis, "
-                "reported given the believed leg masses and written as drive.amplifier_offset_v)"
-                "; off by default: the controllers do not compensate offsets, and the fit "
-                "whose masses absorb them tracks better")
+                "reported given the believed leg masses and written as drive.amplifier_offset_v"
+                ", which every loop then compensates at its outputs); off by default: "
+                "compensated, that description tracks as well as the default fit, whose leg "
+                "masses absorb the offsets' constant force, not better")
 
 
 def register(commands: argparse._SubParsersAction) -> None:

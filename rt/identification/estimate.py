@@ -62,7 +62,11 @@ fc under-estimated, the bias of issue 15). Now:
    (:func:`estimate_physical`) the offsets are free unknowns and the masses' direction the
    data leave open follows the weak prior toward the believed description, inside the
    feasibility bounds (positive masses, physical inertias): the identified slider and rod
-   masses stay the believed ones, the rotor inertias take the rest.
+   masses stay the believed ones, the rotor inertias take the rest. Every loop built from
+   the written description compensates its offsets (the supervisor writes τ·k − offset:
+   ``rt.safety.supervisor_kernel.outputs``); the forces here are the volts written to the
+   DAC × force per volt, so an identification run on a compensating loop measures the whole
+   offset again, not what the compensation left.
 
 Two estimates from the same data:
 
