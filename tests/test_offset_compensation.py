@@ -245,6 +245,7 @@ def test_compiled_and_interpreted_outputs_compensate_alike():
     ((0.0, 0.0), "one offset per axis"),
     (("a", 0.0, 0.0), "amplifier_offset_v must be 3 numbers"),
     (None, "amplifier_offset_v must be 3 numbers"),
+    ("123", "amplifier_offset_v must be 3 numbers"),
 ])
 def test_bad_offsets_are_refused_by_name_and_change_nothing(offsets, why):
     lim = effective(NOMINAL.limits.stroke, RobotLimits(), PatientLimits())

@@ -395,6 +395,8 @@ class Supervisor:
         # Checked here as the description checks it (a Supervisor can be built without one):
         # a bad value is refused by name and the compensation in use stays as it was.
         try:
+            if isinstance(offsets, str | bytes):     # "123" would iterate as 3 numbers
+                raise TypeError
             v = [float(x) for x in offsets]
         except (TypeError, ValueError) as exc:
             raise ConfigurationError(f"amplifier_offset_v must be 3 numbers (V), got "
