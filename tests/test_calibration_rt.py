@@ -37,21 +37,40 @@ PLAN = default_plan(loads_n=[200.0, 600.0], baseline_s=0.5, steps={"ramp_s": 0.3
 HEARTBEAT_TIMEOUT_S = 5.0
 #: Bound on the wait for a module RT process to be at rest with nothing latched (s).
 SETTLE_S = 30.0
-#: Stops a loaded machine's late loop causes mid-trial (the closing notes of 2026-11-25/26):
-#: acknowledged and the trial run once more, as the operator would; the second attempt must
-#: pass. ``encoder_frozen``: the twin, stepped to a late loop's clock, holds a command for
-#: several ms and the count pauses (issue 15 made the check load-aware, not load-proof).
-LOAD_TRIPS = ("encoder_frozen",)
+#: Stops a loaded machine's late loop causes mid-trial (the closing notes of 2026-11-25/26),
+#: acknowledged and the trial run once more, as the operator would, when the RT loop did miss
+#: deadlines in that attempt (:data:`LATE_FRACTION`); the second attempt must pass. Both are
+#: checks a stalled loop can trip: ``encoder_frozen``, the twin stepped to a late loop's
+#: clock holds a command for several ms and the count pauses (issue 15 made the check
+#: load-aware, not load-proof); ``pulling``, F < 0 for 20 ms of loop time, which a stall
+#: spans at once when it comes while the ATI reads its noise about 0 N before contact (seen
+#: on the tilted push at 8.7 % of the cycles late, load 8). A ``force_limit`` stop is never
+#: retried (the explicit-force law's margin against the plate is real).
+LOAD_TRIPS = ("encoder_frozen", "pulling")
+#: The share of an attempt's cycles that missed their deadline above which a stop among
+#: :data:`LOAD_TRIPS` is the loaded machine's: 1 %, 5-15× this VM's floor for a loop doing
+#: nothing (0.06-0.18 %, docs/worklog/2026-11-26c/lead.md).
+LATE_FRACTION = 0.01
 
 
-def _load_trip(printed: dict) -> bool:
-    """True when a CLI run failed on one of :data:`LOAD_TRIPS` (printed first, so the log
-    says what the loaded machine did)."""
+def _loop_counts(endpoint: str) -> tuple[int, int]:
+    """The RT loop's (deadline misses, cycles) so far."""
+    with RtClient(endpoint, timeout_s=5.0) as client:
+        st = client.status()
+    return int(st["deadline_misses"]), int(st["cycles"])
+
+
+def _load_trip(printed: dict, endpoint: str, before: tuple[int, int]) -> bool:
+    """True when a CLI run failed on one of :data:`LOAD_TRIPS` while the RT loop missed more
+    than :data:`LATE_FRACTION` of its deadlines since ``before`` (:func:`_loop_counts`); the
+    error and the late share are printed either way, so the log says what the machine did."""
     error = printed.get("error", "")
-    if any(cause in error for cause in LOAD_TRIPS):
-        print("a loaded machine's trip, acknowledged and run again:", error)
-        return True
-    return False
+    misses, cycles = _loop_counts(endpoint)
+    late = (misses - before[0]) / max(1, cycles - before[1])
+    retry = any(cause in error for cause in LOAD_TRIPS) and late > LATE_FRACTION
+    print(f"attempt failed ({'run again' if retry else 'not retried'}), "
+          f"{late:.2%} of the cycles late:", error)
+    return retry
 
 
 def _config(tmp_path: Path, max_force_n: float) -> str:
@@ -62,6 +81,15 @@ def _config(tmp_path: Path, max_force_n: float) -> str:
                     "robot_limits:\n  deadline_overruns: 1000\n  max_tracking_error_m: 0.05\n"
                     f"patient_limits:\n  max_force_n: {max_force_n}\n")
     return str(path)
+
+
+def _stopped_by(st: dict) -> str:
+    """What stopped an RT process, from its status: the latched causes with their messages,
+    the failed blocks with their reasons, the loop's deadline misses."""
+    return (f"state {st.get('state')}, phase {st.get('phase_name')}, owner {st.get('owner')}, "
+            f"latched {[(f.get('cause'), f.get('message')) for f in st.get('latched', [])]}, "
+            f"failed blocks {st.get('failed_blocks')}, deadline misses "
+            f"{st.get('deadline_misses')} of {st.get('cycles')} cycles")
 
 
 def _settle(endpoint: str) -> None:
@@ -76,19 +104,16 @@ def _settle(endpoint: str) -> None:
             if st["owner"] is None and st["latched"] == [] and st["state"] == "run" \
                     and st["phase_name"] == "rest":
                 return
-            if st["latched"] and st["owner"] is None and st["phase_name"] == "rest":
-                print("RT process: acknowledging what an earlier test left:",
-                      [(f["cause"], f["reaction"]) for f in st["latched"]])
+            if st["latched"] and st["owner"] is None and st["phase_name"] in ("rest",
+                                                                             "stopped"):
+                print("RT process: acknowledging what an earlier test left:", _stopped_by(st))
                 client.control_acquire("test: settle")
                 try:
                     client.reset([f["id"] for f in st["latched"]])
                 finally:
                     client.control_release()
             time.sleep(0.05)
-    pytest.fail(f"the RT process did not settle within {SETTLE_S:.0f} s: state "
-                f"{st.get('state')}, phase {st.get('phase_name')}, owner {st.get('owner')}, "
-                f"latched {[f.get('cause') for f in st.get('latched', [])]}, "
-                f"causes {st.get('causes')}")
+    pytest.fail(f"the RT process did not settle within {SETTLE_S:.0f} s: {_stopped_by(st)}")
 
 
 @pytest.fixture(scope="module")
@@ -142,17 +167,17 @@ def test_campaign_trials_run_through_the_rt_process(rt_cal, capsys) -> None:
     centre, tilted = _trial_ids()
     for attempt in range(2):
         out = tmp / f"campaign-{attempt}"
+        before = _loop_counts(endpoint)
         code = cal_cli._guard(cal_cli._run)(cal_cli_args(
             plan=str(plan_file), out=str(out), backend="rt", endpoint=endpoint,
             trials=f"{centre},{tilted}"))
         printed = json.loads(capsys.readouterr().out)
-        # On a loaded machine the frozen-encoder check can trip as a move starts (the case is
-        # described in the closing note; issue 15 makes that check load-aware): acknowledge it
-        # and run the campaign again into a new folder, as the operator would.
-        if code == 0 or attempt or not _load_trip(printed):
+        # On a loaded machine a late loop can trip a check mid-trial (:data:`LOAD_TRIPS`):
+        # acknowledge it and run the campaign again into a new folder, as the operator would.
+        if code == 0 or attempt or not _load_trip(printed, endpoint, before):
             break
         _acknowledge(endpoint)
-    assert code == 0, printed
+    assert code == 0, (printed, _status_text(endpoint))
     assert printed["trials"] == 2 and printed["backend"] == "rt"
     index = read_campaign(out)
     assert index["runner"] == "RtTrialRunner"
@@ -184,6 +209,11 @@ def test_campaign_trials_run_through_the_rt_process(rt_cal, capsys) -> None:
                                                              abs=0.05)
 
 
+def _status_text(endpoint: str) -> str:
+    with RtClient(endpoint, timeout_s=5.0) as client:
+        return _stopped_by(client.status())
+
+
 def _acknowledge(endpoint: str) -> None:
     """Reset what is latched, as the operator would, and check it cleared (the status printed
     in the message if not)."""
@@ -193,8 +223,7 @@ def _acknowledge(endpoint: str) -> None:
         client.reset(latched)
         st = client.status()
         client.control_release()
-    assert st["latched"] == [], (f"still latched after the reset: state {st['state']}, phase "
-                                 f"{st['phase_name']}, {st['latched']}")
+    assert st["latched"] == [], f"still latched after the reset: {_stopped_by(st)}"
 
 
 def cal_cli_args(**kw):
@@ -231,16 +260,17 @@ def test_the_program_refuses_what_it_cannot_play_and_changes_nothing(rt_cal) -> 
 
 def _run_cli(capsys, endpoint: str, plan_file: Path, out: Path, trials: str, *extra: str
              ) -> tuple[int, dict]:
-    """``talus calibrate run --backend rt``, acknowledging once the start-up frozen-encoder
-    trip of a loaded machine (see test_campaign_trials_run_through_the_rt_process)."""
+    """``talus calibrate run --backend rt``, acknowledging once a loaded machine's trip
+    (:data:`LOAD_TRIPS`, :func:`_load_trip`) and running it again into a new folder."""
     from talus.cli import main
 
     for attempt in range(2):
         folder = out.with_name(f"{out.name}-{attempt}")
+        before = _loop_counts(endpoint)
         code = main(["calibrate", "run", "--plan", str(plan_file), "--out", str(folder),
                      "--backend", "rt", "--endpoint", endpoint, "--trials", trials, *extra])
         printed = json.loads(capsys.readouterr().out)
-        if code == 0 or attempt or not _load_trip(printed):
+        if code == 0 or attempt or not _load_trip(printed, endpoint, before):
             break
         _acknowledge(endpoint)
     printed["folder"] = str(folder)
@@ -272,7 +302,7 @@ def test_the_plate_daq_is_acquired_by_the_client_on_the_plates_own_clock(rt_cal_
     for campaign in range(2):
         code, printed = _run_cli(capsys, endpoint, plan_file, tmp / f"daq{campaign}",
                                  f"{centre},{tilted},{corner}", "--plate-daq", "twin")
-        assert code == 0, printed
+        assert code == 0, (printed, _status_text(endpoint))
         out = Path(printed["folder"])
         index = read_campaign(out)
         assert index["runner"] == "RtTrialRunner" and len(index["trials"]) == 3
@@ -288,18 +318,26 @@ def test_the_plate_daq_is_acquired_by_the_client_on_the_plates_own_clock(rt_cal_
         # line up.
         try:
             clock = dataset.align_clocks(plate, data)
-            break
         except ClockAlignmentError as exc:
             if campaign:
                 raise
             print("the twin plate's clocks did not line up on this machine, run again:", exc)
             _settle(endpoint)
+            continue
+        s = dataset.build_samples(plate, data, [e["site"] for e in index["trials"]], clock)
+        fz_ref = s.w_ref[:, 2]
+        loaded = fz_ref > 150.0
+        # Enough loaded 20 ms blocks for the line below (≈ 300 in these three trials on a
+        # quiet machine). A block counts only when no scan gap inside it exceeds 10 ms
+        # (``dataset.MAX_PLATE_GAP_S``): the software-timed DAQ thread of a loaded machine
+        # leaves such gaps (99 blocks left once at load 7): run again, as for the clocks.
+        if loaded.sum() > 100 or campaign:
+            break
+        print(f"{int(loaded.sum())} loaded blocks without a DAQ gap on this machine, run again")
+        _settle(endpoint)
     assert min(lag.correlation for lag in clock.lags) > 0.99
     assert clock.scatter_s < 2e-3
-    s = dataset.build_samples(plate, data, [e["site"] for e in index["trials"]], clock)
     fz_plate = s.v @ plate.nominal_C()[2]
-    fz_ref = s.w_ref[:, 2]
-    loaded = fz_ref > 150.0
     assert loaded.sum() > 100
     # Aligned, the plate's vertical force is a straight function of the reference's (its
     # sensitivity and crosstalk errors are a few %): a misaligned clock would leave the ramps'
@@ -331,19 +369,20 @@ def test_verify_plays_its_check_through_the_rt_process(rt_cal_1800, tmp_path, ca
     monkeypatch.setattr(verify_mod, "check_sites", lambda size: [
         ("V-centre", 0.0, 0.0), ("V-c0", hx, hy), ("V-c2", -hx, -hy)])
     for attempt in range(2):
+        before = _loop_counts(endpoint)
         code = main(["calibrate", "verify", "--record", str(tmp_path / "cal.json"), "--out",
                      str(tmp_path / f"check-{attempt}"), "--backend", "rt", "--endpoint",
                      endpoint, "--load", "600"])
         out = json.loads(capsys.readouterr().out)
         # Acknowledged and run once more, as the operator would: a loaded machine's late loop
-        # (encoder_frozen). The second attempt must pass. A force_limit stop is not retried:
+        # (:func:`_load_trip`). The second attempt must pass. A force_limit stop is not retried:
         # the explicit-force law's margin against the plate's stiff contact is real now (its
         # gains scheduled on the contact's stiffness: the fast-mode twin holds 600 N with
         # 8 ms of added sensor latency, the unscheduled law stopped on force_limit at 2 ms).
-        if code == 0 or attempt or not _load_trip(out):
+        if code == 0 or attempt or not _load_trip(out, endpoint, before):
             break
         _acknowledge(endpoint)
-    assert code == 0, out
+    assert code == 0, (out, _status_text(endpoint))
     assert len(out["sites"]) == 3 and out["robot_time_s"] > 10.0
     index = read_campaign(tmp_path / f"check-{attempt}")
     assert index["runner"] == "RtTrialRunner"
