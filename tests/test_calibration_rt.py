@@ -44,9 +44,12 @@ SETTLE_S = 30.0
 #: clock holds a command for several ms and the count pauses (issue 15 made the check
 #: load-aware, not load-proof); ``pulling``, F < 0 for 20 ms of loop time, which a stall
 #: spans at once when it comes while the ATI reads its noise about 0 N before contact (seen
-#: on the tilted push at 8.7 % of the cycles late, load 8). A ``force_limit`` stop is never
-#: retried (the explicit-force law's margin against the plate is real).
-LOAD_TRIPS = ("encoder_frozen", "pulling")
+#: on the tilted push at 8.7 % of the cycles late, load 8); the estimator's refusal of a dt
+#: beyond 0.1 s (``KalmanConfig.dt_max_s``: a host stall longer than that, seen at load 9 with
+#: 6 % of the cycles late) that hard-stops the robot as ``component_failed``. A
+#: ``force_limit`` stop is never retried (the explicit-force law's margin against the plate
+#: is real), nor any other block's failure.
+LOAD_TRIPS = ("encoder_frozen", "pulling", "estimator: update returned status 10")
 #: The share of an attempt's cycles that missed their deadline above which a stop among
 #: :data:`LOAD_TRIPS` is the loaded machine's: 1 %, 5-15× this VM's floor for a loop doing
 #: nothing (0.06-0.18 %, docs/worklog/2026-11-26c/lead.md).
