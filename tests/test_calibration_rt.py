@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -71,8 +72,9 @@ def _load_trip(printed: dict, endpoint: str, before: tuple[int, int]) -> bool:
     misses, cycles = _loop_counts(endpoint)
     late = (misses - before[0]) / max(1, cycles - before[1])
     retry = any(cause in error for cause in LOAD_TRIPS) and late > LATE_FRACTION
+    # stderr: the CLI's JSON is read from the captured stdout.
     print(f"attempt failed ({'run again' if retry else 'not retried'}), "
-          f"{late:.2%} of the cycles late:", error)
+          f"{late:.2%} of the cycles late:", error, file=sys.stderr)
     return retry
 
 
@@ -109,7 +111,8 @@ def _settle(endpoint: str) -> None:
                 return
             if st["latched"] and st["owner"] is None and st["phase_name"] in ("rest",
                                                                              "stopped"):
-                print("RT process: acknowledging what an earlier test left:", _stopped_by(st))
+                print("RT process: acknowledging what an earlier test left:", _stopped_by(st),
+                      file=sys.stderr)
                 client.control_acquire("test: settle")
                 try:
                     client.reset([f["id"] for f in st["latched"]])
@@ -324,7 +327,8 @@ def test_the_plate_daq_is_acquired_by_the_client_on_the_plates_own_clock(rt_cal_
         except ClockAlignmentError as exc:
             if campaign:
                 raise
-            print("the twin plate's clocks did not line up on this machine, run again:", exc)
+            print("the twin plate's clocks did not line up on this machine, run again:", exc,
+                  file=sys.stderr)
             _settle(endpoint)
             continue
         s = dataset.build_samples(plate, data, [e["site"] for e in index["trials"]], clock)
@@ -336,7 +340,8 @@ def test_the_plate_daq_is_acquired_by_the_client_on_the_plates_own_clock(rt_cal_
         # leaves such gaps (99 blocks left once at load 7): run again, as for the clocks.
         if loaded.sum() > 100 or campaign:
             break
-        print(f"{int(loaded.sum())} loaded blocks without a DAQ gap on this machine, run again")
+        print(f"{int(loaded.sum())} loaded blocks without a DAQ gap on this machine, run again",
+              file=sys.stderr)
         _settle(endpoint)
     assert min(lag.correlation for lag in clock.lags) > 0.99
     assert clock.scatter_s < 2e-3
