@@ -80,10 +80,11 @@ def test_an_encoder_frozen_right_after_the_payload_step_is_caught(model, rate_hz
 
 def test_500_kg_under_a_force_hold_is_not_read_as_a_frozen_encoder(model) -> None:
     """Under the unmeasured 500 kg the sliders sink ~1.1 mm at the drives' limit (35 ms
-    saturated), then the drives carry it (≈ 1.7 kN of their 2.04 kN per axis) and the axes
-    stand still under a load 1.5 kN beyond the carried one, never learnt (never quasi-static
-    while moving). Nothing else trips either: the saturation is far from half of the 0.5 s
-    window, the ATI's force falls (200 → 118 N: the platform sank under the foot)."""
+    saturated), then the drives carry it (≈ 1.7-1.9 kN of their 2.04 kN per axis), the force
+    hold wins the foot's force back (its integral carries the payload; the axes rise back to
+    where they stood: tests/test_force_hold_payload.py) and the axes stand still under a load
+    ≈ 1.3 kN beyond the carried one, never learnt (never quasi-static while moving). Nothing
+    else trips either: the saturation is far from half of the 0.5 s window."""
     clock = SimClock()
     twin = Twin(None, patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0), seed=0, clock=clock)
     twin.place(model.kin.ik(FORCE_HOLD_Z_M, 0.0, 0.0).q)
@@ -96,6 +97,10 @@ def test_500_kg_under_a_force_hold_is_not_read_as_a_frozen_encoder(model) -> Non
     causes = [e.cause for e in _faults(pl)]
     assert causes == [], causes
     assert max(pl.supervisor.saturated_peak_s) < 0.1
-    # The carried load is stale by the payload's share, and the axes are still: the force
-    # balance holds only because a constant load holds their still stretch.
-    assert min(pl.supervisor.carry_force_n) < 300.0
+    # The carried load is stale by most of the payload's share (the axes rose back under the
+    # load too quickly to learn it: 0.4-0.5 kN carried against ≈ 1.75 kN commanded), and the
+    # axes are still once the hold has won the force back: the force balance holds only
+    # because a constant load holds their still stretch (the carry's own band is 225 N).
+    tau = pl.graph.output("controller.tau")
+    stale = [float(tau[i]) - c for i, c in enumerate(pl.supervisor.carry_force_n)]
+    assert min(stale) > 4.0 * pl.supervisor.holding_force_n, stale

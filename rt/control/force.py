@@ -100,7 +100,15 @@ class ExplicitForceGains(BaseModel):
     kp: NonNeg = 40.0                      # N/N
     ki_per_s: NonNeg = 1000.0              # N/(N s)
     damping_n_s_per_m: NonNeg = 2.0e4
-    integral_limit_n: Pos = 1500.0
+    #: The integral's clamp (N of task force along z): the steady force along z the model
+    #: does not account for, which only the integral carries with no force error left (the
+    #: nominal model's friction and gravity errors, an amplifier's offset, an unmeasured load
+    #: on the platform: 500 kg is 4.9 kN). It may need all the drives give along z; a lower
+    #: clamp leaves the rest to the proportional term, i.e. a force error of excess/Kp (1500
+    #: under 500 kg: 200 → 118 N on the foot). The law clamps at the smaller of this and the
+    #: drives' capacity along z (``ExplicitForce.integral_limit_n``: ≈ 6.1 kN), and holds the
+    #: integral below that while a drive is at its limit (conditional integration).
+    integral_limit_n: Pos = 1.0e4
     angle_kp_n_m_per_rad: Pos = 4000.0
     angle_kd_n_m_s_per_rad: Pos = 200.0
     #: Integral action on roll and pitch: a contact's steady torque (a tip dragged across a
@@ -134,13 +142,15 @@ class ExplicitForceGains(BaseModel):
 
 #: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
 #: (1e5-1e7 N/m) ring at 1 kHz; damping and angle gains follow the PD laws' 5-150 rad/s family
-#: (platform ≈ 630 kg through the legs in z, ≈ 8 kg m² in roll/pitch); integral clamp below
-#: the drives' ≈ 2 kN per axis.
+#: (platform ≈ 630 kg through the legs in z, ≈ 8 kg m² in roll/pitch); the integral's clamp
+#: up to the three drives' ≈ 6 kN along z.
 EXPLICIT_FORCE_RANGES = {
     "kp": GainRange(0.0, 50.0, "N/N"),
     "ki_per_s": GainRange(0.0, 5000.0, "1/s"),
     "damping_n_s_per_m": GainRange(0.0, 1.0e5, "N s/m"),
-    "integral_limit_n": GainRange(1.0, 2500.0, "N"),
+    # The integral's task force along z: up to what three ≈ 2 kN drives give along z (the
+    # law takes the smaller of this and the model's drives' capacity).
+    "integral_limit_n": GainRange(1.0, 1.0e4, "N"),
     "angle_kp_n_m_per_rad": GainRange(100.0, 5.0e4, "N m/rad"),
     "angle_kd_n_m_s_per_rad": GainRange(1.0, 2000.0, "N m s/rad"),
     "angle_ki_n_m_per_rad_s": GainRange(0.0, 1.0e5, "N m/(rad s)"),
@@ -239,13 +249,31 @@ class ExplicitForce:
 
     def _pack_gains(self) -> None:
         g = self.gains
-        self._fg[:] = (g.kp, g.ki_per_s, g.damping_n_s_per_m, g.integral_limit_n,
+        self._fg[:] = (g.kp, g.ki_per_s, g.damping_n_s_per_m, self.integral_limit_n,
                        g.angle_kp_n_m_per_rad, g.angle_kd_n_m_s_per_rad,
                        g.stiffness_guess_n_per_m, 1.0 if g.estimate_stiffness else 0.0,
                        g.forgetting, g.preload_n, g.max_feedforward_speed_m_s,
                        g.max_feedforward_accel_m_s2, self.axis_inertia,
                        self.drive_force_limit_n, g.schedule_stiffness_n_per_m,
                        g.angle_ki_n_m_per_rad_s, g.angle_integral_limit_n_m)
+
+    @property
+    def z_capacity_n(self) -> float:
+        """What the drives give along the platform's z (N; 0: no limit known): the sliders are
+        vertical, so their forces add along z, each carrying S_z,i of a task force Q_z
+        (Σ S_z,i = 1; a third each at the level pose): 3 × 2036 N ≈ 6.1 kN."""
+        return 3.0 * self.drive_force_limit_n
+
+    @property
+    def integral_limit_n(self) -> float:
+        """The integral's clamp in use (N of task force along z): the gain
+        ``integral_limit_n``, at most the drives' capacity along z (:attr:`z_capacity_n`). An
+        unmeasured load the drives can carry is then carried by the integral with the force
+        error back to zero; one they cannot carry saturates them, the integral holds
+        (conditional integration) and the supervisor's checks decide (``rt.safety``)."""
+        limit = float(self.gains.integral_limit_n)
+        cap = self.z_capacity_n
+        return min(limit, cap) if cap > 0.0 else limit
 
     @property
     def integral(self) -> float:
@@ -353,7 +381,7 @@ class ExplicitForce:
         kp = max(0.0, kp)
         if not math.isnan(force_n):
             e = f_d - force_n
-            limit = g.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
+            limit = self.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
             if not ref.transient:
                 integral = max(-limit, min(limit, integral + sched * e * dt))
             if g.estimate_stiffness and force_n > 50.0:
