@@ -131,9 +131,9 @@ class ExplicitForceGains(BaseModel):
     #: 0: no schedule.
     schedule_stiffness_n_per_m: Annotated[float, Field(ge=0.0, le=1e8, allow_inf_nan=False)] = 2.5e5
     #: Friction compensation against a stiff contact: the model's (believed) Coulomb friction
-    #: per axis, in the direction the force error asks, weighted by what the gain schedule
-    #: took from the feedback (1 − k_s/k̂; none on the foot). Without it a hold on the plate
-    #: sticks and slips (``rt.control.kernels.error_friction``). 0: off.
+    #: per axis, in the direction the force error asks, where the gain schedule weakened the
+    #: feedback (none on the foot, k̂ ≤ k_s; in full at k̂ ≥ 2 k_s). Without it a hold on the
+    #: plate sticks and slips (``rt.control.kernels.error_friction``). 0: off.
     friction_compensation: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 1.0
     #: Its deadband on the force error (N), ramping to full over a second one: 3σ of the
     #: ATI's z noise (0.25 N: the Delta's resolution), so the sensor's noise does not flip
@@ -411,9 +411,9 @@ class ExplicitForce:
             out[i] = (grav[i] + S[11, i] * q_roll + S[10, i] * q_pitch
                       + fric[i] + self.axis_inertia * qdd_ff[i])
         if not math.isnan(force_n):
-            ck.error_friction.py_func(self.dyn.coulomb, self.dyn.coulomb_v, j_ik, qd_ff, e,
-                                      sched, g.friction_compensation, g.friction_deadband_n,
-                                      out)
+            ck.error_friction.py_func(self.dyn.coulomb, self.dyn.coulomb_v, j_ik, z_dot_ff,
+                                      ref.roll_rate, ref.pitch_rate, e, sched,
+                                      g.friction_compensation, g.friction_deadband_n, out)
         held = self.integral
 
         def task(integ: float) -> float:

@@ -429,7 +429,8 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
                   + fric[i] + fg[12] * (jik[i, 0] * z_ddot_ff))
     if not math.isnan(force_n):
         tree = rb.unpack_tree(ti, tf)
-        error_friction(tree[9], tree[10], jik, qd_ff, e, sched, fg[17], fg[18], out)
+        error_friction(tree[9], tree[10], jik, z_dot_ff, roll_rate_ref, pitch_rate_ref, e,
+                       sched, fg[17], fg[18], out)
     held = fs[FS_INTEGRAL]
     fz = _task_fz(fg, kp, f_d, e, integral, zd, z_dot_ff)
     if fz < floor and not force_n > floor:
@@ -446,8 +447,14 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
         out[i] += S[8, i] * fz
 
 
+#: The gain schedule's factor at and below which :func:`error_friction` compensates the whole
+#: believed Coulomb level (k̂ ≥ 2 k_s).
+ERROR_FRICTION_FULL_S = 0.5
+
+
 @njit(cache=True)
-def error_friction(fc, vs, jik, qd_ff, e, sched, fraction, deadband, out):
+def error_friction(fc, vs, jik, z_dot_ff, roll_rate, pitch_rate, e, sched, fraction,
+                   deadband, out):
     """Add to ``out`` (N per slider) the believed Coulomb friction ``fc`` (N per axis; the
     model's, never the rig's truth) in the direction the force error ``e`` (N) asks the
     platform to move, where the gain schedule ``sched`` (< 1 against a contact stiffer than
@@ -457,26 +464,34 @@ def error_friction(fc, vs, jik, qd_ff, e, sched, fraction, deadband, out):
     loop's command changes by that much. The unscheduled loop does it within (1 + Kp) e =
     225 N, e ≈ 5 N; scheduled for the plate (s ≈ 1/8) it needs 44 N of error or the
     integral's windup (0.3-0.5 s at a few N), then slips past the reference: a hunting limit
-    cycle (hold spread 1.1-1.5 N, a 20 N step 0.3-0.5 s on the twin). The compensation is
-    weighted by 1 − s (none on the foot, s = 1: its figures unchanged), by ``fraction`` (1:
-    the believed Coulomb level; static friction above it is left to the feedback), and by the
-    share the motion feedforward's own friction term (``tanh(q̇_ff / v_s)``, ``vs`` the
-    model's smoothing) leaves uncompensated. Deadband: none within ``deadband`` (N: 3σ of the
-    sensor's z noise, so noise does not flip it), ramping to full over a second ``deadband``.
-    The slider's direction for an upward platform motion is the sign of J_ik's first column
-    (``jik``, 3×3)."""
+    cycle (hold spread 1.1-1.5 N, a 20 N step 0.5 s on the twin). The compensation is none
+    where the loop is not scheduled (s = 1: the foot, its figures unchanged), full once the
+    schedule has halved the gains (s ≤ ``ERROR_FRICTION_FULL_S``; the plate's s ≈ 1/8), linear
+    between so nothing jumps as k̂ crosses k_s (weighting by 1 − s alone left the 20 N step
+    at 0.115 s against a twin whose friction is 6-21 % above the believed). Further weights:
+    ``fraction`` (1: the believed Coulomb level; static friction above it is left to the
+    feedback), and per slider the share ``1 − |tanh(q̇_r / v_s)|`` (``vs`` the model's
+    smoothing) its commanded motion leaves: q̇_r = J_ik (ż_ff, roll rate, pitch rate) (m/s,
+    rad/s), the motion the law's feedforward and the pose's rate ask. A slider that is
+    commanded to move has its friction in that motion's direction (the feedforward's own term
+    for ż_ff; the angle loop's for a tilt): the error's compensation must not fight it (a 2°
+    tilt under 600 N dropped to 519 N when it did). Deadband:
+    none within ``deadband`` (N: 3σ of the sensor's z noise, so noise does not flip it),
+    ramping to full over a second ``deadband``. The slider's direction for an upward platform
+    motion is the sign of J_ik's first column (``jik``, 3×3)."""
     if fraction <= 0.0 or not sched < 1.0:
         return
     a = abs(e)
     if not a > deadband:
         return
     w = 1.0 if deadband <= 0.0 else min(1.0, (a - deadband) / deadband)
-    w *= fraction * (1.0 - sched)
+    w *= fraction * min(1.0, (1.0 - sched) / (1.0 - ERROR_FRICTION_FULL_S))
     for i in range(3):
         d = jik[i, 0] * e
         if d == 0.0:
             continue
-        free = 1.0 - abs(math.tanh(qd_ff[i] / vs))
+        qd_r = jik[i, 0] * z_dot_ff + jik[i, 1] * roll_rate + jik[i, 2] * pitch_rate
+        free = 1.0 - abs(math.tanh(qd_r / vs))
         out[i] += (w * free * fc[i]) if d > 0.0 else -(w * free * fc[i])
 
 
