@@ -3,10 +3,12 @@ stiffness is remembered from one push to the next, and a soft stop in force cont
 to the position law's hold at once.
 
 Two 400 N pushes on the twin's calibration plate (2e6 N/m through the tool tip), each its own
-program on one loop, as the RT process plays a calibration's pushes. Before, every force-mode
-entry restarted the stiffness estimate k̂ at the gains' guess (1e5 N/m), so the first ≈ 0.2 s
-of every contact ran the plate unscheduled (the gain schedule scales the loop by k_s / k̂ only
-once k̂ has learnt the plate). The twin runs in fast mode (simulated time): deterministic.
+program on one loop, as the RT process plays a calibration's pushes. Without memory every
+force-mode entry restarts the stiffness estimate k̂ at the gains' guess (1e5 N/m). With it
+(``remember_contact``, off by default: see ``HybridController``) the approach still runs the
+guess's gains and the remembered k̂ is applied on the contact's first loaded cycle (F past
+``rt.control.kernels.CONTACT_LOADED_N``). The twin runs in fast mode (simulated time):
+deterministic.
 """
 from __future__ import annotations
 
@@ -122,7 +124,7 @@ def test_the_second_push_is_scheduled_from_its_first_loaded_cycle(entries) -> No
         assert learnt >= 1e6
         n = len(entries)
         _play(pl)
-        push2 = [c for c in entries[n:] if c and max(f for _, f in c) > 100.0][0]
+        push2 = next(c for c in entries[n:] if c and max(f for _, f in c) > 100.0)
         i = _first_loaded(push2)
         assert i > 5                      # a gap closed first, on the guess's gains
         assert all(k == guess for k, _ in push2[:i])
@@ -131,7 +133,7 @@ def test_the_second_push_is_scheduled_from_its_first_loaded_cycle(entries) -> No
         ctl.forget_contact()
         n = len(entries)
         _play(pl)
-        push3 = [c for c in entries[n:] if c and max(f for _, f in c) > 100.0][0]
+        push3 = next(c for c in entries[n:] if c and max(f for _, f in c) > 100.0)
         assert push3[_first_loaded(push3)][0] == guess
     finally:
         pl.graph.stop()
