@@ -42,6 +42,7 @@ from calibration.push import (
     ForceTableGenerator,
 )
 from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
+from rt.components.protocol_blocks import HybridController
 from rt.model import RobotModel
 from rt.position_loop import build_protocol_loop, sim_devices
 from rt.safety.events import Reaction
@@ -80,6 +81,7 @@ def run(truth: str, law: str, model: RobotModel) -> dict[str, Any]:
     if not report.ok:
         raise RuntimeError("; ".join(report.violations))
     ctl = pl.graph.component("controller")
+    assert isinstance(ctl, HybridController)
     ref = pl.reference
     f, fd, tau = [], [], []
     try:

@@ -25,6 +25,7 @@ from calibration.push import (
     ForceTableGenerator,
 )
 from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
+from rt.components.protocol_blocks import HybridController
 from rt.control import kernels as ck
 from rt.control.force import ExplicitForce, ForceReference
 from rt.model import RobotModel
@@ -64,6 +65,7 @@ def _run_hold(gains: dict | None) -> tuple[np.ndarray, np.ndarray]:
     gen = ForceTableGenerator("hold", profile, POSE, DT, MODEL.kin)
     assert gen.validate().ok
     ctl = pl.graph.component("controller")
+    assert isinstance(ctl, HybridController)
     ref = pl.reference
     measured, tracked = [], []
     try:

@@ -389,12 +389,17 @@ def test_a_remembered_contact_is_the_per_block_cycle_bit_for_bit():
         return pl
 
     m = RobotModel.load()
+
+    def push_program() -> ForceTableGenerator:
+        gen = ForceTableGenerator("push", profile, pose, dt, m.kin)
+        assert gen.validate().ok             # (which also prepares its table)
+        return gen
+
     h = _Lockstep(build)
     ctl = h.f.graph.component("controller")
     primed_compiled = 0
     for push in range(2):
-        h.both(lambda pl: pl.reference.request(
-            ForceTableGenerator("push", profile, pose, dt, m.kin)))
+        h.both(lambda pl: pl.reference.request(push_program()))
         for n in range(4000):
             waiting = ctl._hs_live and not np.isnan(ctl._hs[hybrid_kernel.H_K_PENDING])
             h.run(1)
