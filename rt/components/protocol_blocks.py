@@ -29,7 +29,7 @@ class HybridController(Component):
     law tracks the reference read ahead (``force_preview``), and during such a rise its
     integral holds. Switching between
     them resets the force law's integrals so the force starts from its feedforward; with
-    ``remember_contact`` (default) its contact-stiffness estimate starts from the last
+    ``remember_contact`` (off by default) its contact-stiffness estimate starts from the last
     contact's on the new contact's first loaded cycle (:meth:`forget_contact` and a recovery
     from a hard stop forget it: the contact may then have changed), so a second push on the
     same plate is gain-scheduled from the moment it loads, while its approach runs the
