@@ -3,7 +3,7 @@ with the law as it was before its preview (``--law before``: no preview, no lead
 not held at the drives' limit nor through a heel strike), in one run.
 
 Run:  .venv/bin/python bench/gait_error_sources.py [--data DIR] [--cases FILE:PLATE ...]
-      [--law shipped|before|both|stiff|governor] [--json]
+      [--law shipped|before|both|stiff|governor|friction] [--json]
 
 Each plate's protocol (``bench/gait_files.py``: 60 % of a 75 kg patient) is played on the
 in-process twin in simulated time (``protocols.session.build_twin_session``: the run
@@ -81,6 +81,12 @@ def _lagless(pl: Any) -> None:
     c.unload_lag_s = 0.0
 
 
+def _uncompensated(pl: Any) -> None:
+    """The law without its friction compensation against stiff contacts (issue 15's
+    friction-limited hold on the plate): the shipped law otherwise."""
+    pl.graph.component("controller").force_law.set_gains(friction_compensation=0.0)
+
+
 def run_case(case: gf.Case, data: Path, law: str, model: RobotModel) -> dict[str, Any]:
     pl_of: dict[str, Any] = {}
     probe = _Probe("probe", pl_of)
@@ -95,6 +101,8 @@ def run_case(case: gf.Case, data: Path, law: str, model: RobotModel) -> dict[str
             _unscheduled(pl)
         elif law == "lagless":
             _lagless(pl)
+        elif law == "uncompensated":
+            _uncompensated(pl)
         return pl
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -147,13 +155,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default=None, help="folder of the real C3D files")
     ap.add_argument("--cases", nargs="*", default=None, help="FILE:PLATE (default: every plate)")
-    ap.add_argument("--law", choices=("shipped", "before", "unscheduled", "lagless", "both",
-                                      "stiff", "governor"),
+    ap.add_argument("--law", choices=("shipped", "before", "unscheduled", "lagless",
+                                      "uncompensated", "both", "stiff", "governor", "friction"),
                     default="both",
                     help="both: before and shipped; stiff: unscheduled (no stiffness gain "
                          "schedule, no angle integral) and shipped; governor: lagless (the "
                          "unloading governor at 0.5 m/s² without its lag allowance) and "
-                         "shipped")
+                         "shipped; friction: uncompensated (no friction compensation against "
+                         "stiff contacts) and shipped")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     data = gf.data_dir(args.data)
@@ -167,7 +176,8 @@ def main() -> int:
         cases = [c for c in cases if (c.file, c.plate) in wanted]
     laws = {"both": ("before", "shipped"),
             "stiff": ("unscheduled", "shipped"),
-            "governor": ("lagless", "shipped")}.get(args.law, (args.law,))
+            "governor": ("lagless", "shipped"),
+            "friction": ("uncompensated", "shipped")}.get(args.law, (args.law,))
     model = RobotModel.load()
     out = [run_case(c, data, law, model) for c in cases for law in laws]
     if args.json:

@@ -119,8 +119,11 @@ def test_the_schedule_scales_the_force_gains_by_the_stiffness_it_sees(compiled) 
     taus = {}
     for name, k_est, sched in (("soft", 2.0e5, 0.0), ("soft_s", 2.0e5, 2.5e5),
                                ("stiff", 2.0e6, 0.0), ("stiff_s", 2.0e6, 2.5e5)):
+        # The friction compensation (weighted by what the schedule takes) off: this is the
+        # schedule's own arithmetic (tests/test_force_hold_friction.py checks the other).
         law = ExplicitForce(MODEL, {"schedule_stiffness_n_per_m": sched,
-                                    "estimate_stiffness": False}, compiled=compiled)
+                                    "estimate_stiffness": False,
+                                    "friction_compensation": 0.0}, compiled=compiled)
         law.k_est = k_est
         tau = np.zeros(3)
         law.update(st, 580.0, ForceReference(f=600.0), DT, tau)

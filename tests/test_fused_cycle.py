@@ -349,6 +349,72 @@ def test_a_calibration_push_on_the_stiff_plate_is_the_per_block_cycle_bit_for_bi
     assert not [e for e in _events(h.f) if e[3] >= int(Reaction.SOFT_STOP)], _events(h.f)
 
 
+def test_a_remembered_contact_is_the_per_block_cycle_bit_for_bit():
+    """Two 400 N pushes on the twin plate with the contact remembered
+    (``HybridController.remember_contact``): the second push's remembered stiffness is applied
+    on its first loaded cycle by the compiled force cycle (``hybrid_kernel.force_cycle``,
+    ``H_K_PENDING``) in the fused loop and by the interpreted block in the per-block one,
+    every cycle compared."""
+    from calibration.push import (
+        TIP_FRICTION_COEFFICIENT,
+        TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+        TOOL_LENGTH_M,
+        ForceTableGenerator,
+    )
+    from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
+    from rt.safety.limits import PatientLimits, RobotLimits
+    from rt.twin.environment import ForcePlateContact
+    from rt.twin.twin import SimClock, Twin
+
+    dt, pose = 1e-3, (0.633, 0.0, 0.0)
+    up = np.linspace(0.0, 400.0, 300)
+    profile = np.concatenate([up, np.full(200, 400.0), up[::-1]])
+
+    def build() -> PositionLoop:
+        m = RobotModel.load()
+        q0 = np.array(m.kin.ik(*pose).q)
+        p, r = sensor_poses(m, np.array([q0]))
+        env = ForcePlateContact(
+            plate_height_m=float(tip_points_B(p, r, TOOL_LENGTH_M)[0][2]) + START_GAP_M,
+            tool_length_m=TOOL_LENGTH_M,
+            tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+            friction_coefficient=TIP_FRICTION_COEFFICIENT)
+        clock = SimClock()
+        twin = Twin(m.description, env, seed=5, clock=clock)
+        twin.place(q0)
+        pl = build_protocol_loop(sim_devices(twin, clock), None, m, 1.0 / dt, "fast",
+                                 patient_limits=PatientLimits(
+                                     max_force_n=RobotLimits().max_platform_force_n))
+        pl.graph.component("controller").remember_contact = True
+        return pl
+
+    m = RobotModel.load()
+
+    def push_program() -> ForceTableGenerator:
+        gen = ForceTableGenerator("push", profile, pose, dt, m.kin)
+        assert gen.validate().ok             # (which also prepares its table)
+        return gen
+
+    h = _Lockstep(build)
+    ctl = h.f.graph.component("controller")
+    primed_compiled = 0
+    for push in range(2):
+        h.both(lambda pl: pl.reference.request(push_program()))
+        for n in range(4000):
+            waiting = ctl._hs_live and not np.isnan(ctl._hs[hybrid_kernel.H_K_PENDING])
+            h.run(1)
+            if waiting and ctl._hs_live and np.isnan(ctl._hs[hybrid_kernel.H_K_PENDING]):
+                primed_compiled += 1
+            if n > 100 and not h.f.reference.busy:
+                break
+        assert not h.f.reference.busy
+        if push == 0:
+            assert ctl._k_contact >= 1e6
+    assert primed_compiled == 1
+    assert h.force_fused > 800, (h.force_fused, h.ran)
+    assert not [e for e in _events(h.f) if e[3] >= int(Reaction.SOFT_STOP)], _events(h.f)
+
+
 def test_the_fused_chain_refuses_what_it_does_not_cover(model):
     """A non-standard law in the controller slot keeps the per-block cycle (named), and the
     environment flag turns fusion off."""

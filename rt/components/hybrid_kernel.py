@@ -37,7 +37,8 @@ from rt.control import kernels as ck
  H_UNLOAD_LAG,      # ``unload_lag_s``: how late the platform follows the unloading (s)
  H_ROLL_PREV,       # the pose reference's roll one cycle earlier (rad; NaN: none yet)
  H_PITCH_PREV,      # its pitch one cycle earlier (rad; NaN: none yet)
- H_SIZE) = range(14)
+ H_K_PENDING,       # a remembered contact stiffness for the first loaded cycle (N/m; NaN: none)
+ H_SIZE) = range(15)
 
 # ExplicitForce's gains (``ExplicitForce._pack_gains``) this cycle reads.
 _FG_PRELOAD, _FG_VMAX = 9, 10
@@ -119,9 +120,15 @@ def force_cycle(hs, force, preview, pose, wrench, ti, tf, stb, fg, fs, work, out
     """One force-mode cycle of the hybrid controller (steady: no switch this cycle): the
     reference (:func:`force_reference`), then the law's kernel as ``ExplicitForce.update``
     calls it (the measured F = −w_S.fz; roll and pitch held at the program's pose with its rate), the
-    command copied to the law's ``tau`` as it does."""
-    force_reference(hs, fg, fs, force, preview, dt, fr)
+    command copied to the law's ``tau`` as it does. A remembered contact stiffness waiting
+    for the contact's first loaded cycle (``H_K_PENDING``) is applied first, as the block
+    does."""
     measured = -wrench[2]
+    pending = hs[H_K_PENDING]
+    if not math.isnan(pending) and measured > ck.CONTACT_LOADED_N:
+        ck.prime_stiffness(fg, fs, pending)
+        hs[H_K_PENDING] = math.nan
+    force_reference(hs, fg, fs, force, preview, dt, fr)
     # The pose's rate: the backward difference of its reference (0 on the first force-mode
     # cycle), as the interpreted block computes it.
     roll = pose[1]

@@ -138,6 +138,15 @@ class ExplicitForceGains(BaseModel):
     #: gain from height to force, (1 + Kp) k, stays what it is at k_s (module docstring).
     #: 0: no schedule.
     schedule_stiffness_n_per_m: Annotated[float, Field(ge=0.0, le=1e8, allow_inf_nan=False)] = 2.5e5
+    #: Friction compensation against a stiff contact: the model's (believed) Coulomb friction
+    #: per axis, in the direction the force error asks, where the gain schedule weakened the
+    #: feedback (none on the foot, k̂ ≤ k_s; in full at k̂ ≥ 2 k_s). Without it a hold on the
+    #: plate sticks and slips (``rt.control.kernels.error_friction``). 0: off.
+    friction_compensation: Annotated[float, Field(ge=0.0, le=1.0, allow_inf_nan=False)] = 1.0
+    #: Its deadband on the force error (N), ramping to full over a second one: 3σ of the
+    #: ATI's z noise (0.25 N: the Delta's resolution), so the sensor's noise does not flip
+    #: the compensation's direction in a hold.
+    friction_deadband_n: Annotated[float, Field(ge=0.0, le=20.0, allow_inf_nan=False)] = 0.75
 
 
 #: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
@@ -168,6 +177,12 @@ EXPLICIT_FORCE_RANGES = {
     # The stiffness above which the force loop's gains are scaled down (0: never): above the
     # foot's (the heel pad 1e5 N/m, k̂ 0.75-2.4e5 over a stance), below a plate's (≥ 1e6).
     "schedule_stiffness_n_per_m": GainRange(0.0, 1.0e8, "N/m"),
+    # The believed Coulomb friction's share compensated in the force error's direction (more
+    # than the model's own level would overcompensate a rig whose friction is lower).
+    "friction_compensation": GainRange(0.0, 1.0, ""),
+    # From the sensor's noise (a few σ) to a few N (beyond it the hold is friction-limited
+    # again).
+    "friction_deadband_n": GainRange(0.0, 20.0, "N"),
 }
 #: Admittance: a virtual mass below 1 kg or a rate above 0.2 m/s would let the platform jump
 #: at a patient's push; above 500 kg / 1e5 N s/m it no longer yields to a person.
@@ -255,7 +270,8 @@ class ExplicitForce:
                        g.forgetting, g.preload_n, g.max_feedforward_speed_m_s,
                        g.max_feedforward_accel_m_s2, self.axis_inertia,
                        self.drive_force_limit_n, g.schedule_stiffness_n_per_m,
-                       g.angle_ki_n_m_per_rad_s, g.angle_integral_limit_n_m)
+                       g.angle_ki_n_m_per_rad_s, g.angle_integral_limit_n_m,
+                       g.friction_compensation, g.friction_deadband_n)
 
     @property
     def z_capacity_n(self) -> float:
@@ -326,6 +342,13 @@ class ExplicitForce:
         self.k_est = k0
         self.tau = np.zeros(3)
 
+    def prime_stiffness(self, stiffness_n_per_m: float) -> None:
+        """Start the stiffness estimate from a known contact's (N/m, held within 1/5..20× the
+        guess) without touching the integrals: the first loaded cycle of a contact whose
+        stiffness is remembered (``rt.components.protocol_blocks.HybridController``). The
+        same arithmetic as the compiled cycle's (``rt.control.kernels.prime_stiffness``)."""
+        ck.prime_stiffness.py_func(self._fg, self._fs, float(stiffness_n_per_m))
+
     def set_gains(self, **changes) -> None:
         self.gains = _validate(self.name, ExplicitForceGains, self.gain_ranges,
                                {**self.gains.model_dump(), **changes})
@@ -384,7 +407,7 @@ class ExplicitForce:
             limit = self.integral_limit_n / g.ki_per_s if g.ki_per_s > 0 else 0.0
             if not ref.transient:
                 integral = max(-limit, min(limit, integral + sched * e * dt))
-            if g.estimate_stiffness and force_n > 50.0:
+            if g.estimate_stiffness and force_n > ck.CONTACT_LOADED_N:
                 # Learn the contact's stiffness only while clearly in contact and moving a
                 # little; the estimate stays within 1/5..20× the guess, so a poorly excited
                 # stretch cannot turn the motion feedforward into nonsense.
@@ -415,6 +438,10 @@ class ExplicitForce:
         for i in range(3):
             out[i] = (grav[i] + S[11, i] * q_roll + S[10, i] * q_pitch
                       + fric[i] + self.axis_inertia * qdd_ff[i])
+        if not math.isnan(force_n):
+            ck.error_friction.py_func(self.dyn.coulomb, self.dyn.coulomb_v, j_ik, z_dot_ff,
+                                      ref.roll_rate, ref.pitch_rate, e, sched,
+                                      g.friction_compensation, g.friction_deadband_n, out)
         held = self.integral
 
         def task(integ: float) -> float:

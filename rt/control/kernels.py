@@ -315,12 +315,18 @@ def _ro(a):
 # Explicit force law (``rt.control.force.ExplicitForce``). ``fg`` (float64) = [Kp, Ki, D,
 # integral limit, angle Kp, angle Kd, stiffness guess, estimate stiffness (0/1), forgetting,
 # preload, max ż_ff, max z̈_ff, axis inertia, drive force limit (N; ≤ 0: none), gain-schedule
-# stiffness k_s (N/m), angle Ki (N m/(rad s)), angle integral limit (N m)]; ``fs``
+# stiffness k_s (N/m), angle Ki (N m/(rad s)), angle integral limit (N m), friction
+# compensation (fraction of the believed Coulomb level), its deadband (N)]; ``fs``
 # (float64) = [∫e, last z, k̂, RLS θ (2), RLS P (2×2 row-major), ∫ roll error, ∫ pitch error];
 # the reference as scalars.
 FS_INTEGRAL, FS_LAST_Z, FS_K, FS_THETA, FS_P, FS_ANGLE_I = 0, 1, 2, 3, 5, 9
 FS_SIZE = 11
-FG_SIZE = 17
+FG_SIZE = 19
+#: The measured force (N) past which the contact counts as loaded: the stiffness estimate
+#: learns only there (F ≈ k z + c holds once the tool or the heel pad is pressed, not while it
+#: still closes a gap on sensor noise), and a remembered stiffness is applied from there
+#: (``rt.components.protocol_blocks.HybridController``).
+CONTACT_LOADED_N = 50.0
 
 
 @njit(cache=True)
@@ -358,7 +364,7 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
         limit = fg[3] / ki if ki > 0 else 0.0
         if hold == 0.0:
             integral = max(-limit, min(limit, integral + sched * e * dt))
-        if fg[7] != 0.0 and force_n > 50.0:
+        if fg[7] != 0.0 and force_n > CONTACT_LOADED_N:
             last_z = fs[FS_LAST_Z]
             if not math.isnan(last_z) and abs(z - last_z) > 1e-7:
                 # RLS of F ≈ k z + c with forgetting (``rt.control.force._Rls.update``).
@@ -421,6 +427,10 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
     for i in range(3):
         out[i] = (grav[i] + S[11, i] * q_roll + S[10, i] * q_pitch
                   + fric[i] + fg[12] * (jik[i, 0] * z_ddot_ff))
+    if not math.isnan(force_n):
+        tree = rb.unpack_tree(ti, tf)
+        error_friction(tree[9], tree[10], jik, z_dot_ff, roll_rate_ref, pitch_rate_ref, e,
+                       sched, fg[17], fg[18], out)
     held = fs[FS_INTEGRAL]
     fz = _task_fz(fg, kp, f_d, e, integral, zd, z_dot_ff)
     if fz < floor and not force_n > floor:
@@ -435,6 +445,74 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
     fs[FS_INTEGRAL] = integral
     for i in range(3):
         out[i] += S[8, i] * fz
+
+
+#: The gain schedule's factor at and below which :func:`error_friction` compensates the whole
+#: believed Coulomb level (k̂ ≥ 2 k_s).
+ERROR_FRICTION_FULL_S = 0.5
+
+
+@njit(cache=True)
+def error_friction(fc, vs, jik, z_dot_ff, roll_rate, pitch_rate, e, sched, fraction,
+                   deadband, out):
+    """Add to ``out`` (N per slider) the believed Coulomb friction ``fc`` (N per axis; the
+    model's, never the rig's truth) in the direction the force error ``e`` (N) asks the
+    platform to move, where the gain schedule ``sched`` (< 1 against a contact stiffer than
+    k_s) has taken the feedback's authority over the friction away.
+
+    Why: the sliders' static friction (≈ 3 × 75 N in z) holds the platform until the force
+    loop's command changes by that much. The unscheduled loop does it within (1 + Kp) e =
+    225 N, e ≈ 5 N; scheduled for the plate (s ≈ 1/8) it needs 44 N of error or the
+    integral's windup (0.3-0.5 s at a few N), then slips past the reference: a hunting limit
+    cycle (hold spread 1.1-1.5 N, a 20 N step 0.5 s on the twin). The compensation is none
+    where the loop is not scheduled (s = 1: the foot, its figures unchanged), full once the
+    schedule has halved the gains (s ≤ ``ERROR_FRICTION_FULL_S``; the plate's s ≈ 1/8), linear
+    between so nothing jumps as k̂ crosses k_s (weighting by 1 − s alone left the 20 N step
+    at 0.115 s against a twin whose friction is 6-21 % above the believed). Further weights:
+    ``fraction`` (1: the believed Coulomb level; static friction above it is left to the
+    feedback), and per slider the share ``1 − |tanh(q̇_r / v_s)|`` (``vs`` the model's
+    smoothing) its commanded motion leaves: q̇_r = J_ik (ż_ff, roll rate, pitch rate) (m/s,
+    rad/s), the motion the law's feedforward and the pose's rate ask. A slider that is
+    commanded to move has its friction in that motion's direction (the feedforward's own term
+    for ż_ff; the angle loop's for a tilt): the error's compensation must not fight it (a 2°
+    tilt under 600 N dropped to 519 N when it did). Deadband:
+    none within ``deadband`` (N: 3σ of the sensor's z noise, so noise does not flip it),
+    ramping to full over a second ``deadband``. The slider's direction for an upward platform
+    motion is the sign of J_ik's first column (``jik``, 3×3)."""
+    if fraction <= 0.0 or not sched < 1.0:
+        return
+    a = abs(e)
+    if not a > deadband:
+        return
+    w = 1.0 if deadband <= 0.0 else min(1.0, (a - deadband) / deadband)
+    w *= fraction * min(1.0, (1.0 - sched) / (1.0 - ERROR_FRICTION_FULL_S))
+    for i in range(3):
+        d = jik[i, 0] * e
+        if d == 0.0:
+            continue
+        qd_r = jik[i, 0] * z_dot_ff + jik[i, 1] * roll_rate + jik[i, 2] * pitch_rate
+        free = 1.0 - abs(math.tanh(qd_r / vs))
+        out[i] += (w * free * fc[i]) if d > 0.0 else -(w * free * fc[i])
+
+
+@njit(cache=True)
+def prime_stiffness(fg, fs, k):
+    """Start the stiffness estimate from a known contact's ``k`` (N/m), held within the
+    estimate's own bounds (1/5..20× the guess ``fg[6]``): k̂ and the RLS prior of F ≈ k z + c
+    as ``rt.control.force.ExplicitForce.reset`` sets them for a given stiffness, the
+    integrals untouched. Called on the first loaded cycle of a contact (before it the RLS has
+    not moved from its prior), so the gains are scheduled for that contact from there on."""
+    guess = fg[6]
+    k0 = min(20.0 * guess, max(0.2 * guess, k))
+    half = 0.5 * k0
+    fs[FS_K] = k0
+    fs[FS_THETA] = k0
+    fs[FS_THETA + 1] = -k0 * 0.7
+    fs[FS_P] = half * half / 1e-4
+    fs[FS_P + 1] = 0.0
+    fs[FS_P + 2] = 0.0
+    fs[FS_P + 3] = 1e10
+    fs[FS_LAST_Z] = math.nan
 
 
 @njit(cache=True)
