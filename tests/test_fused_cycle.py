@@ -60,10 +60,16 @@ class _Lockstep:
         run = seg.run
         ctl = self.f.graph.component("controller")
 
+        #: Cycles whose drive stage / recorder stage ran in the kernel too.
+        self.drive_fused = self.recorder_fused = 0
+
         def counted(t: float, dt: float, idx: int) -> int:
             n = run(t, dt, idx)
-            self.ran[n] += 1
-            self.force_fused += int(n == 5 and bool(getattr(ctl, "_in_force", False)))
+            # ``ran[5]``: the middle chain ran whole (and the tail's stages maybe too).
+            self.ran[min(n, 5)] += 1
+            self.drive_fused += int(n >= 6 and seg.pending is None)
+            self.recorder_fused += int(n == 7)
+            self.force_fused += int(n >= 5 and bool(getattr(ctl, "_in_force", False)))
             return n
 
         seg.run = counted

@@ -43,13 +43,28 @@ from typing import Any, cast
 
 import numpy as np
 
-from rt.components.blocks import STATUS_SENSOR, ControllerBlock, ModelState, VelocityEstimation
+from rt.components.blocks import (
+    STATUS_SENSOR,
+    ControllerBlock,
+    ModelState,
+    RecorderTap,
+    SignalTap,
+    VelocityEstimation,
+)
 from rt.components.fused_kernel import (
     _INT_BUFFERS,
     _MATRIX_BUFFERS,
+    _U32_BUFFERS,
     B_AMAP,
     B_CTRL_MODE,
+    B_DAC,
+    B_DENABLE,
     B_DFAILED,
+    B_DFAKE,
+    B_DMON,
+    B_DSAMPLES,
+    B_DST,
+    B_DVOLTS,
     B_ENABLE,
     B_EST,
     B_EST_C,
@@ -92,6 +107,9 @@ from rt.components.fused_kernel import (
     B_OUT,
     B_PAR,
     B_PHI,
+    B_REC_ADDR,
+    B_REC_LENS,
+    B_REC_RING,
     B_REF_IO,
     B_REF_MODE,
     B_REF_Q,
@@ -116,6 +134,10 @@ from rt.components.fused_kernel import (
     HYBRID_FORCE,
     HYBRID_FORCE_PYTHON,
     HYBRID_POSITION,
+    I_DRIVE,
+    I_DRIVE_DONE,
+    I_DRIVE_RC,
+    INFO_SIZE,
     LAW_ADAPTIVE,
     LAW_COMPUTED_TORQUE,
     LAW_PADEN_PANJA,
@@ -125,15 +147,22 @@ from rt.components.fused_kernel import (
     N_BUFFERS,
     N_STAGES,
     NOT_HYBRID,
+    ST_CONTROLLER,
+    ST_DRIVE,
+    ST_ESTIMATOR,
+    ST_RECORDER,
+    ST_REFERENCE,
+    ST_SUPERVISOR,
     T_ADDR,
     T_DIMS,
+    T_INFO,
     T_RINGS,
     T_SIZE,
     fused_chain,
     ticks_now,
 )
 from rt.components.protocol_blocks import HybridController
-from rt.components.safety_blocks import SupervisorBlock
+from rt.components.safety_blocks import RedundantDrive, SupervisorBlock
 from rt.control.adaptive import Adaptive
 from rt.control.base import Controller
 from rt.control.force import ExplicitForce
@@ -152,9 +181,12 @@ from rt.safety.events import SupervisorMode
 #: The environment variable that turns the fused cycle off ("0") when a loop is assembled.
 ENV_FLAG = "TALUS_FUSED_CYCLE"
 
-#: The chain's slots, in the graph's order.
+#: The chain's middle slots, in the graph's order (always fused together).
 CHAIN = ("estimator", "model", "reference", "controller", "supervisor")
-assert len(CHAIN) == N_STAGES
+#: The device slots after them that the segment takes when the graph has them there: the
+#: redundant drive and the recorder tap (each fused when its backend is memory, per cycle).
+TAIL = ("drive", "recorder")
+assert ST_SUPERVISOR - ST_ESTIMATOR + 1 == len(CHAIN) and ST_RECORDER - ST_DRIVE + 1 == len(TAIL)
 
 
 #: ``TALUS_FUSED_FORCE=0`` (read when a chain binds): the hybrid controller's force mode runs
@@ -170,6 +202,9 @@ def enabled_by_environment() -> bool:
 _NO_F = np.zeros(1)
 _RUN = float(SupervisorMode.RUN)
 _NO_I = np.zeros(1, dtype=np.int64)
+_NO_U = np.zeros(1, dtype=np.uint32)
+_NO_M = np.zeros((1, 1))
+_F64 = np.dtype(np.float64)
 
 #: The methods whose arithmetic the compiled force cycle mirrors: patched (a bench, a test's
 #: recorder), the hybrid controller's force mode runs its block.
@@ -268,9 +303,14 @@ class FusedChain:
     ``ns`` and, in ``pending``, the Python that completes the last one (the graph times it
     and turns its exception or status into the slot's fault, as for an ``update``)."""
 
-    slots = CHAIN
-
-    def __init__(self) -> None:
+    def __init__(self, slots: tuple[str, ...] = CHAIN) -> None:
+        if slots[:len(CHAIN)] != CHAIN or slots[len(CHAIN):] != TAIL[:len(slots) - len(CHAIN)]:
+            raise ValueError(f"a fused chain's slots are {CHAIN} then a start of {TAIL}, "
+                             f"not {slots}")
+        #: The graph's slots this segment runs (the middle chain, then the tail's it has).
+        self.slots = slots
+        #: The stage after the segment's last (absolute, ``ST_*``).
+        self._end = ST_ESTIMATOR + len(slots)
         self.pending: Callable[[float, float], int] | None = None
         self._graph: Any = None
         self._gen = -1
@@ -279,7 +319,14 @@ class FusedChain:
         self._tab = tab = np.zeros(T_SIZE, dtype=np.int64)
         self._addr = tab[T_ADDR:T_ADDR + N_BUFFERS]
         self._dims = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
-        self._rings = tab[T_RINGS:T_RINGS + N_STAGES]
+        # The graph's rings start at the segment's first stage (the estimator).
+        self._rings = tab[T_RINGS + ST_ESTIMATOR:T_RINGS + ST_ESTIMATOR + len(self.slots)]
+        self._info = tab[T_INFO:T_INFO + INFO_SIZE]
+        self._drive: RedundantDrive | None = None
+        self._rec: SignalTap | None = None
+        self._rec_arrays: tuple = ()
+        #: Why the drive / the recorder tap run their blocks this cycle ("" when fused).
+        self.why_not_drive = self.why_not_recorder = "not bound yet"
         #: The buffer behind each address (kept alive: the kernel writes through them).
         self._bufs: list[np.ndarray] = [_NO_F] * N_BUFFERS
         self._dyn_ids: tuple = ()
@@ -328,7 +375,8 @@ class FusedChain:
     def _set(self, k: int, buf: np.ndarray) -> str:
         """Buffer ``k`` of the table; "" or why it cannot be (not C-contiguous float64 or
         int64 of the rank the kernel views it as)."""
-        want = np.int64 if k in _INT_BUFFERS else np.float64
+        want = (np.int64 if k in _INT_BUFFERS else np.uint32 if k in _U32_BUFFERS
+                else np.float64)
         ndim = 2 if k in _MATRIX_BUFFERS else 1
         if (not isinstance(buf, np.ndarray) or buf.dtype != want or buf.ndim != ndim
                 or not buf.flags.c_contiguous):
@@ -340,8 +388,8 @@ class FusedChain:
         return ""
 
     def _check_and_bind(self, g: Any) -> str:
-        comps = [g.component(s) for s in CHAIN]
-        est, mod, ref, ctl, sup = comps
+        comps = [g.component(s) for s in self.slots]
+        est, mod, ref, ctl, sup = comps[:len(CHAIN)]
         if type(est) is not VelocityEstimation or not isinstance(est.state,
                                                                  CompiledKalmanEstimator):
             return "estimator: not the compiled VelocityEstimation"
@@ -386,7 +434,27 @@ class FusedChain:
                 B_ENABLE: sup.enable.data, B_MODE: sup.mode.data,
                 B_HS: _NO_F, B_HFORCE: _NO_F, B_HPREVIEW: _NO_F, B_HPOSE: _NO_F,
                 B_HWRENCH: _NO_F, B_FTI: _NO_I, B_FTF: _NO_F, B_FG: _NO_F, B_FS: _NO_F,
-                B_FWORK: _NO_F, B_FTAU: _NO_F, B_FREF: self._fref}
+                B_FWORK: _NO_F, B_FTAU: _NO_F, B_FREF: self._fref,
+                B_DST: _NO_F, B_DVOLTS: _NO_F, B_DENABLE: _NO_F, B_DMON: _NO_F, B_DAC: _NO_F,
+                B_DSAMPLES: _NO_U, B_DFAKE: _NO_I, B_REC_RING: _NO_M, B_REC_ADDR: _NO_I,
+                B_REC_LENS: _NO_I}
+        self._drive = self._rec = None
+        self.why_not_drive = self.why_not_recorder = "not in the segment"
+        if len(comps) > ST_DRIVE - ST_ESTIMATOR:
+            drv = comps[ST_DRIVE - ST_ESTIMATOR]
+            self.why_not_drive = _drive_unbindable(drv)
+            if not self.why_not_drive:
+                self._drive = drv
+                bufs.update({B_DST: drv._st, B_DVOLTS: drv.volts.data,
+                             B_DENABLE: drv.enable.data, B_DMON: drv.volts.data})
+        if len(comps) > ST_RECORDER - ST_ESTIMATOR:
+            rec = comps[ST_RECORDER - ST_ESTIMATOR]
+            self.why_not_recorder = _recorder_unbindable(rec)
+            if not self.why_not_recorder:
+                self._rec = rec
+                self._rec_arrays = (rec.ring, rec._addr, rec._lens)
+                bufs.update({B_REC_RING: rec.ring, B_REC_ADDR: rec._addr,
+                             B_REC_LENS: rec._lens})
         if hybrid:
             bufs.update({B_HS: ctl._hs, B_HFORCE: ctl.force.data,
                          B_HPREVIEW: ctl.force_preview.data, B_HPOSE: ctl.pose.data,
@@ -480,14 +548,14 @@ class FusedChain:
         if _WARM:
             return ""
         bufs = [b.copy() for b in self._bufs]
-        scratch_rings = np.zeros((N_STAGES, 1), dtype=np.int64)
+        scratch_rings = np.zeros((N_STAGES, 2), dtype=np.int64)
         tab = self._tab.copy()
         tab[T_ADDR:T_ADDR + N_BUFFERS] = [b.__array_interface__["data"][0] for b in bufs]
         tab[T_RINGS:T_RINGS + N_STAGES] = [r.__array_interface__["data"][0]
                                            for r in scratch_rings]
         try:
-            fused_chain(tab, 0.0, 1e-3, 2, False, self._vpn, NOT_HYBRID, LAW_PADEN_PANJA, False,
-                        0, 0, 1.0)
+            fused_chain(tab, 0.0, 1e-3, ST_ESTIMATOR, ST_REFERENCE, False, self._vpn,
+                        NOT_HYBRID, LAW_PADEN_PANJA, False, 0, 0, 1.0, False, 0, 0)
         except Exception as exc:  # noqa: BLE001 - refused: the chain runs per block
             return f"the fused kernel failed its warm-up: {type(exc).__name__}: {exc}"
         _WARM = True
@@ -496,13 +564,13 @@ class FusedChain:
     # ------------------------------------------------------------------ the cycle
     def run(self, t: float, dt: float, idx: int) -> int:
         """One cycle of the chain, as far as the kernel may go (module docstring); returns
-        the number of stages run (0: run the five blocks). The stages after the first are
-        timed into their slots' rings at ``idx`` by the kernel; ``others_ns`` is their sum."""
+        the number of stages run (0: run the blocks). The stages after the first are timed
+        into their slots' rings at ``idx`` by the kernel; ``others_ns`` is their sum."""
         if self._gen != self._graph.generation:
             self._bind()
         if not self._ok:
             return 0
-        est, mod, ref, ctl, sup = self._comps
+        est, mod, ref, ctl, sup = self._comps[:5]
         if not (est._active and mod._active and ref._active and ctl._active and sup._active):
             return 0
         s = self._sup
@@ -518,44 +586,118 @@ class FusedChain:
         if stale and self._refresh_law():
             self._gen = -1
             return 0
-        upto = N_STAGES
+        g = self._graph
+        upto = self._end
+        has_measured, owner, rec_row = False, 0, 0
         if ref._pending is not None or ref._abort:
-            upto = 2                  # the sequencer's event: its cycle is Python's
+            upto = ST_REFERENCE       # the sequencer's event: its cycle is Python's
         else:
             if ref._table is not self._table:
                 if self._set(B_TABLE, ref._table):
-                    upto = 2          # a table the kernel cannot view: the block plays it
+                    upto = ST_REFERENCE   # a table the kernel cannot view: the block plays it
                 else:
                     self._table = ref._table
             raw = ctl.mode.data[0]
             if cyc is None or raw != (ctl._sup_raw if self._hybrid else ctl._mode_raw):
-                upto = min(upto, 3)   # the controller block runs (mode change, fade)
+                upto = min(upto, ST_CONTROLLER)   # the controller block runs (mode change, fade)
+        # As check_block: the failed blocks recorded every cycle (first), then a pending
+        # request, heartbeat or failed block sends the supervisor's cycle to Python (and the
+        # devices after it run their blocks).
+        sup_python = s.python_side_pending(None if not g.failed else g.failed_components())
+        if upto > ST_DRIVE:
+            if sup_python:
+                upto = ST_DRIVE
+            else:
+                drive = self._drive_args()
+                if drive is None:
+                    upto = ST_DRIVE
+                else:
+                    has_measured, owner = drive
+                    if upto > ST_RECORDER:
+                        rec = self._rec
+                        if rec is None or not rec._active or self._rec_changed(rec):
+                            upto = ST_RECORDER
+                        else:
+                            rec_row = rec.written % rec.capacity
         hybrid = self._hybrid_code(ctl) if self._hybrid else NOT_HYBRID
         st = self._state
-        g = self._graph
         ran, python, self.others_ns, aux, fk = fused_chain(
-            self._tab, t, dt, upto, st._filled, self._vpn, hybrid, b.law_id,
-            b.trajectory, self._nb, idx, self._tick_ns)
-        if ran >= 2 and fk >= 0:
+            self._tab, t, dt, ST_ESTIMATOR, upto, st._filled, self._vpn, hybrid, b.law_id,
+            b.trajectory, self._nb, idx, self._tick_ns, has_measured, owner, rec_row)
+        if ran >= ST_REFERENCE and fk >= 0:
             st.buffer_filled()
-        if ran >= 4:
+        if ran >= ST_SUPERVISOR:
             ctl._dt = dt              # what the block's update records (for a handover)
         self._aux = aux
         pending: Callable[[float, float], int] | None = None
-        if python:
-            if ran == 1:
+        if ran == ST_DRIVE:
+            if python or sup_python:
+                pending = self._finish_supervisor
+        elif python:
+            if ran == ST_MODEL:
                 pending = _sensor_fault
-            elif ran == 3:
+            elif ran == ST_CONTROLLER:
                 pending = self._play_done
-            elif ran == 4:
+            elif ran == ST_SUPERVISOR:
                 pending = self._law_refused
-        elif ran == 5 and (s.python_side_pending(
-                None if not g.failed else g.failed_components()) or aux):
-            # As check_block: the failed blocks recorded every cycle (first), then new events
-            # or a pending request send the cycle to Python.
-            pending = self._finish_supervisor
+            elif ran == ST_RECORDER:
+                pending = self._finish_drive
+        elif ran == ST_RECORDER + 1:
+            self._rec.written += 1    # type: ignore[union-attr]  # the tap's row is in
         self.pending = pending
-        return ran
+        return ran - ST_ESTIMATOR
+
+    def _drive_args(self) -> tuple[bool, int] | None:
+        """The drive stage's (has a monitor reading, the card list's owner) when the drive may
+        run fused this cycle (module docstring: the active card on the twin's compiled
+        double, enabled, not failed, the monitor an array in place), its buffers rebound to
+        the active card; else None (the block runs)."""
+        drv = self._drive
+        if drv is None or not drv._active or drv.failed.data[0] > 0.5 or not drv._enabled:
+            return None
+        cw = drv._compiled_writes[drv._card]
+        fast = cw() if cw is not None else None
+        if fast is None:
+            return None
+        dac, samples, fake, owner = fast
+        bufs = self._bufs
+        if dac is not bufs[B_DAC] or samples is not bufs[B_DSAMPLES] or fake is not bufs[B_DFAKE]:
+            # Another card (a failover): its driver's buffers.
+            if self._set(B_DAC, dac) or self._set(B_DSAMPLES, samples) or \
+                    self._set(B_DFAKE, fake):
+                self._set(B_DAC, _NO_F)
+                return None
+        mon = drv.monitor
+        if mon is None:
+            return False, owner
+        measured = mon()
+        if measured is None:          # no reading newer than the last command
+            return False, owner
+        if measured is not bufs[B_DMON]:
+            if type(measured) is not np.ndarray or measured.dtype != _F64 \
+                    or measured.shape != (3,) or self._set(B_DMON, measured):
+                return None           # any other sequence: the block copies it
+        return True, owner
+
+    def _rec_changed(self, rec: SignalTap) -> bool:
+        """Whether the tap's ring or signals were replaced since the binding (its start binds
+        them again): then the block runs, and the next binding takes the new ones."""
+        arrays = self._rec_arrays
+        if rec.ring is arrays[0] and rec._addr is arrays[1] and rec._lens is arrays[2]:
+            return False
+        if rec._signals is None or self._set(B_REC_RING, rec.ring) or \
+                self._set(B_REC_ADDR, rec._addr) or self._set(B_REC_LENS, rec._lens):
+            self._gen = -1
+            return True
+        self._rec_arrays = (rec.ring, rec._addr, rec._lens)
+        return False
+
+    def _finish_drive(self, t: float, dt: float) -> int:
+        drv = self._drive
+        assert drv is not None
+        info = self._info
+        return drv.after_compiled_write(t, int(info[I_DRIVE]), int(info[I_DRIVE_RC]),
+                                        int(info[I_DRIVE_DONE]), True)
 
     def _play_done(self, t: float, dt: float) -> int:
         return self._comps[2].play_done()
@@ -578,16 +720,51 @@ def _sensor_fault(t: float, dt: float) -> int:
     return STATUS_SENSOR
 
 
+def _drive_unbindable(drv: Any) -> str:
+    """"" when the drive slot's block may run its cycle as the fused drive stage (checked
+    per cycle too: the active card must be on the twin's compiled double), else why not."""
+    if type(drv) is not RedundantDrive:
+        return f"drive: {type(drv).__name__} has no fused stage"
+    if not drv.compiled:
+        return "drive: the interpreted RedundantDrive"
+    if drv.__dict__.get("update") is not None or RedundantDrive.__dict__["update"] \
+            is not _DRIVE_UPDATE:
+        return "drive: RedundantDrive.update is replaced"
+    if not any(c is not None for c in drv._compiled_writes):
+        return "drive: no card writes through the twin's compiled double"
+    return ""
+
+
+def _recorder_unbindable(rec: Any) -> str:
+    if type(rec) is not RecorderTap and type(rec) is not SignalTap:
+        return f"recorder: {type(rec).__name__} has no fused stage"
+    if rec.__dict__.get("update") is not None or SignalTap.__dict__["update"] is not _TAP_UPDATE:
+        return "recorder: SignalTap.update is replaced"
+    if rec._signals is None:
+        return "recorder: its inputs are not one kind of array (it copies them in Python)"
+    return ""
+
+
+_DRIVE_UPDATE = RedundantDrive.__dict__["update"]
+_TAP_UPDATE = SignalTap.__dict__["update"]
+
+
 def attach(graph: Any, enabled: bool | None = None) -> FusedChain | None:
     """Give ``graph`` the fused chain when its slots hold the standard chain's names in order
-    (the blocks themselves are checked at each binding); ``enabled`` None: the environment's
-    :data:`ENV_FLAG`. Returns the chain (None when the slots are not there)."""
+    (and after them the tail's, :data:`TAIL`, as far as it has them; the blocks themselves are
+    checked at each binding); ``enabled`` None: the environment's :data:`ENV_FLAG`. Returns
+    the chain (None when the slots are not there)."""
     order = list(graph.order)
     if CHAIN[0] not in order:
         return None
     i = order.index(CHAIN[0])
-    if tuple(order[i:i + N_STAGES]) != CHAIN:
+    if tuple(order[i:i + len(CHAIN)]) != CHAIN:
         return None
-    chain = FusedChain()
+    slots = CHAIN
+    for k in range(len(TAIL), 0, -1):
+        if tuple(order[i + len(CHAIN):i + len(CHAIN) + k]) == TAIL[:k]:
+            slots = CHAIN + TAIL[:k]
+            break
+    chain = FusedChain(slots)
     graph.fuse(chain, enabled_by_environment() if enabled is None else enabled)
     return chain
