@@ -88,6 +88,8 @@ class _Lockstep:
 
     def compare(self) -> None:
         gf, gp = self.f.graph, self.p.graph
+        # An exception in the segment would turn fusion off (and rerun the blocks): never.
+        assert gf.fused, (self.cycles, repr(gf.last_exception))
         for slot in gf.order:
             cf, cp = gf.component(slot), gp.component(slot)
             assert cf.name == cp.name, (self.cycles, slot)
@@ -102,6 +104,17 @@ class _Lockstep:
         tf, tp = self.f.twin, self.p.twin
         assert tf is not None and tp is not None
         assert repr(tf.true_state()) == repr(tp.true_state()), self.cycles
+        # The device stages' own state: both cards' codes, the drive's numbers, the
+        # recorder's rows (the last one written, and how many).
+        for c in (0, 1):
+            assert tf.dac_libs[c].ao.tobytes() == tp.dac_libs[c].ao.tobytes(), (self.cycles, c)
+        df, dp = gf.component("drive"), gp.component("drive")
+        assert df._st.tobytes() == dp._st.tobytes() and df._card == dp._card, self.cycles
+        assert df._enabled == dp._enabled, self.cycles
+        rf, rp = self.f.recorder, self.p.recorder
+        assert rf.written == rp.written, self.cycles
+        row = (rf.written - 1) % rf.capacity
+        assert rf.ring[row].tobytes() == rp.ring[row].tobytes(), self.cycles
 
 
 def test_a_position_session_with_swaps_and_trips_is_the_per_block_cycle_bit_for_bit(model):
@@ -131,6 +144,33 @@ def test_a_position_session_with_swaps_and_trips_is_the_per_block_cycle_bit_for_
     # Fused whole on steady cycles, stopped part-way on the others: before the reference
     # (approach and return: ruckig; events) and before the controller (the fades).
     assert h.ran[5] > 0.2 * h.cycles and h.ran[2] > 0 and h.ran[3] > 0, h.ran
+
+
+def test_the_drive_stage_fails_over_and_stops_as_the_drive_block_bit_for_bit(model):
+    """The drive as a fused stage (the twin's compiled double): a DAC channel of card 0 dies
+    (its amplifier input disagrees: the kernel's monitor check confirms it, Python fails over
+    to card 1 in the same cycle), card 1's stage runs fused after it; then a write on card 1
+    fails (the list stops part-way: EIO, last card: the hard stop, every card off). Every
+    cycle compared with the per-block drive, codes of both cards included."""
+    h = _Lockstep(lambda: build_sim_position_loop("paden_panja", duration_s=2.5,
+                                                  model=RobotModel.load()))
+    seg = h.f.graph.segment
+    assert seg.slots[-2:] == fused.TAIL and seg.why_not_drive == "" \
+        and seg.why_not_recorder == ""
+    h.run(1100)                                         # the approach, then play
+    before = h.drive_fused
+    assert before > 100 and h.recorder_fused > 100, (h.drive_fused, h.ran)
+    h.both(lambda pl: pl.twin.faults.schedule("dac_dead", pl.twin.t, card=0, channel=1))
+    h.run(30)
+    assert h.f.events.first("dac_card_0") is not None
+    assert h.f.graph.component("drive")._card == 1
+    h.run(200)
+    assert h.drive_fused > before + 150, (h.drive_fused, h.ran)   # card 1 fused after it
+    h.both(lambda pl: pl.twin.dac_libs[1].fail_channels.add(2))
+    h.run(60)
+    assert h.f.graph.component("drive").failed.data[0] == 1.0
+    assert h.f.events.first("drive_channel") is not None
+    assert h.f.supervisor.latched() != []
 
 
 def _library_protocol(model: RobotModel, name: str, *replace: tuple[str, str]):

@@ -150,6 +150,7 @@ from rt.components.fused_kernel import (
     ST_CONTROLLER,
     ST_DRIVE,
     ST_ESTIMATOR,
+    ST_MODEL,
     ST_RECORDER,
     ST_REFERENCE,
     ST_SUPERVISOR,
@@ -661,22 +662,23 @@ class FusedChain:
             return None
         dac, samples, fake, owner = fast
         bufs = self._bufs
-        if dac is not bufs[B_DAC] or samples is not bufs[B_DSAMPLES] or fake is not bufs[B_DFAKE]:
-            # Another card (a failover): its driver's buffers.
-            if self._set(B_DAC, dac) or self._set(B_DSAMPLES, samples) or \
-                    self._set(B_DFAKE, fake):
-                self._set(B_DAC, _NO_F)
-                return None
+        # Another card (a failover): its driver's buffers.
+        if (dac is not bufs[B_DAC] or samples is not bufs[B_DSAMPLES]
+                or fake is not bufs[B_DFAKE]) and (self._set(B_DAC, dac)
+                                                   or self._set(B_DSAMPLES, samples)
+                                                   or self._set(B_DFAKE, fake)):
+            self._set(B_DAC, _NO_F)
+            return None
         mon = drv.monitor
         if mon is None:
             return False, owner
         measured = mon()
         if measured is None:          # no reading newer than the last command
             return False, owner
-        if measured is not bufs[B_DMON]:
-            if type(measured) is not np.ndarray or measured.dtype != _F64 \
-                    or measured.shape != (3,) or self._set(B_DMON, measured):
-                return None           # any other sequence: the block copies it
+        if measured is not bufs[B_DMON] and (
+                type(measured) is not np.ndarray or measured.dtype != _F64
+                or measured.shape != (3,) or self._set(B_DMON, measured)):
+            return None               # any other sequence: the block copies it
         return True, owner
 
     def _rec_changed(self, rec: SignalTap) -> bool:
@@ -760,7 +762,7 @@ def attach(graph: Any, enabled: bool | None = None) -> FusedChain | None:
     i = order.index(CHAIN[0])
     if tuple(order[i:i + len(CHAIN)]) != CHAIN:
         return None
-    slots = CHAIN
+    slots: tuple[str, ...] = CHAIN
     for k in range(len(TAIL), 0, -1):
         if tuple(order[i + len(CHAIN):i + len(CHAIN) + k]) == TAIL[:k]:
             slots = CHAIN + TAIL[:k]
