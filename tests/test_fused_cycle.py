@@ -63,13 +63,21 @@ class _Lockstep:
         #: Cycles whose drive stage / recorder stage ran in the kernel too.
         self.drive_fused = self.recorder_fused = 0
 
+        #: Cycles each sensor ran in the kernel (``fused.HEAD`` order).
+        self.sensors_fused = [0, 0, 0]
+        head = len(fused.HEAD) if seg.slots[0] == fused.HEAD[0] else 0
+
         def counted(t: float, dt: float, idx: int) -> int:
             n = run(t, dt, idx)
+            m = n - head              # stages of the middle chain and the tail
             # ``ran[5]``: the middle chain ran whole (and the tail's stages maybe too).
-            self.ran[min(n, 5)] += 1
-            self.drive_fused += int(n >= 6 and seg.pending is None)
-            self.recorder_fused += int(n == 7)
-            self.force_fused += int(n >= 5 and bool(getattr(ctl, "_in_force", False)))
+            self.ran[max(0, min(m, 5))] += 1
+            self.drive_fused += int(m >= 6 and seg.pending is None)
+            self.recorder_fused += int(m == 7)
+            self.force_fused += int(m >= 5 and bool(getattr(ctl, "_in_force", False)))
+            if n:
+                for k in range(head):
+                    self.sensors_fused[k] += int(seg.why_not_sensor[k] == "")
             return n
 
         seg.run = counted
@@ -171,6 +179,42 @@ def test_the_drive_stage_fails_over_and_stops_as_the_drive_block_bit_for_bit(mod
     assert h.f.graph.component("drive").failed.data[0] == 1.0
     assert h.f.events.first("drive_channel") is not None
     assert h.f.supervisor.latched() != []
+
+
+def test_the_sensor_stages_hand_their_faults_to_their_blocks_bit_for_bit(model):
+    """The sensors as fused stages on the twin's memory: a frozen encoder and a jump (a twin
+    fault: the encoder block decodes), the ATI's stale and lost samples (its blocks read
+    them), a hand stop read by the stops' stage; fused again when the faults clear. Every
+    cycle compared with the per-block sensors."""
+    h = _Lockstep(lambda: build_sim_position_loop("paden_panja", duration_s=2.5,
+                                                  model=RobotModel.load()))
+    seg = h.f.graph.segment
+    assert seg.slots[:3] == fused.HEAD and seg.slots[-2:] == fused.TAIL
+    h.run(1100)
+    assert min(h.sensors_fused) > 1000, h.sensors_fused
+    h.both(lambda pl: pl.twin.faults.schedule("encoder_jump", pl.twin.t, axis=1, counts=3))
+    h.both(lambda pl: pl.twin.faults.schedule("encoder_freeze", pl.twin.t + 0.01,
+                                              pl.twin.t + 0.03, axis=0))
+    before = list(h.sensors_fused)
+    h.run(40)
+    assert seg.why_not_sensor[0] != "" and h.sensors_fused[0] == before[0]
+    h.both(lambda pl: pl.twin.faults.faults.clear())
+    h.run(20)
+    assert h.sensors_fused[0] > before[0]
+    h.both(lambda pl: pl.twin.ati.set_fault("stale"))
+    before = list(h.sensors_fused)
+    h.run(120)                                          # stale beyond the 50 ms timeout
+    assert h.sensors_fused[1] == before[1] and h.sensors_fused[0] > before[0] + 100
+    assert h.f.graph.component("force").flags.data[0] == 1.0          # flagged stale
+    h.both(lambda pl: pl.twin.ati.set_fault("stale", False))
+    h.both(lambda pl: pl.twin.ati.set_fault("dropout"))
+    h.run(80)
+    h.both(lambda pl: pl.twin.ati.clear_faults())
+    h.run(100)
+    h.both(lambda pl: setattr(pl.twin.inputs, "hand_stop", True))   # read by the stage
+    h.run(30)
+    assert h.f.events.first("hand_stop") is not None
+    assert h.sensors_fused[2] > 1300, h.sensors_fused
 
 
 def _library_protocol(model: RobotModel, name: str, *replace: tuple[str, str]):

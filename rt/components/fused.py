@@ -46,6 +46,7 @@ import numpy as np
 from rt.components.blocks import (
     STATUS_SENSOR,
     ControllerBlock,
+    EncoderReader,
     ModelState,
     RecorderTap,
     SignalTap,
@@ -56,6 +57,7 @@ from rt.components.fused_kernel import (
     _MATRIX_BUFFERS,
     _U32_BUFFERS,
     B_AMAP,
+    B_ATI_W,
     B_CTRL_MODE,
     B_DAC,
     B_DENABLE,
@@ -66,6 +68,7 @@ from rt.components.fused_kernel import (
     B_DST,
     B_DVOLTS,
     B_ENABLE,
+    B_ENC_Q,
     B_EST,
     B_EST_C,
     B_EST_IO,
@@ -76,6 +79,13 @@ from rt.components.fused_kernel import (
     B_FK,
     B_FREF,
     B_FS,
+    B_FT_FLAGS,
+    B_FT_RAW,
+    B_FT_REQUEST,
+    B_FT_ST,
+    B_FT_TARE,
+    B_FT_TARE_BUF,
+    B_FT_WRENCH,
     B_FTAU,
     B_FTF,
     B_FTI,
@@ -106,6 +116,10 @@ from rt.components.fused_kernel import (
     B_MODE,
     B_OUT,
     B_PAR,
+    B_PCL_DEC,
+    B_PCL_IO,
+    B_PCL_PORTS,
+    B_PCL_ST,
     B_PHI,
     B_REC_ADDR,
     B_REC_LENS,
@@ -124,6 +138,7 @@ from rt.components.fused_kernel import (
     B_SSTB,
     B_STAU,
     B_STB,
+    B_STOPS,
     B_TABLE,
     B_TF,
     B_TI,
@@ -131,6 +146,9 @@ from rt.components.fused_kernel import (
     B_WFLAGS,
     B_WORK,
     B_WRENCH,
+    HEAD_ENCODERS,
+    HEAD_FORCE,
+    HEAD_STOPS,
     HYBRID_FORCE,
     HYBRID_FORCE_PYTHON,
     HYBRID_POSITION,
@@ -149,10 +167,13 @@ from rt.components.fused_kernel import (
     NOT_HYBRID,
     ST_CONTROLLER,
     ST_DRIVE,
+    ST_ENCODERS,
     ST_ESTIMATOR,
+    ST_FORCE,
     ST_MODEL,
     ST_RECORDER,
     ST_REFERENCE,
+    ST_STOPS,
     ST_SUPERVISOR,
     T_ADDR,
     T_DIMS,
@@ -163,7 +184,7 @@ from rt.components.fused_kernel import (
     ticks_now,
 )
 from rt.components.protocol_blocks import HybridController
-from rt.components.safety_blocks import RedundantDrive, SupervisorBlock
+from rt.components.safety_blocks import ForceReader, RedundantDrive, StopInputs, SupervisorBlock
 from rt.control.adaptive import Adaptive
 from rt.control.base import Controller
 from rt.control.force import ExplicitForce
@@ -184,15 +205,32 @@ ENV_FLAG = "TALUS_FUSED_CYCLE"
 
 #: The chain's middle slots, in the graph's order (always fused together).
 CHAIN = ("estimator", "model", "reference", "controller", "supervisor")
+#: The sensor slots before them that the segment takes when the graph has them there (all
+#: three): each fused when its backend is memory this cycle, else its block runs first.
+HEAD = ("encoders", "force", "stops")
 #: The device slots after them that the segment takes when the graph has them there: the
 #: redundant drive and the recorder tap (each fused when its backend is memory, per cycle).
 TAIL = ("drive", "recorder")
 assert ST_SUPERVISOR - ST_ESTIMATOR + 1 == len(CHAIN) and ST_RECORDER - ST_DRIVE + 1 == len(TAIL)
+assert ST_STOPS - ST_ENCODERS + 1 == len(HEAD) == ST_ESTIMATOR
+_HEAD_BITS = (HEAD_ENCODERS, HEAD_FORCE, HEAD_STOPS)
 
 
 #: ``TALUS_FUSED_FORCE=0`` (read when a chain binds): the hybrid controller's force mode runs
 #: its block even when fused (the state before the force stage; before/after benchmarks).
 FORCE_ENV_FLAG = "TALUS_FUSED_FORCE"
+
+
+#: ``TALUS_FUSED_DEVICES=0`` (read when a loop is assembled): the device blocks (sensors,
+#: drive, recorder) keep their ``update`` though the middle chain is fused (the state before
+#: the device stages; before/after benchmarks).
+DEVICES_ENV_FLAG = "TALUS_FUSED_DEVICES"
+
+
+def sensors_by_environment() -> bool:
+    """False when ``TALUS_FUSED_DEVICES=0`` (or ``false``/``off``/``no``) is set."""
+    return os.environ.get(DEVICES_ENV_FLAG, "1").strip().lower() not in ("0", "false", "off",
+                                                                         "no")
 
 
 def enabled_by_environment() -> bool:
@@ -305,13 +343,20 @@ class FusedChain:
     and turns its exception or status into the slot's fault, as for an ``update``)."""
 
     def __init__(self, slots: tuple[str, ...] = CHAIN) -> None:
-        if slots[:len(CHAIN)] != CHAIN or slots[len(CHAIN):] != TAIL[:len(slots) - len(CHAIN)]:
-            raise ValueError(f"a fused chain's slots are {CHAIN} then a start of {TAIL}, "
-                             f"not {slots}")
-        #: The graph's slots this segment runs (the middle chain, then the tail's it has).
+        h = len(HEAD) if slots[:len(HEAD)] == HEAD else 0
+        mid = slots[h:]
+        if mid[:len(CHAIN)] != CHAIN or mid[len(CHAIN):] != TAIL[:len(mid) - len(CHAIN)]:
+            raise ValueError(f"a fused chain's slots are (optionally {HEAD}), {CHAIN}, then a "
+                             f"start of {TAIL}, not {slots}")
+        #: The graph's slots this segment runs (the sensors, the middle chain, the tail).
         self.slots = slots
-        #: The stage after the segment's last (absolute, ``ST_*``).
-        self._end = ST_ESTIMATOR + len(slots)
+        #: The segment's first stage and the stage after its last (absolute, ``ST_*``).
+        self._first = ST_ENCODERS if h else ST_ESTIMATOR
+        self._end = self._first + len(slots)
+        self._head: tuple = ()
+        self._head_run: list = []
+        #: Why each sensor ran its block in the last cycle ("" when fused; ``HEAD`` order).
+        self.why_not_sensor = ["not bound yet"] * len(HEAD)
         self.pending: Callable[[float, float], int] | None = None
         self._graph: Any = None
         self._gen = -1
@@ -320,8 +365,8 @@ class FusedChain:
         self._tab = tab = np.zeros(T_SIZE, dtype=np.int64)
         self._addr = tab[T_ADDR:T_ADDR + N_BUFFERS]
         self._dims = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
-        # The graph's rings start at the segment's first stage (the estimator).
-        self._rings = tab[T_RINGS + ST_ESTIMATOR:T_RINGS + ST_ESTIMATOR + len(self.slots)]
+        # The graph's rings start at the segment's first stage.
+        self._rings = tab[T_RINGS + self._first:T_RINGS + self._end]
         self._info = tab[T_INFO:T_INFO + INFO_SIZE]
         self._drive: RedundantDrive | None = None
         self._rec: SignalTap | None = None
@@ -390,6 +435,8 @@ class FusedChain:
 
     def _check_and_bind(self, g: Any) -> str:
         comps = [g.component(s) for s in self.slots]
+        head = comps[:ST_ESTIMATOR - self._first]
+        comps = comps[len(head):]
         est, mod, ref, ctl, sup = comps[:len(CHAIN)]
         if type(est) is not VelocityEstimation or not isinstance(est.state,
                                                                  CompiledKalmanEstimator):
@@ -438,7 +485,24 @@ class FusedChain:
                 B_FWORK: _NO_F, B_FTAU: _NO_F, B_FREF: self._fref,
                 B_DST: _NO_F, B_DVOLTS: _NO_F, B_DENABLE: _NO_F, B_DMON: _NO_F, B_DAC: _NO_F,
                 B_DSAMPLES: _NO_U, B_DFAKE: _NO_I, B_REC_RING: _NO_M, B_REC_ADDR: _NO_I,
-                B_REC_LENS: _NO_I}
+                B_REC_LENS: _NO_I, B_PCL_ST: _NO_I, B_PCL_PORTS: _NO_I, B_PCL_IO: _NO_I,
+                B_PCL_DEC: _NO_F, B_ENC_Q: _NO_F, B_ATI_W: _NO_F, B_FT_ST: _NO_F,
+                B_FT_RAW: _NO_F, B_FT_WRENCH: _NO_F, B_FT_FLAGS: _NO_F, B_FT_REQUEST: _NO_F,
+                B_FT_TARE: _NO_F, B_FT_TARE_BUF: _NO_F, B_STOPS: _NO_F}
+        self._head = ()
+        if head:
+            why = _head_unbindable(head)
+            if why:
+                return why
+            enc, force, stops = head
+            self._head = (enc, force, stops)
+            self._head_run = [[e] for e in g.segment_run()[:len(HEAD)]]
+            self._enc_arrays: tuple = ()
+            self._ft_arrays: tuple = ()
+            bufs.update({B_ENC_Q: enc.q.data, B_FT_RAW: force._raw,
+                         B_FT_WRENCH: force.wrench.data, B_FT_FLAGS: force.flags.data,
+                         B_FT_REQUEST: force.tare_request.data, B_FT_TARE: force.tare_out.data,
+                         B_FT_TARE_BUF: force.tare._buf, B_STOPS: stops.stops.data})
         self._drive = self._rec = None
         self.why_not_drive = self.why_not_recorder = "not in the segment"
         if len(comps) > ST_DRIVE - ST_ESTIMATOR:
@@ -469,6 +533,7 @@ class FusedChain:
             if why:
                 return why
         self._comps = comps
+        self._all = (*head, *comps)
         self._est_state = e
         self._law = law
         self._hybrid = hybrid
@@ -556,7 +621,8 @@ class FusedChain:
                                            for r in scratch_rings]
         try:
             fused_chain(tab, 0.0, 1e-3, ST_ESTIMATOR, ST_REFERENCE, False, self._vpn,
-                        NOT_HYBRID, LAW_PADEN_PANJA, False, 0, 0, 1.0, False, 0, 0)
+                        NOT_HYBRID, LAW_PADEN_PANJA, False, 0, 0, 1.0, False, 0, 0, 0, 0, 0,
+                        0.0, 0.0, 0.0)
         except Exception as exc:  # noqa: BLE001 - refused: the chain runs per block
             return f"the fused kernel failed its warm-up: {type(exc).__name__}: {exc}"
         _WARM = True
@@ -574,6 +640,8 @@ class FusedChain:
         est, mod, ref, ctl, sup = self._comps[:5]
         if not (est._active and mod._active and ref._active and ctl._active and sup._active):
             return 0
+        if self._head and not all(c._active for c in self._head):
+            return 0                  # a sensor block in error: every block runs
         s = self._sup
         if est.state is not self._est_state or s._mem is not self._mem \
                 or s._par is not self._par:
@@ -601,6 +669,20 @@ class FusedChain:
             raw = ctl.mode.data[0]
             if cyc is None or raw != (ctl._sup_raw if self._hybrid else ctl._mode_raw):
                 upto = min(upto, ST_CONTROLLER)   # the controller block runs (mode change, fade)
+        head = 0
+        ft_seq = ft_status = 0
+        ft_t = estop = hand = 0.0
+        py_ns = 0
+        if self._head:
+            # Each sensor fused when its backend is memory this cycle; the others run their
+            # blocks now, before the call (the three read independent devices).
+            head, ft_seq, ft_status, ft_t, estop, hand = self._sensors()
+            if head != HEAD_ENCODERS | HEAD_FORCE | HEAD_STOPS:
+                for k in range(len(HEAD)):
+                    if not head & _HEAD_BITS[k]:
+                        ns = g.run_blocks(self._head_run[k], t, dt, idx)
+                        if k:             # the first slot's time is the call's remainder
+                            py_ns += ns
         # As check_block: the failed blocks recorded every cycle (first), then a pending
         # request, heartbeat or failed block sends the supervisor's cycle to Python (and the
         # devices after it run their blocks).
@@ -622,9 +704,13 @@ class FusedChain:
                             rec_row = rec.written % rec.capacity
         hybrid = self._hybrid_code(ctl) if self._hybrid else NOT_HYBRID
         st = self._state
-        ran, python, self.others_ns, aux, fk = fused_chain(
-            self._tab, t, dt, ST_ESTIMATOR, upto, st._filled, self._vpn, hybrid, b.law_id,
-            b.trajectory, self._nb, idx, self._tick_ns, has_measured, owner, rec_row)
+        ran, python, others, aux, fk = fused_chain(
+            self._tab, t, dt, self._first, upto, st._filled, self._vpn, hybrid, b.law_id,
+            b.trajectory, self._nb, idx, self._tick_ns, has_measured, owner, rec_row, head,
+            ft_seq, ft_status, ft_t, estop, hand)
+        self.others_ns = others + py_ns
+        if head & HEAD_ENCODERS and not (python and ran == ST_ENCODERS + 1):
+            self._enc_port.n_reads += 9           # the emulated card's count of inb
         if ran >= ST_REFERENCE and fk >= 0:
             st.buffer_filled()
         if ran >= ST_SUPERVISOR:
@@ -635,7 +721,11 @@ class FusedChain:
             if python or sup_python:
                 pending = self._finish_supervisor
         elif python:
-            if ran == ST_MODEL:
+            if ran == ST_ENCODERS + 1:
+                pending = self._encoder_refused
+            elif ran == ST_FORCE + 1:
+                pending = self._tare_ended
+            elif ran == ST_MODEL:
                 pending = _sensor_fault
             elif ran == ST_CONTROLLER:
                 pending = self._play_done
@@ -646,7 +736,65 @@ class FusedChain:
         elif ran == ST_RECORDER + 1:
             self._rec.written += 1    # type: ignore[union-attr]  # the tap's row is in
         self.pending = pending
-        return ran - ST_ESTIMATOR
+        return ran - self._first
+
+    def _sensors(self) -> tuple[int, int, int, float, float, float]:
+        """Which sensor stages the kernel runs this cycle (``HEAD_*`` bits) and their
+        scalars (the force sample's counter, status and time; the stop levels), each
+        sensor's buffers rebound when its backend's arrays changed."""
+        enc, force, stops = self._head
+        why = self.why_not_sensor
+        head = 0
+        bufs = self._bufs
+        r = enc.encoders.compiled_read()
+        if r is None:
+            why[0] = "the backend is not memory this cycle"
+        elif (r[0] is not bufs[B_PCL_ST] or r[1] is not bufs[B_PCL_PORTS]
+              or r[2] is not bufs[B_PCL_IO] or r[3] is not bufs[B_PCL_DEC]) and (
+                self._set(B_PCL_ST, r[0]) or self._set(B_PCL_PORTS, r[1])
+                or self._set(B_PCL_IO, r[2]) or self._set(B_PCL_DEC, r[3])):
+            self._set(B_PCL_ST, _NO_I)
+            why[0] = "the card's arrays cannot be viewed"
+        else:
+            head = HEAD_ENCODERS
+            self._enc_port = r[4]
+            why[0] = ""
+        ft_seq = ft_status = 0
+        ft_t = 0.0
+        smp = force.sensor.compiled_sample()
+        if smp is None:
+            why[1] = "the sensor's sample is not in memory this cycle"
+        elif (smp[0] is not bufs[B_ATI_W] or smp[1] is not bufs[B_FT_ST]
+              or force.tare._buf is not bufs[B_FT_TARE_BUF]) and (
+                self._set(B_ATI_W, smp[0]) or self._set(B_FT_ST, smp[1])
+                or self._set(B_FT_TARE_BUF, force.tare._buf)):
+            self._set(B_ATI_W, _NO_F)
+            why[1] = "the sample's arrays cannot be viewed"
+        else:
+            head |= HEAD_FORCE
+            ft_seq, ft_status, ft_t = int(smp[2]), int(smp[3]), float(smp[4])
+            why[1] = ""
+        lv = stops.device.compiled_levels()
+        estop = hand = 0.0
+        if lv is None:
+            why[2] = "the inputs are not memory"
+        else:
+            head |= HEAD_STOPS
+            estop, hand = lv
+            why[2] = ""
+        return head, ft_seq, ft_status, ft_t, estop, hand
+
+    def _encoder_refused(self, t: float, dt: float) -> int:
+        # The kernel's read stopped at a port the card refuses: the same read raises the
+        # card's HardwareError (naming the port), as the block's read would.
+        enc = self._head[0]
+        enc.encoders.read_positions_m(enc.q.data)
+        return 0
+
+    def _tare_ended(self, t: float, dt: float) -> int:
+        force = self._head[1]
+        force.tare._end_cycle(force.wrench.data, force.tare_out.data)
+        return 0
 
     def _drive_args(self) -> tuple[bool, int] | None:
         """The drive stage's (has a monitor reading, the card list's owner) when the drive may
@@ -737,6 +885,21 @@ def _drive_unbindable(drv: Any) -> str:
     return ""
 
 
+def _head_unbindable(head: list) -> str:
+    """"" when the sensor slots hold the standard sensor blocks (each fused per cycle when
+    its backend is memory), else why the chain runs per block."""
+    enc, force, stops = head
+    for comp, cls in ((enc, EncoderReader), (force, ForceReader), (stops, StopInputs)):
+        if type(comp) is not cls:
+            return f"{cls.__name__}: {type(comp).__name__} has no fused stage"
+        if comp.__dict__.get("update") is not None or cls.__dict__["update"] \
+                is not _SENSOR_UPDATES[cls]:
+            return f"{cls.__name__}.update is replaced"
+    if not force.compiled:
+        return "force: the interpreted ForceReader"
+    return ""
+
+
 def _recorder_unbindable(rec: Any) -> str:
     if type(rec) is not RecorderTap and type(rec) is not SignalTap:
         return f"recorder: {type(rec).__name__} has no fused stage"
@@ -749,6 +912,7 @@ def _recorder_unbindable(rec: Any) -> str:
 
 _DRIVE_UPDATE = RedundantDrive.__dict__["update"]
 _TAP_UPDATE = SignalTap.__dict__["update"]
+_SENSOR_UPDATES = {cls: cls.__dict__["update"] for cls in (EncoderReader, ForceReader, StopInputs)}
 
 
 def attach(graph: Any, enabled: bool | None = None) -> FusedChain | None:
@@ -763,10 +927,12 @@ def attach(graph: Any, enabled: bool | None = None) -> FusedChain | None:
     if tuple(order[i:i + len(CHAIN)]) != CHAIN:
         return None
     slots: tuple[str, ...] = CHAIN
-    for k in range(len(TAIL), 0, -1):
+    for k in range(len(TAIL) if sensors_by_environment() else 0, 0, -1):
         if tuple(order[i + len(CHAIN):i + len(CHAIN) + k]) == TAIL[:k]:
             slots = CHAIN + TAIL[:k]
             break
+    if i >= len(HEAD) and tuple(order[i - len(HEAD):i]) == HEAD and sensors_by_environment():
+        slots = HEAD + slots
     chain = FusedChain(slots)
     graph.fuse(chain, enabled_by_environment() if enabled is None else enabled)
     return chain

@@ -20,8 +20,11 @@ from numba.extending import intrinsic
 
 from rt.components import hybrid_kernel as hyk
 from rt.components.blocks import tap_row
-from rt.components.safety_blocks import _drive_cycle_write
+from rt.components.safety_blocks import _drive_cycle_write, _force_cycle
+from rt.components.tare import TARE_ENDED
 from rt.control import kernels as ck
+from rt.devices.sampled_ft import _read_sample
+from rt.drivers import kernels as dk
 from rt.estimation.compiled import block_update
 from rt.model.kernels import model_state
 from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
@@ -84,8 +87,16 @@ def ticks_now() -> int:
  # driver state, its list's samples (uint32) and the double's state; the recorder tap's ring
  # (a matrix) and its signals' addresses and lengths (``recorder_stage``).
  B_DST, B_DVOLTS, B_DENABLE, B_DMON, B_DAC, B_DSAMPLES, B_DFAKE,
- B_REC_RING, B_REC_ADDR, B_REC_LENS, N_BUFFERS) = range(77)
-_INT_BUFFERS = (B_TI, B_AMAP, B_FTI, B_DFAKE, B_REC_ADDR, B_REC_LENS)
+ B_REC_RING, B_REC_ADDR, B_REC_LENS,
+ # The sensors on memory (``sensor_stages``): the encoder card's emulation state, the
+ # driver's ports to read, its read/unwrap state and decode constants, its output; the polled
+ # force sensor's device sample and own state, the reader's reading, wrench, flags, tare
+ # request, tare port and tare state; the stop inputs' output.
+ B_PCL_ST, B_PCL_PORTS, B_PCL_IO, B_PCL_DEC, B_ENC_Q,
+ B_ATI_W, B_FT_ST, B_FT_RAW, B_FT_WRENCH, B_FT_FLAGS, B_FT_REQUEST, B_FT_TARE, B_FT_TARE_BUF,
+ B_STOPS, N_BUFFERS) = range(91)
+_INT_BUFFERS = (B_TI, B_AMAP, B_FTI, B_DFAKE, B_REC_ADDR, B_REC_LENS, B_PCL_ST, B_PCL_PORTS,
+                B_PCL_IO)
 _U32_BUFFERS = (B_DSAMPLES,)
 _MATRIX_BUFFERS = (B_TABLE, B_REC_RING)
 
@@ -164,6 +175,48 @@ def drive_stage(has_measured, owner, a, d, info):
     return i >= 0 or python
 
 
+#: ``head`` bits: which sensor stages the kernel runs (the others ran in Python before it).
+HEAD_ENCODERS, HEAD_FORCE, HEAD_STOPS = 1 << ST_ENCODERS, 1 << ST_FORCE, 1 << ST_STOPS
+
+
+@njit(cache=True)
+def sensor_stages(stamps, info, head, ft_seq, ft_status, ft_t, estop, hand, a, d):
+    """The sensor stages the kernel runs (``head``): the encoder card's emulated block read
+    and the driver's decode (``rt.drivers.kernels``: what ``Pcl833Encoders.read_positions_m``
+    does on the twin's card), the polled force sensor's sample (``_read_sample``, given the
+    device's counter, status and time) and the force reader's cycle with its tare
+    (``_force_cycle``), the stop levels. Returns False where Python must finish the stage
+    (a port the card refuses; a tare that ended), ``info[I_RAN]`` then the stage after it."""
+    for k in range(ST_ENCODERS, ST_ESTIMATOR):
+        stamps[k] = _ticks()
+        if head & (1 << k):
+            if k == ST_ENCODERS:
+                io = _vi(a, d, B_PCL_IO)
+                if dk.fake_pcl833_read(_vi(a, d, B_PCL_ST), _vi(a, d, B_PCL_PORTS),
+                                       io[dk.PCL_RAW:dk.PCL_RAW + 9]) >= 0:
+                    stamps[k + 1] = _ticks()
+                    info[I_RAN] = k + 1
+                    info[I_PYTHON] = 1
+                    return False
+                dk.pcl833_decode(io, _v(a, d, B_PCL_DEC), _v(a, d, B_ENC_Q))
+            elif k == ST_FORCE:
+                raw = _v(a, d, B_FT_RAW)
+                _read_sample(_v(a, d, B_ATI_W), ft_seq, ft_status, ft_t, _v(a, d, B_FT_ST), raw)
+                if _force_cycle(raw, _v(a, d, B_FT_WRENCH), _v(a, d, B_FT_FLAGS),
+                                _v(a, d, B_FT_REQUEST), _v(a, d, B_FT_TARE),
+                                _v(a, d, B_FT_TARE_BUF)) == TARE_ENDED:
+                    stamps[k + 1] = _ticks()
+                    info[I_RAN] = k + 1
+                    info[I_PYTHON] = 1
+                    return False
+            else:
+                out = _v(a, d, B_STOPS)
+                out[0] = estop
+                out[1] = hand
+        info[I_RAN] = k + 1
+    return True
+
+
 @njit(cache=True)
 def recorder_stage(t, row, a, d):
     """The recorder tap's row (``rt.components.blocks.tap_row``) on its block's buffers."""
@@ -185,10 +238,11 @@ T_SIZE = T_INFO + INFO_SIZE
 
 @njit(cache=True)
 def fused_chain(tab, t, dt, first, upto, filled, volts_per_n, hybrid, law, trajectory, nb, idx,
-                ns_per_tick, has_measured, owner, rec_row):
-    """:func:`_chain` from stage ``first`` (the segment's first: the stages before it are not
-    the segment's, the sensors before ``ST_ESTIMATOR`` ran in Python before the call), then
-    each kernel stage after the segment's first timed into its slot's ring (the graph's timing
+                ns_per_tick, has_measured, owner, rec_row, head, ft_seq, ft_status, ft_t,
+                estop, hand):
+    """:func:`sensor_stages` (``head``: those the kernel runs; when the segment starts at
+    ``first`` = ``ST_ENCODERS``), then :func:`_chain`, then each stage the kernel ran after
+    the segment's first timed into its slot's ring (the graph's timing
     rings' addresses, in ``tab``, at ``idx``). Returns (the stage after the last one run,
     whether the last needs Python, the ns those later stages took, the supervisor's or the
     law's answer, FK's status)."""
@@ -197,11 +251,17 @@ def fused_chain(tab, t, dt, first, upto, filled, volts_per_n, hybrid, law, traje
     rings = tab[T_RINGS:T_RINGS + N_STAGES]
     stamps = tab[T_STAMPS:T_STAMPS + N_STAGES + 1]
     info = tab[T_INFO:T_INFO + INFO_SIZE]
-    _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d,
-           has_measured, owner, rec_row)
+    info[I_RAN] = first
+    info[I_PYTHON] = 0
+    if first >= ST_ESTIMATOR or sensor_stages(stamps, info, head, ft_seq, ft_status, ft_t,
+                                              estop, hand, a, d):
+        _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a,
+               d, has_measured, owner, rec_row)
     ran = info[I_RAN]
     others = 0
-    for j in range(max(first, ST_ESTIMATOR - 1) + 1, ran):
+    for j in range(first + 1, ran):
+        if j < ST_ESTIMATOR and not head & (1 << j):
+            continue                        # a sensor block Python ran: its ring is written
         ns = np.int64((stamps[j + 1] - stamps[j]) * ns_per_tick)
         carray(i64_at(rings[j]), idx + 1)[idx] = ns
         others += ns
@@ -217,7 +277,6 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
     ``k`` and ``stamps[k + 1]`` after it; ``a``/``d`` the buffers' addresses and shapes
     (``B_*``)."""
     info[I_RAN] = ST_ESTIMATOR
-    info[I_PYTHON] = 0
     stamps[ST_ESTIMATOR] = _ticks()
     status = block_update(_v(a, d, B_EST_C), _v(a, d, B_EST_S), _v(a, d, B_EST_Q), dt,
                           _v(a, d, B_EST_OUT), _v(a, d, B_EST_IO))
