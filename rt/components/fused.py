@@ -1,4 +1,4 @@
-"""The standard chain's five middle blocks as ONE compiled call per cycle (issue 16).
+"""The standard chain's blocks as ONE compiled call per cycle (issue 16).
 
 Estimator → model → reference → controller → supervisor: each block's cycle is already one
 numba kernel on its port buffers, but a block still costs its ``update``'s Python and a numba
@@ -27,6 +27,21 @@ Whatever needs Python stops the kernel exactly where the blocks would run Python
   block does);
 * after the supervisor when something new tripped or a request, a heartbeat or a failed
   block is pending (:meth:`Supervisor.finish_block`).
+
+The device blocks around the chain join the segment when the graph has them there
+(``encoders, force, stops`` before it, ``drive, recorder`` after it; :data:`HEAD`,
+:data:`TAIL`), each decided **per cycle by its backend**: memory the twin fills is read by the
+kernel (the emulated PCL-833's block read and the driver's decode, the ATI sample the twin's
+fused period left with the polled sensor's staleness and the force reader's tare, the stop
+levels, the redundant drive's monitor check and write on the compiled comedilib double, the
+recorder tap's row); a backend that calls a driver (``/dev/port``, comedi through ctypes, the
+ATI's receiver, shared memory) or the twin under a fault keeps its block — a sensor's block
+runs just before the call (``Graph.run_blocks``), the drive's and the recorder's after it.
+A confirmed failed DAC channel, a refused or failed write, a logging double (the block's
+:meth:`RedundantDrive.after_compiled_write`), a tare that ended, a port the card refuses stop
+the kernel there and Python finishes the block, as for the middle stages. The segment's first
+slot's ring holds the call's whole Python (the checks and the dispatch) besides its stage.
+``TALUS_FUSED_DEVICES=0`` keeps the device blocks' ``update`` (the middle chain fused).
 
 The blocks after the stop run their ``update`` in the same cycle. A non-standard block, a
 block not compiled or not active, or a law without a kernel here runs the whole chain per
