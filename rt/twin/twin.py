@@ -174,6 +174,7 @@ class Twin:
         # again if the port is replaced).
         self._port_params_of: FakePcl833Port | None = None
         self.plant.set_payload(None)
+        self._n_chunk = self.plant.substeps(_MAX_CHUNK_S)   # a whole chunk's substeps
         # The fault-free period's kernel loaded now, not in a loop's cycle (see warm_period).
         self.plant.warm_period(self.encoder_port._st, self.ati._packed)
 
@@ -339,7 +340,7 @@ class Twin:
         # (the kernel advances it), the substeps of a whole chunk computed once.
         period, commit = kernels.period_block, ati._commit_pending
         block, store, t_at = plant.B, plant._store, _T_AT
-        n_chunk = plant.substeps(_MAX_CHUNK_S)
+        n_chunk = self._n_chunk
         left = t - store[t_at]
         while left > 1e-12:
             chunk = min(_MAX_CHUNK_S, left)
