@@ -67,8 +67,13 @@ class _Lockstep:
         self.sensors_fused = [0, 0, 0]
         head = len(fused.HEAD) if seg.slots[0] == fused.HEAD[0] else 0
 
+        #: Cycles that took the steady fast path (a plan, still valid after the cycle).
+        self.planned = 0
+
         def counted(t: float, dt: float, idx: int) -> int:
+            planned = seg._plan_ok
             n = run(t, dt, idx)
+            self.planned += int(planned and seg._plan_ok)
             m = n - head              # stages of the middle chain and the tail
             # ``ran[5]``: the middle chain ran whole (and the tail's stages maybe too).
             self.ran[max(0, min(m, 5))] += 1
@@ -168,12 +173,16 @@ def test_the_drive_stage_fails_over_and_stops_as_the_drive_block_bit_for_bit(mod
     h.run(1100)                                         # the approach, then play
     before = h.drive_fused
     assert before > 100 and h.recorder_fused > 100, (h.drive_fused, h.ran)
+    assert seg._plan_ok and h.planned > 100, h.planned  # the fault arrives on the fast path
+    planned = h.planned
     h.both(lambda pl: pl.twin.faults.schedule("dac_dead", pl.twin.t, card=0, channel=1))
     h.run(30)
     assert h.f.events.first("dac_card_0") is not None
     assert h.f.graph.component("drive")._card == 1
     h.run(200)
     assert h.drive_fused > before + 150, (h.drive_fused, h.ran)   # card 1 fused after it
+    # (No fast path on card 1: the twin's fault plan keeps the encoders' block running.)
+    assert h.planned == planned, h.planned
     h.both(lambda pl: pl.twin.dac_libs[1].fail_channels.add(2))
     h.run(60)
     assert h.f.graph.component("drive").failed.data[0] == 1.0
@@ -192,6 +201,9 @@ def test_the_sensor_stages_hand_their_faults_to_their_blocks_bit_for_bit(model):
     assert seg.slots[:3] == fused.HEAD and seg.slots[-2:] == fused.TAIL
     h.run(1100)
     assert min(h.sensors_fused) > 1000, h.sensors_fused
+    # The steady cycles took the fast path (the plan), and the faults below arrive while it
+    # is in force: its checks must send each cycle they change to the general path.
+    assert h.planned > 0.9 * h.recorder_fused > 200 and seg._plan_ok, (h.planned, h.recorder_fused)
     h.both(lambda pl: pl.twin.faults.schedule("encoder_jump", pl.twin.t, axis=1, counts=3))
     h.both(lambda pl: pl.twin.faults.schedule("encoder_freeze", pl.twin.t + 0.01,
                                               pl.twin.t + 0.03, axis=0))

@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import os
 import time
+from array import array
 from collections.abc import Callable
 from typing import Any, cast
 
@@ -71,6 +72,24 @@ from rt.components.fused_kernel import (
     _INT_BUFFERS,
     _MATRIX_BUFFERS,
     _U32_BUFFERS,
+    A_AUX,
+    A_FILLED,
+    A_FIRST,
+    A_FK,
+    A_FT_SEQ,
+    A_FT_STATUS,
+    A_HAS_MEASURED,
+    A_HEAD,
+    A_HYBRID,
+    A_IDX,
+    A_LAW,
+    A_NB,
+    A_OTHERS,
+    A_OWNER,
+    A_PYTHON_OUT,
+    A_REC_ROW,
+    A_TRAJECTORY,
+    A_UPTO,
     B_AMAP,
     B_ATI_W,
     B_CTRL_MODE,
@@ -161,6 +180,14 @@ from rt.components.fused_kernel import (
     B_WFLAGS,
     B_WORK,
     B_WRENCH,
+    F_DT,
+    F_ESTOP,
+    F_FT_T,
+    F_HAND,
+    F_NS_PER_TICK,
+    F_SIZE,
+    F_T,
+    F_VPN,
     HEAD_ENCODERS,
     HEAD_FORCE,
     HEAD_STOPS,
@@ -191,11 +218,13 @@ from rt.components.fused_kernel import (
     ST_STOPS,
     ST_SUPERVISOR,
     T_ADDR,
+    T_ARGS,
     T_DIMS,
+    T_FARGS,
     T_INFO,
     T_RINGS,
     T_SIZE,
-    fused_chain,
+    fused_cycle,
     ticks_now,
 )
 from rt.components.protocol_blocks import HybridController
@@ -229,6 +258,7 @@ TAIL = ("drive", "recorder")
 assert ST_SUPERVISOR - ST_ESTIMATOR + 1 == len(CHAIN) and ST_RECORDER - ST_DRIVE + 1 == len(TAIL)
 assert ST_STOPS - ST_ENCODERS + 1 == len(HEAD) == ST_ESTIMATOR
 _HEAD_BITS = (HEAD_ENCODERS, HEAD_FORCE, HEAD_STOPS)
+ALL_HEAD = HEAD_ENCODERS | HEAD_FORCE | HEAD_STOPS
 
 
 #: ``TALUS_FUSED_FORCE=0`` (read when a chain binds): the hybrid controller's force mode runs
@@ -377,7 +407,18 @@ class FusedChain:
         self._gen = -1
         self._ok = False
         self._tick_ns = 0.0
-        self._tab = tab = np.zeros(T_SIZE, dtype=np.int64)
+        # The table in an ``array`` store (its items written from Python at ≈ 30 ns each, a
+        # NumPy item costs ≈ 3×) viewed as NumPy for the binding; the call's float scalars in
+        # their own store, its address in the table (``fused_kernel.fused_cycle``).
+        self._ta = array("q", bytes(8 * T_SIZE))
+        self._fa = array("d", bytes(8 * F_SIZE))
+        self._tab = tab = np.frombuffer(self._ta, dtype=np.int64)
+        tab[T_FARGS] = self._fa.buffer_info()[0]
+        self._tab_addr = self._ta.buffer_info()[0]
+        #: The steady cycle's plan (:meth:`_make_plan`): what the fast path checks, bound per
+        #: binding; ``_plan_ok`` while the last cycle ran the whole segment in the kernel.
+        self._plan: tuple | None = None
+        self._plan_ok = False
         self._addr = tab[T_ADDR:T_ADDR + N_BUFFERS]
         self._dims = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
         # The graph's rings start at the segment's first stage.
@@ -427,8 +468,12 @@ class FusedChain:
         g = self._graph
         self._gen = g.generation
         self._ok = False
+        self._plan = None
+        self._plan_ok = False
         try:
             self.why_not = self._check_and_bind(g)
+            if not self.why_not:
+                self._plan = self._make_plan()
         except Exception as exc:  # noqa: BLE001 - an unexpected block state: run per block
             self.why_not = f"binding failed: {type(exc).__name__}: {exc}"
         self._ok = not self.why_not
@@ -634,10 +679,15 @@ class FusedChain:
         tab[T_ADDR:T_ADDR + N_BUFFERS] = [b.__array_interface__["data"][0] for b in bufs]
         tab[T_RINGS:T_RINGS + N_STAGES] = [r.__array_interface__["data"][0]
                                            for r in scratch_rings]
+        fa = np.zeros(F_SIZE)
+        fa[F_DT], fa[F_VPN], fa[F_NS_PER_TICK] = 1e-3, self._vpn, 1.0
+        tab[T_FARGS] = fa.__array_interface__["data"][0]
+        args = tab[T_ARGS:T_FARGS]
+        args[:] = 0
+        args[A_FIRST], args[A_UPTO] = ST_ESTIMATOR, ST_REFERENCE
+        args[A_HYBRID], args[A_LAW] = NOT_HYBRID, LAW_PADEN_PANJA
         try:
-            fused_chain(tab, 0.0, 1e-3, ST_ESTIMATOR, ST_REFERENCE, False, self._vpn,
-                        NOT_HYBRID, LAW_PADEN_PANJA, False, 0, 0, 1.0, False, 0, 0, 0, 0, 0,
-                        0.0, 0.0, 0.0)
+            fused_cycle(tab.__array_interface__["data"][0])
         except Exception as exc:  # noqa: BLE001 - refused: the chain runs per block
             return f"the fused kernel failed its warm-up: {type(exc).__name__}: {exc}"
         _WARM = True
@@ -647,7 +697,75 @@ class FusedChain:
     def run(self, t: float, dt: float, idx: int) -> int:
         """One cycle of the chain, as far as the kernel may go (module docstring); returns
         the number of stages run (0: run the blocks). The stages after the first are timed
-        into their slots' rings at ``idx`` by the kernel; ``others_ns`` is their sum."""
+        into their slots' rings at ``idx`` by the kernel; ``others_ns`` is their sum.
+
+        A steady cycle (the last one ran the whole segment in the kernel, :meth:`_make_plan`
+        bound a plan) checks only what can change between two such cycles — from outside the
+        cycle (a lifecycle change, a fault plan, a closed device, a request, new gains, a
+        program) — as attribute reads and identity compares, syncs the twin once, and writes
+        the few scalars that change every cycle; anything else takes the general path below,
+        which decides as before (and from which the fast path may only be stricter)."""
+        ta, fa = self._ta, self._fa
+        plan = self._plan if self._plan_ok else None
+        if plan is not None:
+            (g, est, mod, ref, ctl, sup, enc, force, stops, drv, rec, s, est_state, law,
+             watch, tw, cell, enc_b, enc_d, port, ft_b, ati, stops_b, mon, dmon, card_b,
+             card_d, fake, failed, cmode, hybrid, cap, st, store, t_at) = plan
+            rec_arrays = self._rec_arrays
+            # Stricter than the general path's checks (module docstring): the blocks, their
+            # buffers, the law's binding, the sequencer's and the supervisor's Python side.
+            if (self._gen == g.generation and not g.failed and est._active and mod._active
+                    and ref._active and ctl._active and sup._active and enc._active
+                    and force._active and stops._active and drv._active and rec._active
+                    and est.state is est_state and s._mem is self._mem
+                    and s._par is self._par and law.cycle is self._plan_cycle
+                    and (watch is None or watch() is self._watched)
+                    and ref._pending is None and not ref._abort and ref._table is self._table
+                    and cmode[0] == self._plan_mode and not s._python_side_pending()
+                    # The devices: the same backends, open; the twin's SimClock (one sync is
+                    # the three backends' syncs: they read the same cell).
+                    and enc.encoders is enc_b and force.sensor is ft_b
+                    and stops.device is stops_b and not enc_b._closed and not enc_d._closed
+                    and not port._closed and not ft_b._closed and ft_b._streaming
+                    and not stops_b._closed and tw._clock_cell is cell
+                    and drv._enabled and drv._card == self._plan_card and failed[0] <= 0.5
+                    and drv.monitor is mon and not card_b._closed and not card_d._closed
+                    and card_d._fake_st is fake and rec.ring is rec_arrays[0]
+                    and rec._addr is rec_arrays[1] and rec._lens is rec_arrays[2]):
+                tw.sync()
+                pend = ati._pending
+                if not tw.faults.faults and pend >= 0 and (mon is None or mon() is dmon):
+                    ta[T_ARGS + A_IDX] = idx
+                    ta[T_ARGS + A_FILLED] = st._filled
+                    ta[T_ARGS + A_FT_SEQ] = ati._state.ft_sequence
+                    ta[T_ARGS + A_FT_STATUS] = pend
+                    ta[T_ARGS + A_REC_ROW] = rec.written % cap
+                    if hybrid:
+                        ta[T_ARGS + A_HYBRID] = self._hybrid_code(ctl)
+                    fa[F_T] = t
+                    fa[F_DT] = dt
+                    fa[F_FT_T] = store[t_at]     # ``tw.t`` (two properties)
+                    inputs = tw.inputs
+                    fa[F_ESTOP] = 1.0 if inputs.hardware_estop else 0.0
+                    fa[F_HAND] = 1.0 if inputs.hand_stop else 0.0
+                    ran = fused_cycle(self._tab_addr)
+                    if ran == N_STAGES and not ta[T_ARGS + A_PYTHON_OUT]:
+                        # The whole segment ran: ``_finish``'s steady branch.
+                        self.others_ns = ta[T_ARGS + A_OTHERS]
+                        port.n_reads += 9             # the emulated card's count of inb
+                        if ta[T_ARGS + A_FK] >= 0:
+                            st.buffer_filled()
+                        ctl._dt = dt
+                        self._aux = ta[T_ARGS + A_AUX]
+                        rec.written += 1              # the tap's row is in
+                        self.pending = None
+                        return N_STAGES - ST_ENCODERS
+                    return self._finish(ran, t, dt, ALL_HEAD, 0, False)
+            self._plan_ok = False
+        return self._general(t, dt, idx)
+
+    def _general(self, t: float, dt: float, idx: int) -> int:
+        """:meth:`run`'s general path: every check, each sensor's backend asked."""
         if self._gen != self._graph.generation:
             self._bind()
         if not self._ok:
@@ -673,6 +791,7 @@ class FusedChain:
         g = self._graph
         upto = self._end
         has_measured, owner, rec_row = False, 0, 0
+        mode_raw = ctl._sup_raw if self._hybrid else ctl._mode_raw
         if ref._pending is not None or ref._abort:
             upto = ST_REFERENCE       # the sequencer's event: its cycle is Python's
         else:
@@ -682,7 +801,7 @@ class FusedChain:
                 else:
                     self._table = ref._table
             raw = ctl.mode.data[0]
-            if cyc is None or raw != (ctl._sup_raw if self._hybrid else ctl._mode_raw):
+            if cyc is None or raw != mode_raw:
                 upto = min(upto, ST_CONTROLLER)   # the controller block runs (mode change, fade)
         head = 0
         ft_seq = ft_status = 0
@@ -692,7 +811,7 @@ class FusedChain:
             # Each sensor fused when its backend is memory this cycle; the others run their
             # blocks now, before the call (the three read independent devices).
             head, ft_seq, ft_status, ft_t, estop, hand = self._sensors()
-            if head != HEAD_ENCODERS | HEAD_FORCE | HEAD_STOPS:
+            if head != ALL_HEAD:
                 for k in range(len(HEAD)):
                     if not head & _HEAD_BITS[k]:
                         ns = g.run_blocks(self._head_run[k], t, dt, idx)
@@ -718,19 +837,56 @@ class FusedChain:
                         else:
                             rec_row = rec.written % rec.capacity
         hybrid = self._hybrid_code(ctl) if self._hybrid else NOT_HYBRID
-        st = self._state
-        ran, python, others, aux, fk = fused_chain(
-            self._tab, t, dt, self._first, upto, st._filled, self._vpn, hybrid, b.law_id,
-            b.trajectory, self._nb, idx, self._tick_ns, has_measured, owner, rec_row, head,
-            ft_seq, ft_status, ft_t, estop, hand)
-        self.others_ns = others + py_ns
+        ta, fa = self._ta, self._fa
+        a = T_ARGS
+        ta[a + A_FIRST] = self._first
+        ta[a + A_UPTO] = upto
+        ta[a + A_FILLED] = self._state._filled
+        ta[a + A_HYBRID] = hybrid
+        ta[a + A_LAW] = b.law_id
+        ta[a + A_TRAJECTORY] = b.trajectory
+        ta[a + A_NB] = self._nb
+        ta[a + A_IDX] = idx
+        ta[a + A_HAS_MEASURED] = has_measured
+        ta[a + A_OWNER] = owner
+        ta[a + A_REC_ROW] = rec_row
+        ta[a + A_HEAD] = head
+        ta[a + A_FT_SEQ] = ft_seq
+        ta[a + A_FT_STATUS] = ft_status
+        fa[F_T] = t
+        fa[F_DT] = dt
+        fa[F_VPN] = self._vpn
+        fa[F_NS_PER_TICK] = self._tick_ns
+        fa[F_FT_T] = ft_t
+        fa[F_ESTOP] = estop
+        fa[F_HAND] = hand
+        n = self._finish(fused_cycle(self._tab_addr), t, dt, head, py_ns, sup_python)
+        # The next cycle may take the fast path when this one ran the whole segment in the
+        # kernel with every sensor fused (nothing of the blocks' Python ran).
+        if (self._plan is not None and n == len(self.slots) and self.pending is None
+                and head == ALL_HEAD and not sup_python and cyc is not None):
+            self._plan_cycle = cyc
+            self._plan_mode = mode_raw
+            drv = self._drive
+            assert drv is not None
+            self._plan_card = drv._card
+            self._plan_ok = self._plan_drive_matches(drv)
+        return n
+
+    def _finish(self, ran: int, t: float, dt: float, head: int, py_ns: int,
+                sup_python: bool) -> int:
+        """The call's answers (``fused_kernel.fused_cycle``): the counts the blocks keep,
+        the Python that completes the last stage (``pending``); returns the stages run."""
+        ta = self._ta
+        python = ta[T_ARGS + A_PYTHON_OUT]
+        self.others_ns = ta[T_ARGS + A_OTHERS] + py_ns
         if head & HEAD_ENCODERS and not (python and ran == ST_ENCODERS + 1):
             self._enc_port.n_reads += 9           # the emulated card's count of inb
-        if ran >= ST_REFERENCE and fk >= 0:
-            st.buffer_filled()
+        if ran >= ST_REFERENCE and ta[T_ARGS + A_FK] >= 0:
+            self._state.buffer_filled()
         if ran >= ST_SUPERVISOR:
-            ctl._dt = dt              # what the block's update records (for a handover)
-        self._aux = aux
+            self._comps[3]._dt = dt   # what the block's update records (for a handover)
+        self._aux = ta[T_ARGS + A_AUX]
         pending: Callable[[float, float], int] | None = None
         if ran == ST_DRIVE:
             if python or sup_python:
@@ -751,7 +907,73 @@ class FusedChain:
         elif ran == ST_RECORDER + 1:
             self._rec.written += 1    # type: ignore[union-attr]  # the tap's row is in
         self.pending = pending
+        if pending is not None or ran != self._end:
+            self._plan_ok = False
         return ran - self._first
+
+    def _make_plan(self) -> tuple | None:
+        """The fast path's plan for this binding (:meth:`run`), or None: only for the whole
+        segment (:data:`HEAD`, :data:`CHAIN`, :data:`TAIL`) on the in-process twin's
+        backends (its encoders, ATI, stop inputs and compiled DAC double, the twin on a
+        ``SimClock``). The arrays the kernel views are the backends' own, assigned once in
+        their constructors; the fast path checks the flags that change (closed, streaming,
+        faults, a pending sample) and the objects (the block's backend, the card)."""
+        from rt.twin.backends import (
+            TwinActuators,
+            TwinDigitalInputs,
+            TwinEncoders,
+            TwinForceTorque,
+        )
+        from rt.twin.twin import _T_AT
+
+        if self.slots != HEAD + CHAIN + TAIL or self._drive is None or self._rec is None:
+            return None
+        enc, force, stops = self._head
+        est, mod, ref, ctl, sup, drv, rec = self._comps
+        enc_b, ft_b, stops_b = enc.encoders, force.sensor, stops.device
+        if type(enc_b) is not TwinEncoders or type(ft_b) is not TwinForceTorque \
+                or type(stops_b) is not TwinDigitalInputs:
+            return None
+        tw = enc_b.twin
+        cell = tw._clock_cell
+        if ft_b.twin is not tw or stops_b.twin is not tw or cell is None:
+            return None
+        enc_d = enc_b._driver
+        port = enc_d._port
+        if port.compiled_block_state() is None:
+            return None
+        for cw in drv._compiled_writes:
+            card_b = getattr(cw, "__self__", None)
+            if type(card_b) is not TwinActuators or card_b.twin is not tw:
+                return None
+        mon = drv.monitor
+        cmode = ctl.mode.data
+        return (self._graph, est, mod, ref, ctl, sup, enc, force, stops, drv, rec, self._sup,
+                est.state, self._law, self._binding.watch, tw, cell, enc_b, enc_d, port, ft_b,
+                tw.ati, stops_b, mon, None, None, None, None, drv.failed.data, cmode,
+                self._hybrid, rec.capacity, self._state, tw.plant._store, _T_AT)
+
+    def _plan_drive_matches(self, drv: RedundantDrive) -> bool:
+        """Bind the plan's drive part to the active card (the last cycle's): its backend,
+        its driver and the double's state; the monitor's reading the bound array (or no
+        monitor). False: no fast path."""
+        plan = self._plan
+        assert plan is not None
+        cw = drv._compiled_writes[drv._card]
+        card_b = getattr(cw, "__self__", None)
+        if card_b is None:
+            return False
+        card_d = card_b._driver
+        mon = plan[23]
+        dmon = None
+        if mon is not None:
+            dmon = mon()
+            if dmon is not self._bufs[B_DMON]:
+                return False
+        if card_d._fake_st is not self._bufs[B_DFAKE]:
+            return False
+        self._plan = (*plan[:24], dmon, card_b, card_d, card_d._fake_st, *plan[28:])
+        return True
 
     def _sensors(self) -> tuple[int, int, int, float, float, float]:
         """Which sensor stages the kernel runs this cycle (``HEAD_*`` bits) and their

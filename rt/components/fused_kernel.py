@@ -233,7 +233,17 @@ T_DIMS = T_ADDR + N_BUFFERS
 T_RINGS = T_DIMS + 2 * N_BUFFERS
 T_STAMPS = T_RINGS + N_STAGES
 T_INFO = T_STAMPS + N_STAGES + 1
-T_SIZE = T_INFO + INFO_SIZE
+T_ARGS = T_INFO + INFO_SIZE
+# The call's scalars (devstage7b): numba's dispatch boxes and types each argument (22 of them
+# cost ≈ 4-7 µs a cycle here), so they live in memory the Python side writes item by item
+# (``array`` stores: ≈ 30 ns each) and :func:`fused_cycle` takes one int, this table's
+# address. Integers in ``tab`` at ``T_ARGS``; floats in a float64 store at ``tab[T_FARGS]``.
+(A_FIRST, A_UPTO, A_FILLED, A_HYBRID, A_LAW, A_TRAJECTORY, A_NB, A_IDX, A_HAS_MEASURED,
+ A_OWNER, A_REC_ROW, A_HEAD, A_FT_SEQ, A_FT_STATUS, A_PYTHON_OUT, A_OTHERS, A_AUX, A_FK,
+ A_SIZE) = range(19)
+T_FARGS = T_ARGS + A_SIZE
+T_SIZE = T_FARGS + 1
+(F_T, F_DT, F_VPN, F_NS_PER_TICK, F_FT_T, F_ESTOP, F_HAND, F_SIZE) = range(8)
 
 
 @njit(cache=True)
@@ -354,3 +364,25 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
     recorder_stage(t, rec_row, a, d)
     stamps[N_STAGES] = _ticks()
     info[I_RAN] = N_STAGES
+
+
+@njit(cache=True)
+def fused_cycle(tab_addr):
+    """:func:`fused_chain` with its scalars read from memory (``tab`` at ``tab_addr``: the
+    ``A_*`` integers at ``T_ARGS``, the ``F_*`` floats at ``tab[T_FARGS]``): one integer
+    argument. Returns the stage after the last one run; whether it needs Python, the ns of
+    the later stages, the supervisor's or the law's answer and FK's status go to ``A_PYTHON_OUT``,
+    ``A_OTHERS``, ``A_AUX``, ``A_FK``."""
+    tab = carray(i64_at(tab_addr), T_SIZE)
+    ia = tab[T_ARGS:T_ARGS + A_SIZE]
+    fa = carray(f64_at(tab[T_FARGS]), F_SIZE)
+    ran, python, others, aux, fk = fused_chain(
+        tab, fa[F_T], fa[F_DT], ia[A_FIRST], ia[A_UPTO], ia[A_FILLED] != 0, fa[F_VPN],
+        ia[A_HYBRID], ia[A_LAW], ia[A_TRAJECTORY] != 0, ia[A_NB], ia[A_IDX],
+        fa[F_NS_PER_TICK], ia[A_HAS_MEASURED] != 0, ia[A_OWNER], ia[A_REC_ROW], ia[A_HEAD],
+        ia[A_FT_SEQ], ia[A_FT_STATUS], fa[F_FT_T], fa[F_ESTOP], fa[F_HAND])
+    ia[A_PYTHON_OUT] = python
+    ia[A_OTHERS] = others
+    ia[A_AUX] = aux
+    ia[A_FK] = fk
+    return ran
