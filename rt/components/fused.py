@@ -419,6 +419,7 @@ class FusedChain:
         #: binding; ``_plan_ok`` while the last cycle ran the whole segment in the kernel.
         self._plan: tuple | None = None
         self._plan_ok = False
+        self._next_cycle = -1
         self._addr = tab[T_ADDR:T_ADDR + N_BUFFERS]
         self._dims = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
         # The graph's rings start at the segment's first stage.
@@ -712,9 +713,13 @@ class FusedChain:
              watch, tw, cell, enc_b, enc_d, port, ft_b, ati, stops_b, mon, dmon, card_b,
              card_d, fake, failed, cmode, hybrid, cap, st, store, t_at) = plan
             rec_arrays = self._rec_arrays
-            # Stricter than the general path's checks (module docstring): the blocks, their
-            # buffers, the law's binding, the sequencer's and the supervisor's Python side.
-            if (self._gen == g.generation and not g.failed and est._active and mod._active
+            # Stricter than the general path's checks (module docstring): the graph's previous
+            # cycle was this segment's (not per block: ``Graph.fused`` toggled, a fallback),
+            # the blocks, their buffers, the law's binding, the sequencer's and the
+            # supervisor's Python side.
+            cycles = g._cycles
+            if (self._gen == g.generation and cycles == self._next_cycle
+                    and not g.failed and est._active and mod._active
                     and ref._active and ctl._active and sup._active and enc._active
                     and force._active and stops._active and drv._active and rec._active
                     and est.state is est_state and s._mem is self._mem
@@ -732,6 +737,7 @@ class FusedChain:
                     and drv.monitor is mon and not card_b._closed and not card_d._closed
                     and card_d._fake_st is fake and rec.ring is rec_arrays[0]
                     and rec._addr is rec_arrays[1] and rec._lens is rec_arrays[2]):
+                self._next_cycle = cycles + 1
                 tw.sync()
                 pend = ati._pending
                 if not tw.faults.faults and pend >= 0 and (mon is None or mon() is dmon):
@@ -766,6 +772,7 @@ class FusedChain:
 
     def _general(self, t: float, dt: float, idx: int) -> int:
         """:meth:`run`'s general path: every check, each sensor's backend asked."""
+        self._next_cycle = self._graph._cycles + 1
         if self._gen != self._graph.generation:
             self._bind()
         if not self._ok:
