@@ -15,7 +15,12 @@ with other jobs the figure that does not depend on the load) and wall-clock time
   (``protocols.reference_kernels``, the default) and interpreted (``joint_references`` and
   per-sample ``Kinematics.fk``, the reference implementation), side by side;
 * ``preflight``: ``protocols.session.preflight`` whole, split into the references, the twin
-  (every ``Twin.sync`` timed) and the loop (the rest: blocks, supervisor, drivers, tap);
+  (its block, ``TwinStep.update``: the period's physics, encoder card and ATI sample) and the
+  loop (the rest: blocks, supervisor, drivers, tap, the device reads' no-op ``Twin.sync``).
+  A ``thread_time`` read costs ≈ 0.7 µs here (a system call on this VM), so the twin block's
+  timing adds ≈ 1.5 µs to every cycle: the figures are corrected by that overhead, measured
+  at start-up (``timing_overhead``; before twin7 every ``Twin.sync``, four a cycle, was timed
+  uncorrected: ≈ 6 µs a cycle counted as the twin's);
 * ``per 60 s``: the pre-flight's CPU scaled to a 60 s protocol (pre-flight simulates the
   protocol plus its approach and rest, so the scaling is by the protocol's duration).
 """
@@ -32,6 +37,7 @@ from pathlib import Path
 from protocols import base, generators, session
 from protocols.generators import make_generator
 from protocols.library import load_protocol
+from rt.components.twin_step import TwinStep
 from rt.model import RobotModel
 from rt.twin.twin import Twin
 
@@ -73,15 +79,54 @@ def references_time(protocol, model: RobotModel, compiled: bool) -> dict:
     return {"cpu_s": cpu, "wall_s": wall, "duration_s": report.duration_s}
 
 
+def _timed(fn, spent: dict, key: str):
+    """``fn`` with its CPU added to ``spent[key]`` and its calls to ``spent[key + '_calls']``."""
+    calls = key + "_calls"
+
+    def run(*args):
+        c = time.thread_time()
+        try:
+            return fn(*args)
+        finally:
+            spent[key] += time.thread_time() - c
+            spent[calls] += 1
+    return run
+
+
+def timing_overhead(n: int = 20000, repeats: int = 5) -> tuple[float, float]:
+    """CPU s that timing one call with :func:`_timed` adds (inside the timed interval, and in
+    all: the wrapper's call and its clock reads), medians of ``repeats`` rounds of ``n`` calls
+    of a no-op."""
+    def noop(*args):
+        return 0
+    inside, whole = [], []
+    for _ in range(repeats):
+        spent = {"x": 0.0, "x_calls": 0}
+        run = _timed(noop, spent, "x")
+        c0 = time.thread_time()
+        for _ in range(n):
+            run(None, 0.0, 0.0)
+        c1 = time.thread_time()
+        for _ in range(n):
+            noop(None, 0.0, 0.0)
+        c2 = time.thread_time()
+        inside.append(spent["x"] / n)
+        whole.append(((c1 - c0) - (c2 - c1)) / n)
+    return statistics.median(inside), statistics.median(whole)
+
+
 def preflight_time(protocol, model: RobotModel, fused: bool = True,
-                   blocks: dict | None = None) -> dict:
-    """``session.preflight`` whole, with the CPU of ``validate()`` and of ``Twin.sync``.
+                   blocks: dict | None = None,
+                   overhead: tuple[float, float] = (0.0, 0.0)) -> dict:
+    """``session.preflight`` whole, with the CPU of ``validate()`` and of the twin's block.
 
     ``fused``: the twin's fault-free period as one compiled call (``Twin.fused_period``, the
     default) or the general path, for a before/after in one process. ``blocks``: filled with
-    the loop's per-block execution times (``Graph.stats()``: where the loop's CPU goes).
+    the loop's per-block execution times (``Graph.stats()``: where the loop's CPU goes; the
+    graph is timed for it, ``session.PREFLIGHT_TIMED``). ``overhead``: :func:`timing_overhead`,
+    taken off the figures once per timed call.
     """
-    spent = {"twin": 0.0, "references": 0.0}
+    spent = {"twin": 0.0, "twin_calls": 0, "references": 0.0, "references_calls": 0}
     build = session.build_twin_session
 
     def capture(*args, **kwargs):
@@ -89,31 +134,15 @@ def preflight_time(protocol, model: RobotModel, fused: bool = True,
         if blocks is not None:
             blocks["pl"] = out[3]
         return out
-    sync = Twin.sync
+    step = TwinStep.update
     validate = {cls: cls.validate for cls in (base.TableGenerator,
                                               generators.ActiveAssistGenerator)}
-
-    def timed_sync(self, t=None):
-        c = time.thread_time()
-        try:
-            return sync(self, t)
-        finally:
-            spent["twin"] += time.thread_time() - c
-
-    def timed(fn):
-        def run(self):
-            c = time.thread_time()
-            try:
-                return fn(self)
-            finally:
-                spent["references"] += time.thread_time() - c
-        return run
-
-    Twin.sync = timed_sync                                       # type: ignore[method-assign]
+    TwinStep.update = _timed(step, spent, "twin")               # type: ignore[method-assign]
     Twin.fused_period = fused
     session.build_twin_session = capture                         # type: ignore[assignment]
+    session.PREFLIGHT_TIMED = blocks is not None
     for cls, fn in validate.items():
-        cls.validate = timed(fn)                                 # type: ignore[method-assign]
+        cls.validate = _timed(fn, spent, "references")           # type: ignore[method-assign]
     try:
         setup = session.SessionSetup(protocol=protocol, base_dir=LIBRARY,
                                      patient_weight_kg=PATIENT_KG)
@@ -121,11 +150,17 @@ def preflight_time(protocol, model: RobotModel, fused: bool = True,
         result = session.preflight(setup, model)
         cpu, wall = time.thread_time() - c0, time.perf_counter() - t0
     finally:
-        Twin.sync = sync                                         # type: ignore[method-assign]
+        TwinStep.update = step                                   # type: ignore[method-assign]
         Twin.fused_period = True
         session.build_twin_session = build                       # type: ignore[assignment]
+        session.PREFLIGHT_TIMED = False
         for cls, fn in validate.items():
             cls.validate = fn                                    # type: ignore[method-assign]
+    inside, whole = overhead
+    calls = spent["twin_calls"] + spent["references_calls"]
+    cpu -= calls * whole
+    spent["twin"] -= spent["twin_calls"] * inside
+    spent["references"] -= spent["references_calls"] * inside
     duration = result["predicted"]["duration_s"]
     if blocks is not None:
         stats = blocks.pop("pl").graph.stats()
@@ -136,7 +171,9 @@ def preflight_time(protocol, model: RobotModel, fused: bool = True,
     return {"cpu_s": cpu, "wall_s": wall, "duration_s": duration,
             "references_cpu_s": spent["references"], "twin_cpu_s": spent["twin"],
             "loop_cpu_s": cpu - spent["twin"] - spent["references"],
-            "cpu_per_60s": cpu / duration * 60.0}
+            "cpu_per_60s": cpu / duration * 60.0,
+            "twin_us_per_cycle": spent["twin"] / max(spent["twin_calls"], 1) * 1e6,
+            "cycles": spent["twin_calls"], "timing_overhead_s": calls * whole}
 
 
 def _median(runs: list[dict]) -> dict:
@@ -178,18 +215,22 @@ def main() -> None:
     pre: dict[str, list[dict]] = {n: [] for n in names}
     unfused: dict[str, list[dict]] = {n: [] for n in names}
     blocks: dict[str, dict] = {n: {} for n in names}
+    overhead = (0.0, 0.0)
     if not args.no_preflight:
         session.preflight(session.SessionSetup(protocol=library[names[0]], base_dir=LIBRARY,
                                                patient_weight_kg=PATIENT_KG), model)
+        overhead = timing_overhead()
     for _ in range(args.repeats):
         for name in names:
             for compiled in (False, True):
                 refs[name][compiled].append(references_time(library[name], model, compiled))
             if not args.no_preflight:
                 if args.twin_ab:
-                    unfused[name].append(preflight_time(library[name], model, fused=False))
+                    unfused[name].append(preflight_time(library[name], model, fused=False,
+                                                        overhead=overhead))
                 pre[name].append(preflight_time(library[name], model,
-                                                blocks=blocks[name] if args.blocks else None))
+                                                blocks=blocks[name] if args.blocks else None,
+                                                overhead=overhead))
     result = {name: {"references_interpreted": _median(refs[name][False]),
                      "references_compiled": _median(refs[name][True]),
                      "preflight": _median(pre[name]) if pre[name] else None,
@@ -214,9 +255,12 @@ def main() -> None:
                 continue
             print(f"  {label}: {p['cpu_s']:.2f} / {p['wall_s']:.2f} — references "
                   f"{p['references_cpu_s']:.3f}, twin {p['twin_cpu_s']:.2f} "
-                  f"({p['twin_cpu_s'] / p['cpu_s'] * 100:.0f} %), loop {p['loop_cpu_s']:.2f} "
-                  f"({p['loop_cpu_s'] / p['cpu_s'] * 100:.0f} %); {p['cpu_per_60s']:.2f} s CPU "
-                  "per 60 s of protocol")
+                  f"({p['twin_cpu_s'] / p['cpu_s'] * 100:.0f} %, "
+                  f"{p['twin_us_per_cycle']:.1f} µs a cycle: "
+                  f"{1e3 / p['twin_us_per_cycle']:.0f}× real time), loop "
+                  f"{p['loop_cpu_s']:.2f} ({p['loop_cpu_s'] / p['cpu_s'] * 100:.0f} %); "
+                  f"{p['cpu_per_60s']:.2f} s CPU per 60 s of protocol (timing overhead "
+                  f"{p['timing_overhead_s']:.3f} s taken off)")
         if r["blocks"]:
             print("  loop blocks, µs per cycle (median / mean, last run; the timing's own "
                   "overhead included):")

@@ -237,6 +237,11 @@ def drive_saturation_margin(peak_per_axis_s: list[float], limits: RobotLimits) -
             "stops_beyond_s": limits.max_saturated_fraction * limits.saturation_window_s}
 
 
+#: Whether a pre-flight's graph times its blocks (``Graph.timed``). No verdict reads the
+#: times; ``bench/preflight.py --blocks`` turns it on to show where the CPU goes.
+PREFLIGHT_TIMED = False
+
+
 def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     """Check and simulate the protocol; raises ``ProtocolValidationError`` with the reason.
 
@@ -251,6 +256,8 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     # Nobody drains the loop's recorder tap in a pre-flight (the session tap holds every row
     # the verdict reads): stopped, the graph skips it (issue 16: a tap per cycle less).
     pl.recorder.stop()
+    # Nor reads the blocks' times: the same cycle without its clock reads (issue 16).
+    pl.graph.timed = PREFLIGHT_TIMED
     problems = report.check_against(setup.patient_limits, setup.robot_limits)
     if problems:
         raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: "

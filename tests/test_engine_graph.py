@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 import tracemalloc
 from dataclasses import dataclass
 
@@ -367,6 +368,27 @@ def test_stats_have_the_right_counts_and_plausible_values():
     s = g.stats()
     assert s.cycle.count == 1300 and s.cycle.window == 1024
     assert "whole cycle" in s.table()
+
+
+def test_an_untimed_graph_runs_the_same_cycle_and_reports_no_samples():
+    timed, untimed = chain_graph(3), chain_graph(3)
+    untimed.timed = False
+    assert timed.timed and not untimed.timed
+    for g in (timed, untimed):
+        for _ in range(50):
+            g.step(0.0, 1e-3)
+    assert untimed.cycles == timed.cycles == 50
+    assert untimed.output("a2.y").tolist() == timed.output("a2.y").tolist() == [13.0] * 3
+    s = untimed.stats()
+    assert s.cycle.count == 50 and s.cycle.window == 0 and math.isnan(s.cycle.p50_us)
+    assert all(st.window == 0 and math.isnan(st.mean_us) for st in s.components.values())
+    # Timed again: the samples start from there.
+    untimed.timed = True
+    for _ in range(20):
+        untimed.step(0.0, 1e-3)
+    s = untimed.stats()
+    assert s.cycle.window == 20 and s.cycle.p50_us > 0.0
+    assert all(st.count == 20 and st.window == 20 for st in s.components.values())
 
 
 class Faulty(Component):

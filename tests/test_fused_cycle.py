@@ -60,10 +60,29 @@ class _Lockstep:
         run = seg.run
         ctl = self.f.graph.component("controller")
 
+        #: Cycles whose drive stage / recorder stage ran in the kernel too.
+        self.drive_fused = self.recorder_fused = 0
+
+        #: Cycles each sensor ran in the kernel (``fused.HEAD`` order).
+        self.sensors_fused = [0, 0, 0]
+        head = len(fused.HEAD) if seg.slots[0] == fused.HEAD[0] else 0
+
+        #: Cycles that took the steady fast path (a plan, still valid after the cycle).
+        self.planned = 0
+
         def counted(t: float, dt: float, idx: int) -> int:
+            planned = seg._plan_ok
             n = run(t, dt, idx)
-            self.ran[n] += 1
-            self.force_fused += int(n == 5 and bool(getattr(ctl, "_in_force", False)))
+            self.planned += int(planned and seg._plan_ok)
+            m = n - head              # stages of the middle chain and the tail
+            # ``ran[5]``: the middle chain ran whole (and the tail's stages maybe too).
+            self.ran[max(0, min(m, 5))] += 1
+            self.drive_fused += int(m >= 6 and seg.pending is None)
+            self.recorder_fused += int(m == 7)
+            self.force_fused += int(m >= 5 and bool(getattr(ctl, "_in_force", False)))
+            if n:
+                for k in range(head):
+                    self.sensors_fused[k] += int(seg.why_not_sensor[k] == "")
             return n
 
         seg.run = counted
@@ -82,6 +101,8 @@ class _Lockstep:
 
     def compare(self) -> None:
         gf, gp = self.f.graph, self.p.graph
+        # An exception in the segment would turn fusion off (and rerun the blocks): never.
+        assert gf.fused, (self.cycles, repr(gf.last_exception))
         for slot in gf.order:
             cf, cp = gf.component(slot), gp.component(slot)
             assert cf.name == cp.name, (self.cycles, slot)
@@ -96,6 +117,17 @@ class _Lockstep:
         tf, tp = self.f.twin, self.p.twin
         assert tf is not None and tp is not None
         assert repr(tf.true_state()) == repr(tp.true_state()), self.cycles
+        # The device stages' own state: both cards' codes, the drive's numbers, the
+        # recorder's rows (the last one written, and how many).
+        for c in (0, 1):
+            assert tf.dac_libs[c].ao.tobytes() == tp.dac_libs[c].ao.tobytes(), (self.cycles, c)
+        df, dp = gf.component("drive"), gp.component("drive")
+        assert df._st.tobytes() == dp._st.tobytes() and df._card == dp._card, self.cycles
+        assert df._enabled == dp._enabled, self.cycles
+        rf, rp = self.f.recorder, self.p.recorder
+        assert rf.written == rp.written, self.cycles
+        row = (rf.written - 1) % rf.capacity
+        assert rf.ring[row].tobytes() == rp.ring[row].tobytes(), self.cycles
 
 
 def test_a_position_session_with_swaps_and_trips_is_the_per_block_cycle_bit_for_bit(model):
@@ -125,6 +157,76 @@ def test_a_position_session_with_swaps_and_trips_is_the_per_block_cycle_bit_for_
     # Fused whole on steady cycles, stopped part-way on the others: before the reference
     # (approach and return: ruckig; events) and before the controller (the fades).
     assert h.ran[5] > 0.2 * h.cycles and h.ran[2] > 0 and h.ran[3] > 0, h.ran
+
+
+def test_the_drive_stage_fails_over_and_stops_as_the_drive_block_bit_for_bit(model):
+    """The drive as a fused stage (the twin's compiled double): a DAC channel of card 0 dies
+    (its amplifier input disagrees: the kernel's monitor check confirms it, Python fails over
+    to card 1 in the same cycle), card 1's stage runs fused after it; then a write on card 1
+    fails (the list stops part-way: EIO, last card: the hard stop, every card off). Every
+    cycle compared with the per-block drive, codes of both cards included."""
+    h = _Lockstep(lambda: build_sim_position_loop("paden_panja", duration_s=2.5,
+                                                  model=RobotModel.load()))
+    seg = h.f.graph.segment
+    assert seg.slots[-2:] == fused.TAIL and seg.why_not_drive == "" \
+        and seg.why_not_recorder == ""
+    h.run(1100)                                         # the approach, then play
+    before = h.drive_fused
+    assert before > 100 and h.recorder_fused > 100, (h.drive_fused, h.ran)
+    assert seg._plan_ok and h.planned > 100, h.planned  # the fault arrives on the fast path
+    planned = h.planned
+    h.both(lambda pl: pl.twin.faults.schedule("dac_dead", pl.twin.t, card=0, channel=1))
+    h.run(30)
+    assert h.f.events.first("dac_card_0") is not None
+    assert h.f.graph.component("drive")._card == 1
+    h.run(200)
+    assert h.drive_fused > before + 150, (h.drive_fused, h.ran)   # card 1 fused after it
+    # (No fast path on card 1: the twin's fault plan keeps the encoders' block running.)
+    assert h.planned == planned, h.planned
+    h.both(lambda pl: pl.twin.dac_libs[1].fail_channels.add(2))
+    h.run(60)
+    assert h.f.graph.component("drive").failed.data[0] == 1.0
+    assert h.f.events.first("drive_channel") is not None
+    assert h.f.supervisor.latched() != []
+
+
+def test_the_sensor_stages_hand_their_faults_to_their_blocks_bit_for_bit(model):
+    """The sensors as fused stages on the twin's memory: a frozen encoder and a jump (a twin
+    fault: the encoder block decodes), the ATI's stale and lost samples (its blocks read
+    them), a hand stop read by the stops' stage; fused again when the faults clear. Every
+    cycle compared with the per-block sensors."""
+    h = _Lockstep(lambda: build_sim_position_loop("paden_panja", duration_s=2.5,
+                                                  model=RobotModel.load()))
+    seg = h.f.graph.segment
+    assert seg.slots[:3] == fused.HEAD and seg.slots[-2:] == fused.TAIL
+    h.run(1100)
+    assert min(h.sensors_fused) > 1000, h.sensors_fused
+    # The steady cycles took the fast path (the plan), and the faults below arrive while it
+    # is in force: its checks must send each cycle they change to the general path.
+    assert h.planned > 0.9 * h.recorder_fused > 200 and seg._plan_ok, (h.planned, h.recorder_fused)
+    h.both(lambda pl: pl.twin.faults.schedule("encoder_jump", pl.twin.t, axis=1, counts=3))
+    h.both(lambda pl: pl.twin.faults.schedule("encoder_freeze", pl.twin.t + 0.01,
+                                              pl.twin.t + 0.03, axis=0))
+    before = list(h.sensors_fused)
+    h.run(40)
+    assert seg.why_not_sensor[0] != "" and h.sensors_fused[0] == before[0]
+    h.both(lambda pl: pl.twin.faults.faults.clear())
+    h.run(20)
+    assert h.sensors_fused[0] > before[0]
+    h.both(lambda pl: pl.twin.ati.set_fault("stale"))
+    before = list(h.sensors_fused)
+    h.run(120)                                          # stale beyond the 50 ms timeout
+    assert h.sensors_fused[1] == before[1] and h.sensors_fused[0] > before[0] + 100
+    assert h.f.graph.component("force").flags.data[0] == 1.0          # flagged stale
+    h.both(lambda pl: pl.twin.ati.set_fault("stale", False))
+    h.both(lambda pl: pl.twin.ati.set_fault("dropout"))
+    h.run(80)
+    h.both(lambda pl: pl.twin.ati.clear_faults())
+    h.run(100)
+    h.both(lambda pl: setattr(pl.twin.inputs, "hand_stop", True))   # read by the stage
+    h.run(30)
+    assert h.f.events.first("hand_stop") is not None
+    assert h.sensors_fused[2] > 1300, h.sensors_fused
 
 
 def _library_protocol(model: RobotModel, name: str, *replace: tuple[str, str]):

@@ -159,6 +159,61 @@ def test_packed_state_is_shared_with_the_named_arrays():
     assert plant.P[kernels.P_FRICTION] == 123.0
 
 
+def test_the_block_period_is_the_17_argument_period_to_the_bit():
+    """``kernels.period_block`` (one block, the scalars read from it, the time advanced in
+    it) against ``kernels.period`` with every argument passed, on two twins fed the same
+    codes under a strapped foot: the whole block, the encoder card and the ATI sample
+    equal as bits, and ``plant.t`` the same float."""
+    twins = [Twin(environment=parse_environment("ankle"), seed=3) for _ in range(2)]
+    for tw in twins:
+        tw.set_card_enabled(0, True)
+        tw.plant.set_encoder_card(tw.encoder_port.sign, tw.encoder_port.m_per_count)
+    hold = holding_volts(twins[0])
+    draws = np.random.default_rng(1).standard_normal((400, 12))
+    old, new = (tw.plant for tw in twins)
+    for k in range(300):
+        for tw in twins:
+            codes = tw.dac_libs[0].codes3
+            for i in range(3):
+                codes[i] = volts_to_code(hold[i] + 0.4 * math.sin(0.02 * k + i))
+        a, b = twins
+        bits_old = kernels.period(old.geom, old.P, old.env, old.S, old.W, a.encoder_port._st,
+                                  a.dac_libs[0].codes3, a.ati._packed, draws, 1e-3, 5, old.t,
+                                  old.realistic, old.integrator, k, 1e-3,
+                                  kernels.OVERLOAD_BITS)
+        old.t = old.t + 1e-3
+        bits_new = kernels.period_block(new.B, b.encoder_port._st, b.dac_libs[0].codes3,
+                                        b.ati._packed, draws, 1e-3, 5, k, 1e-3)
+        assert bits_old == bits_new
+    assert old.B.view(np.int64).tolist() == new.B.view(np.int64).tolist()
+    assert twins[0].encoder_port._st.tolist() == twins[1].encoder_port._st.tolist()
+    assert twins[0].ati._packed.view(np.int64).tolist() == twins[1].ati._packed.view(
+        np.int64).tolist()
+    assert old.t == new.t == new.B[kernels.B_X + kernels.X_T] and 0.299 < new.t < 0.301
+    assert np.ptp(new.q) > 0.0                       # it moved
+
+
+def test_the_plant_time_and_a_sim_clock_live_in_arrays():
+    """Groundwork of a compiled pre-flight driver: what it advances is in arrays Python
+    reads (``TwinPlant.t`` in the block, ``SimClock.t`` in its cell), and ``sync()`` follows
+    a clock advanced through its cell."""
+    from rt.twin.twin import SimClock
+    clock = SimClock(0.25)
+    assert clock() == clock.t == clock.cell[0] == 0.25
+    twin = Twin(clock=clock)
+    twin.plant.t = 0.125
+    assert twin.plant.B[kernels.B_X + kernels.X_T] == 0.125 and twin.t == 0.125
+    clock.cell[0] = 0.130
+    twin.sync()
+    assert twin.t == pytest.approx(0.130, abs=1e-12)
+    clock.t = 0.131
+    twin.sync()
+    assert twin.t == pytest.approx(0.131, abs=1e-12)
+    twin.clock = None                       # no clock: sync() without a time does nothing
+    twin.sync()
+    assert twin.t == pytest.approx(0.131, abs=1e-12)
+
+
 @pytest.mark.parametrize("faults", [(), ("stale",), ("saturate",), ("dropout",)])
 def test_compiled_ati_model_gives_the_interpreted_samples(faults):
     params = AtiSensorParams(ranges=(50.0, 50.0, 150.0, 5.0, 5.0, 5.0))

@@ -1,4 +1,4 @@
-"""The standard chain's five middle blocks as ONE compiled call per cycle (issue 16).
+"""The standard chain's blocks as ONE compiled call per cycle (issue 16).
 
 Estimator → model → reference → controller → supervisor: each block's cycle is already one
 numba kernel on its port buffers, but a block still costs its ``update``'s Python and a numba
@@ -28,6 +28,21 @@ Whatever needs Python stops the kernel exactly where the blocks would run Python
 * after the supervisor when something new tripped or a request, a heartbeat or a failed
   block is pending (:meth:`Supervisor.finish_block`).
 
+The device blocks around the chain join the segment when the graph has them there
+(``encoders, force, stops`` before it, ``drive, recorder`` after it; :data:`HEAD`,
+:data:`TAIL`), each decided **per cycle by its backend**: memory the twin fills is read by the
+kernel (the emulated PCL-833's block read and the driver's decode, the ATI sample the twin's
+fused period left with the polled sensor's staleness and the force reader's tare, the stop
+levels, the redundant drive's monitor check and write on the compiled comedilib double, the
+recorder tap's row); a backend that calls a driver (``/dev/port``, comedi through ctypes, the
+ATI's receiver, shared memory) or the twin under a fault keeps its block — a sensor's block
+runs just before the call (``Graph.run_blocks``), the drive's and the recorder's after it.
+A confirmed failed DAC channel, a refused or failed write, a logging double (the block's
+:meth:`RedundantDrive.after_compiled_write`), a tare that ended, a port the card refuses stop
+the kernel there and Python finishes the block, as for the middle stages. The segment's first
+slot's ring holds the call's whole Python (the checks and the dispatch) besides its stage.
+``TALUS_FUSED_DEVICES=0`` keeps the device blocks' ``update`` (the middle chain fused).
+
 The blocks after the stop run their ``update`` in the same cycle. A non-standard block, a
 block not compiled or not active, or a law without a kernel here runs the whole chain per
 block; a swap rebinds the chain to the new block at its cycle (its fade runs the controller
@@ -38,19 +53,56 @@ from __future__ import annotations
 
 import os
 import time
+from array import array
 from collections.abc import Callable
 from typing import Any, cast
 
 import numpy as np
 
-from rt.components.blocks import STATUS_SENSOR, ControllerBlock, ModelState, VelocityEstimation
+from rt.components.blocks import (
+    STATUS_SENSOR,
+    ControllerBlock,
+    EncoderReader,
+    ModelState,
+    RecorderTap,
+    SignalTap,
+    VelocityEstimation,
+)
 from rt.components.fused_kernel import (
     _INT_BUFFERS,
     _MATRIX_BUFFERS,
+    _U32_BUFFERS,
+    A_AUX,
+    A_FILLED,
+    A_FIRST,
+    A_FK,
+    A_FT_SEQ,
+    A_FT_STATUS,
+    A_HAS_MEASURED,
+    A_HEAD,
+    A_HYBRID,
+    A_IDX,
+    A_LAW,
+    A_NB,
+    A_OTHERS,
+    A_OWNER,
+    A_PYTHON_OUT,
+    A_REC_ROW,
+    A_TRAJECTORY,
+    A_UPTO,
     B_AMAP,
+    B_ATI_W,
     B_CTRL_MODE,
+    B_DAC,
+    B_DENABLE,
     B_DFAILED,
+    B_DFAKE,
+    B_DMON,
+    B_DSAMPLES,
+    B_DST,
+    B_DVOLTS,
     B_ENABLE,
+    B_ENC_Q,
     B_EST,
     B_EST_C,
     B_EST_IO,
@@ -61,6 +113,13 @@ from rt.components.fused_kernel import (
     B_FK,
     B_FREF,
     B_FS,
+    B_FT_FLAGS,
+    B_FT_RAW,
+    B_FT_REQUEST,
+    B_FT_ST,
+    B_FT_TARE,
+    B_FT_TARE_BUF,
+    B_FT_WRENCH,
     B_FTAU,
     B_FTF,
     B_FTI,
@@ -91,7 +150,14 @@ from rt.components.fused_kernel import (
     B_MODE,
     B_OUT,
     B_PAR,
+    B_PCL_DEC,
+    B_PCL_IO,
+    B_PCL_PORTS,
+    B_PCL_ST,
     B_PHI,
+    B_REC_ADDR,
+    B_REC_LENS,
+    B_REC_RING,
     B_REF_IO,
     B_REF_MODE,
     B_REF_Q,
@@ -106,6 +172,7 @@ from rt.components.fused_kernel import (
     B_SSTB,
     B_STAU,
     B_STB,
+    B_STOPS,
     B_TABLE,
     B_TF,
     B_TI,
@@ -113,9 +180,24 @@ from rt.components.fused_kernel import (
     B_WFLAGS,
     B_WORK,
     B_WRENCH,
+    F_DT,
+    F_ESTOP,
+    F_FT_T,
+    F_HAND,
+    F_NS_PER_TICK,
+    F_SIZE,
+    F_T,
+    F_VPN,
+    HEAD_ENCODERS,
+    HEAD_FORCE,
+    HEAD_STOPS,
     HYBRID_FORCE,
     HYBRID_FORCE_PYTHON,
     HYBRID_POSITION,
+    I_DRIVE,
+    I_DRIVE_DONE,
+    I_DRIVE_RC,
+    INFO_SIZE,
     LAW_ADAPTIVE,
     LAW_COMPUTED_TORQUE,
     LAW_PADEN_PANJA,
@@ -125,15 +207,28 @@ from rt.components.fused_kernel import (
     N_BUFFERS,
     N_STAGES,
     NOT_HYBRID,
+    ST_CONTROLLER,
+    ST_DRIVE,
+    ST_ENCODERS,
+    ST_ESTIMATOR,
+    ST_FORCE,
+    ST_MODEL,
+    ST_RECORDER,
+    ST_REFERENCE,
+    ST_STOPS,
+    ST_SUPERVISOR,
     T_ADDR,
+    T_ARGS,
     T_DIMS,
+    T_FARGS,
+    T_INFO,
     T_RINGS,
     T_SIZE,
-    fused_chain,
+    fused_cycle,
     ticks_now,
 )
 from rt.components.protocol_blocks import HybridController
-from rt.components.safety_blocks import SupervisorBlock
+from rt.components.safety_blocks import ForceReader, RedundantDrive, StopInputs, SupervisorBlock
 from rt.control.adaptive import Adaptive
 from rt.control.base import Controller
 from rt.control.force import ExplicitForce
@@ -152,14 +247,35 @@ from rt.safety.events import SupervisorMode
 #: The environment variable that turns the fused cycle off ("0") when a loop is assembled.
 ENV_FLAG = "TALUS_FUSED_CYCLE"
 
-#: The chain's slots, in the graph's order.
+#: The chain's middle slots, in the graph's order (always fused together).
 CHAIN = ("estimator", "model", "reference", "controller", "supervisor")
-assert len(CHAIN) == N_STAGES
+#: The sensor slots before them that the segment takes when the graph has them there (all
+#: three): each fused when its backend is memory this cycle, else its block runs first.
+HEAD = ("encoders", "force", "stops")
+#: The device slots after them that the segment takes when the graph has them there: the
+#: redundant drive and the recorder tap (each fused when its backend is memory, per cycle).
+TAIL = ("drive", "recorder")
+assert ST_SUPERVISOR - ST_ESTIMATOR + 1 == len(CHAIN) and ST_RECORDER - ST_DRIVE + 1 == len(TAIL)
+assert ST_STOPS - ST_ENCODERS + 1 == len(HEAD) == ST_ESTIMATOR
+_HEAD_BITS = (HEAD_ENCODERS, HEAD_FORCE, HEAD_STOPS)
+ALL_HEAD = HEAD_ENCODERS | HEAD_FORCE | HEAD_STOPS
 
 
 #: ``TALUS_FUSED_FORCE=0`` (read when a chain binds): the hybrid controller's force mode runs
 #: its block even when fused (the state before the force stage; before/after benchmarks).
 FORCE_ENV_FLAG = "TALUS_FUSED_FORCE"
+
+
+#: ``TALUS_FUSED_DEVICES=0`` (read when a loop is assembled): the device blocks (sensors,
+#: drive, recorder) keep their ``update`` though the middle chain is fused (the state before
+#: the device stages; before/after benchmarks).
+DEVICES_ENV_FLAG = "TALUS_FUSED_DEVICES"
+
+
+def sensors_by_environment() -> bool:
+    """False when ``TALUS_FUSED_DEVICES=0`` (or ``false``/``off``/``no``) is set."""
+    return os.environ.get(DEVICES_ENV_FLAG, "1").strip().lower() not in ("0", "false", "off",
+                                                                         "no")
 
 
 def enabled_by_environment() -> bool:
@@ -170,6 +286,9 @@ def enabled_by_environment() -> bool:
 _NO_F = np.zeros(1)
 _RUN = float(SupervisorMode.RUN)
 _NO_I = np.zeros(1, dtype=np.int64)
+_NO_U = np.zeros(1, dtype=np.uint32)
+_NO_M = np.zeros((1, 1))
+_F64 = np.dtype(np.float64)
 
 #: The methods whose arithmetic the compiled force cycle mirrors: patched (a bench, a test's
 #: recorder), the hybrid controller's force mode runs its block.
@@ -268,18 +387,49 @@ class FusedChain:
     ``ns`` and, in ``pending``, the Python that completes the last one (the graph times it
     and turns its exception or status into the slot's fault, as for an ``update``)."""
 
-    slots = CHAIN
-
-    def __init__(self) -> None:
+    def __init__(self, slots: tuple[str, ...] = CHAIN) -> None:
+        h = len(HEAD) if slots[:len(HEAD)] == HEAD else 0
+        mid = slots[h:]
+        if mid[:len(CHAIN)] != CHAIN or mid[len(CHAIN):] != TAIL[:len(mid) - len(CHAIN)]:
+            raise ValueError(f"a fused chain's slots are (optionally {HEAD}), {CHAIN}, then a "
+                             f"start of {TAIL}, not {slots}")
+        #: The graph's slots this segment runs (the sensors, the middle chain, the tail).
+        self.slots = slots
+        #: The segment's first stage and the stage after its last (absolute, ``ST_*``).
+        self._first = ST_ENCODERS if h else ST_ESTIMATOR
+        self._end = self._first + len(slots)
+        self._head: tuple = ()
+        self._head_run: list = []
+        #: Why each sensor ran its block in the last cycle ("" when fused; ``HEAD`` order).
+        self.why_not_sensor = ["not bound yet"] * len(HEAD)
         self.pending: Callable[[float, float], int] | None = None
         self._graph: Any = None
         self._gen = -1
         self._ok = False
         self._tick_ns = 0.0
-        self._tab = tab = np.zeros(T_SIZE, dtype=np.int64)
+        # The table in an ``array`` store (its items written from Python at ≈ 30 ns each, a
+        # NumPy item costs ≈ 3×) viewed as NumPy for the binding; the call's float scalars in
+        # their own store, its address in the table (``fused_kernel.fused_cycle``).
+        self._ta = array("q", bytes(8 * T_SIZE))
+        self._fa = array("d", bytes(8 * F_SIZE))
+        self._tab = tab = np.frombuffer(self._ta, dtype=np.int64)
+        tab[T_FARGS] = self._fa.buffer_info()[0]
+        self._tab_addr = self._ta.buffer_info()[0]
+        #: The steady cycle's plan (:meth:`_make_plan`): what the fast path checks, bound per
+        #: binding; ``_plan_ok`` while the last cycle ran the whole segment in the kernel.
+        self._plan: tuple | None = None
+        self._plan_ok = False
+        self._next_cycle = -1
         self._addr = tab[T_ADDR:T_ADDR + N_BUFFERS]
         self._dims = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
-        self._rings = tab[T_RINGS:T_RINGS + N_STAGES]
+        # The graph's rings start at the segment's first stage.
+        self._rings = tab[T_RINGS + self._first:T_RINGS + self._end]
+        self._info = tab[T_INFO:T_INFO + INFO_SIZE]
+        self._drive: RedundantDrive | None = None
+        self._rec: SignalTap | None = None
+        self._rec_arrays: tuple = ()
+        #: Why the drive / the recorder tap run their blocks this cycle ("" when fused).
+        self.why_not_drive = self.why_not_recorder = "not bound yet"
         #: The buffer behind each address (kept alive: the kernel writes through them).
         self._bufs: list[np.ndarray] = [_NO_F] * N_BUFFERS
         self._dyn_ids: tuple = ()
@@ -319,8 +469,12 @@ class FusedChain:
         g = self._graph
         self._gen = g.generation
         self._ok = False
+        self._plan = None
+        self._plan_ok = False
         try:
             self.why_not = self._check_and_bind(g)
+            if not self.why_not:
+                self._plan = self._make_plan()
         except Exception as exc:  # noqa: BLE001 - an unexpected block state: run per block
             self.why_not = f"binding failed: {type(exc).__name__}: {exc}"
         self._ok = not self.why_not
@@ -328,7 +482,8 @@ class FusedChain:
     def _set(self, k: int, buf: np.ndarray) -> str:
         """Buffer ``k`` of the table; "" or why it cannot be (not C-contiguous float64 or
         int64 of the rank the kernel views it as)."""
-        want = np.int64 if k in _INT_BUFFERS else np.float64
+        want = (np.int64 if k in _INT_BUFFERS else np.uint32 if k in _U32_BUFFERS
+                else np.float64)
         ndim = 2 if k in _MATRIX_BUFFERS else 1
         if (not isinstance(buf, np.ndarray) or buf.dtype != want or buf.ndim != ndim
                 or not buf.flags.c_contiguous):
@@ -340,8 +495,10 @@ class FusedChain:
         return ""
 
     def _check_and_bind(self, g: Any) -> str:
-        comps = [g.component(s) for s in CHAIN]
-        est, mod, ref, ctl, sup = comps
+        comps = [g.component(s) for s in self.slots]
+        head = comps[:ST_ESTIMATOR - self._first]
+        comps = comps[len(head):]
+        est, mod, ref, ctl, sup = comps[:len(CHAIN)]
         if type(est) is not VelocityEstimation or not isinstance(est.state,
                                                                  CompiledKalmanEstimator):
             return "estimator: not the compiled VelocityEstimation"
@@ -386,7 +543,44 @@ class FusedChain:
                 B_ENABLE: sup.enable.data, B_MODE: sup.mode.data,
                 B_HS: _NO_F, B_HFORCE: _NO_F, B_HPREVIEW: _NO_F, B_HPOSE: _NO_F,
                 B_HWRENCH: _NO_F, B_FTI: _NO_I, B_FTF: _NO_F, B_FG: _NO_F, B_FS: _NO_F,
-                B_FWORK: _NO_F, B_FTAU: _NO_F, B_FREF: self._fref}
+                B_FWORK: _NO_F, B_FTAU: _NO_F, B_FREF: self._fref,
+                B_DST: _NO_F, B_DVOLTS: _NO_F, B_DENABLE: _NO_F, B_DMON: _NO_F, B_DAC: _NO_F,
+                B_DSAMPLES: _NO_U, B_DFAKE: _NO_I, B_REC_RING: _NO_M, B_REC_ADDR: _NO_I,
+                B_REC_LENS: _NO_I, B_PCL_ST: _NO_I, B_PCL_PORTS: _NO_I, B_PCL_IO: _NO_I,
+                B_PCL_DEC: _NO_F, B_ENC_Q: _NO_F, B_ATI_W: _NO_F, B_FT_ST: _NO_F,
+                B_FT_RAW: _NO_F, B_FT_WRENCH: _NO_F, B_FT_FLAGS: _NO_F, B_FT_REQUEST: _NO_F,
+                B_FT_TARE: _NO_F, B_FT_TARE_BUF: _NO_F, B_STOPS: _NO_F}
+        self._head = ()
+        if head:
+            why = _head_unbindable(head)
+            if why:
+                return why
+            enc, force, stops = head
+            self._head = (enc, force, stops)
+            self._head_run = [[e] for e in g.segment_run()[:len(HEAD)]]
+            self._enc_arrays: tuple = ()
+            self._ft_arrays: tuple = ()
+            bufs.update({B_ENC_Q: enc.q.data, B_FT_RAW: force._raw,
+                         B_FT_WRENCH: force.wrench.data, B_FT_FLAGS: force.flags.data,
+                         B_FT_REQUEST: force.tare_request.data, B_FT_TARE: force.tare_out.data,
+                         B_FT_TARE_BUF: force.tare._buf, B_STOPS: stops.stops.data})
+        self._drive = self._rec = None
+        self.why_not_drive = self.why_not_recorder = "not in the segment"
+        if len(comps) > ST_DRIVE - ST_ESTIMATOR:
+            drv = comps[ST_DRIVE - ST_ESTIMATOR]
+            self.why_not_drive = _drive_unbindable(drv)
+            if not self.why_not_drive:
+                self._drive = drv
+                bufs.update({B_DST: drv._st, B_DVOLTS: drv.volts.data,
+                             B_DENABLE: drv.enable.data, B_DMON: drv.volts.data})
+        if len(comps) > ST_RECORDER - ST_ESTIMATOR:
+            rec = comps[ST_RECORDER - ST_ESTIMATOR]
+            self.why_not_recorder = _recorder_unbindable(rec)
+            if not self.why_not_recorder:
+                self._rec = rec
+                self._rec_arrays = (rec.ring, rec._addr, rec._lens)
+                bufs.update({B_REC_RING: rec.ring, B_REC_ADDR: rec._addr,
+                             B_REC_LENS: rec._lens})
         if hybrid:
             bufs.update({B_HS: ctl._hs, B_HFORCE: ctl.force.data,
                          B_HPREVIEW: ctl.force_preview.data, B_HPOSE: ctl.pose.data,
@@ -400,6 +594,7 @@ class FusedChain:
             if why:
                 return why
         self._comps = comps
+        self._all = (*head, *comps)
         self._est_state = e
         self._law = law
         self._hybrid = hybrid
@@ -480,14 +675,20 @@ class FusedChain:
         if _WARM:
             return ""
         bufs = [b.copy() for b in self._bufs]
-        scratch_rings = np.zeros((N_STAGES, 1), dtype=np.int64)
+        scratch_rings = np.zeros((N_STAGES, 2), dtype=np.int64)
         tab = self._tab.copy()
         tab[T_ADDR:T_ADDR + N_BUFFERS] = [b.__array_interface__["data"][0] for b in bufs]
         tab[T_RINGS:T_RINGS + N_STAGES] = [r.__array_interface__["data"][0]
                                            for r in scratch_rings]
+        fa = np.zeros(F_SIZE)
+        fa[F_DT], fa[F_VPN], fa[F_NS_PER_TICK] = 1e-3, self._vpn, 1.0
+        tab[T_FARGS] = fa.__array_interface__["data"][0]
+        args = tab[T_ARGS:T_FARGS]
+        args[:] = 0
+        args[A_FIRST], args[A_UPTO] = ST_ESTIMATOR, ST_REFERENCE
+        args[A_HYBRID], args[A_LAW] = NOT_HYBRID, LAW_PADEN_PANJA
         try:
-            fused_chain(tab, 0.0, 1e-3, 2, False, self._vpn, NOT_HYBRID, LAW_PADEN_PANJA, False,
-                        0, 0, 1.0)
+            fused_cycle(tab.__array_interface__["data"][0])
         except Exception as exc:  # noqa: BLE001 - refused: the chain runs per block
             return f"the fused kernel failed its warm-up: {type(exc).__name__}: {exc}"
         _WARM = True
@@ -496,15 +697,91 @@ class FusedChain:
     # ------------------------------------------------------------------ the cycle
     def run(self, t: float, dt: float, idx: int) -> int:
         """One cycle of the chain, as far as the kernel may go (module docstring); returns
-        the number of stages run (0: run the five blocks). The stages after the first are
-        timed into their slots' rings at ``idx`` by the kernel; ``others_ns`` is their sum."""
+        the number of stages run (0: run the blocks). The stages after the first are timed
+        into their slots' rings at ``idx`` by the kernel; ``others_ns`` is their sum.
+
+        A steady cycle (the last one ran the whole segment in the kernel, :meth:`_make_plan`
+        bound a plan) checks only what can change between two such cycles — from outside the
+        cycle (a lifecycle change, a fault plan, a closed device, a request, new gains, a
+        program) — as attribute reads and identity compares, syncs the twin once, and writes
+        the few scalars that change every cycle; anything else takes the general path below,
+        which decides as before (and from which the fast path may only be stricter)."""
+        ta, fa = self._ta, self._fa
+        plan = self._plan if self._plan_ok else None
+        if plan is not None:
+            (g, est, mod, ref, ctl, sup, enc, force, stops, drv, rec, s, est_state, law,
+             watch, tw, cell, enc_b, enc_d, port, ft_b, ati, stops_b, mon, dmon, card_b,
+             card_d, fake, failed, cmode, hybrid, cap, st, store, t_at) = plan
+            rec_arrays = self._rec_arrays
+            # Stricter than the general path's checks (module docstring): the graph's previous
+            # cycle was this segment's (not per block: ``Graph.fused`` toggled, a fallback),
+            # the blocks, their buffers, the law's binding, the sequencer's and the
+            # supervisor's Python side.
+            cycles = g._cycles
+            if (self._gen == g.generation and cycles == self._next_cycle
+                    and not g.failed and est._active and mod._active
+                    and ref._active and ctl._active and sup._active and enc._active
+                    and force._active and stops._active and drv._active and rec._active
+                    and est.state is est_state and s._mem is self._mem
+                    and s._par is self._par and law.cycle is self._plan_cycle
+                    and (watch is None or watch() is self._watched)
+                    and ref._pending is None and not ref._abort and ref._table is self._table
+                    and cmode[0] == self._plan_mode and not s._python_side_pending()
+                    # The devices: the same backends, open; the twin's SimClock (one sync is
+                    # the three backends' syncs: they read the same cell).
+                    and enc.encoders is enc_b and force.sensor is ft_b
+                    and stops.device is stops_b and not enc_b._closed and not enc_d._closed
+                    and not port._closed and not ft_b._closed and ft_b._streaming
+                    and not stops_b._closed and tw._clock_cell is cell
+                    and drv._enabled and drv._card == self._plan_card and failed[0] <= 0.5
+                    and drv.monitor is mon and not card_b._closed and not card_d._closed
+                    and card_d._fake_st is fake and rec.ring is rec_arrays[0]
+                    and rec._addr is rec_arrays[1] and rec._lens is rec_arrays[2]):
+                self._next_cycle = cycles + 1
+                tw.sync()
+                pend = ati._pending
+                if not tw.faults.faults and pend >= 0 and (mon is None or mon() is dmon):
+                    ta[T_ARGS + A_IDX] = idx
+                    ta[T_ARGS + A_FILLED] = st._filled
+                    ta[T_ARGS + A_FT_SEQ] = ati._state.ft_sequence
+                    ta[T_ARGS + A_FT_STATUS] = pend
+                    ta[T_ARGS + A_REC_ROW] = rec.written % cap
+                    if hybrid:
+                        ta[T_ARGS + A_HYBRID] = self._hybrid_code(ctl)
+                    fa[F_T] = t
+                    fa[F_DT] = dt
+                    fa[F_FT_T] = store[t_at]     # ``tw.t`` (two properties)
+                    inputs = tw.inputs
+                    fa[F_ESTOP] = 1.0 if inputs.hardware_estop else 0.0
+                    fa[F_HAND] = 1.0 if inputs.hand_stop else 0.0
+                    ran = fused_cycle(self._tab_addr)
+                    if ran == N_STAGES and not ta[T_ARGS + A_PYTHON_OUT]:
+                        # The whole segment ran: ``_finish``'s steady branch.
+                        self.others_ns = ta[T_ARGS + A_OTHERS]
+                        port.n_reads += 9             # the emulated card's count of inb
+                        if ta[T_ARGS + A_FK] >= 0:
+                            st.buffer_filled()
+                        ctl._dt = dt
+                        self._aux = ta[T_ARGS + A_AUX]
+                        rec.written += 1              # the tap's row is in
+                        self.pending = None
+                        return N_STAGES - ST_ENCODERS
+                    return self._finish(ran, t, dt, ALL_HEAD, 0, False)
+            self._plan_ok = False
+        return self._general(t, dt, idx)
+
+    def _general(self, t: float, dt: float, idx: int) -> int:
+        """:meth:`run`'s general path: every check, each sensor's backend asked."""
+        self._next_cycle = self._graph._cycles + 1
         if self._gen != self._graph.generation:
             self._bind()
         if not self._ok:
             return 0
-        est, mod, ref, ctl, sup = self._comps
+        est, mod, ref, ctl, sup = self._comps[:5]
         if not (est._active and mod._active and ref._active and ctl._active and sup._active):
             return 0
+        if self._head and not all(c._active for c in self._head):
+            return 0                  # a sensor block in error: every block runs
         s = self._sup
         if est.state is not self._est_state or s._mem is not self._mem \
                 or s._par is not self._par:
@@ -518,44 +795,303 @@ class FusedChain:
         if stale and self._refresh_law():
             self._gen = -1
             return 0
-        upto = N_STAGES
+        g = self._graph
+        upto = self._end
+        has_measured, owner, rec_row = False, 0, 0
+        mode_raw = ctl._sup_raw if self._hybrid else ctl._mode_raw
         if ref._pending is not None or ref._abort:
-            upto = 2                  # the sequencer's event: its cycle is Python's
+            upto = ST_REFERENCE       # the sequencer's event: its cycle is Python's
         else:
             if ref._table is not self._table:
                 if self._set(B_TABLE, ref._table):
-                    upto = 2          # a table the kernel cannot view: the block plays it
+                    upto = ST_REFERENCE   # a table the kernel cannot view: the block plays it
                 else:
                     self._table = ref._table
             raw = ctl.mode.data[0]
-            if cyc is None or raw != (ctl._sup_raw if self._hybrid else ctl._mode_raw):
-                upto = min(upto, 3)   # the controller block runs (mode change, fade)
+            if cyc is None or raw != mode_raw:
+                upto = min(upto, ST_CONTROLLER)   # the controller block runs (mode change, fade)
+        head = 0
+        ft_seq = ft_status = 0
+        ft_t = estop = hand = 0.0
+        py_ns = 0
+        if self._head:
+            # Each sensor fused when its backend is memory this cycle; the others run their
+            # blocks now, before the call (the three read independent devices).
+            head, ft_seq, ft_status, ft_t, estop, hand = self._sensors()
+            if head != ALL_HEAD:
+                for k in range(len(HEAD)):
+                    if not head & _HEAD_BITS[k]:
+                        ns = g.run_blocks(self._head_run[k], t, dt, idx)
+                        if k:             # the first slot's time is the call's remainder
+                            py_ns += ns
+        # As check_block: the failed blocks recorded every cycle (first), then a pending
+        # request, heartbeat or failed block sends the supervisor's cycle to Python (and the
+        # devices after it run their blocks).
+        sup_python = s.python_side_pending(None if not g.failed else g.failed_components())
+        if upto > ST_DRIVE:
+            if sup_python:
+                upto = ST_DRIVE
+            else:
+                drive = self._drive_args()
+                if drive is None:
+                    upto = ST_DRIVE
+                else:
+                    has_measured, owner = drive
+                    if upto > ST_RECORDER:
+                        rec = self._rec
+                        if rec is None or not rec._active or self._rec_changed(rec):
+                            upto = ST_RECORDER
+                        else:
+                            rec_row = rec.written % rec.capacity
         hybrid = self._hybrid_code(ctl) if self._hybrid else NOT_HYBRID
-        st = self._state
-        g = self._graph
-        ran, python, self.others_ns, aux, fk = fused_chain(
-            self._tab, t, dt, upto, st._filled, self._vpn, hybrid, b.law_id,
-            b.trajectory, self._nb, idx, self._tick_ns)
-        if ran >= 2 and fk >= 0:
-            st.buffer_filled()
-        if ran >= 4:
-            ctl._dt = dt              # what the block's update records (for a handover)
-        self._aux = aux
+        ta, fa = self._ta, self._fa
+        a = T_ARGS
+        ta[a + A_FIRST] = self._first
+        ta[a + A_UPTO] = upto
+        ta[a + A_FILLED] = self._state._filled
+        ta[a + A_HYBRID] = hybrid
+        ta[a + A_LAW] = b.law_id
+        ta[a + A_TRAJECTORY] = b.trajectory
+        ta[a + A_NB] = self._nb
+        ta[a + A_IDX] = idx
+        ta[a + A_HAS_MEASURED] = has_measured
+        ta[a + A_OWNER] = owner
+        ta[a + A_REC_ROW] = rec_row
+        ta[a + A_HEAD] = head
+        ta[a + A_FT_SEQ] = ft_seq
+        ta[a + A_FT_STATUS] = ft_status
+        fa[F_T] = t
+        fa[F_DT] = dt
+        fa[F_VPN] = self._vpn
+        fa[F_NS_PER_TICK] = self._tick_ns
+        fa[F_FT_T] = ft_t
+        fa[F_ESTOP] = estop
+        fa[F_HAND] = hand
+        n = self._finish(fused_cycle(self._tab_addr), t, dt, head, py_ns, sup_python)
+        # The next cycle may take the fast path when this one ran the whole segment in the
+        # kernel with every sensor fused (nothing of the blocks' Python ran).
+        if (self._plan is not None and n == len(self.slots) and self.pending is None
+                and head == ALL_HEAD and not sup_python and cyc is not None):
+            self._plan_cycle = cyc
+            self._plan_mode = mode_raw
+            drv = self._drive
+            assert drv is not None
+            self._plan_card = drv._card
+            self._plan_ok = self._plan_drive_matches(drv)
+        return n
+
+    def _finish(self, ran: int, t: float, dt: float, head: int, py_ns: int,
+                sup_python: bool) -> int:
+        """The call's answers (``fused_kernel.fused_cycle``): the counts the blocks keep,
+        the Python that completes the last stage (``pending``); returns the stages run."""
+        ta = self._ta
+        python = ta[T_ARGS + A_PYTHON_OUT]
+        self.others_ns = ta[T_ARGS + A_OTHERS] + py_ns
+        if head & HEAD_ENCODERS and not (python and ran == ST_ENCODERS + 1):
+            self._enc_port.n_reads += 9           # the emulated card's count of inb
+        if ran >= ST_REFERENCE and ta[T_ARGS + A_FK] >= 0:
+            self._state.buffer_filled()
+        if ran >= ST_SUPERVISOR:
+            self._comps[3]._dt = dt   # what the block's update records (for a handover)
+        self._aux = ta[T_ARGS + A_AUX]
         pending: Callable[[float, float], int] | None = None
-        if python:
-            if ran == 1:
+        if ran == ST_DRIVE:
+            if python or sup_python:
+                pending = self._finish_supervisor
+        elif python:
+            if ran == ST_ENCODERS + 1:
+                pending = self._encoder_refused
+            elif ran == ST_FORCE + 1:
+                pending = self._tare_ended
+            elif ran == ST_MODEL:
                 pending = _sensor_fault
-            elif ran == 3:
+            elif ran == ST_CONTROLLER:
                 pending = self._play_done
-            elif ran == 4:
+            elif ran == ST_SUPERVISOR:
                 pending = self._law_refused
-        elif ran == 5 and (s.python_side_pending(
-                None if not g.failed else g.failed_components()) or aux):
-            # As check_block: the failed blocks recorded every cycle (first), then new events
-            # or a pending request send the cycle to Python.
-            pending = self._finish_supervisor
+            elif ran == ST_RECORDER:
+                pending = self._finish_drive
+        elif ran == ST_RECORDER + 1:
+            self._rec.written += 1    # type: ignore[union-attr]  # the tap's row is in
         self.pending = pending
-        return ran
+        if pending is not None or ran != self._end:
+            self._plan_ok = False
+        return ran - self._first
+
+    def _make_plan(self) -> tuple | None:
+        """The fast path's plan for this binding (:meth:`run`), or None: only for the whole
+        segment (:data:`HEAD`, :data:`CHAIN`, :data:`TAIL`) on the in-process twin's
+        backends (its encoders, ATI, stop inputs and compiled DAC double, the twin on a
+        ``SimClock``). The arrays the kernel views are the backends' own, assigned once in
+        their constructors; the fast path checks the flags that change (closed, streaming,
+        faults, a pending sample) and the objects (the block's backend, the card)."""
+        from rt.twin.backends import (
+            TwinActuators,
+            TwinDigitalInputs,
+            TwinEncoders,
+            TwinForceTorque,
+        )
+        from rt.twin.twin import _T_AT
+
+        if self.slots != HEAD + CHAIN + TAIL or self._drive is None or self._rec is None:
+            return None
+        enc, force, stops = self._head
+        est, mod, ref, ctl, sup, drv, rec = self._comps
+        enc_b, ft_b, stops_b = enc.encoders, force.sensor, stops.device
+        if type(enc_b) is not TwinEncoders or type(ft_b) is not TwinForceTorque \
+                or type(stops_b) is not TwinDigitalInputs:
+            return None
+        tw = enc_b.twin
+        cell = tw._clock_cell
+        if ft_b.twin is not tw or stops_b.twin is not tw or cell is None:
+            return None
+        enc_d = enc_b._driver
+        port = enc_d._port
+        if port.compiled_block_state() is None:
+            return None
+        for cw in drv._compiled_writes:
+            card_b = getattr(cw, "__self__", None)
+            if type(card_b) is not TwinActuators or card_b.twin is not tw:
+                return None
+        mon = drv.monitor
+        cmode = ctl.mode.data
+        return (self._graph, est, mod, ref, ctl, sup, enc, force, stops, drv, rec, self._sup,
+                est.state, self._law, self._binding.watch, tw, cell, enc_b, enc_d, port, ft_b,
+                tw.ati, stops_b, mon, None, None, None, None, drv.failed.data, cmode,
+                self._hybrid, rec.capacity, self._state, tw.plant._store, _T_AT)
+
+    def _plan_drive_matches(self, drv: RedundantDrive) -> bool:
+        """Bind the plan's drive part to the active card (the last cycle's): its backend,
+        its driver and the double's state; the monitor's reading the bound array (or no
+        monitor). False: no fast path."""
+        plan = self._plan
+        assert plan is not None
+        cw = drv._compiled_writes[drv._card]
+        card_b = getattr(cw, "__self__", None)
+        if card_b is None:
+            return False
+        card_d = card_b._driver
+        mon = plan[23]
+        dmon = None
+        if mon is not None:
+            dmon = mon()
+            if dmon is not self._bufs[B_DMON]:
+                return False
+        if card_d._fake_st is not self._bufs[B_DFAKE]:
+            return False
+        self._plan = (*plan[:24], dmon, card_b, card_d, card_d._fake_st, *plan[28:])
+        return True
+
+    def _sensors(self) -> tuple[int, int, int, float, float, float]:
+        """Which sensor stages the kernel runs this cycle (``HEAD_*`` bits) and their
+        scalars (the force sample's counter, status and time; the stop levels), each
+        sensor's buffers rebound when its backend's arrays changed."""
+        enc, force, stops = self._head
+        why = self.why_not_sensor
+        head = 0
+        bufs = self._bufs
+        r = enc.encoders.compiled_read()
+        if r is None:
+            why[0] = "the backend is not memory this cycle"
+        elif (r[0] is not bufs[B_PCL_ST] or r[1] is not bufs[B_PCL_PORTS]
+              or r[2] is not bufs[B_PCL_IO] or r[3] is not bufs[B_PCL_DEC]) and (
+                self._set(B_PCL_ST, r[0]) or self._set(B_PCL_PORTS, r[1])
+                or self._set(B_PCL_IO, r[2]) or self._set(B_PCL_DEC, r[3])):
+            self._set(B_PCL_ST, _NO_I)
+            why[0] = "the card's arrays cannot be viewed"
+        else:
+            head = HEAD_ENCODERS
+            self._enc_port = r[4]
+            why[0] = ""
+        ft_seq = ft_status = 0
+        ft_t = 0.0
+        smp = force.sensor.compiled_sample()
+        if smp is None:
+            why[1] = "the sensor's sample is not in memory this cycle"
+        elif (smp[0] is not bufs[B_ATI_W] or smp[1] is not bufs[B_FT_ST]
+              or force.tare._buf is not bufs[B_FT_TARE_BUF]) and (
+                self._set(B_ATI_W, smp[0]) or self._set(B_FT_ST, smp[1])
+                or self._set(B_FT_TARE_BUF, force.tare._buf)):
+            self._set(B_ATI_W, _NO_F)
+            why[1] = "the sample's arrays cannot be viewed"
+        else:
+            head |= HEAD_FORCE
+            ft_seq, ft_status, ft_t = int(smp[2]), int(smp[3]), float(smp[4])
+            why[1] = ""
+        lv = stops.device.compiled_levels()
+        estop = hand = 0.0
+        if lv is None:
+            why[2] = "the inputs are not memory"
+        else:
+            head |= HEAD_STOPS
+            estop, hand = lv
+            why[2] = ""
+        return head, ft_seq, ft_status, ft_t, estop, hand
+
+    def _encoder_refused(self, t: float, dt: float) -> int:
+        # The kernel's read stopped at a port the card refuses: the same read raises the
+        # card's HardwareError (naming the port), as the block's read would.
+        enc = self._head[0]
+        enc.encoders.read_positions_m(enc.q.data)
+        return 0
+
+    def _tare_ended(self, t: float, dt: float) -> int:
+        force = self._head[1]
+        force.tare._end_cycle(force.wrench.data, force.tare_out.data)
+        return 0
+
+    def _drive_args(self) -> tuple[bool, int] | None:
+        """The drive stage's (has a monitor reading, the card list's owner) when the drive may
+        run fused this cycle (module docstring: the active card on the twin's compiled
+        double, enabled, not failed, the monitor an array in place), its buffers rebound to
+        the active card; else None (the block runs)."""
+        drv = self._drive
+        if drv is None or not drv._active or drv.failed.data[0] > 0.5 or not drv._enabled:
+            return None
+        cw = drv._compiled_writes[drv._card]
+        fast = cw() if cw is not None else None
+        if fast is None:
+            return None
+        dac, samples, fake, owner = fast
+        bufs = self._bufs
+        # Another card (a failover): its driver's buffers.
+        if (dac is not bufs[B_DAC] or samples is not bufs[B_DSAMPLES]
+                or fake is not bufs[B_DFAKE]) and (self._set(B_DAC, dac)
+                                                   or self._set(B_DSAMPLES, samples)
+                                                   or self._set(B_DFAKE, fake)):
+            self._set(B_DAC, _NO_F)
+            return None
+        mon = drv.monitor
+        if mon is None:
+            return False, owner
+        measured = mon()
+        if measured is None:          # no reading newer than the last command
+            return False, owner
+        if measured is not bufs[B_DMON] and (
+                type(measured) is not np.ndarray or measured.dtype != _F64
+                or measured.shape != (3,) or self._set(B_DMON, measured)):
+            return None               # any other sequence: the block copies it
+        return True, owner
+
+    def _rec_changed(self, rec: SignalTap) -> bool:
+        """Whether the tap's ring or signals were replaced since the binding (its start binds
+        them again): then the block runs, and the next binding takes the new ones."""
+        arrays = self._rec_arrays
+        if rec.ring is arrays[0] and rec._addr is arrays[1] and rec._lens is arrays[2]:
+            return False
+        if rec._signals is None or self._set(B_REC_RING, rec.ring) or \
+                self._set(B_REC_ADDR, rec._addr) or self._set(B_REC_LENS, rec._lens):
+            self._gen = -1
+            return True
+        self._rec_arrays = (rec.ring, rec._addr, rec._lens)
+        return False
+
+    def _finish_drive(self, t: float, dt: float) -> int:
+        drv = self._drive
+        assert drv is not None
+        info = self._info
+        return drv.after_compiled_write(t, int(info[I_DRIVE]), int(info[I_DRIVE_RC]),
+                                        int(info[I_DRIVE_DONE]), True)
 
     def _play_done(self, t: float, dt: float) -> int:
         return self._comps[2].play_done()
@@ -578,16 +1114,69 @@ def _sensor_fault(t: float, dt: float) -> int:
     return STATUS_SENSOR
 
 
+def _drive_unbindable(drv: Any) -> str:
+    """"" when the drive slot's block may run its cycle as the fused drive stage (checked
+    per cycle too: the active card must be on the twin's compiled double), else why not."""
+    if type(drv) is not RedundantDrive:
+        return f"drive: {type(drv).__name__} has no fused stage"
+    if not drv.compiled:
+        return "drive: the interpreted RedundantDrive"
+    if drv.__dict__.get("update") is not None or RedundantDrive.__dict__["update"] \
+            is not _DRIVE_UPDATE:
+        return "drive: RedundantDrive.update is replaced"
+    if not any(c is not None for c in drv._compiled_writes):
+        return "drive: no card writes through the twin's compiled double"
+    return ""
+
+
+def _head_unbindable(head: list) -> str:
+    """"" when the sensor slots hold the standard sensor blocks (each fused per cycle when
+    its backend is memory), else why the chain runs per block."""
+    enc, force, stops = head
+    for comp, cls in ((enc, EncoderReader), (force, ForceReader), (stops, StopInputs)):
+        if type(comp) is not cls:
+            return f"{cls.__name__}: {type(comp).__name__} has no fused stage"
+        if comp.__dict__.get("update") is not None or cls.__dict__["update"] \
+                is not _SENSOR_UPDATES[cls]:
+            return f"{cls.__name__}.update is replaced"
+    if not force.compiled:
+        return "force: the interpreted ForceReader"
+    return ""
+
+
+def _recorder_unbindable(rec: Any) -> str:
+    if type(rec) is not RecorderTap and type(rec) is not SignalTap:
+        return f"recorder: {type(rec).__name__} has no fused stage"
+    if rec.__dict__.get("update") is not None or SignalTap.__dict__["update"] is not _TAP_UPDATE:
+        return "recorder: SignalTap.update is replaced"
+    if rec._signals is None:
+        return "recorder: its inputs are not one kind of array (it copies them in Python)"
+    return ""
+
+
+_DRIVE_UPDATE = RedundantDrive.__dict__["update"]
+_TAP_UPDATE = SignalTap.__dict__["update"]
+_SENSOR_UPDATES = {cls: cls.__dict__["update"] for cls in (EncoderReader, ForceReader, StopInputs)}
+
+
 def attach(graph: Any, enabled: bool | None = None) -> FusedChain | None:
     """Give ``graph`` the fused chain when its slots hold the standard chain's names in order
-    (the blocks themselves are checked at each binding); ``enabled`` None: the environment's
-    :data:`ENV_FLAG`. Returns the chain (None when the slots are not there)."""
+    (and after them the tail's, :data:`TAIL`, as far as it has them; the blocks themselves are
+    checked at each binding); ``enabled`` None: the environment's :data:`ENV_FLAG`. Returns
+    the chain (None when the slots are not there)."""
     order = list(graph.order)
     if CHAIN[0] not in order:
         return None
     i = order.index(CHAIN[0])
-    if tuple(order[i:i + N_STAGES]) != CHAIN:
+    if tuple(order[i:i + len(CHAIN)]) != CHAIN:
         return None
-    chain = FusedChain()
+    slots: tuple[str, ...] = CHAIN
+    for k in range(len(TAIL) if sensors_by_environment() else 0, 0, -1):
+        if tuple(order[i + len(CHAIN):i + len(CHAIN) + k]) == TAIL[:k]:
+            slots = CHAIN + TAIL[:k]
+            break
+    if i >= len(HEAD) and tuple(order[i - len(HEAD):i]) == HEAD and sensors_by_environment():
+        slots = HEAD + slots
+    chain = FusedChain(slots)
     graph.fuse(chain, enabled_by_environment() if enabled is None else enabled)
     return chain

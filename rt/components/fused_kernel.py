@@ -1,5 +1,7 @@
-"""The fused cycle's kernel (issue 16): the standard chain's five block kernels called from
-one numba function, on the blocks' own buffers reached through a table of addresses.
+"""The fused cycle's kernel (issue 16): the standard chain's block kernels called from one
+numba function, on the blocks' own buffers reached through a table of addresses — the five
+middle blocks (estimator → supervisor) and, after them, the device blocks whose backend is
+memory (the twin's redundant drive on its compiled comedilib double, the recorder tap).
 
 Kept apart from :mod:`rt.components.fused` (the Python side: binding, checks, the graph's
 segment) so that editing that side does not invalidate numba's on-disk cache of this one
@@ -17,20 +19,31 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from rt.components import hybrid_kernel as hyk
+from rt.components.blocks import tap_row
+from rt.components.safety_blocks import _drive_cycle_write, _force_cycle
+from rt.components.tare import TARE_ENDED
 from rt.control import kernels as ck
+from rt.devices.sampled_ft import _read_sample
+from rt.drivers import kernels as dk
 from rt.estimation.compiled import block_update
 from rt.model.kernels import model_state
 from rt.model.kinematics import FK_MAX_ITERATIONS, FK_STEP_TOL_RAD
-from rt.pointers import f64_at, i64_at
+from rt.pointers import f64_at, i64_at, u32_at
 from rt.references import sequencer_kernel as rk
 from rt.safety import supervisor_kernel as svk
 
-#: The stages, in the graph's order (estimator, model, reference, controller, supervisor).
-N_STAGES = 5
+#: The stages, in the graph's order, numbered absolutely: the sensors (run by Python before
+#: the call: their backends call drivers or Python objects), the five middle blocks, the drive
+#: and the recorder tap. A segment covers a consecutive run of them (``first`` .. ``upto``).
+(ST_ENCODERS, ST_FORCE, ST_STOPS, ST_ESTIMATOR, ST_MODEL, ST_REFERENCE, ST_CONTROLLER,
+ ST_SUPERVISOR, ST_DRIVE, ST_RECORDER, N_STAGES) = range(11)
 
-# ``info`` (int64) the kernel fills: stages it ran, whether the last one needs Python, the
-# estimator's status, FK's status, the reference's answer, the law's status, the supervisor's.
-I_RAN, I_PYTHON, I_EST, I_FK, I_REF, I_LAW, I_SUP, INFO_SIZE = 0, 1, 2, 3, 4, 5, 6, 7
+# ``info`` (int64) the kernel fills: stages it ran (absolute: the stage after the last one
+# run), whether the last one needs Python, the estimator's status, FK's status, the
+# reference's answer, the law's status, the supervisor's, and the drive's answers (failed
+# channel or -1, the codes' answer, the list's answer).
+(I_RAN, I_PYTHON, I_EST, I_FK, I_REF, I_LAW, I_SUP, I_DRIVE, I_DRIVE_RC, I_DRIVE_DONE,
+ INFO_SIZE) = range(11)
 _EST_JUMP = -3          # EstimatorStatus.JUMP: published, the supervisor's business
 
 
@@ -68,9 +81,24 @@ def ticks_now() -> int:
  # The hybrid controller's force mode (``force_stage``): its state, its input ports, the
  # explicit-force law's tree, gains, state, work, its own copy of the command, the reference.
  B_HS, B_HFORCE, B_HPREVIEW, B_HPOSE, B_HWRENCH, B_FTI, B_FTF, B_FG, B_FS, B_FWORK, B_FTAU,
- B_FREF, N_BUFFERS) = range(67)
-_INT_BUFFERS = (B_TI, B_AMAP, B_FTI)
-_MATRIX_BUFFERS = (B_TABLE,)
+ B_FREF,
+ # The redundant drive on the twin's compiled comedilib double (``drive_stage``): its state,
+ # its command and enable inputs, the amplifier-input monitor's array, the active card's
+ # driver state, its list's samples (uint32) and the double's state; the recorder tap's ring
+ # (a matrix) and its signals' addresses and lengths (``recorder_stage``).
+ B_DST, B_DVOLTS, B_DENABLE, B_DMON, B_DAC, B_DSAMPLES, B_DFAKE,
+ B_REC_RING, B_REC_ADDR, B_REC_LENS,
+ # The sensors on memory (``sensor_stages``): the encoder card's emulation state, the
+ # driver's ports to read, its read/unwrap state and decode constants, its output; the polled
+ # force sensor's device sample and own state, the reader's reading, wrench, flags, tare
+ # request, tare port and tare state; the stop inputs' output.
+ B_PCL_ST, B_PCL_PORTS, B_PCL_IO, B_PCL_DEC, B_ENC_Q,
+ B_ATI_W, B_FT_ST, B_FT_RAW, B_FT_WRENCH, B_FT_FLAGS, B_FT_REQUEST, B_FT_TARE, B_FT_TARE_BUF,
+ B_STOPS, N_BUFFERS) = range(91)
+_INT_BUFFERS = (B_TI, B_AMAP, B_FTI, B_DFAKE, B_REC_ADDR, B_REC_LENS, B_PCL_ST, B_PCL_PORTS,
+                B_PCL_IO)
+_U32_BUFFERS = (B_DSAMPLES,)
+_MATRIX_BUFFERS = (B_TABLE, B_REC_RING)
 
 LAW_PADEN_PANJA, LAW_COMPUTED_TORQUE, LAW_PD_GRAVITY, LAW_PD_G0, LAW_PID, LAW_ADAPTIVE = range(6)
 
@@ -89,6 +117,11 @@ def _v(addr, dims, i):
 @njit(cache=True, inline="always")
 def _vi(addr, dims, i):
     return carray(i64_at(addr[i]), dims[i, 0])
+
+
+@njit(cache=True, inline="always")
+def _vu(addr, dims, i):
+    return carray(u32_at(addr[i]), dims[i, 0])
 
 
 @njit(cache=True)
@@ -126,6 +159,72 @@ def force_stage(dt, a, d):
     return 0
 
 
+@njit(cache=True)
+def drive_stage(has_measured, owner, a, d, info):
+    """The redundant drive's cycle on the twin's compiled double
+    (``rt.components.safety_blocks._drive_cycle_write``: the monitor check, the command kept
+    as the last one and the active card's whole write) on its block's buffers; its answers go
+    to ``info``. Returns whether they need the block's Python (a confirmed failed channel, a
+    refused or incomplete write, a double that keeps a log)."""
+    i, rc, done, python = _drive_cycle_write(
+        _v(a, d, B_DMON), has_measured, _v(a, d, B_DVOLTS), _v(a, d, B_DST), _v(a, d, B_DAC),
+        _vu(a, d, B_DSAMPLES), _vi(a, d, B_DFAKE), owner)
+    info[I_DRIVE] = i
+    info[I_DRIVE_RC] = rc
+    info[I_DRIVE_DONE] = done
+    return i >= 0 or python
+
+
+#: ``head`` bits: which sensor stages the kernel runs (the others ran in Python before it).
+HEAD_ENCODERS, HEAD_FORCE, HEAD_STOPS = 1 << ST_ENCODERS, 1 << ST_FORCE, 1 << ST_STOPS
+
+
+@njit(cache=True)
+def sensor_stages(stamps, info, head, ft_seq, ft_status, ft_t, estop, hand, a, d):
+    """The sensor stages the kernel runs (``head``): the encoder card's emulated block read
+    and the driver's decode (``rt.drivers.kernels``: what ``Pcl833Encoders.read_positions_m``
+    does on the twin's card), the polled force sensor's sample (``_read_sample``, given the
+    device's counter, status and time) and the force reader's cycle with its tare
+    (``_force_cycle``), the stop levels. Returns False where Python must finish the stage
+    (a port the card refuses; a tare that ended), ``info[I_RAN]`` then the stage after it."""
+    for k in range(ST_ENCODERS, ST_ESTIMATOR):
+        stamps[k] = _ticks()
+        if head & (1 << k):
+            if k == ST_ENCODERS:
+                io = _vi(a, d, B_PCL_IO)
+                if dk.fake_pcl833_read(_vi(a, d, B_PCL_ST), _vi(a, d, B_PCL_PORTS),
+                                       io[dk.PCL_RAW:dk.PCL_RAW + 9]) >= 0:
+                    stamps[k + 1] = _ticks()
+                    info[I_RAN] = k + 1
+                    info[I_PYTHON] = 1
+                    return False
+                dk.pcl833_decode(io, _v(a, d, B_PCL_DEC), _v(a, d, B_ENC_Q))
+            elif k == ST_FORCE:
+                raw = _v(a, d, B_FT_RAW)
+                _read_sample(_v(a, d, B_ATI_W), ft_seq, ft_status, ft_t, _v(a, d, B_FT_ST), raw)
+                if _force_cycle(raw, _v(a, d, B_FT_WRENCH), _v(a, d, B_FT_FLAGS),
+                                _v(a, d, B_FT_REQUEST), _v(a, d, B_FT_TARE),
+                                _v(a, d, B_FT_TARE_BUF)) == TARE_ENDED:
+                    stamps[k + 1] = _ticks()
+                    info[I_RAN] = k + 1
+                    info[I_PYTHON] = 1
+                    return False
+            else:
+                out = _v(a, d, B_STOPS)
+                out[0] = estop
+                out[1] = hand
+        info[I_RAN] = k + 1
+    return True
+
+
+@njit(cache=True)
+def recorder_stage(t, row, a, d):
+    """The recorder tap's row (``rt.components.blocks.tap_row``) on its block's buffers."""
+    ring = carray(f64_at(a[B_REC_RING]), (d[B_REC_RING, 0], d[B_REC_RING, 1]))
+    tap_row(ring, row, t, _vi(a, d, B_REC_ADDR), _vi(a, d, B_REC_LENS))
+    return 0
+
+
 # ``tab`` (int64), everything the kernel reads or writes besides the blocks' buffers, in one
 # argument: the buffers' addresses and shapes, the timing rings' addresses, the stamps and
 # the info.
@@ -134,44 +233,65 @@ T_DIMS = T_ADDR + N_BUFFERS
 T_RINGS = T_DIMS + 2 * N_BUFFERS
 T_STAMPS = T_RINGS + N_STAGES
 T_INFO = T_STAMPS + N_STAGES + 1
-T_SIZE = T_INFO + INFO_SIZE
+T_ARGS = T_INFO + INFO_SIZE
+# The call's scalars (devstage7b): numba's dispatch boxes and types each argument (22 of them
+# cost ≈ 4-7 µs a cycle here), so they live in memory the Python side writes item by item
+# (``array`` stores: ≈ 30 ns each) and :func:`fused_cycle` takes one int, this table's
+# address. Integers in ``tab`` at ``T_ARGS``; floats in a float64 store at ``tab[T_FARGS]``.
+(A_FIRST, A_UPTO, A_FILLED, A_HYBRID, A_LAW, A_TRAJECTORY, A_NB, A_IDX, A_HAS_MEASURED,
+ A_OWNER, A_REC_ROW, A_HEAD, A_FT_SEQ, A_FT_STATUS, A_PYTHON_OUT, A_OTHERS, A_AUX, A_FK,
+ A_SIZE) = range(19)
+T_FARGS = T_ARGS + A_SIZE
+T_SIZE = T_FARGS + 1
+(F_T, F_DT, F_VPN, F_NS_PER_TICK, F_FT_T, F_ESTOP, F_HAND, F_SIZE) = range(8)
 
 
 @njit(cache=True)
-def fused_chain(tab, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, idx,
-                ns_per_tick):
-    """:func:`_chain`, then each stage after the first timed into its slot's ring (the
-    graph's timing rings' addresses, in ``tab``, at ``idx``). Returns (stages run, whether the
-    last needs Python, the ns those later stages took, the supervisor's or the law's answer,
-    FK's status)."""
+def fused_chain(tab, t, dt, first, upto, filled, volts_per_n, hybrid, law, trajectory, nb, idx,
+                ns_per_tick, has_measured, owner, rec_row, head, ft_seq, ft_status, ft_t,
+                estop, hand):
+    """:func:`sensor_stages` (``head``: those the kernel runs; when the segment starts at
+    ``first`` = ``ST_ENCODERS``), then :func:`_chain`, then each stage the kernel ran after
+    the segment's first timed into its slot's ring (the graph's timing
+    rings' addresses, in ``tab``, at ``idx``). Returns (the stage after the last one run,
+    whether the last needs Python, the ns those later stages took, the supervisor's or the
+    law's answer, FK's status)."""
     a = tab[T_ADDR:T_ADDR + N_BUFFERS]
     d = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
     rings = tab[T_RINGS:T_RINGS + N_STAGES]
     stamps = tab[T_STAMPS:T_STAMPS + N_STAGES + 1]
     info = tab[T_INFO:T_INFO + INFO_SIZE]
-    _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d)
+    info[I_RAN] = first
+    info[I_PYTHON] = 0
+    if first >= ST_ESTIMATOR or sensor_stages(stamps, info, head, ft_seq, ft_status, ft_t,
+                                              estop, hand, a, d):
+        _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a,
+               d, has_measured, owner, rec_row)
     ran = info[I_RAN]
     others = 0
-    for j in range(1, ran):
+    for j in range(first + 1, ran):
+        if j < ST_ESTIMATOR and not head & (1 << j):
+            continue                        # a sensor block Python ran: its ring is written
         ns = np.int64((stamps[j + 1] - stamps[j]) * ns_per_tick)
         carray(i64_at(rings[j]), idx + 1)[idx] = ns
         others += ns
-    aux = info[I_SUP] if ran == 5 else info[I_LAW]
+    aux = info[I_SUP] if ran == ST_SUPERVISOR + 1 else info[I_LAW]
     return ran, info[I_PYTHON], others, aux, info[I_FK]
 
 
 @njit(cache=True)
-def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d):
-    """The five stages (module docstring) up to stage ``upto`` (exclusive), stopping where
-    Python must run; ``stamps`` the cycle counter before the first and after each stage;
-    ``a``/``d`` the buffers' addresses and shapes (``B_*``)."""
-    info[I_RAN] = 0
-    info[I_PYTHON] = 0
-    stamps[0] = _ticks()
+def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a, d,
+           has_measured, owner, rec_row):
+    """The stages (module docstring) from the estimator up to stage ``upto`` (exclusive,
+    absolute), stopping where Python must run; ``stamps[k]`` the cycle counter before stage
+    ``k`` and ``stamps[k + 1]`` after it; ``a``/``d`` the buffers' addresses and shapes
+    (``B_*``)."""
+    info[I_RAN] = ST_ESTIMATOR
+    stamps[ST_ESTIMATOR] = _ticks()
     status = block_update(_v(a, d, B_EST_C), _v(a, d, B_EST_S), _v(a, d, B_EST_Q), dt,
                           _v(a, d, B_EST_OUT), _v(a, d, B_EST_IO))
-    stamps[1] = _ticks()
-    info[I_RAN] = 1
+    stamps[ST_MODEL] = _ticks()
+    info[I_RAN] = ST_MODEL
     info[I_EST] = status
     if status < 0 and status != _EST_JUMP:
         info[I_PYTHON] = 1                  # the block returns STATUS_SENSOR: a fault
@@ -180,10 +300,10 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
                      _v(a, d, B_MOD_QD), _v(a, d, B_STB), FK_STEP_TOL_RAD, FK_MAX_ITERATIONS,
                      _v(a, d, B_MOD_WORK))
     _v(a, d, B_FK)[0] = 1.0 if fk >= 0 else 0.0
-    stamps[2] = _ticks()
-    info[I_RAN] = 2
+    stamps[ST_REFERENCE] = _ticks()
+    info[I_RAN] = ST_REFERENCE
     info[I_FK] = fk
-    if upto <= 2:
+    if upto <= ST_REFERENCE:
         return
     table = carray(f64_at(a[B_TABLE]), (d[B_TABLE, 0], d[B_TABLE, 1]))
     r = rk.cycle(_v(a, d, B_REF_IO), _v(a, d, B_SEQ), _v(a, d, B_REF_Q), _v(a, d, B_REF_MODE),
@@ -191,12 +311,12 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
     info[I_REF] = r
     if r == rk.NEED_PYTHON:                 # nothing written: the block runs its cycle
         return
-    stamps[3] = _ticks()
-    info[I_RAN] = 3
+    stamps[ST_CONTROLLER] = _ticks()
+    info[I_RAN] = ST_CONTROLLER
     if r == rk.PLAY_DONE:                   # the return is planned in Python
         info[I_PYTHON] = 1
         return
-    if upto <= 3:
+    if upto <= ST_CONTROLLER:
         return
     if hybrid == NOT_HYBRID:
         ls = _law(dt, law, trajectory, nb, a, d)
@@ -209,13 +329,13 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
             ls = force_stage(dt, a, d)
         else:
             ls = _law(dt, law, trajectory, nb, a, d)
-    stamps[4] = _ticks()
-    info[I_RAN] = 4
+    stamps[ST_SUPERVISOR] = _ticks()
+    info[I_RAN] = ST_SUPERVISOR
     info[I_LAW] = ls
     if ls < 0:
         info[I_PYTHON] = 1                  # PD+G0's refused FK raises in Python
         return
-    if upto <= 4:
+    if upto <= ST_SUPERVISOR:
         return
     new = svk.block_cycle(_v(a, d, B_PAR), _v(a, d, B_MEM), t, dt, _v(a, d, B_SQ),
                           _v(a, d, B_SEST), _v(a, d, B_SQD), _v(a, d, B_SQDD),
@@ -224,8 +344,45 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
                           _v(a, d, B_WRENCH), _v(a, d, B_WFLAGS), _v(a, d, B_INPUTS),
                           _v(a, d, B_DFAILED), volts_per_n, _v(a, d, B_VOLTS),
                           _v(a, d, B_ENABLE), _v(a, d, B_MODE))
-    stamps[5] = _ticks()
-    info[I_RAN] = 5
+    stamps[ST_DRIVE] = _ticks()
+    info[I_RAN] = ST_DRIVE
     info[I_SUP] = new
+    if new != 0:
+        info[I_PYTHON] = 1                  # something new tripped: finish_block
+        return
+    # The drive: only enabled (a disabling cycle switches its card off in Python).
+    if upto <= ST_DRIVE or _v(a, d, B_DENABLE)[0] <= 0.5:
+        return
+    python = drive_stage(has_measured, owner, a, d, info)
+    stamps[ST_RECORDER] = _ticks()
+    info[I_RAN] = ST_RECORDER
+    if python:
+        info[I_PYTHON] = 1                  # a failover, a refused write, a log: the block's
+        return
+    if upto <= ST_RECORDER:
+        return
+    recorder_stage(t, rec_row, a, d)
+    stamps[N_STAGES] = _ticks()
+    info[I_RAN] = N_STAGES
 
 
+@njit(cache=True)
+def fused_cycle(tab_addr):
+    """:func:`fused_chain` with its scalars read from memory (``tab`` at ``tab_addr``: the
+    ``A_*`` integers at ``T_ARGS``, the ``F_*`` floats at ``tab[T_FARGS]``): one integer
+    argument. Returns the stage after the last one run; whether it needs Python, the ns of
+    the later stages, the supervisor's or the law's answer and FK's status go to ``A_PYTHON_OUT``,
+    ``A_OTHERS``, ``A_AUX``, ``A_FK``."""
+    tab = carray(i64_at(tab_addr), T_SIZE)
+    ia = tab[T_ARGS:T_ARGS + A_SIZE]
+    fa = carray(f64_at(tab[T_FARGS]), F_SIZE)
+    ran, python, others, aux, fk = fused_chain(
+        tab, fa[F_T], fa[F_DT], ia[A_FIRST], ia[A_UPTO], ia[A_FILLED] != 0, fa[F_VPN],
+        ia[A_HYBRID], ia[A_LAW], ia[A_TRAJECTORY] != 0, ia[A_NB], ia[A_IDX],
+        fa[F_NS_PER_TICK], ia[A_HAS_MEASURED] != 0, ia[A_OWNER], ia[A_REC_ROW], ia[A_HEAD],
+        ia[A_FT_SEQ], ia[A_FT_STATUS], fa[F_FT_T], fa[F_ESTOP], fa[F_HAND])
+    ia[A_PYTHON_OUT] = python
+    ia[A_OTHERS] = others
+    ia[A_AUX] = aux
+    ia[A_FK] = fk
+    return ran

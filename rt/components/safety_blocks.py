@@ -409,14 +409,7 @@ class RedundantDrive(Component):
             else None
         if fast is not None:
             i, rc, done, python = _drive_cycle_write(m, has, v, self._st, *fast)
-            if i < 0:
-                if python:
-                    self._finish_write(t, card, v, rc, done)
-                return 0
-            if not self._fail_over(t, i, "amplifier input disagrees with the command"):
-                self._all_off()
-                return 0
-            return self._finish_cycle(t, v, enabled)
+            return self.after_compiled_write(t, i, rc, done, python)
         # One compiled call: the monitor check, and the command stored as the last one.
         i = _drive_cycle(m, has, v, enabled, self._st)
         if i >= 0:
@@ -446,6 +439,20 @@ class RedundantDrive(Component):
             self.cards[self._card].write_volts(v)
             self._last[:] = v
         return 0
+
+    def after_compiled_write(self, t: float, i: int, rc: int, done: int, python: bool) -> int:
+        """The cycle's rest after :func:`_drive_cycle_write` answered (``i`` the confirmed
+        failed channel or -1, ``rc``/``done`` the write's answers, ``python`` whether they
+        need the driver's Python): the block's own fast path and the fused cycle's drive
+        stage (``rt.components.fused``) both end here."""
+        if i < 0:
+            if python:
+                self._finish_write(t, self.cards[self._card], self.volts.data, rc, done)
+            return 0
+        if not self._fail_over(t, i, "amplifier input disagrees with the command"):
+            self._all_off()
+            return 0
+        return self._finish_cycle(t, self.volts.data, True)
 
     def _finish_write(self, t: float, card: Any, v: np.ndarray, rc: int, done: int) -> None:
         """The compiled write's answer that needs Python: what ``card.write_volts`` raising

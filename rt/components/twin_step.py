@@ -22,6 +22,7 @@ class TwinStep(Component):
     def update(self, t: float, dt: float) -> int:
         if self._t0 is None:
             self._t0 = t
-        self.clock.t = t - self._t0
-        self.twin.sync(self.clock.t)
+        now = t - self._t0
+        self.clock.t = now
+        self.twin.sync(now)
         return 0

@@ -10,6 +10,7 @@ import abc
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -115,6 +116,14 @@ class EncoderBank(Device):
     def reset(self) -> None:
         """Set every counter to its reference value (the PCL-833 midpoint)."""
 
+    def compiled_read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Any] | None:
+        """When this cycle's :meth:`read_positions_m` is memory a compiled caller can read
+        itself (the twin's emulated PCL-833): the card's state, the driver's ports, its read
+        state and decode constants (``rt.drivers.kernels.fake_pcl833_read`` then
+        ``pcl833_decode``) and the port (its read count is the caller's to advance); else
+        None (the default: call :meth:`read_positions_m`, e.g. the rig's ``/dev/port``)."""
+        return None
+
 
 class ActuatorOutputs(Device):
     """Analog command outputs (V) to the current-mode amplifiers, with drive enable.
@@ -169,6 +178,14 @@ class ForceTorqueSensor(Device):
     @abc.abstractmethod
     def read(self, out: Wrench) -> Wrench:
         """Latest wrench written into ``out`` (stale flag set if none arrived in time)."""
+
+    def compiled_sample(self) -> tuple[np.ndarray, np.ndarray, int, int, float] | None:
+        """When this cycle's :meth:`read_array` is a polled sample in memory (the twin's ATI,
+        no fault): the sample's wrench (float64[6]), this sensor's polled state, the sample's
+        counter, status word and time, for ``rt.devices.sampled_ft._read_sample`` in a
+        compiled caller; else None (the default: call :meth:`read_array`; a receiver thread
+        or a driver keeps it so)."""
+        return None
 
     def read_array(self, out: np.ndarray) -> np.ndarray:
         """:meth:`read` into a float64[``FT_READ_SIZE``] array (layout ``FT_*``: fx..tz, t,
@@ -233,6 +250,12 @@ class DigitalInputs(Device):
 
     @abc.abstractmethod
     def read(self, out: DigitalInputState) -> DigitalInputState: ...
+
+    def compiled_levels(self) -> tuple[float, float] | None:
+        """When this cycle's levels are memory (the twin's inputs): [hardware e-stop,
+        hand-held stop] as 0/1 for a compiled caller to write; else None (the default: call
+        :meth:`read_array`, e.g. the rig's comedi DIO)."""
+        return None
 
     def read_array(self, out: np.ndarray) -> np.ndarray:
         """[hardware e-stop, hand-held stop] as 0/1 into ``out`` (float64[2]), the loop's

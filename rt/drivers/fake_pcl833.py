@@ -160,6 +160,14 @@ class FakePcl833Port(PortIO):
         self.n_reads += ports.shape[0]
         return out
 
+    def compiled_block_state(self) -> np.ndarray | None:
+        """The card's state for a compiled block read (:meth:`read_block`'s kernel); None
+        once closed, or for a subclass with its own ``read_block``/``inb``."""
+        if self._closed or type(self).read_block is not FakePcl833Port.read_block \
+                or type(self).inb is not FakePcl833Port.inb:
+            return None
+        return self._st
+
     def outb(self, port: int, value: int) -> None:
         self._check_open()
         if not 0 <= value <= 0xFF:

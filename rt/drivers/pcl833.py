@@ -358,6 +358,18 @@ class Pcl833Encoders(EncoderBank):
         kernels.pcl833_decode(self._io, self._dec, out)
         return out
 
+    def compiled_read(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                     PortIO] | None:
+        """:meth:`read_positions_m`'s arrays when its port is memory (the emulated card:
+        ``PortIO.compiled_block_state``): (card state, ports, read state, decode constants,
+        port); None on ``/dev/port`` or once closed."""
+        if self._closed:
+            return None
+        st = self._port.compiled_block_state()
+        if st is None:
+            return None
+        return st, self._read_ports, self._io, self._dec, self._port
+
     def read_positions_m_interpreted(self, out: np.ndarray) -> np.ndarray:
         """:meth:`read_positions_m` one byte and one axis at a time (the reference)."""
         self._check_open()

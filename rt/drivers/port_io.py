@@ -65,6 +65,12 @@ class PortIO(Device):
         return out
 
 
+    def compiled_block_state(self) -> np.ndarray | None:
+        """The int64 state ``rt.drivers.kernels.fake_pcl833_read`` reads a block from, when
+        this port is memory (the card's emulation), else None (a system call per byte)."""
+        return None
+
+
 class DevPortIO(PortIO):
     """Port access through ``/dev/port`` (Linux, root or ``CAP_SYS_RAWIO``).
 

@@ -440,29 +440,34 @@ class Loop:
         step = self.graph.step
         queue = self._queue
         pending = queue._dq
-        t_end = None
+        # The time base in locals, read again after a command (a new rate re-anchors it): the
+        # cycle's Python is pre-flight's overhead (issue 16), and the same floats result.
+        anchor_t, anchor_cycle, period = self._anchor_t, self._anchor_cycle, self._period_s
+        t_end = math.inf
         if seconds is not None:
-            t_first = self._anchor_t + (self._cycles - self._anchor_cycle) * self._period_s
+            t_first = anchor_t + (self._cycles - anchor_cycle) * period
             # Half a period of slack so that float rounding cannot add or drop a cycle.
-            t_end = t_first + seconds - 0.5 * self._period_s
-        k = 0
-        while not self._stop_requested and (cycles is None or k < cycles):
-            cycle = self._cycles
-            t = self._anchor_t + (cycle - self._anchor_cycle) * self._period_s
-            if t_end is not None and t > t_end:
+            t_end = t_first + seconds - 0.5 * period
+        last = self._cycles + cycles if cycles is not None else None
+        cycle = self._cycles
+        while not self._stop_requested and cycle != last:
+            t = anchor_t + (cycle - anchor_cycle) * period
+            if t > t_end:
                 break
-            dt = self._period_s  # the period over the interval that ends at this cycle
+            dt = period           # the period over the interval that ends at this cycle
             self._t_current = t
             if pending:
                 queue.drain(self, cycle)  # a new rate re-anchors at (t, cycle)
+                anchor_t, anchor_cycle, period = (self._anchor_t, self._anchor_cycle,
+                                                  self._period_s)
             self._t = t
             self._dt = dt
             step(t, dt)
-            self._cycles = cycle + 1
-            k += 1
+            cycle += 1
+            self._cycles = cycle
             if self._signals:
                 for sig in self._signals:
-                    if (cycle + 1) % sig.every == 0:
+                    if cycle % sig.every == 0:
                         sig.fire()
 
     def _run_realtime(self, cycles: int | None, seconds: float | None) -> None:

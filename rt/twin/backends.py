@@ -43,6 +43,18 @@ class TwinEncoders(EncoderBank):
             out[i] = decode_counts(count, m_per_count=self.twin.m_per_count)
         return out
 
+    def compiled_read(self) -> tuple | None:
+        """The driver's arrays on the emulated card (``Pcl833Encoders.compiled_read``), the
+        twin synced as :meth:`read_positions_m` syncs it; None under a fault (a latency fault
+        delays the counts: the block decodes them) or once closed."""
+        if self._closed:
+            return None
+        twin = self.twin
+        twin.sync()
+        if twin.faults.faults:
+            return None
+        return self._driver.compiled_read()
+
     def reset(self) -> None:
         self._driver.reset()
 
@@ -109,6 +121,19 @@ class TwinForceTorque(SampledForceTorque):
         super().__init__(timeout_s)
         self.twin = twin
 
+    def compiled_sample(self) -> tuple | None:
+        """The twin's latest sample where its fused period left it (``Twin.latest_ati``), the
+        twin synced as :meth:`_sample` syncs it; None under a fault, before the first sample,
+        when not streaming, or once closed (the block reads it then)."""
+        if self._closed or not self._streaming:
+            return None
+        twin = self.twin
+        twin.sync()
+        ati = twin.ati
+        if twin.faults.faults or ati._pending < 0:
+            return None
+        return ati._out, self._st, ati._state.ft_sequence, ati._pending, twin.t
+
     def _sample(self):
         twin = self.twin
         twin.sync()
@@ -137,6 +162,13 @@ class TwinDigitalInputs(DigitalInputs):
         out.hardware_estop = self.twin.inputs.hardware_estop
         out.hand_stop = self.twin.inputs.hand_stop
         return out
+
+    def compiled_levels(self) -> tuple[float, float] | None:
+        if self._closed:
+            return None
+        self.twin.sync()
+        inputs = self.twin.inputs
+        return (1.0 if inputs.hardware_estop else 0.0, 1.0 if inputs.hand_stop else 0.0)
 
     def read_array(self, out: np.ndarray) -> np.ndarray:
         self._check_open()

@@ -24,10 +24,12 @@ one dispatch with five array arguments instead of ~25 (numba unboxes every array
 from __future__ import annotations
 
 import math
+from array import array
 
 import numpy as np
 from numba import njit
 
+from rt.ati.rdt import STATUS_ANY_ERROR, STATUS_FT_OUT_OF_RANGE
 from rt.ati.twin_sensor import _measure_kernel
 from rt.drivers.kernels import dac_code_volts, fake_pcl833_move
 from rt.twin import physics
@@ -68,7 +70,9 @@ P_WITH_OFFSET = _PX + 14          # 1.0 when an amplifier input offset is set
 P_AMP_OFFSET = _PX + 15           # 3, V, the amplifiers' input offsets
 P_PORT_SIGN = _PX + 18            # 3, the encoder card's count direction per axis
 P_PORT_MPC = _PX + 21             # 3, m per count per axis
-P_SIZE = _PX + 24
+P_REALISTIC = _PX + 24            # 1.0 with the rig's imperfections (``TwinPlant.realistic``)
+P_INTEGRATOR = _PX + 25           # ``physics.INTEGRATOR_*`` (``TwinPlant.integrator``)
+P_SIZE = _PX + 26
 
 # ---- state array S
 S_Q = 0
@@ -118,6 +122,26 @@ _W_APPLIED = _W_VISCOUS + N_FRICTION
 _W_WORK = _W_APPLIED + 3
 _W_PORT_INDEX = _W_WORK + WORK_SIZE     # 3, the encoder card's new index (floats)
 W_SIZE = _W_PORT_INDEX + 3
+
+#: Length of the closed-chain geometry array (``rt.model.kernels.pack_geometry``).
+GEOM_SIZE = 12
+
+# ---- the period's one block ``B`` (float64[B_SIZE]): everything :func:`period_block` touches
+# but the devices' and the ATI's arrays, contiguous, so a period unboxes one array instead of
+# five and its memory is a few adjacent cache lines (issue 16: between two periods the loop's
+# other blocks evict the twin's state). ``S`` comes first, so the ``S_*`` offsets index ``B``
+# too. ``TwinPlant``'s ``S``, ``P``, ``W``, ``env`` and ``geom`` are views of it.
+B_S = 0
+B_P = B_S + S_SIZE
+B_W = B_P + P_SIZE
+B_ENV = B_W + W_SIZE
+B_GEOM = B_ENV + physics.ENV_SIZE
+B_X = B_GEOM + GEOM_SIZE
+# ``X``: the plant's Python-side state a compiled period advances (a compiled pre-flight
+# driver advances it too, between Python's events), read by Python through ``TwinPlant``.
+X_T = 0                   # s, the plant's time (``TwinPlant.t``)
+X_SIZE = 2                # (one spare: the block ends on an even number of floats)
+B_SIZE = B_X + X_SIZE
 
 
 @njit(cache=True)
@@ -328,6 +352,29 @@ def period(geom, P, env, S, W, port, codes, ati, ati_block, dt, n, t, realistic,
                            ati[ATI_OUT:ATI_SIZE], ati_dt, overload_bits)
 
 
+#: The ATI's status bits for an overloaded axis in a fault-free period (``Twin``'s
+#: ``_ATI_OVERLOAD``, a constant of the compiled period since issue 16's twin7).
+OVERLOAD_BITS = STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE
+
+
+@njit(cache=True)
+def period_block(B, port, codes, ati, ati_block, dt, n, ati_row, ati_dt):
+    """:func:`period` on the plant's one block ``B`` (``B_*``): the same call with the same
+    arguments, read from the block (``realistic`` and ``integrator`` from ``P``, the time
+    from ``X``; the overload bits are :data:`OVERLOAD_BITS`), so the arithmetic is the same
+    to the bit. Advances the plant's time ``X_T`` by ``dt`` when the physics succeeded (the
+    float ``t + dt`` Python computed before). Returns :func:`period`'s result."""
+    P = B[B_P:B_P + P_SIZE]
+    t = B[B_X + X_T]
+    bits = period(B[B_GEOM:B_GEOM + GEOM_SIZE], P, B[B_ENV:B_ENV + physics.ENV_SIZE],
+                  B[B_S:B_S + S_SIZE], B[B_W:B_W + W_SIZE], port, codes, ati, ati_block, dt, n,
+                  t, P[P_REALISTIC] > 0.5, int(P[P_INTEGRATOR]), ati_row, ati_dt,
+                  OVERLOAD_BITS)
+    if bits >= 0:
+        B[B_X + X_T] = t + dt
+    return bits
+
+
 @njit(cache=True)
 def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd, phi, xm, vm,
                         current, cable_tau, volts, volts_prev, delay_steps, n_steps, h_step,
@@ -440,3 +487,16 @@ def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd
 def new_state() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Zeroed (P, S, W) arrays of the right sizes."""
     return np.zeros(P_SIZE), np.zeros(S_SIZE), np.zeros(W_SIZE)
+
+
+def new_block() -> tuple[array, np.ndarray]:
+    """A zeroed block: its store (``array('d')``: Python reads a float from it faster than
+    from numpy, for the plant's time) and the float64 view of it the kernels take."""
+    store = array("d", bytes(8 * B_SIZE))
+    return store, np.frombuffer(store, dtype=np.float64)
+
+
+def block_views(B: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The (P, S, W, env, geom) views of a block."""
+    return (B[B_P:B_P + P_SIZE], B[B_S:B_S + S_SIZE], B[B_W:B_W + W_SIZE],
+            B[B_ENV:B_ENV + physics.ENV_SIZE], B[B_GEOM:B_GEOM + GEOM_SIZE])

@@ -64,14 +64,18 @@ class TwinPlant:
                                      "symplectic_euler only; use RigImperfections.none() for rk4")
         self.description = description
         self.kin = Kinematics(description)
-        self.geom = self.kin.geom
         self.physics_rate_hz = float(physics_rate_hz)
         self.integrator = INTEGRATORS[integrator]
         self.compiled = compiled
-        # Packed parameters, state and scratch of the compiled period (rt.twin.kernels); the
-        # named arrays below are views into them, so both paths share one state.
-        self.P, self.S, self.W = kernels.new_state()
+        # Packed parameters, state and scratch of the compiled period (rt.twin.kernels), all
+        # views of one block ``B`` with the environment, the geometry and the time; the named
+        # arrays below are views into them, so both paths share one state.
+        self._store, self.B = kernels.new_block()
+        self.P, self.S, self.W, self.env, self.geom = kernels.block_views(self.B)
+        self.geom[:] = self.kin.geom
         P, S, K = self.P, self.S, kernels
+        P[K.P_REALISTIC] = 1.0 if self.realistic else 0.0
+        P[K.P_INTEGRATOR] = self.integrator
         self.bodies = P[K.P_BODIES:K.P_BODIES + physics.N_BODY_PARAMS]
         self.friction = P[K.P_FRICTION:K.P_FRICTION + physics.N_FRICTION]
         self.friction_slider = P[K.P_FRICTION_SLIDER:K.P_FRICTION_SLIDER + physics.N_FRICTION]
@@ -98,7 +102,7 @@ class TwinPlant:
         self.payload: Payload | None = None
         self._pack_bodies()
         self.environment = environment or FreeMotion()
-        self.env = self.environment.pack()
+        self.env[:] = self.environment.pack()
         self.env_state = S[K.S_ENV_STATE:K.S_ENV_STATE + physics.ENV_STATE_SIZE]
         self.q = S[K.S_Q:K.S_Q + 3]
         self.qd = S[K.S_QD:K.S_QD + 3]
@@ -119,7 +123,7 @@ class TwinPlant:
         self.wrench_filtered = S[K.S_W_FILTERED:K.S_W_FILTERED + 6]
         self.wrench_sensed = S[K.S_W_SENSED:K.S_W_SENSED + 6]
         self.wrench_measured = S[K.S_W_MEAS:K.S_W_MEAS + 6]
-        self.t = 0.0
+        self.t = 0.0       # in the block (``X_T``): a compiled period advances it
         self._volts = S[K.S_VOLTS:K.S_VOLTS + 3]
         self._volts_prev = S[K.S_VOLTS_PREV:K.S_VOLTS_PREV + 3]
         self._delay_left = 0
@@ -201,6 +205,16 @@ class TwinPlant:
         P[K.P_TOOL_MG] = imp.ati_tool_mass_kg * self.description.gravity_m_s2
         P[K.P_TOOL_COM] = imp.ati_tool_com_m
 
+    @property
+    def t(self) -> float:
+        """The plant's time (s): held in the block (``kernels.X_T``), where the compiled
+        period advances it; read from the block's ``array('d')`` store (a Python float)."""
+        return self._store[kernels.B_X + kernels.X_T]
+
+    @t.setter
+    def t(self, value: float) -> None:
+        self._store[kernels.B_X + kernels.X_T] = value
+
     # Scalar state kept in ``S`` so the compiled period and the interpreted path share it.
     @property
     def _delay_left(self) -> int:
@@ -276,7 +290,7 @@ class TwinPlant:
 
     def set_environment(self, environment) -> None:
         self.environment = environment
-        self.env = environment.pack()
+        self.env[:] = environment.pack()
         self.env_state[:] = 0.0       # a new environment: no contact, no stuck point yet
 
     # ------------------------------------------------------------------ state
@@ -355,32 +369,35 @@ class TwinPlant:
         if not self.compiled:
             return
         codes = np.full(3, kernels.NO_CODE, dtype=np.int64)
-        P = self.P.copy()
+        B = self.B.copy()
+        P = B[kernels.B_P:kernels.B_P + kernels.P_SIZE]
         K = kernels
         P[K.P_PORT_SIGN:K.P_PORT_SIGN + 3] = 1.0     # a card's scale (set_encoder_card's,
         P[K.P_PORT_MPC:K.P_PORT_MPC + 3] = 1e-6      # unset until the first period)
-        kernels.period(self.geom, P, self.env.copy(), self.S.copy(), self.W.copy(),
-                       port.copy(), codes, ati.copy(), np.zeros((1, 12)), 1e-3, 5, self.t,
-                       self.realistic, self.integrator, 0, 0.0, 0)
+        kernels.period_block(B, port.copy(), codes, ati.copy(), np.zeros((1, 12)), 1e-3, 5, 0,
+                             0.0)
 
-    def period(self, dt: float, port: np.ndarray, codes: np.ndarray, ati: np.ndarray,
-               ati_block: np.ndarray, ati_row: int, ati_dt: float, overload_bits: int) -> int:
-        """The twin's fault-free period on the compiled path (``kernels.period``): the
-        amplifier input from the DAC ``codes``, ``advance(dt, ·)``, the encoder card's
-        counters (``port``, the card's int64 state; its scale from
-        :meth:`set_encoder_card`) and the ATI sample (``ati``: the model's packed array) in
-        one dispatch. Returns the ATI overload bits."""
+    def substeps(self, dt: float) -> int:
+        """The physics substeps of a period of ``dt`` s (cached for the last ``dt``)."""
         last_dt, n = self._n_of_dt
         if dt != last_dt:
             n = max(1, round(dt * self.physics_rate_hz))
             self._n_of_dt = (dt, n)
-        t = self.t
-        bits = kernels.period(self.geom, self.P, self.env, self.S, self.W, port, codes, ati,
-                              ati_block, dt, n, t, self.realistic, self.integrator, ati_row,
-                              ati_dt, overload_bits)
+        return n
+
+    def period(self, dt: float, port: np.ndarray, codes: np.ndarray, ati: np.ndarray,
+               ati_block: np.ndarray, ati_row: int, ati_dt: float) -> int:
+        """The twin's fault-free period on the compiled path (``kernels.period_block``): the
+        amplifier input from the DAC ``codes``, ``advance(dt, ·)``, the encoder card's
+        counters (``port``, the card's int64 state; its scale from
+        :meth:`set_encoder_card`) and the ATI sample (``ati``: the model's packed array) in
+        one dispatch, the plant's time advanced in the block. Returns the ATI overload bits
+        (``kernels.OVERLOAD_BITS`` on an overloaded axis). ``Twin._sync_fused`` makes the
+        same call inline."""
+        bits = kernels.period_block(self.B, port, codes, ati, ati_block, dt,
+                                    self.substeps(dt), ati_row, ati_dt)
         if bits < 0:
             raise self._fk_failed()
-        self.t = t + dt
         return bits
 
     def advance(self, dt: float, volts) -> None:

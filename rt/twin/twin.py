@@ -32,13 +32,13 @@ results within 1e-12 (``tests/test_twin_compiled.py``).
 from __future__ import annotations
 
 import math
+from array import array
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from rt.ati.rdt import STATUS_ANY_ERROR, STATUS_FT_OUT_OF_RANGE
 from rt.ati.twin_sensor import AtiSample, AtiSensorParams, TwinAtiSensorModel
 from rt.devices.interfaces import DigitalInputState
 from rt.drivers.fake_comedi import FakeComedi
@@ -56,18 +56,33 @@ from rt.twin.realism import RigImperfections, default_truth
 
 #: Longest stretch integrated with one held command and one fault/schedule check (s).
 _MAX_CHUNK_S = 0.001
-#: The ATI's status bits for an overloaded axis (``TwinAtiSensorModel``'s compiled sample).
-_ATI_OVERLOAD = STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE
+#: Where the plant's time sits in its block's store (``TwinPlant.t``).
+_T_AT = kernels.B_X + kernels.X_T
 
 
 class SimClock:
-    """Simulated time for lockstep runs as fast as possible: whoever drives the loop sets ``t``."""
+    """Simulated time for lockstep runs as fast as possible: whoever drives the loop sets ``t``.
+
+    The time is held in ``cell`` (``array('d')`` of one float): a compiled loop that advances
+    the twin between Python's events (issue 16's pre-flight driver) writes it there, and the
+    twin reads it without a call (``Twin.sync``)."""
+
+    __slots__ = ("cell",)
 
     def __init__(self, t: float = 0.0) -> None:
-        self.t = t
+        self.cell = array("d", (t,))
+
+    @property
+    def t(self) -> float:
+        """The simulated time (s)."""
+        return self.cell[0]
+
+    @t.setter
+    def t(self, value: float) -> None:
+        self.cell[0] = value
 
     def __call__(self) -> float:
-        return self.t
+        return self.cell[0]
 
 
 def _check_reachable(environment: object, plant: TwinPlant) -> None:
@@ -131,7 +146,7 @@ class Twin:
         self._encoder_q = self.plant.encoder_q
         _check_reachable(self.environment, self.plant)
         self.rng = np.random.default_rng(seed)
-        self.clock = clock
+        self.clock = clock                   # (also binds ``_clock_cell``: the setter)
         self.faults = FaultPlan()
         enc = self.description.encoder
         self.m_per_count = enc.m_per_count
@@ -159,6 +174,7 @@ class Twin:
         # again if the port is replaced).
         self._port_params_of: FakePcl833Port | None = None
         self.plant.set_payload(None)
+        self._n_chunk = self.plant.substeps(_MAX_CHUNK_S)   # a whole chunk's substeps
         # The fault-free period's kernel loaded now, not in a loop's cycle (see warm_period).
         self.plant.warm_period(self.encoder_port._st, self.ati._packed)
 
@@ -250,14 +266,30 @@ class Twin:
     def t(self) -> float:
         return self.plant.t
 
+    @property
+    def clock(self) -> Callable[[], float] | None:
+        """The time ``sync()`` advances to (s); None: only ``sync(t)`` advances."""
+        return self._clock
+
+    @clock.setter
+    def clock(self, clock: Callable[[], float] | None) -> None:
+        self._clock = clock
+        # A SimClock's time is read from its cell, without a call: every device backend
+        # syncs before it reads (three or four times a cycle), almost always a no-op.
+        self._clock_cell = clock.cell if type(clock) is SimClock else None
+
     # ------------------------------------------------------------------ running
     def sync(self, t: float | None = None) -> None:
         """Advance the physics to time ``t`` (s; default ``clock()``) with the held commands."""
         if t is None:
-            if self.clock is None:
+            cell = self._clock_cell
+            if cell is not None:
+                t = cell[0]
+            elif self._clock is None:
                 return
-            t = self.clock()
-        if t - self.plant.t <= 1e-12:
+            else:
+                t = self._clock()
+        if t - self.plant._store[_T_AT] <= 1e-12:
             # Already there (every device backend syncs before it reads, after the loop's
             # twin block advanced the physics): nothing to integrate, as below, at less cost.
             return
@@ -304,8 +336,12 @@ class Twin:
         # The kernel computes amp_volts from the codes: the general path's cache of the key
         # it last computed them from is void now.
         self._amp_key = None
-        period, commit = plant.period, ati._commit_pending
-        left = t - plant.t
+        # ``plant.period`` inline: the plant's block, its time read from the block's store
+        # (the kernel advances it), the substeps of a whole chunk computed once.
+        period, commit = kernels.period_block, ati._commit_pending
+        block, store, t_at = plant.B, plant._store, _T_AT
+        n_chunk = self._n_chunk
+        left = t - store[t_at]
         while left > 1e-12:
             chunk = min(_MAX_CHUNK_S, left)
             # The enabled card's codes, read every chunk as the general path does: a twin
@@ -317,15 +353,19 @@ class Twin:
             # computes amp_volts from it (the period's kernel is loaded at construction, so no
             # cycle runs against a stale input while it compiles: preflight6).
             codes = dac_libs[card].codes3 if card >= 0 else no_codes
-            t_end = plant.t + chunk                 # what plant.t is after the period
-            block: np.ndarray = st.block            # type: ignore[assignment]  # an array
+            t_end = store[t_at] + chunk             # what plant.t is after the period
+            draws: np.ndarray = st.block            # type: ignore[assignment]  # an array
             row = st.block_pos                      # when compiled
-            if row >= len(block):
-                block, row = ati._next_block_row()  # refills the random block
+            if row >= len(draws):
+                draws, row = ati._next_block_row()  # refills the random block
             t_last = st.t_last
-            commit(period(chunk, port_state, codes, packed, block, row,
-                          0.0 if t_last is None else t_end - t_last, _ATI_OVERLOAD), t_end)
-            left = t - plant.t
+            bits = period(block, port_state, codes, packed, draws, chunk,
+                          n_chunk if chunk == _MAX_CHUNK_S else plant.substeps(chunk), row,
+                          0.0 if t_last is None else t_end - t_last)
+            if bits < 0:
+                raise plant._fk_failed()
+            commit(bits, t_end)
+            left = t - store[t_at]
 
     @property
     def ati_sample(self) -> AtiSample | None:
