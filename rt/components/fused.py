@@ -43,6 +43,13 @@ the kernel there and Python finishes the block, as for the middle stages. The se
 slot's ring holds the call's whole Python (the checks and the dispatch) besides its stage.
 ``TALUS_FUSED_DEVICES=0`` keeps the device blocks' ``update`` (the middle chain fused).
 
+The call takes one integer (``fused_kernel.fused_cycle``: the scalars live in the table, written
+item by item into ``array`` stores). A steady cycle on the in-process twin (the last one ran the
+whole segment in the kernel) takes a fast path (:meth:`FusedChain.run`): a per-binding plan
+whose checks are attribute reads and identity compares of what can change from outside the
+cycle, one twin sync, the few scalars that change; anything else takes the general path, which
+decides as before (devstage7b: the segment's Python ≈ 37-55 µs loaded → ≈ 10 µs quiet).
+
 The blocks after the stop run their ``update`` in the same cycle. A non-standard block, a
 block not compiled or not active, or a law without a kernel here runs the whole chain per
 block; a swap rebinds the chain to the new block at its cycle (its fade runs the controller
