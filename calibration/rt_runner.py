@@ -168,8 +168,8 @@ class RtTrialRunner(TrialRunner):
             acq.start(len(profile_n) * dt + 2.0 * WAIT_MARGIN_S)
         # Subscribed before the program starts (a PUB/SUB subscription takes a moment to reach
         # the server), only when someone watches the trial live.
-        live = _LiveTelemetry(self, trial_id, loop_clock=acq is not None) \
-            if self.samples is not None else None
+        live = _LiveTelemetry(self, trial_id, loop_clock=acq is not None, dt=dt,
+                              steps=len(profile_n) - 1) if self.samples is not None else None
         try:
             started = self.client.run(PROGRAM_NAME, params)
             if live is not None:
@@ -343,13 +343,20 @@ class _LiveTelemetry:
     On the file's clock, within one telemetry period (≈ 17 ms): with the plate's DAQ the file
     keeps the loop's own clock (:func:`trial_from_acquisition`), and so do these samples; on
     the twin plate the file starts at the program's first played cycle with the runner's
-    offset added (:func:`_common_instants`, ``trial_from_rows``), and these samples start at
-    the first telemetry of the played phase."""
+    offset added (:func:`_common_instants`, ``trial_from_rows``), and these samples are placed
+    on it by the program's progress: the first telemetry of the played phase may come late (the
+    publisher's thread waits for the loop's lock; 0.14 s seen at load), so its loop time is not
+    the first played cycle's. With ``progress`` = k / ``steps`` (``reference.progress``: k
+    samples played, the first on the cycle that ended the approach), that cycle's loop time is
+    the message's minus (k − 1) periods."""
 
-    def __init__(self, runner: RtTrialRunner, trial_id: str, loop_clock: bool) -> None:
+    def __init__(self, runner: RtTrialRunner, trial_id: str, loop_clock: bool, dt: float,
+                 steps: int) -> None:
         self.runner = runner
         self.trial_id = trial_id
         self.loop_clock = loop_clock
+        self.dt = dt
+        self.steps = max(1, steps)
         self.sub = runner.client.subscribe(["telemetry"])
         self._running = False
         self._t_first: float | None = None
@@ -374,7 +381,8 @@ class _LiveTelemetry:
             if not self.loop_clock and msg.get("phase") != "play":
                 continue                          # the twin plate's file holds the play only
             if self._t_first is None:
-                self._t_first = float(t_loop)
+                played = round(float(msg.get("progress") or 0.0) * self.steps)
+                self._t_first = float(t_loop) - max(0, played - 1) * self.dt
             t.append(float(t_loop) if self.loop_clock
                      else float(t_loop) - self._t_first + self.runner._t_offset)
             ref.append(float(msg.get("force_ref_n") or 0.0))

@@ -373,6 +373,9 @@ class RtService:
             "causes": sorted(sup.causes), "latched": sup.latched(),
             "failed_blocks": dict(g.failed),
             "t": stats.t, "cycles": stats.cycles, "deadline_misses": stats.misses,
+            # The periods the loop dropped when it fell behind (a host stall of 0.1 s drops
+            # ≈ 100 at 1 kHz): an operator's and a test's evidence that the machine stalled.
+            "skipped_periods": stats.skipped_periods,
             "rate_hz": self.config.rate_hz,
             "controller": pl.controller.name,
             "phase": int(g.output("reference.phase")[0]),

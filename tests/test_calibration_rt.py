@@ -55,26 +55,35 @@ LOAD_TRIPS = ("encoder_frozen", "pulling", "estimator: update returned status 10
 #: :data:`LOAD_TRIPS` is the loaded machine's: 1 %, 5-15× this VM's floor for a loop doing
 #: nothing (0.06-0.18 %, docs/worklog/2026-11-26c/lead.md).
 LATE_FRACTION = 0.01
+#: Or: the loop dropped at least this many periods in the attempt (s of loop time), the
+#: estimator's ``dt_max_s``: one host stall that long is enough for its refusal, however few
+#: of the other cycles were late (CI, stop 23).
+STALL_S = 0.1
 
 
-def _loop_counts(endpoint: str) -> tuple[int, int]:
-    """The RT loop's (deadline misses, cycles) so far."""
+def _loop_counts(endpoint: str) -> tuple[int, int, float]:
+    """The RT loop's (deadline misses, cycles, time of the periods it dropped (s)) so far."""
     with RtClient(endpoint, timeout_s=5.0) as client:
         st = client.status()
-    return int(st["deadline_misses"]), int(st["cycles"])
+    return (int(st["deadline_misses"]), int(st["cycles"]),
+            int(st["skipped_periods"]) / float(st["rate_hz"]))
 
 
-def _load_trip(printed: dict, endpoint: str, before: tuple[int, int]) -> bool:
+def _load_trip(printed: dict, endpoint: str, before: tuple[int, int, float]) -> bool:
     """True when a CLI run failed on one of :data:`LOAD_TRIPS` while the RT loop missed more
-    than :data:`LATE_FRACTION` of its deadlines since ``before`` (:func:`_loop_counts`); the
-    error and the late share are printed either way, so the log says what the machine did."""
+    than :data:`LATE_FRACTION` of its deadlines since ``before`` (:func:`_loop_counts`) or
+    dropped :data:`STALL_S` of periods; the error, the late share and the dropped time are
+    printed either way, so the log says what the machine did."""
     error = printed.get("error", "")
-    misses, cycles = _loop_counts(endpoint)
+    misses, cycles, dropped_total_s = _loop_counts(endpoint)
     late = (misses - before[0]) / max(1, cycles - before[1])
-    retry = any(cause in error for cause in LOAD_TRIPS) and late > LATE_FRACTION
+    dropped_s = dropped_total_s - before[2]
+    retry = any(cause in error for cause in LOAD_TRIPS) and (late > LATE_FRACTION
+                                                            or dropped_s >= STALL_S)
     # stderr: the CLI's JSON is read from the captured stdout.
     print(f"attempt failed ({'run again' if retry else 'not retried'}), "
-          f"{late:.2%} of the cycles late:", error, file=sys.stderr)
+          f"{late:.2%} of the cycles late, {dropped_s:.3f} s of periods dropped:", error,
+          file=sys.stderr)
     return retry
 
 
