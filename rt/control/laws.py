@@ -264,63 +264,53 @@ def _computed_torque(dyn, st: State, v: np.ndarray, out: np.ndarray) -> None:
     out[:] = m @ v + c @ st.qd + g + dyn.friction(st.qd)
 
 
+class _ComputedTorque(Controller):
+    """The computed-torque laws: τ = M(q) v + C q̇ + G + F(q̇) with v from the gains; the
+    regulation law (``tracking`` False) feeds no reference velocity nor acceleration forward."""
+
+    gains: CtGains
+    gains_type = CtGains
+    gain_ranges = CT_RANGES
+    #: True: v = q̈_d − Kd ė − Kp e (trajectory tracking); False: v = −Kd q̇ − Kp e.
+    tracking: bool
+
+    def _law(self, st, ref, dt, out, dry_run):
+        g_ = self.gains
+        e = np.asarray(st.cfg.q) - ref.q
+        if self.tracking:
+            v = ref.qdd - g_.kd_per_s * (st.qd - ref.qd) - g_.kp_per_s2 * e
+        else:
+            v = -g_.kd_per_s * st.qd - g_.kp_per_s2 * e
+        _computed_torque(self.dyn, st, v, out)
+        return STATUS_OK
+
+    def _pack_gains(self) -> None:
+        self._gain_array[0] = self.gains.kp_per_s2
+        self._gain_array[1] = self.gains.kd_per_s
+
+    def _law_compiled(self, st, ref, dt, out, dry_run):
+        d = self.dyn
+        ck.computed_torque(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
+                           self._gain_array, self.tracking, self._work, out)
+        return STATUS_OK
+
+    def _bound_kernel(self, st, ref, out):
+        d = self.dyn
+        return _bound(ck.computed_torque, d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
+                      self._gain_array, self.tracking, self._work, out)
+
+
 @register
-class ComputedTorquePtp(Controller):
+class ComputedTorquePtp(_ComputedTorque):
     """τ = M(q)(−Kd q̇ − Kp e) + C q̇ + G + F(q̇) (thesis eq. 29): regulation to q_d."""
 
     name = "computed_torque_ptp"
-    gains: CtGains
-    gains_type = CtGains
-    gain_ranges = CT_RANGES
-
-    def _law(self, st, ref, dt, out, dry_run):
-        g_ = self.gains
-        v = -g_.kd_per_s * st.qd - g_.kp_per_s2 * (np.asarray(st.cfg.q) - ref.q)
-        _computed_torque(self.dyn, st, v, out)
-        return STATUS_OK
-
-    def _pack_gains(self) -> None:
-        self._gain_array[0] = self.gains.kp_per_s2
-        self._gain_array[1] = self.gains.kd_per_s
-
-    def _law_compiled(self, st, ref, dt, out, dry_run):
-        d = self.dyn
-        ck.computed_torque(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
-                           self._gain_array, False, self._work, out)
-        return STATUS_OK
-
-    def _bound_kernel(self, st, ref, out):
-        d = self.dyn
-        return _bound(ck.computed_torque, d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
-                      self._gain_array, False, self._work, out)
+    tracking = False
 
 
 @register
-class ComputedTorqueTrajectory(Controller):
+class ComputedTorqueTrajectory(_ComputedTorque):
     """τ = M(q)(q̈_d − Kd ė − Kp e) + C q̇ + G + F(q̇) (thesis eq. 31): ë + Kd ė + Kp e = 0."""
 
     name = "computed_torque"
-    gains: CtGains
-    gains_type = CtGains
-    gain_ranges = CT_RANGES
-
-    def _law(self, st, ref, dt, out, dry_run):
-        g_ = self.gains
-        v = ref.qdd - g_.kd_per_s * (st.qd - ref.qd) - g_.kp_per_s2 * (np.asarray(st.cfg.q) - ref.q)
-        _computed_torque(self.dyn, st, v, out)
-        return STATUS_OK
-
-    def _pack_gains(self) -> None:
-        self._gain_array[0] = self.gains.kp_per_s2
-        self._gain_array[1] = self.gains.kd_per_s
-
-    def _law_compiled(self, st, ref, dt, out, dry_run):
-        d = self.dyn
-        ck.computed_torque(d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
-                           self._gain_array, True, self._work, out)
-        return STATUS_OK
-
-    def _bound_kernel(self, st, ref, out):
-        d = self.dyn
-        return _bound(ck.computed_torque, d.tree_i, d.tree_f, st.buf, ref.q, ref.qd, ref.qdd,
-                      self._gain_array, True, self._work, out)
+    tracking = True
