@@ -245,8 +245,12 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
     chosen reference and controller need beyond it."""
     d = model.description
     events = EventLog()
-    limits = effective(d.limits.stroke, robot_limits or RobotLimits(),
-                       patient_limits or PatientLimits(), protocol_limits)
+    robot = robot_limits or RobotLimits()
+    limits = effective(d.limits.stroke, robot, patient_limits or PatientLimits(),
+                       protocol_limits)
+    # A force-control soft stop's hold yields to a pull, below the stroke's soft-stop margin.
+    reference.configure_yield(robot.pull_yield_speed_m_s, robot.pull_yield_max_m,
+                              limits.stroke_hi_m - limits.stroke_margin_m)
     supervisor = Supervisor(limits, 1.0 / rate_hz, events, **supervisor_physics(d))
     b = GraphBuilder()
     if devices.first is not None:

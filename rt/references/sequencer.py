@@ -35,6 +35,7 @@ import numpy as np
 
 from rt.components.tare import TareState, refusal_message
 from rt.engine import Array, Component
+from rt.errors import ConfigurationError
 from rt.references import sequencer_kernel as sk
 from rt.references.approach import Approach, ApproachStatus
 from rt.references.program import (
@@ -68,6 +69,16 @@ class Phase(IntEnum):
         """True while a program owns the motion (a client must keep heartbeating)."""
         return self in (Phase.APPROACH, Phase.PLAY, Phase.RETURN)
 
+
+#: The compliant hold after a force-control soft stop (``ProgramReference._yield_step``):
+#: defaults and validated ranges of its speed (m/s) and distance (m; 0: no yield). 20 mm/s unloads the twin's strapped
+#: foot (1e5 N/m) pulled with 0.5 kN (5 mm) in ≈ 0.25 s plus the position law's lag; 20 mm
+#: covers a 0.5 kN pull on a foot four times softer. The robot limits carry the values in use
+#: (``RobotLimits.pull_yield_speed_m_s``, ``pull_yield_max_m``).
+YIELD_SPEED_M_S = 0.02
+YIELD_SPEED_RANGE_M_S = (0.001, 0.05)
+YIELD_MAX_M = 0.02
+YIELD_MAX_RANGE_M = (0.0, 0.05)
 
 #: How long a program's watcher waits after seeing the sequencer stopped, so the stop's events
 #: reach the loop's event log before it records them (s).
@@ -107,6 +118,7 @@ class _State:
     taring: bool = False             # holding at the first sample while the sensor is tared
     tare_measuring: bool = False     # the force reader has started this tare
     tares_before: float = 0.0        # the force reader's tare count when the tare began
+    yielding: bool = False           # a force-control soft stop's hold yields to a pull
 
 
 class _Field:
@@ -136,6 +148,7 @@ class _SeqState:
     taring = _Field(sk.S_TARING, bool)
     tare_measuring = _Field(sk.S_TARE_MEASURING, bool)
     tares_before = _Field(sk.S_TARES_BEFORE, float)
+    yielding = _Field(sk.S_YIELD, bool)
 
     def __init__(self, seq: np.ndarray) -> None:
         seq[:] = 0.0
@@ -222,6 +235,16 @@ class ProgramReference(Component):
         self.epoch = 0
         self.refused = 0
         self.last_error = ""
+        # The compliant hold after a force-control soft stop (``configure_yield``): the loop's
+        # builder sets the robot limits' values; until then the defaults, with no stroke top
+        # known beyond the stroke itself.
+        self.yield_speed_m_s = YIELD_SPEED_M_S
+        self.yield_max_m = YIELD_MAX_M
+        self.yield_top_m = float(stroke[1])
+        #: How far the current (or last) stop's hold has yielded (m), and whether it ended
+        #: with the pull still there (its distance or the stroke exhausted).
+        self.yielded_m = 0.0
+        self.yield_exhausted = False
 
     #: False (on the class or a block): a previewed program's PLAY reads ahead in Python even
     #: where the compiled cycle could (the reference, for tests and before/after benchmarks;
@@ -380,6 +403,66 @@ class ProgramReference(Component):
         self.qdd_ref.data[:] = 0.0
         self.approach.reset(self.q_meas.data)
 
+    def configure_yield(self, speed_m_s: float, max_m: float, top_m: float) -> None:
+        """The compliant hold after a force-control soft stop (``_yield_step``): the hold's
+        reference rises at ``speed_m_s`` (m/s) while the foot is pulled, by at most ``max_m``
+        (m; 0: no yield) and never past ``top_m`` (a slider position, m: the stroke's top less
+        its margin). Refused by name out of range, nothing changed."""
+        checks = (("pull_yield_speed_m_s", speed_m_s, YIELD_SPEED_RANGE_M_S),
+                  ("pull_yield_max_m", max_m, YIELD_MAX_RANGE_M))
+        for name, value, (lo, hi) in checks:
+            if not (isinstance(value, int | float) and lo <= value <= hi):
+                raise ConfigurationError(f"{name} = {value!r} is not within [{lo:g}, {hi:g}]")
+        lo_q, hi_q = self.approach.lo, self.approach.hi
+        if not (isinstance(top_m, int | float) and lo_q < top_m <= hi_q):
+            raise ConfigurationError(f"pull yield top_m = {top_m!r} m is not inside the "
+                                     f"stroke ({lo_q:g}, {hi_q:g}] m")
+        self.yield_speed_m_s = float(speed_m_s)
+        self.yield_max_m = float(max_m)
+        self.yield_top_m = float(top_m)
+
+    def _start_yield(self) -> None:
+        """A force-control soft stop's hold starts: it yields to a pull from here on."""
+        self.yielded_m = 0.0
+        self.yield_exhausted = False
+        self.state.yielding = self.yield_max_m > 0.0
+
+    def _yield_step(self, dt: float) -> None:
+        """The compliant hold (issue 15). A soft stop in force control holds where the robot
+        is with the position law (``_hold_here``); under an unmeasured load the law (no
+        integral) then holds the platform below the strapped foot and pulls it indefinitely
+        (565 kg on the twin: −507 N with the drives at 1.74 of 2.04 kN). A hard stop does
+        not end that pull: the drives let go, the platform drops until the brakes engage and
+        the brakes then hold the deeper pull (−507 → −722 N, twin). So while the measured
+        push (−wrench z) is below 0 N, the hold's reference rises (all three sliders alike:
+        a pure heave, the direction that unloads a foot above the platform) at
+        ``yield_speed_m_s``, by at most ``yield_max_m`` and not past ``yield_top_m``, and
+        holds where it got to otherwise. It stays compliant for the whole stop: a load the
+        drives carry less well as they warm (580 kg, twin: the platform creeps down ≈ 20 µm/s
+        once unloaded) is followed, step by step. The sensor's noise about 0 N moves it by
+        one step (``yield_speed_m_s`` × dt, 20 µm at 1 kHz: ≈ 2 N on the twin's foot) per
+        negative sample, so it settles with the foot unpulled, pressed by about the noise.
+        Once the yield is exhausted with the pull still there (``yield_exhausted``: the
+        drives cannot lift the load, or the distance or the stroke is used up) it holds as any
+        stop does (the compiled cycle again). A NaN force (no sample) moves nothing."""
+        q, qd, qdd = self.q_ref.data, self.qd_ref.data, self.qdd_ref.data
+        qdd[:] = 0.0
+        push = -float(self.wrench.data[2])
+        if push < 0.0:
+            room = min(self.yield_max_m - self.yielded_m, self.yield_top_m - float(q.max()))
+            if room > 0.0:
+                step = self.yield_speed_m_s * dt
+                d = step if step < room else room  # noqa: FURB136
+                for i in range(3):
+                    q[i] += d
+                    qd[i] = d / dt
+                self.yielded_m += d
+                return
+            self.yield_exhausted = True
+            self.state.yielding = False
+            self.approach.reset(q)                  # hold here (the compiled cycle's hold)
+        qd[:] = 0.0
+
     def update(self, t: float, dt: float) -> int:
         if not self.compiled:
             return self._update(dt)
@@ -426,8 +509,10 @@ class ProgramReference(Component):
                     # In force control: the position law holds where the robot is, at once.
                     # Ramping the force down instead would run the force law on, and a soft
                     # stop may be the sign that it is unstable (a lagging sensor, a contact it
-                    # does not suit): the hold needs neither the sensor nor the contact.
+                    # does not suit): the hold needs neither the sensor nor the contact. It
+                    # yields to a pull on the foot, though (``_yield_step``).
                     self._hold_here()
+                    self._start_yield()
                 else:
                     self._brake()
                 st.phase = Phase.STOPPED
@@ -436,6 +521,8 @@ class ProgramReference(Component):
             elif mode == SupervisorMode.RUN:              # reset: hold where the robot is
                 self.approach.reset(self.q_meas.data)
                 st.phase = Phase.REST
+            if mode != SupervisorMode.SOFT_STOP:
+                st.yielding = False           # the drives off, or reset: no hold to yield
             st.mode = mode
         if self._pending is not None:
             req, self._pending = self._pending, None
@@ -458,6 +545,8 @@ class ProgramReference(Component):
             self.qdd_ref.data[:] = 0.0
             f[:] = 0.0
             self.ctrl_mode.data[0] = float(Mode.POSITION)
+        elif st.yielding:
+            self._yield_step(dt)
         elif st.phase == Phase.STOPPED or st.phase == Phase.REST:
             self.approach.update(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
             self._ramp_force(dt)
