@@ -245,6 +245,7 @@ class ProgramReference(Component):
         #: with the pull still there (its distance or the stroke exhausted).
         self.yielded_m = 0.0
         self.yield_exhausted = False
+        self._stepped = False                   # the hold's reference rose last cycle
 
     #: False (on the class or a block): a previewed program's PLAY reads ahead in Python even
     #: where the compiled cycle could (the reference, for tests and before/after benchmarks;
@@ -425,6 +426,7 @@ class ProgramReference(Component):
         """A force-control soft stop's hold starts: it yields to a pull from here on."""
         self.yielded_m = 0.0
         self.yield_exhausted = False
+        self._stepped = False
         self.state.yielding = self.yield_max_m > 0.0
 
     def _yield_step(self, dt: float) -> None:
@@ -448,15 +450,23 @@ class ProgramReference(Component):
         q, qd, qdd = self.q_ref.data, self.qd_ref.data, self.qdd_ref.data
         qdd[:] = 0.0
         push = -float(self.wrench.data[2])
+        stepped = self._stepped
+        self._stepped = False
         if push < 0.0:
             room = min(self.yield_max_m - self.yielded_m, self.yield_top_m - float(q.max()))
             if room > 0.0:
                 step = self.yield_speed_m_s * dt
                 d = step if step < room else room  # noqa: FURB136
+                # The rise's speed as the law's feedforward once it goes on (without it the
+                # law lags the rise by millimetres and overshoots into the foot), but not on
+                # its first step: a single one (a noise sample) must not kick the drives
+                # through the law's damping (≈ 0.4 kN for one cycle at 20 mm/s, twin).
+                v = d / dt if stepped else 0.0
                 for i in range(3):
                     q[i] += d
-                    qd[i] = d / dt
+                    qd[i] = v
                 self.yielded_m += d
+                self._stepped = True
                 return
             self.yield_exhausted = True
             self.state.yielding = False
