@@ -69,7 +69,8 @@ FORCE_CUSHION = 0.9
 #: while the force port then holds one ATI sample: a 20 ms stall while the sensor reads its
 #: noise about 0 N is one sample of pull, not 20 ms of it. A real pull is seen on every cycle
 #: (at 1 kHz the 20 ms of ``max_pull_s`` are 20 cycles of ≤ 1.5 periods), so it is counted in
-#: full; a stall can shorten nothing, only fail to lengthen the count.
+#: full; a pull that spans a stall is judged on the samples seen (its stop late by at most
+#: the stall, as every other check of that cycle).
 PULL_DT_PERIODS = 2.0
 #: The sustained-saturation window is kept as this many buckets of saturated time per axis
 #: (a bucketed sliding window: the saturated time of the last ``window`` ± one bucket, 2 % of
