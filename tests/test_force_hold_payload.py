@@ -253,9 +253,19 @@ def test_a_pull_through_the_soft_stops_hold_ends_within_the_yields_bound(model,
     assert float(np.median(r.tau[late])) < 0.995 * limit
 
 
-def test_the_yield_is_configured_within_its_ranges_and_refused_by_name(model) -> None:
-    """The robot limits carry the yield (validated there); the sequencer refuses a value
-    out of range by name and keeps the one it had."""
+def test_the_yield_is_configured_within_its_ranges_and_refused_by_name(model,
+                                                                        tmp_path) -> None:
+    """The robot limits carry the yield (validated there, and so in the RT process's
+    ``rt.yaml``); the sequencer refuses a value out of range by name and keeps the one it
+    had."""
+    from rt.service import load_config
+
+    path = tmp_path / "rt.yaml"
+    path.write_text("robot_limits:\n  pull_yield_speed_m_s: 0.5\n")
+    with pytest.raises(ConfigurationError, match="pull_yield_speed_m_s"):
+        load_config(path)
+    path.write_text("robot_limits:\n  pull_yield_max_m: 0.01\n")
+    assert load_config(path).limits_of_robot().pull_yield_max_m == 0.01
     assert (sequencer.YIELD_SPEED_M_S, sequencer.YIELD_MAX_M) == \
         (RobotLimits().pull_yield_speed_m_s, RobotLimits().pull_yield_max_m)
     fields = RobotLimits.model_fields
