@@ -16,8 +16,10 @@
   from where an abort caught it); a force reference decays to zero (time constant
   ``force_ramp_s``, zero below 1 N), then the position law holds where the robot is.
 * STOPPED: the supervisor soft-stopped (same braking and ramp as RETURN, but latched until the
-  faults are reset) or hard-stopped (the reference follows the measured position so nothing
-  jumps when the drives come back). After a reset it holds where the robot is (REST).
+  faults are reset; in force control the position law holds where the robot is at once, and
+  that hold yields upward while the foot is pulled: ``ProgramReference._yield_step``) or
+  hard-stopped (the reference follows the measured position so nothing jumps when the drives
+  come back). After a reset it holds where the robot is (REST).
 * REST: holding where the robot is, no program.
 
 Programs are requested from any thread (:meth:`ProgramReference.request`) and taken at the next
