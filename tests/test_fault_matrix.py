@@ -53,7 +53,7 @@ def test_fault_is_caught_within_its_targets(name):
         # the foot is pulled and the supervisor soft-stops on ``pulling``; the stop's hold
         # then yields upward while the foot is pulled, so the pull ends within the yield's
         # stated bound (its distance over its speed: 20 mm at 20 mm/s, 1 s; twin figures,
-        # fast mode: ended 0.27 s after the stop, peak −286 N) and the platform comes to
+        # fast mode: ended 0.26 s after the stop, peak −286 N) and the platform comes to
         # rest. Before, the hold kept pulling with ≈ −507 N for as long as it ran.
         limits = RobotLimits()
         bound_ms = 1e3 * limits.pull_yield_max_m / limits.pull_yield_speed_m_s

@@ -277,7 +277,7 @@ def scenarios(model: RobotModel) -> list[Scenario]:
         # position hold (no integral) used to hold the platform 7 mm low and pull the foot
         # with ≈ 0.5 kN for good; it now yields upward while the foot is pulled
         # (``ProgramReference._yield_step``): the pull must end within the yield's stated
-        # bound (``pull_end_ms``; twin figures: peak −286 N, over 0.27 s after the stop).
+        # bound (``pull_end_ms``; twin figures: peak −286 N, over 0.26 s after the stop).
         Scenario("payload_pull", payload_lands,
                  environment=patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0),
                  force_hold_n=200.0),
