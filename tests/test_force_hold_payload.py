@@ -289,3 +289,24 @@ def test_the_yield_is_configured_within_its_ranges_and_refused_by_name(model,
         with pytest.raises(ConfigurationError, match=name):
             ref.configure_yield(*args)
         assert (ref.yield_speed_m_s, ref.yield_max_m) == (0.01, 0.005)
+
+
+def test_a_pull_through_the_stops_hold_is_the_per_block_cycle_bit_for_bit(model) -> None:
+    """The fused cycle (its reference stage hands the compliant hold's cycles to the
+    sequencer's Python) against the per-block cycle through a 565 kg landing in the middle of
+    the sine Fz protocol: the ``pulling`` soft stop, the hold's rise and its hold, every output
+    port, event and the twin's state byte for byte every cycle."""
+    from test_fused_cycle import _Lockstep, _sine_loop, _to_play
+
+    h = _Lockstep(lambda: _sine_loop(model))
+    _to_play(h)
+    h.run(300)
+    h.both(lambda pl: pl.twin.plant.set_payload(Payload(565.0, (0.0, 0.0, 0.10))))
+    h.run(700)
+    faults = [e for e in h.f.events.snapshot() if e.kind == "fault"]
+    print([(round(e.t, 3), e.cause) for e in faults], h.f.reference.yielded_m, h.ran)
+    # Heavier than the hold's 200 N: the sine's drives saturate first (the stop's cause),
+    # then the platform sinks under the foot and the stop's hold yields.
+    assert faults[0].reaction == Reaction.SOFT_STOP, faults
+    ref = h.f.reference
+    assert ref.yielded_m > 0.002 and ref.yielded_m == h.p.reference.yielded_m
