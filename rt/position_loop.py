@@ -284,7 +284,8 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
             ("supervisor.volts", "drive.volts"), ("supervisor.enable", "drive.enable"),
             ("encoders.q", "recorder.q"), ("estimator.qd", "recorder.qd"),
             ("reference.q_ref", "recorder.q_ref"), ("controller.tau", "recorder.tau"),
-            ("force.wrench", "reference.wrench"), ("force.tare", "reference.tare"),
+            ("force.wrench", "reference.wrench"), ("force.flags", "reference.wrench_flags"),
+            ("force.tare", "reference.tare"),
             ("supervisor.volts", "recorder.volts"), *own_connections,
             *(extra_connections or ())):
         b.connect(src, dst)

@@ -390,12 +390,13 @@ class _Twins:
         self.q = np.array(q0, float)
         self.mode = np.zeros(1)
         self.wrench = np.array([0.3, -0.2, -3.9, 0.01, 0.02, 0.0])
+        self.flags = np.zeros(2)                   # the force reader's [stale, saturated]
         self.tare = Tare()
         self.tare_port = np.zeros(10)
         self.tare_request = np.zeros(1)
         for r in self.refs:
             for port, buf in ((r.q_meas, self.q), (r.mode, self.mode), (r.wrench, self.wrench),
-                              (r.tare, self.tare_port)):
+                              (r.wrench_flags, self.flags), (r.tare, self.tare_port)):
                 view = buf.view()
                 view.flags.writeable = False
                 port._bind(view, "test")
@@ -560,6 +561,12 @@ def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -
     h.wrench[2] = -1.0                             # unloaded: it holds there
     h.run(50)
     assert np.array_equal(c.q_ref.data - held, rise) and not c.qd_ref.data.any()
+    h.wrench[2] = 40.0
+    for flag in (0, 1):                            # a stale, a saturated sensor: no rise
+        h.flags[flag] = 1.0
+        h.run(30)
+        h.flags[flag] = 0.0
+        assert np.array_equal(c.q_ref.data - held, rise)
     before = h.interpreted_cycles
     h.wrench[2] = 40.0                             # pulled until the yield is used up
     h.run(900)

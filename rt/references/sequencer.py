@@ -163,7 +163,8 @@ class _SeqState:
 class ProgramReference(Component):
     """Ports: in ``q_meas``: float64[3] m; in ``mode``: float64[1] (the supervisor's
     :class:`SupervisorMode`, one cycle late); in ``wrench``: float64[6] (sensor frame: the
-    patient's torques for interactive programs). Out ``q_ref``, ``qd_ref``, ``qdd_ref``:
+    patient's torques for interactive programs, the pull a force stop's hold yields to); in
+    ``wrench_flags``: float64[2] (the force reader's [stale, saturated]). Out ``q_ref``, ``qd_ref``, ``qdd_ref``:
     float64[3] (m, m/s, m/s²); ``force``: float64[3] (F_d N, Ḟ_d N/s, F̈_d N/s²); ``force_preview``: float64[3] (the same read
     ``preview_steps`` samples ahead for a :class:`ForcePreview` program, else ``force``); ``pose``:
     float64[3] (z m, roll, pitch rad); ``ctrl_mode``: float64[1] (:class:`Mode`); ``phase``:
@@ -199,6 +200,9 @@ class ProgramReference(Component):
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.mode = self.declare_input("mode", Array(1))
         self.wrench = self.declare_input("wrench", Array(6))
+        # The force reader's [stale, saturated]: the compliant hold moves only on a valid
+        # sample (a harness that leaves it unbound: always valid).
+        self.wrench_flags = self.declare_input("wrench_flags", Array(2))
         self.q_ref = self.declare_output("q_ref", Array(3), buffer=io[sk.IO_Q:sk.IO_Q + 3])
         self.qd_ref = self.declare_output("qd_ref", Array(3), buffer=io[sk.IO_QD:sk.IO_QD + 3])
         self.qdd_ref = self.declare_output("qdd_ref", Array(3),
@@ -448,10 +452,14 @@ class ProgramReference(Component):
         negative sample, so it settles with the foot unpulled, pressed by about the noise.
         Once the yield is exhausted with the pull still there (``yield_exhausted``: the
         drives cannot lift the load, or the distance or the stroke is used up) it holds as any
-        stop does (the compiled cycle again). A NaN force (no sample) moves nothing."""
+        stop does (the compiled cycle again). A NaN force (no sample) or a stale or saturated
+        one (``wrench_flags``: a stale stream repeats its last value) moves nothing."""
         q, qd, qdd = self.q_ref.data, self.qd_ref.data, self.qdd_ref.data
         qdd[:] = 0.0
         push = -float(self.wrench.data[2])
+        flags = self.wrench_flags.data
+        if flags is not None and (flags[0] > 0.5 or flags[1] > 0.5):
+            push = math.nan              # a stale or saturated sensor moves nothing
         stepped = self._stepped
         self._stepped = False
         if push < 0.0:
