@@ -90,7 +90,7 @@ def land(model: RobotModel, mass_kg: float, seconds: float, tolerance_n: float,
         "integral_last_n": round(float(a[-1, 2]), 0),
         "drive_command_last_n": [round(float(x), 0) for x in a[-1, 3:6]],
         "drive_limit_n": round(law.drive_force_limit_n, 0),
-        "faults": faults[:6],
+        "faults": faults[:8],
         **pull,
     }
 

@@ -34,7 +34,7 @@ from rt.errors import ConfigurationError, HardwareError
 from rt.model import RobotModel
 from rt.model.description import RobotDescription
 from rt.references.program import Program, TrajectoryProgram
-from rt.references.sequencer import ProgramReference
+from rt.references.sequencer import YIELD_LEAD_TRACKING, ProgramReference
 from rt.safety.events import EventLog
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
 from rt.safety.supervisor import Supervisor, supervisor_physics
@@ -250,7 +250,8 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
                        protocol_limits)
     # A force-control soft stop's hold yields to a pull, below the stroke's soft-stop margin.
     reference.configure_yield(robot.pull_yield_speed_m_s, robot.pull_yield_max_m,
-                              limits.stroke_hi_m - limits.stroke_margin_m)
+                              limits.stroke_hi_m - limits.stroke_margin_m,
+                              YIELD_LEAD_TRACKING * limits.max_tracking_error_m)
     supervisor = Supervisor(limits, 1.0 / rate_hz, events, **supervisor_physics(d))
     b = GraphBuilder()
     if devices.first is not None:

@@ -310,3 +310,21 @@ def test_a_pull_through_the_stops_hold_is_the_per_block_cycle_bit_for_bit(model)
     assert faults[0].reaction == Reaction.SOFT_STOP, faults
     ref = h.f.reference
     assert ref.yielded_m > 0.002 and ref.yielded_m == h.p.reference.yielded_m
+
+
+def test_a_load_the_drives_cannot_lift_is_waited_for_not_run_away_from(model) -> None:
+    """615 kg: the rise needs the drives beyond their limit, so the platform does not follow
+    the rising hold. The hold waits for it (at most 2.5 tracking limits ahead of a measured
+    slider) instead of running into the tracking hard stop (without that bound: +0.279 s, and
+    the brakes then held −729 N); the sustained saturation's hard stop ends the drives'
+    effort and the brakes hold what is left of the pull (−570 N measured, the hold without
+    the yield: −594 N with the drives on)."""
+    r = _land(model, 615.0, 1.0)
+    _stop(r)
+    faults = [e for e in r.pl.events.snapshot() if e.kind == "fault"]
+    hard = [e.cause for e in faults if e.reaction == Reaction.HARD_STOP]
+    assert hard and hard[0].startswith("drive_saturated_"), faults
+    assert not any(c.startswith("tracking_") for c in hard), hard
+    lead = r.pl.reference.yield_lead_m
+    assert lead == pytest.approx(2.5 * RobotLimits().max_tracking_error_m, rel=1e-12)
+    assert float(r.truth[r.t > 0.8].min()) > -600.0

@@ -81,6 +81,10 @@ YIELD_SPEED_M_S = 0.02
 YIELD_SPEED_RANGE_M_S = (0.001, 0.05)
 YIELD_MAX_M = 0.02
 YIELD_MAX_RANGE_M = (0.0, 0.05)
+#: How far the rising hold may lead a measured slider, in tracking limits: below the
+#: supervisor's tracking hard stop (3 ×) with room for the law's sag under the load (5.6-5.8 mm
+#: at 565-580 kg on the twin, where the tracking limit is 3 mm).
+YIELD_LEAD_TRACKING = 2.5
 
 #: How long a program's watcher waits after seeing the sequencer stopped, so the stop's events
 #: reach the loop's event log before it records them (s).
@@ -247,6 +251,7 @@ class ProgramReference(Component):
         self.yield_speed_m_s = YIELD_SPEED_M_S
         self.yield_max_m = YIELD_MAX_M
         self.yield_top_m = float(stroke[1])
+        self.yield_lead_m = math.inf
         #: How far the current (or last) stop's hold has yielded (m), and whether it ended
         #: with the pull still there (its distance or the stroke exhausted).
         self.yielded_m = 0.0
@@ -410,11 +415,14 @@ class ProgramReference(Component):
         self.qdd_ref.data[:] = 0.0
         self.approach.reset(self.q_meas.data)
 
-    def configure_yield(self, speed_m_s: float, max_m: float, top_m: float) -> None:
+    def configure_yield(self, speed_m_s: float, max_m: float, top_m: float,
+                        lead_m: float = math.inf) -> None:
         """The compliant hold after a force-control soft stop (``_yield_step``): the hold's
         reference rises at ``speed_m_s`` (m/s) while the foot is pulled, by at most ``max_m``
-        (m; 0: no yield) and never past ``top_m`` (a slider position, m: the stroke's top less
-        its margin). Refused by name out of range, nothing changed."""
+        (m; 0: no yield), never past ``top_m`` (a slider position, m: the stroke's top less
+        its margin) and never more than ``lead_m`` (m) ahead of a measured slider (the loop's
+        builder: 2.5 × the tracking limit, below the supervisor's hard stop at 3 ×). Refused
+        by name out of range, nothing changed."""
         checks = (("pull_yield_speed_m_s", speed_m_s, YIELD_SPEED_RANGE_M_S),
                   ("pull_yield_max_m", max_m, YIELD_MAX_RANGE_M))
         for name, value, (lo, hi) in checks:
@@ -424,6 +432,9 @@ class ProgramReference(Component):
         if not (isinstance(top_m, int | float) and lo_q < top_m <= hi_q):
             raise ConfigurationError(f"pull yield top_m = {top_m!r} m is not inside the "
                                      f"stroke ({lo_q:g}, {hi_q:g}] m")
+        if not (isinstance(lead_m, int | float) and lead_m > 0.0):
+            raise ConfigurationError(f"pull yield lead_m = {lead_m!r} m must be > 0")
+        self.yield_lead_m = float(lead_m)
         self.yield_speed_m_s = float(speed_m_s)
         self.yield_max_m = float(max_m)
         self.yield_top_m = float(top_m)
@@ -464,6 +475,12 @@ class ProgramReference(Component):
         self._stepped = False
         if push < 0.0:
             room = min(self.yield_max_m - self.yielded_m, self.yield_top_m - float(q.max()))
+            if room > 0.0 and not float((q - self.q_meas.data).max()) < self.yield_lead_m:
+                # The platform does not follow (the drives at their limit under a load they
+                # cannot lift): wait for it rather than run away into the tracking hard stop,
+                # whose brakes would hold the pull.
+                qd[:] = 0.0
+                return
             if room > 0.0:
                 step = self.yield_speed_m_s * dt
                 d = step if step < room else room  # noqa: FURB136
