@@ -285,7 +285,9 @@ def test_the_yield_is_configured_within_its_ranges_and_refused_by_name(model,
     for args, name in (((0.2, 0.01, hi), "pull_yield_speed_m_s"),
                        ((0.01, 0.5, hi), "pull_yield_max_m"),
                        ((0.01, float("nan"), hi), "pull_yield_max_m"),
-                       ((0.01, 0.01, hi + 0.1), "top_m")):
+                       ((0.01, 0.01, hi + 0.1), "top_m"),
+                       ((0.01, 0.01, hi, 0.0), "lead_m"),
+                       ((0.01, 0.01, hi, float("nan")), "lead_m")):
         with pytest.raises(ConfigurationError, match=name):
             ref.configure_yield(*args)
         assert (ref.yield_speed_m_s, ref.yield_max_m) == (0.01, 0.005)

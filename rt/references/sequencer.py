@@ -461,9 +461,11 @@ class ProgramReference(Component):
         once unloaded) is followed, step by step. The sensor's noise about 0 N moves it by
         one step (``yield_speed_m_s`` × dt, 20 µm at 1 kHz: ≈ 2 N on the twin's foot) per
         negative sample, so it settles with the foot unpulled, pressed by about the noise.
-        Once the yield is exhausted with the pull still there (``yield_exhausted``: the
-        drives cannot lift the load, or the distance or the stroke is used up) it holds as any
-        stop does (the compiled cycle again). A NaN force (no sample) or a stale or saturated
+        It never leads a measured slider by more than ``yield_lead_m``: a load the drives
+        cannot lift is waited for, not run into the supervisor's tracking hard stop (whose
+        brakes would hold the pull). Once the yield is exhausted with the pull still there
+        (``yield_exhausted``: its distance or the stroke used up) it holds as any stop does
+        (the compiled cycle again). A NaN force (no sample) or a stale or saturated
         one (``wrench_flags``: a stale stream repeats its last value) moves nothing."""
         q, qd, qdd = self.q_ref.data, self.qd_ref.data, self.qdd_ref.data
         qdd[:] = 0.0
