@@ -10,6 +10,16 @@ change them.
 
     .venv/bin/python bench/force_hold_payload.py --mass 500 550 565 700
     .venv/bin/python bench/force_hold_payload.py --mass 500 --integral-limit 1500   # the old clamp
+
+A payload beyond what the landing carries (565-580 kg) pulls the strapped foot and soft-stops
+the hold on ``pulling``; printed then: the pull's peak after the stop, when it ended (the foot's
+push back above −``PULL_ENDED_N`` for good; None: still pulled at the end), how far the stop's
+compliant hold yielded, and the push over the last 0.5 s. ``--no-yield`` holds still as before
+the compliant hold (``pull_yield_max_m`` 0); ``--estop-at S`` hard-stops S s after the landing
+(the brakes' effect on the pull).
+
+    .venv/bin/python bench/force_hold_payload.py --mass 565 580 --seconds 3
+    .venv/bin/python bench/force_hold_payload.py --mass 565 --seconds 2 --no-yield --estop-at 1
 """
 from __future__ import annotations
 
@@ -21,7 +31,9 @@ import numpy as np
 from rt.model import RobotModel
 from rt.model.dynamics import Payload
 from rt.position_loop import build_protocol_loop, sim_devices
-from rt.safety.fault_matrix import FORCE_HOLD_Z_M, ForceHold
+from rt.safety.events import Reaction
+from rt.safety.fault_matrix import FORCE_HOLD_Z_M, PULL_ENDED_N, ForceHold
+from rt.safety.limits import RobotLimits
 from rt.twin.environment import patient_foot
 from rt.twin.twin import SimClock, Twin
 
@@ -29,20 +41,23 @@ HOLD_N = 200.0
 
 
 def land(model: RobotModel, mass_kg: float, seconds: float, tolerance_n: float,
-         gains: dict | None) -> dict:
+         gains: dict | None, limits: RobotLimits | None = None,
+         estop_at: float | None = None) -> dict:
     clock = SimClock()
     twin = Twin(None, patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0), seed=0, clock=clock)
     twin.place(model.kin.ik(FORCE_HOLD_Z_M, 0.0, 0.0).q)
     pl = build_protocol_loop(sim_devices(twin, clock),
                              ForceHold(model.kin, FORCE_HOLD_Z_M, HOLD_N, 60.0, 1e-3), model,
-                             force_gains=gains)
+                             force_gains=gains, robot_limits=limits)
     pl.loop.run(seconds=3.0)
     law = pl.graph.component("controller").force_law
     t_land = twin.plant.t
     twin.plant.set_payload(Payload(mass_kg, (0.0, 0.0, 0.10)))
     tau = pl.graph.output("controller.tau")
     rows = []
-    for _ in range(round(seconds * 1e3)):
+    for k in range(round(seconds * 1e3)):
+        if estop_at is not None and k == round(estop_at * 1e3):
+            pl.supervisor.request_estop("cli")
         pl.loop.run(cycles=1)
         rows.append((twin.plant.t - t_land, -twin.plant.wrench_s[2],
                      law.integral * law.gains.ki_per_s, *tau))
@@ -51,8 +66,21 @@ def land(model: RobotModel, mass_kg: float, seconds: float, tolerance_n: float,
     outside = np.abs(f - HOLD_N) >= tolerance_n
     back = None if outside[-1] else float(t[outside].max()) if outside.any() else 0.0
     late = t >= seconds - 0.5
-    faults = [(round(e.t - t_land, 3), e.cause, e.reaction.name.lower())
-              for e in pl.events.snapshot() if e.kind == "fault"]
+    events = [e for e in pl.events.snapshot() if e.kind == "fault"]
+    faults = [(round(e.t - t_land, 3), e.cause, e.reaction.name.lower()) for e in events]
+    pull: dict = {}
+    stop = next((e for e in events if e.reaction >= Reaction.SOFT_STOP), None)
+    if stop is not None:
+        after = t >= stop.t - t_land
+        pulled = after & (f < -PULL_ENDED_N)
+        ref = pl.reference
+        pull = {"pull_peak_after_stop_n": round(float(f[after].min()), 1),
+                "pull_ended_after_stop_s": (None if pulled[-1] else
+                                            round(float(t[pulled].max()) + 1e-3
+                                                  - (stop.t - t_land), 3)
+                                            if pulled.any() else 0.0),
+                "yielded_mm": round(ref.yielded_m * 1e3, 2),
+                "yield_exhausted": ref.yield_exhausted}
     return {
         "mass_kg": mass_kg,
         "integral_clamp_n": law.integral_limit_n,
@@ -62,7 +90,8 @@ def land(model: RobotModel, mass_kg: float, seconds: float, tolerance_n: float,
         "integral_last_n": round(float(a[-1, 2]), 0),
         "drive_command_last_n": [round(float(x), 0) for x in a[-1, 3:6]],
         "drive_limit_n": round(law.drive_force_limit_n, 0),
-        "faults": faults[:6],
+        "faults": faults[:8],
+        **pull,
     }
 
 
@@ -74,11 +103,17 @@ def main() -> None:
                     help="N (default 2 %% of the 200 N hold: DESIGN's force figure)")
     ap.add_argument("--integral-limit", type=float, default=None,
                     help="the force law's integral_limit_n gain (N; default: the law's)")
+    ap.add_argument("--no-yield", action="store_true",
+                    help="the soft stop's hold does not yield to a pull (pull_yield_max_m 0)")
+    ap.add_argument("--estop-at", type=float, default=None,
+                    help="s after the landing: a hard stop (e-stop) there")
     args = ap.parse_args()
     gains = None if args.integral_limit is None else {"integral_limit_n": args.integral_limit}
+    limits = RobotLimits(pull_yield_max_m=0.0) if args.no_yield else None
     model = RobotModel.load()
     for m in args.mass:
-        print(json.dumps(land(model, m, args.seconds, args.tolerance, gains)))
+        print(json.dumps(land(model, m, args.seconds, args.tolerance, gains, limits,
+                              args.estop_at)))
 
 
 if __name__ == "__main__":

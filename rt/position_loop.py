@@ -34,7 +34,7 @@ from rt.errors import ConfigurationError, HardwareError
 from rt.model import RobotModel
 from rt.model.description import RobotDescription
 from rt.references.program import Program, TrajectoryProgram
-from rt.references.sequencer import ProgramReference
+from rt.references.sequencer import YIELD_LEAD_TRACKING, ProgramReference
 from rt.safety.events import EventLog
 from rt.safety.limits import PatientLimits, ProtocolLimits, RobotLimits, effective
 from rt.safety.supervisor import Supervisor, supervisor_physics
@@ -245,8 +245,13 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
     chosen reference and controller need beyond it."""
     d = model.description
     events = EventLog()
-    limits = effective(d.limits.stroke, robot_limits or RobotLimits(),
-                       patient_limits or PatientLimits(), protocol_limits)
+    robot = robot_limits or RobotLimits()
+    limits = effective(d.limits.stroke, robot, patient_limits or PatientLimits(),
+                       protocol_limits)
+    # A force-control soft stop's hold yields to a pull, below the stroke's soft-stop margin.
+    reference.configure_yield(robot.pull_yield_speed_m_s, robot.pull_yield_max_m,
+                              limits.stroke_hi_m - limits.stroke_margin_m,
+                              YIELD_LEAD_TRACKING * limits.max_tracking_error_m)
     supervisor = Supervisor(limits, 1.0 / rate_hz, events, **supervisor_physics(d))
     b = GraphBuilder()
     if devices.first is not None:
@@ -280,7 +285,8 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
             ("supervisor.volts", "drive.volts"), ("supervisor.enable", "drive.enable"),
             ("encoders.q", "recorder.q"), ("estimator.qd", "recorder.qd"),
             ("reference.q_ref", "recorder.q_ref"), ("controller.tau", "recorder.tau"),
-            ("force.wrench", "reference.wrench"), ("force.tare", "reference.tare"),
+            ("force.wrench", "reference.wrench"), ("force.flags", "reference.wrench_flags"),
+            ("force.tare", "reference.tare"),
             ("supervisor.volts", "recorder.volts"), *own_connections,
             *(extra_connections or ())):
         b.connect(src, dst)

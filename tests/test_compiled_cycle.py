@@ -390,12 +390,13 @@ class _Twins:
         self.q = np.array(q0, float)
         self.mode = np.zeros(1)
         self.wrench = np.array([0.3, -0.2, -3.9, 0.01, 0.02, 0.0])
+        self.flags = np.zeros(2)                   # the force reader's [stale, saturated]
         self.tare = Tare()
         self.tare_port = np.zeros(10)
         self.tare_request = np.zeros(1)
         for r in self.refs:
             for port, buf in ((r.q_meas, self.q), (r.mode, self.mode), (r.wrench, self.wrench),
-                              (r.tare, self.tare_port)):
+                              (r.wrench_flags, self.flags), (r.tare, self.tare_port)):
                 view = buf.view()
                 view.flags.writeable = False
                 port._bind(view, "test")
@@ -411,6 +412,7 @@ class _Twins:
 
         compiled._update = counted  # type: ignore[method-assign]
         self.k = 0
+        self.yield_cycles = 0
 
     def request(self, make_program, **kw) -> None:
         """Each sequencer gets its own program (the interpreted one calls it every cycle)."""
@@ -425,16 +427,19 @@ class _Twins:
         c, i = self.refs
         self.tare.cycle(self.wrench.copy(), True, self.tare_request[0] > 0.5, self.tare_port)
         w = self.wrench.copy()
+        # A force-control soft stop's compliant hold reads the wrench: Python's by design.
+        self.yield_cycles += int(c.state.yielding)
         for r in self.refs:
             assert r.update(self.k * DT, DT) == 0
             self.wrench[:] = w
         assert np.array_equal(c._io, i._io, equal_nan=True), \
             (self.k, np.flatnonzero(~((c._io == i._io) | (np.isnan(c._io) & np.isnan(i._io)))))
         for name in ("phase", "mode", "started", "k", "taring", "tare_measuring",
-                     "tares_before"):
+                     "tares_before", "yielding"):
             assert getattr(c.state, name) == getattr(i.state, name), (self.k, name)
         assert (c.epoch, c.refused, c.last_error, c.tare_refused) == \
             (i.epoch, i.refused, i.last_error, i.tare_refused), self.k
+        assert (c.yielded_m, c.yield_exhausted) == (i.yielded_m, i.yield_exhausted), self.k
         self.tare_request[:] = c.tare_request.data
         self.q[:] = c.q_ref.data + 2e-6 * math.sin(0.37 * self.k)
         self.k += 1
@@ -536,13 +541,50 @@ def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -
     h.until(Phase.APPROACH)
     h.until(Phase.REST)
     h.run(5)
+    # A pull through a force-control soft stop's hold (issue 15): the hold's reference rises
+    # while the foot is pulled (a step per cycle, all sliders alike), holds while it is not,
+    # and once its distance is used up with the pull still there, holds as any stop (the
+    # compiled cycle again).
+    h.wrench[2] = -3.9
+    h.request(sine, rest_q=tuple(q_mid))
+    h.until(Phase.PLAY)
+    h.run(300)
+    h.mode[0] = SupervisorMode.SOFT_STOP
+    h.run(3)
     c = h.refs[0]
-    assert c.tare_refused == 1 and c.refused == 2 and c.epoch == 6
+    assert c.state.yielding and c.yielded_m == 0.0
+    held = c.q_ref.data.copy()
+    h.wrench[2] = 40.0                             # the platform pulls the foot with 40 N
+    h.run(200)
+    rise = c.q_ref.data - held
+    assert np.allclose(rise, 200 * c.yield_speed_m_s * DT, rtol=0.0, atol=1e-12), rise
+    h.wrench[2] = -1.0                             # unloaded: it holds there
+    h.run(50)
+    assert np.array_equal(c.q_ref.data - held, rise) and not c.qd_ref.data.any()
+    h.wrench[2] = 40.0
+    for flag in (0, 1):                            # a stale, a saturated sensor: no rise
+        h.flags[flag] = 1.0
+        h.run(30)
+        h.flags[flag] = 0.0
+        assert np.array_equal(c.q_ref.data - held, rise)
+    before = h.interpreted_cycles
+    h.wrench[2] = 40.0                             # pulled until the yield is used up
+    h.run(900)
+    assert c.yield_exhausted and not c.state.yielding
+    assert c.yielded_m == pytest.approx(c.yield_max_m, abs=1e-12)
+    h.run(100)                                     # the plain hold: compiled again
+    assert h.interpreted_cycles - before < 900, h.interpreted_cycles - before
+    h.wrench[2] = -3.9
+    h.mode[0] = SupervisorMode.RUN
+    h.run(10)
+    assert not c.state.yielding
+    c = h.refs[0]
+    assert c.tare_refused == 1 and c.refused == 2 and c.epoch == 7
     # Steady cycles ran compiled: the interpreted path took the approaches, returns, ramps,
-    # tares and the events, not the playing or the holding.
+    # tares, the events and the force stops' compliant holds, not the playing or the holding.
     assert h.k > 10_000
     played = h.k - h.interpreted_cycles
-    assert played > 0.4 * h.k, (played, h.k)
+    assert played > 0.4 * (h.k - h.yield_cycles), (played, h.k, h.yield_cycles)
 
     # The force law's preview (gait4): a force program known in advance is read ahead
     # (``force_preview``); the compiled cycle reads a table program ahead itself

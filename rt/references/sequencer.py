@@ -16,8 +16,10 @@
   from where an abort caught it); a force reference decays to zero (time constant
   ``force_ramp_s``, zero below 1 N), then the position law holds where the robot is.
 * STOPPED: the supervisor soft-stopped (same braking and ramp as RETURN, but latched until the
-  faults are reset) or hard-stopped (the reference follows the measured position so nothing
-  jumps when the drives come back). After a reset it holds where the robot is (REST).
+  faults are reset; in force control the position law holds where the robot is at once, and
+  that hold yields upward while the foot is pulled: ``ProgramReference._yield_step``) or
+  hard-stopped (the reference follows the measured position so nothing jumps when the drives
+  come back). After a reset it holds where the robot is (REST).
 * REST: holding where the robot is, no program.
 
 Programs are requested from any thread (:meth:`ProgramReference.request`) and taken at the next
@@ -35,6 +37,7 @@ import numpy as np
 
 from rt.components.tare import TareState, refusal_message
 from rt.engine import Array, Component
+from rt.errors import ConfigurationError
 from rt.references import sequencer_kernel as sk
 from rt.references.approach import Approach, ApproachStatus
 from rt.references.program import (
@@ -68,6 +71,20 @@ class Phase(IntEnum):
         """True while a program owns the motion (a client must keep heartbeating)."""
         return self in (Phase.APPROACH, Phase.PLAY, Phase.RETURN)
 
+
+#: The compliant hold after a force-control soft stop (``ProgramReference._yield_step``):
+#: defaults and validated ranges of its speed (m/s) and distance (m; 0: no yield). 20 mm/s unloads the twin's strapped
+#: foot (1e5 N/m) pulled with 0.5 kN (5 mm) in ≈ 0.25 s plus the position law's lag; 20 mm
+#: covers a 0.5 kN pull on a foot four times softer. The robot limits carry the values in use
+#: (``RobotLimits.pull_yield_speed_m_s``, ``pull_yield_max_m``).
+YIELD_SPEED_M_S = 0.02
+YIELD_SPEED_RANGE_M_S = (0.001, 0.05)
+YIELD_MAX_M = 0.02
+YIELD_MAX_RANGE_M = (0.0, 0.05)
+#: How far the rising hold may lead a measured slider, in tracking limits: below the
+#: supervisor's tracking hard stop (3 ×) with room for the law's sag under the load (5.6-5.8 mm
+#: at 565-580 kg on the twin, where the tracking limit is 3 mm).
+YIELD_LEAD_TRACKING = 2.5
 
 #: How long a program's watcher waits after seeing the sequencer stopped, so the stop's events
 #: reach the loop's event log before it records them (s).
@@ -107,6 +124,7 @@ class _State:
     taring: bool = False             # holding at the first sample while the sensor is tared
     tare_measuring: bool = False     # the force reader has started this tare
     tares_before: float = 0.0        # the force reader's tare count when the tare began
+    yielding: bool = False           # a force-control soft stop's hold yields to a pull
 
 
 class _Field:
@@ -136,6 +154,7 @@ class _SeqState:
     taring = _Field(sk.S_TARING, bool)
     tare_measuring = _Field(sk.S_TARE_MEASURING, bool)
     tares_before = _Field(sk.S_TARES_BEFORE, float)
+    yielding = _Field(sk.S_YIELD, bool)
 
     def __init__(self, seq: np.ndarray) -> None:
         seq[:] = 0.0
@@ -148,7 +167,8 @@ class _SeqState:
 class ProgramReference(Component):
     """Ports: in ``q_meas``: float64[3] m; in ``mode``: float64[1] (the supervisor's
     :class:`SupervisorMode`, one cycle late); in ``wrench``: float64[6] (sensor frame: the
-    patient's torques for interactive programs). Out ``q_ref``, ``qd_ref``, ``qdd_ref``:
+    patient's torques for interactive programs, the pull a force stop's hold yields to); in
+    ``wrench_flags``: float64[2] (the force reader's [stale, saturated]). Out ``q_ref``, ``qd_ref``, ``qdd_ref``:
     float64[3] (m, m/s, m/s²); ``force``: float64[3] (F_d N, Ḟ_d N/s, F̈_d N/s²); ``force_preview``: float64[3] (the same read
     ``preview_steps`` samples ahead for a :class:`ForcePreview` program, else ``force``); ``pose``:
     float64[3] (z m, roll, pitch rad); ``ctrl_mode``: float64[1] (:class:`Mode`); ``phase``:
@@ -184,6 +204,9 @@ class ProgramReference(Component):
         self.q_meas = self.declare_input("q_meas", Array(3))
         self.mode = self.declare_input("mode", Array(1))
         self.wrench = self.declare_input("wrench", Array(6))
+        # The force reader's [stale, saturated]: the compliant hold moves only on a valid
+        # sample (a harness that leaves it unbound: always valid).
+        self.wrench_flags = self.declare_input("wrench_flags", Array(2))
         self.q_ref = self.declare_output("q_ref", Array(3), buffer=io[sk.IO_Q:sk.IO_Q + 3])
         self.qd_ref = self.declare_output("qd_ref", Array(3), buffer=io[sk.IO_QD:sk.IO_QD + 3])
         self.qdd_ref = self.declare_output("qdd_ref", Array(3),
@@ -222,6 +245,18 @@ class ProgramReference(Component):
         self.epoch = 0
         self.refused = 0
         self.last_error = ""
+        # The compliant hold after a force-control soft stop (``configure_yield``): the loop's
+        # builder sets the robot limits' values; until then the defaults, with no stroke top
+        # known beyond the stroke itself.
+        self.yield_speed_m_s = YIELD_SPEED_M_S
+        self.yield_max_m = YIELD_MAX_M
+        self.yield_top_m = float(stroke[1])
+        self.yield_lead_m = math.inf
+        #: How far the current (or last) stop's hold has yielded (m), and whether it ended
+        #: with the pull still there (its distance or the stroke exhausted).
+        self.yielded_m = 0.0
+        self.yield_exhausted = False
+        self._stepped = False                   # the hold's reference rose last cycle
 
     #: False (on the class or a block): a previewed program's PLAY reads ahead in Python even
     #: where the compiled cycle could (the reference, for tests and before/after benchmarks;
@@ -380,6 +415,93 @@ class ProgramReference(Component):
         self.qdd_ref.data[:] = 0.0
         self.approach.reset(self.q_meas.data)
 
+    def configure_yield(self, speed_m_s: float, max_m: float, top_m: float,
+                        lead_m: float = math.inf) -> None:
+        """The compliant hold after a force-control soft stop (``_yield_step``): the hold's
+        reference rises at ``speed_m_s`` (m/s) while the foot is pulled, by at most ``max_m``
+        (m; 0: no yield), never past ``top_m`` (a slider position, m: the stroke's top less
+        its margin) and never more than ``lead_m`` (m) ahead of a measured slider (the loop's
+        builder: 2.5 × the tracking limit, below the supervisor's hard stop at 3 ×). Refused
+        by name out of range, nothing changed."""
+        checks = (("pull_yield_speed_m_s", speed_m_s, YIELD_SPEED_RANGE_M_S),
+                  ("pull_yield_max_m", max_m, YIELD_MAX_RANGE_M))
+        for name, value, (lo, hi) in checks:
+            if not (isinstance(value, int | float) and lo <= value <= hi):
+                raise ConfigurationError(f"{name} = {value!r} is not within [{lo:g}, {hi:g}]")
+        lo_q, hi_q = self.approach.lo, self.approach.hi
+        if not (isinstance(top_m, int | float) and lo_q < top_m <= hi_q):
+            raise ConfigurationError(f"pull yield top_m = {top_m!r} m is not inside the "
+                                     f"stroke ({lo_q:g}, {hi_q:g}] m")
+        if not (isinstance(lead_m, int | float) and lead_m > 0.0):
+            raise ConfigurationError(f"pull yield lead_m = {lead_m!r} m must be > 0")
+        self.yield_lead_m = float(lead_m)
+        self.yield_speed_m_s = float(speed_m_s)
+        self.yield_max_m = float(max_m)
+        self.yield_top_m = float(top_m)
+
+    def _start_yield(self) -> None:
+        """A force-control soft stop's hold starts: it yields to a pull from here on."""
+        self.yielded_m = 0.0
+        self.yield_exhausted = False
+        self._stepped = False
+        self.state.yielding = self.yield_max_m > 0.0
+
+    def _yield_step(self, dt: float) -> None:
+        """The compliant hold (issue 15). A soft stop in force control holds where the robot
+        is with the position law (``_hold_here``); under an unmeasured load the law (no
+        integral) then holds the platform below the strapped foot and pulls it indefinitely
+        (565 kg on the twin: −507 N with the drives at 1.74 of 2.04 kN). A hard stop does
+        not end that pull: the drives let go, the platform drops until the brakes engage and
+        the brakes then hold the deeper pull (−507 → −722 N, twin). So while the measured
+        push (−wrench z) is below 0 N, the hold's reference rises (all three sliders alike:
+        a pure heave, the direction that unloads a foot above the platform) at
+        ``yield_speed_m_s``, by at most ``yield_max_m`` and not past ``yield_top_m``, and
+        holds where it got to otherwise. It stays compliant for the whole stop: a load the
+        drives carry less well as they warm (580 kg, twin: the platform creeps down ≈ 20 µm/s
+        once unloaded) is followed, step by step. The sensor's noise about 0 N moves it by
+        one step (``yield_speed_m_s`` × dt, 20 µm at 1 kHz: ≈ 2 N on the twin's foot) per
+        negative sample, so it settles with the foot unpulled, pressed by about the noise.
+        It never leads a measured slider by more than ``yield_lead_m``: a load the drives
+        cannot lift is waited for, not run into the supervisor's tracking hard stop (whose
+        brakes would hold the pull). Once the yield is exhausted with the pull still there
+        (``yield_exhausted``: its distance or the stroke used up) it holds as any stop does
+        (the compiled cycle again). A NaN force (no sample) or a stale or saturated
+        one (``wrench_flags``: a stale stream repeats its last value) moves nothing."""
+        q, qd, qdd = self.q_ref.data, self.qd_ref.data, self.qdd_ref.data
+        qdd[:] = 0.0
+        push = -float(self.wrench.data[2])
+        flags = self.wrench_flags.data
+        if flags is not None and (flags[0] > 0.5 or flags[1] > 0.5):
+            push = math.nan              # a stale or saturated sensor moves nothing
+        stepped = self._stepped
+        self._stepped = False
+        if push < 0.0:
+            room = min(self.yield_max_m - self.yielded_m, self.yield_top_m - float(q.max()))
+            if room > 0.0 and not float((q - self.q_meas.data).max()) < self.yield_lead_m:
+                # The platform does not follow (the drives at their limit under a load they
+                # cannot lift): wait for it rather than run away into the tracking hard stop,
+                # whose brakes would hold the pull.
+                qd[:] = 0.0
+                return
+            if room > 0.0:
+                step = self.yield_speed_m_s * dt
+                d = step if step < room else room  # noqa: FURB136
+                # The rise's speed as the law's feedforward once it goes on (without it the
+                # law lags the rise by millimetres and overshoots into the foot), but not on
+                # its first step: a single one (a noise sample) must not kick the drives
+                # through the law's damping (≈ 0.4 kN for one cycle at 20 mm/s, twin).
+                v = d / dt if stepped else 0.0
+                for i in range(3):
+                    q[i] += d
+                    qd[i] = v
+                self.yielded_m += d
+                self._stepped = True
+                return
+            self.yield_exhausted = True
+            self.state.yielding = False
+            self.approach.reset(q)                  # hold here (the compiled cycle's hold)
+        qd[:] = 0.0
+
     def update(self, t: float, dt: float) -> int:
         if not self.compiled:
             return self._update(dt)
@@ -426,8 +548,10 @@ class ProgramReference(Component):
                     # In force control: the position law holds where the robot is, at once.
                     # Ramping the force down instead would run the force law on, and a soft
                     # stop may be the sign that it is unstable (a lagging sensor, a contact it
-                    # does not suit): the hold needs neither the sensor nor the contact.
+                    # does not suit): the hold needs neither the sensor nor the contact. It
+                    # yields to a pull on the foot, though (``_yield_step``).
                     self._hold_here()
+                    self._start_yield()
                 else:
                     self._brake()
                 st.phase = Phase.STOPPED
@@ -436,6 +560,8 @@ class ProgramReference(Component):
             elif mode == SupervisorMode.RUN:              # reset: hold where the robot is
                 self.approach.reset(self.q_meas.data)
                 st.phase = Phase.REST
+            if mode != SupervisorMode.SOFT_STOP:
+                st.yielding = False           # the drives off, or reset: no hold to yield
             st.mode = mode
         if self._pending is not None:
             req, self._pending = self._pending, None
@@ -458,6 +584,8 @@ class ProgramReference(Component):
             self.qdd_ref.data[:] = 0.0
             f[:] = 0.0
             self.ctrl_mode.data[0] = float(Mode.POSITION)
+        elif st.yielding:
+            self._yield_step(dt)
         elif st.phase == Phase.STOPPED or st.phase == Phase.REST:
             self.approach.update(self.q_ref.data, self.qd_ref.data, self.qdd_ref.data)
             self._ramp_force(dt)

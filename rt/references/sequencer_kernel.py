@@ -8,7 +8,8 @@ the progress), a hold at rest, a hard stop following the measured position — a
 :data:`NEED_PYTHON` without writing anything when the cycle is an event: the supervisor's
 mode changed this cycle, a program is requested or aborted, the approach or the return runs
 (ruckig stays in Python: its update is one call per cycle at most), a tare, a force ramp,
-the PLAY of a force program read ahead (``force_preview``: the interpreted read-ahead runs).
+the PLAY of a force program read ahead (``force_preview``: the interpreted read-ahead runs),
+a force-control soft stop's hold yielding to a pull (it reads the wrench).
 The interpreted sequencer then runs that cycle exactly as it always did; its PLAY step goes
 through :func:`play_table` / :func:`emit` too, so a program's samples are produced by one
 code path whichever side runs the cycle. A table program's last sample answers
@@ -56,7 +57,9 @@ S_PREVIEW = S_ROW + N_FIELDS  # 1 while the program is a ForcePreview read ahead
                               # steps > 0): its PLAY cycles are Python's unless S_AHEAD
 S_AHEAD = S_PREVIEW + 1       # 1: the read-ahead is the table's (``read_ahead``), compiled
 S_AHEAD_STEPS = S_AHEAD + 1   # how far ahead (samples)
-SEQ_SIZE = S_AHEAD_STEPS + 1
+S_YIELD = S_AHEAD_STEPS + 1   # 1 while a force-control soft stop's hold yields to a pull
+                              # (``ProgramReference._yield_step``: Python's, on the wrench)
+SEQ_SIZE = S_YIELD + 1
 
 #: Half-width (samples) of the centred difference that gives the previewed F̈_d: the table is
 #: known on both sides of the sample read ahead, so the derivative is smoothed without lag
@@ -172,8 +175,9 @@ def cycle(io, seq, q_meas, mode, table, dt):
         io[IO_CTRL_MODE] = 0.0
     elif phase == STOPPED or phase == REST:
         # The approach holds still (its update writes the hold); a force reference still
-        # ramping down is Python's (it ends by re-planning the approach).
-        if seq[S_HOLDING] == 0.0 or io[IO_CTRL_MODE] > 0.5:
+        # ramping down is Python's (it ends by re-planning the approach), and so is a hold
+        # yielding to a pull (it reads the wrench).
+        if seq[S_HOLDING] == 0.0 or io[IO_CTRL_MODE] > 0.5 or seq[S_YIELD] != 0.0:
             return NEED_PYTHON
         for i in range(3):
             io[IO_Q + i] = seq[S_HOLD + i]

@@ -64,5 +64,14 @@ def _matrix(args) -> int:
               f"{f.get('cause', '-'):18s} {_fmt(f['latency_ms']):>8s} "
               f"{_fmt(f['time_to_zero_output_ms']):>7s} {_fmt(f['time_to_rest_ms']):>8s} "
               f"{_fmt(e['rom_deg']):>6s} {e['force_pct']:6.2f} {e['stroke_mm']:6.2f}  "
-              f"{f['final_state']}")
+              f"{f['final_state']}" + _pull_text(f))
     return 0
+
+
+def _pull_text(f: dict) -> str:
+    """A force-hold row's pull on the foot after its stop (none: nothing)."""
+    if "pull_end_ms" not in f:
+        return ""
+    end = f["pull_end_ms"]
+    return (f"  pull peak {f['pull_peak_n']:g} N, "
+            + ("still pulled at the end" if end is None else f"over {end:g} ms after the stop"))

@@ -21,6 +21,7 @@ from rt.control.base import Reference
 from rt.engine import Component
 from rt.errors import ConfigurationError, InputError, KinematicsError
 from rt.model import RobotModel
+from rt.model.dynamics import Payload
 from rt.position_loop import (
     PositionLoop,
     build_protocol_loop,
@@ -45,6 +46,13 @@ from rt.twin.environment import CompliantAnkle, FreeMotion, patient_foot
 from rt.twin.twin import SimClock, Twin
 
 FAULT_AT_S = 3.0
+#: A force-hold scenario's pull is over once the foot's true push stays above −this (N): a
+#: few newtons, what the compliant hold's steps (≈ 2 N each on the twin's foot) and the
+#: sensor's noise leave; the pull it ends is hundreds of newtons.
+PULL_ENDED_N = 5.0
+#: The payload of the matrix's pull scenario (kg): beyond what the force hold's landing
+#: carries (≈ 550-560 kg), within the drives' static capacity along z (≈ 620 kg).
+PULL_PAYLOAD_KG = 565.0
 RUN_S = 5.0
 REST_SPEED_M_S = 1e-3
 REST_HOLD_S = 0.05
@@ -70,7 +78,8 @@ class TruthProbe(Component):
     def __init__(self, name: str, pl_ref: list, capacity: int):
         super().__init__(name)
         self._pl = pl_ref
-        self.rows = np.full((capacity, 12), np.nan)   # t, q(3), qd(3), amp(3), force, mode
+        # t, q(3), qd(3), amp(3), force, mode, the platform's push (N, < 0: a pull)
+        self.rows = np.full((capacity, 13), np.nan)
         self.n = 0
 
     def update(self, t: float, dt: float) -> int:
@@ -85,6 +94,7 @@ class TruthProbe(Component):
         w = plant.wrench_s
         r[10] = math.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
         r[11] = pl.graph.output("supervisor.mode")[0]
+        r[12] = -w[2]
         self.n += 1
         return 0
 
@@ -219,6 +229,11 @@ def scenarios(model: RobotModel) -> list[Scenario]:
     def gui_estop(pl: PositionLoop, t_f: float) -> list[Later]:
         return [(t_f, lambda: pl.supervisor.request_estop("gui"))]
 
+    def payload_lands(pl: PositionLoop, t_f: float) -> list[Later]:
+        twin = _sim_twin(pl)
+        return [(t_f, lambda: twin.plant.set_payload(Payload(PULL_PAYLOAD_KG,
+                                                             (0.0, 0.0, 0.10))))]
+
     return [
         Scenario("encoder_freeze", _fault("encoder_freeze", axis=0)),
         # The same freeze with a patient's foot strapped on the platform (the ATI reads its
@@ -254,6 +269,16 @@ def scenarios(model: RobotModel) -> list[Scenario]:
         # window into that soft stop, dropped them (hard stop at 523 ms). The saturation
         # check stays the net for any other law or contact (tests/test_drive_saturation.py).
         Scenario("latency_force", lag_from_now,
+                 environment=patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0),
+                 force_hold_n=200.0),
+        # A pull through the soft stop's hold (issue 15): 565 kg land on the platform (not
+        # through the ATI) under the 200 N force hold; the drives saturate while it sinks
+        # below the strapped foot, and the supervisor soft-stops on ``pulling``. The stop's
+        # position hold (no integral) used to hold the platform 7 mm low and pull the foot
+        # with ≈ 0.5 kN for good; it now yields upward while the foot is pulled
+        # (``ProgramReference._yield_step``): the pull must end within the yield's stated
+        # bound (``pull_end_ms``; twin figures: peak −286 N, over 0.26 s after the stop).
+        Scenario("payload_pull", payload_lands,
                  environment=patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0),
                  force_hold_n=200.0),
     ]
@@ -328,6 +353,18 @@ def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
                 rest = round((t[k] - first.t) * 1e3, 3)
                 break
     result["time_to_rest_ms"] = rest
+    stop = next((e for e in events if e.reaction >= Reaction.SOFT_STOP), None)
+    if sc.force_hold_n is not None and stop is not None:
+        # How long the foot stayed pulled after the stop (its first soft or hard stop): to
+        # the end of the last sample with its push below −PULL_ENDED_N (0: never after it;
+        # None: still pulled when the run ended), and the strongest pull after it (N, ≤ 0).
+        push = rows[:, 12]
+        after = t >= stop.t
+        pulled = after & (push < -PULL_ENDED_N)
+        result["pull_end_ms"] = (None if pulled[-1] else
+                                 round((t[pulled][-1] + 1e-3 - stop.t) * 1e3, 3)
+                                 if pulled.any() else 0.0)
+        result["pull_peak_n"] = round(min(0.0, float(np.nanmin(push[after]))), 1)
     result["excursion"] = _excursions(rows, sc, model, ref_t)
     mode = SupervisorMode.from_port(rows[-1, 11])
     result["final_state"] = (mode.name.lower() if mode != SupervisorMode.RUN else

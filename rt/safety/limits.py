@@ -51,6 +51,12 @@ class RobotLimits(_Limits):
     #: the never-pull yank 32 ms (6.4 %); the shear push's limit cycle 82-87 %.
     saturation_window_s: Annotated[float, Field(ge=0.05, le=5.0, allow_inf_nan=False)] = 0.5
     max_saturated_fraction: Annotated[float, Field(gt=0.0, lt=1.0, allow_inf_nan=False)] = 0.5
+    #: The compliant hold after a force-control soft stop (issue 15): while the foot is
+    #: pulled the hold's reference rises at this speed (m/s), by at most this far (m; 0: the
+    #: hold does not yield), then holds (``ProgramReference._yield_step`` says why: a hard
+    #: stop's brakes would hold a deeper pull). Ranges as ``rt.references.sequencer``'s.
+    pull_yield_speed_m_s: Annotated[float, Field(ge=0.001, le=0.05, allow_inf_nan=False)] = 0.02
+    pull_yield_max_m: Annotated[float, Field(ge=0.0, le=0.05, allow_inf_nan=False)] = 0.02
 
     @model_validator(mode="after")
     def _saturation_beyond_preflight(self) -> RobotLimits:

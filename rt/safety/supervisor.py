@@ -20,7 +20,9 @@ Checks (robot, patient and protocol limits combined in ``EffectiveLimits``):
 * tracking error beyond the robot limit → soft stop, beyond three times it → hard stop;
 * pulling on the foot: in force control, measured Fz (the platform's push, ``fz_n``) below
   0 N for ``max_pull_s`` → soft stop (the contact is unilateral; the force law never commands
-  a pull, so this catches what it cannot prevent);
+  a pull, so this catches what it cannot prevent); counted stall-aware: one cycle adds at most
+  :data:`~rt.safety.supervisor_kernel.PULL_DT_PERIODS` periods (a host stall's long dt is one
+  ATI sample, not that long a pull);
 * platform force (ATI) above 90 % of the patient/protocol limit → soft stop, beyond it → hard
   stop (only dropping the drive force is fast enough against a stiff contact); saturated or
   implausible → soft stop; stale → soft stop when force control depends on it, else warn;
@@ -1017,7 +1019,9 @@ class InterpretedSupervisor(Supervisor):
                 trip("force_limit", Reaction.SOFT_STOP, "platform force reaching the limit",
                      force_n=force_n)
         if self.force_control and fz_n < 0.0:
-            self._pull_time += dt
+            # Stall-aware: a cycle adds at most PULL_DT_PERIODS periods (a stall is one sample).
+            cap = sk.PULL_DT_PERIODS * self.period_s
+            self._pull_time += dt if dt < cap else cap  # noqa: FURB136
             if self._pull_time >= lim.max_pull_s:
                 trip("pulling", Reaction.SOFT_STOP, "the platform is pulling on the foot "
                      "(measured Fz below 0 N)", fz_n=fz_n, for_s=self._pull_time)

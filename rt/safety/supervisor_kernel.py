@@ -64,6 +64,14 @@ QUASI_STATIC_ACCEL = 0.5
 QUASI_STATIC_S = 0.01
 FROZEN_COUNTS = 4
 FORCE_CUSHION = 0.9
+#: The pull check is stall-aware: one cycle adds at most this many loop periods to the pull's
+#: duration. A realtime loop's dt after a host stall is the stall (``Loop``: dt = now − prev),
+#: while the force port then holds one ATI sample: a 20 ms stall while the sensor reads its
+#: noise about 0 N is one sample of pull, not 20 ms of it. A real pull is seen on every cycle
+#: (at 1 kHz the 20 ms of ``max_pull_s`` are 20 cycles of ≤ 1.5 periods), so it is counted in
+#: full; a pull that spans a stall is judged on the samples seen (its stop late by at most
+#: the stall, as every other check of that cycle).
+PULL_DT_PERIODS = 2.0
 #: The sustained-saturation window is kept as this many buckets of saturated time per axis
 #: (a bucketed sliding window: the saturated time of the last ``window`` ± one bucket, 2 % of
 #: it; the state is fixed whatever the loop's rate).
@@ -411,7 +419,9 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
         elif force_n > FORCE_CUSHION * par[P_MAX_FORCE]:
             new += _trip(mem, C_FORCE_LIMIT, R_SOFT, force_n, nan, nan)
     if force_control and fz_n < 0.0:
-        mem[M_PULL_TIME] += dt
+        # Stall-aware: a cycle adds at most PULL_DT_PERIODS periods (a stall is one sample).
+        cap = PULL_DT_PERIODS * par[P_PERIOD]
+        mem[M_PULL_TIME] += dt if dt < cap else cap  # noqa: FURB136
         if mem[M_PULL_TIME] >= par[P_MAX_PULL_S]:
             new += _trip(mem, C_PULL, R_SOFT, fz_n, mem[M_PULL_TIME], nan)
     else:
