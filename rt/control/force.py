@@ -147,6 +147,11 @@ class ExplicitForceGains(BaseModel):
     #: ATI's z noise (0.25 N: the Delta's resolution), so the sensor's noise does not flip
     #: the compensation's direction in a hold.
     friction_deadband_n: Annotated[float, Field(ge=0.0, le=20.0, allow_inf_nan=False)] = 0.75
+    #: Before contact (F at most the preload) the law closes the gap no faster than the
+    #: impact onto the contact it expects overshoots by this much (N): v ≤ margin / √(k m),
+    #: k the remembered contact's stiffness or the guess, m the drives' inertia along z
+    #: (``rt.control.kernels.approach_speed``). 0: unbounded (the law before).
+    approach_force_margin_n: Annotated[float, Field(ge=0.0, le=5000.0, allow_inf_nan=False)] = 200.0
 
 
 #: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
@@ -183,6 +188,9 @@ EXPLICIT_FORCE_RANGES = {
     # From the sensor's noise (a few σ) to a few N (beyond it the hold is friction-limited
     # again).
     "friction_deadband_n": GainRange(0.0, 20.0, "N"),
+    # The impact overshoot the approach allows: a fraction of a push's force up to the
+    # drives' capacity along z (0: unbounded).
+    "approach_force_margin_n": GainRange(0.0, 5000.0, "N"),
 }
 #: Admittance: a virtual mass below 1 kg or a rate above 0.2 m/s would let the platform jump
 #: at a patient's push; above 500 kg / 1e5 N s/m it no longer yields to a person.
@@ -271,7 +279,8 @@ class ExplicitForce:
                        g.max_feedforward_accel_m_s2, self.axis_inertia,
                        self.drive_force_limit_n, g.schedule_stiffness_n_per_m,
                        g.angle_ki_n_m_per_rad_s, g.angle_integral_limit_n_m,
-                       g.friction_compensation, g.friction_deadband_n)
+                       g.friction_compensation, g.friction_deadband_n,
+                       g.approach_force_margin_n)
 
     @property
     def z_capacity_n(self) -> float:
@@ -340,7 +349,16 @@ class ExplicitForce:
         self.rls.P[:] = np.diag([(0.5 * k0) ** 2 / 1e-4, 1e10])
         self._last_z = math.nan
         self.k_est = k0
+        fs[ck.FS_K_APPROACH] = k0
         self.tau = np.zeros(3)
+
+    def expect_stiffness(self, stiffness_n_per_m: float) -> None:
+        """The approach to the next contact bounded for this stiffness (N/m, held within
+        1/5..20× the guess) instead of the guess's: a remembered contact whose k̂ is applied
+        only on its first loaded cycle (``rt.components.protocol_blocks.HybridController``).
+        Until then the gains stay the guess's."""
+        guess = self.gains.stiffness_guess_n_per_m
+        self._fs[ck.FS_K_APPROACH] = min(20.0 * guess, max(0.2 * guess, float(stiffness_n_per_m)))
 
     def prime_stiffness(self, stiffness_n_per_m: float) -> None:
         """Start the stiffness estimate from a known contact's (N/m, held within 1/5..20× the
@@ -448,6 +466,19 @@ class ExplicitForce:
             return f_d + kp * e + g.ki_per_s * integ - g.damping_n_s_per_m * (zd - z_dot_ff)
 
         fz = task(integral)
+        if not force_n > floor and g.approach_force_margin_n > 0.0:
+            # Before contact: no faster than the expected contact takes
+            # (``rt.control.kernels.approach_speed``), the gap's error not integrated.
+            m_z = 0.0
+            for i in range(3):
+                m_z += j_ik[i, 0] * j_ik[i, 0]
+            v_a = ck.approach_speed.py_func(g.approach_force_margin_n,
+                                            float(self._fs[ck.FS_K_APPROACH]),
+                                            self.axis_inertia * m_z)
+            cap = g.damping_n_s_per_m * (v_a - zd)
+            if fz > cap:
+                fz = cap
+                integral = held
         if fz < floor and not force_n > floor:
             # Never pull: with the foot carrying no more than the preload (or no reading) the
             # command is held at the preload, and the integral only moves up (conditional
