@@ -1,0 +1,120 @@
+"""The force-mode approach bounded by the contact it expects (issue 15): before contact (F at
+most the preload) the explicit-force law closes the gap no faster than v_a = margin / √(k m)
+(``rt.control.kernels.approach_speed``: the impact of a mass m at v onto a spring k peaks
+v √(k m) above the reference), k the remembered contact's stiffness or the gains' guess.
+
+400 N pushes on the twin's calibration plate (2e6 N/m through the tool tip, the tip 0.5 mm
+above it), the loop of ``tests/test_force_contact_memory.py``. Fast mode: deterministic.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_force_contact_memory import MODEL, _plate_loop, _push
+
+from rt.control import kernels as ck
+from rt.control.force import ExplicitForce
+from rt.errors import ConfigurationError
+
+CONTACT_N = 5.0         # the tip touches: a few N above the ATI's noise (σ 0.25 N)
+
+
+def _run_push(margin_n: float | None = None, pushes: int = 1, memory: bool = False):
+    """Per push: (max ż before contact (m/s), the approach's bound v_a (m/s), ms from the
+    force-mode entry to contact, max |τ| (N) over the 0.2 s after the first loaded cycle)."""
+    pl = _plate_loop()
+    try:
+        ctl = pl.graph.component("controller")
+        ctl.remember_contact = memory
+        law = ctl.force_law
+        if margin_n is not None:
+            law.set_gains(approach_force_margin_n=margin_n)
+        ref = pl.reference
+        out = []
+        for _ in range(pushes):
+            ref.request(_push())
+            entry, contact, loaded, vmax, v_a, taus = None, None, None, 0.0, math.nan, []
+            for i in range(4000):
+                pl.loop.run(seconds=0.001)
+                assert pl.supervisor.reaction < 2, pl.events.snapshot()
+                if ref.ctrl_mode.data[0] < 0.5:
+                    if entry is not None and not ref.busy:
+                        break
+                    continue
+                if entry is None:
+                    entry = i
+                    st = ctl.state_in.data
+                    m_z = law.axis_inertia * float(np.sum(st.inverse_jacobian()[:, 0] ** 2))
+                    v_a = ck.approach_speed.py_func(law.gains.approach_force_margin_n,
+                                                    float(law._fs[ck.FS_K_APPROACH]), m_z)
+                f = -pl.graph.output("force.wrench")[2]
+                st = ctl.state_in.data
+                if contact is None:
+                    if f > CONTACT_N:
+                        contact = i - entry
+                    else:
+                        vmax = max(vmax, float(st.S[8] @ st.qd))
+                if loaded is None and f > ck.CONTACT_LOADED_N:
+                    loaded = i
+                if loaded is not None and i - loaded < 200:
+                    taus.append(float(np.max(np.abs(pl.graph.output("controller.tau")))))
+            out.append((vmax, v_a, contact, max(taus)))
+        return out, law
+    finally:
+        pl.graph.stop()
+
+
+def _slack(law: ExplicitForce, v_a: float) -> float:
+    """The approach's bound as the twin can keep it: v_a, plus preload / D (the law never
+    commands less than the preload, 0.5 mm/s), plus 5 % of v_a (the bound acts through the
+    damping D on the measured ż one cycle late, with the model's friction feedforward at
+    ż_ff, not the twin's friction at ż)."""
+    g = law.gains
+    return 1.05 * v_a + g.preload_n / g.damping_n_s_per_m
+
+
+def test_the_approach_speed_is_the_impact_margin_over_sqrt_k_m() -> None:
+    """5.7 mm/s for 200 N onto the plate (2e6 N/m, ≈ 616 kg the drives reflect in z); 25 mm/s
+    onto the guess's 1e5 N/m: a stiffer contact is met slower."""
+    assert ck.approach_speed.py_func(200.0, 2e6, 616.0) == pytest.approx(200.0 / math.sqrt(2e6 * 616.0))
+    assert ck.approach_speed.py_func(200.0, 2e6, 616.0) == pytest.approx(5.70e-3, rel=1e-3)
+    assert ck.approach_speed(200.0, 1e5, 616.0) == ck.approach_speed.py_func(200.0, 1e5, 616.0)
+
+
+def test_the_bounded_approach_does_not_saturate_the_drives() -> None:
+    """Default margin (200 N) on the guess (1e5 N/m): the gap is closed at ≤ v_a (``_slack``) and the impact's first 0.2 s stay under
+    the drives' limit (2036 N). Unbounded (margin 0, the law before) the tip arrives at
+    ≈ 45 mm/s, well above v_a, and the braking asks > 2.5 kN of a drive."""
+    ((vmax, v_a, contact, tau),), law = _run_push()
+    assert 0.02 < v_a < 0.03
+    assert 0.5 * v_a < vmax <= _slack(law, v_a)
+    assert contact <= 60                   # ms (unbounded: 31; 0.5 mm at 25 mm/s is 20 ms)
+    assert tau < law.drive_force_limit_n
+    ((vmax0, _, contact0, tau0),), _ = _run_push(margin_n=0.0)
+    assert vmax0 > 1.5 * v_a
+    assert tau0 > law.drive_force_limit_n
+    assert contact0 < contact
+
+
+def test_a_remembered_contact_is_approached_at_its_own_bound() -> None:
+    """With memory on the second push's approach is bounded for push 1's learnt stiffness
+    (≥ 1e6 N/m: v_a ≤ 8 mm/s) while its gains are still the guess's, so its gap takes longer
+    and its impact stays well under the drives' limit."""
+    (p1, p2), law = _run_push(pushes=2, memory=True)
+    assert p2[1] < 0.4 * p1[1] and p2[1] < 8e-3
+    assert p2[0] <= _slack(law, p2[1])
+    assert p2[2] > p1[2]
+    assert p2[3] < 0.5 * law.drive_force_limit_n
+
+
+@pytest.mark.parametrize("bad", [-1.0, 5001.0, math.nan])
+def test_a_bad_margin_is_refused_and_changes_nothing(bad: float) -> None:
+
+    law = ExplicitForce(MODEL, compiled=False)
+    fg = law._fg.copy()
+    with pytest.raises(ConfigurationError, match="approach_force_margin_n"):
+        law.set_gains(approach_force_margin_n=bad)
+    assert law.gains.approach_force_margin_n == 200.0
+    assert np.array_equal(law._fg, fg)
