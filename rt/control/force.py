@@ -147,11 +147,14 @@ class ExplicitForceGains(BaseModel):
     #: ATI's z noise (0.25 N: the Delta's resolution), so the sensor's noise does not flip
     #: the compensation's direction in a hold.
     friction_deadband_n: Annotated[float, Field(ge=0.0, le=20.0, allow_inf_nan=False)] = 0.75
-    #: Before contact (F at most the preload) the law closes the gap no faster than the
-    #: impact onto the contact it expects overshoots by this much (N): v ≤ margin / √(k m),
-    #: k the remembered contact's stiffness or the guess, m the drives' inertia along z
-    #: (``rt.control.kernels.approach_speed``). 0: unbounded (the law before).
-    approach_force_margin_n: Annotated[float, Field(ge=0.0, le=5000.0, allow_inf_nan=False)] = 200.0
+    #: Before contact (F ≤ ``rt.control.kernels.CONTACT_TOUCH_N``) the law closes the gap
+    #: no faster than the impact onto the contact it expects overshoots by this much (N):
+    #: v ≤ margin / √(k m), k the remembered contact's stiffness or the guess, m the drives'
+    #: inertia along z (``rt.control.kernels.approach_speed``): 200 N → 25 mm/s onto the
+    #: guess (1e5 N/m), 5.7 mm/s onto a remembered plate (2e6 N/m). 0: unbounded (the law
+    #: before: the plate was met at 45 mm/s, ≈ 1.6 kN of impact, drives saturated).
+    approach_force_margin_n: Annotated[
+        float, Field(ge=0.0, le=5000.0, allow_inf_nan=False)] = 200.0
 
 
 #: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
@@ -466,7 +469,7 @@ class ExplicitForce:
             return f_d + kp * e + g.ki_per_s * integ - g.damping_n_s_per_m * (zd - z_dot_ff)
 
         fz = task(integral)
-        if not force_n > floor and g.approach_force_margin_n > 0.0:
+        if not force_n > ck.CONTACT_TOUCH_N and g.approach_force_margin_n > 0.0:
             # Before contact: no faster than the expected contact takes
             # (``rt.control.kernels.approach_speed``), the gap's error not integrated.
             m_z = 0.0
