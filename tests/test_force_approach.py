@@ -78,13 +78,15 @@ def _slack(law: ExplicitForce, v_a: float) -> float:
 def test_the_approach_speed_is_the_impact_margin_over_sqrt_k_m() -> None:
     """5.7 mm/s for 200 N onto the plate (2e6 N/m, ≈ 616 kg the drives reflect in z); 25 mm/s
     onto the guess's 1e5 N/m: a stiffer contact is met slower."""
-    assert ck.approach_speed.py_func(200.0, 2e6, 616.0) == pytest.approx(200.0 / math.sqrt(2e6 * 616.0))
+    v = ck.approach_speed.py_func(200.0, 2e6, 616.0)
+    assert v == pytest.approx(200.0 / math.sqrt(2e6 * 616.0))
     assert ck.approach_speed.py_func(200.0, 2e6, 616.0) == pytest.approx(5.70e-3, rel=1e-3)
     assert ck.approach_speed(200.0, 1e5, 616.0) == ck.approach_speed.py_func(200.0, 1e5, 616.0)
 
 
 def test_the_bounded_approach_does_not_saturate_the_drives() -> None:
-    """Default margin (200 N) on the guess (1e5 N/m): the gap is closed at ≤ v_a (``_slack``) and the impact's first 0.2 s stay under
+    """Default margin (200 N) on the guess (1e5 N/m): the gap is closed at ≤ v_a (``_slack``)
+    and the impact's first 0.2 s stay under
     the drives' limit (2036 N). Unbounded (margin 0, the law before) the tip arrives at
     ≈ 45 mm/s, well above v_a, and the braking asks > 2.5 kN of a drive."""
     ((vmax, v_a, contact, tau),), law = _run_push()
