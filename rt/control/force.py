@@ -39,6 +39,11 @@ stays below 0 N anyway (``rt.safety.supervisor``).
   the online estimate below), so a stiffer contact has the loop's poles of k_s. k_s = 2.5e5:
   above the foot's k̂ (0.75-2.4e5 over a stance: its figures unchanged); at 5e5 the shear
   push under a fast roll still bounced (tests/test_force_stiff_contact.py).
+  Approach (``approach_force_margin_n``): before contact (F ≤ ``CONTACT_TOUCH_N``) the law is
+  a velocity loop that met the calibration plate at 45 mm/s (≈ 1.6 kN of impact, drives
+  saturated); Q_z is bounded so the platform closes the gap no faster than margin / √(k m),
+  k the contact it expects (the guess, or a remembered contact's), the integral held
+  meanwhile (``rt.control.kernels.approach_speed``).
   Roll and pitch: PD plus an integral (``angle_ki_n_m_per_rad_s``, clamped): a tip dragged
   across a plate at its friction cone resists with μ N h (≈ 60 N m under 600 N), which the PD
   alone leaves 0.8° short.
