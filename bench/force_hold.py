@@ -36,18 +36,14 @@ sys.path = [p for p in sys.path if os.path.abspath(p or os.curdir) != _HERE]
 import numpy as np
 
 from calibration.push import (
-    TIP_FRICTION_COEFFICIENT,
-    TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-    TOOL_LENGTH_M,
     ForceTableGenerator,
 )
-from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
+from calibration.twin_runner import plate_above_tool_tip
 from rt.components.protocol_blocks import HybridController
 from rt.model import RobotModel
 from rt.position_loop import build_protocol_loop, sim_devices
 from rt.safety.events import Reaction
 from rt.safety.limits import PatientLimits, RobotLimits
-from rt.twin.environment import ForcePlateContact
 from rt.twin.realism import default_truth
 from rt.twin.twin import SimClock, Twin
 
@@ -59,11 +55,7 @@ WINDOW = 500
 
 def run(truth: str, law: str, model: RobotModel) -> dict[str, Any]:
     q0 = np.array(model.kin.ik(*POSE).q)
-    p, r = sensor_poses(model, np.array([q0]))
-    env = ForcePlateContact(
-        plate_height_m=float(tip_points_B(p, r, TOOL_LENGTH_M)[0][2]) + START_GAP_M,
-        tool_length_m=TOOL_LENGTH_M, tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-        friction_coefficient=TIP_FRICTION_COEFFICIENT)
+    env = plate_above_tool_tip(model, POSE[0])
     clock = SimClock()
     twin = Twin(model.description if truth == "nominal" else default_truth(), env, seed=5,
                 clock=clock)

@@ -58,11 +58,15 @@ class _Probe(Component):
 
 
 def _before(pl: Any) -> None:
-    """The law as it was: no preview, no lead (so no transient hold), no drive-limit hold."""
+    """The law as it was: no preview, no lead (so no transient hold), no drive-limit hold, the
+    integral's clamp at its old 1500 N (with no drive limit known the clamp is the gain alone,
+    ``ExplicitForce.integral_limit_n``; today's gain is a 1e4 N cap under the drives'
+    capacity)."""
     pl.reference.preview_steps = 0
     c = pl.graph.component("controller")
     c._beyond = lambda rate: False
     c.force_law.drive_force_limit_n = 0.0
+    c.force_law.gains.integral_limit_n = 1500.0
     c.force_law._pack_gains()
 
 

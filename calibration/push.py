@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,12 +18,26 @@ from protocols.schema import Pose
 from rt.errors import KinematicsError
 from rt.references.program import FORCE_BLOCK, POSE, ProgramTable, Q, ReferenceOutput
 
+if TYPE_CHECKING:
+    from rt.twin.environment import ForcePlateContact
+
 #: Tool (load applicator) length above the ATI's origin along its z axis (m).
 TOOL_LENGTH_M = 0.02
 #: The tool tip on the plate (the twin's contact): lateral stiffness of tip and plate (N/m) and
 #: the static friction coefficient (a hard-rubber tip on an aluminium top plate).
 TIP_TANGENTIAL_STIFFNESS_N_PER_M = 5.0e5
 TIP_FRICTION_COEFFICIENT = 0.6
+
+
+def tool_plate(height_m: float) -> ForcePlateContact:
+    """The twin's calibration plate with its surface at ``height_m`` (base frame) under the
+    push tool: the tool's length, its tip's tangential stiffness and friction. (The twin is
+    imported here, not with this module: the RT process loads this module on the rig too.)"""
+    from rt.twin.environment import ForcePlateContact
+
+    return ForcePlateContact(plate_height_m=height_m, tool_length_m=TOOL_LENGTH_M,
+                             tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
+                             friction_coefficient=TIP_FRICTION_COEFFICIENT)
 
 
 @dataclass(frozen=True)

@@ -51,10 +51,9 @@ from pydantic import ValidationError
 
 from calibration.plan import Plan, Trial, force_profile, tilt_profile, trial_pose
 from calibration.push import (
-    TIP_FRICTION_COEFFICIENT,
-    TIP_TANGENTIAL_STIFFNESS_N_PER_M,
     TOOL_LENGTH_M,
     ForceTableGenerator,
+    tool_plate,
 )
 from calibration.twin_plate_daq import WirePublisher
 from rt.errors import InputError, validation_summary
@@ -163,8 +162,6 @@ def _check_out(value: Any) -> Path:
 
 def calibration_push(params: dict[str, Any], service: RtService) -> ContactRecordingProgram:
     """``run calibration_push {plan, trial, out}`` (module docstring)."""
-    from rt.twin.environment import ForcePlateContact
-
     allowed = {"plan", "trial", "out", "plate_daq", "twin_contact_shm"}
     extra = sorted(set(params) - allowed)
     if extra:
@@ -218,9 +215,7 @@ def calibration_push(params: dict[str, Any], service: RtService) -> ContactRecor
     twin = pl.twin
     publisher = WirePublisher(wire_name) if wire_name is not None else None
     if twin is not None:
-        env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
-                                tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-                                friction_coefficient=TIP_FRICTION_COEFFICIENT)
+        env = tool_plate(height)
 
         def place_plate(loop: Any) -> None:
             twin.set_environment(env)          # the operator placed the plate (simulated)

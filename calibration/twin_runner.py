@@ -21,10 +21,9 @@ from calibration.operator import MoveTolerance, Operator, SimulatedOperator, con
 from calibration.plan import Plan, ProfileKind
 from calibration.plate import PlateDescription
 from calibration.push import (
-    TIP_FRICTION_COEFFICIENT,
-    TIP_TANGENTIAL_STIFFNESS_N_PER_M,
     TOOL_LENGTH_M,
     ForceTableGenerator,
+    tool_plate,
 )
 from calibration.trial import TrialData, TrialRunner
 from calibration.twin_plate import PlateTruth, TwinPlate, draw_truth
@@ -110,6 +109,14 @@ def tip_points_B(p_BS: np.ndarray, R_BS: np.ndarray, tool_length_m: float) -> np
     return p_BS + tool_length_m * R_BS[:, [2, 5, 8]]
 
 
+def plate_above_tool_tip(model: RobotModel, z_m: float) -> ForcePlateContact:
+    """The plate (:func:`calibration.push.tool_plate`) ``START_GAP_M`` above the tool tip at
+    the level pose of height ``z_m``: where a campaign at that height puts it
+    (:meth:`TwinTrialRunner.run`)."""
+    p, R = sensor_poses(model, np.array([model.kin.ik(z_m, 0.0, 0.0).q]))
+    return tool_plate(float(tip_points_B(p, R, TOOL_LENGTH_M)[0][2]) + START_GAP_M)
+
+
 class _SiteMoves:
     """The operator moving the plate between sites (simulated: a placement error drawn per
     move), then its registration, checked against the planned pose when the camera registers
@@ -193,9 +200,7 @@ class TwinTrialRunner(TrialRunner):
         tip_lvl = tip_points_B(p_lvl, R_lvl, TOOL_LENGTH_M)[0]
         T_true, registered = self.moves.place(tip_lvl, site_xy_m, site_name(trial_id))
         height = float(tip_lvl[2]) + START_GAP_M
-        env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
-                                tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-                                friction_coefficient=TIP_FRICTION_COEFFICIENT)
+        env = tool_plate(height)
         clock = SimClock()
         twin = Twin(model.description, env, seed=self.seed + len(trial_id), clock=clock,
                     imperfections=self.imperfections)

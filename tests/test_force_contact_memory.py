@@ -16,12 +16,9 @@ import numpy as np
 import pytest
 
 from calibration.push import (
-    TIP_FRICTION_COEFFICIENT,
-    TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-    TOOL_LENGTH_M,
     ForceTableGenerator,
 )
-from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
+from calibration.twin_runner import plate_above_tool_tip
 from rt.control import force as force_mod
 from rt.control import kernels as ck
 from rt.control.force import ExplicitForce
@@ -30,7 +27,6 @@ from rt.position_loop import build_protocol_loop, sim_devices
 from rt.references.program import Mode
 from rt.safety.events import Reaction
 from rt.safety.limits import PatientLimits, RobotLimits
-from rt.twin.environment import ForcePlateContact
 from rt.twin.twin import SimClock, Twin
 
 DT = 1e-3
@@ -48,11 +44,7 @@ def _plate_loop():
     """A loop with the tool tip 0.5 mm above the twin's plate at ``POSE`` (as
     ``calibration.twin_runner.TwinTrialRunner`` places it), holding until a program comes."""
     q0 = np.array(MODEL.kin.ik(*POSE).q)
-    p, R = sensor_poses(MODEL, np.array([q0]))
-    height = float(tip_points_B(p, R, TOOL_LENGTH_M)[0][2]) + START_GAP_M
-    env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
-                            tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-                            friction_coefficient=TIP_FRICTION_COEFFICIENT)
+    env = plate_above_tool_tip(MODEL, POSE[0])
     clock = SimClock()
     twin = Twin(MODEL.description, env, seed=5, clock=clock)
     twin.place(q0)

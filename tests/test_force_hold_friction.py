@@ -19,12 +19,9 @@ import numpy as np
 import pytest
 
 from calibration.push import (
-    TIP_FRICTION_COEFFICIENT,
-    TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-    TOOL_LENGTH_M,
     ForceTableGenerator,
 )
-from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
+from calibration.twin_runner import plate_above_tool_tip
 from rt.components.protocol_blocks import HybridController
 from rt.control import kernels as ck
 from rt.control.force import ExplicitForce, ForceReference
@@ -32,7 +29,6 @@ from rt.model import RobotModel
 from rt.position_loop import build_protocol_loop, sim_devices
 from rt.safety.events import Reaction
 from rt.safety.limits import PatientLimits, RobotLimits
-from rt.twin.environment import ForcePlateContact
 from rt.twin.realism import default_truth
 from rt.twin.twin import SimClock, Twin
 
@@ -47,11 +43,7 @@ def _run_hold(gains: dict | None) -> tuple[np.ndarray, np.ndarray]:
     0.5 s, on the plate 0.5 mm above the tool tip. Returns the measured F and the reference
     the law tracked (N) for every force-mode cycle."""
     q0 = np.array(MODEL.kin.ik(*POSE).q)
-    p, R = sensor_poses(MODEL, np.array([q0]))
-    height = float(tip_points_B(p, R, TOOL_LENGTH_M)[0][2]) + START_GAP_M
-    env = ForcePlateContact(plate_height_m=height, tool_length_m=TOOL_LENGTH_M,
-                            tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-                            friction_coefficient=TIP_FRICTION_COEFFICIENT)
+    env = plate_above_tool_tip(MODEL, POSE[0])
     clock = SimClock()
     twin = Twin(default_truth(), env, seed=5, clock=clock)
     twin.place(q0)

@@ -382,14 +382,10 @@ def test_a_calibration_push_on_the_stiff_plate_is_the_per_block_cycle_bit_for_bi
     )
     from calibration.plate import TWIN_PLATE_FILE, load_plate
     from calibration.push import (
-        TIP_FRICTION_COEFFICIENT,
-        TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-        TOOL_LENGTH_M,
         ForceTableGenerator,
     )
-    from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
+    from calibration.twin_runner import plate_above_tool_tip
     from rt.safety.limits import PatientLimits, RobotLimits
-    from rt.twin.environment import ForcePlateContact
     from rt.twin.twin import SimClock, Twin
 
     dt = 1e-3
@@ -402,12 +398,7 @@ def test_a_calibration_push_on_the_stiff_plate_is_the_per_block_cycle_bit_for_bi
     def build() -> PositionLoop:
         m = RobotModel.load()
         z0, roll, pitch = pose
-        p_lvl, r_lvl = sensor_poses(m, np.array([m.kin.ik(z0, 0.0, 0.0).q]))
-        tip = tip_points_B(p_lvl, r_lvl, TOOL_LENGTH_M)[0]
-        env = ForcePlateContact(plate_height_m=float(tip[2]) + START_GAP_M,
-                                tool_length_m=TOOL_LENGTH_M,
-                                tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-                                friction_coefficient=TIP_FRICTION_COEFFICIENT)
+        env = plate_above_tool_tip(m, z0)
         clock = SimClock()
         twin = Twin(m.description, env, seed=7, clock=clock)
         twin.place(np.array(m.kin.ik(z0, roll, pitch).q))
@@ -458,14 +449,10 @@ def test_a_remembered_contact_is_the_per_block_cycle_bit_for_bit():
     ``H_K_PENDING``) in the fused loop and by the interpreted block in the per-block one,
     every cycle compared."""
     from calibration.push import (
-        TIP_FRICTION_COEFFICIENT,
-        TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-        TOOL_LENGTH_M,
         ForceTableGenerator,
     )
-    from calibration.twin_runner import START_GAP_M, sensor_poses, tip_points_B
+    from calibration.twin_runner import plate_above_tool_tip
     from rt.safety.limits import PatientLimits, RobotLimits
-    from rt.twin.environment import ForcePlateContact
     from rt.twin.twin import SimClock, Twin
 
     dt, pose = 1e-3, (0.633, 0.0, 0.0)
@@ -475,12 +462,7 @@ def test_a_remembered_contact_is_the_per_block_cycle_bit_for_bit():
     def build() -> PositionLoop:
         m = RobotModel.load()
         q0 = np.array(m.kin.ik(*pose).q)
-        p, r = sensor_poses(m, np.array([q0]))
-        env = ForcePlateContact(
-            plate_height_m=float(tip_points_B(p, r, TOOL_LENGTH_M)[0][2]) + START_GAP_M,
-            tool_length_m=TOOL_LENGTH_M,
-            tangential_stiffness_n_per_m=TIP_TANGENTIAL_STIFFNESS_N_PER_M,
-            friction_coefficient=TIP_FRICTION_COEFFICIENT)
+        env = plate_above_tool_tip(m, pose[0])
         clock = SimClock()
         twin = Twin(m.description, env, seed=5, clock=clock)
         twin.place(q0)

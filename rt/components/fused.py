@@ -743,7 +743,18 @@ class FusedChain:
                     and drv._enabled and drv._card == self._plan_card and failed[0] <= 0.5
                     and drv.monitor is mon and not card_b._closed and not card_d._closed
                     and card_d._fake_st is fake and rec.ring is rec_arrays[0]
-                    and rec._addr is rec_arrays[1] and rec._lens is rec_arrays[2]):
+                    and rec._addr is rec_arrays[1] and rec._lens is rec_arrays[2]
+                    # No device method replaced on its instance since the plan (a wrapper,
+                    # an injected fault: the backends' ``*_READS``/``*_WRITES``): the
+                    # compiled stage would no longer be what the block calls.
+                    and "read_positions_m" not in enc_b.__dict__
+                    and "read_counts" not in enc_b.__dict__
+                    and "read_positions_m" not in enc_d.__dict__
+                    and "read_array" not in ft_b.__dict__ and "read" not in ft_b.__dict__
+                    and "_sample" not in ft_b.__dict__
+                    and "read_array" not in stops_b.__dict__ and "read" not in stops_b.__dict__
+                    and "write_volts" not in card_b.__dict__
+                    and "write_volts" not in card_d.__dict__):
                 self._next_cycle = cycles + 1
                 tw.sync()
                 pend = ati._pending

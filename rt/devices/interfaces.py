@@ -95,6 +95,16 @@ class Device(abc.ABC):
         """Backend-specific release."""
 
 
+def replaced(device: object, *names: str) -> bool:
+    """Whether one of the methods ``names`` was replaced on this instance (a wrapper, a test's
+    injected fault): the ``compiled_*`` hooks then answer None, because a compiled caller
+    reading the device's memory would no longer do what the method does; the block calls
+    the method instead. (An instance's own attributes live in its ``__dict__``; methods do
+    not, unless assigned there.)"""
+    d = vars(device)
+    return any(n in d for n in names)
+
+
 class EncoderBank(Device):
     """Incremental encoders of the three sliders.
 

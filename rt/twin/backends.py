@@ -8,12 +8,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from rt.devices.interfaces import ActuatorOutputs, DigitalInputs, DigitalInputState, EncoderBank
+from rt.devices.interfaces import (
+    ActuatorOutputs,
+    DigitalInputs,
+    DigitalInputState,
+    EncoderBank,
+    replaced,
+)
 from rt.devices.sampled_ft import SampledForceTorque
 from rt.drivers.pci1720 import Pci1720Outputs
 from rt.drivers.pcl833 import Pcl833Encoders, decode_counts
 from rt.errors import HardwareError
 from rt.twin.twin import Twin
+
+# The methods each block calls on its backend (and what they call): replaced on an instance,
+# the compiled hooks step aside (``rt.devices.interfaces.replaced``); the fused cycle's fast
+# path checks the same names (``rt.components.fused``).
+ENCODER_READS = ("read_positions_m", "read_counts")
+FT_READS = ("read_array", "read", "_sample")
+INPUT_READS = ("read_array", "read")
+ACTUATOR_WRITES = ("write_volts",)
 
 
 class TwinEncoders(EncoderBank):
@@ -46,8 +60,10 @@ class TwinEncoders(EncoderBank):
     def compiled_read(self) -> tuple | None:
         """The driver's arrays on the emulated card (``Pcl833Encoders.compiled_read``), the
         twin synced as :meth:`read_positions_m` syncs it; None under a fault (a latency fault
-        delays the counts: the block decodes them) or once closed."""
-        if self._closed:
+        delays the counts: the block decodes them), once closed, or when the read was
+        replaced on the bank or its driver (:func:`replaced`)."""
+        if self._closed or replaced(self, *ENCODER_READS) \
+                or replaced(self._driver, "read_positions_m"):
             return None
         twin = self.twin
         twin.sync()
@@ -100,8 +116,12 @@ class TwinActuators(ActuatorOutputs):
 
     def compiled_write(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
         """The driver's compiled write on the twin's comedilib double
-        (``Pci1720Outputs.compiled_write``); None once closed."""
-        return None if self._closed else self._driver.compiled_write()
+        (``Pci1720Outputs.compiled_write``); None once closed or when the write was replaced
+        on the card or its driver (:func:`replaced`)."""
+        if self._closed or replaced(self, *ACTUATOR_WRITES) \
+                or replaced(self._driver, "write_volts"):
+            return None
+        return self._driver.compiled_write()
 
     def finish_compiled_write(self, volts: np.ndarray, rc: int, done: int) -> None:
         self._driver.finish_compiled_write(volts, rc, done)
@@ -124,8 +144,9 @@ class TwinForceTorque(SampledForceTorque):
     def compiled_sample(self) -> tuple | None:
         """The twin's latest sample where its fused period left it (``Twin.latest_ati``), the
         twin synced as :meth:`_sample` syncs it; None under a fault, before the first sample,
-        when not streaming, or once closed (the block reads it then)."""
-        if self._closed or not self._streaming:
+        when not streaming, once closed, or when a read was replaced (:func:`replaced`): the
+        block reads it then."""
+        if self._closed or not self._streaming or replaced(self, *FT_READS):
             return None
         twin = self.twin
         twin.sync()
@@ -164,7 +185,7 @@ class TwinDigitalInputs(DigitalInputs):
         return out
 
     def compiled_levels(self) -> tuple[float, float] | None:
-        if self._closed:
+        if self._closed or replaced(self, *INPUT_READS):
             return None
         self.twin.sync()
         inputs = self.twin.inputs
