@@ -43,7 +43,9 @@ stays below 0 N anyway (``rt.safety.supervisor``).
   a velocity loop that met the calibration plate at 45 mm/s (≈ 1.6 kN of impact, drives
   saturated); Q_z is bounded so the platform closes the gap no faster than margin / √(k m),
   k the contact it expects (the guess, or a remembered contact's), the integral held
-  meanwhile (``rt.control.kernels.approach_speed``).
+  meanwhile (``rt.control.kernels.approach_speed``). Only until the first touch after each
+  force-mode entry (latched, ``FS_TOUCHED``; ``reset`` re-arms it): an overload that sinks
+  the platform away from the foot unloads the sensor too, and must meet the law unbounded.
   Roll and pitch: PD plus an integral (``angle_ki_n_m_per_rad_s``, clamped): a tip dragged
   across a plate at its friction cone resists with μ N h (≈ 60 N m under 600 N), which the PD
   alone leaves 0.8° short.
@@ -152,7 +154,8 @@ class ExplicitForceGains(BaseModel):
     #: ATI's z noise (0.25 N: the Delta's resolution), so the sensor's noise does not flip
     #: the compensation's direction in a hold.
     friction_deadband_n: Annotated[float, Field(ge=0.0, le=20.0, allow_inf_nan=False)] = 0.75
-    #: Before contact (F ≤ ``rt.control.kernels.CONTACT_TOUCH_N``) the law closes the gap
+    #: Before contact (from the force-mode entry until the first cycle with F >
+    #: ``rt.control.kernels.CONTACT_TOUCH_N``; latched off after it) the law closes the gap
     #: no faster than the impact onto the contact it expects overshoots by this much (N):
     #: v ≤ margin / √(k m), k the remembered contact's stiffness or the guess, m the drives'
     #: inertia along z (``rt.control.kernels.approach_speed``): 200 N → 25 mm/s onto the
@@ -358,6 +361,8 @@ class ExplicitForce:
         self._last_z = math.nan
         self.k_est = k0
         fs[ck.FS_K_APPROACH] = k0
+        # The approach's bound armed until the first touch (``rt.control.kernels``).
+        fs[ck.FS_TOUCHED] = 0.0
         self.tau = np.zeros(3)
 
     def expect_stiffness(self, stiffness_n_per_m: float) -> None:
@@ -474,9 +479,13 @@ class ExplicitForce:
             return f_d + kp * e + g.ki_per_s * integ - g.damping_n_s_per_m * (zd - z_dot_ff)
 
         fz = task(integral)
-        if not force_n > ck.CONTACT_TOUCH_N and g.approach_force_margin_n > 0.0:
-            # Before contact: no faster than the expected contact takes
-            # (``rt.control.kernels.approach_speed``), the gap's error not integrated.
+        fs = self._fs
+        if force_n > ck.CONTACT_TOUCH_N:
+            fs[ck.FS_TOUCHED] = 1.0
+        if fs[ck.FS_TOUCHED] == 0.0 and g.approach_force_margin_n > 0.0:
+            # Before the entry's first touch: no faster than the expected contact takes
+            # (``rt.control.kernels.approach_speed``: why, and why latched), the gap's error
+            # not integrated.
             m_z = 0.0
             for i in range(3):
                 m_z += j_ik[i, 0] * j_ik[i, 0]
