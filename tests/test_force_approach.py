@@ -151,19 +151,19 @@ def test_the_bound_is_latched_off_after_the_first_touch_until_the_next_entry(
         compiled: bool) -> None:
     """The 700 kg landing's failure, at the law: after the entry's first touch the measured
     force falling back to ≈ 0 (the overload sinking the platform away from the foot), a pull
-    or a lost reading leave the law unbounded — its command bit for bit the unbounded law's
-    from the same state — and a new entry (``reset``) bounds the approach again. The
-    compiled and the interpreted law run the same sequence bit for bit."""
+    or a lost reading leave the law unbounded — its command the unbounded law's from the same
+    state — and a new entry (``reset``) bounds the approach again. The compiled and the
+    interpreted law run the same sequence to 1e-9 N (not bit for bit: G and J_ik come from
+    the compiled tree and ``inv3`` in one, Pinocchio and LAPACK in the other; the bound moves
+    the command by ≥ 30 N per axis here)."""
     st = MODEL.dyn.state(np.asarray(MODEL.kin.ik(*POSE).q), np.zeros(3))
     law = ExplicitForce(MODEL, compiled=compiled)
     twin = ExplicitForce(MODEL, compiled=not compiled)
-    taus = []
 
     def step(force_n: float) -> np.ndarray:
         out = _step(law, st, force_n)
-        assert np.array_equal(out, _step(twin, st, force_n)), force_n   # compiled ≡ interpreted
-        assert np.array_equal(law._fs, twin._fs, equal_nan=True)
-        taus.append(out)
+        np.testing.assert_allclose(out, _step(twin, st, force_n), rtol=0.0, atol=1e-9)
+        np.testing.assert_allclose(law._fs, twin._fs, rtol=1e-12, atol=1e-12, equal_nan=True)
         return out
 
     for _ in range(2):                                  # two force-mode entries
@@ -174,7 +174,7 @@ def test_the_bound_is_latched_off_after_the_first_touch_until_the_next_entry(
             free = _unbounded(law, st, f)
             held = law.integral
             out = step(f)
-            assert np.all(out < free), (f, out, free)
+            assert np.all(out < free - 30.0), (f, out, free)
             assert law.integral == held
             assert law._fs[ck.FS_TOUCHED] == 0.0
         step(ck.CONTACT_TOUCH_N + 0.5)                  # the touch
@@ -182,7 +182,7 @@ def test_the_bound_is_latched_off_after_the_first_touch_until_the_next_entry(
         for f in (0.0, 1.0, math.nan, -1.0, -50.0, 0.0):
             # Unloaded again, a pull, a lost reading: the law as if unbounded.
             free = _unbounded(law, st, f)
-            assert np.array_equal(step(f), free), f
+            np.testing.assert_allclose(step(f), free, rtol=0.0, atol=1e-9, err_msg=str(f))
             assert law._fs[ck.FS_TOUCHED] == 1.0
         law.reset()
         twin.reset()
