@@ -202,3 +202,32 @@ def test_every_entry_is_approached_at_the_bound_and_the_contact_is_not() -> None
         assert wrong == 0
         print("rebound cycles (F ≤ touch after the touch):", rebound)
     assert p2[2] == pytest.approx(p1[2], abs=3)
+
+
+def test_an_overload_unloading_the_sensor_mid_hold_meets_the_law_unbounded() -> None:
+    """The failure the latch mends, on the twin: 700 kg lands under the fault matrix's 200 N
+    hold on the strapped foot; the platform sinks away from the foot, whose force passes
+    through ≈ 0 into a pull. On every force-mode cycle until the ``pulling`` stop the latch
+    is set (the hold's entry touched at once) and the drives stay at their limit pushing
+    back; re-engaged there (approach7's first version) the bound cut the command to ≈ 0.6 kN
+    and the stop chain of ``tests/test_force_hold_payload.py`` failed."""
+    from test_force_hold_payload import _hold_loop
+
+    from rt.model.dynamics import Payload
+
+    twin, pl = _hold_loop(MODEL)
+    law = pl.graph.component("controller").force_law
+    assert law._fs[ck.FS_TOUCHED] == 1.0
+    twin.plant.set_payload(Payload(700.0, (0.0, 0.0, 0.10)))
+    wrench, tau = pl.graph.output("force.wrench"), pl.graph.output("controller.tau")
+    unloaded = 0
+    for i in range(100):
+        pl.loop.run(cycles=1)
+        if pl.supervisor.reaction >= 1:
+            break
+        assert law._fs[ck.FS_TOUCHED] == 1.0
+        if -wrench[2] <= ck.CONTACT_TOUCH_N:
+            unloaded += 1
+            assert float(np.min(tau)) > law.drive_force_limit_n, (i, -wrench[2], list(tau))
+    assert unloaded >= 3, unloaded
+    assert next(e.cause for e in pl.events.snapshot() if e.kind == "fault") == "pulling"
