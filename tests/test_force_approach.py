@@ -213,10 +213,13 @@ def test_an_overload_unloading_the_sensor_mid_hold_meets_the_law_unbounded() -> 
     and the stop chain of ``tests/test_force_hold_payload.py`` failed."""
     from test_force_hold_payload import _hold_loop
 
+    from rt.components.protocol_blocks import HybridController
     from rt.model.dynamics import Payload
 
     twin, pl = _hold_loop(MODEL)
-    law = pl.graph.component("controller").force_law
+    ctl = pl.graph.component("controller")
+    assert isinstance(ctl, HybridController)
+    law = ctl.force_law
     assert law._fs[ck.FS_TOUCHED] == 1.0
     twin.plant.set_payload(Payload(700.0, (0.0, 0.0, 0.10)))
     wrench, tau = pl.graph.output("force.wrench"), pl.graph.output("controller.tau")
