@@ -209,7 +209,7 @@ def test_an_overload_unloading_the_sensor_mid_hold_meets_the_law_unbounded() -> 
     hold on the strapped foot; the platform sinks away from the foot, whose force passes
     through ≈ 0 into a pull. On every force-mode cycle until the ``pulling`` stop the latch
     is set (the hold's entry touched at once) and the drives stay at their limit pushing
-    back; re-engaged there (approach7's first version) the bound cut the command to ≈ 0.6 kN
+    back; re-engaged there (approach7) the bound cut the command to 0.6-1.1 kN per drive
     and the stop chain of ``tests/test_force_hold_payload.py`` failed."""
     from test_force_hold_payload import _hold_loop
 
