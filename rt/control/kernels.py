@@ -558,9 +558,9 @@ def approach_speed(margin, k, m):
     ``rt.control.force.ExplicitForce.reset`` re-arms it): within a hold, F falling to ≈ 0 is
     not told apart from a gap by the sensor alone, and the case that matters is the one the
     law must answer with all it has: an unmeasured load landing on the platform sinks it away
-    from the strapped foot, which unloads and then pulls; a bound re-engaged there caps the
-    push-back exactly when the drives must carry the load (the overload's ``pulling`` stop
-    came late or not at all, ``tests/test_force_hold_payload.py``). A genuine loss of contact
+    from the strapped foot, which unloads and then pulls; a bound re-engaged there capped the
+    push-back at 0.6-1.1 kN per drive exactly when the drives must carry the load at their
+    limit (700 kg, ``tests/test_force_hold_payload.py``). A genuine loss of contact
     (the foot lifted, the plate removed) ends or pauses the exercise, and the next push or
     hold is a new entry, armed again; a lifted strapped foot pulls (F < 0), which the
     supervisor's ``pulling`` check stops."""
