@@ -288,6 +288,10 @@ class HybridController(Component):
             self.force_law.reset()
             self._k_entry = self.force_law.k_est
             self._k_pending = self._k_contact if force_mode else math.nan
+            if not math.isnan(self._k_pending):
+                # ... but the approach is bounded for it already (a stiffer contact is
+                # met slower: ``rt.control.kernels.approach_speed``).
+                self.force_law.expect_stiffness(self._k_pending)
             self._roll_prev = self._pitch_prev = math.nan
             self._in_force = force_mode
             self.supervisor.force_control = force_mode

@@ -39,6 +39,13 @@ stays below 0 N anyway (``rt.safety.supervisor``).
   the online estimate below), so a stiffer contact has the loop's poles of k_s. k_s = 2.5e5:
   above the foot's k̂ (0.75-2.4e5 over a stance: its figures unchanged); at 5e5 the shear
   push under a fast roll still bounced (tests/test_force_stiff_contact.py).
+  Approach (``approach_force_margin_n``): before contact (F ≤ ``CONTACT_TOUCH_N``) the law is
+  a velocity loop that met the calibration plate at 45 mm/s (≈ 1.6 kN of impact, drives
+  saturated); Q_z is bounded so the platform closes the gap no faster than margin / √(k m),
+  k the contact it expects (the guess, or a remembered contact's), the integral held
+  meanwhile (``rt.control.kernels.approach_speed``). Only until the first touch after each
+  force-mode entry (latched, ``FS_TOUCHED``; ``reset`` re-arms it): an overload that sinks
+  the platform away from the foot unloads the sensor too, and must meet the law unbounded.
   Roll and pitch: PD plus an integral (``angle_ki_n_m_per_rad_s``, clamped): a tip dragged
   across a plate at its friction cone resists with μ N h (≈ 60 N m under 600 N), which the PD
   alone leaves 0.8° short.
@@ -147,6 +154,15 @@ class ExplicitForceGains(BaseModel):
     #: ATI's z noise (0.25 N: the Delta's resolution), so the sensor's noise does not flip
     #: the compensation's direction in a hold.
     friction_deadband_n: Annotated[float, Field(ge=0.0, le=20.0, allow_inf_nan=False)] = 0.75
+    #: Before contact (from the force-mode entry until the first cycle with F >
+    #: ``rt.control.kernels.CONTACT_TOUCH_N``; latched off after it) the law closes the gap
+    #: no faster than the impact onto the contact it expects overshoots by this much (N):
+    #: v ≤ margin / √(k m), k the remembered contact's stiffness or the guess, m the drives'
+    #: inertia along z (``rt.control.kernels.approach_speed``): 200 N → 25 mm/s onto the
+    #: guess (1e5 N/m), 5.7 mm/s onto a remembered plate (2e6 N/m). 0: unbounded (the law
+    #: before: the plate was met at 45 mm/s, ≈ 1.6 kN of impact, drives saturated).
+    approach_force_margin_n: Annotated[
+        float, Field(ge=0.0, le=5000.0, allow_inf_nan=False)] = 200.0
 
 
 #: Explicit force: Kp above ~50 N/N or Ki above ~5000 1/s make the loop through a stiff plate
@@ -183,6 +199,9 @@ EXPLICIT_FORCE_RANGES = {
     # From the sensor's noise (a few σ) to a few N (beyond it the hold is friction-limited
     # again).
     "friction_deadband_n": GainRange(0.0, 20.0, "N"),
+    # The impact overshoot the approach allows: a fraction of a push's force up to the
+    # drives' capacity along z (0: unbounded).
+    "approach_force_margin_n": GainRange(0.0, 5000.0, "N"),
 }
 #: Admittance: a virtual mass below 1 kg or a rate above 0.2 m/s would let the platform jump
 #: at a patient's push; above 500 kg / 1e5 N s/m it no longer yields to a person.
@@ -271,7 +290,8 @@ class ExplicitForce:
                        g.max_feedforward_accel_m_s2, self.axis_inertia,
                        self.drive_force_limit_n, g.schedule_stiffness_n_per_m,
                        g.angle_ki_n_m_per_rad_s, g.angle_integral_limit_n_m,
-                       g.friction_compensation, g.friction_deadband_n)
+                       g.friction_compensation, g.friction_deadband_n,
+                       g.approach_force_margin_n)
 
     @property
     def z_capacity_n(self) -> float:
@@ -340,7 +360,18 @@ class ExplicitForce:
         self.rls.P[:] = np.diag([(0.5 * k0) ** 2 / 1e-4, 1e10])
         self._last_z = math.nan
         self.k_est = k0
+        fs[ck.FS_K_APPROACH] = k0
+        # The approach's bound armed until the first touch (``rt.control.kernels``).
+        fs[ck.FS_TOUCHED] = 0.0
         self.tau = np.zeros(3)
+
+    def expect_stiffness(self, stiffness_n_per_m: float) -> None:
+        """The approach to the next contact bounded for this stiffness (N/m, held within
+        1/5..20× the guess) instead of the guess's: a remembered contact whose k̂ is applied
+        only on its first loaded cycle (``rt.components.protocol_blocks.HybridController``).
+        Until then the gains stay the guess's."""
+        guess = self.gains.stiffness_guess_n_per_m
+        self._fs[ck.FS_K_APPROACH] = min(20.0 * guess, max(0.2 * guess, float(stiffness_n_per_m)))
 
     def prime_stiffness(self, stiffness_n_per_m: float) -> None:
         """Start the stiffness estimate from a known contact's (N/m, held within 1/5..20× the
@@ -448,6 +479,23 @@ class ExplicitForce:
             return f_d + kp * e + g.ki_per_s * integ - g.damping_n_s_per_m * (zd - z_dot_ff)
 
         fz = task(integral)
+        fs = self._fs
+        if force_n > ck.CONTACT_TOUCH_N:
+            fs[ck.FS_TOUCHED] = 1.0
+        if fs[ck.FS_TOUCHED] == 0.0 and g.approach_force_margin_n > 0.0:
+            # Before the entry's first touch: no faster than the expected contact takes
+            # (``rt.control.kernels.approach_speed``: why, and why latched), the gap's error
+            # not integrated.
+            m_z = 0.0
+            for i in range(3):
+                m_z += j_ik[i, 0] * j_ik[i, 0]
+            v_a = ck.approach_speed.py_func(g.approach_force_margin_n,
+                                            float(self._fs[ck.FS_K_APPROACH]),
+                                            self.axis_inertia * m_z)
+            cap = g.damping_n_s_per_m * (v_a - zd)
+            if fz > cap:
+                fz = cap
+                integral = held
         if fz < floor and not force_n > floor:
             # Never pull: with the foot carrying no more than the preload (or no reading) the
             # command is held at the preload, and the integral only moves up (conditional
