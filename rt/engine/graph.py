@@ -37,6 +37,7 @@ from rt.engine.stats import (
     new_ring,
     summarize,
 )
+from rt.epoch import bump
 from rt.errors import ConfigurationError, InputError
 
 #: The graph's clock when it is not timed (:attr:`Graph.timed`): a C callable that returns 0,
@@ -424,6 +425,7 @@ class Graph:
     @fused.setter
     def fused(self, on: bool) -> None:
         self._fused = bool(on) and self._segment is not None
+        bump()                        # a toggle ends the segment's steady plan
 
     @property
     def segment(self) -> Any:
@@ -500,6 +502,7 @@ class Graph:
             raise
         self._running = True
         self.generation += 1
+        bump()
         if self._segment is not None:
             self._segment.prepare()       # bound (and its kernel loaded) now, not in a cycle
 
@@ -507,6 +510,7 @@ class Graph:
         """Stop every active component (reverse order); all are attempted, failures reported."""
         self._running = False
         self.generation += 1
+        bump()
         failures = []
         for slot in reversed(self._order):
             comp = self._components[slot]
@@ -536,6 +540,7 @@ class Graph:
         supervisor hard-stops while one is in error, and the operator's reset restarts it."""
         refused: dict[str, str] = {}
         self.generation += 1
+        bump()
         for slot in list(self.failed) + [s for s in also if s not in self.failed]:
             comp = self._components[slot]
             try:
@@ -549,6 +554,7 @@ class Graph:
                 refused[slot] = str(exc)
                 continue
             self.failed.pop(slot, None)
+        bump()
         return refused
 
     def reset(self) -> None:
@@ -558,6 +564,7 @@ class Graph:
         if self._running:
             raise LifecycleError("graph.reset(): stop the graph first")
         self.generation += 1
+        bump()
         for slot in self._order:
             comp = self._components[slot]
             if comp.lifecycle in (Lifecycle.INACTIVE, Lifecycle.ERROR):
@@ -567,6 +574,7 @@ class Graph:
                 port.reset_value()
         for lt in self._latch_specs:
             lt.type.copier()(lt.buffer, lt.type.allocate(lt.initial))
+        bump()
 
     # ------------------------------------------------------------------ the cycle
     def step(self, t: float, dt: float) -> int:
@@ -642,6 +650,7 @@ class Graph:
             # after it (the per-block path is the reference).
             self._fused = False
             self.last_exception = exc
+            bump()
             n = 0
         faults += self._seg_faults
         self._seg_faults = 0
@@ -682,6 +691,7 @@ class Graph:
         comp.error(reason)
         self.fault_count += 1
         self.failed[self._order[k]] = comp.fault_reason or reason
+        bump()                        # the supervisor's cycle now reports it (Python)
         self._faults.append(Fault(self._cycles, t, self._order[k], comp.name, code,
                                   comp.fault_reason or reason))
         if exc is not None:
@@ -819,6 +829,7 @@ class Graph:
         self._run[k] = (k, new, new.update, self._stores[k])
         self._split_run()
         self.generation += 1
+        bump()
         old._graph = None
         if old.lifecycle is Lifecycle.ACTIVE:
             try:
