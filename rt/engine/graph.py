@@ -27,6 +27,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from rt.engine.component import STATUS_EXCEPTION, Component, Lifecycle, LifecycleError
+from rt.engine.latches import copy_latches, latch_table
 from rt.engine.ports import InputPort, OutputPort, PortType, StructType, check_name
 from rt.engine.stats import (
     DEFAULT_CAPACITY,
@@ -309,6 +310,8 @@ class Graph:
         # (copy, latch, producer buffer) triples: the producer buffer object never changes,
         # even across swaps (the new component adopts it), so this list is built once.
         self._latches = [(lt.type.copier(), lt.buffer, lt.source) for lt in latches]
+        # All latches float64 arrays (the position loop's): one compiled copy of them all.
+        self._latch_table = latch_table([(lt.buffer, lt.source) for lt in latches])
         self._latch_specs = tuple(latches)
         self._idx = 0
         self._cycles = 0
@@ -595,8 +598,12 @@ class Graph:
         """The cycle's end, per block or fused: the delay latches, the cycle's time (from
         ``t0``, ns) into its ring and maximum, the ring index and the count; returns
         ``faults``."""
-        for copy, latch, src in self._latches:
-            copy(latch, src)
+        table = self._latch_table
+        if table is not None:
+            copy_latches(table)
+        else:
+            for copy, latch, src in self._latches:
+                copy(latch, src)
         elapsed = self._clock() - t0
         self._cycle_store[idx] = elapsed
         self._cycle_max = max(self._cycle_max, elapsed)
