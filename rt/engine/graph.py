@@ -686,10 +686,14 @@ class Graph:
                         self._fault(k, comp, int(status), f"update returned status {status}",
                                     t, None)
                         faults += 1
-        more, prev = self._blocks(self._seg_tails[n], t, dt, idx, prev)
-        faults += more
-        more, prev = self._blocks(self._post, t, dt, idx, prev)
-        faults += more
+        # (Empty in the steady fused cycle: no call then, ≈ 0.3 µs each.)
+        tails = self._seg_tails[n]
+        if tails:
+            more, prev = self._blocks(tails, t, dt, idx, prev)
+            faults += more
+        if self._post:
+            more, prev = self._blocks(self._post, t, dt, idx, prev)
+            faults += more
         return self._end_cycle(idx, t0, faults)
 
     def _fault(self, k: int, comp: Component, code: int, reason: str, t: float,
