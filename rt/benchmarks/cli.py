@@ -109,6 +109,9 @@ def _loop(args) -> int:
     else:
         print(f"{result['controller']} at {result['rate_hz']:.0f} Hz ({result['mode']}, twin): "
               f"{result['cycles']} cycles, {result['deadline_misses']} deadline misses")
+        if result["latched"]:
+            print(f"  the supervisor stopped the loop ({', '.join(result['latched'])}): the "
+                  f"figures include the stop's cycles, not only steady ones")
         c = result["cycle_us"]
         print(f"  whole cycle      median {c['median']:7.1f}  p99 {c['p99']:7.1f}  max "
               f"{c['max']:8.1f} µs")

@@ -47,4 +47,8 @@ def run_loop_benchmark(controller: str, seconds: float, rate_hz: float = 1000.0,
             "fused": graph.fused,
             "cycles": int(cycles), "deadline_misses": int(stats.misses),
             "cycle_us": _summary(cycle_ns), "cycle_without_twin_us": _summary(without),
-            "components": components}
+            "components": components,
+            # A host stall of tens of ms trips ``deadline_overruns`` (or tracking) now and
+            # then: the rest of such a run is a stopped loop (its blocks' Python), not the
+            # steady cycle; say so next to the figures (guard8).
+            "latched": [x["cause"] for x in pl.supervisor.latched()]}

@@ -46,9 +46,11 @@ slot's ring holds the call's whole Python (the checks and the dispatch) besides 
 The call takes one integer (``fused_kernel.fused_cycle``: the scalars live in the table, written
 item by item into ``array`` stores). A steady cycle on the in-process twin (the last one ran the
 whole segment in the kernel) takes a fast path (:meth:`FusedChain.run`): a per-binding plan
-whose checks are attribute reads and identity compares of what can change from outside the
-cycle, one twin sync, the few scalars that change; anything else takes the general path, which
-decides as before (devstage7b: the segment's Python ≈ 37-55 µs loaded → ≈ 10 µs quiet).
+whose guard is one integer compare (``rt.epoch``: every event that can change from outside the
+cycle what the general path decided from bumps it) plus the graph's cycle count and the mode
+input, one twin sync, the few scalars that change; anything else takes the general path, which
+decides as before (devstage7b: the segment's Python ≈ 37-55 µs loaded → ≈ 10 µs quiet; guard8:
+the guard's ≈ 50 attribute reads became the epoch compare).
 
 The blocks after the stop run their ``update`` in the same cycle. A non-standard block, a
 block not compiled or not active, or a law without a kernel here runs the whole chain per
@@ -247,6 +249,7 @@ from rt.control.laws import (
     PdG0,
     Pid,
 )
+from rt.epoch import EPOCH as _EPOCH
 from rt.estimation.compiled import CompiledKalmanEstimator
 from rt.references.sequencer import ProgramReference
 from rt.safety.events import SupervisorMode
@@ -427,6 +430,8 @@ class FusedChain:
         self._plan: tuple | None = None
         self._plan_ok = False
         self._next_cycle = -1
+        #: ``rt.epoch.EPOCH.n`` read at the start of the general cycle that made the plan.
+        self._plan_epoch = -1
         self._addr = tab[T_ADDR:T_ADDR + N_BUFFERS]
         self._dims = tab[T_DIMS:T_DIMS + 2 * N_BUFFERS].reshape((N_BUFFERS, 2))
         # The graph's rings start at the segment's first stage.
@@ -708,53 +713,27 @@ class FusedChain:
         into their slots' rings at ``idx`` by the kernel; ``others_ns`` is their sum.
 
         A steady cycle (the last one ran the whole segment in the kernel, :meth:`_make_plan`
-        bound a plan) checks only what can change between two such cycles — from outside the
-        cycle (a lifecycle change, a fault plan, a closed device, a request, new gains, a
-        program) — as attribute reads and identity compares, syncs the twin once, and writes
+        bound a plan) checks only that nothing changed between two such cycles from outside
+        the cycle (a lifecycle change, a fault plan, a closed device, a request, new gains, a
+        program: each bumps ``rt.epoch``) by one compare, syncs the twin once, and writes
         the few scalars that change every cycle; anything else takes the general path below,
         which decides as before (and from which the fast path may only be stricter)."""
         ta, fa = self._ta, self._fa
         plan = self._plan if self._plan_ok else None
         if plan is not None:
-            (g, est, mod, ref, ctl, sup, enc, force, stops, drv, rec, s, est_state, law,
-             watch, tw, cell, enc_b, enc_d, port, ft_b, ati, stops_b, mon, dmon, card_b,
-             card_d, fake, failed, cmode, hybrid, cap, st, store, t_at) = plan
-            rec_arrays = self._rec_arrays
-            # Stricter than the general path's checks (module docstring): the graph's previous
-            # cycle was this segment's (not per block: ``Graph.fused`` toggled, a fallback),
-            # the blocks, their buffers, the law's binding, the sequencer's and the
-            # supervisor's Python side.
+            (g, ctl, cmode, hybrid, tw, ati, port, mon, dmon, st, rec, cap, store,
+             t_at) = plan
+            # Stricter than the general path's checks (module docstring): nothing that may
+            # change from outside the cycle changed since the general cycle that made the plan
+            # checked it all (``rt.epoch``: the blocks' lifecycle, the graph's generation and
+            # failed blocks, a law rebound, the sequencer's and the supervisor's requests, a
+            # device closed or a method replaced on it, the drive's card, the twin's clock and
+            # faults), the graph's previous cycle was this segment's (not per block:
+            # ``Graph.fused`` toggled, a fallback), and the controller's mode input is the
+            # plan's (written in the cycle: the fade after a mode change is the block's).
             cycles = g._cycles
-            if (self._gen == g.generation and cycles == self._next_cycle
-                    and not g.failed and est._active and mod._active
-                    and ref._active and ctl._active and sup._active and enc._active
-                    and force._active and stops._active and drv._active and rec._active
-                    and est.state is est_state and s._mem is self._mem
-                    and s._par is self._par and law.cycle is self._plan_cycle
-                    and (watch is None or watch() is self._watched)
-                    and ref._pending is None and not ref._abort and ref._table is self._table
-                    and cmode[0] == self._plan_mode and not s._python_side_pending()
-                    # The devices: the same backends, open; the twin's SimClock (one sync is
-                    # the three backends' syncs: they read the same cell).
-                    and enc.encoders is enc_b and force.sensor is ft_b
-                    and stops.device is stops_b and not enc_b._closed and not enc_d._closed
-                    and not port._closed and not ft_b._closed and ft_b._streaming
-                    and not stops_b._closed and tw._clock_cell is cell
-                    and drv._enabled and drv._card == self._plan_card and failed[0] <= 0.5
-                    and drv.monitor is mon and not card_b._closed and not card_d._closed
-                    and card_d._fake_st is fake and rec.ring is rec_arrays[0]
-                    and rec._addr is rec_arrays[1] and rec._lens is rec_arrays[2]
-                    # No device method replaced on its instance since the plan (a wrapper,
-                    # an injected fault: the backends' ``*_READS``/``*_WRITES``): the
-                    # compiled stage would no longer be what the block calls.
-                    and "read_positions_m" not in enc_b.__dict__
-                    and "read_counts" not in enc_b.__dict__
-                    and "read_positions_m" not in enc_d.__dict__
-                    and "read_array" not in ft_b.__dict__ and "read" not in ft_b.__dict__
-                    and "_sample" not in ft_b.__dict__
-                    and "read_array" not in stops_b.__dict__ and "read" not in stops_b.__dict__
-                    and "write_volts" not in card_b.__dict__
-                    and "write_volts" not in card_d.__dict__):
+            if (_EPOCH.n == self._plan_epoch and cycles == self._next_cycle
+                    and cmode[0] == self._plan_mode):
                 self._next_cycle = cycles + 1
                 tw.sync()
                 pend = ati._pending
@@ -790,6 +769,9 @@ class FusedChain:
 
     def _general(self, t: float, dt: float, idx: int) -> int:
         """:meth:`run`'s general path: every check, each sensor's backend asked."""
+        # The epoch first, then the checks (``rt.epoch``): an event after this read makes the
+        # next cycle's compare differ; one before it is seen by the checks below.
+        epoch = _EPOCH.n
         self._next_cycle = self._graph._cycles + 1
         if self._gen != self._graph.generation:
             self._bind()
@@ -890,11 +872,10 @@ class FusedChain:
         # kernel with every sensor fused (nothing of the blocks' Python ran).
         if (self._plan is not None and n == len(self.slots) and self.pending is None
                 and head == ALL_HEAD and not sup_python and cyc is not None):
-            self._plan_cycle = cyc
             self._plan_mode = mode_raw
+            self._plan_epoch = epoch
             drv = self._drive
             assert drv is not None
-            self._plan_card = drv._card
             self._plan_ok = self._plan_drive_matches(drv)
         return n
 
@@ -941,8 +922,15 @@ class FusedChain:
         segment (:data:`HEAD`, :data:`CHAIN`, :data:`TAIL`) on the in-process twin's
         backends (its encoders, ATI, stop inputs and compiled DAC double, the twin on a
         ``SimClock``). The arrays the kernel views are the backends' own, assigned once in
-        their constructors; the fast path checks the flags that change (closed, streaming,
-        faults, a pending sample) and the objects (the block's backend, the card)."""
+        their constructors, as are the blocks' backends (``encoders``, ``sensor``,
+        ``device``), the drive's monitor and cards, the recorder's ring and the twin's
+        plant store. Everything else the general path decides from changes only at an event
+        that bumps ``rt.epoch`` after it (a block's lifecycle or a graph change, a request,
+        a reset or new gains, ``Device.close``, ``SampledForceTorque.start/stop``, the
+        drive's card or enable, ``FaultPlan.schedule``, ``Twin.clock``, a backend's method
+        replaced on its instance: ``WatchReplaced``), or in a block's Python, which ends
+        the plan; the fast path compares the epoch, then reads what changes in the cycle
+        (the mode input, the ATI's pending sample, the monitor's reading, the stop levels)."""
         from rt.twin.backends import (
             TwinActuators,
             TwinDigitalInputs,
@@ -954,7 +942,7 @@ class FusedChain:
         if self.slots != HEAD + CHAIN + TAIL or self._drive is None or self._rec is None:
             return None
         enc, force, stops = self._head
-        est, mod, ref, ctl, sup, drv, rec = self._comps
+        ctl, drv, rec = self._comps[3], self._comps[5], self._comps[6]
         enc_b, ft_b, stops_b = enc.encoders, force.sensor, stops.device
         if type(enc_b) is not TwinEncoders or type(ft_b) is not TwinForceTorque \
                 or type(stops_b) is not TwinDigitalInputs:
@@ -971,12 +959,10 @@ class FusedChain:
             card_b = getattr(cw, "__self__", None)
             if type(card_b) is not TwinActuators or card_b.twin is not tw:
                 return None
-        mon = drv.monitor
-        cmode = ctl.mode.data
-        return (self._graph, est, mod, ref, ctl, sup, enc, force, stops, drv, rec, self._sup,
-                est.state, self._law, self._binding.watch, tw, cell, enc_b, enc_d, port, ft_b,
-                tw.ati, stops_b, mon, None, None, None, None, drv.failed.data, cmode,
-                self._hybrid, rec.capacity, self._state, tw.plant._store, _T_AT)
+        # What the fast path reads every cycle (``dmon``, the monitor's array, is bound by
+        # :meth:`_plan_drive_matches`); everything else it relies on bumps ``rt.epoch``.
+        return (self._graph, ctl, ctl.mode.data, self._hybrid, tw, tw.ati, port, drv.monitor,
+                None, self._state, rec, rec.capacity, tw.plant._store, _T_AT)
 
     def _plan_drive_matches(self, drv: RedundantDrive) -> bool:
         """Bind the plan's drive part to the active card (the last cycle's): its backend,
@@ -989,7 +975,7 @@ class FusedChain:
         if card_b is None:
             return False
         card_d = card_b._driver
-        mon = plan[23]
+        mon = plan[7]
         dmon = None
         if mon is not None:
             dmon = mon()
@@ -997,7 +983,7 @@ class FusedChain:
                 return False
         if card_d._fake_st is not self._bufs[B_DFAKE]:
             return False
-        self._plan = (*plan[:24], dmon, card_b, card_d, card_d._fake_st, *plan[28:])
+        self._plan = (*plan[:8], dmon, *plan[9:])
         return True
 
     def _sensors(self) -> tuple[int, int, int, float, float, float]:

@@ -27,6 +27,7 @@ from rt.drivers.kernels import (
     pci1720_write_fake,
 )
 from rt.engine import Array, Component, Struct
+from rt.epoch import bump
 from rt.errors import HardwareError
 from rt.model.dynamics import State
 from rt.safety import supervisor_kernel as sk
@@ -344,13 +345,16 @@ class RedundantDrive(Component):
         # Each card's compiled write (None for a card that has none, e.g. a duck-typed one).
         self._compiled_writes = [getattr(c, "compiled_write", None) for c in self.cards]
         self._card = 0
+        bump()
         self.cards[0].enable()
         self._enabled = True
+        bump()
 
     def _fail_over(self, t: float, channel: int, why: str) -> bool:
         old = self._card
         if old + 1 >= len(self.cards):
             self.failed.data[0] = 1.0
+            bump()
             self.log.append(SafetyEvent(t, "fault", "drive_channel", Reaction.HARD_STOP,
                                         f"channel {channel} failed on the last card ({why})",
                                         {"card": old, "channel": channel}))
@@ -360,6 +364,7 @@ class RedundantDrive(Component):
         except HardwareError:
             pass                               # the failing card may not even disable
         self._card = old + 1
+        bump()
         self.cards[self._card].enable()
         self.active_card.data[0] = self._card
         self._mismatch[:] = 0
@@ -380,6 +385,7 @@ class RedundantDrive(Component):
             except HardwareError:
                 pass
         self._enabled = False
+        bump()
 
     def update(self, t: float, dt: float) -> int:
         if not self.compiled:
@@ -427,6 +433,7 @@ class RedundantDrive(Component):
                 self._last[:] = self._st[_BACKUP:_BACKUP + 3]     # as before this cycle
                 raise
             self._enabled = enabled
+            bump()
         if not enabled:
             return 0
         try:
@@ -477,6 +484,7 @@ class RedundantDrive(Component):
             else:
                 card.disable()
             self._enabled = enabled
+            bump()
         if not enabled:
             self._last[:] = 0.0
             return 0

@@ -23,6 +23,7 @@ from pydantic import Field
 from rt.control import kernels as ck
 from rt.control.base import STATUS_OK, Controller, GainRange, Gains, register
 from rt.control.laws import PD_RANGES
+from rt.epoch import bump
 from rt.model import rigid_body as rb
 from rt.model.dynamics import Payload
 from rt.model.kernels import TREE_DOF
@@ -170,6 +171,7 @@ class Adaptive(Controller):
         est[self._gains_at:self._gains_at + 2] = self._gain_array[0:2]
         self._est = est
         self._nb = nb
+        bump()                        # a new estimate array: the fused cycle binds it again
         self.theta = est[0:nb]
 
     def _law_compiled(self, st, ref, dt, out, dry_run):

@@ -28,6 +28,7 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from rt.epoch import bump
 from rt.errors import ConfigurationError
 from rt.model import RobotModel
 from rt.model import rigid_body as rb
@@ -186,6 +187,7 @@ class Controller(abc.ABC):
         b = self._binding
         self.cycle = (None if b is None or not self.compiled or self._offset_weight > 0.0
                       else self._bound_kernel(*b))
+        bump()                        # the fused cycle binds the law's buffers again
 
     def _bound_kernel(self, st: State, ref: Reference, out: np.ndarray
                       ) -> Callable[[float], int] | None:

@@ -20,6 +20,7 @@ from rt.devices.interfaces import (
     ForceTorqueSensor,
     Wrench,
 )
+from rt.epoch import bump
 
 # The polled sensor's own state (float64[9]): last sample counter (integers are exact in
 # float64), the time it last changed (s), the stale timeout (s), the software bias (6).
@@ -90,9 +91,11 @@ class SampledForceTorque(ForceTorqueSensor):
     def start(self) -> None:
         self._check_open()
         self._streaming = True
+        bump()
 
     def stop(self) -> None:
         self._streaming = False
+        bump()
 
     def bias(self) -> None:
         """Software bias: subtract the current reading from later ones."""

@@ -64,7 +64,7 @@ from typing import Any
 
 import numpy as np
 
-from rt.devices.interfaces import ActuatorOutputs
+from rt.devices.interfaces import ActuatorOutputs, WatchReplaced
 from rt.drivers import kernels
 from rt.errors import BackendUnavailableError, ConfigurationError, HardwareError, InputError
 
@@ -237,7 +237,7 @@ class _Channel:
     maxdata: int
 
 
-class Pci1720Outputs(ActuatorOutputs):
+class Pci1720Outputs(WatchReplaced, ActuatorOutputs):
     """Command voltages (V) to the three current-mode amplifiers through a PCI-1720.
 
     Inputs: ``write_volts(volts)`` with one voltage per axis. Outputs: ``last_codes`` (DAC
@@ -258,6 +258,8 @@ class Pci1720Outputs(ActuatorOutputs):
 
     Starts disabled with 0 V on every channel. ``close()`` disables, then closes the device.
     """
+
+    REPLACEABLE = frozenset({"write_volts"})
 
     def __init__(self, device: str = "/dev/comedi0", subdevice: int = 0,
                  channels: Sequence[int] = (0, 1, 2), range_index: int = RANGE_BIPOLAR_10V,

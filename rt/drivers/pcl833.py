@@ -46,7 +46,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from rt.devices.interfaces import EncoderBank
+from rt.devices.interfaces import EncoderBank, WatchReplaced
 from rt.drivers import kernels
 from rt.drivers.port_io import DevPortIO, PortIO
 from rt.errors import ConfigurationError
@@ -222,7 +222,7 @@ def _per_axis(value: float | Sequence[float], name: str, n: int) -> tuple:
     return values
 
 
-class Pcl833Encoders(EncoderBank):
+class Pcl833Encoders(WatchReplaced, EncoderBank):
     """The three slider encoders read through a PCL-833 card.
 
     Outputs: ``read_positions_m(out)`` -> slider positions q (m, len 3): ``origin_m`` plus the
@@ -245,6 +245,8 @@ class Pcl833Encoders(EncoderBank):
     * ``origin_m``: slider positions (m) that the counters' reset value stands for, i.e. where
       the sliders are when the counters are reset (the rig's homing position); default 0.
     """
+
+    REPLACEABLE = frozenset({"read_positions_m"})
 
     def __init__(self, port_io: PortIO | None = None, base: int = DEFAULT_BASE,
                  m_per_count: float | Sequence[float] = DEFAULT_M_PER_COUNT,

@@ -34,6 +34,7 @@ import enum
 from typing import Any, ClassVar
 
 from rt.engine.ports import InputPort, OutputPort, PortType, check_name
+from rt.epoch import bump
 from rt.errors import ConfigurationError, InputError, TalusError
 
 STATUS_OK = 0
@@ -149,6 +150,7 @@ class Component:
         try:
             self.on_configure()
             self.state = self.make_state()
+            bump()
         except Exception as exc:
             raise ConfigurationError(self._hook_failed("configure", exc)) from exc
         self._was_configured = True
@@ -164,12 +166,14 @@ class Component:
             raise LifecycleError(self._hook_failed("start", exc)) from exc
         self._lifecycle = Lifecycle.ACTIVE
         self._active = True
+        bump()                        # the fused cycle's plan checked the blocks' lifecycle
 
     def stop(self) -> None:
         """active → inactive."""
         if self._lifecycle is not Lifecycle.ACTIVE:
             raise self._refuse("stop", "active")
         self._active = False
+        bump()
         try:
             self.on_stop()
         except Exception as exc:
@@ -181,6 +185,7 @@ class Component:
         a failing ``on_error`` hook is appended to the recorded reason."""
         self._active = False
         self._lifecycle = Lifecycle.ERROR
+        bump()
         try:
             self.on_error(reason)
         except Exception as exc:  # noqa: BLE001 - the fault path must not fault
@@ -198,6 +203,7 @@ class Component:
             return
         try:
             self.state = self.make_state()
+            bump()
             self.on_reset()
         except Exception as exc:
             raise LifecycleError(self._hook_failed("reset", exc)) from exc

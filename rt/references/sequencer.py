@@ -37,6 +37,7 @@ import numpy as np
 
 from rt.components.tare import TareState, refusal_message
 from rt.engine import Array, Component
+from rt.epoch import bump
 from rt.errors import ConfigurationError
 from rt.references import sequencer_kernel as sk
 from rt.references.approach import Approach, ApproachStatus
@@ -310,6 +311,7 @@ class ProgramReference(Component):
         """
         # The output (and the table) is built here, on the caller's thread, not in the cycle.
         self._pending = self._new_request(program, approach_min_s, rest_q, return_min_s)
+        bump()                        # after the request (``rt.epoch``): its cycle is Python's
 
     def _new_request(self, program: Program, approach_min_s: float | None = None,
                      rest_q: tuple[float, float, float] | None = None,
@@ -322,6 +324,7 @@ class ProgramReference(Component):
     def request_abort(self) -> None:
         """Soft stop of the program without a fault: brake, ramp force down, then rest."""
         self._abort = True
+        bump()
 
     @property
     def busy(self) -> bool:
@@ -383,6 +386,7 @@ class ProgramReference(Component):
             seq[sk.S_TABLE] = 0.0
             return
         self._table = view.table
+        bump()
         seq[sk.S_TABLE] = 1.0
         seq[sk.S_COL0] = float(view.col0)
         seq[sk.S_PROGRAM_MODE] = float(view.mode)

@@ -109,6 +109,7 @@ from typing import Any
 
 import numpy as np
 
+from rt.epoch import bump
 from rt.errors import ConfigurationError
 from rt.model.description import AMPLIFIER_OFFSET_MAX_V, RobotDescription
 from rt.safety import supervisor_kernel as sk
@@ -343,8 +344,8 @@ class Supervisor:
         # deceleration over the lever ∂q/∂angle (≈ 1.5 R_p for this geometry).
         self.alpha_stop = soft_stop_accel_m_s2 / lever_m_per_rad
         self.jerk_time = soft_stop_accel_m_s2 / soft_stop_jerk_m_s3
-        self.heartbeat_age: Callable[[], float] | None = None
-        self.heartbeat_required = False
+        self._heartbeat_age: Callable[[], float] | None = None
+        self._heartbeat_required = False
         self.force_control = False
         # Frozen-encoder physics: the axis' inertia (slider + reflected rotor, kg), how far the
         # command may move from the force that carried the moving axis without moving it (the
@@ -480,6 +481,7 @@ class Supervisor:
         # forces, overruns, pull time, brakes, per-cause latch/report flags.
         self._mem = sk.new_mem()
         self._mem[sk.M_BRAKES_OPEN_AT] = self.brake_release_s   # drives enabled at t = 0
+        bump()                        # new requests and ``_mem``: the fused cycle's plan ends
 
     @property
     def carry_force_n(self) -> list[float]:
@@ -498,10 +500,33 @@ class Supervisor:
     def request_estop(self, source: str) -> None:
         """E-stop from a client (``gui``, ``cli``, ``keyboard``); acted on next cycle."""
         self._estop_request = source
+        bump()                        # after the request (``rt.epoch``: state, then bump)
 
     def request_stop(self) -> None:
         """Soft stop from a client."""
         self._stop_request = True
+        bump()
+
+    @property
+    def heartbeat_required(self) -> bool:
+        """Whether a client drives the robot and its heartbeat's age is checked each cycle
+        (with :attr:`heartbeat_age`)."""
+        return self._heartbeat_required
+
+    @heartbeat_required.setter
+    def heartbeat_required(self, on: bool) -> None:
+        self._heartbeat_required = on
+        bump()                        # the cycle's Python side changes (``rt.epoch``)
+
+    @property
+    def heartbeat_age(self) -> Callable[[], float] | None:
+        """The client's heartbeat age (s) when called, or None (no client)."""
+        return self._heartbeat_age
+
+    @heartbeat_age.setter
+    def heartbeat_age(self, age: Callable[[], float] | None) -> None:
+        self._heartbeat_age = age
+        bump()
 
     def latched(self) -> list[dict]:
         """The latched faults: ``{"id", "cause", "reaction"}`` each (any thread)."""
@@ -521,6 +546,7 @@ class Supervisor:
             else frozenset(int(i) for i in acknowledge)
         ticket = ResetTicket(ids)
         self._reset_tickets.append(ticket)
+        bump()
         return ticket
 
     # ------------------------------------------------------------------ the cycle
@@ -590,7 +616,7 @@ class Supervisor:
     def _python_side_pending(self) -> bool:
         return (self._estop_request is not None or self._stop_request
                 or bool(self._reset_tickets) or self._failed_components is not None
-                or (self.heartbeat_required and self.heartbeat_age is not None))
+                or (self._heartbeat_required and self._heartbeat_age is not None))
 
     def _trip(self, t: float, cause: str, reaction: Reaction, message: str,
               values: dict) -> None:

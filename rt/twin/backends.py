@@ -13,6 +13,7 @@ from rt.devices.interfaces import (
     DigitalInputs,
     DigitalInputState,
     EncoderBank,
+    WatchReplaced,
     replaced,
 )
 from rt.devices.sampled_ft import SampledForceTorque
@@ -30,8 +31,10 @@ INPUT_READS = ("read_array", "read")
 ACTUATOR_WRITES = ("write_volts",)
 
 
-class TwinEncoders(EncoderBank):
+class TwinEncoders(WatchReplaced, EncoderBank):
     """The PCL-833 driver reading the twin's emulated card (homed: positions are absolute)."""
+
+    REPLACEABLE = frozenset(ENCODER_READS)
 
     def __init__(self, twin: Twin):
         self.twin = twin
@@ -78,8 +81,10 @@ class TwinEncoders(EncoderBank):
         self._driver.close()
 
 
-class TwinActuators(ActuatorOutputs):
+class TwinActuators(WatchReplaced, ActuatorOutputs):
     """One of the twin's two PCI-1720 cards (``card`` 0 or 1), through the real driver."""
+
+    REPLACEABLE = frozenset(ACTUATOR_WRITES)
 
     def __init__(self, twin: Twin, card: int = 0, limit_v: float | None = None):
         if card not in (0, 1):
@@ -131,11 +136,13 @@ class TwinActuators(ActuatorOutputs):
         self._driver.close()
 
 
-class TwinForceTorque(SampledForceTorque):
+class TwinForceTorque(WatchReplaced, SampledForceTorque):
     """The twin's ATI sensor read in-process (the RDT/CAN servers expose it on the wire).
 
     ``stale`` is set when the sensor's sample counter has not advanced for ``timeout_s``.
     """
+
+    REPLACEABLE = frozenset(FT_READS)
 
     def __init__(self, twin: Twin, timeout_s: float = 0.05):
         super().__init__(timeout_s)
@@ -171,8 +178,10 @@ class TwinForceTorque(SampledForceTorque):
         return sample.wrench, sample.ft_sequence, sample.status, twin.t
 
 
-class TwinDigitalInputs(DigitalInputs):
+class TwinDigitalInputs(WatchReplaced, DigitalInputs):
     """The twin's stop inputs (set by the fault plan: ``hardware_estop``, ``hand_stop``)."""
+
+    REPLACEABLE = frozenset(INPUT_READS)
 
     def __init__(self, twin: Twin):
         self.twin = twin

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from rt.epoch import bump
 from rt.errors import InputError
 
 KINDS = ("encoder_freeze", "encoder_jump", "encoder_noise", "dac_dead", "dac_stuck",
@@ -85,6 +86,7 @@ class FaultPlan:
             fields["seconds"] = float(seconds)
         fault = Fault(kind, float(t_start), end, **fields)
         self.faults.append(fault)
+        bump()                        # the fused cycle's fast path leaves the twin's faults
         return fault
 
     def clear(self) -> None:

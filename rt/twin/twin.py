@@ -45,6 +45,7 @@ from rt.drivers.fake_comedi import FakeComedi
 from rt.drivers.fake_pcl833 import FakePcl833Port
 from rt.drivers.pci1720 import code_to_volts
 from rt.drivers.pcl833 import encode_position
+from rt.epoch import bump
 from rt.errors import InputError
 from rt.model.description import RobotDescription, load_description
 from rt.model.dynamics import Payload
@@ -277,6 +278,7 @@ class Twin:
         # A SimClock's time is read from its cell, without a call: every device backend
         # syncs before it reads (three or four times a cycle), almost always a no-op.
         self._clock_cell = clock.cell if type(clock) is SimClock else None
+        bump()                        # the fused cycle's fast path reads this cell
 
     # ------------------------------------------------------------------ running
     def sync(self, t: float | None = None) -> None:
