@@ -42,6 +42,7 @@ is not a float64 array, a loop with signals, an interpreted twin.
 """
 from __future__ import annotations
 
+from time import thread_time
 from typing import Any
 
 import numpy as np
@@ -68,6 +69,7 @@ from rt.components.fused_kernel import (
     T_ARGS,
     T_FARGS,
     T_SIZE,
+    _ticks,
     fused_cycle,
 )
 from rt.components.twin_step import TwinStep
@@ -82,8 +84,11 @@ from rt.twin.twin import _MAX_CHUNK_S, _T_AT, SimClock
 DONE, BACK_BEFORE, BACK_INSIDE = 0, 1, 2
 #: ``out`` of :func:`steady_cycles` (int64): cycles completed, why it returned, the kernel's
 #: stage reached (inside), filled, whether an FK succeeded, the last others_ns and aux, the
-#: graph's ring index after the last completed cycle.
-O_DONE, O_WHY, O_RAN, O_FILLED, O_FK_ANY, O_OTHERS, O_AUX, O_IDX, O_SIZE = range(9)
+#: graph's ring index after the last completed cycle, the CPU cycle counter's ticks spent in
+#: the twin's periods and in the whole call (the twin's share of a pre-flight:
+#: ``bench/preflight.py``).
+(O_DONE, O_WHY, O_RAN, O_FILLED, O_FK_ANY, O_OTHERS, O_AUX, O_IDX, O_TWIN_TICKS, O_TICKS,
+ O_SIZE) = range(11)
 #: ``rings`` of :func:`steady_cycles`: the addresses of the twin slot's, the segment's first
 #: slot's and the tap slot's timing stores and the graph's cycle store (int64 each).
 R_TWIN, R_SEG0, R_TAP, R_CYCLE, R_SIZE = range(5)
@@ -116,6 +121,8 @@ def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, code
     why = DONE
     ran = 0
     done = 0
+    twin_ticks = 0
+    start = _ticks()
     for c in range(n):
         if cmode[0] != plan_mode or failed[0] > 0.5:
             why = BACK_BEFORE                       # the fast path's guard would refuse
@@ -125,6 +132,7 @@ def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, code
         cell[0] = now                               # TwinStep: the SimClock, then sync
         left = now - B[_T_AT]
         bits = 0
+        tick = _ticks()
         while left > 1e-12:
             chunk = min(_MAX_CHUNK_S, left)
             # ``TwinPlant.substeps``: max(1, round(chunk · rate)), round half to even.
@@ -133,6 +141,7 @@ def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, code
             if bits < 0:
                 break
             left = now - B[_T_AT]
+        twin_ticks += _ticks() - tick
         if bits < 0 or ati[tk.ATI_PENDING] == 0.0:
             why = BACK_BEFORE                       # new random draws, a failed FK: Python's
             break
@@ -175,6 +184,8 @@ def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, code
     out[O_OTHERS] = others
     out[O_AUX] = aux
     out[O_IDX] = idx
+    out[O_TWIN_TICKS] = twin_ticks
+    out[O_TICKS] = _ticks() - start
     return t
 
 
@@ -191,6 +202,11 @@ class PreflightDriver:
         self.tap = tap
         self.cycles_compiled = 0
         self.cycles_python = 0
+        #: This thread's CPU time in the compiled calls (s), and its share spent in the twin's
+        #: periods (s: each call's CPU time × the twin's share of its cycle-counter ticks; the
+        #: ticks alone also count the time the process was preempted, on a loaded machine).
+        self.compiled_cpu_s = 0.0
+        self.twin_cpu_s = 0.0
         self._out = np.zeros(O_SIZE, dtype=np.int64)
         self._static: tuple | None = None
         self.why_not = self._check()
@@ -304,6 +320,7 @@ class PreflightDriver:
         lat_dst, lat_src, lat_len, rings = static
         out = self._out
         k0 = loop._cycles
+        c0 = thread_time()
         t = steady_cycles(
             n, k0, loop._anchor_t, loop._anchor_cycle, loop._period_s, step._t0,
             tw._clock_cell, tw.plant.B, tw.encoder_port._st, codes, tw.ati._packed,
@@ -311,6 +328,10 @@ class PreflightDriver:
             seg._plan_mode, cmode, plan[28], 1 if st._filled else 0, rec.written, plan[31],
             tap.ring, tap.written, tap._addr, tap._lens, lat_dst, lat_src, lat_len, rings,
             g._idx, g._mask, out)
+        cpu = thread_time() - c0
+        self.compiled_cpu_s += cpu
+        if out[O_TICKS] > 0:
+            self.twin_cpu_s += cpu * float(out[O_TWIN_TICKS]) / float(out[O_TICKS])
         done = int(out[O_DONE])
         tw._amp_key = None            # the kernel computed amp_volts (``_sync_fused``'s)
         if done:
