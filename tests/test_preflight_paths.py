@@ -20,8 +20,10 @@ import pytest
 
 from protocols import session
 from protocols.library import load_protocol
+from protocols.schema import validate_protocol_data
 from rt.components.fused import ENV_FLAG
 from rt.model import RobotModel
+from rt.model.ankle import AnkleSetup
 from rt.preflight import driver as driver_mod
 from rt.safety.limits import RobotLimits
 
@@ -86,7 +88,7 @@ def _preflight_rows(setup: session.SessionSetup, monkeypatch, *, driver: bool, f
 
     def keep(*args, **kwargs):
         out = build(*args, **kwargs)
-        kept["tap"] = out[4]
+        kept["pl"], kept["tap"] = out[3], out[4]
         return out
 
     def keep_driver(*args, **kwargs):
@@ -99,7 +101,22 @@ def _preflight_rows(setup: session.SessionSetup, monkeypatch, *, driver: bool, f
     except session.ProtocolValidationError as exc:
         verdict = str(exc)
     tap = kept["tap"]
-    return verdict, tap.ring[:tap.written].copy(), kept.get("driver")
+    rows = tap.ring[:tap.written].copy()
+    truth = session.truth_tap(kept["pl"])
+    if truth is not None:          # an ankle setup: the twin ankle's true torque, same cycles
+        assert truth.written == tap.written
+        rows = np.hstack([rows, truth.ring[:truth.written]])
+    return verdict, rows, kept.get("driver")
+
+
+def _ankle_rom(amplitude_deg: float) -> dict:
+    """A short ankle ROM about the ankle (``tests/test_ankle_session.py``'s)."""
+    return {"schema_version": 1, "kind": "ankle_rom", "name": "rom",
+            "pose": {"z_m": 0.63}, "sequence": ["dorsi_plantar", "inversion_eversion"],
+            "amplitude_deg": {"dorsiflexion": amplitude_deg, "plantarflexion": amplitude_deg,
+                              "inversion": amplitude_deg, "eversion": amplitude_deg},
+            "speed_deg_s": 20.0, "hold_s": 0.3, "max_acceleration_deg_s2": 200.0,
+            "max_jerk_deg_s3": 4000.0}
 
 
 def _setups() -> list:
@@ -110,6 +127,12 @@ def _setups() -> list:
         pytest.param(session.SessionSetup(LIBRARY / "sine_fz.yaml"), True, id="sine_fz"),
         pytest.param(session.SessionSetup(LIBRARY / "gait_replay.yaml",
                                           patient_weight_kg=70.0), True, id="gait_replay"),
+        # An ankle setup: the twin ankle's truth block and its tap after the session tap.
+        pytest.param(session.SessionSetup(protocol=validate_protocol_data(_ankle_rom(8.0)),
+                                          ankle=AnkleSetup(side="left",
+                                                           height_above_sole_m=0.07,
+                                                           offset_x_m=0.01)),
+                     True, id="ankle_setup"),
         # A run the supervisor stops: the drives limited to 0.5 V saturate (the kernel's
         # supervisor latches the stop: a hand-back inside a cycle), then 0.6 s at rest.
         pytest.param(session.SessionSetup(LIBRARY / "sine_fz.yaml",

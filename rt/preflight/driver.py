@@ -36,9 +36,9 @@ fast path keeps (``n_reads``, ``buffer_filled``, the controller's ``_dt``, the s
 the per-block one's tap rows and verdict, bit for bit.
 
 Where it does not apply (:meth:`PreflightDriver.why_not`, then every cycle is Python's, as
-before): a timed graph, no fused segment, a graph whose slots are not exactly
-twin → segment → session tap (the twin ankle's truth block of an ankle setup), a latch that
-is not a float64 array, a loop with signals, an interpreted twin.
+before): a timed graph, no fused segment, a graph whose slots are not
+twin → segment → session tap (→ the twin ankle's truth block and its tap, an ankle setup),
+a latch that is not a float64 array, a loop with signals, an interpreted twin.
 """
 from __future__ import annotations
 
@@ -78,6 +78,12 @@ from rt.twin import kernels as tk
 from rt.twin.environment import PayloadStep
 from rt.twin.twin import _MAX_CHUNK_S, _T_AT, SimClock
 
+#: The plant's rotation and environment state in its block (``TwinPlant.rot``, ``env_state``).
+_S_ROT, _S_ENV = tk.B_S + tk.S_ROT, tk.B_S + tk.S_ENV_STATE
+_NO_TRUTH = np.zeros(0)
+_NO_RING = np.zeros((1, 1))
+_NO_I = np.zeros(0, dtype=np.int64)
+
 #: Why :func:`steady_cycles` returned: every cycle asked for ran; a hand-back before a cycle
 #: (nothing of it, or whole twin chunks of it, ran); a hand-back inside a cycle (the twin's
 #: period and the segment's kernel ran: Python finishes it from the kernel's answer).
@@ -90,21 +96,26 @@ DONE, BACK_BEFORE, BACK_INSIDE = 0, 1, 2
 (O_DONE, O_WHY, O_RAN, O_FILLED, O_FK_ANY, O_OTHERS, O_AUX, O_IDX, O_TWIN_TICKS, O_TICKS,
  O_SIZE) = range(11)
 #: ``rings`` of :func:`steady_cycles`: the addresses of the twin slot's, the segment's first
-#: slot's and the tap slot's timing stores and the graph's cycle store (int64 each).
-R_TWIN, R_SEG0, R_TAP, R_CYCLE, R_SIZE = range(5)
+#: slot's and the tap slot's timing stores, the graph's cycle store, and (an ankle setup) the
+#: twin ankle's truth block's and its tap's stores (int64 each; 0 without).
+R_TWIN, R_SEG0, R_TAP, R_CYCLE, R_TRUTH, R_TRUTH_TAP, R_SIZE = range(7)
 
 
 @njit(cache=True)
 def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, codes, ati, draws,
                   n_chunk, rate_hz, tab_addr, plan_mode, cmode, failed, filled, rec_written,
                   rec_cap, tap_ring, tap_written, tap_addr, tap_lens, lat_dst, lat_src,
-                  lat_len, rings, idx, mask, out):
+                  lat_len, rings, idx, mask, truth, truth_ring, truth_addr, truth_lens, out):
     """Up to ``n`` steady pre-flight cycles from loop cycle ``k0`` (module docstring): per
     cycle the loop's time (``Loop._run_fast``'s float arithmetic), the twin's fault-free
     period to it in chunks (``Twin._sync_fused``: ``kernels.period_ati``), the segment's
     kernel with the scalars the fast path writes (``fused_cycle``), the session tap's row
-    (``tap_row``), the latches' copies (float64, by address), the timing stores as an untimed
-    graph writes them. Returns the loop's time of the last cycle it touched; ``out``
+    (``tap_row``); with an ankle setup (``truth``: float64[3], else empty) the twin ankle's
+    true joint torque (``protocols.session.TwinAnkleTruth.update``: Rᵀ m on the plant's
+    rotation and environment state) and its tap's row (``truth_ring``, ``truth_addr``,
+    ``truth_lens``; its count is ``tap_written`` too: both taps run every cycle); the
+    latches' copies (float64, by address), the timing stores as an untimed graph writes
+    them. Returns the loop's time of the last cycle it touched; ``out``
     (``O_*``) says how far it went and why it stopped."""
     tab = carray(i64_at(tab_addr), T_SIZE)
     ia = tab[T_ARGS:T_ARGS + (T_FARGS - T_ARGS)]
@@ -113,6 +124,10 @@ def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, code
     ring_seg0 = carray(i64_at(rings[R_SEG0]), mask + 1)
     ring_tap = carray(i64_at(rings[R_TAP]), mask + 1)
     ring_cycle = carray(i64_at(rings[R_CYCLE]), mask + 1)
+    ankle = truth.shape[0] == 3
+    ring_truth = carray(i64_at(rings[R_TRUTH if ankle else R_CYCLE]), mask + 1)
+    ring_truth_tap = carray(i64_at(rings[R_TRUTH_TAP if ankle else R_CYCLE]), mask + 1)
+    truth_cap = truth_ring.shape[0]
     cap = tap_ring.shape[0]
     t = 0.0
     fk_any = 0
@@ -166,8 +181,15 @@ def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, code
         ring_twin[idx] = 0
         ring_seg0[idx] = -others
         tap_row(tap_ring, tap_written % cap, t, tap_addr, tap_lens)
-        tap_written += 1
         ring_tap[idx] = 0
+        if ankle:
+            for a in range(3):        # TwinAnkleTruth.update: Rᵀ m, on floats, same order
+                truth[a] = (B[_S_ROT + a] * B[_S_ENV + 1] + B[_S_ROT + 3 + a] * B[_S_ENV + 2]
+                            + B[_S_ROT + 6 + a] * B[_S_ENV + 3])
+            ring_truth[idx] = 0
+            tap_row(truth_ring, tap_written % truth_cap, t, truth_addr, truth_lens)
+            ring_truth_tap[idx] = 0
+        tap_written += 1
         for j in range(lat_dst.shape[0]):
             dst = carray(f64_at(lat_dst[j]), lat_len[j])
             src = carray(f64_at(lat_src[j]), lat_len[j])
@@ -209,6 +231,7 @@ class PreflightDriver:
         self.twin_cpu_s = 0.0
         self._out = np.zeros(O_SIZE, dtype=np.int64)
         self._static: tuple | None = None
+        self._truth: tuple | None = None
         self.why_not = self._check()
 
     # ------------------------------------------------------------------ applicability
@@ -221,8 +244,20 @@ class PreflightDriver:
             return "no fused segment"
         if len(g._pre) != 1 or not isinstance(g._pre[0][1], TwinStep):
             return "the slots before the segment are not the twin's block alone"
-        if len(g._post) != 1 or g._post[0][1] is not self.tap or self.tap._signals is None:
-            return "the slots after the segment are not the session tap alone"
+        post = [entry[1] for entry in g._post]
+        if not post or post[0] is not self.tap or self.tap._signals is None:
+            return "the slot after the segment is not the session tap"
+        # The twin ankle's truth block is ``protocols.session.TwinAnkleTruth`` (``rt`` does
+        # not import ``protocols``: known by its name, its twin and its tap's one signal).
+        if len(post) == 3 and type(post[1]).__name__ == "TwinAnkleTruth" \
+                and isinstance(post[2], SignalTap) and post[2]._signals is not None \
+                and len(post[2]._signals) == 1 \
+                and post[2]._signals[0].ctypes.data == post[1].torque.data.ctypes.data \
+                and post[1].twin is g._pre[0][1].twin and post[2].capacity == self.tap.capacity:
+            # An ankle setup: the twin ankle's truth block and its tap (one row per cycle).
+            self._truth = (post[1], post[2])
+        elif len(post) != 1:
+            return "the slots after the session tap are not the twin ankle's truth and its tap"
         for _copy, latch, src in g._latches:
             if not (isinstance(latch, np.ndarray) and isinstance(src, np.ndarray)
                     and latch.dtype == np.float64 and src.dtype == np.float64
@@ -252,6 +287,9 @@ class PreflightDriver:
         step = g._pre[0][1]
         tw = step.twin
         if step._t0 is None or not step._active or not self.tap._active:
+            return False
+        if self._truth is not None and not (self._truth[0]._active and self._truth[1]._active
+                                            and self._truth[1].written == self.tap.written):
             return False
         return (tw.fused_period and not tw.faults.faults and not tw.ati._faults_possible
                 and tw._arrival is None and tw._port_params_of is tw.encoder_port
@@ -316,8 +354,17 @@ class PreflightDriver:
                 np.array([g._stores[g._pre[0][0]].buffer_info()[0],
                           g._stores[g._seg[0][0]].buffer_info()[0],
                           g._stores[g._post[0][0]].buffer_info()[0],
-                          g._cycle_store.buffer_info()[0]], dtype=np.int64))
+                          g._cycle_store.buffer_info()[0]]
+                         + ([g._stores[g._post[1][0]].buffer_info()[0],
+                             g._stores[g._post[2][0]].buffer_info()[0]]
+                            if self._truth is not None else [0, 0]), dtype=np.int64))
         lat_dst, lat_src, lat_len, rings = static
+        if self._truth is not None:
+            truth_block, truth_tap = self._truth
+            truth, truth_ring = truth_block.torque.data, truth_tap.ring
+            truth_addr, truth_lens = truth_tap._addr, truth_tap._lens
+        else:
+            truth, truth_ring, truth_addr, truth_lens = _NO_TRUTH, _NO_RING, _NO_I, _NO_I
         out = self._out
         k0 = loop._cycles
         c0 = thread_time()
@@ -327,7 +374,7 @@ class PreflightDriver:
             tw.ati._state.block, tw._n_chunk, tw.plant.physics_rate_hz, seg._tab_addr,
             seg._plan_mode, cmode, plan[28], 1 if st._filled else 0, rec.written, plan[31],
             tap.ring, tap.written, tap._addr, tap._lens, lat_dst, lat_src, lat_len, rings,
-            g._idx, g._mask, out)
+            g._idx, g._mask, truth, truth_ring, truth_addr, truth_lens, out)
         cpu = thread_time() - c0
         self.compiled_cpu_s += cpu
         if out[O_TICKS] > 0:
@@ -346,6 +393,8 @@ class PreflightDriver:
             ctl._dt = period
             rec.written += done
             tap.written += done
+            if self._truth is not None:
+                self._truth[1].written += done
             g._idx = int(out[O_IDX])
             g._cycles += done
             g._cycle_max = max(g._cycle_max, 0)
