@@ -312,15 +312,21 @@ class PreflightDriver:
         while anchor_t + (last - anchor_cycle) * period <= t_end:
             last += 1
         while loop._cycles < last:
+            if loop._anchor_t != anchor_t or loop._anchor_cycle != anchor_cycle \
+                    or loop._period_s != period:
+                # A rate command (drained by the loop's own cycle) re-anchored the time base:
+                # the end counted again on the new one against the same ``t_end``, as
+                # ``Loop._run_fast`` keeps its end and reads the new anchor.
+                anchor_t, anchor_cycle, period = (loop._anchor_t, loop._anchor_cycle,
+                                                  loop._period_s)
+                last = loop._cycles
+                while anchor_t + (last - anchor_cycle) * period <= t_end:
+                    last += 1
+                continue
             if self.why_not or not self._steady():
                 loop.run(cycles=1)
                 self.cycles_python += 1
                 continue
-            if loop._anchor_t != anchor_t or loop._anchor_cycle != anchor_cycle \
-                    or loop._period_s != period:
-                # A rate command re-anchored the time base: the loop's own cycles.
-                loop.run(cycles=last - loop._cycles)
-                break
             self._stretch(last - loop._cycles)
         return loop._cycles - first
 
