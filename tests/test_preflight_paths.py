@@ -7,6 +7,10 @@ same stop or none, the same peak forces and speeds, the same ``at_robot_limit`` 
 ankle_rom (one repetition) is a position protocol (the fused chain runs almost every cycle); gait_replay is a
 force protocol (the chain stops before the controller in force mode and the blocks finish the
 cycle), so both hand-over paths are exercised.
+
+The compiled driver (``rt.preflight.driver``: the steady cycles in one compiled loop, handing
+back to the loop where a cycle needs Python) is held to the loop's fused cycle and to every
+block's ``update``: the same tap rows, every signal of every cycle, to the bit.
 """
 from __future__ import annotations
 
