@@ -39,6 +39,7 @@ from protocols.generators import make_generator
 from protocols.library import load_protocol
 from rt.components.twin_step import TwinStep
 from rt.model import RobotModel
+from rt.preflight import driver as driver_mod
 from rt.twin.twin import Twin
 
 LIBRARY = Path(__file__).resolve().parent.parent / "protocols" / "library"
@@ -128,6 +129,12 @@ def preflight_time(protocol, model: RobotModel, fused: bool = True,
     """
     spent = {"twin": 0.0, "twin_calls": 0, "references": 0.0, "references_calls": 0}
     build = session.build_twin_session
+    drivers: list = []
+    make_driver = driver_mod.PreflightDriver
+
+    def keep_driver(*args, **kwargs):
+        drivers.append(make_driver(*args, **kwargs))
+        return drivers[-1]
 
     def capture(*args, **kwargs):
         out = build(*args, **kwargs)
@@ -140,6 +147,7 @@ def preflight_time(protocol, model: RobotModel, fused: bool = True,
     TwinStep.update = _timed(step, spent, "twin")               # type: ignore[method-assign]
     Twin.fused_period = fused
     session.build_twin_session = capture                         # type: ignore[assignment]
+    driver_mod.PreflightDriver = keep_driver                     # type: ignore[assignment, misc]
     session.PREFLIGHT_TIMED = blocks is not None
     for cls, fn in validate.items():
         cls.validate = _timed(fn, spent, "references")           # type: ignore[method-assign]
@@ -153,6 +161,7 @@ def preflight_time(protocol, model: RobotModel, fused: bool = True,
         TwinStep.update = step                                   # type: ignore[method-assign]
         Twin.fused_period = True
         session.build_twin_session = build                       # type: ignore[assignment]
+        driver_mod.PreflightDriver = make_driver                 # type: ignore[misc]
         session.PREFLIGHT_TIMED = False
         for cls, fn in validate.items():
             cls.validate = fn                                    # type: ignore[method-assign]
@@ -162,6 +171,11 @@ def preflight_time(protocol, model: RobotModel, fused: bool = True,
     spent["twin"] -= spent["twin_calls"] * inside
     spent["references"] -= spent["references_calls"] * inside
     duration = result["predicted"]["duration_s"]
+    # The driver's compiled cycles do not call the twin's block: their twin periods' share is
+    # measured inside the compiled loop (``PreflightDriver.twin_cpu_s``), added here.
+    compiled = sum(d.cycles_compiled for d in drivers)
+    spent["twin"] += sum(d.twin_cpu_s for d in drivers)
+    spent["twin_calls"] += compiled
     if blocks is not None:
         stats = blocks.pop("pl").graph.stats()
         blocks.update({slot: {"p50_us": c.p50_us, "mean_us": c.mean_us, "count": c.count}
@@ -173,7 +187,8 @@ def preflight_time(protocol, model: RobotModel, fused: bool = True,
             "loop_cpu_s": cpu - spent["twin"] - spent["references"],
             "cpu_per_60s": cpu / duration * 60.0,
             "twin_us_per_cycle": spent["twin"] / max(spent["twin_calls"], 1) * 1e6,
-            "cycles": spent["twin_calls"], "timing_overhead_s": calls * whole}
+            "cycles": spent["twin_calls"], "cycles_compiled": compiled,
+            "timing_overhead_s": calls * whole}
 
 
 def _median(runs: list[dict]) -> dict:

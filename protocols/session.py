@@ -15,6 +15,7 @@ they stream, so an hour at 1 kHz is never held at once; pre-flight, the in-proce
 from __future__ import annotations
 
 import math
+import os
 import sys
 import threading
 from collections.abc import Callable
@@ -178,11 +179,14 @@ def start_pose(gen) -> tuple[float, float, float]:
 
 
 def _run(pl: PositionLoop, tap: SignalTap, duration_s: float,
-         progress: Callable[[float], None] | None) -> None:
+         progress: Callable[[float], None] | None, driver: Any = None) -> None:
     """Run the in-process twin as fast as possible until the protocol is done and back at
     rest, or the supervisor stopped it (then 0.6 s more, to come to rest). A real session runs
-    in the RT process, never here."""
+    in the RT process, never here. ``driver`` (``rt.preflight.driver.PreflightDriver``) runs
+    the same cycles, the steady ones compiled."""
     end = duration_s + 10.0
+    run = (driver.run if driver is not None
+           else (lambda seconds: pl.loop.run(seconds=seconds)))
 
     def finished() -> bool:
         row = tap.ring[(tap.written - 1) % tap.capacity]
@@ -193,10 +197,10 @@ def _run(pl: PositionLoop, tap: SignalTap, duration_s: float,
 
     t = 0.0
     while t < end:
-        pl.loop.run(seconds=0.1)
+        run(0.1)
         t += 0.1
         if finished():
-            pl.loop.run(seconds=0.6)
+            run(0.6)
             break
 
 
@@ -240,6 +244,11 @@ def drive_saturation_margin(peak_per_axis_s: list[float], limits: RobotLimits) -
 #: Whether a pre-flight's graph times its blocks (``Graph.timed``). No verdict reads the
 #: times; ``bench/preflight.py --blocks`` turns it on to show where the CPU goes.
 PREFLIGHT_TIMED = False
+#: ``TALUS_PREFLIGHT_DRIVER=0`` in the environment (read at each pre-flight) runs every
+#: cycle of a pre-flight through the loop instead of the compiled driver
+#: (``rt.preflight.driver``; issue 16): the reference the driver is held to
+#: (``tests/test_preflight_paths.py``).
+PREFLIGHT_DRIVER_ENV = "TALUS_PREFLIGHT_DRIVER"
 
 
 def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
@@ -251,18 +260,26 @@ def preflight(setup: SessionSetup, model: RobotModel | None = None) -> dict:
     ``RobotLimits.max_saturation_s``, or a force below the preload (every reason named with its
     time and value).
     """
+    from rt.preflight.driver import PreflightDriver
+
     model = model or RobotModel.load()
     protocol, _gen, report, pl, tap = build_twin_session(setup, model, "fast")
-    # Nobody drains the loop's recorder tap in a pre-flight (the session tap holds every row
-    # the verdict reads): stopped, the graph skips it (issue 16: a tap per cycle less).
-    pl.recorder.stop()
-    # Nor reads the blocks' times: the same cycle without its clock reads (issue 16).
+    # Nobody reads the blocks' times: the same cycle without its clock reads (issue 16).
     pl.graph.timed = PREFLIGHT_TIMED
+    # Nobody drains the loop's recorder tap in a pre-flight either (the session tap holds
+    # every row the verdict reads), but it stays running: its row is one compiled stage, and
+    # the fused segment's fast path (and so the compiled driver) needs the whole segment.
     problems = report.check_against(setup.patient_limits, setup.robot_limits)
     if problems:
         raise ProtocolValidationError(f"{setup.source}: refused by pre-flight: "
                                       + "; ".join(problems))
-    _run(pl, tap, report.duration_s, None)
+    # The compiled driver (issue 16) where the loop's shape allows it (``why_not``: the
+    # twin ankle's truth block of an ankle setup, a timed graph, no fused segment); it runs
+    # the same cycles as the loop, the steady ones in one compiled call.
+    driver = (PreflightDriver(pl, tap) if os.environ.get(PREFLIGHT_DRIVER_ENV, "1") != "0"
+              else None)
+    _run(pl, tap, report.duration_s, None,
+         driver if driver is not None and not driver.why_not else None)
     rows = tap.ring[:tap.written]
     stops = [e for e in pl.events.snapshot() if e.reaction >= Reaction.SOFT_STOP]
     figures = figures_of(pl, tap, protocol, model, setup.robot_limits, setup.ankle)

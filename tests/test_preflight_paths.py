@@ -7,18 +7,29 @@ same stop or none, the same peak forces and speeds, the same ``at_robot_limit`` 
 ankle_rom (one repetition) is a position protocol (the fused chain runs almost every cycle); gait_replay is a
 force protocol (the chain stops before the controller in force mode and the blocks finish the
 cycle), so both hand-over paths are exercised.
+
+The compiled driver (``rt.preflight.driver``: the steady cycles in one compiled loop, handing
+back to the loop where a cycle needs Python) is held to the loop's fused cycle and to every
+block's ``update``: the same tap rows, every signal of every cycle, to the bit.
 """
 from __future__ import annotations
 
 import math
+import os
+import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from protocols import session
 from protocols.library import load_protocol
+from protocols.schema import validate_protocol_data
 from rt.components.fused import ENV_FLAG
 from rt.model import RobotModel
+from rt.model.ankle import AnkleSetup
+from rt.preflight import driver as driver_mod
+from rt.safety.limits import RobotLimits
 
 LIBRARY = Path(__file__).resolve().parent.parent / "protocols" / "library"
 
@@ -61,3 +72,123 @@ def test_the_fused_preflight_gives_the_per_block_verdict(protocol, model, monkey
     assert [pl.graph.fused for pl in loops] == [True, False]
     assert verdicts["1"]["ok"] and verdicts["1"]["predicted"]["duration_s"] > 5.0
     assert _bits(verdicts["1"]) == _bits(verdicts["0"])
+
+
+# ---------------------------------------------------------------- the compiled driver
+C3D_DIR = os.environ.get("TALUS_C3D_DIR")
+
+
+def _preflight_rows(setup: session.SessionSetup, monkeypatch, *, driver: bool, fused: bool
+                    ) -> tuple[object, np.ndarray, object]:
+    """One pre-flight with a fresh model (a model object carries state from one pre-flight
+    to the next: the first one's controller torques differ from a second one's by ≈ 1e-14
+    relative, with or without the driver): (verdict or the refusal's message, the session
+    tap's rows, the driver or None)."""
+    monkeypatch.setenv(ENV_FLAG, "1" if fused else "0")
+    monkeypatch.setenv(session.PREFLIGHT_DRIVER_ENV, "1" if driver else "0")
+    kept: dict = {}
+    build = session.build_twin_session
+    make = driver_mod.PreflightDriver
+
+    def keep(*args, **kwargs):
+        out = build(*args, **kwargs)
+        kept["pl"], kept["tap"] = out[3], out[4]
+        return out
+
+    def keep_driver(*args, **kwargs):
+        kept["driver"] = make(*args, **kwargs)
+        return kept["driver"]
+    monkeypatch.setattr(session, "build_twin_session", keep)
+    monkeypatch.setattr(driver_mod, "PreflightDriver", keep_driver)
+    try:
+        verdict: object = session.preflight(setup, RobotModel.load())
+    except session.ProtocolValidationError as exc:
+        verdict = str(exc)
+    tap = kept["tap"]
+    rows = tap.ring[:tap.written].copy()
+    truth = session.truth_tap(kept["pl"])
+    if truth is not None:          # an ankle setup: the twin ankle's true torque, same cycles
+        assert truth.written == tap.written
+        rows = np.hstack([rows, truth.ring[:truth.written]])
+    return verdict, rows, kept.get("driver")
+
+
+def _ankle_rom(amplitude_deg: float) -> dict:
+    """A short ankle ROM about the ankle (``tests/test_ankle_session.py``'s)."""
+    return {"schema_version": 1, "kind": "ankle_rom", "name": "rom",
+            "pose": {"z_m": 0.63}, "sequence": ["dorsi_plantar", "inversion_eversion"],
+            "amplitude_deg": {"dorsiflexion": amplitude_deg, "plantarflexion": amplitude_deg,
+                              "inversion": amplitude_deg, "eversion": amplitude_deg},
+            "speed_deg_s": 20.0, "hold_s": 0.3, "max_acceleration_deg_s2": 200.0,
+            "max_jerk_deg_s3": 4000.0}
+
+
+def _setups() -> list:
+    rom = load_protocol(LIBRARY / "ankle_rom.yaml").model_copy(update={"repetitions": 1})
+    cases = [
+        pytest.param(session.SessionSetup(protocol=rom, base_dir=LIBRARY,
+                                          patient_weight_kg=70.0), True, id="ankle_rom"),
+        pytest.param(session.SessionSetup(LIBRARY / "sine_fz.yaml"), True, id="sine_fz"),
+        pytest.param(session.SessionSetup(LIBRARY / "gait_replay.yaml",
+                                          patient_weight_kg=70.0), True, id="gait_replay"),
+        # An ankle setup: the twin ankle's truth block and its tap after the session tap.
+        pytest.param(session.SessionSetup(protocol=validate_protocol_data(_ankle_rom(8.0)),
+                                          ankle=AnkleSetup(side="left",
+                                                           height_above_sole_m=0.07,
+                                                           offset_x_m=0.01)),
+                     True, id="ankle_setup"),
+        # A run the supervisor stops: the drives limited to 0.5 V saturate (the kernel's
+        # supervisor latches the stop: a hand-back inside a cycle), then 0.6 s at rest.
+        pytest.param(session.SessionSetup(LIBRARY / "sine_fz.yaml",
+                                          robot_limits=RobotLimits(max_command_v=0.5)),
+                     False, id="sine_fz_saturating"),
+    ]
+    return cases
+
+
+@pytest.mark.parametrize("setup,accepted", _setups())
+def test_the_compiled_driver_gives_the_loops_tap_rows_and_verdict(setup, accepted,
+                                                                  monkeypatch):
+    """The driver's pre-flight (steady cycles in one compiled loop, hand-backs to the loop)
+    against the same pre-flight through the loop's fused cycle and through every block's
+    ``update``: every tap row (every signal of every cycle) and the verdict equal to the bit,
+    and the driver really ran most cycles."""
+    v_drv, rows_drv, drv = _preflight_rows(setup, monkeypatch, driver=True, fused=True)
+    v_fused, rows_fused, none = _preflight_rows(setup, monkeypatch, driver=False, fused=True)
+    v_block, rows_block, _ = _preflight_rows(setup, monkeypatch, driver=False, fused=False)
+    assert none is None and drv is not None and drv.why_not == ""
+    assert rows_drv.shape == rows_fused.shape == rows_block.shape
+    assert rows_drv.view(np.int64).tolist() == rows_fused.view(np.int64).tolist()
+    assert rows_drv.view(np.int64).tolist() == rows_block.view(np.int64).tolist()
+    assert _bits(v_drv) == _bits(v_fused) == _bits(v_block)
+    assert isinstance(v_drv, dict) == accepted
+    if not accepted:
+        assert "drive_saturated" in str(v_drv)
+    assert drv.cycles_compiled + drv.cycles_python == len(rows_drv)
+    assert drv.cycles_compiled > 0.9 * len(rows_drv)
+
+
+@pytest.mark.skipif(not C3D_DIR or not (Path(C3D_DIR) / "type2_vicon.c3d").exists(),
+                    reason="the real C3D files ($TALUS_C3D_DIR) are not present")
+def test_the_compiled_driver_on_a_real_c3d_gait(monkeypatch, tmp_path):
+    """A gait replay of a real C3D force plate (type2_vicon, plate 0: ``bench/gait_files.py``'s
+    protocol) through the driver and through the loop: the same tap rows and verdict, bit
+    for bit."""
+    import importlib.util
+
+    assert C3D_DIR is not None
+    spec = importlib.util.spec_from_file_location(
+        "bench_gait_files", Path(__file__).parents[1] / "bench" / "gait_files.py")
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = bench
+    spec.loader.exec_module(bench)
+    case = next(c for c in bench.CASES if c.file == "type2_vicon.c3d" and c.plate == 0)
+    path = tmp_path / "gait.yaml"
+    path.write_text(bench.protocol_text(case, Path(C3D_DIR)))
+    setup = session.SessionSetup(path, patient_weight_kg=bench.PATIENT_KG)
+    v_drv, rows_drv, drv = _preflight_rows(setup, monkeypatch, driver=True, fused=True)
+    v_loop, rows_loop, _ = _preflight_rows(setup, monkeypatch, driver=False, fused=True)
+    assert drv is not None and drv.cycles_compiled > 0.9 * len(rows_drv)
+    assert rows_drv.view(np.int64).tolist() == rows_loop.view(np.int64).tolist()
+    assert _bits(v_drv) == _bits(v_loop) and isinstance(v_drv, dict)

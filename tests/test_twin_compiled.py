@@ -327,3 +327,60 @@ def test_an_ati_fault_after_fused_periods_sees_their_last_sample(kind):
         assert reads[0].tolist() == reads[1].tolist(), f"period {k}"
         assert general.ati_sample == fused.ati_sample, f"period {k}"
     assert general.ati_sample is not None
+
+
+def test_the_atis_bookkeeping_lives_in_its_packed_array_on_both_paths():
+    """Issue 16 (a compiled pre-flight driver advances the twin without Python): the ATI's
+    bookkeeping — the random block's next row, the last sample's time and counter, its status
+    word — is in the model's packed array, advanced there by the fused period's kernel
+    (``kernels.period_ati``) and by the general path's Python alike. Over 1.3 s (past the
+    first random block of 1024 rows: the refill between two kernel calls) both paths leave
+    the same array to the bit, every period; only the object-not-built flag differs (the
+    general path builds every sample's object)."""
+    from rt.ati.twin_sensor import _A_PENDING, _A_ROW, _A_SEQ, _A_STATUS, _A_T_LAST, _State
+
+    assert not {"block_pos", "t_last", "ft_sequence"} & set(_State.__dataclass_fields__)
+    stream = _record("plate:0.7128", ideal=False, seconds=1.3)
+    general = Twin(environment=parse_environment("plate:0.7128"), seed=3)
+    general.fused_period = False
+    fused = Twin(environment=parse_environment("plate:0.7128"), seed=3)
+    for twin in (general, fused):
+        pk = twin.ati._packed
+        assert pk[_A_SEQ] == 0.0 and pk[_A_ROW] == 0.0 and math.isnan(pk[_A_T_LAST])
+        assert twin.ati.t_last is None and twin.ati.ft_sequence == 0
+    keep = np.ones(len(fused.ati._packed), dtype=bool)
+    keep[_A_PENDING] = False
+    overloads = 0
+    for k, (t, codes, enabled) in enumerate(stream):
+        for twin in (general, fused):
+            _apply(twin, codes, enabled)
+            twin.sync(t)
+        g, f = general.ati._packed, fused.ati._packed
+        assert g[keep].view(np.int64).tolist() == f[keep].view(np.int64).tolist(), f"period {k}"
+        assert f[_A_PENDING] == 1.0 and g[_A_PENDING] == 0.0
+        assert f[_A_SEQ] == k + 1 and f[_A_ROW] == (k % 1024) + 1
+        assert f[_A_T_LAST] == fused.t
+        overloads += f[_A_STATUS] != 0.0
+        if k % 97 == 0:                 # the object built on demand from the array
+            assert fused.ati_sample == general.ati_sample, f"period {k}"
+            assert f[_A_PENDING] == 0.0
+    assert len(stream) > 1024
+    assert fused.ati.ft_sequence == len(stream) and fused.ati.t_last == fused.t
+
+
+def test_the_twins_period_draws_the_next_random_block_in_python():
+    """``kernels.period_ati`` does nothing and answers ``NEED_DRAWS`` when the ATI's random
+    block is used up; the twin then draws the next one (``_next_block_row``) and repeats the
+    call: the period's state is the same as if the block had been there."""
+    twin = Twin(seed=5)
+    twin.set_card_enabled(0, True)
+    ati = twin.ati
+    before = twin.plant.B.copy()
+    empty = np.empty((0, 12))
+    bits = kernels.period_ati(twin.plant.B, twin.encoder_port._st, twin.dac_libs[0].codes3,
+                              ati._packed, empty, 1e-3, twin._n_chunk)
+    assert bits == kernels.NEED_DRAWS
+    assert twin.plant.B.view(np.int64).tolist() == before.view(np.int64).tolist()
+    twin.sync(0.001)
+    assert ati.ft_sequence == 1 and ati._packed[kernels.ATI_ROW] == 1.0
+    assert len(ati._state.block) == 1024

@@ -117,18 +117,29 @@ class _State:
     drift: list | np.ndarray = field(default_factory=lambda: [0.0] * 6)
     # Standard normals drawn in blocks (one row of 12 per sample: 6 drift, 6 noise); per-sample
     # numpy calls on 6-vectors cost ~10 µs, a block draw amortises to well under 1 µs.
+    # The bookkeeping (the next row of ``block``, the last sample's time and counter, a
+    # sample committed without its object) lives in the model's packed array (``_A_ROW``,
+    # ``_A_T_LAST``, ``_A_SEQ``, ``_A_STATUS``): the twin's compiled period advances it there.
     block: list | np.ndarray = field(default_factory=list)
-    block_pos: int = 0
-    t_last: float | None = None
-    ft_sequence: int = 0
     last: AtiSample | None = None
 
 
 #: Offsets of the compiled model's parameter array (6 values each, Fx..Tz).
 _P_RATE, _P_LIMIT, _P_BIAS, _P_SIGMA, _P_RANGE = 0, 6, 12, 18, 24
-#: The packed array of the compiled model: parameters, drift, last sample (``rt.twin.kernels``
-#: ``ATI_*`` name the same offsets).
-_A_PARAMS, _A_DRIFT, _A_OUT, _A_SIZE = 0, 30, 36, 42
+#: The packed array of the model (``rt.twin.kernels`` ``ATI_*`` name the same offsets):
+#: parameters, drift, the last compiled sample, then the bookkeeping both paths read and
+#: write (issue 16: the last twin state a compiled pre-flight driver needs in arrays).
+#: The sample is its wrench, ``_A_SEQ`` its ft_sequence (an exact float, < 2**32) and
+#: ``_A_STATUS`` its status word, contiguous (``_A_OUT:_A_SAMPLE_END`` is what a compiled
+#: reader takes: ``TwinForceTorque.compiled_sample``). ``_A_PENDING`` is 1.0 while the twin's
+#: period committed the sample without building its ``AtiSample`` (built on demand:
+#: :meth:`TwinAtiSensorModel.last_sample`), ``_A_ROW`` the next row of the random block,
+#: ``_A_T_LAST`` the last sample's time (s; NaN before the first).
+(_A_PARAMS, _A_DRIFT, _A_OUT, _A_SEQ, _A_STATUS, _A_PENDING, _A_ROW, _A_T_LAST,
+ _A_SIZE) = (0, 30, 36, 42, 43, 44, 45, 46, 47)
+#: The wrench's end and the compiled sample's end in the packed array.
+_A_OUT_END = _A_OUT + 6
+_A_SAMPLE_END = _A_STATUS + 1
 
 
 @njit(cache=True)
@@ -196,16 +207,16 @@ class TwinAtiSensorModel:
         self._packed = np.zeros(_A_SIZE)
         self._kparams = self._packed[_A_PARAMS:_A_DRIFT]
         self._kparams[:] = (p.drift_rate + p.drift_limit + p.bias + p.noise_sigma + p.ranges)
-        self._out = self._packed[_A_OUT:_A_SIZE]
-        # A compiled sample committed by the twin's period whose ``AtiSample`` is not built
-        # yet (its status bits; −1: none): most readers take the wrench from ``_out``, so the
-        # object is built only when asked for (:meth:`last_sample`).
-        self._pending = -1
+        self._out = self._packed[_A_OUT:_A_OUT_END]
+        # The sample as a compiled reader takes it (wrench, counter, status).
+        self._sample_view = self._packed[_A_OUT:_A_SAMPLE_END]
         self._state = self._new_state()
 
     def _new_state(self) -> _State:
         st = _State(rng=np.random.default_rng(self.seed))
-        self._pending = -1
+        pk = self._packed
+        pk[_A_SEQ] = pk[_A_STATUS] = pk[_A_PENDING] = pk[_A_ROW] = 0.0
+        pk[_A_T_LAST] = math.nan
         if self.compiled:
             st.drift = self._packed[_A_DRIFT:_A_OUT]
             st.drift[:] = 0.0
@@ -218,6 +229,17 @@ class TwinAtiSensorModel:
         if seed is not None:
             self.seed = int(seed)
         self._state = self._new_state()
+
+    @property
+    def ft_sequence(self) -> int:
+        """The last sample's counter (0 before the first)."""
+        return int(self._packed[_A_SEQ])
+
+    @property
+    def t_last(self) -> float | None:
+        """The last sample's time (s; None before the first)."""
+        t = float(self._packed[_A_T_LAST])
+        return None if math.isnan(t) else t
 
     @property
     def drift(self) -> Wrench6:
@@ -266,7 +288,8 @@ class TwinAtiSensorModel:
         if len(true_wrench) != 6:
             raise InputError(f"true_wrench needs 6 values (N, N m), got {len(true_wrench)}")
         st = self._state
-        if self._pending >= 0:
+        pk = self._packed
+        if pk[_A_PENDING] != 0.0:
             self.last_sample()                  # ``stale`` repeats it
         faults = self._faults_possible
         if faults and self.fault_active("dropout", t):
@@ -274,14 +297,16 @@ class TwinAtiSensorModel:
         if faults and st.last is not None and self.fault_active("stale", t):
             return st.last
 
-        dt = 0.0 if st.t_last is None else t - st.t_last
+        t_last = float(pk[_A_T_LAST])
+        dt = 0.0 if math.isnan(t_last) else t - t_last
         if self.compiled:
             return self._measure_compiled(true_wrench, t, dt)
-        if st.block_pos >= len(st.block):
+        row = int(pk[_A_ROW])
+        if row >= len(st.block):
             st.block = st.rng.standard_normal((_BLOCK, 12)).tolist()
-            st.block_pos = 0
-        z = st.block[st.block_pos]
-        st.block_pos += 1
+            row = 0
+        z = st.block[row]
+        pk[_A_ROW] = row + 1
         drift = st.drift
         if dt > 0.0:
             # Bounded random walk: increments ~ N(0, rate^2 dt), clipped to +-limit.
@@ -290,8 +315,8 @@ class TwinAtiSensorModel:
                 d = drift[i] + self._drift_rate[i] * root_dt * z[i]
                 lim = self._drift_limit[i]
                 drift[i] = lim if d > lim else (max(d, -lim))
-        if st.t_last is None or t > st.t_last:
-            st.t_last = t
+        if math.isnan(t_last) or t > t_last:
+            pk[_A_T_LAST] = t
 
         status = 0
         m = [0.0] * 6
@@ -305,8 +330,9 @@ class TwinAtiSensorModel:
         if faults and self.fault_active("saturate", t):
             status |= STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE
 
-        st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
-        sample = AtiSample((m[0], m[1], m[2], m[3], m[4], m[5]), status, st.ft_sequence)
+        seq = (int(pk[_A_SEQ]) + 1) & 0xFFFF_FFFF
+        pk[_A_SEQ] = seq
+        sample = AtiSample((m[0], m[1], m[2], m[3], m[4], m[5]), status, seq)
         st.last = sample
         return sample
 
@@ -319,60 +345,54 @@ class TwinAtiSensorModel:
                                      self._out, dt, STATUS_ANY_ERROR | STATUS_FT_OUT_OF_RANGE))
         return self._commit_compiled(status, t)
 
-    # The compiled sample in two halves around the kernel, so the twin can run the kernel
-    # inside its own compiled period (``rt.twin.kernels.period``): one bookkeeping for
-    # both callers.
+    # The compiled sample in two halves around the kernel; the twin's fault-free period
+    # does both halves in its own compiled call (``rt.twin.kernels.period_ati``: the row, the
+    # drift's step and the bookkeeping in ``_packed``), the random block refilled here.
     def _next_block_row(self) -> tuple[np.ndarray, int]:
         """The random block and row the next compiled sample draws from (refilled when used
         up: the same draws, in the same order, as the interpreted path)."""
         st = self._state
-        if st.block_pos >= len(st.block):
+        pk = self._packed
+        row = int(pk[_A_ROW])
+        if row >= len(st.block):
             st.block = st.rng.standard_normal((_BLOCK, 12))
-            st.block_pos = 0
+            row = 0
+            pk[_A_ROW] = 0.0
         block = st.block
         assert isinstance(block, np.ndarray)        # the compiled state holds an array
-        return block, st.block_pos
-
-    def _dt_to(self, t: float) -> float:
-        """The drift's time step for a sample at ``t`` (s)."""
-        t_last = self._state.t_last
-        return 0.0 if t_last is None else t - t_last
+        return block, row
 
     def _commit_compiled(self, status: int, t: float) -> AtiSample:
-        """The sample the kernel wrote into ``_out`` with overload bits ``status``, at ``t``."""
+        """The sample the kernel wrote into ``_out`` with overload bits ``status``, at ``t``:
+        the bookkeeping ``period_ati`` does in the twin's period, plus the ``saturate``
+        fault's bits and the sample's object."""
         st = self._state
-        st.block_pos += 1
-        if st.t_last is None or t > st.t_last:
-            st.t_last = t
+        pk = self._packed
+        pk[_A_ROW] += 1.0
+        t_last = pk[_A_T_LAST]
+        if math.isnan(t_last) or t > t_last:
+            pk[_A_T_LAST] = t
         if self._faults_possible and self.fault_active("saturate", t):
             status |= STATUS_ANY_ERROR | STATUS_GAGE_OUT_OF_RANGE
-        st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
-        self._pending = -1
+        seq = (int(pk[_A_SEQ]) + 1) & 0xFFFF_FFFF
+        pk[_A_SEQ] = seq
+        pk[_A_STATUS] = status
+        pk[_A_PENDING] = 0.0
         v = self._out.tolist()
-        sample = AtiSample((v[0], v[1], v[2], v[3], v[4], v[5]), status, st.ft_sequence)
+        sample = AtiSample((v[0], v[1], v[2], v[3], v[4], v[5]), status, seq)
         st.last = sample
         return sample
-
-    def _commit_pending(self, status: int, t: float) -> None:
-        """:meth:`_commit_compiled` for the twin's fault-free period: the same bookkeeping,
-        the ``AtiSample`` left to :meth:`last_sample` (the period's caller checked that no
-        fault can be on)."""
-        st = self._state
-        st.block_pos += 1
-        if st.t_last is None or t > st.t_last:
-            st.t_last = t
-        st.ft_sequence = (st.ft_sequence + 1) & 0xFFFF_FFFF
-        self._pending = status
 
     def last_sample(self) -> AtiSample | None:
         """The last sample reported (None before the first): built now if the twin's period
         committed it without an object."""
         st = self._state
-        if self._pending >= 0:
+        pk = self._packed
+        if pk[_A_PENDING] != 0.0:
             v = self._out.tolist()
-            st.last = AtiSample((v[0], v[1], v[2], v[3], v[4], v[5]), self._pending,
-                                st.ft_sequence)
-            self._pending = -1
+            st.last = AtiSample((v[0], v[1], v[2], v[3], v[4], v[5]), int(pk[_A_STATUS]),
+                                int(pk[_A_SEQ]))
+            pk[_A_PENDING] = 0.0
         return st.last
 
     def make_source(self, true_wrench: Sequence[float] | Callable[[], Sequence[float]],

@@ -68,6 +68,7 @@ from typing import Any, cast
 
 import numpy as np
 
+from rt.ati.twin_sensor import _A_PENDING as _ATI_PENDING
 from rt.components.blocks import (
     STATUS_SENSOR,
     ControllerBlock,
@@ -85,8 +86,6 @@ from rt.components.fused_kernel import (
     A_FILLED,
     A_FIRST,
     A_FK,
-    A_FT_SEQ,
-    A_FT_STATUS,
     A_HAS_MEASURED,
     A_HEAD,
     A_HYBRID,
@@ -736,12 +735,13 @@ class FusedChain:
                     and cmode[0] == self._plan_mode):
                 self._next_cycle = cycles + 1
                 tw.sync()
-                pend = ati._pending
-                if not tw.faults.faults and pend >= 0 and (mon is None or mon() is dmon):
+                # The ATI's sample (wrench, counter, status) is read by the kernel where the
+                # twin's period left it (``ati._packed``); a sample whose object was built
+                # meanwhile is the block's, as in ``compiled_sample``.
+                if not tw.faults.faults and ati._packed[_ATI_PENDING] != 0.0 \
+                        and (mon is None or mon() is dmon):
                     ta[T_ARGS + A_IDX] = idx
                     ta[T_ARGS + A_FILLED] = st._filled
-                    ta[T_ARGS + A_FT_SEQ] = ati._state.ft_sequence
-                    ta[T_ARGS + A_FT_STATUS] = pend
                     ta[T_ARGS + A_REC_ROW] = rec.written % cap
                     if hybrid:
                         ta[T_ARGS + A_HYBRID] = self._hybrid_code(ctl)
@@ -811,13 +811,12 @@ class FusedChain:
             if cyc is None or raw != mode_raw:
                 upto = min(upto, ST_CONTROLLER)   # the controller block runs (mode change, fade)
         head = 0
-        ft_seq = ft_status = 0
         ft_t = estop = hand = 0.0
         py_ns = 0
         if self._head:
             # Each sensor fused when its backend is memory this cycle; the others run their
             # blocks now, before the call (the three read independent devices).
-            head, ft_seq, ft_status, ft_t, estop, hand = self._sensors()
+            head, ft_t, estop, hand = self._sensors()
             if head != ALL_HEAD:
                 for k in range(len(HEAD)):
                     if not head & _HEAD_BITS[k]:
@@ -858,8 +857,6 @@ class FusedChain:
         ta[a + A_OWNER] = owner
         ta[a + A_REC_ROW] = rec_row
         ta[a + A_HEAD] = head
-        ta[a + A_FT_SEQ] = ft_seq
-        ta[a + A_FT_STATUS] = ft_status
         fa[F_T] = t
         fa[F_DT] = dt
         fa[F_VPN] = self._vpn
@@ -986,9 +983,9 @@ class FusedChain:
         self._plan = (*plan[:8], dmon, *plan[9:])
         return True
 
-    def _sensors(self) -> tuple[int, int, int, float, float, float]:
+    def _sensors(self) -> tuple[int, float, float, float]:
         """Which sensor stages the kernel runs this cycle (``HEAD_*`` bits) and their
-        scalars (the force sample's counter, status and time; the stop levels), each
+        scalars (the force sample's time; the stop levels), each
         sensor's buffers rebound when its backend's arrays changed."""
         enc, force, stops = self._head
         why = self.why_not_sensor
@@ -1007,7 +1004,6 @@ class FusedChain:
             head = HEAD_ENCODERS
             self._enc_port = r[4]
             why[0] = ""
-        ft_seq = ft_status = 0
         ft_t = 0.0
         smp = force.sensor.compiled_sample()
         if smp is None:
@@ -1020,7 +1016,7 @@ class FusedChain:
             why[1] = "the sample's arrays cannot be viewed"
         else:
             head |= HEAD_FORCE
-            ft_seq, ft_status, ft_t = int(smp[2]), int(smp[3]), float(smp[4])
+            ft_t = float(smp[2])
             why[1] = ""
         lv = stops.device.compiled_levels()
         estop = hand = 0.0
@@ -1030,7 +1026,7 @@ class FusedChain:
             head |= HEAD_STOPS
             estop, hand = lv
             why[2] = ""
-        return head, ft_seq, ft_status, ft_t, estop, hand
+        return head, ft_t, estop, hand
 
     def _encoder_refused(self, t: float, dt: float) -> int:
         # The kernel's read stopped at a port the card refuses: the same read raises the

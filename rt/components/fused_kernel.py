@@ -180,11 +180,11 @@ HEAD_ENCODERS, HEAD_FORCE, HEAD_STOPS = 1 << ST_ENCODERS, 1 << ST_FORCE, 1 << ST
 
 
 @njit(cache=True)
-def sensor_stages(stamps, info, head, ft_seq, ft_status, ft_t, estop, hand, a, d):
+def sensor_stages(stamps, info, head, ft_t, estop, hand, a, d):
     """The sensor stages the kernel runs (``head``): the encoder card's emulated block read
     and the driver's decode (``rt.drivers.kernels``: what ``Pcl833Encoders.read_positions_m``
-    does on the twin's card), the polled force sensor's sample (``_read_sample``, given the
-    device's counter, status and time) and the force reader's cycle with its tare
+    does on the twin's card), the polled force sensor's sample (``_read_sample`` on the
+    device's sample — wrench, counter and status in its memory, ``B_ATI_W`` — and its time) and the force reader's cycle with its tare
     (``_force_cycle``), the stop levels. Returns False where Python must finish the stage
     (a port the card refuses; a tare that ended), ``info[I_RAN]`` then the stage after it."""
     for k in range(ST_ENCODERS, ST_ESTIMATOR):
@@ -201,7 +201,8 @@ def sensor_stages(stamps, info, head, ft_seq, ft_status, ft_t, estop, hand, a, d
                 dk.pcl833_decode(io, _v(a, d, B_PCL_DEC), _v(a, d, B_ENC_Q))
             elif k == ST_FORCE:
                 raw = _v(a, d, B_FT_RAW)
-                _read_sample(_v(a, d, B_ATI_W), ft_seq, ft_status, ft_t, _v(a, d, B_FT_ST), raw)
+                w = _v(a, d, B_ATI_W)
+                _read_sample(w, int(w[6]), int(w[7]), ft_t, _v(a, d, B_FT_ST), raw)
                 if _force_cycle(raw, _v(a, d, B_FT_WRENCH), _v(a, d, B_FT_FLAGS),
                                 _v(a, d, B_FT_REQUEST), _v(a, d, B_FT_TARE),
                                 _v(a, d, B_FT_TARE_BUF)) == TARE_ENDED:
@@ -239,8 +240,7 @@ T_ARGS = T_INFO + INFO_SIZE
 # (``array`` stores: ≈ 30 ns each) and :func:`fused_cycle` takes one int, this table's
 # address. Integers in ``tab`` at ``T_ARGS``; floats in a float64 store at ``tab[T_FARGS]``.
 (A_FIRST, A_UPTO, A_FILLED, A_HYBRID, A_LAW, A_TRAJECTORY, A_NB, A_IDX, A_HAS_MEASURED,
- A_OWNER, A_REC_ROW, A_HEAD, A_FT_SEQ, A_FT_STATUS, A_PYTHON_OUT, A_OTHERS, A_AUX, A_FK,
- A_SIZE) = range(19)
+ A_OWNER, A_REC_ROW, A_HEAD, A_PYTHON_OUT, A_OTHERS, A_AUX, A_FK, A_SIZE) = range(17)
 T_FARGS = T_ARGS + A_SIZE
 T_SIZE = T_FARGS + 1
 (F_T, F_DT, F_VPN, F_NS_PER_TICK, F_FT_T, F_ESTOP, F_HAND, F_SIZE) = range(8)
@@ -248,8 +248,7 @@ T_SIZE = T_FARGS + 1
 
 @njit(cache=True)
 def fused_chain(tab, t, dt, first, upto, filled, volts_per_n, hybrid, law, trajectory, nb, idx,
-                ns_per_tick, has_measured, owner, rec_row, head, ft_seq, ft_status, ft_t,
-                estop, hand):
+                ns_per_tick, has_measured, owner, rec_row, head, ft_t, estop, hand):
     """:func:`sensor_stages` (``head``: those the kernel runs; when the segment starts at
     ``first`` = ``ST_ENCODERS``), then :func:`_chain`, then each stage the kernel ran after
     the segment's first timed into its slot's ring (the graph's timing
@@ -263,8 +262,7 @@ def fused_chain(tab, t, dt, first, upto, filled, volts_per_n, hybrid, law, traje
     info = tab[T_INFO:T_INFO + INFO_SIZE]
     info[I_RAN] = first
     info[I_PYTHON] = 0
-    if first >= ST_ESTIMATOR or sensor_stages(stamps, info, head, ft_seq, ft_status, ft_t,
-                                              estop, hand, a, d):
+    if first >= ST_ESTIMATOR or sensor_stages(stamps, info, head, ft_t, estop, hand, a, d):
         _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajectory, nb, a,
                d, has_measured, owner, rec_row)
     ran = info[I_RAN]
@@ -380,7 +378,7 @@ def fused_cycle(tab_addr):
         tab, fa[F_T], fa[F_DT], ia[A_FIRST], ia[A_UPTO], ia[A_FILLED] != 0, fa[F_VPN],
         ia[A_HYBRID], ia[A_LAW], ia[A_TRAJECTORY] != 0, ia[A_NB], ia[A_IDX],
         fa[F_NS_PER_TICK], ia[A_HAS_MEASURED] != 0, ia[A_OWNER], ia[A_REC_ROW], ia[A_HEAD],
-        ia[A_FT_SEQ], ia[A_FT_STATUS], fa[F_FT_T], fa[F_ESTOP], fa[F_HAND])
+        fa[F_FT_T], fa[F_ESTOP], fa[F_HAND])
     ia[A_PYTHON_OUT] = python
     ia[A_OTHERS] = others
     ia[A_AUX] = aux

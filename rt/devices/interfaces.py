@@ -214,12 +214,13 @@ class ForceTorqueSensor(Device):
     def read(self, out: Wrench) -> Wrench:
         """Latest wrench written into ``out`` (stale flag set if none arrived in time)."""
 
-    def compiled_sample(self) -> tuple[np.ndarray, np.ndarray, int, int, float] | None:
+    def compiled_sample(self) -> tuple[np.ndarray, np.ndarray, float] | None:
         """When this cycle's :meth:`read_array` is a polled sample in memory (the twin's ATI,
-        no fault): the sample's wrench (float64[6]), this sensor's polled state, the sample's
-        counter, status word and time, for ``rt.devices.sampled_ft._read_sample`` in a
-        compiled caller; else None (the default: call :meth:`read_array`; a receiver thread
-        or a driver keeps it so)."""
+        no fault): the sample (float64[8]: the wrench, its counter and status word, exact
+        floats: the memory the device writes, read by the compiled caller, so no scalar of
+        it passes through Python), this sensor's polled state and the sample's time, for
+        ``rt.devices.sampled_ft._read_sample`` in a compiled caller; else None (the default:
+        call :meth:`read_array`; a receiver thread or a driver keeps it so)."""
         return None
 
     def read_array(self, out: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ from rt.devices.sampled_ft import SampledForceTorque
 from rt.drivers.pci1720 import Pci1720Outputs
 from rt.drivers.pcl833 import Pcl833Encoders, decode_counts
 from rt.errors import HardwareError
+from rt.twin.kernels import ATI_PENDING as _ATI_PENDING
 from rt.twin.twin import Twin
 
 # The methods each block calls on its backend (and what they call): replaced on an instance,
@@ -149,8 +150,9 @@ class TwinForceTorque(WatchReplaced, SampledForceTorque):
         self.twin = twin
 
     def compiled_sample(self) -> tuple | None:
-        """The twin's latest sample where its fused period left it (``Twin.latest_ati``), the
-        twin synced as :meth:`_sample` syncs it; None under a fault, before the first sample,
+        """The twin's latest sample where its fused period left it (``Twin.latest_ati``: the
+        ATI model's packed wrench, counter and status, ``ATI_OUT:ATI_STATUS + 1``), the twin
+        synced as :meth:`_sample` syncs it; None under a fault, before the first sample,
         when not streaming, once closed, or when a read was replaced (:func:`replaced`): the
         block reads it then."""
         if self._closed or not self._streaming or replaced(self, *FT_READS):
@@ -158,9 +160,9 @@ class TwinForceTorque(WatchReplaced, SampledForceTorque):
         twin = self.twin
         twin.sync()
         ati = twin.ati
-        if twin.faults.faults or ati._pending < 0:
+        if twin.faults.faults or ati._packed[_ATI_PENDING] == 0.0:
             return None
-        return ati._out, self._st, ati._state.ft_sequence, ati._pending, twin.t
+        return ati._sample_view, self._st, twin.t
 
     def _sample(self):
         twin = self.twin

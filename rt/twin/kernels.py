@@ -29,6 +29,7 @@ from array import array
 import numpy as np
 from numba import njit
 
+from rt.ati import twin_sensor as _ati
 from rt.ati.rdt import STATUS_ANY_ERROR, STATUS_FT_OUT_OF_RANGE
 from rt.ati.twin_sensor import _measure_kernel
 from rt.drivers.kernels import dac_code_volts, fake_pcl833_move
@@ -292,9 +293,18 @@ def advance(geom, P, env, S, W, volts, dt, n, t, realistic, integrator):
     return status
 
 
-#: ``ati`` layout of :func:`period` (``TwinAtiSensorModel``'s packed array): the model's
-#: parameters (``_measure_kernel``'s ``params``), its drift and the sample it writes.
-ATI_PARAMS, ATI_DRIFT, ATI_OUT, ATI_SIZE = 0, 30, 36, 42
+#: ``ati`` layout of :func:`period` (``TwinAtiSensorModel``'s packed array, ``_A_*`` there):
+#: the model's parameters (``_measure_kernel``'s ``params``), its drift, the sample it writes
+#: (wrench, then its counter and status word), then the bookkeeping :func:`period_ati`
+#: advances (the object-not-built flag, the random block's next row, the last sample's time,
+#: NaN before the first).
+(ATI_PARAMS, ATI_DRIFT, ATI_OUT, ATI_OUT_END, ATI_SEQ, ATI_STATUS, ATI_PENDING, ATI_ROW,
+ ATI_T_LAST, ATI_SIZE) = (_ati._A_PARAMS, _ati._A_DRIFT, _ati._A_OUT, _ati._A_OUT_END,
+                          _ati._A_SEQ, _ati._A_STATUS, _ati._A_PENDING, _ati._A_ROW,
+                          _ati._A_T_LAST, _ati._A_SIZE)
+#: :func:`period_ati`'s answer when the ATI's random block is used up (nothing was done:
+#: Python draws the next block, ``TwinAtiSensorModel._next_block_row``, and calls again).
+NEED_DRAWS = -2
 #: DAC codes meaning "no code written" (a channel never written, or no card enabled).
 NO_CODE = -1
 
@@ -349,7 +359,7 @@ def period(geom, P, env, S, W, port, codes, ati, ati_block, dt, n, t, realistic,
     fake_pcl833_move(port, index)
     return _measure_kernel(S[S_W_MEAS:S_W_MEAS + 6], ati_block, ati_row,
                            ati[ATI_PARAMS:ATI_DRIFT], ati[ATI_DRIFT:ATI_OUT],
-                           ati[ATI_OUT:ATI_SIZE], ati_dt, overload_bits)
+                           ati[ATI_OUT:ATI_OUT_END], ati_dt, overload_bits)
 
 
 #: The ATI's status bits for an overloaded axis in a fault-free period (``Twin``'s
@@ -372,6 +382,33 @@ def period_block(B, port, codes, ati, ati_block, dt, n, ati_row, ati_dt):
                   OVERLOAD_BITS)
     if bits >= 0:
         B[B_X + X_T] = t + dt
+    return bits
+
+
+@njit(cache=True)
+def period_ati(B, port, codes, ati, ati_block, dt, n):
+    """:func:`period_block` with the ATI's bookkeeping in its packed array (``ATI_*``): the
+    row of the random block and the drift's step (the sample's time ``t + dt`` minus the
+    last one's; 0 before the first) read there, and after a sample the row, the last time,
+    the counter (mod 2**32), the status word and the object-not-built flag written there:
+    ``TwinAtiSensorModel._commit_compiled``'s bookkeeping without a fault's bits (the
+    caller checked none can be on), in the same floats. Returns :func:`period_block`'s
+    result, or :data:`NEED_DRAWS` (nothing done) when the block is used up."""
+    row = int(ati[ATI_ROW])
+    if row >= ati_block.shape[0]:
+        return NEED_DRAWS
+    t_end = B[B_X + X_T] + dt
+    t_last = ati[ATI_T_LAST]
+    nan = math.isnan(t_last)
+    bits = period_block(B, port, codes, ati, ati_block, dt, n, row,
+                        0.0 if nan else t_end - t_last)
+    if bits >= 0:
+        ati[ATI_ROW] = row + 1
+        if nan or t_end > t_last:
+            ati[ATI_T_LAST] = t_end
+        ati[ATI_SEQ] = (int(ati[ATI_SEQ]) + 1) & 0xFFFF_FFFF
+        ati[ATI_STATUS] = bits
+        ati[ATI_PENDING] = 1.0
     return bits
 
 

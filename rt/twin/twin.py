@@ -59,6 +59,9 @@ from rt.twin.realism import RigImperfections, default_truth
 _MAX_CHUNK_S = 0.001
 #: Where the plant's time sits in its block's store (``TwinPlant.t``).
 _T_AT = kernels.B_X + kernels.X_T
+#: The ATI's packed array (``TwinAtiSensorModel._packed``): a sample committed by the fused
+#: period whose ``AtiSample`` is not built (1.0), its counter and status word.
+_ATI_PENDING, _ATI_SEQ, _ATI_STATUS = kernels.ATI_PENDING, kernels.ATI_SEQ, kernels.ATI_STATUS
 
 
 class SimClock:
@@ -300,7 +303,7 @@ class Twin:
                 and (self._payload_applied or not isinstance(self.environment, PayloadStep))):
             self._sync_fused(t)
             return
-        if self.ati._pending >= 0:          # a fused period's sample: the object now
+        if self.ati._packed[_ATI_PENDING] != 0.0:   # a fused period's sample: the object now
             self._ati_sample = self.ati.last_sample()
         while t - self.plant.t > 1e-12:
             chunk = min(_MAX_CHUNK_S, t - self.plant.t)
@@ -323,8 +326,10 @@ class Twin:
         command is one compiled call (``kernels.period``: the amplifier input from the DAC
         codes, the physics, the encoder card's counters and the ATI sample), with the same
         arithmetic in the same order as the general path (``_update_amplifier_input``,
-        ``plant.advance``, ``_update_sensors``). Python keeps only the ATI's bookkeeping; the
-        sample's object is built when someone asks for it (``ati_sample``)."""
+        ``plant.advance``, ``_update_sensors``). The ATI's bookkeeping is advanced by the same
+        call in the model's packed array (``kernels.period_ati``); Python only draws the next
+        random block when one is used up. The sample's object is built when someone asks for
+        it (``ati_sample``)."""
         plant = self.plant
         port = self.encoder_port
         ati = self.ati
@@ -340,7 +345,7 @@ class Twin:
         self._amp_key = None
         # ``plant.period`` inline: the plant's block, its time read from the block's store
         # (the kernel advances it), the substeps of a whole chunk computed once.
-        period, commit = kernels.period_block, ati._commit_pending
+        period = kernels.period_ati
         block, store, t_at = plant.B, plant._store, _T_AT
         n_chunk = self._n_chunk
         left = t - store[t_at]
@@ -355,24 +360,19 @@ class Twin:
             # computes amp_volts from it (the period's kernel is loaded at construction, so no
             # cycle runs against a stale input while it compiles: preflight6).
             codes = dac_libs[card].codes3 if card >= 0 else no_codes
-            t_end = store[t_at] + chunk             # what plant.t is after the period
-            draws: np.ndarray = st.block            # type: ignore[assignment]  # an array
-            row = st.block_pos                      # when compiled
-            if row >= len(draws):
-                draws, row = ati._next_block_row()  # refills the random block
-            t_last = st.t_last
-            bits = period(block, port_state, codes, packed, draws, chunk,
-                          n_chunk if chunk == _MAX_CHUNK_S else plant.substeps(chunk), row,
-                          0.0 if t_last is None else t_end - t_last)
+            bits = period(block, port_state, codes, packed, st.block, chunk,
+                          n_chunk if chunk == _MAX_CHUNK_S else plant.substeps(chunk))
             if bits < 0:
+                if bits == kernels.NEED_DRAWS:
+                    ati._next_block_row()           # the next random block; then the period
+                    continue
                 raise plant._fk_failed()
-            commit(bits, t_end)
             left = t - store[t_at]
 
     @property
     def ati_sample(self) -> AtiSample | None:
         """The ATI's last sample (None before the first)."""
-        if self.ati._pending >= 0:
+        if self.ati._packed[_ATI_PENDING] != 0.0:
             self._ati_sample = self.ati.last_sample()
         return self._ati_sample
 
@@ -384,9 +384,9 @@ class Twin:
         """The ATI's last sample as (wrench N/N·m, ft_sequence, status), None before the first,
         without building an ``AtiSample`` when the fused period left it in the model's array
         (the force reader's path every cycle). Undelayed: see :meth:`delayed`."""
-        ati = self.ati
-        if ati._pending >= 0:
-            return ati._out, ati._state.ft_sequence, ati._pending
+        pk = self.ati._packed
+        if pk[_ATI_PENDING] != 0.0:
+            return self.ati._out, int(pk[_ATI_SEQ]), int(pk[_ATI_STATUS])
         s = self._ati_sample
         return None if s is None else (s.wrench, s.ft_sequence, s.status)
 
