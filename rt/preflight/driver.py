@@ -73,6 +73,7 @@ from rt.components.fused_kernel import (
     fused_cycle,
 )
 from rt.components.twin_step import TwinStep
+from rt.epoch import EPOCH
 from rt.pointers import f64_at, i64_at
 from rt.twin import kernels as tk
 from rt.twin.environment import PayloadStep
@@ -281,8 +282,12 @@ class PreflightDriver:
         if g.timed or not g.fused or not g._running or loop._queue._dq \
                 or loop._stop_requested:
             return False
+        # ``rt.epoch``: nothing changed from outside the cycle since the general cycle that
+        # bound the segment's plan (the fast path's own compare, made before each driver run:
+        # inside the compiled loop no Python runs that could bump it).
         if not (seg._plan_ok and seg._plan is not None and seg.pending is None
-                and seg._next_cycle == g._cycles and seg._gen == g.generation):
+                and seg._next_cycle == g._cycles and seg._gen == g.generation
+                and EPOCH.n == seg._plan_epoch):
             return False
         step = g._pre[0][1]
         tw = step.twin
