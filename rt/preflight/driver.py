@@ -342,8 +342,10 @@ class PreflightDriver:
         seg: FusedChain = g.segment
         plan = seg._plan
         assert plan is not None
-        ctl, rec, tw, cmode, hybrid, st = plan[4], plan[10], plan[15], plan[29], plan[30], \
-            plan[32]
+        # The fast path's plan (``FusedChain._make_plan``), and the drive's failed flags.
+        (_g, ctl, cmode, hybrid, tw, _ati, port, _mon, _dmon, st, rec, cap, _store,
+         _t_at) = plan
+        drive_failed = seg._comps[5].failed.data
         step = g._pre[0][1]
         ta, fa = seg._ta, seg._fa
         # The scalars the fast path writes that do not change between steady cycles.
@@ -383,7 +385,7 @@ class PreflightDriver:
             n, k0, loop._anchor_t, loop._anchor_cycle, loop._period_s, step._t0,
             tw._clock_cell, tw.plant.B, tw.encoder_port._st, codes, tw.ati._packed,
             tw.ati._state.block, tw._n_chunk, tw.plant.physics_rate_hz, seg._tab_addr,
-            seg._plan_mode, cmode, plan[28], 1 if st._filled else 0, rec.written, plan[31],
+            seg._plan_mode, cmode, drive_failed, 1 if st._filled else 0, rec.written, cap,
             tap.ring, tap.written, tap._addr, tap._lens, lat_dst, lat_src, lat_len, rings,
             g._idx, g._mask, truth, truth_ring, truth_addr, truth_lens, out)
         cpu = thread_time() - c0
@@ -398,7 +400,7 @@ class PreflightDriver:
             seg.others_ns = int(out[O_OTHERS])
             seg._aux = int(out[O_AUX])
             seg.pending = None
-            plan[19].n_reads += 9 * done          # the emulated card's count of inb
+            port.n_reads += 9 * done          # the emulated card's count of inb
             if out[O_FK_ANY]:
                 st.buffer_filled()
             ctl._dt = period
