@@ -29,7 +29,9 @@ from rt.components.fused import ENV_FLAG
 from rt.model import RobotModel
 from rt.model.ankle import AnkleSetup
 from rt.preflight import driver as driver_mod
+from rt.references.program import Mode
 from rt.safety.limits import RobotLimits
+from rt.sessions import COLUMNS
 
 LIBRARY = Path(__file__).resolve().parent.parent / "protocols" / "library"
 
@@ -165,7 +167,15 @@ def test_the_compiled_driver_gives_the_loops_tap_rows_and_verdict(setup, accepte
     if not accepted:
         assert "drive_saturated" in str(v_drv)
     assert drv.cycles_compiled + drv.cycles_python == len(rows_drv)
-    assert drv.cycles_compiled > 0.9 * len(rows_drv)
+    # Nine cycles in ten were the driver's, not counting a stopped run's cycles after its
+    # force control ended (a force stop's compliant hold reads the wrench in the sequencer's
+    # Python every cycle, by design: rt.references.sequencer._yield_step).
+    hold = 0
+    if not accepted:
+        in_force = np.flatnonzero(rows_drv[:, COLUMNS["ctrl_mode"].start] == float(Mode.FORCE))
+        assert len(in_force)
+        hold = len(rows_drv) - int(in_force[-1]) - 1
+    assert drv.cycles_python < 0.1 * len(rows_drv) + hold
 
 
 @pytest.mark.skipif(not C3D_DIR or not (Path(C3D_DIR) / "type2_vicon.c3d").exists(),
