@@ -237,9 +237,13 @@ class RtTrialRunner(TrialRunner):
             time.sleep(POLL_S)
             st = self.client.status()
             if st["state"] != "run":
+                # The failed blocks with their reasons: a ``component_failed`` stop names
+                # only its cause in ``latched``.
+                failed = "".join(f"; {name}: {why}"
+                                 for name, why in (st.get("failed_blocks") or {}).items())
                 raise SafetyTrip(f"trial {trial_id}: the robot stopped moving to the trial's "
                                  f"pose ({', '.join(st['causes']) or st['state']}: "
-                                 f"{json.dumps(st.get('latched'))})")
+                                 f"{json.dumps(st.get('latched'))}{failed})")
             if st["phase_name"] != "rest":
                 seen = True
             elif seen or time.monotonic() - t0 > float(started["duration_s"]) + 2.0:
