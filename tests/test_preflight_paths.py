@@ -77,7 +77,11 @@ def test_the_fused_preflight_gives_the_per_block_verdict(protocol, model, monkey
 
 
 # ---------------------------------------------------------------- the compiled driver
-C3D_DIR = os.environ.get("TALUS_C3D_DIR")
+#: The real C3D files: $TALUS_C3D_DIR, else ../shared/data/c3d beside the repository (as
+#: tests/test_gait_real_files.py finds them).
+C3D_DIR = next((str(d) for d in (os.environ.get("TALUS_C3D_DIR"),
+                                 Path(__file__).parents[2] / "shared/data/c3d")
+                if d and (Path(d) / "type2_vicon.c3d").is_file()), None)
 
 
 def _preflight_rows(setup: session.SessionSetup, monkeypatch, *, driver: bool, fused: bool
@@ -178,8 +182,8 @@ def test_the_compiled_driver_gives_the_loops_tap_rows_and_verdict(setup, accepte
     assert drv.cycles_python < 0.1 * len(rows_drv) + hold
 
 
-@pytest.mark.skipif(not C3D_DIR or not (Path(C3D_DIR) / "type2_vicon.c3d").exists(),
-                    reason="the real C3D files ($TALUS_C3D_DIR) are not present")
+@pytest.mark.skipif(C3D_DIR is None, reason="the real C3D files (../shared/data/c3d beside "
+                    "the repository, or $TALUS_C3D_DIR) are not present")
 def test_the_compiled_driver_on_a_real_c3d_gait(monkeypatch, tmp_path):
     """A gait replay of a real C3D force plate (type2_vicon, plate 0: ``bench/gait_files.py``'s
     protocol) through the driver and through the loop: the same tap rows and verdict, bit
