@@ -5,9 +5,11 @@ lateness and execution time (twin figures, this machine; DESIGN §10, issue 16).
         [--controller paden_panja] [--cpu-latency-us 0] [--out DIR] [--force]
 
 Runs ``build_sim_position_loop`` in realtime mode (the product's loop: sleep, then spin to
-each deadline) for ``--seconds`` per rate, in chunks of ``--chunk`` seconds so the timing rings
-(65536 cycles) never wrap: between chunks the rings are folded into 1 µs histograms (the next
-chunk restarts its timing at once, its first dt is the nominal period). Prints, per rate,
+each deadline) for ``--seconds`` per rate, in one ``Loop.run`` as the RT process does (a loop
+re-entered after a pause stops at once: until 2026-11-26e this bench chunked by ``run`` and
+measured a stopped loop); every ``--chunk`` seconds the loop copies its new timing samples in
+its own thread at a cycle boundary (the rings hold 65536 cycles), folded here into 1 µs
+histograms. Prints, per rate,
 median / p99 / max of lateness, whole cycle and cycle without the twin block (the rig has no
 twin), and the deadline misses (cycles later than 20 % of the period), and
 the host's steal time per chunk beside that chunk's misses (``/proc/stat``; ``--chunk 1`` for a
@@ -24,6 +26,7 @@ import json
 import os
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -69,46 +72,72 @@ def _steal_jiffies() -> int:
         return 0
 
 
+def _new_samples(ring: np.ndarray, end: int, n: int) -> np.ndarray:
+    """The ``n`` samples a ring of power-of-two length wrote before position ``end`` (a
+    running count), oldest first."""
+    cap = len(ring)
+    n = min(n, cap)
+    return ring[np.arange(end - n, end) % cap].copy()
+
+
 def run_rate(rate_hz: float, seconds: float, chunk_s: float, controller: str,
              cpu_latency_us: int | None = 0) -> dict:
     # PM QoS as the RT process has it by default (RtConfig.cpu_latency_us 0); None: not asked.
     extra = {} if cpu_latency_us is None else {"cpu_latency_us": cpu_latency_us}
-    pl = build_sim_position_loop(controller, duration_s=seconds + 10.0, rate_hz=rate_hz,
-                                 mode="realtime", **extra)
+    pl = build_sim_position_loop(controller, duration_s=WARM_UP_S + seconds + 10.0,
+                                 rate_hz=rate_hz, mode="realtime", **extra)
+    loop, graph = pl.loop, pl.graph
+    twin_slot = graph._order.index("twin")
     hists = {k: np.zeros(N_BINS, dtype=np.int64) for k in ("lateness", "cycle", "without_twin")}
     maxes = dict.fromkeys(hists, 0.0)
+    # One ``Loop.run`` for the whole span, as the RT process runs its loop: a loop that leaves
+    # ``run`` and enters it again stops at once (the twin catches up the pause: an
+    # ``encoder_jump`` hard stop; 2026-11-26e), so chunking by ``run`` measured a stopped loop.
+    # The timing rings (65536 cycles) are copied every ``chunk_s`` instead, in the loop's own
+    # thread at a cycle boundary (``Loop.call``: exact, ≈ 0.3 ms of copying once per chunk, in
+    # the idle time before the next deadline), and folded here.
+    marks = {"cycles": 0, "lat": 0}
+
+    def copy_rings(_loop) -> tuple[np.ndarray, ...]:
+        cycles, lat_count = graph._cycles, loop._lat_count
+        n_cyc, n_lat = cycles - marks["cycles"], lat_count - marks["lat"]
+        marks["cycles"], marks["lat"] = cycles, lat_count
+        return (_new_samples(graph._cycle_ring, cycles, n_cyc),
+                _new_samples(graph._rings[twin_slot], cycles, n_cyc),
+                _new_samples(loop._lat_ring, loop._lat_idx, n_lat))
+
+    runner = threading.Thread(target=loop.run, kwargs={"seconds": WARM_UP_S + seconds},
+                              name="loop_10min", daemon=True)
+    runner.start()
     # Warm-up, not counted: the first cycles load numba's cached kernels (the twin's too) and
     # fault in memory; a clinic's loop is started well before a protocol runs.
-    pl.loop.run(seconds=WARM_UP_S)
-    warm = pl.loop.stats()
-    remaining = seconds
+    time.sleep(WARM_UP_S)
+    loop.call(copy_rings, "loop_10min: warm-up mark").result(timeout=10.0)
+    warm = loop.stats()
     wall0 = time.monotonic()
     # Per chunk: the loop's misses beside the host's steal time over the same span, so a run
     # says whether its misses come with the hypervisor taking the vCPU (nothing the loop can do).
     chunks: list[dict] = []
     misses_before = warm.misses
-    while remaining > 1e-9:
-        span = min(chunk_s, remaining)
+    done = False
+    while not done:
         steal0 = _steal_jiffies()
-        n = pl.loop.run(seconds=span)
+        runner.join(timeout=chunk_s)
+        done = not runner.is_alive()
         steal1 = _steal_jiffies()
-        remaining -= span
-        now_misses = pl.loop.stats().misses
-        chunks.append({"cycles": int(n), "misses": int(now_misses - misses_before),
+        cycle, twin, lat = (copy_rings(loop) if done else
+                            loop.call(copy_rings, "loop_10min: timing rings").result(timeout=10.0))
+        now_misses = loop.stats().misses
+        chunks.append({"cycles": len(cycle), "misses": int(now_misses - misses_before),
                        "steal_ms": 1000.0 * (steal1 - steal0) / os.sysconf("SC_CLK_TCK")})
         misses_before = now_misses
-        if n == 0:
-            continue
-        rings = pl.graph.timing_samples()
-        lat = pl.loop.lateness_samples()[-n:]
-        cycle = rings["cycle"][-n:]
-        twin = rings["components"]["twin"][-n:]
         ok = (cycle >= 0) & (twin >= 0)
-        for key, s in (("lateness", lat), ("cycle", cycle[cycle >= 0]),
-                       ("without_twin", cycle[ok] - twin[ok])):
-            _fold(hists[key], s)
-            if s.size:
-                maxes[key] = max(maxes[key], float(s.max()))
+        for key, samples in (("lateness", lat), ("cycle", cycle[cycle >= 0]),
+                             ("without_twin", cycle[ok] - twin[ok])):
+            _fold(hists[key], samples)
+            if samples.size:
+                maxes[key] = max(maxes[key], float(samples.max()))
+    latched = [x["cause"] for x in pl.supervisor.latched()]
     stats = pl.loop.stats()
     pl.graph.stop()
     cycles = int(stats.lateness.count - warm.lateness.count)
@@ -122,6 +151,8 @@ def run_rate(rate_hz: float, seconds: float, chunk_s: float, controller: str,
             "miss_tolerance_us": stats.miss_tolerance_us,
             "rephases": int(stats.rephases - warm.rephases), "warm_up_s": WARM_UP_S,
             "chunks": chunks, "steal": _steal_summary(chunks),
+            # A stop latched during the run: its figures are a stopped loop's, not steady ones.
+            "latched": latched,
             "lateness": _summary(hists["lateness"], maxes["lateness"]),
             "cycle": _summary(hists["cycle"], maxes["cycle"]),
             "cycle_without_twin": _summary(hists["without_twin"], maxes["without_twin"]),
@@ -212,6 +243,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{rate:g} Hz, {args.seconds:g} s ({r['cycles']} cycles, {args.controller}, "
               f"twin): misses {r['deadline_misses']} ({r['miss_percent']:.3f} %, "
               f"> {r['miss_tolerance_us']:.0f} µs late), re-phased {r['rephases']}x")
+        if r["latched"]:
+            print(f"  STOPPED during the run ({', '.join(r['latched'])}): not steady figures")
         st = r["steal"]
         print(f"  host steal: {st['steal_ms_total']:.0f} ms over {st['chunks_with_steal']} of "
               f"{st['chunks']} chunks; misses in those chunks {st['misses_in_chunks_with_steal']}, "
