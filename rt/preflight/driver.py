@@ -73,6 +73,7 @@ from rt.components.fused_kernel import (
     fused_cycle,
 )
 from rt.components.twin_step import TwinStep
+from rt.engine.latches import copy_latches
 from rt.epoch import EPOCH
 from rt.pointers import f64_at, i64_at
 from rt.twin import kernels as tk
@@ -84,6 +85,7 @@ _S_ROT, _S_ENV = tk.B_S + tk.S_ROT, tk.B_S + tk.S_ENV_STATE
 _NO_TRUTH = np.zeros(0)
 _NO_RING = np.zeros((1, 1))
 _NO_I = np.zeros(0, dtype=np.int64)
+_NO_LATCHES = np.zeros((0, 3), dtype=np.int64)
 
 #: Why :func:`steady_cycles` returned: every cycle asked for ran; a hand-back before a cycle
 #: (nothing of it, or whole twin chunks of it, ran); a hand-back inside a cycle (the twin's
@@ -105,8 +107,8 @@ R_TWIN, R_SEG0, R_TAP, R_CYCLE, R_TRUTH, R_TRUTH_TAP, R_SIZE = range(7)
 @njit(cache=True)
 def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, codes, ati, draws,
                   n_chunk, rate_hz, tab_addr, plan_mode, cmode, failed, filled, rec_written,
-                  rec_cap, tap_ring, tap_written, tap_addr, tap_lens, lat_dst, lat_src,
-                  lat_len, rings, idx, mask, truth, truth_ring, truth_addr, truth_lens, out):
+                  rec_cap, tap_ring, tap_written, tap_addr, tap_lens, latches, rings, idx, mask,
+                  truth, truth_ring, truth_addr, truth_lens, out):
     """Up to ``n`` steady pre-flight cycles from loop cycle ``k0`` (module docstring): per
     cycle the loop's time (``Loop._run_fast``'s float arithmetic), the twin's fault-free
     period to it in chunks (``Twin._sync_fused``: ``kernels.period_ati``), the segment's
@@ -115,9 +117,9 @@ def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, code
     true joint torque (``protocols.session.TwinAnkleTruth.update``: Rᵀ m on the plant's
     rotation and environment state) and its tap's row (``truth_ring``, ``truth_addr``,
     ``truth_lens``; its count is ``tap_written`` too: both taps run every cycle); the
-    latches' copies (float64, by address), the timing stores as an untimed graph writes
-    them. Returns the loop's time of the last cycle it touched; ``out``
-    (``O_*``) says how far it went and why it stopped."""
+    latches' copies (the graph's table ``latches``: ``rt.engine.latches.copy_latches``), the
+    timing stores as an untimed graph writes them. Returns the loop's time of the last cycle
+    it touched; ``out`` (``O_*``) says how far it went and why it stopped."""
     tab = carray(i64_at(tab_addr), T_SIZE)
     ia = tab[T_ARGS:T_ARGS + (T_FARGS - T_ARGS)]
     fa = carray(f64_at(tab[T_FARGS]), F_SIZE)
@@ -191,11 +193,7 @@ def steady_cycles(n, k0, anchor_t, anchor_cycle, period, t0, cell, B, port, code
             tap_row(truth_ring, tap_written % truth_cap, t, truth_addr, truth_lens)
             ring_truth_tap[idx] = 0
         tap_written += 1
-        for j in range(lat_dst.shape[0]):
-            dst = carray(f64_at(lat_dst[j]), lat_len[j])
-            src = carray(f64_at(lat_src[j]), lat_len[j])
-            for i in range(lat_len[j]):
-                dst[i] = src[i]
+        copy_latches(latches)
         ring_cycle[idx] = 0
         idx = (idx + 1) & mask
         done += 1
@@ -259,12 +257,8 @@ class PreflightDriver:
             self._truth = (post[1], post[2])
         elif len(post) != 1:
             return "the slots after the session tap are not the twin ankle's truth and its tap"
-        for _copy, latch, src in g._latches:
-            if not (isinstance(latch, np.ndarray) and isinstance(src, np.ndarray)
-                    and latch.dtype == np.float64 and src.dtype == np.float64
-                    and latch.ndim == 1 and src.shape == latch.shape
-                    and latch.flags.c_contiguous and src.flags.c_contiguous):
-                return "a delay latch that is not a float64 array"
+        if g._latches and g._latch_table is None:
+            return "a delay latch that is not a float64 array"
         if self.loop._signals:
             return "the loop has signals"
         step = g._pre[0][1]
@@ -359,11 +353,10 @@ class PreflightDriver:
         codes = tw.dac_libs[card].codes3 if card >= 0 else tw._codes
         static = self._static
         if static is None:
-            lat = g._latches
+            # The graph's own latch table (``rt.engine.latches``; none: no latches).
+            latches = g._latch_table if g._latch_table is not None else _NO_LATCHES
             static = self._static = (
-                np.array([s[1].ctypes.data for s in lat], dtype=np.int64),
-                np.array([s[2].ctypes.data for s in lat], dtype=np.int64),
-                np.array([s[1].shape[0] for s in lat], dtype=np.int64),
+                latches,
                 np.array([g._stores[g._pre[0][0]].buffer_info()[0],
                           g._stores[g._seg[0][0]].buffer_info()[0],
                           g._stores[g._post[0][0]].buffer_info()[0],
@@ -371,7 +364,7 @@ class PreflightDriver:
                          + ([g._stores[g._post[1][0]].buffer_info()[0],
                              g._stores[g._post[2][0]].buffer_info()[0]]
                             if self._truth is not None else [0, 0]), dtype=np.int64))
-        lat_dst, lat_src, lat_len, rings = static
+        latches, rings = static
         if self._truth is not None:
             truth_block, truth_tap = self._truth
             truth, truth_ring = truth_block.torque.data, truth_tap.ring
@@ -386,7 +379,7 @@ class PreflightDriver:
             tw._clock_cell, tw.plant.B, tw.encoder_port._st, codes, tw.ati._packed,
             tw.ati._state.block, tw._n_chunk, tw.plant.physics_rate_hz, seg._tab_addr,
             seg._plan_mode, cmode, drive_failed, 1 if st._filled else 0, rec.written, cap,
-            tap.ring, tap.written, tap._addr, tap._lens, lat_dst, lat_src, lat_len, rings,
+            tap.ring, tap.written, tap._addr, tap._lens, latches, rings,
             g._idx, g._mask, truth, truth_ring, truth_addr, truth_lens, out)
         cpu = thread_time() - c0
         self.compiled_cpu_s += cpu
@@ -410,7 +403,6 @@ class PreflightDriver:
                 self._truth[1].written += done
             g._idx = int(out[O_IDX])
             g._cycles += done
-            g._cycle_max = max(g._cycle_max, 0)
             seg._next_cycle = g._cycles
             loop._cycles = k0 + done
             loop._t = loop._t_current = t

@@ -24,8 +24,8 @@ from rt.twin.kernels import ATI_PENDING as _ATI_PENDING
 from rt.twin.twin import Twin
 
 # The methods each block calls on its backend (and what they call): replaced on an instance,
-# the compiled hooks step aside (``rt.devices.interfaces.replaced``); the fused cycle's fast
-# path checks the same names (``rt.components.fused``).
+# the compiled hooks step aside (``rt.devices.interfaces.replaced``), and the assignment bumps
+# ``rt.epoch`` (``WatchReplaced``: the fused cycle's fast path leaves at its next cycle).
 ENCODER_READS = ("read_positions_m", "read_counts")
 FT_READS = ("read_array", "read", "_sample")
 INPUT_READS = ("read_array", "read")
