@@ -244,6 +244,9 @@ def _assemble(devices: Devices, model: RobotModel, reference: ProgramReference,
     recorder (→ watchdog feed), the wiring every loop shares; ``own_connections`` add what the
     chosen reference and controller need beyond it."""
     d = model.description
+    # A model reused from an earlier loop (pre-flight after pre-flight) starts its FK where a
+    # fresh one does: the same protocol then gives the same cycles to the last bit.
+    model.kin.reset_warm_start()
     events = EventLog()
     robot = robot_limits or RobotLimits()
     limits = effective(d.limits.stroke, robot, patient_limits or PatientLimits(),

@@ -115,6 +115,13 @@ class Kinematics:
         self._pos = np.zeros(3)
         self._spheres = np.zeros((3, 3))
 
+    def reset_warm_start(self) -> None:
+        """Start the next forward kinematics from the level, centred platform's rod angles, as
+        a freshly loaded model does. A loop built on a model that ran before calls this so that
+        what it computes does not depend on that history: Newton's last bits follow its start."""
+        # In place: the compiled blocks hold this array.
+        self._phi_guess[:] = self.phi_nominal
+
     # ------------------------------------------------------------------ inverse kinematics
     def ik(self, z: float, roll: float, pitch: float, check: bool = True) -> Configuration:
         """Slider positions for a platform pose (z m, roll γ rad, pitch β rad).
