@@ -299,8 +299,9 @@ def _event_text(c: int, reaction: int, v: np.ndarray) -> tuple[str, dict]:
 
 def _pull_in_stop_text(fz_n: float, since_t: float, for_s: float) -> tuple[str, dict]:
     """Message and values of the ``pull_in_stop`` alarm (both supervisors')."""
-    message = (f"the foot is still pulled ({fz_n:.0f} N) in the stop, since t = {since_t:.2f} "
-               "s: the robot cannot lift it; support the limb or release the strap")
+    when = "in the stop" if math.isnan(for_s) else f"{for_s:.1f} s into the stop"
+    message = (f"the foot is still pulled ({fz_n:.0f} N) {when}: the robot cannot lift it; "
+               "support the limb or release the strap")
     return (message,
             {"fz_n": fz_n, "since_t": since_t, "for_s": for_s})
 

@@ -90,13 +90,20 @@ PULL_IN_STOP_S = 1.0
 #: 0.1 mm of compression, so the height where it was last held is the contact's own.
 CONTACT_HELD_N = 10.0
 #: ``contact_lost``: the contact is lost when, with Fz at or below CONTACT_HELD_N, the sliders'
-#: mean position has risen this far (m) above where the contact was last held. Physics: on the
-#: foot (1e5 N/m) 5 mm more would press 500 N, on the plate (2e6 N/m) 10 kN — reading under
-#: 10 N there means nothing is there; a tilt moves the sliders' mean only to second order
-#: (0.9 mm at 15°); an overload or the impact's rebound moves the platform *down*, away from
-#: the contact. Small next to the chase's travel: at the slider-speed limit (0.2 m/s) 5 mm
-#: are 25 ms.
-CONTACT_LOST_RISE_M = 0.005
+#: mean position has risen this far (m) above where the contact was last held. The force law
+#: rises only while it reads less than it is asked (at F_d ≈ 0, between gait stances, it does
+#: not follow a foot up), so a legitimate rise with the contact under 10 N is bounded by: the
+#: foot's compression between 10 N and 0 (0.1 mm on its 1e5 N/m heel pad; 5 µm on the
+#: 2e6 N/m plate); the sensor's lag (FORCE_LAG_S, 3 ms) at the slider-speed limit (0.2 m/s),
+#: 0.6 mm travelled before a re-touch shows; an encoder count (20 µm). A rebound after an
+#: impact, an overload's sink and an unloading all move the platform *down*. 1 mm above the
+#: last loaded height the foot would be pressed 100 N more (the plate 2 kN): reading under
+#: 10 N there, nothing is there. Measured on the twin (200 N hold, the foot removed): the
+#: platform is 1 mm up 17 ms after the removal, 6 ms before the slider-speed soft stop, which
+#: was the only net before. Caveat: a tilt moves the sliders' mean to second order (0.9 mm
+#: at 15°, 3.3 mm at 20° roll and pitch together): only a force entry that tilts far while
+#: reading under 10 N and asking more could trip on it (none in the library).
+CONTACT_LOST_RISE_M = 0.001
 #: The sustained-saturation window is kept as this many buckets of saturated time per axis
 #: (a bucketed sliding window: the saturated time of the last ``window`` ± one bucket, 2 % of
 #: it; the state is fixed whatever the loop's rate).
