@@ -390,6 +390,7 @@ def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
                                  if pulled.any() else 0.0)
         result["pull_peak_n"] = round(min(0.0, float(np.nanmin(push[after]))), 1)
         result["stop_ms"] = round((stop.t - t_fault) * 1e3, 3)     # the fault → its stop
+        result["stop_cause"] = stop.cause
         # The staff's alarm for a pull the robot cannot end (ms after the first stop; None:
         # not raised), and after the hard stop when there was one.
         alarm = next((e for e in events if e.cause == "pull_in_stop"), None)
