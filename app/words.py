@@ -63,6 +63,8 @@ def _fixed(cause: str) -> str | None:
         "angular_speed_roll": tr("inversion/eversion faster than the patient's limit"),
         "angular_speed_pitch": tr("dorsi/plantarflexion faster than the patient's limit"),
         "pulling": tr("the platform pulled on the foot"),
+        "pull_in_stop": tr("the foot is still pulled after the stop"),
+        "contact_lost": tr("contact with the foot or plate was lost during force control"),
         "component_failed": tr("the control computer found a fault in its own software"),
     }.get(cause)
 
@@ -96,6 +98,18 @@ def cause_words(cause: str) -> str:
     if m:   # an e-stop source this screen has no words for yet
         return tr("E-STOP (%1)").replace("%1", m.group(1))
     return cause
+
+
+def alarm_instruction(alarm: dict[str, Any]) -> str:
+    """What the staff must do about an alarm the RT status carries (``status["alarms"]``),
+    one specific instruction: what is happening, the force, what to do."""
+    if alarm.get("cause") == "pull_in_stop":
+        fz = alarm.get("fz_n")
+        force = f"{abs(fz):.0f}" if isinstance(fz, (int, float)) and math.isfinite(fz) else "?"
+        return tr("ALARM: the robot has stopped but the strap is still pulling the patient's "
+                  "foot down with %1 N, and the robot cannot lift it. Support the patient's "
+                  "leg and release the strap now.").replace("%1", force)
+    return tr("ALARM: %1").replace("%1", cause_words(str(alarm.get("cause", ""))))
 
 
 def event_words(event: dict[str, Any]) -> str:

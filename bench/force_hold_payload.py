@@ -16,7 +16,9 @@ the hold on ``pulling``; printed then: the pull's peak after the stop, when it e
 push back above −``PULL_ENDED_N`` for good; None: still pulled at the end), how far the stop's
 compliant hold yielded, and the push over the last 0.5 s. ``--no-yield`` holds still as before
 the compliant hold (``pull_yield_max_m`` 0); ``--estop-at S`` hard-stops S s after the landing
-(the brakes' effect on the pull).
+(the brakes' effect on the pull). ``pull_in_stop_at_s``: when the supervisor raised the staff's
+alarm for a pull that outlasted the stop's bound (None: not raised); ``alarms_at_end``: the
+alarms the RT status carries at the end.
 
     .venv/bin/python bench/force_hold_payload.py --mass 565 580 --seconds 3
     .venv/bin/python bench/force_hold_payload.py --mass 565 --seconds 2 --no-yield --estop-at 1
@@ -81,6 +83,13 @@ def land(model: RobotModel, mass_kg: float, seconds: float, tolerance_n: float,
                                             if pulled.any() else 0.0),
                 "yielded_mm": round(ref.yielded_m * 1e3, 2),
                 "yield_exhausted": ref.yield_exhausted}
+        # The staff's alarm for a pull the robot cannot end (s after the landing; None: not
+        # raised) and the alarms the RT status carries at the end.
+        alarm = next((e for e in pl.events.snapshot() if e.cause == "pull_in_stop"
+                      and e.kind == "warn"), None)
+        pull["pull_in_stop_at_s"] = None if alarm is None else round(alarm.t - t_land, 3)
+        pull["alarms_at_end"] = [(a["cause"], round(a["fz_n"], 1))
+                                 for a in pl.supervisor.alarms()]
     return {
         "mass_kg": mass_kg,
         "integral_clamp_n": law.integral_limit_n,

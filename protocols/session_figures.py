@@ -133,6 +133,23 @@ def _t(event: dict[str, Any]) -> float:
     return round(float(t), 3) if isinstance(t, (int, float)) else math.nan
 
 
+def _alarms(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The staff alarms of a session (``pull_in_stop``: a pull that persisted after a stop):
+    when raised (``t``, s), the pull then (``fz_n``, N), and when and how it ended
+    (``ended_t`` s and ``how``; None: still raised when the session ended)."""
+    out: list[dict[str, Any]] = []
+    for e in events:
+        if e.get("cause") != "pull_in_stop":
+            continue
+        values = e.get("values") or {}
+        if e.get("kind") == "warn":
+            out.append({"t": _t(e), "cause": "pull_in_stop", "fz_n": values.get("fz_n"),
+                        "message": e.get("message", ""), "ended_t": None, "how": None})
+        elif e.get("kind") == "alarm_end" and out and out[-1]["ended_t"] is None:
+            out[-1].update(ended_t=_t(e), how=values.get("how"))
+    return out
+
+
 def _nanmax(x: np.ndarray) -> float:
     x = x[~np.isnan(x)]
     return float(x.max()) if len(x) else -math.inf
@@ -508,6 +525,7 @@ class SessionFigures:
                          "reaction": e.get("reaction", ""), "message": e.get("message", "")}
                         for e in ev if e.get("reaction") in STOP_REACTIONS
                         and e.get("kind", "fault") == "fault"]
+        out["alarms"] = _alarms(ev)
         out["failovers"] = [{"t": _t(e), "cause": e.get("cause", ""),
                              "message": e.get("message", "")}
                             for e in ev if e.get("reaction") == "failover"]

@@ -116,6 +116,9 @@ _TRIGGERS: tuple[tuple[str, str, str], ...] = (
     ("deadline_overruns", "safety supervisor", "the controller ran late repeatedly"),
     ("drive_saturated", "safety supervisor",
      "a motor was held at its force limit (blocked, or the control shaking)"),
+    ("pulling", "safety supervisor", "the platform pulled on the foot"),
+    ("contact_lost", "safety supervisor",
+     "contact with the foot or plate was lost during force control"),
 )
 
 

@@ -71,6 +71,20 @@ def _figures(inp: SessionReportInput) -> dict[str, Any]:
     return dict(inp.summary or {})
 
 
+def _alarm_row(alarm: dict[str, Any]) -> list[str]:
+    """One staff alarm of the figures (``alarms``: a pull the robot could not end after a
+    stop) as a report row: time, what happened, the pull, how it ended."""
+    fz = alarm.get("fz_n")
+    ended = alarm.get("ended_t")
+    end = ("still pulled at the end of the session" if ended is None
+           else f"ended at {fmt(ended, 3, 's')}"
+           + (" (stop reset)" if alarm.get("how") == "stop_reset" else ""))
+    what = ("the foot was still pulled after the stop; the robot could not lift it "
+            "(staff: support the leg, release the strap)")
+    return [fmt(alarm.get("t"), 3, "s"), what,
+            fmt(abs(fz) if isinstance(fz, (int, float)) else None, 0, "N"), end]
+
+
 def _outcome(inp: SessionReportInput, f: dict[str, Any]) -> tuple[str, Any]:
     stops = f.get("stops") or []
     if stops:
@@ -392,6 +406,13 @@ def _details(inp: SessionReportInput, st: Styles, width: float) -> list[Flowable
                                      [0.1, 0.27, 0.14, 0.19, 0.30]), st, width))
     else:
         story.append(p("No stop: the session ran without a soft or hard stop.", st.body))
+    alarms = f.get("alarms") or []
+    if alarms:
+        # What the robot could not end and the staff had to (a pull after a stop).
+        rows = [_alarm_row(a) for a in alarms]
+        story.append(p("Alarms to the staff", st.h1))
+        story.append(table(TableSpec(["time", "what happened", "pull", "end"], rows,
+                                     [0.12, 0.53, 0.1, 0.25]), st, width))
     fail = f.get("failovers") or []
     if fail:
         story.append(p("Drive failovers (the robot kept running on the backup card): "

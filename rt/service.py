@@ -371,6 +371,8 @@ class RtService:
         return {
             "state": self._mode().name.lower(),
             "causes": sorted(sup.causes), "latched": sup.latched(),
+            # What the staff must act on now (``Supervisor.alarms``: a pull in a stop).
+            "alarms": sup.alarms(),
             "failed_blocks": dict(g.failed),
             "t": stats.t, "cycles": stats.cycles, "deadline_misses": stats.misses,
             # The periods the loop dropped when it fell behind (a host stall of 0.1 s drops

@@ -17,6 +17,7 @@ EXPECTED = {
     "hand_stop": "soft_stop", "gui_estop": "hard_stop", "client_loss": "soft_stop",
     "rom_limit_at_speed": "soft_stop", "force_overload": "soft_stop",
     "latency_force": "soft_stop", "payload_pull": "soft_stop",
+    "pull_beyond_drives": "hard_stop", "contact_removed": "soft_stop",
 }
 
 
@@ -25,7 +26,7 @@ def test_matrix_covers_every_twin_fault_kind():
 
     covered = {"encoder_freeze", "encoder_jump", "encoder_noise", "dac_dead", "dac_stuck",
                "ati_dropout", "ati_stale", "ati_saturation", "latency", "hardware_estop",
-               "hand_stop"}
+               "hand_stop", "contact_removed"}
     assert set(KINDS) <= covered <= set(SCENARIOS)
     assert set(EXPECTED) == set(SCENARIOS)
 
@@ -60,6 +61,30 @@ def test_fault_is_caught_within_its_targets(name):
         assert r["cause"] == "pulling", r
         assert r["pull_end_ms"] is not None and r["pull_end_ms"] <= bound_ms, r
         assert -450.0 < r["pull_peak_n"] < -100.0, r
+    if name == "payload_pull":
+        assert r["alarm_ms"] is None, r          # the hold ended the pull: no alarm
+    if name == "pull_beyond_drives":
+        # 700 kg (issue 15): ``pulling`` soft stop, ``force_limit`` hard stop, the brakes
+        # hold the foot pulled by ≈ 1.7 kN (twin: soft 54 ms, hard 139 ms after the landing,
+        # −1748 N peak). The robot cannot end it: the ``pull_in_stop`` alarm, PULL_IN_STOP_S
+        # after the first stop (+ the cycle that latches it), so within that bound after the
+        # hard stop; no escalation. The issue-5 targets are the load's to miss (F% is the
+        # brakes' hold, the outputs drop at the hard stop, not at the landing): not applied.
+        from rt.safety.supervisor_kernel import PULL_IN_STOP_S
+        bound_ms = PULL_IN_STOP_S * 1e3
+        assert r["cause"] == "force_limit" and r["pull_end_ms"] is None, r
+        assert bound_ms <= r["alarm_ms"] <= bound_ms + 2.0, r
+        assert 0.0 < r["alarm_after_hard_ms"] <= bound_ms, r
+        assert r["pull_peak_n"] < -1500.0 and r["final_state"] == "hard_stop", r
+        assert r["zero_output_after_hard_ms"] is not None and \
+            r["zero_output_after_hard_ms"] <= 20.0, r
+        return
+    if name == "contact_removed":
+        # The foot goes away under the 200 N hold (issue 15): ``contact_lost`` soft stop
+        # before the slider-speed check's (twin: stop 17 ms after the removal, the sliders
+        # 2.3 mm above where they stood, the foot's 2 mm heel pad released included).
+        assert r["cause"] == "contact_lost" and r["stop_ms"] <= 20.0, r
+        assert 1.0 < r["rise_mm"] < 3.0, r
     if r["reaction"] == "hard_stop":
         # Hard stop: zero drive output within 20 ms of the fault (issue 5).
         assert r["time_to_zero_output_ms"] is not None and r["time_to_zero_output_ms"] <= 20.0

@@ -25,7 +25,7 @@ from rt.safety.limits import PatientLimits, RobotLimits, effective
 from rt.safety.supervisor import InterpretedSupervisor, Supervisor, supervisor_physics
 
 DT = 1e-3
-CYCLES = 3250
+CYCLES = 5800
 #: Inputs of the supervisor block: name → width.
 PORTS = {"q": 3, "est_status": 1, "qd": 3, "qdd": 3, "fk_ok": 1, "q_ref": 3, "qd_ref": 3,
          "tau": 3, "wrench": 6, "wrench_flags": 2, "inputs": 2, "drive_failed": 1}
@@ -144,6 +144,22 @@ def _stream(recorded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     s["tau"][2900:2960, 1] = np.linspace(40.0, 180.0, 60)
     s["tau"][2960:3000, 1] = 180.0
     s["tau"][3000:3250, 1] = np.minimum(np.linspace(180.0, 680.0, 250), 480.0)
+    # A lost contact (issue 15, force control from 3300): the foot held at 50 N with the
+    # sliders at 0.2 m, then nothing read while they rise 8 mm: contact_lost once the mean
+    # is 5 mm above where the contact was last held.
+    q[3300:3400, :] = 0.2
+    q[3330:3360, :] = 0.2 + np.linspace(0.0, 0.008, 30)[:, None]
+    q[3360:3400, :] = 0.208
+    q_ref[3300:3400, :] = q[3300:3400, :]
+    w[3300:3330, 2] = -50.0
+    w[3330:3400, 2] = 0.0
+    # A pull that persists in a (client's) stop from 3500: 80 N for 1.1 s (a stale sample
+    # and a stall in it) → pull_in_stop raised; a sample of no pull at 4600 ends it; the pull
+    # again from 4650 → raised again; a reset of the stop at 5700 ends it.
+    w[3500:5800, 2] = 80.0
+    w[4600:4650, 2] = -20.0
+    s["wrench_flags"][4000:4003, 0] = 1.0
+    s["dt"][4100:4103] = 5.0 * DT
     return s
 
 
@@ -154,7 +170,8 @@ ACTIONS = {150: "reset", 160: "reset", 205: "reset", 250: "reset", 450: "reset",
            870: "stop", 880: "reset", 920: "heartbeat", 950: "reset", 960: "heartbeat_off",
            970: "reset", 1100: "reset", 1250: "reset", 1300: "stop", 1301: "estop",
            1310: "reset", 1500: "limits", 1510: "reset", 1930: "reset", 2100: "window",
-           2110: "reset", 2760: "reset"}
+           2110: "reset", 2760: "reset", 3260: "reset", 3300: "force_control_on",
+           3400: "force_control_off", 3410: "reset", 3500: "stop", 5700: "reset"}
 
 
 def _block(sup: Supervisor, stream: dict[str, np.ndarray]) -> tuple[SupervisorBlock, dict]:
@@ -242,6 +259,7 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
         assert sups[0].saturated_peak_s == sups[1].saturated_peak_s, k
         for m, r in ((sk.M_STILL_LO, ref._still_lo), (sk.M_STILL_HI, ref._still_hi)):
             assert mem[m:m + 3].tolist() == pytest.approx(r, nan_ok=True, rel=0.0, abs=0.0), k
+        assert sups[0].alarms() == sups[1].alarms(), k
         if k == 2799:
             assert sups[0].reaction == Reaction.NONE          # the load-change splice runs
     events = [[_event(e) for e in sup.log.snapshot()] for sup in sups]
@@ -258,7 +276,7 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
     assert axis_free <= {c.rstrip("012") for c in logged}, axis_free - logged
     assert {"estop_gui", "stop_client", "heartbeat_lost"} <= logged
     kinds = {e[1] for e in events[0]}
-    assert kinds == {"fault", "warn", "reset", "reset_refused"}
+    assert kinds == {"fault", "warn", "reset", "reset_refused", "alarm_end"}
     # … at both reactions where a cause has two.
     reactions = {(e[2], e[3]) for e in events[0]}
     for cause in ("tracking_0", "rom_roll", "force_limit", "drive_saturated_0"):
@@ -300,8 +318,25 @@ def test_compiled_supervisor_matches_the_interpreted_one(recorded, model) -> Non
     # the freeze (180 N + 225 N: cycle 3112) and the excess carried the axis' 207 kg over 4
     # counts (x = J T / 2m with a ramp's J: ≈ 32 cycles more).
     frozen = [round(e[0] / DT) - 1 for e in events[0] if e[2] == "encoder_frozen_1"
-              and e[0] > 2800 * DT]
+              and e[1] == "fault" and e[0] > 2800 * DT]
     assert len(frozen) == 1 and 3112 < frozen[0] < 3160, frozen
+    # The lost contact: when the sliders' mean first stood more than 5 mm above 0.2 m.
+    lost = [(round(e[0] / DT) - 1, e[5]) for e in events[0] if e[2] == "contact_lost"
+            and e[1] == "fault"]
+    k_lost = 3330 + int(np.argmax(np.linspace(0.0, 0.008, 30) > sk.CONTACT_LOST_RISE_M))
+    assert [k for k, _ in lost] == [k_lost], lost
+    assert lost[0][1]["touch_q_m"] == pytest.approx(0.2, abs=1e-15) and lost[0][1]["fz_n"] == 0.0
+    # The pull in the stop: raised once per pull, 1 s of it counted (the stale samples not,
+    # the stall's 5 ms as 2), ended by a sample of no pull, then by the stop's reset.
+    pull = [(e[1], round(e[0] / DT) - 1, e[5]) for e in events[0] if e[2] == "pull_in_stop"]
+    assert [(kind, k) for kind, k, _ in pull] == [
+        # counted from 3501 (the stop latched in 3500): 1000 cycles' worth, the 3 stale
+        # ones not counted, the 3 stalled ones as 2 periods each
+        ("warn", 3501 + 1000 + 3 - 3 - 1), ("alarm_end", 4600),
+        ("warn", 4650 + 1000 - 1), ("alarm_end", 5701)], pull
+    assert pull[0][2]["fz_n"] == -80.0 and pull[0][2]["since_t"] == pytest.approx(3502 * DT)
+    assert pull[1][2]["how"] == "pull_ended" and pull[1][2]["fz_n"] == 20.0
+    assert pull[3][2]["how"] == "stop_reset" and pull[3][2]["fz_n"] == -80.0
 
 
 def test_steady_cycles_run_no_python_side(recorded, model, monkeypatch) -> None:

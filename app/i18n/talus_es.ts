@@ -571,7 +571,7 @@
     <message>
         <location filename="../pages/review.py" line="100"/>
         <location filename="../pages/run.py" line="148"/>
-        <location filename="../pages/run.py" line="525"/>
+        <location filename="../pages/run.py" line="552"/>
         <source>Ankle angles (°)</source>
         <translation>Ángulos del tobillo (°)</translation>
     </message>
@@ -619,13 +619,13 @@
     </message>
     <message>
         <location filename="../pages/review.py" line="220"/>
-        <location filename="../pages/run.py" line="539"/>
+        <location filename="../pages/run.py" line="566"/>
         <source>platform pitch (engineers)</source>
         <translation>cabeceo de la plataforma (ingeniería)</translation>
     </message>
     <message>
         <location filename="../pages/review.py" line="222"/>
-        <location filename="../pages/run.py" line="540"/>
+        <location filename="../pages/run.py" line="567"/>
         <source>platform roll (engineers)</source>
         <translation>alabeo de la plataforma (ingeniería)</translation>
     </message>
@@ -706,120 +706,120 @@
         <translation>tobillo: inversión(+)/eversión(−) desde la posición neutra</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="231"/>
+        <location filename="../pages/run.py" line="239"/>
         <source>Platform angles (engineers)</source>
         <extracomment>True while the angle plot shows the ankle view (the telemetry&apos;s ankle fields)</extracomment>
         <translation>Ángulos de la plataforma (ingeniería)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="315"/>
+        <location filename="../pages/run.py" line="325"/>
         <source>Protocol: %1</source>
         <translation>Protocolo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="330"/>
+        <location filename="../pages/run.py" line="340"/>
         <source>Checking the protocol on the robot model, then starting…</source>
         <translation>Comprobando el protocolo en el modelo del robot; después se inicia…</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="345"/>
+        <location filename="../pages/run.py" line="355"/>
         <source>Could not take control: %1</source>
         <translation>No se pudo tomar el control: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="344"/>
-        <location filename="../pages/run.py" line="411"/>
+        <location filename="../pages/run.py" line="354"/>
+        <location filename="../pages/run.py" line="438"/>
         <source>You control the robot.</source>
         <translation>Usted controla el robot.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="350"/>
+        <location filename="../pages/run.py" line="360"/>
         <source>The session did not start: %1</source>
         <translation>La sesión no se inició: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="365"/>
+        <location filename="../pages/run.py" line="375"/>
         <source>Session running.</source>
         <translation>Sesión en curso.</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="379"/>
+        <location filename="../pages/run.py" line="389"/>
         <source>Session ended: %1</source>
         <translation>Sesión terminada: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="384"/>
+        <location filename="../pages/run.py" line="399"/>
         <source>Stopped: %1</source>
         <translation>Detenido: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="387"/>
+        <location filename="../pages/run.py" line="402"/>
         <source>Session stopping: %1</source>
         <translation>La sesión se está deteniendo: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="392"/>
+        <location filename="../pages/run.py" line="419"/>
         <source>The clinical record did not take the session: %1</source>
         <translation>La historia clínica no registró la sesión: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="473"/>
+        <location filename="../pages/run.py" line="500"/>
         <source>%1 s left</source>
         <translation>quedan %1 s</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="524"/>
+        <location filename="../pages/run.py" line="551"/>
         <source>Ankle angles from neutral (°)</source>
         <translation>Ángulos del tobillo desde la posición neutra (°)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="575"/>
-        <location filename="../pages/run.py" line="628"/>
+        <location filename="../pages/run.py" line="602"/>
+        <location filename="../pages/run.py" line="655"/>
         <source>Ankle torque: —</source>
         <translation>Par en el tobillo: —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="585"/>
+        <location filename="../pages/run.py" line="612"/>
         <source>Ankle torque: %1 %2 N·m, %3 %4 N·m</source>
         <translation>Par en el tobillo: %1 %2 N·m, %3 %4 N·m</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="604"/>
+        <location filename="../pages/run.py" line="631"/>
         <source>Ankle from neutral: %1 %2°, %3 %4°</source>
         <translation>Tobillo desde la posición neutra: %1 %2°, %3 %4°</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="610"/>
+        <location filename="../pages/run.py" line="637"/>
         <source>Ankle from neutral: —</source>
         <translation>Tobillo desde la posición neutra: —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="613"/>
+        <location filename="../pages/run.py" line="640"/>
         <source>the ankle centre moved %1 mm (comfort limit %2 mm)</source>
         <translation>el centro del tobillo se ha desplazado %1 mm (límite de confort %2 mm)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="620"/>
+        <location filename="../pages/run.py" line="647"/>
         <source>Hold %1: %2 %3 N·m (target now %4 N·m)</source>
         <translation>Mantenimiento %1: %2 %3 N·m (objetivo ahora %4 N·m)</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="636"/>
+        <location filename="../pages/run.py" line="663"/>
         <source>Platform (engineers): roll %1°, pitch %2°</source>
         <translation>Plataforma (ingeniería): alabeo %1°, cabeceo %2°</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="640"/>
+        <location filename="../pages/run.py" line="667"/>
         <source>Platform (engineers): —</source>
         <translation>Plataforma (ingeniería): —</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="650"/>
+        <location filename="../pages/run.py" line="677"/>
         <source>Repetitions: %1</source>
         <translation>Repeticiones: %1</translation>
     </message>
     <message>
-        <location filename="../pages/run.py" line="652"/>
+        <location filename="../pages/run.py" line="679"/>
         <source>Repetitions: %1 of %2</source>
         <translation>Repeticiones: %1 de %2</translation>
     </message>
@@ -1115,58 +1115,78 @@
     </message>
     <message>
         <location filename="../words.py" line="66"/>
+        <source>the foot is still pulled after the stop</source>
+        <translation>el pie sigue siendo traccionado después de la parada</translation>
+    </message>
+    <message>
+        <location filename="../words.py" line="67"/>
+        <source>contact with the foot or plate was lost during force control</source>
+        <translation>se perdió el contacto con el pie o la placa durante el control de fuerza</translation>
+    </message>
+    <message>
+        <location filename="../words.py" line="68"/>
         <source>the control computer found a fault in its own software</source>
         <translation>el ordenador de control detectó un fallo en su propio software</translation>
     </message>
     <message>
-        <location filename="../words.py" line="80"/>
+        <location filename="../words.py" line="82"/>
         <source>actuator %1 at the end of its travel</source>
         <translation>actuador %1 al final de su recorrido</translation>
     </message>
     <message>
-        <location filename="../words.py" line="81"/>
+        <location filename="../words.py" line="83"/>
         <source>actuator %1 near the end of its travel</source>
         <translation>actuador %1 cerca del final de su recorrido</translation>
     </message>
     <message>
-        <location filename="../words.py" line="82"/>
+        <location filename="../words.py" line="84"/>
         <source>actuator %1 moving too fast</source>
         <translation>actuador %1 demasiado rápido</translation>
     </message>
     <message>
-        <location filename="../words.py" line="83"/>
+        <location filename="../words.py" line="85"/>
         <source>actuator %1 accelerating too hard</source>
         <translation>actuador %1 acelera demasiado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="84"/>
+        <location filename="../words.py" line="86"/>
         <source>actuator %1 could not follow its path</source>
         <translation>actuador %1 no pudo seguir su trayectoria</translation>
     </message>
     <message>
-        <location filename="../words.py" line="85"/>
+        <location filename="../words.py" line="87"/>
         <source>actuator %1 pushing too hard</source>
         <translation>actuador %1 empuja demasiado</translation>
     </message>
     <message>
-        <location filename="../words.py" line="86"/>
+        <location filename="../words.py" line="88"/>
         <source>position sensor %1 stopped changing</source>
         <translation>el sensor de posición %1 dejó de cambiar</translation>
     </message>
     <message>
-        <location filename="../words.py" line="87"/>
+        <location filename="../words.py" line="89"/>
         <source>actuator %1 held at its force limit (blocked or shaking)</source>
         <translation>actuador %1 retenido en su límite de fuerza (bloqueado u oscilando)</translation>
     </message>
     <message>
-        <location filename="../words.py" line="93"/>
+        <location filename="../words.py" line="95"/>
         <source>motor drive card %1 failed; the spare card took over</source>
         <translation>falló la tarjeta de accionamiento %1; la tarjeta de reserva tomó el control</translation>
     </message>
     <message>
-        <location filename="../words.py" line="97"/>
+        <location filename="../words.py" line="99"/>
         <source>E-STOP (%1)</source>
         <translation>PARADA DE EMERGENCIA (%1)</translation>
+    </message>
+    <message>
+        <location filename="../words.py" line="109"/>
+        <source>ALARM: the robot has stopped but the strap is still pulling the patient&apos;s foot down with %1 N, and the robot cannot lift it. Support the patient&apos;s leg and release the strap now.</source>
+        <translation>ALARMA: el robot se ha detenido pero la correa sigue tirando del pie del paciente hacia abajo con %1 N, y el robot no puede levantarlo. Sujete la pierna del paciente y suelte la correa ahora.</translation>
+    </message>
+    <message>
+        <location filename="../words.py" line="112"/>
+        <source>ALARM: %1</source>
+        <translation>ALARMA: %1</translation>
     </message>
     <message>
         <location filename="../pages/login.py" line="30"/>
@@ -1505,16 +1525,16 @@
     <message>
         <location filename="../pages/patients.py" line="503"/>
         <location filename="../pages/run.py" line="84"/>
-        <location filename="../pages/run.py" line="586"/>
-        <location filename="../pages/run.py" line="605"/>
+        <location filename="../pages/run.py" line="613"/>
+        <location filename="../pages/run.py" line="632"/>
         <source>dorsiflexion</source>
         <translation>dorsiflexión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="504"/>
         <location filename="../pages/run.py" line="84"/>
-        <location filename="../pages/run.py" line="586"/>
-        <location filename="../pages/run.py" line="605"/>
+        <location filename="../pages/run.py" line="613"/>
+        <location filename="../pages/run.py" line="632"/>
         <source>plantarflexion</source>
         <extracomment>Redraw rate of the live plots, Hz: the issue asks ≥ 30 fps; a 33 ms timer gives at most 30.3 and any late tick drops below, so the timer runs a little faster (frames with no new telemetry, 60 Hz, are skipped). Seconds of history on the live plots. The angle curves of the ankle view (from neutral) and of the platform (absolute).</extracomment>
         <translation>plantarflexión</translation>
@@ -1522,16 +1542,16 @@
     <message>
         <location filename="../pages/patients.py" line="505"/>
         <location filename="../pages/run.py" line="85"/>
-        <location filename="../pages/run.py" line="588"/>
-        <location filename="../pages/run.py" line="607"/>
+        <location filename="../pages/run.py" line="615"/>
+        <location filename="../pages/run.py" line="634"/>
         <source>inversion</source>
         <translation>inversión</translation>
     </message>
     <message>
         <location filename="../pages/patients.py" line="505"/>
         <location filename="../pages/run.py" line="85"/>
-        <location filename="../pages/run.py" line="588"/>
-        <location filename="../pages/run.py" line="607"/>
+        <location filename="../pages/run.py" line="615"/>
+        <location filename="../pages/run.py" line="634"/>
         <source>eversion</source>
         <translation>eversión</translation>
     </message>

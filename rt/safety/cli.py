@@ -73,5 +73,8 @@ def _pull_text(f: dict) -> str:
     if "pull_end_ms" not in f:
         return ""
     end = f["pull_end_ms"]
-    return (f"  pull peak {f['pull_peak_n']:g} N, "
-            + ("still pulled at the end" if end is None else f"over {end:g} ms after the stop"))
+    alarm = f.get("alarm_ms")
+    return (f"  stop {f['stop_ms']:g} ms ({f['stop_cause']}), pull peak {f['pull_peak_n']:g} N, "
+            + ("still pulled at the end" if end is None else f"over {end:g} ms after the stop")
+            + ("" if alarm is None else f", pull_in_stop alarm {alarm:g} ms after the stop")
+            + f", rise {f.get('rise_mm', 0.0):g} mm")

@@ -53,6 +53,11 @@ PULL_ENDED_N = 5.0
 #: The payload of the matrix's pull scenario (kg): beyond what the force hold's landing
 #: carries (≈ 550-560 kg), within the drives' static capacity along z (≈ 620 kg).
 PULL_PAYLOAD_KG = 565.0
+#: The payload of the matrix's pull beyond the drives (kg): more than three 2 kN drives lift
+#: (≈ 620 kg along z with the platform), so the stops follow, the spring brakes hold and the
+#: foot stays pulled (≈ 1.7 kN, escalate8's figure): what only the staff can end, so the
+#: ``pull_in_stop`` alarm must name it.
+PULL_BEYOND_DRIVES_KG = 700.0
 RUN_S = 5.0
 REST_SPEED_M_S = 1e-3
 REST_HOLD_S = 0.05
@@ -229,10 +234,13 @@ def scenarios(model: RobotModel) -> list[Scenario]:
     def gui_estop(pl: PositionLoop, t_f: float) -> list[Later]:
         return [(t_f, lambda: pl.supervisor.request_estop("gui"))]
 
-    def payload_lands(pl: PositionLoop, t_f: float) -> list[Later]:
+    def payload_lands(pl: PositionLoop, t_f: float, mass_kg: float = PULL_PAYLOAD_KG
+                      ) -> list[Later]:
         twin = _sim_twin(pl)
-        return [(t_f, lambda: twin.plant.set_payload(Payload(PULL_PAYLOAD_KG,
-                                                             (0.0, 0.0, 0.10))))]
+        return [(t_f, lambda: twin.plant.set_payload(Payload(mass_kg, (0.0, 0.0, 0.10))))]
+
+    def payload_beyond_drives(pl: PositionLoop, t_f: float) -> list[Later]:
+        return payload_lands(pl, t_f, PULL_BEYOND_DRIVES_KG)
 
     return [
         Scenario("encoder_freeze", _fault("encoder_freeze", axis=0)),
@@ -279,6 +287,22 @@ def scenarios(model: RobotModel) -> list[Scenario]:
         # (``ProgramReference._yield_step``): the pull must end within the yield's stated
         # bound (``pull_end_ms``; twin figures: peak −286 N, over 0.26 s after the stop).
         Scenario("payload_pull", payload_lands,
+                 environment=patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0),
+                 force_hold_n=200.0),
+        # A pull beyond the drives (issue 15): 700 kg land under the same hold; ``pulling``
+        # soft-stops, ``force_limit`` hard-stops, the spring brakes then hold the foot pulled
+        # by ≈ 1.7 kN for good. Nothing the robot does lifts it: the supervisor raises the
+        # ``pull_in_stop`` alarm (``alarm_ms`` after the first stop, bound
+        # PULL_IN_STOP_S) for the staff. The issue-5 targets do not apply to this row (the
+        # load, not the robot, is beyond them): its own outcome is judged.
+        Scenario("pull_beyond_drives", payload_beyond_drives,
+                 environment=patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0),
+                 force_hold_n=200.0),
+        # The foot goes away under the force hold (issue 15; twin fault ``contact_removed``):
+        # the force law chases it upwards; ``contact_lost`` soft-stops once the sliders are
+        # CONTACT_LOST_RISE_M above where the contact was last held (``rise_mm``: how far
+        # they rose at most above where they stood at the fault).
+        Scenario("contact_removed", _fault("contact_removed"),
                  environment=patient_foot(model.kin, FORCE_HOLD_Z_M, 0.0, 0.0),
                  force_hold_n=200.0),
     ]
@@ -365,6 +389,20 @@ def run_scenario(sc: Scenario, model: RobotModel, seconds: float = RUN_S,
                                  round((t[pulled][-1] + 1e-3 - stop.t) * 1e3, 3)
                                  if pulled.any() else 0.0)
         result["pull_peak_n"] = round(min(0.0, float(np.nanmin(push[after]))), 1)
+        result["stop_ms"] = round((stop.t - t_fault) * 1e3, 3)     # the fault → its stop
+        result["stop_cause"] = stop.cause
+        # The staff's alarm for a pull the robot cannot end (ms after the first stop; None:
+        # not raised), and after the hard stop when there was one.
+        alarm = next((e for e in events if e.cause == "pull_in_stop"), None)
+        result["alarm_ms"] = None if alarm is None else round((alarm.t - stop.t) * 1e3, 3)
+        result["alarm_after_hard_ms"] = (None if alarm is None or hard is None else
+                                         round((alarm.t - hard.t) * 1e3, 3))
+    if sc.force_hold_n is not None:
+        # How far the sliders rose above where they stood at the fault (mm; the chase after
+        # a lost contact), from the truth.
+        h = rows[:, 1:4].mean(axis=1)
+        k0 = int(np.searchsorted(t, t_fault))
+        result["rise_mm"] = round(max(0.0, float(h[k0:].max() - h[k0])) * 1e3, 3)
     result["excursion"] = _excursions(rows, sc, model, ref_t)
     mode = SupervisorMode.from_port(rows[-1, 11])
     result["final_state"] = (mode.name.lower() if mode != SupervisorMode.RUN else

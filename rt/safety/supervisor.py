@@ -225,6 +225,7 @@ def _cause_names() -> tuple[str, ...]:
               "force_saturated", "force_stale", "force_implausible", "force_limit", "pulling",
               "deadline_overruns"]
     names += [f"drive_saturated_{i}" for i in range(3)]
+    names += ["pull_in_stop", "contact_lost"]
     assert len(names) == sk.N_CAUSES
     return tuple(names)
 
@@ -288,8 +289,41 @@ def _event_text(c: int, reaction: int, v: np.ndarray) -> tuple[str, dict]:
                 {"fz_n": float(v[0]), "for_s": float(v[1])})
     if c == sk.C_DEADLINE:
         return "consecutive deadline overruns", {"count": int(v[0]), "dt": float(v[1])}
+    if c == sk.C_PULL_STOP:
+        return _pull_in_stop_text(float(v[0]), float(v[1]), float(v[2]))
+    if c == sk.C_CONTACT_LOST:
+        return _contact_lost_text(float(v[0]), float(v[1]), float(v[2]))
     return _saturation_text(c - sk.C_DRIVE_SAT, reaction, float(v[0]), float(v[1]),
                             float(v[2]))
+
+
+def _pull_in_stop_text(fz_n: float, since_t: float, for_s: float) -> tuple[str, dict]:
+    """Message and values of the ``pull_in_stop`` alarm (both supervisors')."""
+    when = "in the stop" if math.isnan(for_s) else f"{for_s:.1f} s into the stop"
+    message = (f"the foot is still pulled ({fz_n:.0f} N) {when}: the robot cannot lift it; "
+               "support the limb or release the strap")
+    return (message,
+            {"fz_n": fz_n, "since_t": since_t, "for_s": for_s})
+
+
+def _pull_in_stop_end_text(fz_n: float, since_t: float, how: float,
+                           t: float) -> tuple[str, dict]:
+    """Message and values of the event that ends the ``pull_in_stop`` alarm at loop time
+    ``t``: ``fz_n`` the sample that ended it (or the last pull read), ``since_t`` when the
+    pull began, ``how`` the kernel's ``M_PULL_STOP_END`` (1: a sample read no pull, 2: the
+    stop was reset)."""
+    ended = "pull_ended" if how == 1.0 else "stop_reset"
+    message = ("the pull in the stop has ended" if ended == "pull_ended"
+               else "the stop was reset while the foot was pulled (pull no longer watched)")
+    return message, {"how": ended, "fz_n": fz_n, "since_t": since_t, "lasted_s": t - since_t}
+
+
+def _contact_lost_text(fz_n: float, rise_m: float, touch_m: float) -> tuple[str, dict]:
+    """Message and values of ``contact_lost`` (both supervisors')."""
+    message = (f"contact lost in force control: {fz_n:.1f} N with the platform "
+               f"{rise_m * 1e3:.1f} mm above where it last touched")
+    return (message,
+            {"fz_n": fz_n, "rise_m": rise_m, "touch_q_m": touch_m})
 
 
 def _saturation_text(i: int, reaction: int, saturated_s: float, window_s: float,
@@ -647,6 +681,9 @@ class Supervisor:
         for c in range(sk.N_CAUSES if new else 0):
             if c == sk.C_DRIVE:
                 self._take_stop_request(t)
+            if c == sk.C_PULL_STOP and mem[sk.M_PULL_STOP_END] != 0.0:
+                k = sk.M_VALS + sk.N_VALUES * c
+                self._log_alarm_end(t, *(float(x) for x in mem[k:k + sk.N_VALUES]))
             if mem[sk.M_NEW + c] == 0.0:
                 continue
             reaction = Reaction(int(mem[sk.M_REACT + c]))
@@ -672,6 +709,23 @@ class Supervisor:
             active = {CAUSES[c] for c in range(sk.N_CAUSES) if mem[sk.M_REACT + c] != 0.0}
             self._take_reset(t, self._reset_tickets.popleft(), active | self._py_active)
         self._relatch(t)
+
+    def _log_alarm_end(self, t: float, fz_n: float, since_t: float, how: float) -> None:
+        message, values = _pull_in_stop_end_text(fz_n, since_t, how, t)
+        self.log.append(SafetyEvent(t, "alarm_end", "pull_in_stop", Reaction.NONE, message,
+                                    values))
+
+    def alarms(self) -> list[dict]:
+        """The alarms raised now (any thread): ``pull_in_stop`` while a pull the robot cannot
+        end persists in a stop — ``{"cause", "fz_n"`` (the latest pull, N), ``"since_t"``
+        (loop time it began, s), ``"message"}``. The RT status carries them (a warning is
+        logged once; this says it is still so)."""
+        m = self._mem
+        if m[sk.M_PULL_STOP_ON] == 0.0:
+            return []
+        fz, since = float(m[sk.M_PULL_STOP_FZ]), float(m[sk.M_PULL_STOP_SINCE])
+        return [{"cause": "pull_in_stop", "fz_n": fz, "since_t": since,
+                 "message": _pull_in_stop_text(fz, since, math.nan)[0]}]
 
     def _take_stop_request(self, t: float) -> None:
         if self._stop_request:
@@ -749,6 +803,11 @@ class InterpretedSupervisor(Supervisor):
         self._restart_saturation_window()
         self._sat_peak = [0.0, 0.0, 0.0]
         self._stop_since = math.nan                    # since when a stop is latched (s)
+        self._pull_stop_time = 0.0                     # the pull in the stop lasted (s)
+        self._pull_stop_since = math.nan               # ... since this loop time (s)
+        self._pull_stop_on = False                     # pull_in_stop raised
+        self._pull_stop_fz = 0.0                       # the latest pull read while raised (N)
+        self._touch_z = math.nan                       # sliders' mean at the last contact (m)
 
     def _restart_saturation_window(self) -> None:
         self._sat_k = math.nan                         # the window's current bucket
@@ -783,6 +842,74 @@ class InterpretedSupervisor(Supervisor):
             step = (load - c) * dt / (CARRY_TAU_S + dt)
             cap = self.holding_force_n * dt / CARRY_TAU_S
             self._carry[i] = c + (cap if step > cap else (-cap if -cap > step else step))  # noqa: FURB136
+
+    def alarms(self) -> list[dict]:
+        if not self._pull_stop_on:
+            return []
+        fz, since = self._pull_stop_fz, self._pull_stop_since
+        return [{"cause": "pull_in_stop", "fz_n": fz, "since_t": since,
+                 "message": _pull_in_stop_text(fz, since, math.nan)[0]}]
+
+    def _check_pull_in_stop(self, t: float, dt: float, fz_n: float, stale: bool) -> None:
+        """``pull_in_stop`` (the compiled ``_pull_in_stop``'s arithmetic, which says why): in
+        a latched stop, a pull read for :data:`~rt.safety.supervisor_kernel.PULL_IN_STOP_S`
+        raises a warning once and keeps the alarm up until a sample reads no pull or the stop
+        is reset (an ``alarm_end`` event)."""
+        fz_n = float(fz_n)
+        on = self._pull_stop_on
+        if self.reaction < Reaction.SOFT_STOP:
+            if on:
+                self._pull_stop_on = False
+                self._log_alarm_end(t, self._pull_stop_fz, self._pull_stop_since, 2.0)
+            self._pull_stop_time = 0.0
+            self._pull_stop_since = math.nan
+            return
+        if stale or math.isnan(fz_n):
+            if on:
+                self._active.add("pull_in_stop")
+            return
+        if not fz_n < sk.PULL_FZ_N:
+            if on:
+                self._pull_stop_on = False
+                self._pull_stop_fz = fz_n
+                self._log_alarm_end(t, fz_n, self._pull_stop_since, 1.0)
+            self._pull_stop_time = 0.0
+            self._pull_stop_since = math.nan
+            return
+        if math.isnan(self._pull_stop_since):
+            self._pull_stop_since = t
+        cap = sk.PULL_DT_PERIODS * self.period_s
+        self._pull_stop_time += dt if dt < cap else cap  # noqa: FURB136
+        if on:
+            self._active.add("pull_in_stop")
+            self._pull_stop_fz = fz_n
+            return
+        if self._pull_stop_time >= sk.PULL_IN_STOP_S:
+            self._active.add("pull_in_stop")
+            self._pull_stop_on = True
+            self._pull_stop_fz = fz_n
+            message, values = _pull_in_stop_text(fz_n, self._pull_stop_since,
+                                                 self._pull_stop_time)
+            self.log.append(SafetyEvent(t, "warn", "pull_in_stop", Reaction.WARN, message,
+                                        values))
+
+    def _check_contact_lost(self, q, fz_n: float, stale: bool, saturated: bool,
+                            trip: Callable[..., None]) -> None:
+        """``contact_lost`` (the compiled ``_contact_lost``'s arithmetic, which says why)."""
+        if not self.force_control:
+            self._touch_z = math.nan
+            return
+        fz_n = float(fz_n)
+        if stale or saturated or math.isnan(fz_n):
+            return
+        h = (float(q[0]) + float(q[1]) + float(q[2])) / 3.0
+        if fz_n > sk.CONTACT_HELD_N:
+            self._touch_z = h
+            return
+        rise = h - self._touch_z
+        if rise > sk.CONTACT_LOST_RISE_M:
+            message, values = _contact_lost_text(fz_n, rise, self._touch_z)
+            trip("contact_lost", Reaction.SOFT_STOP, message, **values)
 
     def _saturated_time(self, t: float, dt: float, tau) -> list[float]:
         """Each axis' time with its command at the drive's limit (``|τ| ≥``
@@ -1044,7 +1171,7 @@ class InterpretedSupervisor(Supervisor):
             elif force_n > FORCE_CUSHION * lim.max_force_n:
                 trip("force_limit", Reaction.SOFT_STOP, "platform force reaching the limit",
                      force_n=force_n)
-        if self.force_control and fz_n < 0.0:
+        if self.force_control and fz_n < sk.PULL_FZ_N:
             # Stall-aware: a cycle adds at most PULL_DT_PERIODS periods (a stall is one sample).
             cap = sk.PULL_DT_PERIODS * self.period_s
             self._pull_time += dt if dt < cap else cap  # noqa: FURB136
@@ -1072,6 +1199,8 @@ class InterpretedSupervisor(Supervisor):
                 message, values = _saturation_text(i, reaction, saturated, window,
                                                    self.applied_force_max_n)
                 trip(f"drive_saturated_{i}", reaction, message, **values)
+        self._check_pull_in_stop(t, dt, fz_n, wrench_stale)
+        self._check_contact_lost(q, fz_n, wrench_stale, wrench_saturated, trip)
         if self.heartbeat_required and self.heartbeat_age is not None:
             age = self.heartbeat_age()
             if age > lim.heartbeat_timeout_s:

@@ -53,7 +53,9 @@ C_FORCE_LIMIT = C_FORCE_SAT + 3
 C_PULL = C_FORCE_SAT + 4
 C_DEADLINE = C_FORCE_SAT + 5                  # 35
 C_DRIVE_SAT = C_DEADLINE + 1                  # per axis i: C_DRIVE_SAT + i (36-38)
-N_CAUSES = C_DRIVE_SAT + 3
+C_PULL_STOP = C_DRIVE_SAT + 3                 # 39: a pull that persists in a stop (an alarm)
+C_CONTACT_LOST = C_PULL_STOP + 1              # 40
+N_CAUSES = C_CONTACT_LOST + 1
 N_VALUES = 3
 
 # Reactions as the kernel's numbers (rt.safety.events.Reaction).
@@ -72,6 +74,36 @@ FORCE_CUSHION = 0.9
 #: full; a pull that spans a stall is judged on the samples seen (its stop late by at most
 #: the stall, as every other check of that cycle).
 PULL_DT_PERIODS = 2.0
+#: The ``pulling`` check's threshold (N): the platform's measured push Fz below it is a pull
+#: (the contact is unilateral: any measured pull is the strap's). ``pull_in_stop`` reuses it.
+PULL_FZ_N = 0.0
+#: ``pull_in_stop``: how long a pull may last once a stop is latched before the staff are
+#: alarmed (s). The stop's compliant hold (``ProgramReference._yield_step``) ends a pull within
+#: ``pull_yield_max_m / pull_yield_speed_m_s`` = 20 mm / 20 mm/s = 1 s of the stop whenever the
+#: drives can lift the load (measured 0.26-0.28 s at 565-580 kg); a pull still there after
+#: that bound is one the robot cannot end (beyond the drives: the brakes or the saturated
+#: drives hold it), so only a person can (support the limb, release the strap).
+PULL_IN_STOP_S = 1.0
+#: ``contact_lost``: in force control the contact counts as held while the measured push Fz
+#: exceeds this (N): above what the ATI reads with nothing on it (its drift bound 4 N plus
+#: 6 σ of its 0.25 N noise, 5.5 N; ``rt.ati.twin_sensor``), and on the foot's 1e5 N/m heel pad
+#: 0.1 mm of compression, so the height where it was last held is the contact's own.
+CONTACT_HELD_N = 10.0
+#: ``contact_lost``: the contact is lost when, with Fz at or below CONTACT_HELD_N, the sliders'
+#: mean position has risen this far (m) above where the contact was last held. The force law
+#: rises only while it reads less than it is asked (at F_d ≈ 0, between gait stances, it does
+#: not follow a foot up), so a legitimate rise with the contact under 10 N is bounded by: the
+#: foot's compression between 10 N and 0 (0.1 mm on its 1e5 N/m heel pad; 5 µm on the
+#: 2e6 N/m plate); the sensor's lag (FORCE_LAG_S, 3 ms) at the slider-speed limit (0.2 m/s),
+#: 0.6 mm travelled before a re-touch shows; an encoder count (20 µm). A rebound after an
+#: impact, an overload's sink and an unloading all move the platform *down*. 1 mm above the
+#: last loaded height the foot would be pressed 100 N more (the plate 2 kN): reading under
+#: 10 N there, nothing is there. Measured on the twin (200 N hold, the foot removed): the
+#: platform is 1 mm up 17 ms after the removal, 6 ms before the slider-speed soft stop, which
+#: was the only net before. Caveat: a tilt moves the sliders' mean to second order (0.9 mm
+#: at 15°, 3.3 mm at 20° roll and pitch together): only a force entry that tilts far while
+#: reading under 10 N and asking more could trip on it (none in the library).
+CONTACT_LOST_RISE_M = 0.001
 #: The sustained-saturation window is kept as this many buckets of saturated time per axis
 #: (a bucketed sliding window: the saturated time of the last ``window`` ± one bucket, 2 % of
 #: it; the state is fixed whatever the loop's rate).
@@ -109,7 +141,13 @@ M_SAT_PEAK = 33      # per axis: the most saturated time any window held since t
 M_STOP_SINCE = 36    # since when a soft (or hard) stop is latched (loop time, s; NaN: none)
 M_STILL_LO = 37      # per axis: the least load (N) since its count stopped (NaN: moving)
 M_STILL_HI = 40      # per axis: the largest load (N) since its count stopped (NaN: moving)
-M_SAT_BUCKETS = 43   # per axis SAT_BUCKETS buckets of saturated time (s), a ring
+M_PULL_STOP_TIME = 43   # how long the pull has lasted in the stop (s, stall-aware)
+M_PULL_STOP_SINCE = 44  # loop time the pull in the stop began (s; NaN: no pull)
+M_PULL_STOP_ON = 45     # 1 while the pull_in_stop alarm is raised (the RT status shows it)
+M_PULL_STOP_FZ = 46     # the latest valid Fz while the alarm is raised (N)
+M_PULL_STOP_END = 47    # this cycle ended the alarm: 1 the pull ended, 2 the stop was reset
+M_TOUCH_Z = 48          # force control: the sliders' mean where contact was last held (m; NaN)
+M_SAT_BUCKETS = 49   # per axis SAT_BUCKETS buckets of saturated time (s), a ring
 M_REACT = M_SAT_BUCKETS + 3 * SAT_BUCKETS
 M_LATCHED = M_REACT + N_CAUSES
 M_REPORTED = M_LATCHED + N_CAUSES
@@ -128,6 +166,8 @@ def new_mem() -> np.ndarray:
     mem[M_STOP_SINCE] = math.nan
     mem[M_STILL_LO:M_STILL_LO + 3] = math.nan
     mem[M_STILL_HI:M_STILL_HI + 3] = math.nan
+    mem[M_PULL_STOP_SINCE] = math.nan
+    mem[M_TOUCH_Z] = math.nan
     return mem
 
 
@@ -418,7 +458,7 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
             new += _trip(mem, C_FORCE_LIMIT, R_HARD, force_n, nan, nan)
         elif force_n > FORCE_CUSHION * par[P_MAX_FORCE]:
             new += _trip(mem, C_FORCE_LIMIT, R_SOFT, force_n, nan, nan)
-    if force_control and fz_n < 0.0:
+    if force_control and fz_n < PULL_FZ_N:
         # Stall-aware: a cycle adds at most PULL_DT_PERIODS periods (a stall is one sample).
         cap = PULL_DT_PERIODS * par[P_PERIOD]
         mem[M_PULL_TIME] += dt if dt < cap else cap  # noqa: FURB136
@@ -435,7 +475,92 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
         mem[M_OVERRUNS] = 0.0
     # -- sustained drive saturation
     new += _saturation(par, mem, t, dt, tau)
+    new += _pull_in_stop(par, mem, t, dt, fz_n, wrench_stale)
+    new += _contact_lost(mem, q, force_control, fz_n, wrench_stale, wrench_saturated)
     return new
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _pull_in_stop(par, mem, t, dt, fz_n, wrench_stale):
+    """The ``pull_in_stop`` alarm (the interpreted ``Supervisor._check_pull_in_stop``'s
+    arithmetic): once a stop is latched (soft or hard), a pull (Fz below PULL_FZ_N) read on
+    every sample for PULL_IN_STOP_S (stall-aware, as ``pulling``) raises it once, a warning:
+    no escalation, the brakes or the drives already hold, and releasing them would drop the
+    platform. It stays raised (``M_PULL_STOP_ON``, the RT status's ``alarms``) until a sample
+    reads no pull or the stop is reset, which ends it (``M_PULL_STOP_END``, an event of its
+    own). A stale or NaN sample neither counts nor ends it; a saturated one counts (the sensor
+    is overloaded: the pull is at least what it reads). Returns the number of new events."""
+    mem[M_PULL_STOP_END] = 0.0
+    on = mem[M_PULL_STOP_ON] != 0.0
+    k = M_VALS + N_VALUES * C_PULL_STOP
+    if mem[M_REACTION] < R_SOFT:
+        if on:
+            # The end's values in the cause's slots: the last pull, since when, how.
+            mem[M_PULL_STOP_ON] = 0.0
+            mem[M_PULL_STOP_END] = 2.0
+            mem[k] = mem[M_PULL_STOP_FZ]
+            mem[k + 1] = mem[M_PULL_STOP_SINCE]
+            mem[k + 2] = 2.0
+        mem[M_PULL_STOP_TIME] = 0.0
+        mem[M_PULL_STOP_SINCE] = math.nan
+        return 1 if on else 0
+    if wrench_stale or math.isnan(fz_n):
+        if on:
+            mem[M_REACT + C_PULL_STOP] = R_WARN
+        return 0
+    if not fz_n < PULL_FZ_N:
+        if on:
+            mem[M_PULL_STOP_ON] = 0.0
+            mem[M_PULL_STOP_END] = 1.0
+            mem[M_PULL_STOP_FZ] = fz_n
+            mem[k] = fz_n
+            mem[k + 1] = mem[M_PULL_STOP_SINCE]
+            mem[k + 2] = 1.0
+        mem[M_PULL_STOP_TIME] = 0.0
+        mem[M_PULL_STOP_SINCE] = math.nan
+        return 1 if on else 0
+    if math.isnan(mem[M_PULL_STOP_SINCE]):
+        mem[M_PULL_STOP_SINCE] = t
+    cap = PULL_DT_PERIODS * par[P_PERIOD]
+    mem[M_PULL_STOP_TIME] += dt if dt < cap else cap  # noqa: FURB136
+    if on:
+        mem[M_REACT + C_PULL_STOP] = R_WARN
+        mem[M_PULL_STOP_FZ] = fz_n
+        return 0
+    if mem[M_PULL_STOP_TIME] >= PULL_IN_STOP_S:
+        mem[M_REACT + C_PULL_STOP] = R_WARN
+        mem[M_PULL_STOP_ON] = 1.0
+        mem[M_PULL_STOP_FZ] = fz_n
+        mem[M_NEW + C_PULL_STOP] = 1.0
+        mem[k] = fz_n
+        mem[k + 1] = mem[M_PULL_STOP_SINCE]
+        mem[k + 2] = mem[M_PULL_STOP_TIME]
+        return 1
+    return 0
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _contact_lost(mem, q, force_control, fz_n, wrench_stale, wrench_saturated):
+    """The ``contact_lost`` soft stop (the interpreted ``Supervisor._check_contact_lost``'s
+    arithmetic): in force control, the sliders' mean position where the contact was last held
+    (a valid Fz above CONTACT_HELD_N) is remembered; a valid Fz at or below it with the mean
+    risen more than CONTACT_LOST_RISE_M above that height means the foot or the plate went
+    away while the force law searches upwards for it. Forgotten outside force control (each
+    entry arms it at its own first contact). An invalid sample judges nothing (the sensor's
+    own checks name it). Returns the number of new events."""
+    if not force_control:
+        mem[M_TOUCH_Z] = math.nan
+        return 0
+    if wrench_stale or wrench_saturated or math.isnan(fz_n):
+        return 0
+    h = (q[0] + q[1] + q[2]) / 3.0
+    if fz_n > CONTACT_HELD_N:
+        mem[M_TOUCH_Z] = h
+        return 0
+    rise = h - mem[M_TOUCH_Z]                        # NaN (never held): no trip
+    if rise > CONTACT_LOST_RISE_M:
+        return _trip(mem, C_CONTACT_LOST, R_SOFT, fz_n, rise, mem[M_TOUCH_Z])
+    return 0
 
 
 @njit(cache=True, error_model="numpy")

@@ -13,6 +13,9 @@ in twin time (s). ``FaultPlan.schedule(...)`` validates and records; the twin as
   its last sample / flags gage saturation (delegated to the twin's ATI model).
 * ``latency`` (seconds): sensor readings (encoders and ATI) arrive ``seconds`` late.
 * ``hardware_estop`` / ``hand_stop``: the stop input reads pressed.
+* ``contact_removed``: what the platform touches goes away (the patient's foot lifted out of
+  the straps, the plate taken off the tool): the platform moves free until ``t_end``, then
+  touches it again where it was.
 """
 from __future__ import annotations
 
@@ -23,7 +26,8 @@ from rt.epoch import bump
 from rt.errors import InputError
 
 KINDS = ("encoder_freeze", "encoder_jump", "encoder_noise", "dac_dead", "dac_stuck",
-         "ati_dropout", "ati_stale", "ati_saturation", "latency", "hardware_estop", "hand_stop")
+         "ati_dropout", "ati_stale", "ati_saturation", "latency", "hardware_estop", "hand_stop",
+         "contact_removed")
 _NEEDS_AXIS = {"encoder_freeze", "encoder_jump", "encoder_noise"}
 _NEEDS_CHANNEL = {"dac_dead", "dac_stuck"}
 

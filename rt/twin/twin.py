@@ -171,6 +171,7 @@ class Twin:
         self.inputs = DigitalInputState()
         self._payload_applied = False
         self._arrival: _Arrival | None = None
+        self._contact_removed = False        # a ``contact_removed`` fault holds it away
         self._jumps_done: set[int] = set()
         # Delayed sensor history for the latency fault: (t, positions, ATI sample).
         self._history: deque = deque(maxlen=512)
@@ -205,6 +206,7 @@ class Twin:
         self.plant.set_environment(environment)
         self._payload_applied = False
         self._arrival = None
+        self._contact_removed = False        # an active contact_removed takes it away again
 
     def set_environment_on_arrival(self, make: Callable[[np.ndarray], object], q_target,
                                    tolerance_m: float = ARRIVAL_TOLERANCE_M,
@@ -317,6 +319,8 @@ class Twin:
                     self._payload_applied = True
                 else:
                     chunk = min(chunk, remaining)
+            if self.faults.faults:
+                self._remove_contact_if_faulted()
             self._update_amplifier_input()
             self.plant.advance(chunk, self.amp_volts)
             self._update_sensors(chunk)
@@ -455,6 +459,16 @@ class Twin:
         w = self._wrench_filtered
         w += a * (w_in - w)
         return w
+
+    def _remove_contact_if_faulted(self) -> None:
+        """The ``contact_removed`` fault: while it is active the plant touches nothing (free
+        motion: the foot or the plate has gone); when it ends, the twin's environment is back
+        where it was (a foot put back in the straps, a plate remounted), its contact state
+        fresh."""
+        removed = bool(self.faults.active("contact_removed", self.plant.t))
+        if removed != self._contact_removed:
+            self._contact_removed = removed
+            self.plant.set_environment(FreeMotion() if removed else self.environment)
 
     def _update_sensors(self, chunk: float) -> None:
         t = self.plant.t
