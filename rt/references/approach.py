@@ -332,22 +332,19 @@ class Approach:
         move's target state (9: p, v, a), written on its arrival."""
         plan = self.plan
         for dof, prof in enumerate(self._chk_traj.profiles[0]):
-            b = ak.P_PROFILES + dof * ak.PROFILE_SIZE
             brake = prof.brake
-            plan[b + ak.PR_BRAKE_DURATION] = brake.duration
-            for k, values in ((ak.PR_BRAKE_T, brake.t), (ak.PR_BRAKE_P, brake.p),
-                              (ak.PR_BRAKE_V, brake.v), (ak.PR_BRAKE_A, brake.a),
-                              (ak.PR_BRAKE_J, brake.j), (ak.PR_P, prof.p), (ak.PR_V, prof.v),
-                              (ak.PR_A, prof.a), (ak.PR_J, prof.j)):
-                plan[b + k:b + k + len(values)] = values
             # ruckig's Profile::check: t_sum[0] = t[0], t_sum[i + 1] = t_sum[i] + t[i + 1]
             # (the binding does not expose t_sum; the same sums in the same order).
-            t = prof.t
-            acc = t[0]
-            plan[b + ak.PR_T_SUM] = acc
-            for i in range(6):
-                acc = acc + t[i + 1]
-                plan[b + ak.PR_T_SUM + i + 1] = acc
+            t_sum = []
+            acc = 0.0
+            for i, ti in enumerate(prof.t):
+                acc = ti if i == 0 else acc + ti
+                t_sum.append(acc)
+            # One assignment per axis, in ``approach_kernel``'s PR_* order.
+            b = ak.P_PROFILES + dof * ak.PROFILE_SIZE
+            plan[b:b + ak.PROFILE_SIZE] = ([brake.duration] + brake.t + brake.p + brake.v
+                                           + brake.a + brake.j + t_sum + prof.p + prof.v
+                                           + prof.a + prof.j)
         plan[ak.P_TARGET:ak.P_TARGET + 3 * N_AXES] = target
         plan[ak.P_DURATION] = self._chk_traj.duration
         plan[ak.P_TIME] = 0.0
