@@ -29,12 +29,18 @@ Statuses (:class:`ApproachStatus`; negative = error). ``set_target``/``soft_stop
 return one instead of raising, so the supervisor can call them inside the cycle; a refused target
 changes nothing (a running move continues).
 
-Costs (median, the PLATFORM.md VM): ``update`` ≈ 3 µs (ruckig sampling plus reading its Python
-lists), ≈ 9 µs on the cycle after a new target (ruckig replans); ``set_target`` ≈ 40 µs and
-``soft_stop`` ≈ 20 µs — events, not per-cycle calls: they plan the move on a second planner and
-integrate its phases for the extrema before touching the running one. The ruckig binding returns
-new 3-element Python lists when its outputs are read; apart from those no object is created per
-cycle.
+**Planned once, played compiled** (issue 16, approach9). ``set_target``/``soft_stop`` plan the
+move with ruckig (``calculate``), check it, and copy its phases into ``plan``; each ``update``
+then evaluates them at ruckig's clock with ruckig's arithmetic (:mod:`rt.references.
+approach_kernel`, numba: ruckig's online ``update`` bit for bit, ``tests/test_approach_kernel.
+py``), so the sequencer's compiled cycle plays an approach or a return without Python. Every
+command plans afresh from the current state (ruckig's ``update`` kept its old trajectory when
+a command repeated the running input: a stop during a stop arrived early, see that test).
+
+Costs (median, this VM, loaded: ``docs/worklog/2026-11-26f/approach9.md``): ``update`` ≈ 0.9 µs
+from Python (the numba call; ≈ 0.1 µs inside the compiled cycle); ``set_target`` ≈ 41 µs
+(planning, the extrema, the phases' copy ≈ 11 µs) — an event, not a per-cycle call. No
+object is created per cycle.
 """
 from __future__ import annotations
 
