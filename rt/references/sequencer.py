@@ -182,7 +182,8 @@ class ProgramReference(Component):
     (requests whose approach was refused) and ``last_error`` (why), ``busy``.
 
     The cycle runs compiled (``rt.references.sequencer_kernel``: one call per steady cycle;
-    events — a mode change, a request, an abort, the approach, a tare, the end of a program —
+    events — a mode change, a request, an abort, a move planned or arriving (the approach, the
+    return, a brake: their samples are compiled), a tare, the end of a program —
     run here, in Python, on their exact cycle); ``compiled=False`` runs the interpreted
     cycle throughout, the reference it is tested against. Programs that offer a table
     (``ProgramTable``: the protocols' table generators, the identification excitation,
