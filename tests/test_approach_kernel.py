@@ -248,3 +248,18 @@ def test_a_stop_during_a_stop_ends_at_rest_without_a_step() -> None:
     steps.append(np.abs(out[3:6] - prev).max())
     assert cycles + 1 == 200 and not out[3:].any()
     assert max(steps) <= DEFAULT_MAX_ACCELERATION_M_S2 * DT * (1 + 1e-9), max(steps)
+
+
+def test_a_sequencer_whose_approach_was_replaced_refuses_to_start() -> None:
+    """Its compiled cycle plays the move kept in its own state array: an approach with a plan
+    of its own would be planned by Python and never played (a frozen reference)."""
+    import pytest
+
+    from rt.errors import ConfigurationError
+    from rt.references.sequencer import ProgramReference
+
+    ref = ProgramReference("reference", STROKE_M, DT)
+    ref.on_start()                                  # its own approach: fine
+    ref.approach = Approach(dt=DT, stroke=STROKE_M)
+    with pytest.raises(ConfigurationError, match="plan in the sequencer's state"):
+        ref.on_start()

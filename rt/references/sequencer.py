@@ -345,6 +345,11 @@ class ProgramReference(Component):
         return _SeqState(self._seq) if self.compiled else _State()
 
     def on_start(self) -> None:
+        if not np.shares_memory(self.approach.plan, self._seq):
+            # The compiled cycle plays the move it finds in ``_seq`` (``sk.S_PLAN``).
+            raise ConfigurationError("the sequencer's approach must keep its plan in the "
+                                     "sequencer's state (a view of _seq): build another "
+                                     "ProgramReference rather than replace its approach")
         self.state = self.make_state()
         self._table = self._no_table
         self._pending = self._initial
