@@ -6,8 +6,10 @@ baseline, each in its own process, alternated (issue 16, guard8).
 
 Variants, one process each (so each loads its own code), alternated within each pair:
 
-* ``loop``: ``build_sim_position_loop`` in realtime mode, one run; the approach's first
-  1100 cycles are left out (ruckig's Python), the rest is the steady cycle;
+* ``loop``: ``build_sim_position_loop`` in realtime mode, one run; the first 1100 cycles
+  (the approach) are left out, the rest is the steady program (the approach ran ruckig's
+  Python every cycle before approach9; it is compiled now, but the split is kept so that
+  the figures compare with the earlier ones: ``bench/approach_cycles.py`` classes them);
 * ``main``: the same with ``--main``'s code on ``PYTHONPATH`` (before/after);
 * ``baseline``: the engine's ``Loop`` (same hygiene: SCHED_FIFO, mlockall, gc frozen and off)
   over one block whose ``update`` is a compiled arithmetic spin of ``--work-us``: a fixed
@@ -40,7 +42,7 @@ from typing import Any
 import numpy as np
 
 HERE = Path(__file__).resolve().parent.parent
-APPROACH_CYCLES = 1100          # the approach (ruckig's Python) before the steady cycle
+APPROACH_CYCLES = 1100          # the approach, left out (module docstring)
 
 
 def _steal_ticks() -> int:

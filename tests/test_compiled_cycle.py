@@ -434,6 +434,8 @@ class _Twins:
             self.wrench[:] = w
         assert np.array_equal(c._io, i._io, equal_nan=True), \
             (self.k, np.flatnonzero(~((c._io == i._io) | (np.isnan(c._io) & np.isnan(i._io)))))
+        # The approach's whole state (its plan, its clock, where it holds) too.
+        assert c.approach.plan.tobytes() == i.approach.plan.tobytes(), self.k
         for name in ("phase", "mode", "started", "k", "taring", "tare_measuring",
                      "tares_before", "yielding"):
             assert getattr(c.state, name) == getattr(i.state, name), (self.k, name)
@@ -645,6 +647,100 @@ def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -
     before = h.interpreted_cycles
     assert count_ahead(300) == 0
     assert h.interpreted_cycles == before                  # steady PLAY: the kernel's
+
+
+def test_approaches_returns_and_brakes_run_compiled_bit_for_bit(model) -> None:
+    """The approach, the return and a position-mode brake (issue 16, approach9): planned once
+    with ruckig on their event's cycle (Python), then played by the compiled cycle
+    (``approach_kernel.working_sample``), every output and the approach's whole plan the
+    interpreted sequencer's bit for bit; only the plan and the arrival are Python's. A program
+    whose first sample lies beyond the stroke (ruckig's community edition ignores position
+    limits) and a return to a rest beyond it are refused by our check, compiled as
+    interpreted; a second brake during a brake ends at rest."""
+    from rt.identification.program import ExcitationProgram
+    from rt.references.sequencer import Phase
+    from rt.safety.events import SupervisorMode
+
+    q_mid = np.array(model.kin.ik(0.63, 0.0, 0.0).q)
+    lo, hi = RobotModel.load().description.limits.stroke
+    h = _Twins(q_mid)
+    c = h.refs[0]
+    h.run(5)
+
+    def table(start, n: int = 300) -> np.ndarray:
+        t = np.zeros((n, 9))
+        t[:, 0:3] = start + 2e-3 * np.sin(np.linspace(0.0, 3.0, n))[:, None]
+        t[:, 3:6] = 2e-3 * 3.0 / ((n - 1) * DT) * np.cos(np.linspace(0.0, 3.0, n))[:, None]
+        return t
+
+    def python_in(phase: Phase, limit: int = 20_000) -> tuple[int, int]:
+        """Cycles in ``phase`` from now until it ends, and how many were interpreted."""
+        n = before = 0
+        before = h.interpreted_cycles
+        while Phase(int(c.phase.data[0])) == phase:
+            h.step()
+            n += 1
+            assert n < limit
+        return n, h.interpreted_cycles - before
+
+    # An approach of 0.5 s and a return of 0.4 s to a rest 8 mm away.
+    far = q_mid + np.array([0.01, -0.006, 0.004])
+    rest = tuple(q_mid - 0.008)
+    h.request(lambda: ExcitationProgram(table(far), DT), approach_min_s=0.5, rest_q=rest,
+              return_min_s=0.4)
+    h.step()                                        # the request: planned (Python)
+    assert Phase(int(c.phase.data[0])) == Phase.APPROACH
+    n, py = python_in(Phase.APPROACH)
+    assert n >= 500 and py <= 1, (n, py)            # the arrival (the first sample) only
+    h.until(Phase.RETURN)
+    n, py = python_in(Phase.RETURN)
+    assert n >= 400 and py <= 1, (n, py)            # the arrival at rest only
+    assert np.array_equal(c.q_ref.data, rest)
+    h.run(5)
+
+    # A supervisor's soft stop mid-approach (position mode): the brake is compiled too.
+    h.request(lambda: ExcitationProgram(table(far), DT), approach_min_s=0.5)
+    h.run(200)
+    h.mode[0] = SupervisorMode.SOFT_STOP
+    h.step()                                        # the stop: planned (Python)
+    before = h.interpreted_cycles
+    h.run(400)
+    assert h.interpreted_cycles - before <= 2       # the brake's arrival and its settle
+    assert not c.qd_ref.data.any()
+    h.mode[0] = SupervisorMode.RUN
+    h.run(5)
+
+    # An abort mid-approach (the return brakes), then a soft stop during that brake: the
+    # second brake plans from where the first one got to and ends at rest.
+    h.request(lambda: ExcitationProgram(table(far), DT), approach_min_s=0.5)
+    h.run(200)
+    h.abort()
+    h.run(60)
+    assert Phase(int(c.phase.data[0])) == Phase.RETURN and c.qd_ref.data.any()
+    h.mode[0] = SupervisorMode.SOFT_STOP
+    prev = c.qd_ref.data.copy()
+    for _ in range(400):
+        h.step()
+        assert np.abs(c.qd_ref.data - prev).max() <= 0.5 * DT * (1 + 1e-9)
+        prev = c.qd_ref.data.copy()
+    assert not c.qd_ref.data.any() and Phase(int(c.phase.data[0])) == Phase.STOPPED
+    h.mode[0] = SupervisorMode.RUN
+    h.run(5)
+
+    # Beyond the stroke: refused before anything moves.
+    refused = c.refused
+    outside = table(q_mid)
+    outside[:, 0] += hi - outside[0, 0] + 1e-3      # the first sample 1 mm above the top
+    h.request(lambda: ExcitationProgram(outside, DT))
+    h.run(3)
+    assert c.refused == refused + 1 and "ERROR_OUTSIDE_STROKE" in c.last_error
+    assert Phase(int(c.phase.data[0])) == Phase.REST and not c.qd_ref.data.any()
+    # A rest beyond the stroke: the return brakes where the program ended instead.
+    h.request(lambda: ExcitationProgram(table(q_mid), DT), rest_q=(lo - 1e-3, *rest[1:]))
+    h.until(Phase.RETURN)
+    h.until(Phase.REST)
+    assert (c.q_ref.data >= lo).all() and (c.q_ref.data <= hi).all()
+    h.run(5)
 
 
 def test_a_signal_taps_compiled_row_is_the_signals_in_order() -> None:

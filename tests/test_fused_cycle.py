@@ -161,6 +161,41 @@ def test_a_position_session_with_swaps_and_trips_is_the_per_block_cycle_bit_for_
     assert h.ran[5] > 0.2 * h.cycles and h.ran[2] > 0 and h.ran[3] > 0, h.ran
 
 
+def test_an_approach_and_a_return_take_the_fast_path_bit_for_bit(model):
+    """The approach and the return (issue 16, approach9): each move planned once with ruckig
+    on its event's cycle, its samples then played by the fused kernel's reference stage; in
+    lockstep with the per-block cycle byte for byte, and nearly all of their cycles on the
+    steady fast path (before: every one of them ran the sequencer's Python)."""
+    from rt.references.sequencer import Phase
+
+    h = _Lockstep(lambda: build_sim_position_loop("paden_panja", duration_s=0.2,
+                                                  model=RobotModel.load()))
+    ref = h.f.reference
+    seg = h.f.graph.segment
+    run = seg.run
+    by_phase: Counter[tuple[Phase, bool]] = Counter()
+
+    def classed(t: float, dt: float, idx: int) -> int:
+        planned = seg._plan_ok
+        n = run(t, dt, idx)
+        by_phase[(Phase(int(ref.phase.data[0])), planned and seg._plan_ok)] += 1
+        return n
+
+    seg.run = classed
+    for _ in range(4000):
+        h.run(1)
+        if by_phase[(Phase.RETURN, True)] and Phase(int(ref.phase.data[0])) == Phase.REST:
+            break
+    h.run(20)
+    approach = by_phase[(Phase.APPROACH, True)] + by_phase[(Phase.APPROACH, False)]
+    back = by_phase[(Phase.RETURN, True)] + by_phase[(Phase.RETURN, False)]
+    assert approach > 500 and back > 200, by_phase
+    # The approach's first cycle, its arrival and the cycle after each (the general path
+    # that re-makes the plan); the same for the return.
+    assert by_phase[(Phase.APPROACH, False)] <= 4, by_phase
+    assert by_phase[(Phase.RETURN, False)] <= 4, by_phase
+
+
 def test_the_drive_stage_fails_over_and_stops_as_the_drive_block_bit_for_bit(model):
     """The drive as a fused stage (the twin's compiled double): a DAC channel of card 0 dies
     (its amplifier input disagrees: the kernel's monitor check confirms it, Python fails over

@@ -174,6 +174,26 @@ def test_a_scheduled_twin_fault_takes_the_general_path(h):
     h.steady()
 
 
+def test_no_plan_is_made_while_a_twin_fault_is_scheduled(h):
+    """Why the fast path does not look at the twin's faults (approach9 dropped that check):
+    scheduling one bumps the epoch (the cycle after it is general), and while any is in the
+    list no general cycle makes a plan (the encoders' stage is the block's: their counts may
+    be delayed), so no cycle takes the fast path while it is there. Here a latency fault
+    active from the next millisecond for 50 ms, compared with the per-block cycle byte for
+    byte, then the plan back once it is cleared."""
+    seg = h.f.graph.segment
+    h.event(lambda pl: pl.twin.faults.schedule("latency", pl.twin.t + 1e-3, pl.twin.t + 0.05,
+                                               seconds=0.003))
+    planned = h.planned
+    for _ in range(80):
+        h.run(1)
+        assert not seg._plan_ok and h.planned == planned
+        assert seg.why_not_sensor[0] != ""
+    assert h.f.supervisor.latched() == []
+    h.both(lambda pl: pl.twin.faults.clear())
+    h.steady()
+
+
 def test_the_twin_clock_set_again_takes_the_general_path(h):
     h.event(lambda pl: setattr(pl.twin, "clock", pl.twin.clock))
 

@@ -737,9 +737,12 @@ class FusedChain:
                 tw.sync()
                 # The ATI's sample (wrench, counter, status) is read by the kernel where the
                 # twin's period left it (``ati._packed``); a sample whose object was built
-                # meanwhile is the block's, as in ``compiled_sample``.
-                if not tw.faults.faults and ati._packed[_ATI_PENDING] != 0.0 \
-                        and (mon is None or mon() is dmon):
+                # meanwhile is the block's, as in ``compiled_sample``. The twin's faults need
+                # no check here: no plan is made while one is scheduled (the encoders'
+                # ``compiled_read`` is None then, so the general cycle never fuses every
+                # sensor) and scheduling one bumps the epoch (``Faults.schedule``;
+                # ``tests/test_fused_epoch.py``).
+                if ati._packed[_ATI_PENDING] != 0.0 and (mon is None or mon() is dmon):
                     ta[T_ARGS + A_IDX] = idx
                     ta[T_ARGS + A_FILLED] = st._filled
                     ta[T_ARGS + A_REC_ROW] = rec.written % cap

@@ -304,6 +304,8 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
     if upto <= ST_REFERENCE:
         return
     table = carray(f64_at(a[B_TABLE]), (d[B_TABLE, 0], d[B_TABLE, 1]))
+    # The sequencer's steady cycles, an approach's, a return's and a brake's samples among
+    # them (the move's plan is in B_SEQ: ``rt.references.approach_kernel``).
     r = rk.cycle(_v(a, d, B_REF_IO), _v(a, d, B_SEQ), _v(a, d, B_REF_Q), _v(a, d, B_REF_MODE),
                  table, dt)
     info[I_REF] = r

@@ -29,12 +29,18 @@ Statuses (:class:`ApproachStatus`; negative = error). ``set_target``/``soft_stop
 return one instead of raising, so the supervisor can call them inside the cycle; a refused target
 changes nothing (a running move continues).
 
-Costs (median, the PLATFORM.md VM): ``update`` ≈ 3 µs (ruckig sampling plus reading its Python
-lists), ≈ 9 µs on the cycle after a new target (ruckig replans); ``set_target`` ≈ 40 µs and
-``soft_stop`` ≈ 20 µs — events, not per-cycle calls: they plan the move on a second planner and
-integrate its phases for the extrema before touching the running one. The ruckig binding returns
-new 3-element Python lists when its outputs are read; apart from those no object is created per
-cycle.
+**Planned once, played compiled** (issue 16, approach9). ``set_target``/``soft_stop`` plan the
+move with ruckig (``calculate``), check it, and copy its phases into ``plan``; each ``update``
+then evaluates them at ruckig's clock with ruckig's arithmetic (:mod:`rt.references.
+approach_kernel`, numba: ruckig's online ``update`` bit for bit, ``tests/test_approach_kernel.
+py``), so the sequencer's compiled cycle plays an approach or a return without Python. Every
+command plans afresh from the current state (ruckig's ``update`` kept its old trajectory when
+a command repeated the running input: a stop during a stop arrived early, see that test).
+
+Costs (median, this VM, loaded: ``docs/worklog/2026-11-26f/approach9.md``): ``update`` ≈ 0.9 µs
+from Python (the numba call; ≈ 0.1 µs inside the compiled cycle); ``set_target`` ≈ 41 µs
+(planning, the extrema, the phases' copy ≈ 11 µs) — an event, not a per-cycle call. No
+object is created per cycle.
 """
 from __future__ import annotations
 
@@ -47,7 +53,6 @@ from ruckig import (
     ControlInterface,
     DurationDiscretization,
     InputParameter,
-    OutputParameter,
     Result,
     Ruckig,
     RuckigError,
@@ -56,6 +61,7 @@ from ruckig import (
 )
 
 from rt.errors import ConfigurationError
+from rt.references import approach_kernel as ak
 
 N_AXES = 3
 # Nominal stroke of the sliders (m), as rt/data/robot_nominal.yaml limits.stroke_m.
@@ -66,7 +72,6 @@ DEFAULT_MAX_JERK_M_S3 = 5.0
 # Slack on the stroke check (m): ruckig's arithmetic lands on a target exactly at the limit within
 # ~1e-15 m; 1e-9 m is far below one encoder count (2e-5 m).
 POSITION_SLACK_M = 1e-9
-_ZERO3 = (0.0, 0.0, 0.0)
 
 
 class ApproachStatus(IntEnum):
@@ -187,7 +192,8 @@ class Approach:
     def __init__(self, dt: float = 1.0e-3, stroke: tuple[float, float] = STROKE_M,
                  max_velocity: float | Sequence[float] = DEFAULT_MAX_VELOCITY_M_S,
                  max_acceleration: float | Sequence[float] = DEFAULT_MAX_ACCELERATION_M_S2,
-                 max_jerk: float | Sequence[float] = DEFAULT_MAX_JERK_M_S3) -> None:
+                 max_jerk: float | Sequence[float] = DEFAULT_MAX_JERK_M_S3,
+                 plan: np.ndarray | None = None) -> None:
         if not (math.isfinite(dt) and 0.0 < dt <= 0.1):
             raise ConfigurationError(f"dt must be in (0, 0.1] s (got {dt!r})")
         lo, hi = float(stroke[0]), float(stroke[1])
@@ -199,27 +205,50 @@ class Approach:
         self.max_acceleration = _per_axis(max_acceleration, "max_acceleration")
         self.max_jerk = _per_axis(max_jerk, "max_jerk")
 
-        # Two planners: the one that runs, and one that plans a candidate move so it can be
-        # checked (extrema) before the running one is touched.
-        self._otg = Ruckig(N_AXES, dt)
-        self._inp = InputParameter(N_AXES)
-        self._out = OutputParameter(N_AXES)
+        # One planner: it plans (and checks) each move when commanded; the cycle plays the
+        # planned trajectory from ``plan`` (``rt.references.approach_kernel``: ruckig's own
+        # sampling, compiled), so the running move is never touched by a refused candidate.
         self._chk_otg = Ruckig(N_AXES, dt)
         self._chk_inp = InputParameter(N_AXES)
         self._chk_traj = Trajectory(N_AXES)
-        for inp in (self._inp, self._chk_inp):
-            inp.max_velocity = self.max_velocity
-            inp.max_acceleration = self.max_acceleration
-            inp.max_jerk = self.max_jerk
-            # Moves end on a cycle boundary, so the next phase (playback) starts on the next
-            # cycle with no fractional-period seam (soft stops switch this off).
-            inp.duration_discretization = DurationDiscretization.Discrete
-        self.mode = Mode.UNSET
-        self.duration = 0.0  # of the current move (s)
+        inp = self._chk_inp
+        inp.max_velocity = self.max_velocity
+        inp.max_acceleration = self.max_acceleration
+        inp.max_jerk = self.max_jerk
+        # Moves end on a cycle boundary, so the next phase (playback) starts on the next
+        # cycle with no fractional-period seam (soft stops switch this off).
+        inp.duration_discretization = DurationDiscretization.Discrete
+        if plan is None:
+            plan = np.zeros(ak.PLAN_SIZE)
+        if plan.shape != (ak.PLAN_SIZE,) or plan.dtype != np.float64:
+            raise ConfigurationError(f"plan must be float64[{ak.PLAN_SIZE}] (got "
+                                     f"{plan.dtype}{list(plan.shape)})")
+        #: The generator's whole state (``approach_kernel``'s layout): a caller may keep it in
+        #: its own array (the sequencer: a view of its state, read by its compiled cycle).
+        self.plan = plan
+        plan[:] = 0.0
+        plan[ak.P_MODE] = float(Mode.UNSET)
+        plan[ak.P_DT] = dt
+        plan[ak.P_LO], plan[ak.P_HI] = lo, hi
+        plan[ak.P_HOLD_AT_REST] = 1.0
         self.last_checked_duration = 0.0  # of the last move planned by a check (s)
         self._extrema: list[tuple[float, float]] = [(lo, lo)] * N_AXES
-        self._hold = [0.0] * N_AXES
-        self._hold_at_rest = True
+        ak.warm_up()
+
+    @property
+    def mode(self) -> Mode:
+        """What the generator is doing."""
+        return Mode(int(self.plan[ak.P_MODE]))
+
+    @property
+    def duration(self) -> float:
+        """Of the current move (s)."""
+        return float(self.plan[ak.P_DURATION])
+
+    def _current(self) -> tuple[list[float], list[float], list[float]]:
+        """The current state (m, m/s, m/s²): where the next move starts."""
+        c = self.plan[ak.P_CUR:ak.P_CUR + 3 * N_AXES].tolist()
+        return c[0:3], c[3:6], c[6:9]
 
     # -- commands --------------------------------------------------------------------------------
     def reset(self, position: Sequence[float] | np.ndarray,
@@ -234,13 +263,12 @@ class Approach:
             return ApproachStatus.ERROR_INVALID_INPUT
         if not self._in_stroke(p):
             return ApproachStatus.ERROR_OUTSIDE_STROKE
-        self._inp.current_position = p
-        self._inp.current_velocity = v
-        self._inp.current_acceleration = a
-        self._hold = list(p)
-        self._hold_at_rest = False
-        self.mode = Mode.IDLE
-        self.duration = 0.0
+        plan = self.plan
+        plan[ak.P_CUR:ak.P_CUR + 3 * N_AXES] = p + v + a
+        plan[ak.P_HOLD:ak.P_HOLD + N_AXES] = p
+        plan[ak.P_HOLD_AT_REST] = 0.0
+        plan[ak.P_MODE] = float(Mode.IDLE)
+        plan[ak.P_DURATION] = 0.0
         return ApproachStatus.IDLE
 
     def check_move(self, position: Sequence[float] | np.ndarray,
@@ -278,22 +306,13 @@ class Approach:
         """
         if self.mode == Mode.UNSET:
             return ApproachStatus.ERROR_NOT_READY
-        inp = self._inp
-        status = self._check(inp.current_position, inp.current_velocity,
-                             inp.current_acceleration, position, velocity, acceleration,
+        status = self._check(*self._current(), position, velocity, acceleration,
                              minimum_duration, ControlInterface.Position)
         if status != ApproachStatus.WORKING:
             return status
         chk = self._chk_inp
-        inp.control_interface = ControlInterface.Position
-        inp.synchronization = Synchronization.Time  # all axes arrive together, on one state
-        inp.duration_discretization = DurationDiscretization.Discrete
-        inp.target_position = chk.target_position
-        inp.target_velocity = chk.target_velocity
-        inp.target_acceleration = chk.target_acceleration
-        inp.minimum_duration = chk.minimum_duration
-        self.mode = Mode.MOVING
-        self.duration = self.last_checked_duration
+        self._play(Mode.MOVING, list(chk.target_position) + list(chk.target_velocity)
+                   + list(chk.target_acceleration))
         return ApproachStatus.WORKING
 
     def soft_stop(self) -> ApproachStatus:
@@ -306,21 +325,36 @@ class Approach:
         """
         if self.mode == Mode.UNSET:
             return ApproachStatus.ERROR_NOT_READY
-        inp = self._inp
-        status = self._check(inp.current_position, inp.current_velocity,
-                             inp.current_acceleration, None, None, None, None,
+        status = self._check(*self._current(), None, None, None, None,
                              ControlInterface.Velocity)
         if status not in (ApproachStatus.WORKING, ApproachStatus.ERROR_OVERSHOOT):
             return status
-        inp.control_interface = ControlInterface.Velocity
-        inp.synchronization = Synchronization.No
-        inp.duration_discretization = DurationDiscretization.Continuous
-        inp.target_velocity = [0.0] * N_AXES
-        inp.target_acceleration = [0.0] * N_AXES
-        inp.minimum_duration = None
-        self.mode = Mode.STOPPING
-        self.duration = self.last_checked_duration
+        self._play(Mode.STOPPING, [0.0] * (3 * N_AXES))
         return status
+
+    def _play(self, mode: Mode, target: list[float]) -> None:
+        """Run the move just planned by ``_check`` (``_chk_traj``): its phases into the plan,
+        ruckig's clock at 0 (as ruckig's ``update`` after it recalculates). ``target``: the
+        move's target state (9: p, v, a), written on its arrival."""
+        plan = self.plan
+        for dof, prof in enumerate(self._chk_traj.profiles[0]):
+            brake = prof.brake
+            # ruckig's Profile::check: t_sum[0] = t[0], t_sum[i + 1] = t_sum[i] + t[i + 1]
+            # (the binding does not expose t_sum; the same sums in the same order).
+            t_sum = []
+            acc = 0.0
+            for i, ti in enumerate(prof.t):
+                acc = ti if i == 0 else acc + ti
+                t_sum.append(acc)
+            # One assignment per axis, in ``approach_kernel``'s PR_* order.
+            b = ak.P_PROFILES + dof * ak.PROFILE_SIZE
+            plan[b:b + ak.PROFILE_SIZE] = ([brake.duration] + brake.t + brake.p + brake.v
+                                           + brake.a + brake.j + t_sum + prof.p + prof.v
+                                           + prof.a + prof.j)
+        plan[ak.P_TARGET:ak.P_TARGET + 3 * N_AXES] = target
+        plan[ak.P_DURATION] = self._chk_traj.duration
+        plan[ak.P_TIME] = 0.0
+        plan[ak.P_MODE] = float(mode)
 
     # -- the per-cycle call ----------------------------------------------------------------------
     def update(self, out_pos: np.ndarray, out_vel: np.ndarray,
@@ -333,92 +367,17 @@ class Approach:
         must continue at a non-zero target velocity takes over on the ``FINISHED`` cycle (as
         ``ReferenceSequence`` does).
         """
-        mode = self.mode
-        if mode == Mode.IDLE or mode == Mode.HOLD:
-            if not self._hold_at_rest:
-                self._settle_hold()
-            h = self._hold
-            for i in range(N_AXES):
-                out_pos[i] = h[i]
-                out_vel[i] = 0.0
-                out_acc[i] = 0.0
-            return ApproachStatus.IDLE if mode == Mode.IDLE else ApproachStatus.FINISHED
-        if mode == Mode.UNSET:
-            return ApproachStatus.ERROR_NOT_READY
-        try:
-            result = self._otg.update(self._inp, self._out)
-        except RuckigError:
-            return ApproachStatus.ERROR_RUCKIG
-        if result != Result.Working and result != Result.Finished:
-            return ApproachStatus.ERROR_RUCKIG
-        out = self._out
-        out.pass_to_input(self._inp)
-        # ruckig reports Finished only once its clock has passed the duration, i.e. possibly one
-        # cycle after the sample at the end. A move's duration is discretised, so its end falls
-        # on a cycle: arrival is detected by time and the exact target state is written. A stop's
-        # is not (each axis brakes time-optimally): it has arrived on the first sample at or past
-        # its end, which is rest.
-        margin = 0.5 * self.dt if mode == Mode.MOVING else 1e-9
-        arrived = result == Result.Finished or out.time >= self.duration - margin
-        if arrived and mode == Mode.MOVING:
-            inp = self._inp
-            p = inp.target_position
-            v = inp.target_velocity
-            a = inp.target_acceleration
-        elif arrived:  # stopped: exactly at rest (ruckig leaves ~1e-17 m/s of round-off)
-            p = out.new_position
-            v = a = _ZERO3
-        else:
-            p = out.new_position
-            v = out.new_velocity
-            a = out.new_acceleration
-        status = ApproachStatus.FINISHED if arrived else ApproachStatus.WORKING
-        lo, hi = self.lo - POSITION_SLACK_M, self.hi + POSITION_SLACK_M
-        h = self._hold
-        for i in range(N_AXES):
-            pi = p[i]
-            if lo <= pi <= hi:
-                out_pos[i] = pi
-                out_vel[i] = v[i]
-                out_acc[i] = a[i]
-                h[i] = pi
-            else:  # never expected after the extrema check, except in an overshooting stop
-                pi = self.lo if pi < lo else self.hi
-                out_pos[i] = pi
-                out_vel[i] = 0.0
-                out_acc[i] = 0.0
-                h[i] = pi
-                status = ApproachStatus.ERROR_POSITION_LIMIT
-        if arrived:
-            if status == ApproachStatus.ERROR_POSITION_LIMIT:
-                v = a = (0.0, 0.0, 0.0)
-            self._enter_hold(p, v, a)
-        return status
-
-    def _enter_hold(self, p: Sequence[float], v: Sequence[float], a: Sequence[float]) -> None:
-        """Arrived: the next move starts from the state just emitted (continuous retargeting on
-        the FINISHED cycle); from the next held cycle on, from rest at the held position."""
-        self.mode = Mode.HOLD
-        inp = self._inp
-        inp.current_position = self._hold
-        inp.current_velocity = [float(x) for x in v]
-        inp.current_acceleration = [float(x) for x in a]
-        self._hold_at_rest = False
-
-    def _settle_hold(self) -> None:
-        inp = self._inp
-        inp.current_velocity = [0.0] * N_AXES
-        inp.current_acceleration = [0.0] * N_AXES
-        self._hold_at_rest = True
+        return ApproachStatus(ak.update(self.plan, out_pos, out_vel, out_acc))
 
     def still_hold(self, out: np.ndarray) -> bool:
         """True when every ``update`` until the next command only writes the held position
         (m) with zero velocity and acceleration (holding at rest, after a reset or an arrival);
         the held position is then written into ``out`` (3,). A compiled caller may then write
         the hold itself instead of calling ``update`` (``rt.references.sequencer_kernel``)."""
-        if (self.mode == Mode.IDLE or self.mode == Mode.HOLD) and self._hold_at_rest:
-            h = self._hold
-            out[0], out[1], out[2] = h[0], h[1], h[2]
+        plan = self.plan
+        mode = plan[ak.P_MODE]
+        if (mode == Mode.IDLE or mode == Mode.HOLD) and plan[ak.P_HOLD_AT_REST] != 0.0:
+            out[:3] = plan[ak.P_HOLD:ak.P_HOLD + 3]
             return True
         return False
 

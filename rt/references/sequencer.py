@@ -39,6 +39,7 @@ from rt.components.tare import TareState, refusal_message
 from rt.engine import Array, Component
 from rt.epoch import bump
 from rt.errors import ConfigurationError
+from rt.references import approach_kernel as ak
 from rt.references import sequencer_kernel as sk
 from rt.references.approach import Approach, ApproachStatus
 from rt.references.program import (
@@ -158,7 +159,7 @@ class _SeqState:
     yielding = _Field(sk.S_YIELD, bool)
 
     def __init__(self, seq: np.ndarray) -> None:
-        seq[:] = 0.0
+        seq[:sk.S_PLAN] = 0.0         # not the approach's plan (its own state: it carries on)
         seq[sk.S_PHASE] = float(Phase.REST)
         seq[sk.S_MODE] = float(SupervisorMode.RUN)
         seq[sk.S_N] = 1.0
@@ -181,7 +182,8 @@ class ProgramReference(Component):
     (requests whose approach was refused) and ``last_error`` (why), ``busy``.
 
     The cycle runs compiled (``rt.references.sequencer_kernel``: one call per steady cycle;
-    events — a mode change, a request, an abort, the approach, a tare, the end of a program —
+    events — a mode change, a request, an abort, a move planned or arriving (the approach, the
+    return, a brake: their samples are compiled), a tare, the end of a program —
     run here, in Python, on their exact cycle); ``compiled=False`` runs the interpreted
     cycle throughout, the reference it is tested against. Programs that offer a table
     (``ProgramTable``: the protocols' table generators, the identification excitation,
@@ -192,14 +194,16 @@ class ProgramReference(Component):
                  program: Program | None = None, force_ramp_s: float = 0.3,
                  compiled: bool = True):
         super().__init__(name)
-        self.approach = Approach(dt=dt, stroke=stroke)
         self.force_ramp_s = force_ramp_s
         self.compiled = compiled
         if compiled:
             sk.warm_up()
-        # Every output is a view of one arena, the state one array: the kernel's arguments.
+        # Every output is a view of one arena, the state one array (the approach's in it):
+        # the kernel's arguments.
         self._io = io = np.zeros(sk.IO_SIZE)
         self._seq = np.zeros(sk.SEQ_SIZE)
+        self.approach = Approach(dt=dt, stroke=stroke,
+                                 plan=self._seq[sk.S_PLAN:sk.S_PLAN + ak.PLAN_SIZE])
         self._no_table = np.zeros((1, 1))
         self._table: np.ndarray = self._no_table
         self.q_meas = self.declare_input("q_meas", Array(3))
@@ -341,6 +345,11 @@ class ProgramReference(Component):
         return _SeqState(self._seq) if self.compiled else _State()
 
     def on_start(self) -> None:
+        if not np.shares_memory(self.approach.plan, self._seq):
+            # The compiled cycle plays the move it finds in ``_seq`` (``sk.S_PLAN``).
+            raise ConfigurationError("the sequencer's approach must keep its plan in the "
+                                     "sequencer's state (a view of _seq): build another "
+                                     "ProgramReference rather than replace its approach")
         self.state = self.make_state()
         self._table = self._no_table
         self._pending = self._initial

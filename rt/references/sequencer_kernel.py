@@ -6,8 +6,9 @@ a cycle is ``cycle(io, seq, q_meas, mode, table, dt)``. The kernel runs every *s
 cycle — a table program playing (the sample's row, the force reference and its smoothed F̈,
 the progress), a hold at rest, a hard stop following the measured position — and answers
 :data:`NEED_PYTHON` without writing anything when the cycle is an event: the supervisor's
-mode changed this cycle, a program is requested or aborted, the approach or the return runs
-(ruckig stays in Python: its update is one call per cycle at most), a tare, a force ramp,
+mode changed this cycle, a program is requested or aborted, an approach, a return or a brake
+is planned, arrives or leaves the stroke (each move is planned once with ruckig, in Python;
+its plain samples are played here: ``rt.references.approach_kernel``), a tare, a force ramp,
 the PLAY of a force program read ahead (``force_preview``: the interpreted read-ahead runs),
 a force-control soft stop's hold yielding to a pull (it reads the wrench).
 The interpreted sequencer then runs that cycle exactly as it always did; its PLAY step goes
@@ -25,6 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
+from rt.references import approach_kernel as ak
 from rt.references.program import FZ, FZ_DOT, N_FIELDS, POSE
 
 #: First-order smoothing of F̈_d per cycle (≈ 35 Hz at 1 kHz).
@@ -59,7 +61,9 @@ S_AHEAD = S_PREVIEW + 1       # 1: the read-ahead is the table's (``read_ahead``
 S_AHEAD_STEPS = S_AHEAD + 1   # how far ahead (samples)
 S_YIELD = S_AHEAD_STEPS + 1   # 1 while a force-control soft stop's hold yields to a pull
                               # (``ProgramReference._yield_step``: Python's, on the wrench)
-SEQ_SIZE = S_YIELD + 1
+S_PLAN = S_YIELD + 1          # ak.PLAN_SIZE: the approach's state (``Approach.plan``, a view:
+                              # the move it plays, ``approach_kernel``'s layout)
+SEQ_SIZE = S_PLAN + ak.PLAN_SIZE
 
 #: Half-width (samples) of the centred difference that gives the previewed F̈_d: the table is
 #: known on both sides of the sample read ahead, so the derivative is smoothed without lag
@@ -173,16 +177,27 @@ def cycle(io, seq, q_meas, mode, table, dt):
             io[IO_QDD + i] = 0.0
             io[IO_FORCE + i] = 0.0
         io[IO_CTRL_MODE] = 0.0
-    elif phase == STOPPED or phase == REST:
-        # The approach holds still (its update writes the hold); a force reference still
-        # ramping down is Python's (it ends by re-planning the approach), and so is a hold
-        # yielding to a pull (it reads the wrench).
-        if seq[S_HOLDING] == 0.0 or io[IO_CTRL_MODE] > 0.5 or seq[S_YIELD] != 0.0:
+    elif phase == STOPPED or phase == REST or phase == RETURN:
+        # The approach holds still (its update writes the hold) or plays a move's plain
+        # sample (a brake, the return); a force reference still ramping down is Python's (it
+        # ends by re-planning the approach), and so is a hold yielding to a pull (it reads the
+        # wrench), the move's arrival (RETURN ends at rest) and a sample outside the stroke.
+        if io[IO_CTRL_MODE] > 0.5 or seq[S_YIELD] != 0.0:
             return NEED_PYTHON
-        for i in range(3):
-            io[IO_Q + i] = seq[S_HOLD + i]
-            io[IO_QD + i] = 0.0
-            io[IO_QDD + i] = 0.0
+        if seq[S_HOLDING] != 0.0 and phase != RETURN:
+            for i in range(3):
+                io[IO_Q + i] = seq[S_HOLD + i]
+                io[IO_QD + i] = 0.0
+                io[IO_QDD + i] = 0.0
+        elif not ak.working_sample(seq[S_PLAN:S_PLAN + ak.PLAN_SIZE], io[IO_Q:IO_Q + 3],
+                                   io[IO_QD:IO_QD + 3], io[IO_QDD:IO_QDD + 3]):
+            return NEED_PYTHON
+    elif phase == APPROACH:
+        # The approach's plain samples; its arrival (the program's first sample, a tare) is
+        # Python's.
+        if not ak.working_sample(seq[S_PLAN:S_PLAN + ak.PLAN_SIZE], io[IO_Q:IO_Q + 3],
+                                 io[IO_QD:IO_QD + 3], io[IO_QDD:IO_QDD + 3]):
+            return NEED_PYTHON
     elif phase == PLAY and seq[S_TABLE] != 0.0 and (seq[S_PREVIEW] == 0.0
                                                     or seq[S_AHEAD] != 0.0):
         if play_table(io, seq, table, dt):
@@ -201,6 +216,7 @@ def cycle(io, seq, q_meas, mode, table, dt):
 def warm_up() -> None:
     """Compile (or load from numba's cache) for the argument types the loop passes — the mode
     and q_meas as read-only port views — at construction, never in a cycle."""
+    ak.warm_up()
     io = np.zeros(IO_SIZE)
     seq = np.zeros(SEQ_SIZE)
     seq[S_N] = 1.0
