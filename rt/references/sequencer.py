@@ -53,6 +53,7 @@ from rt.references.program import (
 )
 from rt.references.sequencer_kernel import F_DDOT_SMOOTHING, PREVIEW_F_DDOT_HALF_WIDTH
 from rt.safety.events import SupervisorMode
+from rt.safety.supervisor_kernel import CONTACT_HELD_N
 
 #: Component status codes (non-zero = the cycle's block failed).
 STATUS_APPROACH_FAILED = 20
@@ -87,6 +88,12 @@ YIELD_MAX_RANGE_M = (0.0, 0.05)
 #: supervisor's tracking hard stop (3 ×) with room for the law's sag under the load (5.6-5.8 mm
 #: at 565-580 kg on the twin, where the tracking limit is 3 mm).
 YIELD_LEAD_TRACKING = 2.5
+#: The compliant hold starts rising only on a pull beyond what the force sensor reads with
+#: nothing on it (the supervisor's CONTACT_HELD_N, 10 N): after a lost contact an offset sensor
+#: (−3 N, a drift since the tare) otherwise raised the platform its whole 20 mm towards where
+#: the foot had been (watch9, 2026-11-26f). Once a real pull started it, it yields to any pull
+#: (push < 0 N) for the rest of the stop, so the foot still ends unpulled.
+YIELD_START_PULL_N = CONTACT_HELD_N
 
 #: How long a program's watcher waits after seeing the sequencer stopped, so the stop's events
 #: reach the loop's event log before it records them (s).
@@ -262,6 +269,7 @@ class ProgramReference(Component):
         self.yielded_m = 0.0
         self.yield_exhausted = False
         self._stepped = False                   # the hold's reference rose last cycle
+        self._pulled = False                    # a pull beyond YIELD_START_PULL_N seen
 
     #: False (on the class or a block): a previewed program's PLAY reads ahead in Python even
     #: where the compiled cycle could (the reference, for tests and before/after benchmarks;
@@ -457,6 +465,7 @@ class ProgramReference(Component):
         self.yielded_m = 0.0
         self.yield_exhausted = False
         self._stepped = False
+        self._pulled = False
         self.state.yielding = self.yield_max_m > 0.0
 
     def _yield_step(self, dt: float) -> None:
@@ -466,7 +475,8 @@ class ProgramReference(Component):
         (565 kg on the twin: −507 N with the drives at 1.74 of 2.04 kN). A hard stop does
         not end that pull: the drives let go, the platform drops until the brakes engage and
         the brakes then hold the deeper pull (−507 → −722 N, twin). So while the measured
-        push (−wrench z) is below 0 N, the hold's reference rises (all three sliders alike:
+        push (−wrench z) is below 0 N (once a pull beyond ``YIELD_START_PULL_N`` started it:
+        not an offset sensor's few N with nothing on the platform), the hold's reference rises (all three sliders alike:
         a pure heave, the direction that unloads a foot above the platform) at
         ``yield_speed_m_s``, by at most ``yield_max_m`` and not past ``yield_top_m``, and
         holds where it got to otherwise. It stays compliant for the whole stop: a load the
@@ -488,7 +498,8 @@ class ProgramReference(Component):
             push = math.nan              # a stale or saturated sensor moves nothing
         stepped = self._stepped
         self._stepped = False
-        if push < 0.0:
+        self._pulled = self._pulled or push < -YIELD_START_PULL_N
+        if push < 0.0 and self._pulled:
             room = min(self.yield_max_m - self.yielded_m, self.yield_top_m - float(q.max()))
             if room > 0.0 and not float((q - self.q_meas.data).max()) < self.yield_lead_m:
                 # The platform does not follow (the drives at their limit under a load they

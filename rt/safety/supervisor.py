@@ -868,7 +868,7 @@ class InterpretedSupervisor(Supervisor):
             if on:
                 self._active.add("pull_in_stop")
             return
-        if not fz_n < sk.PULL_FZ_N:
+        if not fz_n < sk.PULL_IN_STOP_FZ_N:
             if on:
                 self._pull_stop_on = False
                 self._pull_stop_fz = fz_n

@@ -75,7 +75,7 @@ FORCE_CUSHION = 0.9
 #: the stall, as every other check of that cycle).
 PULL_DT_PERIODS = 2.0
 #: The ``pulling`` check's threshold (N): the platform's measured push Fz below it is a pull
-#: (the contact is unilateral: any measured pull is the strap's). ``pull_in_stop`` reuses it.
+#: (the contact is unilateral: any measured pull is the strap's).
 PULL_FZ_N = 0.0
 #: ``pull_in_stop``: how long a pull may last once a stop is latched before the staff are
 #: alarmed (s). The stop's compliant hold (``ProgramReference._yield_step``) ends a pull within
@@ -89,6 +89,11 @@ PULL_IN_STOP_S = 1.0
 #: 6 σ of its 0.25 N noise, 5.5 N; ``rt.ati.twin_sensor``), and on the foot's 1e5 N/m heel pad
 #: 0.1 mm of compression, so the height where it was last held is the contact's own.
 CONTACT_HELD_N = 10.0
+#: ``pull_in_stop``: a reading counts as the strap's pull below this (N): beyond what the ATI
+#: reads with nothing on it (CONTACT_HELD_N's bound), so an offset sensor on an empty platform
+#: after a lost contact (−3 N: a drift since the tare, within the twin's ±4 N) does not tell the
+#: staff to release a strap that pulls nothing. The pulls it exists for are hundreds of N.
+PULL_IN_STOP_FZ_N = -CONTACT_HELD_N
 #: ``contact_lost``: the contact is lost when, with Fz at or below CONTACT_HELD_N, the sliders'
 #: mean position has risen this far (m) above where the contact was last held. The force law
 #: rises only while it reads less than it is asked (at F_d ≈ 0, between gait stances, it does
@@ -483,7 +488,7 @@ def check(par, mem, t, dt, q, est_status, qd, qdd, fk_ok, roll, pitch, roll_rate
 @njit(cache=True, inline="always", error_model="numpy")
 def _pull_in_stop(par, mem, t, dt, fz_n, wrench_stale):
     """The ``pull_in_stop`` alarm (the interpreted ``Supervisor._check_pull_in_stop``'s
-    arithmetic): once a stop is latched (soft or hard), a pull (Fz below PULL_FZ_N) read on
+    arithmetic): once a stop is latched (soft or hard), a pull (Fz below PULL_IN_STOP_FZ_N) read on
     every sample for PULL_IN_STOP_S (stall-aware, as ``pulling``) raises it once, a warning:
     no escalation, the brakes or the drives already hold, and releasing them would drop the
     platform. It stays raised (``M_PULL_STOP_ON``, the RT status's ``alarms``) until a sample
@@ -508,7 +513,7 @@ def _pull_in_stop(par, mem, t, dt, fz_n, wrench_stale):
         if on:
             mem[M_REACT + C_PULL_STOP] = R_WARN
         return 0
-    if not fz_n < PULL_FZ_N:
+    if not fz_n < PULL_IN_STOP_FZ_N:
         if on:
             mem[M_PULL_STOP_ON] = 0.0
             mem[M_PULL_STOP_END] = 1.0
