@@ -172,6 +172,23 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
     """:func:`tree_maps_work` with the rod angles' sines and cosines already in
     ``work[0:3]`` and ``work[3:6]`` (the same arithmetic: the twin's substep computes them
     once for the assembly, these maps and its mass matrix)."""
+    return _tree_maps(geom, q, rot, qd, S, Sd, twist, work, False)
+
+
+@njit(cache=True)
+def tree_maps_drift_sc(geom, q, rot, qd, S, sdq, twist, work):
+    """:func:`tree_maps_sc` with the drift Ṡ q̇ (float64[12], ``sdq``) in place of Ṡ: the
+    second-order term H(q̇, q̇) evaluated once, where Ṡ is its three columns H(q̇, e_k) (the
+    twin's substep needs only Ṡ q̇: a third of the second-order work, issue 16). The same
+    bilinear form, so equal to Ṡ q̇ = Σ_k Ṡ e_k q̇_k to round-off (not bit for bit: the
+    sums run in another order)."""
+    return _tree_maps(geom, q, rot, qd, S, sdq.reshape((12, 1)), twist, work, True)
+
+
+@njit(cache=True, inline="always")
+def _tree_maps(geom, q, rot, qd, S, Sd, twist, work, drift):
+    """:func:`tree_maps_sc`'s body; ``drift``: ``Sd`` is (12, 1) and receives H(q̇, q̇)
+    (:func:`tree_maps_drift_sc`), else (12, 3) with H(q̇, e_k) in column k."""
     rb = geom[0]
     rp = geom[1]
     ln = geom[2]
@@ -232,13 +249,19 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
     hd = work[72:84].reshape((m, 3))
     w = work[84:96].reshape((m, 3))
     ang = work[96:108].reshape((m, 3))     # (yaw rate, pitch rate, roll rate)
-    for k in range(m):
+    for k in range(3 if drift else m):
         for i in range(3):
             acc = 0.0
-            for j in range(3):
-                u = qd[j] if k == 3 else (1.0 if j == k else 0.0)
+            if k < 3:
+                # u = e_k: only j = k contributes (the other terms are exact zeros, and
+                # (a b) 1 = a b: the same floats as the general sum, a third of its work).
                 for p in range(3):
-                    acc -= f_phi_inv[i, p] * f_q[p, j] * u
+                    acc -= f_phi_inv[i, p] * f_q[p, k]
+            else:
+                for j in range(3):
+                    u = qd[j]
+                    for p in range(3):
+                        acc -= f_phi_inv[i, p] * f_q[p, j] * u
             phid[k, i] = acc
         for i in range(3):
             u = qd[i] if k == 3 else (1.0 if i == k else 0.0)
@@ -269,6 +292,12 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
             twist[3, k] = wx
             twist[4, k] = wy
             twist[5, k] = wz
+    if drift:
+        # Row 3 (u = q̇): every rate above is linear in u, so Σ_j q̇_j (row j) (the same to
+        # round-off, a fraction of the work).
+        for c in range(3):
+            for arr in (phid, rhod, hd, w, ang):
+                arr[3, c] = qd[0] * arr[0, c] + qd[1] * arr[1, c] + qd[2] * arr[2, c]
 
     # Ṡ e_k = H(qd, e_k): the symmetric bilinear second-order term of Q(q) (q̈ = 0).
     eb_x = -sa
@@ -279,7 +308,8 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
     u_ = 3
     kappa = work[108:111]
     phidd = work[111:114]
-    for k in range(3):
+    for col in range(1 if drift else 3):
+        k = 3 if drift else col           # the second argument's row: e_k, or q̇ itself
         pp = work[114:117]
         for i in range(3):
             pp[i] = phid[u_, i] * phid[k, i]
@@ -345,14 +375,14 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
         tz += c2
         yaw_dd, pitch_dd, roll_dd = _euler_rates(dwx - tx, dwy - ty, dwz - tz, ca, sa, cb, sb)
         for i in range(3):
-            Sd[2 * i, k] = 0.0
-            Sd[2 * i + 1, k] = phidd[i]
-        Sd[IX_X, k] = ax
-        Sd[IX_Y, k] = ay
-        Sd[IX_Z, k] = az
-        Sd[IX_YAW, k] = yaw_dd
-        Sd[IX_PITCH, k] = pitch_dd
-        Sd[IX_ROLL, k] = roll_dd
+            Sd[2 * i, col] = 0.0
+            Sd[2 * i + 1, col] = phidd[i]
+        Sd[IX_X, col] = ax
+        Sd[IX_Y, col] = ay
+        Sd[IX_Z, col] = az
+        Sd[IX_YAW, col] = yaw_dd
+        Sd[IX_PITCH, col] = pitch_dd
+        Sd[IX_ROLL, col] = roll_dd
     return det
 
 
