@@ -19,6 +19,7 @@ from numba import njit
 
 from rt.model import rigid_body as rb
 from rt.model.small_linalg import cross3, dot3, roll_pitch, unit3
+from rt.pointers import f64_view
 
 TREE_DOF = 12
 IX_X, IX_Y, IX_Z, IX_YAW, IX_PITCH, IX_ROLL = 6, 7, 8, 9, 10, 11
@@ -182,7 +183,7 @@ def tree_maps_drift_sc(geom, q, rot, qd, S, sdq, twist, work):
     twin's substep needs only Ṡ q̇: a third of the second-order work, issue 16). The same
     bilinear form, so equal to Ṡ q̇ = Σ_k Ṡ e_k q̇_k to round-off (not bit for bit: the
     sums run in another order)."""
-    return _tree_maps(geom, q, rot, qd, S, sdq.reshape((12, 1)), twist, work, True)
+    return _tree_maps(geom, q, rot, qd, S, f64_view(sdq, 0, (12, 1)), twist, work, True)
 
 
 @njit(cache=True, inline="always")
@@ -205,7 +206,7 @@ def _tree_maps(geom, q, rot, qd, S, Sd, twist, work, drift):
     # Constraint Jacobians of f_p = |B_i - B_j|² - 3 R_p² for the pairs p = (i, j).
     _, _, _, a00, a01, a11, a12, a22, a20 = constraint_terms_sc(
         geom, q, sphi[0], cphi[0], sphi[1], cphi[1], sphi[2], cphi[2])
-    f_phi = work[12:21].reshape((3, 3))
+    f_phi = f64_view(work, 12, (3, 3))
     f_phi[:, :] = 0.0
     f_phi[0, 0] = a00
     f_phi[0, 1] = a01
@@ -213,7 +214,7 @@ def _tree_maps(geom, q, rot, qd, S, Sd, twist, work, drift):
     f_phi[1, 2] = a12
     f_phi[2, 2] = a22
     f_phi[2, 0] = a20
-    f_q = work[21:30].reshape((3, 3))
+    f_q = f64_view(work, 21, (3, 3))
     f_q[:, :] = 0.0
     for p in range(3):
         i = (0, 1, 2)[p]
@@ -221,13 +222,13 @@ def _tree_maps(geom, q, rot, qd, S, Sd, twist, work, drift):
         d = h[i] - h[j]
         f_q[p, i] = 2.0 * d
         f_q[p, j] = -2.0 * d
-    f_phi_inv = work[30:39].reshape((3, 3))
+    f_phi_inv = f64_view(work, 30, (3, 3))
     det = inv3(f_phi, f_phi_inv)
     # Platform geometry: sphere offsets r_i = B_i - p (p is the centroid), normal n.
     nx = rot[0, 2]
     ny = rot[1, 2]
     nz = rot[2, 2]
-    r = work[39:48].reshape((3, 3))
+    r = f64_view(work, 39, (3, 3))
     for i in range(3):
         r[i, 0] = rot[0, 0] * ct[i] * rp + rot[0, 1] * st[i] * rp
         r[i, 1] = rot[1, 0] * ct[i] * rp + rot[1, 1] * st[i] * rp
@@ -244,11 +245,11 @@ def _tree_maps(geom, q, rot, qd, S, Sd, twist, work, drift):
 
     # Velocity-level quantities for m = 4 velocity vectors: the three unit vectors e_k and qd.
     m = 4
-    phid = work[48:60].reshape((m, 3))
-    rhod = work[60:72].reshape((m, 3))
-    hd = work[72:84].reshape((m, 3))
-    w = work[84:96].reshape((m, 3))
-    ang = work[96:108].reshape((m, 3))     # (yaw rate, pitch rate, roll rate)
+    phid = f64_view(work, 48, (m, 3))
+    rhod = f64_view(work, 60, (m, 3))
+    hd = f64_view(work, 72, (m, 3))
+    w = f64_view(work, 84, (m, 3))
+    ang = f64_view(work, 96, (m, 3))     # (yaw rate, pitch rate, roll rate)
     for k in range(3 if drift else m):
         for i in range(3):
             acc = 0.0
@@ -514,7 +515,7 @@ def model_state(geom, limits, phi_guess, q_meas, qd, stb, step_tol, max_iteratio
         return FK_OUTSIDE
     q = work[0:3]
     phi = work[3:6]
-    rot = work[6:15].reshape((3, 3))
+    rot = f64_view(work, 6, (3, 3))
     pos = work[15:18]
     q[0] = q0
     q[1] = q1
@@ -525,8 +526,8 @@ def model_state(geom, limits, phi_guess, q_meas, qd, stb, step_tol, max_iteratio
     iterations = fk_solve(geom, q, phi, step_tol, max_iterations)
     if iterations < 0:
         return iterations
-    spheres = stb[rb.STATE_SPHERES:rb.STATE_SPHERES + 9].reshape((3, 3))
-    sph = work[18:27].reshape((3, 3))
+    spheres = f64_view(stb, rb.STATE_SPHERES, (3, 3))
+    sph = f64_view(work, 18, (3, 3))
     assemble(geom, q, phi, rot, pos, sph)
     roll, pitch = roll_pitch(rot)
     yaw = math.atan2(rot[1, 0], rot[0, 0])

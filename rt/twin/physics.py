@@ -41,6 +41,7 @@ from rt.model.kernels import (
     tree_maps_drift_sc,
     tree_maps_work,
 )
+from rt.pointers import f64_view
 
 ENV_FREE = 0.0
 ENV_PLATE = 1.0
@@ -205,11 +206,12 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
     The congruences are factored — R I Rᵀ as (R I) Rᵀ, Aᵀ I A as Aᵀ (I A): 54 multiplications
     per body instead of ~900 (issue 16; the substep's largest cost before)."""
     extra = work[TREE_MAPS_WORK:]
-    spheres = extra[0:9].reshape((3, 3))
-    iw = extra[9:18].reshape((3, 3))
-    av = extra[27:36].reshape((3, 3))
-    aw = extra[36:45].reshape((3, 3))
-    tmp = extra[45:54].reshape((3, 3))
+    x = TREE_MAPS_WORK                  # the 3 × 3 views below: f64_view, not reshape
+    spheres = f64_view(work, x, (3, 3))
+    iw = f64_view(work, x + 9, (3, 3))
+    av = f64_view(work, x + 27, (3, 3))
+    aw = f64_view(work, x + 36, (3, 3))
+    tmp = f64_view(work, x + 45, (3, 3))
     # The rod angles' sines and cosines once per substep, where the tree maps keep them
     # (work[0:6]): the assembly, the maps and the rods' inertia below all read them (the same
     # values as each computing its own: issue 16, 24 transcendental calls per substep → 6).
