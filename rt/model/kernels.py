@@ -445,6 +445,33 @@ def assemble(geom, q, phi, rot, pos, spheres):
 
 
 @njit(cache=True)
+def fk_rows(geom, qs, phi_guess, step_tol, max_iterations, rot_z, status):
+    """``Kinematics.fk(q, check=False)`` for each row of ``qs`` (m, finite) in order: Newton
+    (:func:`fk_solve`) warm-started from ``phi_guess`` (rad, in/out: the last solution; a row
+    that fails leaves it, as ``fk`` does), then :func:`assemble`. Writes each row's
+    iterations or ``FK_SINGULAR``/``FK_NO_CONVERGENCE`` to ``status`` and R_BP's third row
+    (what roll and pitch are read from) to ``rot_z``: the same floats as that many ``fk``
+    calls, without their Python (issue 16: the pre-flight figures' ROM, ≈ 15 µs a row)."""
+    q = np.empty(3)
+    phi = np.empty(3)
+    rot = np.empty((3, 3))
+    pos = np.empty(3)
+    spheres = np.empty((3, 3))
+    for r in range(qs.shape[0]):
+        for i in range(3):
+            q[i] = qs[r, i]
+            phi[i] = phi_guess[i]
+        it = fk_solve(geom, q, phi, step_tol, max_iterations)
+        status[r] = it
+        if it < 0:
+            continue
+        assemble(geom, q, phi, rot, pos, spheres)
+        for c in range(3):
+            rot_z[r, c] = rot[2, c]
+            phi_guess[c] = phi[c]
+
+
+@njit(cache=True)
 def assemble_sc(geom, q, s0, c0, s1, c1, s2, c2, rot, pos, spheres):
     """:func:`assemble` from the rod angles' sines and cosines (the same arithmetic)."""
     rb = geom[0]
