@@ -181,3 +181,31 @@ def test_fk_warm_start_converges_in_few_steps(robot):
     b = kin.ik(0.6301, 0.1001, -0.0501)      # one 1 kHz cycle away
     kin.fk(a.q)
     assert kin.fk(b.q).iterations <= 3
+
+
+def test_fk_roll_pitch_is_fk_row_by_row_bit_for_bit(robot):
+    """The figures' batch FK (compiled, issue 16) gives the floats of one ``fk(q,
+    check=False)`` per row, in order, with the same warm starts: a row FK cannot solve (far
+    outside the assembly range) gets NaN angles and leaves the warm start, as ``fk`` raising
+    does; both objects end with the same warm start."""
+    rng = np.random.default_rng(3)
+    rows = [robot.kin.ik(rng.uniform(0.55, 0.75), rng.uniform(-0.2, 0.2),
+                         rng.uniform(-0.2, 0.2)).q for _ in range(40)]
+    qs = np.array(rows)
+    qs[17] = (0.0, 5.0, -5.0)                               # no assembly
+    one, batch = Kinematics(robot.kin.description), Kinematics(robot.kin.description)
+    expected = []
+    for q in qs:
+        try:
+            cfg = one.fk(q, check=False)
+            expected.append((cfg.roll, cfg.pitch))
+        except KinematicsError:
+            expected.append(None)
+    roll, pitch, ok = batch.fk_roll_pitch(qs)
+    assert ok.tolist() == [e is not None for e in expected] and not ok[17]
+    assert [(r, p) for r, p, k in zip(roll.tolist(), pitch.tolist(), ok) if k] == \
+        [e for e in expected if e is not None]
+    assert np.isnan(roll[17]) and np.isnan(pitch[17])
+    assert one._phi_guess.tolist() == batch._phi_guess.tolist()
+    with pytest.raises(WorkspaceError, match="finite"):
+        batch.fk_roll_pitch([(0.6, np.inf, 0.6)])

@@ -5,7 +5,6 @@ definition; what a recording lacks (drive commands, wrench, tare) is left out, n
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,8 +18,9 @@ from rt.sessions import COL_CTRL_MODE, COL_FREF, COL_FZ, COL_PHASE, COLUMNS, SES
 class _Kin:
     """Forward kinematics stand-in: roll and pitch proportional to the sliders' differences."""
 
-    def fk(self, q, guess=None, check=True):
-        return SimpleNamespace(roll=float(q[0] - q[1]), pitch=float(q[2] - q[0]))
+    def fk_roll_pitch(self, qs):
+        qs = np.asarray(qs, dtype=float).reshape(-1, 3)
+        return qs[:, 0] - qs[:, 1], qs[:, 2] - qs[:, 0], np.ones(len(qs), dtype=bool)
 
 
 def _rows(n: int, seed: int) -> np.ndarray:

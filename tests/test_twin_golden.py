@@ -1,5 +1,6 @@
-"""The twin's pre-flight path is bit for bit the twin of commit 43b157e (issue 16's speed work
-must not move a single bit of any pre-flight figure).
+"""The twin's pre-flight path is bit for bit the golden run (issue 16's speed work must not
+move a single bit of any pre-flight figure unknowingly: a change of the floats writes a new
+golden, with its reason and its accuracy, below).
 
 A closed loop on the realistic twin (default truth and imperfections: amplifier offset and
 delay, current loop, compliant screw with backlash, friction with its ripple and heating,
@@ -8,13 +9,17 @@ backends the pre-flight loop uses: the PCL-833 driver reading the emulated card,
 driver writing codes to the emulated DAC, the ATI sampled as the force reader reads it. The
 drives are switched off for 60 ms (the brakes engage) and back on. Every 25 ms the encoder
 counts, the decoded positions, the ATI sample and the plant's whole packed state are compared
-with the values that commit produced, as float hex: equality, not a tolerance.
+with the golden file's, as float hex: equality, not a tolerance.
 
-``tests/data/twin_golden_2026-11-26b.json`` was written by this file's ``__main__``
-(``python tests/test_twin_golden.py OUT``) once the twin realised its truth's amplifier exactly
-(the mean current over each substep and the fractional delay: 0.26 ms of lag for the nominal
-1 kHz / 100 µs, where it realised 0.08 ms; branch ident5-exact-amp); the first golden, from
-commit 43b157e, pinned the older discretization. The replay tests of
+``tests/data/twin_golden_2026-11-26f.json`` was written by this file's ``__main__``
+(``python tests/test_twin_golden.py OUT``) when the substep's mass and bias took fewer
+operations for the same dynamics (issue 16, branch preflight9: the rods' rotation as one
+scalar inertia, Ṡ q̇ as H(q̇, q̇) evaluated once, the yaw's sine and cosine from R): 320 of its
+7776 values moved, by at most 1.2e-15 relative (round-off), and the error against ten times
+the substeps is unchanged (``bench/twin_accuracy.py``: x_m 34.43 µm, q̇ 1.453 mm/s, as
+before). The golden before it (``…-26b``, branch ident5-exact-amp) pinned the twin once it
+realised its truth's amplifier exactly (the mean current over each substep and the fractional
+delay); the first, from commit 43b157e, the older discretization. The replay tests of
 ``tests/test_twin_compiled.py`` compare the twin's paths with each other; this one pins the
 substep kernels they share. A different libm (``sin``, ``exp``) would show here first.
 """
@@ -34,7 +39,7 @@ from rt.twin.environment import parse_environment
 from rt.twin.serve import holding_volts
 from rt.twin.twin import SimClock, Twin
 
-GOLDEN = Path(__file__).parent / "data" / "twin_golden_2026-11-26b.json"
+GOLDEN = Path(__file__).parent / "data" / "twin_golden_2026-11-26f.json"
 ENVS = ("free", "plate:0.75", "ankle")
 DT = 0.001
 SECONDS = 0.6

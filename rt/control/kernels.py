@@ -17,6 +17,7 @@ from numba import njit
 
 from rt.model import rigid_body as rb
 from rt.model.kernels import MODEL_STATE_WORK, inv3, model_state
+from rt.pointers import f64_view
 
 #: ``gains`` layouts: PD-family [Kp (N/m), Kd (N s/m)]; computed torque [Kp (1/s²), Kd (1/s)];
 #: PID [Kp, Kd, Ki (N/(m s)), integral limit (N)]; adaptive [Λ (1/s), K_D (N s/m)].
@@ -174,7 +175,7 @@ def adaptive(ti, tf, stb, rq, rqd, rqdd, amap, est, dt, dry_run, out):
     hi = est[3 * nb:4 * nb]
     ys = est[4 * nb:5 * nb]
     o = 5 * nb
-    pith = est[o:o + rb.N_PARAMS * n].reshape((n, rb.N_PARAMS))
+    pith = f64_view(est, o, (n, rb.N_PARAMS))
     o += rb.N_PARAMS * n
     s = est[o:o + 3]
     qd_r = est[o + 3:o + 6]
@@ -418,8 +419,8 @@ def explicit_force(ti, tf, stb, fg, fs, force_n, f_ref, f_dot_ref, f_ddot_ref, r
     pi = rb.unpack_tree(ti, tf)[5]
     rb.mixed_torque(ti, tf, pi, stb, zero, zero, True, work[30:], grav)
     # J_ik = (rows z, roll, pitch of S)⁻¹; its first column maps ż to the sliders.
-    jfk = work[6:15].reshape((3, 3))
-    jik = work[15:24].reshape((3, 3))
+    jfk = f64_view(work, 6, (3, 3))
+    jik = f64_view(work, 15, (3, 3))
     for c in range(3):
         jfk[0, c] = S[8, c]
         jfk[1, c] = S[11, c]

@@ -19,6 +19,7 @@ from numba import njit
 
 from rt.model import rigid_body as rb
 from rt.model.small_linalg import cross3, dot3, roll_pitch, unit3
+from rt.pointers import f64_view
 
 TREE_DOF = 12
 IX_X, IX_Y, IX_Z, IX_YAW, IX_PITCH, IX_ROLL = 6, 7, 8, 9, 10, 11
@@ -172,6 +173,23 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
     """:func:`tree_maps_work` with the rod angles' sines and cosines already in
     ``work[0:3]`` and ``work[3:6]`` (the same arithmetic: the twin's substep computes them
     once for the assembly, these maps and its mass matrix)."""
+    return _tree_maps(geom, q, rot, qd, S, Sd, twist, work, False)
+
+
+@njit(cache=True)
+def tree_maps_drift_sc(geom, q, rot, qd, S, sdq, twist, work):
+    """:func:`tree_maps_sc` with the drift Ṡ q̇ (float64[12], ``sdq``) in place of Ṡ: the
+    second-order term H(q̇, q̇) evaluated once, where Ṡ is its three columns H(q̇, e_k) (the
+    twin's substep needs only Ṡ q̇: a third of the second-order work, issue 16). The same
+    bilinear form, so equal to Ṡ q̇ = Σ_k Ṡ e_k q̇_k to round-off (not bit for bit: the
+    sums run in another order)."""
+    return _tree_maps(geom, q, rot, qd, S, f64_view(sdq, 0, (12, 1)), twist, work, True)
+
+
+@njit(cache=True, inline="always")
+def _tree_maps(geom, q, rot, qd, S, Sd, twist, work, drift):
+    """:func:`tree_maps_sc`'s body; ``drift``: ``Sd`` is (12, 1) and receives H(q̇, q̇)
+    (:func:`tree_maps_drift_sc`), else (12, 3) with H(q̇, e_k) in column k."""
     rb = geom[0]
     rp = geom[1]
     ln = geom[2]
@@ -188,7 +206,7 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
     # Constraint Jacobians of f_p = |B_i - B_j|² - 3 R_p² for the pairs p = (i, j).
     _, _, _, a00, a01, a11, a12, a22, a20 = constraint_terms_sc(
         geom, q, sphi[0], cphi[0], sphi[1], cphi[1], sphi[2], cphi[2])
-    f_phi = work[12:21].reshape((3, 3))
+    f_phi = f64_view(work, 12, (3, 3))
     f_phi[:, :] = 0.0
     f_phi[0, 0] = a00
     f_phi[0, 1] = a01
@@ -196,7 +214,7 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
     f_phi[1, 2] = a12
     f_phi[2, 2] = a22
     f_phi[2, 0] = a20
-    f_q = work[21:30].reshape((3, 3))
+    f_q = f64_view(work, 21, (3, 3))
     f_q[:, :] = 0.0
     for p in range(3):
         i = (0, 1, 2)[p]
@@ -204,13 +222,13 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
         d = h[i] - h[j]
         f_q[p, i] = 2.0 * d
         f_q[p, j] = -2.0 * d
-    f_phi_inv = work[30:39].reshape((3, 3))
+    f_phi_inv = f64_view(work, 30, (3, 3))
     det = inv3(f_phi, f_phi_inv)
     # Platform geometry: sphere offsets r_i = B_i - p (p is the centroid), normal n.
     nx = rot[0, 2]
     ny = rot[1, 2]
     nz = rot[2, 2]
-    r = work[39:48].reshape((3, 3))
+    r = f64_view(work, 39, (3, 3))
     for i in range(3):
         r[i, 0] = rot[0, 0] * ct[i] * rp + rot[0, 1] * st[i] * rp
         r[i, 1] = rot[1, 0] * ct[i] * rp + rot[1, 1] * st[i] * rp
@@ -227,18 +245,24 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
 
     # Velocity-level quantities for m = 4 velocity vectors: the three unit vectors e_k and qd.
     m = 4
-    phid = work[48:60].reshape((m, 3))
-    rhod = work[60:72].reshape((m, 3))
-    hd = work[72:84].reshape((m, 3))
-    w = work[84:96].reshape((m, 3))
-    ang = work[96:108].reshape((m, 3))     # (yaw rate, pitch rate, roll rate)
-    for k in range(m):
+    phid = f64_view(work, 48, (m, 3))
+    rhod = f64_view(work, 60, (m, 3))
+    hd = f64_view(work, 72, (m, 3))
+    w = f64_view(work, 84, (m, 3))
+    ang = f64_view(work, 96, (m, 3))     # (yaw rate, pitch rate, roll rate)
+    for k in range(3 if drift else m):
         for i in range(3):
             acc = 0.0
-            for j in range(3):
-                u = qd[j] if k == 3 else (1.0 if j == k else 0.0)
+            if k < 3:
+                # u = e_k: only j = k contributes (the other terms are exact zeros, and
+                # (a b) 1 = a b: the same floats as the general sum, a third of its work).
                 for p in range(3):
-                    acc -= f_phi_inv[i, p] * f_q[p, j] * u
+                    acc -= f_phi_inv[i, p] * f_q[p, k]
+            else:
+                for j in range(3):
+                    u = qd[j]
+                    for p in range(3):
+                        acc -= f_phi_inv[i, p] * f_q[p, j] * u
             phid[k, i] = acc
         for i in range(3):
             u = qd[i] if k == 3 else (1.0 if i == k else 0.0)
@@ -269,6 +293,12 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
             twist[3, k] = wx
             twist[4, k] = wy
             twist[5, k] = wz
+    if drift:
+        # Row 3 (u = q̇): every rate above is linear in u, so Σ_j q̇_j (row j) (the same to
+        # round-off, a fraction of the work).
+        for c in range(3):
+            for arr in (phid, rhod, hd, w, ang):
+                arr[3, c] = qd[0] * arr[0, c] + qd[1] * arr[1, c] + qd[2] * arr[2, c]
 
     # Ṡ e_k = H(qd, e_k): the symmetric bilinear second-order term of Q(q) (q̈ = 0).
     eb_x = -sa
@@ -279,7 +309,8 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
     u_ = 3
     kappa = work[108:111]
     phidd = work[111:114]
-    for k in range(3):
+    for col in range(1 if drift else 3):
+        k = 3 if drift else col           # the second argument's row: e_k, or q̇ itself
         pp = work[114:117]
         for i in range(3):
             pp[i] = phid[u_, i] * phid[k, i]
@@ -345,14 +376,14 @@ def tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work):
         tz += c2
         yaw_dd, pitch_dd, roll_dd = _euler_rates(dwx - tx, dwy - ty, dwz - tz, ca, sa, cb, sb)
         for i in range(3):
-            Sd[2 * i, k] = 0.0
-            Sd[2 * i + 1, k] = phidd[i]
-        Sd[IX_X, k] = ax
-        Sd[IX_Y, k] = ay
-        Sd[IX_Z, k] = az
-        Sd[IX_YAW, k] = yaw_dd
-        Sd[IX_PITCH, k] = pitch_dd
-        Sd[IX_ROLL, k] = roll_dd
+            Sd[2 * i, col] = 0.0
+            Sd[2 * i + 1, col] = phidd[i]
+        Sd[IX_X, col] = ax
+        Sd[IX_Y, col] = ay
+        Sd[IX_Z, col] = az
+        Sd[IX_YAW, col] = yaw_dd
+        Sd[IX_PITCH, col] = pitch_dd
+        Sd[IX_ROLL, col] = roll_dd
     return det
 
 
@@ -411,6 +442,33 @@ def assemble(geom, q, phi, rot, pos, spheres):
     """
     assemble_sc(geom, q, math.sin(phi[0]), math.cos(phi[0]), math.sin(phi[1]),
                 math.cos(phi[1]), math.sin(phi[2]), math.cos(phi[2]), rot, pos, spheres)
+
+
+@njit(cache=True)
+def fk_rows(geom, qs, phi_guess, step_tol, max_iterations, rot_z, status):
+    """``Kinematics.fk(q, check=False)`` for each row of ``qs`` (m, finite) in order: Newton
+    (:func:`fk_solve`) warm-started from ``phi_guess`` (rad, in/out: the last solution; a row
+    that fails leaves it, as ``fk`` does), then :func:`assemble`. Writes each row's
+    iterations or ``FK_SINGULAR``/``FK_NO_CONVERGENCE`` to ``status`` and R_BP's third row
+    (what roll and pitch are read from) to ``rot_z``: the same floats as that many ``fk``
+    calls, without their Python (issue 16: the pre-flight figures' ROM, ≈ 15 µs a row)."""
+    q = np.empty(3)
+    phi = np.empty(3)
+    rot = np.empty((3, 3))
+    pos = np.empty(3)
+    spheres = np.empty((3, 3))
+    for r in range(qs.shape[0]):
+        for i in range(3):
+            q[i] = qs[r, i]
+            phi[i] = phi_guess[i]
+        it = fk_solve(geom, q, phi, step_tol, max_iterations)
+        status[r] = it
+        if it < 0:
+            continue
+        assemble(geom, q, phi, rot, pos, spheres)
+        for c in range(3):
+            rot_z[r, c] = rot[2, c]
+            phi_guess[c] = phi[c]
 
 
 @njit(cache=True)
@@ -484,7 +542,7 @@ def model_state(geom, limits, phi_guess, q_meas, qd, stb, step_tol, max_iteratio
         return FK_OUTSIDE
     q = work[0:3]
     phi = work[3:6]
-    rot = work[6:15].reshape((3, 3))
+    rot = f64_view(work, 6, (3, 3))
     pos = work[15:18]
     q[0] = q0
     q[1] = q1
@@ -495,8 +553,8 @@ def model_state(geom, limits, phi_guess, q_meas, qd, stb, step_tol, max_iteratio
     iterations = fk_solve(geom, q, phi, step_tol, max_iterations)
     if iterations < 0:
         return iterations
-    spheres = stb[rb.STATE_SPHERES:rb.STATE_SPHERES + 9].reshape((3, 3))
-    sph = work[18:27].reshape((3, 3))
+    spheres = f64_view(stb, rb.STATE_SPHERES, (3, 3))
+    sph = f64_view(work, 18, (3, 3))
     assemble(geom, q, phi, rot, pos, sph)
     roll, pitch = roll_pitch(rot)
     yaw = math.atan2(rot[1, 0], rot[0, 0])

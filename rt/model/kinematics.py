@@ -26,7 +26,7 @@ import numpy as np
 
 from rt.errors import ConvergenceError, WorkspaceError
 from rt.model.description import RobotDescription
-from rt.model.kernels import FK_SINGULAR, assemble, fk_solve, pack_geometry
+from rt.model.kernels import FK_SINGULAR, assemble, fk_rows, fk_solve, pack_geometry
 
 FK_MAX_ITERATIONS = 25
 # Newton stops when the largest rod-angle update is below this (rad). 1e-12 rad on a 0.45 m rod
@@ -211,6 +211,30 @@ class Kinematics:
             self.check_workspace(cfg)
         self._phi_guess[0], self._phi_guess[1], self._phi_guess[2] = p0, p1, p2
         return cfg
+
+    def fk_roll_pitch(self, qs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Roll and pitch (rad) of ``fk(q, check=False)`` for each row of ``qs`` (n × 3 slider
+        positions, m, finite), in order, as n such calls give them: the same warm starts
+        (this object's, left at the last solution) and the same floats, compiled
+        (``rt.model.kernels.fk_rows``). Also which rows solved (a row FK cannot solve gets
+        NaN angles and leaves the warm start, as ``fk`` raising does)."""
+        qs = np.ascontiguousarray(qs, dtype=np.float64).reshape(-1, 3)
+        if not np.isfinite(qs).all():
+            raise WorkspaceError("slider positions must be finite numbers")
+        n = len(qs)
+        rot_z = np.empty((n, 3))
+        status = np.empty(n, dtype=np.int64)
+        fk_rows(self.geom, qs, self._phi_guess, FK_STEP_TOL_RAD, FK_MAX_ITERATIONS, rot_z,
+                status)
+        ok = status >= 0
+        roll = np.full(n, np.nan)
+        pitch = np.full(n, np.nan)
+        for k in np.flatnonzero(ok).tolist():
+            r20, r21, r22 = rot_z[k].tolist()
+            # ``_assemble``'s arithmetic on the same floats (Python's atan2 and hypot).
+            roll[k] = math.atan2(r21, r22)
+            pitch[k] = math.atan2(-r20, math.hypot(r21, r22))
+        return roll, pitch, ok
 
     def _assemble(self, q, phi, iterations: int) -> Configuration:
         """Platform frame from the three sphere centres (thesis eq. 7), angles read off R."""

@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from rt.model.small_linalg import cross3, mat_t_vec3, mat_vec3
+from rt.pointers import f64_view
 
 #: Joint kinds (one DOF each).
 PRISMATIC = 0
@@ -301,11 +302,11 @@ def unpack_tree(ti, tf):
     kind = ti[n:2 * n]
     axis = ti[2 * n:3 * n]
     o = 0
-    prot = tf[o:o + 9 * n].reshape((n, 3, 3))
+    prot = f64_view(tf, o, (n, 3, 3))
     o += 9 * n
-    ptrans = tf[o:o + 3 * n].reshape((n, 3))
+    ptrans = f64_view(tf, o, (n, 3))
     o += 3 * n
-    pi = tf[o:o + N_PARAMS * n].reshape((n, N_PARAMS))
+    pi = f64_view(tf, o, (n, N_PARAMS))
     o += N_PARAMS * n
     g = tf[o:o + 3]
     jr = tf[o + 3:o + 6]
@@ -324,15 +325,15 @@ def work_size(n: int) -> int:
 def unpack_work(work, n):
     """Views (R, p, v, a, f, tau, V, A, tmp, u, ua, grad, e, zero3) of the scratch array."""
     o = 0
-    R = work[o:o + 9 * n].reshape((n, 3, 3))
+    R = f64_view(work, o, (n, 3, 3))
     o += 9 * n
-    p = work[o:o + 3 * n].reshape((n, 3))
+    p = f64_view(work, o, (n, 3))
     o += 3 * n
-    v = work[o:o + 6 * n].reshape((n, 6))
+    v = f64_view(work, o, (n, 6))
     o += 6 * n
-    a = work[o:o + 6 * n].reshape((n, 6))
+    a = f64_view(work, o, (n, 6))
     o += 6 * n
-    f = work[o:o + 6 * n].reshape((n, 6))
+    f = f64_view(work, o, (n, 6))
     o += 6 * n
     tau = work[o:o + n]
     o += n
@@ -342,15 +343,15 @@ def unpack_work(work, n):
     o += n
     tmp = work[o:o + n]
     o += n
-    u = work[o:o + 6 * n].reshape((n, 6))
+    u = f64_view(work, o, (n, 6))
     o += 6 * n
-    ua = work[o:o + 6 * n].reshape((n, 6))
+    ua = f64_view(work, o, (n, 6))
     o += 6 * n
-    uf = work[o:o + 6 * n].reshape((n, 6))
+    uf = f64_view(work, o, (n, 6))
     o += 6 * n
-    grad = work[o:o + N_PARAMS * n].reshape((n, N_PARAMS))
+    grad = f64_view(work, o, (n, N_PARAMS))
     o += N_PARAMS * n
-    e = work[o:o + N_PARAMS].reshape((1, N_PARAMS))
+    e = f64_view(work, o, (1, N_PARAMS))
     o += N_PARAMS
     zero3 = work[o:o + 3]
     return R, p, v, a, f, tau, V, A, tmp, u, ua, uf, grad, e, zero3
@@ -378,10 +379,10 @@ STATE_SIZE = 143
 def unpack_state(stb):
     """Views (Q, Qd, qd, S, Sd, twist, rot, q, phi) of a State buffer."""
     return (stb[STATE_Q:STATE_Q + 12], stb[STATE_QD_TREE:STATE_QD_TREE + 12],
-            stb[STATE_QD:STATE_QD + 3], stb[STATE_S:STATE_S + 36].reshape((12, 3)),
-            stb[STATE_SD:STATE_SD + 36].reshape((12, 3)),
-            stb[STATE_TWIST:STATE_TWIST + 18].reshape((6, 3)),
-            stb[STATE_ROT:STATE_ROT + 9].reshape((3, 3)), stb[STATE_Q_ACT:STATE_Q_ACT + 3],
+            stb[STATE_QD:STATE_QD + 3], f64_view(stb, STATE_S, (12, 3)),
+            f64_view(stb, STATE_SD, (12, 3)),
+            f64_view(stb, STATE_TWIST, (6, 3)),
+            f64_view(stb, STATE_ROT, (3, 3)), stb[STATE_Q_ACT:STATE_Q_ACT + 3],
             stb[STATE_PHI:STATE_PHI + 3])
 
 

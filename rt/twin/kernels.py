@@ -33,6 +33,7 @@ from rt.ati import twin_sensor as _ati
 from rt.ati.rdt import STATUS_ANY_ERROR, STATUS_FT_OUT_OF_RANGE
 from rt.ati.twin_sensor import _measure_kernel
 from rt.drivers.kernels import dac_code_volts, fake_pcl833_move
+from rt.pointers import f64_view
 from rt.twin import physics
 from rt.twin.physics import (
     B_F_PER_A,
@@ -280,7 +281,7 @@ def advance(geom, P, env, S, W, volts, dt, n, t, realistic, integrator):
             q, qd, phi, S[S_XM:S_XM + 3], S[S_VM:S_VM + 3], S[S_CURRENT:S_CURRENT + 3],
             S[S_CABLE_TAU:S_CABLE_TAU + 3], S[S_VOLTS:S_VOLTS + 3],
             S[S_VOLTS_PREV:S_VOLTS_PREV + 3], delay, n, h, env_state, qdd, wrench,
-            S[S_ROT:S_ROT + 9].reshape((3, 3)), W)
+            f64_view(S, S_ROT, (3, 3)), W)
         if delay < n:
             # The delay has ended (its fractional substep included): from now on the
             # amplifiers' previous command is the present one.
@@ -429,12 +430,12 @@ def integrate_real_work(geom, bodies, friction, friction_motor, env, real, q, qd
     spring = W[_W_SPRING:_W_SPRING + 3]
     for i in range(3):
         spring[i] = 0.0
-    rot = W[_W_ROT:_W_ROT + 9].reshape((3, 3))
+    rot = f64_view(W, _W_ROT, (3, 3))
     pos = W[_W_POS:_W_POS + 3]
-    S = W[_W_S:_W_S + 36].reshape((12, 3))
-    Sd = W[_W_SD:_W_SD + 36].reshape((12, 3))
-    twist = W[_W_TWIST:_W_TWIST + 18].reshape((6, 3))
-    M = W[_W_M:_W_M + 9].reshape((3, 3))
+    S = f64_view(W, _W_S, (12, 3))
+    Sd = f64_view(W, _W_SD, (12, 3))
+    twist = f64_view(W, _W_TWIST, (6, 3))
+    M = f64_view(W, _W_M, (3, 3))
     hb = W[_W_HB:_W_HB + 3]
     tau_env = W[_W_TAU_ENV:_W_TAU_ENV + 3]
     fr = W[_W_FR:_W_FR + 3]

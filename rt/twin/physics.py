@@ -38,8 +38,10 @@ from rt.model.kernels import (
     TREE_MAPS_WORK,
     assemble_sc,
     fk_solve,
-    tree_maps_sc,
+    tree_maps_drift_sc,
+    tree_maps_work,
 )
+from rt.pointers import f64_view
 
 ENV_FREE = 0.0
 ENV_PLATE = 1.0
@@ -126,13 +128,20 @@ def friction_force(q, qd, friction, out):
     period = friction[18]
     for i in range(3):
         v = qd[i]
+        viscous = friction[11 + i] * friction[i] * v
+        if friction[14 + i] == 0.0:
+            # No Coulomb part (the slider's share with a compliant screw: ``integrate_real``
+            # applies it implicitly, every substep): 0 · level · tanh(v/v_smooth) is a zero
+            # of v's sign, and so is ``viscous`` when v = ±0, so the sum is ``viscous`` to
+            # the bit, without the exp, sin and tanh (issue 16).
+            out[i] = viscous
+            continue
         x = v / vst
         level = friction[3 + i] + (friction[6 + i] - friction[3 + i]) * math.exp(-x * x)
         if ripple != 0.0:
             level *= 1.0 + ripple * math.sin(2.0 * math.pi * q[i] / period
                                              + 2.0 * math.pi * i / 3.0)
-        out[i] = (friction[11 + i] * friction[i] * v
-                  + friction[14 + i] * level * math.tanh(v / vsm))
+        out[i] = viscous + friction[14 + i] * level * math.tanh(v / vsm)
 
 
 @njit(cache=True)
@@ -158,10 +167,12 @@ WORK_SIZE = TREE_MAPS_WORK + 72
 def mass_and_bias(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h):
     """Actuated mass matrix M (kg) and bias forces h = C q̇ + G (N) at (q, q̇).
 
-    ``phi`` must hold the solved rod angles; S, Ṡ and the twist map are filled here.
+    ``phi`` must hold the solved rod angles; S, Ṡ and the twist map are filled here (Ṡ by
+    ``tree_maps_work``: the bias takes Ṡ q̇ from ``tree_maps_drift_sc``).
     """
     mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h,
                        np.empty(WORK_SIZE))
+    tree_maps_work(geom, q, phi, rot, qd, S, Sd, twist, np.empty(TREE_MAPS_WORK))
 
 
 @njit(cache=True)
@@ -195,12 +206,12 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
     The congruences are factored — R I Rᵀ as (R I) Rᵀ, Aᵀ I A as Aᵀ (I A): 54 multiplications
     per body instead of ~900 (issue 16; the substep's largest cost before)."""
     extra = work[TREE_MAPS_WORK:]
-    spheres = extra[0:9].reshape((3, 3))
-    iw = extra[9:18].reshape((3, 3))
-    rr = extra[18:27].reshape((3, 3))
-    av = extra[27:36].reshape((3, 3))
-    aw = extra[36:45].reshape((3, 3))
-    tmp = extra[45:54].reshape((3, 3))
+    x = TREE_MAPS_WORK                  # the 3 × 3 views below: f64_view, not reshape
+    spheres = f64_view(work, x, (3, 3))
+    iw = f64_view(work, x + 9, (3, 3))
+    av = f64_view(work, x + 27, (3, 3))
+    aw = f64_view(work, x + 36, (3, 3))
+    tmp = f64_view(work, x + 45, (3, 3))
     # The rod angles' sines and cosines once per substep, where the tree maps keep them
     # (work[0:6]): the assembly, the maps and the rods' inertia below all read them (the same
     # values as each computing its own: issue 16, 24 transcendental calls per substep → 6).
@@ -210,11 +221,11 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
     assemble_sc(geom, q, work[0], work[3], work[1], work[4], work[2], work[5], rot, pos,
                 spheres)
     sdq = extra[54:66]
-    # S, Ṡ and the twist map from the model's one kernel (``rt.model.kernels``); the drift
-    # Ṡ q̇ is what the bias needs.
-    tree_maps_sc(geom, q, rot, qd, S, Sd, twist, work)
-    for r in range(12):
-        sdq[r] = Sd[r, 0] * qd[0] + Sd[r, 1] * qd[1] + Sd[r, 2] * qd[2]
+    # S, the twist map and the drift Ṡ q̇ (all the bias needs of Ṡ) from the model's one
+    # kernel (``rt.model.kernels``): Ṡ q̇ as the second-order term H(q̇, q̇) itself, not as
+    # Ṡ's three columns dotted with q̇ (issue 16: a third of that work; equal to round-off).
+    # ``Sd`` is not written (``mass_and_bias`` fills it for its callers).
+    tree_maps_drift_sc(geom, q, rot, qd, S, sdq, twist, work)
     g = bodies[B_G]
     ms = bodies[B_M_SLIDER]
     for a in range(3):
@@ -223,82 +234,58 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
             M[a, b] = 0.0
         M[a, a] = bodies[B_J_REFL_AXES + a] + ms
     # ---- rods: rotation about the leg tangent t_i, pivot moving with the slider.
+    # R_rod = Rz(θ) Ry(φ) turns the rod about t = R ŷ, fixed in the base frame: every
+    # angular velocity and acceleration of the rod lies along t. So its rotational share is
+    # that of one scalar inertia, tᵀ (R I Rᵀ) t = ŷᵀ I ŷ = I_yy (about the COM): M += I_yy s sᵀ
+    # and h += I_yy φ̈⁰ s, with s the row of φ̇ in S, and no gyroscopic term (t · (ω × I_w ω)
+    # = 0 for ω ∥ t). The same dynamics as the full R I Rᵀ congruence, without it (issue 16:
+    # equal to round-off, ``tests/test_twin.py`` against Pinocchio).
     mr = bodies[B_M_ROD]
+    iyy = bodies[B_I_ROD + 4]
+    cx = bodies[B_C_ROD]
+    cy = bodies[B_C_ROD + 1]
+    cz = bodies[B_C_ROD + 2]
     for i in range(3):
         ct = geom[3 + i]
         st = geom[6 + i]
         sp = work[i]
         cp = work[3 + i]
-        # R_rod = Rz(θ) Ry(φ); columns in the base frame.
-        r00 = ct * cp
-        r01 = -st
-        r02 = ct * sp
-        r10 = st * cp
-        r11 = ct
-        r12 = st * sp
-        r20 = -sp
-        r21 = 0.0
-        r22 = cp
-        cx = bodies[B_C_ROD]
-        cy = bodies[B_C_ROD + 1]
-        cz = bodies[B_C_ROD + 2]
-        rhox = r00 * cx + r01 * cy + r02 * cz
-        rhoy = r10 * cx + r11 * cy + r12 * cz
-        rhoz = r20 * cx + r21 * cy + r22 * cz
-        # World inertia I_w = R I Rᵀ.
-        rr[0, 0] = r00
-        rr[0, 1] = r01
-        rr[0, 2] = r02
-        rr[1, 0] = r10
-        rr[1, 1] = r11
-        rr[1, 2] = r12
-        rr[2, 0] = r20
-        rr[2, 1] = r21
-        rr[2, 2] = r22
-        _congruence(rr, bodies, B_I_ROD, tmp, iw)
+        # ρ = R c, with R's columns (ct cp, st cp, −sp), (−st, ct, 0), (ct sp, st sp, cp).
+        rhox = ct * cp * cx - st * cy + ct * sp * cz
+        rhoy = st * cp * cx + ct * cy + st * sp * cz
+        rhoz = -sp * cx + cp * cz
         tx = -st
         ty = ct
+        s0 = S[2 * i + 1, 0]
+        s1 = S[2 * i + 1, 1]
+        s2 = S[2 * i + 1, 2]
         # Columns: v_k = δ_ik ẑ + ω_k × ρ, ω_k = φ̇_ik t.
         for k in range(3):
             pd = S[2 * i + 1, k]
-            wx = pd * tx
-            wy = pd * ty
-            wz = 0.0
-            vx, vy, vz = _cross(wx, wy, wz, rhox, rhoy, rhoz)
+            vx, vy, vz = _cross(pd * tx, pd * ty, 0.0, rhox, rhoy, rhoz)
             if k == i:
                 vz += 1.0
             av[0, k] = vx
             av[1, k] = vy
             av[2, k] = vz
-            aw[0, k] = wx
-            aw[1, k] = wy
-            aw[2, k] = wz
         # Drift accelerations (q̈ = 0) for the actual q̇.
-        phid = 0.0
-        for k in range(3):
-            phid += S[2 * i + 1, k] * qd[k]
+        phid = s0 * qd[0] + s1 * qd[1] + s2 * qd[2]
         phidd = sdq[2 * i + 1]
         wx = phid * tx
         wy = phid * ty
-        alx = phidd * tx
-        aly = phidd * ty
-        a1x, a1y, a1z = _cross(alx, aly, 0.0, rhox, rhoy, rhoz)
+        a1x, a1y, a1z = _cross(phidd * tx, phidd * ty, 0.0, rhox, rhoy, rhoz)
         w1x, w1y, w1z = _cross(wx, wy, 0.0, rhox, rhoy, rhoz)
         a2x, a2y, a2z = _cross(wx, wy, 0.0, w1x, w1y, w1z)
         ax0 = a1x + a2x
         ay0 = a1y + a2y
         az0 = a1z + a2z + g            # a⁰ − g_vec with g_vec = (0, 0, −g)
-        iwx = iw[0, 0] * wx + iw[0, 1] * wy
-        iwy = iw[1, 0] * wx + iw[1, 1] * wy
-        iwz = iw[2, 0] * wx + iw[2, 1] * wy
-        gx, gy, gz = _cross(wx, wy, 0.0, iwx, iwy, iwz)
-        tqx = iw[0, 0] * alx + iw[0, 1] * aly + gx
-        tqy = iw[1, 0] * alx + iw[1, 1] * aly + gy
-        tqz = iw[2, 0] * alx + iw[2, 1] * aly + gz
+        spin = iyy * phidd
         for a in range(3):
-            h[a] += mr * (av[0, a] * ax0 + av[1, a] * ay0 + av[2, a] * az0) \
-                + aw[0, a] * tqx + aw[1, a] * tqy + aw[2, a] * tqz
-        _add_mass(mr, av, aw, iw, tmp, M)
+            sa_ = S[2 * i + 1, a]
+            h[a] += mr * (av[0, a] * ax0 + av[1, a] * ay0 + av[2, a] * az0) + spin * sa_
+            for b in range(3):
+                M[a, b] += (mr * (av[0, a] * av[0, b] + av[1, a] * av[1, b]
+                                  + av[2, a] * av[2, b]) + iyy * sa_ * S[2 * i + 1, b])
     # ---- platform (with sensor and payload).
     mp = bodies[B_M_PLAT]
     cx = bodies[B_C_PLAT]
@@ -339,9 +326,13 @@ def mass_and_bias_work(geom, bodies, q, qd, phi, rot, pos, S, Sd, twist, M, h, w
         wx += twist[3, k] * qd[k]
         wy += twist[4, k] * qd[k]
         wz += twist[5, k] * qd[k]
-    yaw = math.atan2(rot[1, 0], rot[0, 0])
-    sa = math.sin(yaw)
-    ca = math.cos(yaw)
+    # The yaw's cosine and sine from R's first column, as ``tree_maps_sc`` takes them (not
+    # through atan2, sin and cos: issue 16; the same angles to round-off).
+    ca = rot[0, 0]
+    sa = rot[1, 0]
+    nrm = math.hypot(ca, sa)
+    ca /= nrm
+    sa /= nrm
     sb = -rot[2, 0]
     cb = math.sqrt(max(0.0, 1.0 - sb * sb))
     ebx = -sa
