@@ -171,6 +171,29 @@ def test_the_foot_going_away_under_force_control_stops_on_contact_lost(model) ->
     assert next(e[2] for e in events[0] if e[1] == "fault") == "contact_lost"
 
 
+def test_an_offset_sensor_after_the_lost_contact_neither_raises_the_hold_nor_alarms(model
+                                                                                   ) -> None:
+    """The foot goes away and the force sensor has drifted since its tare: the empty platform
+    reads a 3 N pull (twin drift bound ±4 N). The stop's compliant hold must not take that for
+    the strap (it rose its whole 20 mm towards where the foot had been, and ``pull_in_stop``
+    told the staff to release a strap pulling nothing: ``YIELD_START_PULL_N``,
+    ``PULL_IN_STOP_FZ_N``)."""
+    twin, pl = _hold(model)
+    h0 = float(twin.plant.q.mean())
+    # The push (−Fz) reads −3 N with nothing on it.
+    pl.graph.component("force").tare.offset[2] -= 3.0
+    twin.faults.schedule("contact_removed", twin.plant.t)
+    rec = _run(pl, twin, 2.5)
+    stops = [e.cause for e in pl.events.snapshot() if e.kind == "fault"]
+    assert stops == ["contact_lost"]
+    # The empty platform really reads the offset's pull throughout the hold.
+    push = -np.array([w[2] for w in rec["wrench"]])
+    assert -4.5 < float(np.median(push[-1000:])) < -1.5
+    # Where the offset-free run rests (twin: 2.3 mm above, the chase before the stop).
+    assert rec["h"].max() - h0 < 0.003
+    assert rec["alarms"].max() == 0 and pl.supervisor.alarms() == []
+
+
 def test_the_recording_and_the_session_report_carry_the_alarm(tmp_path) -> None:
     """The alarm's events, recorded as the RT process records every safety event
     (``/safety/events``), reach the session's figures (``alarms``: raised, the pull, how it
