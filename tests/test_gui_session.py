@@ -77,7 +77,16 @@ def test_clinician_flow_refusal_run_stop_acknowledge_review(gui, qtbot):
     assert not run.start_button.isEnabled()             # not the owner yet
     click(qtbot, run.control_button)
     # Start follows the watcher's next status showing this GUI as the owner (0.25 s period).
-    qtbot.waitUntil(run.start_button.isEnabled, timeout=ENABLED_MS)
+    # A timeout names what the status said (once, at load, Start stayed off for 30 s).
+    try:
+        qtbot.waitUntil(run.start_button.isEnabled, timeout=ENABLED_MS)
+    except qtbot.TimeoutError:
+        status = run.link.last_status or {}
+        raise AssertionError(
+            f"Start not enabled: connected {run.link.connected}, owner {status.get('owner')} "
+            f"(this GUI {run.link.client_id}), state {status.get('state')}, latched "
+            f"{status.get('latched')}, session {status.get('session')}, message "
+            f"{run.message.text()!r}") from None
     click(qtbot, run.start_button)
     qtbot.waitUntil(lambda: run.session_id is not None or bool(run.last_error), timeout=WAIT_MS)
     assert run.session_id is not None, (run.last_error, (run.link.last_status or {}).get(
