@@ -1,6 +1,8 @@
 """The band across the top of every page: robot state in words and colour, the connection,
-who owns the robot, the patient; a latched fault's cause with a Reset that says what it
-clears and asks for acknowledgement (inline, never a modal dialog that could hide STOP)."""
+who owns the robot, the patient; an alarm the staff must act on (the RT status's ``alarms``:
+a pull the robot cannot end) on whichever page is open; a latched fault's cause with a Reset
+that says what it clears and asks for acknowledgement (inline, never a modal dialog that could
+hide STOP)."""
 from __future__ import annotations
 
 from typing import Any
@@ -10,7 +12,18 @@ from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWi
 
 from app.i18n import tr
 from app.style import TARGET_PX
-from app.words import STATE_COLOURS, cause_words, display_state, state_words
+from app.words import (
+    STATE_COLOURS,
+    alarm_instruction,
+    cause_words,
+    display_state,
+    state_words,
+)
+
+# The alarm's own look inside the band, whatever the state's colour (the band's style sheet
+# carries it: a label's own sheet would lose to the band's ``QLabel`` rule).
+ALARM_STYLE = ("#statusBand QLabel#staffAlarm { background: #b00020; font-size: 16pt; "
+               "font-weight: bold; padding: 8px; }")
 
 
 def _set_text(label: QLabel, text: str) -> None:
@@ -46,6 +59,10 @@ class StatusBand(QWidget):
         self.state_label.setFont(font)
         self.detail_label = QLabel()
         self.detail_label.setWordWrap(True)
+        self.alarm_label = QLabel()
+        self.alarm_label.setObjectName("staffAlarm")
+        self.alarm_label.setWordWrap(True)
+        self.alarm_label.hide()
         self.connection_label = QLabel()
         self.owner_label = QLabel()
         self.patient_label = QLabel()
@@ -78,6 +95,7 @@ class StatusBand(QWidget):
         ack.addWidget(self.cancel_button)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(12, 6, 12, 6)
+        layout.addWidget(self.alarm_label)
         layout.addLayout(top)
         layout.addWidget(self.detail_label)
         layout.addLayout(ack)
@@ -92,9 +110,19 @@ class StatusBand(QWidget):
                                    else tr("No patient selected"))
 
     def remember_event(self, event: dict[str, Any]) -> None:
-        """Keep a published fault event (its values say by how much a limit was passed)."""
+        """Keep a published fault event (its values say by how much a limit was passed); an
+        alarm's warning is shown at once, before the next status carries it."""
         if isinstance(event.get("id"), int):
             self._events[event["id"]] = event
+        if event.get("kind") == "warn" and event.get("cause") == "pull_in_stop":
+            values = event.get("values") or {}
+            self.show_alarms([{"cause": "pull_in_stop", "fz_n": values.get("fz_n")}])
+
+    def show_alarms(self, alarms: list[dict[str, Any]]) -> None:
+        """Show the alarms as instructions to the staff, or hide the alarm when there is none."""
+        text = "\n".join(alarm_instruction(a) for a in alarms if isinstance(a, dict))
+        _set_text(self.alarm_label, text)
+        _set_visible(self.alarm_label, bool(text))
 
     def update_status(self, status: dict[str, Any] | None, connected: bool,
                       reason: str = "") -> None:
@@ -107,13 +135,19 @@ class StatusBand(QWidget):
         if colour != self._colour:
             self._colour = colour
             self.setStyleSheet(f"#statusBand {{ background: {colour}; }} "
-                               f"#statusBand QLabel {{ color: white; font-size: 12pt; }}")
+                               f"#statusBand QLabel {{ color: white; font-size: 12pt; }} "
+                               + ALARM_STYLE)
         _set_text(self.state_label, state_words(self.state))
         _set_text(self.connection_label, tr("Robot connected") if connected
                   else tr("Robot NOT connected: %1").replace("%1", reason))
         owner = (status or {}).get("owner")
         _set_text(self.owner_label, tr("Controlled by: %1").replace("%1", owner["name"])
                   if isinstance(owner, dict) else tr("Nobody controls the robot"))
+        alarms = (status or {}).get("alarms")
+        if isinstance(alarms, list):
+            # A status without the field (an older RT process) or none at all (the link
+            # lost) leaves what is shown: the pull it was about is most likely still there.
+            self.show_alarms(alarms)
         self.latched = list((status or {}).get("latched") or [])
         if self.latched:
             _set_text(self.detail_label, tr("Why: %1").replace("%1", "; ".join(
@@ -138,7 +172,14 @@ class StatusBand(QWidget):
     def _ask_acknowledge(self) -> None:
         self._pending = [int(f["id"]) for f in self.latched]
         lines = [f"• {self._fault_text(f)}" for f in self.latched]
-        self.ack_label.setText(tr("Reset will clear:") + "\n" + "\n".join(lines))
+        text = tr("Reset will clear:") + "\n" + "\n".join(lines)
+        if not self.alarm_label.isHidden():
+            # Reset hands the load back to the drives (after a hard stop it releases the
+            # brakes): under a load they cannot hold, the platform sinks and pulls harder.
+            text = tr("The strap is still pulling and the drives cannot hold this load: after "
+                      "Reset the platform may sink and pull harder. Release the strap "
+                      "first.") + "\n" + text
+        self.ack_label.setText(text)
         for w in (self.ack_label, self.ack_button, self.cancel_button):
             w.show()
         self.ack_button.setFocus(Qt.FocusReason.OtherFocusReason)

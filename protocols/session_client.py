@@ -87,6 +87,11 @@ def print_summary(s: dict) -> None:
     w(f"  stops             {len(s['stops'])}"
       + "".join(f"\n    t={x['t']} s {x['reaction']}: {x['cause']} ({x['message']})"
                 for x in s["stops"]) + "\n")
+    for a in s.get("alarms") or ():
+        # What the staff had to act on (a pull the robot could not end), and whether it ended.
+        end = ("still raised at the end" if a.get("ended_t") is None
+               else f"ended t={a['ended_t']} s ({a.get('how')})")
+        w(f"  ALARM             t={a['t']} s {a['cause']}: {a['message']}; {end}\n")
     if s.get("recording"):
         w(f"  recording         {s['recording']['path']} (sha256 "
           f"{s['recording']['sha256'][:16]}…)\n")

@@ -274,3 +274,25 @@ def test_legitimate_force_sessions_neither_stop_nor_alarm(tmp_path, name) -> Non
     if name == "gait_replay.yaml":
         assert unloaded > 1000, unloaded               # the rests were judged
     assert worst < 5e-5, worst
+
+
+def test_the_session_cli_prints_the_alarm(capsys) -> None:
+    """``talus session run`` prints a session's staff alarms with the stops."""
+    from protocols.session_client import print_summary
+
+    summary = {"protocol": "Hold", "kind": "sine_fz", "outcome": "stopped", "rt": None,
+               "rms_error_pct": None, "peak_force_n": 812.0, "rom_deg": {}, "stops": [],
+               "preflight": {"peak_actuator_force_n": 1500.0, "peak_slider_speed_m_s": 0.05},
+               "alarms": [{"t": 1.055, "cause": "pull_in_stop", "fz_n": -1733.0,
+                           "message": "the foot is still pulled (-1733 N)", "ended_t": None,
+                           "how": None},
+                          {"t": 9.0, "cause": "pull_in_stop", "fz_n": -400.0,
+                           "message": "the foot is still pulled (-400 N)", "ended_t": 9.8,
+                           "how": "pull_ended"}]}
+    print_summary(summary)
+    lines = [x for x in capsys.readouterr().out.splitlines() if "ALARM" in x]
+    assert lines == [
+        ("  ALARM             t=1.055 s pull_in_stop: the foot is still pulled (-1733 N); "
+         "still raised at the end"),
+        ("  ALARM             t=9.0 s pull_in_stop: the foot is still pulled (-400 N); "
+         "ended t=9.8 s (pull_ended)")]

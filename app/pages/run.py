@@ -43,7 +43,7 @@ from app.patient_context import PatientContext
 from app.rt_link import RtLink
 from app.style import LARGE_PX, TARGET_PX
 from app.telemetry import RepetitionCounter, ankle_state
-from app.words import alarm_instruction, event_words
+from app.words import event_words
 from rt.ipc.client import RtClient
 
 #: Redraw rate of the live plots, Hz: the issue asks ≥ 30 fps; a 33 ms timer gives at most
@@ -212,14 +212,6 @@ class RunPage(QWidget):
         self.phase_label.setFont(font)
         self.events_label = QLabel()
         self.events_label.setWordWrap(True)
-        # An alarm the staff must act on (the RT status's ``alarms``: a pull the robot cannot
-        # end), shown for as long as the status carries it, above everything but the band.
-        self.alarm_label = QLabel()
-        self.alarm_label.setObjectName("staffAlarm")
-        self.alarm_label.setWordWrap(True)
-        self.alarm_label.setStyleSheet("#staffAlarm { background: #b00020; color: white; "
-                                       "font-size: 16pt; font-weight: bold; padding: 8px; }")
-        self.alarm_label.hide()
         self.reps_label = QLabel()
         self.reps_label.setObjectName("repetitions")
         self.reps_label.setFont(font)
@@ -254,7 +246,6 @@ class RunPage(QWidget):
         plots.addWidget(self.force_plot, 0, 0)
         plots.addWidget(self.angle_plot, 0, 1)
         layout = QVBoxLayout(self)
-        layout.addWidget(self.alarm_label)
         layout.addLayout(top)
         layout.addWidget(self.message)
         layout.addLayout(plots, 1)
@@ -282,7 +273,6 @@ class RunPage(QWidget):
             link.replied.connect(self._replied)
             link.event_received.connect(self._event)
             link.status_changed.connect(lambda _s: self.update_buttons())
-            link.status_changed.connect(self.show_alarms)
             link.connection_changed.connect(lambda *_: self.update_buttons())
             self.timer.start()
         self.update_buttons()
@@ -389,11 +379,6 @@ class RunPage(QWidget):
             self.message.setText(tr("Session ended: %1").replace(
                 "%1", str(self.last_summary.get("outcome", event.get("cause", "")))))
             self.session_ended.emit(self.last_summary)
-        elif event.get("kind") == "warn" and event.get("cause") == "pull_in_stop":
-            # Shown at once; the status (four a second) then keeps it up while it lasts.
-            values = event.get("values") or {}
-            self.show_alarms({"alarms": [{"cause": "pull_in_stop",
-                                          "fz_n": values.get("fz_n")}]})
         elif event.get("kind") == "fault":
             words = event_words(event)
             self.events_label.setText(tr("Stopped: %1").replace("%1", words))
@@ -401,18 +386,6 @@ class RunPage(QWidget):
                 # Not "Session running." until the session's end arrives: it is stopping.
                 self.message.setText(tr("Session stopping: %1").replace("%1", words))
         self.update_buttons()
-
-    def show_alarms(self, status: object) -> None:
-        """Show the status's alarms as instructions to the staff, or hide the banner when it
-        carries none (a status without the field, from an older RT process: as it was)."""
-        alarms = status.get("alarms") if isinstance(status, dict) else None
-        if not isinstance(alarms, list):
-            return
-        text = "\n".join(alarm_instruction(a) for a in alarms if isinstance(a, dict))
-        if text != self.alarm_label.text():
-            self.alarm_label.setText(text)
-        if self.alarm_label.isHidden() == bool(text):
-            self.alarm_label.setVisible(bool(text))
 
     def _journaled(self, tag: str, _result: object, error: str) -> None:
         if error:
