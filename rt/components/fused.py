@@ -672,7 +672,7 @@ class FusedChain:
             return HYBRID_POSITION
         if ctl._sup_raw != _RUN:
             # A stop's cycles are the block's (a stop may hand the force mode over: the
-            # interpreted block decides; the sequencer's ramp-down is Python's anyway).
+            # interpreted block decides).
             return HYBRID_FORCE_PYTHON
         if self._seen_in_force is not True or (self._force_ok
                                                and ctl.force_law.tau is not self._ftau):

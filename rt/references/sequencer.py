@@ -204,7 +204,8 @@ class ProgramReference(Component):
 
     The cycle runs compiled (``rt.references.sequencer_kernel``: one call per steady cycle;
     events — a mode change, a request, an abort, a move planned or arriving (the approach, the
-    return, a brake: their samples are compiled), a tare, the end of a program —
+    return, a brake: their samples are compiled), a tare asked for, granted or refused (its
+    wait is compiled), a force ramp's end, a compliant hold's exhaustion, the end of a program —
     run here, in Python, on their exact cycle); ``compiled=False`` runs the interpreted
     cycle throughout, the reference it is tested against. Programs that offer a table
     (``ProgramTable``: the protocols' table generators, the identification excitation,
@@ -216,8 +217,9 @@ class ProgramReference(Component):
                  compiled: bool = True):
         super().__init__(name)
         self.compiled = compiled
-        if compiled:
-            sk.warm_up()
+        # Both paths call the kernel's functions (the interpreted one its tare wait, ramp and
+        # hold): compiled, or loaded from numba's cache, here, never in a cycle.
+        sk.warm_up()
         # Every output is a view of one arena, the state one array (the approach's and the
         # compliant hold's in it): the kernel's arguments.
         self._io = io = np.zeros(sk.IO_SIZE)
