@@ -13,6 +13,17 @@ path), ``general`` (``FusedChain._general`` ran: every check, the first cycle af
 the count and the cycle without the twin (graph's cycle ring minus the twin slot's, µs: median,
 p99). With ``--main`` the same in a process on that checkout's code first. Twin figures; on a
 loaded machine compare within one run only.
+
+``--force`` (hold9): instead, the force programs' pre-flights (``protocols.session.preflight``:
+the library's ``sine_fz``, ``gait_replay``, and ``sine_fz`` with the drives limited to 0.5 V,
+which saturates and soft-stops: ``tests/test_preflight_paths.py``'s ``sine_fz_saturating``),
+counting the cycles whose sequencer ran its Python (``ProgramReference._update``) by why, read
+from the sequencer's state as the cycle begins: ``event`` (a request, an abort, a mode change,
+the start-up), ``tare`` (the tare wait at the force program's first sample), ``ramp`` (the force
+reference ramping down: RETURN/STOPPED/REST in force mode), ``yield`` (the compliant hold of a
+force-control soft stop), ``other`` (an approach's arrival, a sample outside the stroke, an
+interpreted read-ahead, the end of a program); with the pre-flight driver's own count of the
+cycles it handed back to the loop (``cycles_python``) and the total.
 """
 from __future__ import annotations
 
@@ -84,6 +95,73 @@ def measure(controller: str, seconds: float, mode: str, duration: float) -> dict
     return out
 
 
+def _why(ref: Any) -> str:
+    """Why the sequencer's Python runs this cycle (``--force``), from its state on entry."""
+    from rt.references import sequencer_kernel as sk
+
+    seq, io = ref._seq, ref._io
+    if (ref._pending is not None or ref._abort or seq[sk.S_STARTED] == 0.0
+            or ref.mode.data[0] != seq[sk.S_MODE]):
+        return "event"
+    phase = seq[sk.S_PHASE]
+    if seq[sk.S_YIELD] != 0.0:
+        return "yield"
+    if phase == sk.APPROACH and seq[sk.S_TARING] != 0.0:
+        return "tare"
+    if phase in (sk.RETURN, sk.STOPPED, sk.REST) and io[sk.IO_CTRL_MODE] > 0.5:
+        return "ramp"
+    return "other"
+
+
+def measure_force() -> dict[str, Any]:
+    from protocols import session
+    from rt.model import RobotModel
+    from rt.preflight import driver as driver_mod
+    from rt.references.sequencer import ProgramReference
+    from rt.safety.limits import RobotLimits
+
+    library = HERE / "protocols" / "library"
+    setups = {"sine_fz": session.SessionSetup(library / "sine_fz.yaml"),
+              "gait_replay": session.SessionSetup(library / "gait_replay.yaml",
+                                                  patient_weight_kg=70.0),
+              "sine_fz_saturating": session.SessionSetup(
+                  library / "sine_fz.yaml", robot_limits=RobotLimits(max_command_v=0.5))}
+    counts: dict[str, int] = defaultdict(int)
+    update = ProgramReference._update
+
+    def counted(self: Any, dt: float) -> int:
+        counts[_why(self)] += 1
+        return update(self, dt)
+
+    kept: dict[str, Any] = {}
+    make = driver_mod.PreflightDriver
+
+    def keep(*args: Any, **kwargs: Any) -> Any:
+        kept["driver"] = make(*args, **kwargs)
+        return kept["driver"]
+
+    ProgramReference._update = counted  # type: ignore[method-assign]
+    driver_mod.PreflightDriver = keep  # type: ignore[misc]
+    out: dict[str, Any] = {}
+    try:
+        for name, setup in setups.items():
+            counts.clear()
+            kept.clear()
+            try:
+                verdict = "accepted" if session.preflight(setup, RobotModel.load()) else "?"
+            except session.ProtocolValidationError as exc:
+                verdict = "refused: " + str(exc).splitlines()[0][:60]
+            drv = kept.get("driver")
+            out[name] = {"verdict": verdict, "sequencer_python": dict(counts),
+                         "cycles": None if drv is None
+                         else drv.cycles_compiled + drv.cycles_python,
+                         "driver_python": None if drv is None else drv.cycles_python}
+    finally:
+        ProgramReference._update = update  # type: ignore[method-assign]
+        driver_mod.PreflightDriver = make  # type: ignore[misc]
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--controller", default="paden_panja")
@@ -93,7 +171,19 @@ def main() -> int:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--main", type=Path, default=None)
     ap.add_argument("--inner", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--force", action="store_true",
+                    help="the force programs' pre-flights: the sequencer's Python cycles by why")
     args = ap.parse_args()
+    if args.force:
+        res_f = measure_force()
+        if args.json:
+            print(json.dumps(res_f))
+            return 0
+        for name, d in res_f.items():
+            why = "  ".join(f"{k} {v}" for k, v in sorted(d["sequencer_python"].items()))
+            print(f"{name:20s} {d['verdict'][:40]:40s} cycles {d['cycles']}  driver's Python "
+                  f"{d['driver_python']}  sequencer's Python: {why}")
+        return 0
     if args.inner or args.main is None:
         res = measure(args.controller, args.seconds, args.mode, args.duration)
         res["tree"] = os.environ.get("PYTHONPATH") or str(HERE)

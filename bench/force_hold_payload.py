@@ -18,7 +18,8 @@ compliant hold yielded, and the push over the last 0.5 s. ``--no-yield`` holds s
 the compliant hold (``pull_yield_max_m`` 0); ``--estop-at S`` hard-stops S s after the landing
 (the brakes' effect on the pull). ``pull_in_stop_at_s``: when the supervisor raised the staff's
 alarm for a pull that outlasted the stop's bound (None: not raised); ``alarms_at_end``: the
-alarms the RT status carries at the end.
+alarms the RT status carries at the end; ``stop_cycle_cpu_us``: this thread's CPU per cycle of
+the stop (µs, the twin included: the one figure here that depends on the machine).
 
     .venv/bin/python bench/force_hold_payload.py --mass 565 580 --seconds 3
     .venv/bin/python bench/force_hold_payload.py --mass 565 --seconds 2 --no-yield --estop-at 1
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 
 import numpy as np
 
@@ -57,10 +59,13 @@ def land(model: RobotModel, mass_kg: float, seconds: float, tolerance_n: float,
     twin.plant.set_payload(Payload(mass_kg, (0.0, 0.0, 0.10)))
     tau = pl.graph.output("controller.tau")
     rows = []
+    cpu_ns = []
     for k in range(round(seconds * 1e3)):
         if estop_at is not None and k == round(estop_at * 1e3):
             pl.supervisor.request_estop("cli")
+        c0 = time.thread_time_ns()
         pl.loop.run(cycles=1)
+        cpu_ns.append(time.thread_time_ns() - c0)
         rows.append((twin.plant.t - t_land, -twin.plant.wrench_s[2],
                      law.integral * law.gains.ki_per_s, *tau))
     a = np.array(rows)
@@ -83,6 +88,13 @@ def land(model: RobotModel, mass_kg: float, seconds: float, tolerance_n: float,
                                             if pulled.any() else 0.0),
                 "yielded_mm": round(ref.yielded_m * 1e3, 2),
                 "yield_exhausted": ref.yield_exhausted}
+        # This thread's CPU per cycle of the stop (µs; a cycle run by ``loop.run(cycles=1)``,
+        # the twin included; a thread_time read costs ≈ 0.7 µs here): not deterministic.
+        us = np.asarray(cpu_ns)[after] / 1e3
+        pull["stop_cycle_cpu_us"] = {"cycles": int(after.sum()),
+                                     "median": round(float(np.median(us)), 1),
+                                     "p90": round(float(np.percentile(us, 90)), 1),
+                                     "total_ms": round(float(us.sum()) / 1e3, 1)}
         # The staff's alarm for a pull the robot cannot end (s after the landing; None: not
         # raised) and the alarms the RT status carries at the end.
         alarm = next((e for e in pl.events.snapshot() if e.cause == "pull_in_stop"

@@ -9,6 +9,7 @@ to their scale (the compiled RNEA sums in another order than Pinocchio: ~1e-16 o
 from __future__ import annotations
 
 import math
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ import pytest
 import rt.control.adaptive
 import rt.control.laws  # noqa: F401  (registers the laws for the parametrization)
 from rt.components.blocks import ModelState, VelocityEstimation
+from rt.components.tare import TareState
 from rt.control.base import CONTROLLERS, Reference, create
 from rt.model import RobotModel
 from rt.model import rigid_body as rb
@@ -408,11 +410,33 @@ class _Twins:
 
         def counted(dt: float) -> int:
             self.interpreted_cycles += 1
+            self.interpreted[self.kind(event=True)] += 1
             return run(dt)
 
         compiled._update = counted  # type: ignore[method-assign]
         self.k = 0
         self.yield_cycles = 0
+        #: Cycles by kind as they begin (``kind``), and those the interpreted path ran.
+        self.cycles: Counter[str] = Counter()
+        self.interpreted: Counter[str] = Counter()
+
+    def kind(self, event: bool = False) -> str:
+        """What the compiled sequencer's next cycle is: a force program's tare wait, a force
+        reference's ramp-down, a force stop's compliant hold, or "other"; with ``event``, a
+        request, an abort or a mode change first (an event: Python's by design)."""
+        from rt.references import sequencer_kernel as sk
+
+        c = self.refs[0]
+        seq, io = c._seq, c._io
+        if event and (c._pending is not None or c._abort or self.mode[0] != seq[sk.S_MODE]):
+            return "event"
+        if seq[sk.S_YIELD] != 0.0:
+            return "yield"
+        if seq[sk.S_PHASE] == sk.APPROACH and seq[sk.S_TARING] != 0.0:
+            return "tare"
+        if seq[sk.S_PHASE] in (sk.RETURN, sk.STOPPED, sk.REST) and io[sk.IO_CTRL_MODE] > 0.5:
+            return "ramp"
+        return "other"
 
     def request(self, make_program, **kw) -> None:
         """Each sequencer gets its own program (the interpreted one calls it every cycle)."""
@@ -427,8 +451,8 @@ class _Twins:
         c, i = self.refs
         self.tare.cycle(self.wrench.copy(), True, self.tare_request[0] > 0.5, self.tare_port)
         w = self.wrench.copy()
-        # A force-control soft stop's compliant hold reads the wrench: Python's by design.
         self.yield_cycles += int(c.state.yielding)
+        self.cycles[self.kind()] += 1
         for r in self.refs:
             assert r.update(self.k * DT, DT) == 0
             self.wrench[:] = w
@@ -647,6 +671,61 @@ def test_the_compiled_sequencer_matches_the_interpreted_one_bit_for_bit(model) -
     before = h.interpreted_cycles
     assert count_ahead(300) == 0
     assert h.interpreted_cycles == before                  # steady PLAY: the kernel's
+
+
+def test_the_tare_wait_the_force_ramp_and_the_compliant_hold_run_compiled(model) -> None:
+    """hold9 (issue 16): a force program's tare wait, a force reference's ramp-down (an abort
+    in force) and a force-control soft stop's compliant hold (pulled, unloaded, stale and
+    saturated samples, pulled until exhausted) run in the compiled cycle, every output and the
+    whole state bit for bit with the interpreted sequencer; the interpreted path runs only
+    their events: the tare's grant, the ramp's end (and the brake's arrival before it), the
+    hold's exhaustion."""
+    from rt.references import sequencer_kernel as sk
+    from rt.references.sequencer import Phase
+    from rt.safety.events import SupervisorMode
+
+    assert (sk.TARE_MEASURING, sk.TARE_DONE, sk.TARE_REFUSED) == (
+        TareState.MEASURING, TareState.DONE, TareState.REFUSED)
+    q_mid = np.array(model.kin.ik(0.63, 0.0, 0.0).q)
+    h = _Twins(q_mid + 0.002)
+    h.run(5)
+    # A Python force program (no table): its approach, the tare wait, 300 cycles in force,
+    # then an abort: RETURN brakes and ramps 250 N down (≈ 1.7 s at 0.3 s), then rests.
+    h.request(lambda: _PythonForceHold(q_mid + 0.001, 1.0))
+    h.until(Phase.PLAY)
+    assert h.cycles["tare"] > 50 and h.interpreted["tare"] <= 1, (h.cycles, h.interpreted)
+    h.run(300)
+    h.abort()
+    h.until(Phase.REST)
+    h.run(5)
+    assert h.cycles["ramp"] > 1000 and h.interpreted["ramp"] <= 3, (h.cycles, h.interpreted)
+    assert not h.refs[0].force.data.any()
+    # Again, soft-stopped in force: the compliant hold, pulled by 40 N.
+    h.request(lambda: _PythonForceHold(q_mid + 0.001, 3.0))
+    h.until(Phase.PLAY)
+    h.run(200)
+    h.mode[0] = SupervisorMode.SOFT_STOP
+    h.run(3)
+    c = h.refs[0]
+    held = c.q_ref.data.copy()
+    h.wrench[2] = 40.0
+    h.run(200)
+    rise = c.q_ref.data - held
+    assert np.allclose(rise, 200 * c.yield_speed_m_s * DT, rtol=0.0, atol=1e-12), rise
+    h.wrench[2] = -1.0                             # unloaded: it holds there
+    h.run(50)
+    h.wrench[2] = 40.0
+    for flag in (0, 1):                            # a stale, a saturated sensor: no rise
+        h.flags[flag] = 1.0
+        h.run(30)
+        h.flags[flag] = 0.0
+    h.run(900)                                     # pulled until the yield is used up
+    assert c.yield_exhausted and not c.state.yielding
+    assert h.cycles["yield"] > 1000 and h.interpreted["yield"] <= 1, (h.cycles, h.interpreted)
+    h.mode[0] = SupervisorMode.RUN
+    h.wrench[2] = -3.9
+    h.run(10)
+    assert h.interpreted["tare"] + h.interpreted["ramp"] + h.interpreted["yield"] <= 6
 
 
 def test_approaches_returns_and_brakes_run_compiled_bit_for_bit(model) -> None:

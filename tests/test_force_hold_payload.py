@@ -294,8 +294,8 @@ def test_the_yield_is_configured_within_its_ranges_and_refused_by_name(model,
 
 
 def test_a_pull_through_the_stops_hold_is_the_per_block_cycle_bit_for_bit(model) -> None:
-    """The fused cycle (its reference stage hands the compliant hold's cycles to the
-    sequencer's Python) against the per-block cycle through a 565 kg landing in the middle of
+    """The fused cycle (its reference stage runs the compliant hold's cycles: hold9) against
+    the per-block cycle through a 565 kg landing in the middle of
     the sine Fz protocol: the ``pulling`` soft stop, the hold's rise and its hold, every output
     port, event and the twin's state byte for byte every cycle."""
     from test_fused_cycle import _Lockstep, _sine_loop, _to_play

@@ -21,6 +21,7 @@ from rt.components import fused, hybrid_kernel
 from rt.engine import STATUS_EXCEPTION, Array, Component, GraphBuilder
 from rt.errors import ConfigurationError
 from rt.model import RobotModel
+from rt.model.dynamics import Payload
 from rt.position_loop import (
     PositionLoop,
     build_protocol_loop,
@@ -334,6 +335,68 @@ def test_a_force_then_a_position_protocol_are_the_per_block_cycle_bit_for_bit(mo
     h.run(1500)
     assert h.f.reference.epoch == 2
     assert h.ran[5] > 0.3 * h.cycles and h.ran[2] + h.ran[3] > 0, h.ran
+
+
+def _sequencer_kind(ref) -> str:
+    """The sequencer's next cycle: a force program's tare wait, a force reference's ramp-down,
+    a force stop's compliant hold, or "other"."""
+    from rt.references import sequencer_kernel as sk
+
+    seq, io = ref._seq, ref._io
+    if seq[sk.S_YIELD] != 0.0:
+        return "yield"
+    if seq[sk.S_PHASE] == sk.APPROACH and seq[sk.S_TARING] != 0.0:
+        return "tare"
+    if seq[sk.S_PHASE] in (sk.RETURN, sk.STOPPED, sk.REST) and io[sk.IO_CTRL_MODE] > 0.5:
+        return "ramp"
+    return "other"
+
+
+def test_a_force_programs_tare_ramp_and_hold_run_in_the_kernel_bit_for_bit(model):
+    """hold9 (issue 16): against the per-block loop with its sequencer interpreted
+    (``compiled=False``), a force program's tare wait, the force ramp-down after an abort in
+    force, then a 565 kg landing mid-sine (the ``pulling`` soft stop and the compliant hold
+    rising under it) are byte for byte every cycle, and the fused kernel ran their cycles
+    whole: only their events (the tare's grant, the ramp's end and the brake's arrival before
+    it, the stop itself) left it."""
+    from rt.references.sequencer import Phase
+
+    h = _Lockstep(lambda: _sine_loop(model))
+    h.p.reference.compiled = False
+    cycles: Counter[str] = Counter()
+    whole: Counter[str] = Counter()
+
+    def step(n: int) -> None:
+        for _ in range(n):
+            kind = _sequencer_kind(h.f.reference)
+            before = h.ran[5]
+            h.run(1)
+            cycles[kind] += 1
+            whole[kind] += h.ran[5] - before
+
+    def until(done: Callable[[], bool], most: int = 20_000) -> None:
+        for _ in range(most):
+            if done():
+                return
+            step(1)
+        raise AssertionError("never happened")
+
+    until(lambda: h.f.reference.current_phase == Phase.PLAY)
+    assert cycles["tare"] > 50 and cycles["tare"] - whole["tare"] <= 2, (cycles, whole)
+    step(50)
+    h.both(lambda pl: setattr(pl.reference, "force_ramp_s", 0.1))    # 0.3 s: 3 × longer
+    h.both(lambda pl: pl.reference.request_abort())
+    until(lambda: not h.f.reference.busy)
+    assert cycles["ramp"] > 150 and cycles["ramp"] - whole["ramp"] <= 4, (cycles, whole)
+    h.both(lambda pl: pl.reference.request(_short_sine(model)))
+    until(lambda: h.f.reference.current_phase == Phase.PLAY)
+    step(300)
+    h.both(lambda pl: pl.twin.plant.set_payload(Payload(565.0, (0.0, 0.0, 0.10))))
+    step(700)
+    ref = h.f.reference
+    assert ref.yielded_m > 0.002 and ref.yielded_m == h.p.reference.yielded_m
+    assert cycles["yield"] > 300 and cycles["yield"] - whole["yield"] <= 2, (cycles, whole)
+    assert cycles["tare"] > 100                    # both programs' tares
 
 
 @pytest.mark.parametrize("stop", ["soft", "estop"])

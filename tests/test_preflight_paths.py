@@ -169,15 +169,13 @@ def test_the_compiled_driver_gives_the_loops_tap_rows_and_verdict(setup, accepte
     if not accepted:
         assert "drive_saturated" in str(v_drv)
     assert drv.cycles_compiled + drv.cycles_python == len(rows_drv)
-    # Nine cycles in ten were the driver's, not counting a stopped run's cycles after its
-    # force control ended (a force stop's compliant hold reads the wrench in the sequencer's
-    # Python every cycle, by design: rt.references.sequencer._yield_step).
-    hold = 0
+    # Nine cycles in ten were the driver's, a stopped run's compliant hold after its force
+    # control ended included (the hold's cycles are compiled: hold9; they were Python's).
+    assert drv.cycles_python < 0.1 * len(rows_drv)
     if not accepted:
         in_force = np.flatnonzero(rows_drv[:, COLUMNS["ctrl_mode"].start] == float(Mode.FORCE))
-        assert len(in_force)
         hold = len(rows_drv) - int(in_force[-1]) - 1
-    assert drv.cycles_python < 0.1 * len(rows_drv) + hold
+        assert hold > 500 and drv.cycles_python < 30, (hold, drv.cycles_python)
 
 
 @pytest.mark.skipif(C3D_DIR is None, reason="the real C3D files (../shared/data/c3d beside "

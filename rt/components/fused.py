@@ -166,9 +166,12 @@ from rt.components.fused_kernel import (
     B_REC_ADDR,
     B_REC_LENS,
     B_REC_RING,
+    B_REF_FLAGS,
     B_REF_IO,
     B_REF_MODE,
     B_REF_Q,
+    B_REF_TARE,
+    B_REF_WRENCH,
     B_SEQ,
     B_SEST,
     B_SFK,
@@ -293,6 +296,7 @@ def enabled_by_environment() -> bool:
 
 
 _NO_F = np.zeros(1)
+_NO_F0 = np.zeros(0)            # an unbound input port the kernel checks for (empty)
 _RUN = float(SupervisorMode.RUN)
 _NO_I = np.zeros(1, dtype=np.int64)
 _NO_U = np.zeros(1, dtype=np.uint32)
@@ -543,6 +547,8 @@ class FusedChain:
                 B_MOD_WORK: mod._work, B_FK: mod.fk_ok.data,
                 B_REF_IO: ref._io, B_SEQ: ref._seq, B_REF_Q: ref.q_meas.data,
                 B_REF_MODE: ref.mode.data, B_TABLE: ref._table,
+                B_REF_WRENCH: ref.wrench.data if ref.wrench.data is not None else _NO_F0,
+                B_REF_FLAGS: ref._flags(), B_REF_TARE: ref._tare_port(),
                 B_CTRL_MODE: ctl.ctrl_mode.data if hybrid else _NO_F,
                 **binding.fixed,
                 B_PAR: s._par, B_MEM: s._mem, B_SQ: sup.q.data, B_SEST: sup.est_status.data,
@@ -666,7 +672,7 @@ class FusedChain:
             return HYBRID_POSITION
         if ctl._sup_raw != _RUN:
             # A stop's cycles are the block's (a stop may hand the force mode over: the
-            # interpreted block decides; the sequencer's ramp-down is Python's anyway).
+            # interpreted block decides).
             return HYBRID_FORCE_PYTHON
         if self._seen_in_force is not True or (self._force_ok
                                                and ctl.force_law.tau is not self._ftau):

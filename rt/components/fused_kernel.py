@@ -94,7 +94,10 @@ def ticks_now() -> int:
  # request, tare port and tare state; the stop inputs' output.
  B_PCL_ST, B_PCL_PORTS, B_PCL_IO, B_PCL_DEC, B_ENC_Q,
  B_ATI_W, B_FT_ST, B_FT_RAW, B_FT_WRENCH, B_FT_FLAGS, B_FT_REQUEST, B_FT_TARE, B_FT_TARE_BUF,
- B_STOPS, N_BUFFERS) = range(91)
+ B_STOPS,
+ # The sequencer's wrench, wrench flags and tare input ports (its tare wait, its compliant
+ # hold: ``sequencer_kernel.cycle``; an unbound port: an empty array).
+ B_REF_WRENCH, B_REF_FLAGS, B_REF_TARE, N_BUFFERS) = range(94)
 _INT_BUFFERS = (B_TI, B_AMAP, B_FTI, B_DFAKE, B_REC_ADDR, B_REC_LENS, B_PCL_ST, B_PCL_PORTS,
                 B_PCL_IO)
 _U32_BUFFERS = (B_DSAMPLES,)
@@ -305,9 +308,11 @@ def _chain(stamps, info, t, dt, upto, filled, volts_per_n, hybrid, law, trajecto
         return
     table = carray(f64_at(a[B_TABLE]), (d[B_TABLE, 0], d[B_TABLE, 1]))
     # The sequencer's steady cycles, an approach's, a return's and a brake's samples among
-    # them (the move's plan is in B_SEQ: ``rt.references.approach_kernel``).
+    # them (the move's plan is in B_SEQ: ``rt.references.approach_kernel``), a force
+    # program's tare wait, a force ramp-down and a force stop's compliant hold.
     r = rk.cycle(_v(a, d, B_REF_IO), _v(a, d, B_SEQ), _v(a, d, B_REF_Q), _v(a, d, B_REF_MODE),
-                 table, dt)
+                 table, dt, _v(a, d, B_REF_WRENCH), _v(a, d, B_REF_FLAGS),
+                 _v(a, d, B_REF_TARE))
     info[I_REF] = r
     if r == rk.NEED_PYTHON:                 # nothing written: the block runs its cycle
         return

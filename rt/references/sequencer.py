@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from rt.components.tare import TareState, refusal_message
+from rt.components.tare import refusal_message
 from rt.engine import Array, Component
 from rt.epoch import bump
 from rt.errors import ConfigurationError
@@ -53,7 +53,6 @@ from rt.references.program import (
 )
 from rt.references.sequencer_kernel import F_DDOT_SMOOTHING, PREVIEW_F_DDOT_HALF_WIDTH
 from rt.safety.events import SupervisorMode
-from rt.safety.supervisor_kernel import CONTACT_HELD_N
 
 #: Component status codes (non-zero = the cycle's block failed).
 STATUS_APPROACH_FAILED = 20
@@ -93,7 +92,7 @@ YIELD_LEAD_TRACKING = 2.5
 #: (−3 N, a drift since the tare) otherwise raised the platform its whole 20 mm towards where
 #: the foot had been (watch9, 2026-11-26f). Once a real pull started it, it yields to any pull
 #: (push < 0 N) for the rest of the stop, so the foot still ends unpulled.
-YIELD_START_PULL_N = CONTACT_HELD_N
+YIELD_START_PULL_N = sk.YIELD_START_PULL_N
 
 #: How long a program's watcher waits after seeing the sequencer stopped, so the stop's events
 #: reach the loop's event log before it records them (s).
@@ -153,6 +152,21 @@ class _Field:
         obj.seq[self.index] = float(value)  # type: ignore[arg-type]
 
 
+class _Slot:
+    """An attribute of :class:`ProgramReference` kept in its compliant hold's part of the
+    state array (``_ys``, ``sk.Y_*``), where the compiled cycle reads and writes it."""
+
+    def __init__(self, index: int, kind: type) -> None:
+        self.index = index
+        self.kind = kind
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        return self.kind(obj._ys[self.index])
+
+    def __set__(self, obj: Any, value: object) -> None:
+        obj._ys[self.index] = float(value)  # type: ignore[arg-type]
+
+
 class _SeqState:
     """``_State`` over the array the compiled cycle reads and writes (same fields)."""
 
@@ -190,7 +204,8 @@ class ProgramReference(Component):
 
     The cycle runs compiled (``rt.references.sequencer_kernel``: one call per steady cycle;
     events — a mode change, a request, an abort, a move planned or arriving (the approach, the
-    return, a brake: their samples are compiled), a tare, the end of a program —
+    return, a brake: their samples are compiled), a tare asked for, granted or refused (its
+    wait is compiled), a force ramp's end, a compliant hold's exhaustion, the end of a program —
     run here, in Python, on their exact cycle); ``compiled=False`` runs the interpreted
     cycle throughout, the reference it is tested against. Programs that offer a table
     (``ProgramTable``: the protocols' table generators, the identification excitation,
@@ -201,14 +216,16 @@ class ProgramReference(Component):
                  program: Program | None = None, force_ramp_s: float = 0.3,
                  compiled: bool = True):
         super().__init__(name)
-        self.force_ramp_s = force_ramp_s
         self.compiled = compiled
-        if compiled:
-            sk.warm_up()
-        # Every output is a view of one arena, the state one array (the approach's in it):
-        # the kernel's arguments.
+        # Both paths call the kernel's functions (the interpreted one its tare wait, ramp and
+        # hold): compiled, or loaded from numba's cache, here, never in a cycle.
+        sk.warm_up()
+        # Every output is a view of one arena, the state one array (the approach's and the
+        # compliant hold's in it): the kernel's arguments.
         self._io = io = np.zeros(sk.IO_SIZE)
         self._seq = np.zeros(sk.SEQ_SIZE)
+        self._ys = self._seq[sk.S_Y:sk.S_Y + sk.YIELD_SIZE]
+        self.force_ramp_s = force_ramp_s
         self.approach = Approach(dt=dt, stroke=stroke,
                                  plan=self._seq[sk.S_PLAN:sk.S_PLAN + ak.PLAN_SIZE])
         self._no_table = np.zeros((1, 1))
@@ -260,16 +277,25 @@ class ProgramReference(Component):
         # The compliant hold after a force-control soft stop (``configure_yield``): the loop's
         # builder sets the robot limits' values; until then the defaults, with no stroke top
         # known beyond the stroke itself.
+        # (In ``_seq``, ``sk.S_Y``: the compiled cycle runs the hold; ``yielded_m``
+        # and ``yield_exhausted`` say how far the current or last stop's hold has yielded (m),
+        # and whether it ended with the pull still there: its distance or the stroke used up.)
         self.yield_speed_m_s = YIELD_SPEED_M_S
         self.yield_max_m = YIELD_MAX_M
         self.yield_top_m = float(stroke[1])
         self.yield_lead_m = math.inf
-        #: How far the current (or last) stop's hold has yielded (m), and whether it ended
-        #: with the pull still there (its distance or the stroke exhausted).
-        self.yielded_m = 0.0
-        self.yield_exhausted = False
-        self._stepped = False                   # the hold's reference rose last cycle
-        self._pulled = False                    # a pull beyond YIELD_START_PULL_N seen
+        self._empty = np.zeros(0)               # an unbound wrench_flags/tare port's array
+        self._empty.flags.writeable = False
+
+    force_ramp_s = _Slot(sk.Y_RAMP_S, float)
+    yield_speed_m_s = _Slot(sk.Y_SPEED, float)
+    yield_max_m = _Slot(sk.Y_MAX, float)
+    yield_top_m = _Slot(sk.Y_TOP, float)
+    yield_lead_m = _Slot(sk.Y_LEAD, float)
+    yielded_m = _Slot(sk.Y_YIELDED, float)
+    yield_exhausted = _Slot(sk.Y_EXHAUSTED, bool)
+    _stepped = _Slot(sk.Y_STEPPED, bool)       # the hold's reference rose last cycle
+    _pulled = _Slot(sk.Y_PULLED, bool)         # a pull beyond YIELD_START_PULL_N seen
 
     #: False (on the class or a block): a previewed program's PLAY reads ahead in Python even
     #: where the compiled cycle could (the reference, for tests and before/after benchmarks;
@@ -418,13 +444,8 @@ class ProgramReference(Component):
     def _ramp_force(self, dt: float) -> None:
         """Ramp a force reference down; at zero the position law holds where the robot is
         (not where the contact started: under load the platform had moved into it)."""
-        f = self.force.data
-        if self.ctrl_mode.data[0] > 0.5:
-            f[0] = max(0.0, f[0] - (abs(f[0]) + 1.0) * dt / self.force_ramp_s) \
-                if f[0] > 1.0 else 0.0
-            f[1] = f[2] = 0.0
-            if f[0] == 0.0:
-                self._hold_here()
+        if self.ctrl_mode.data[0] > 0.5 and sk.ramp_force(self._io, self.force_ramp_s, dt):
+            self._hold_here()          # (the compiled cycle ramps; this end is Python's)
 
     def _hold_here(self) -> None:
         """Leave force control: the position law holds where the robot is (not where the
@@ -490,48 +511,27 @@ class ProgramReference(Component):
         (``yield_exhausted``: its distance or the stroke used up) it holds as any stop does
         (the compiled cycle again). A NaN force (no sample) or a stale or saturated
         one (``wrench_flags``: a stale stream repeats its last value) moves nothing."""
-        q, qd, qdd = self.q_ref.data, self.qd_ref.data, self.qdd_ref.data
-        qdd[:] = 0.0
-        push = -float(self.wrench.data[2])
-        flags = self.wrench_flags.data
-        if flags is not None and (flags[0] > 0.5 or flags[1] > 0.5):
-            push = math.nan              # a stale or saturated sensor moves nothing
-        stepped = self._stepped
+        # The arithmetic is ``sk.yield_step``, which the compiled cycle runs too; its end
+        # (exhausted: the approach re-planned to hold here) is Python's.
+        if sk.yield_step(self._io, self._ys, self.q_meas.data, self.wrench.data, self._flags(),
+                         dt) == sk.YIELD_DONE:
+            return
+        q = self.q_ref.data
+        self.qdd_ref.data[:] = 0.0
+        self.qd_ref.data[:] = 0.0
         self._stepped = False
-        self._pulled = self._pulled or push < -YIELD_START_PULL_N
-        if push < 0.0 and self._pulled:
-            room = min(self.yield_max_m - self.yielded_m, self.yield_top_m - float(q.max()))
-            if room > 0.0 and not float((q - self.q_meas.data).max()) < self.yield_lead_m:
-                # The platform does not follow (the drives at their limit under a load they
-                # cannot lift): wait for it rather than run away into the tracking hard stop,
-                # whose brakes would hold the pull.
-                qd[:] = 0.0
-                return
-            if room > 0.0:
-                step = self.yield_speed_m_s * dt
-                d = step if step < room else room  # noqa: FURB136
-                # The rise's speed as the law's feedforward once it goes on (without it the
-                # law lags the rise by millimetres and overshoots into the foot), but not on
-                # its first step: a single one (a noise sample) must not kick the drives
-                # through the law's damping (≈ 0.4 kN for one cycle at 20 mm/s, twin).
-                v = d / dt if stepped else 0.0
-                for i in range(3):
-                    q[i] += d
-                    qd[i] = v
-                self.yielded_m += d
-                self._stepped = True
-                return
-            self.yield_exhausted = True
-            self.state.yielding = False
-            self.approach.reset(q)                  # hold here (the compiled cycle's hold)
-        qd[:] = 0.0
+        self._pulled = True
+        self.yield_exhausted = True
+        self.state.yielding = False
+        self.approach.reset(q)                  # hold here (the compiled cycle's hold)
 
     def update(self, t: float, dt: float) -> int:
         if not self.compiled:
             return self._update(dt)
         if self._pending is None and not self._abort:
             result = sk.cycle(self._io, self._seq, self.q_meas.data, self.mode.data,
-                              self._table, dt)
+                              self._table, dt, self.wrench.data, self._flags(),
+                              self._tare_port())
             if result == sk.DONE:
                 return 0
             if result == sk.PLAY_DONE:          # the program's last sample: plan the return
@@ -539,6 +539,16 @@ class ProgramReference(Component):
         status = self._update(dt)
         self._sync_hold()
         return status
+
+    def _flags(self) -> np.ndarray:
+        """The wrench flags' port, or an empty array when unbound (always valid)."""
+        flags = self.wrench_flags.data
+        return self._empty if flags is None else flags
+
+    def _tare_port(self) -> np.ndarray:
+        """The tare port, or an empty array when unbound (a tare wait is then Python's)."""
+        tare = self.tare.data
+        return self._empty if tare is None else tare
 
     def play_done(self) -> int:
         """The end of a compiled cycle that answered ``PLAY_DONE`` (the program's last sample
@@ -679,16 +689,14 @@ class ProgramReference(Component):
             st.tares_before = float(tare[1])
             self.tare_request.data[0] = 1.0
             return ApproachStatus.WORKING
-        state = int(tare[0])
-        if state == TareState.MEASURING:
-            st.tare_measuring = True
-        if not st.tare_measuring:          # the port still shows an earlier tare's outcome
-            return ApproachStatus.WORKING
-        if state == TareState.DONE and tare[1] > st.tares_before:
+        # The wait's arithmetic is the compiled cycle's (``sk.tare_progress``): it runs the
+        # waiting cycles itself; the request, the grant and the refusal are Python's.
+        answer, st.tare_measuring = sk.tare_progress(tare, st.tare_measuring, st.tares_before)
+        if answer == sk.TARE_GRANTED:
             self.tare_request.data[0] = 0.0
             self._needs_tare = False
             return ApproachStatus.FINISHED
-        if state == TareState.REFUSED:
+        if answer == sk.TARE_DENIED:
             self.tare_request.data[0] = 0.0
             self.last_error = "ATI tare refused: " + refusal_message(int(tare[2]),
                                                                      float(tare[3]))

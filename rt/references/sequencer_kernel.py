@@ -8,16 +8,24 @@ the progress), a hold at rest, a hard stop following the measured position — a
 :data:`NEED_PYTHON` without writing anything when the cycle is an event: the supervisor's
 mode changed this cycle, a program is requested or aborted, an approach, a return or a brake
 is planned, arrives or leaves the stroke (each move is planned once with ruckig, in Python;
-its plain samples are played here: ``rt.references.approach_kernel``), a tare, a force ramp,
-the PLAY of a force program read ahead (``force_preview``: the interpreted read-ahead runs),
-a force-control soft stop's hold yielding to a pull (it reads the wrench).
+its plain samples are played here: ``rt.references.approach_kernel``), a tare asked for,
+granted or refused, a force ramp's end, an exhausted compliant hold, the PLAY of a force
+program read ahead by the program's own Python (``force_preview``).
 The interpreted sequencer then runs that cycle exactly as it always did; its PLAY step goes
 through :func:`play_table` / :func:`emit` too, so a program's samples are produced by one
-code path whichever side runs the cycle. A table program's last sample answers
+code path whichever side runs the cycle. So do the force program's tare wait
+(:func:`tare_progress`), the force reference's ramp-down (:func:`ramp_force`) and a
+force-control soft stop's compliant hold (:func:`yield_step`, on the wrench and its flags):
+the interpreted sequencer calls the same functions (hold9). A table program's last sample answers
 :data:`PLAY_DONE`: Python plans the return (ruckig) on that same cycle.
 
 Every operation is the interpreted sequencer's, in its order (``tests/test_compiled_cycle.py``
 replays recorded inputs through both and compares every output bit for bit).
+
+``cycle(io, seq, q_meas, mode, table, dt, wrench, flags, tare)``: ``wrench`` (6, N and N·m,
+sensor frame), ``flags`` (the force reader's [stale, saturated]; empty: unbound, always valid)
+and ``tare`` (the force reader's tare port: state, count, refusal, mean; empty: unbound, a
+tare wait is then Python's) are the sequencer's input ports.
 """
 from __future__ import annotations
 
@@ -28,6 +36,7 @@ from numba import njit
 
 from rt.references import approach_kernel as ak
 from rt.references.program import FZ, FZ_DOT, N_FIELDS, POSE
+from rt.safety.supervisor_kernel import CONTACT_HELD_N
 
 #: First-order smoothing of F̈_d per cycle (≈ 35 Hz at 1 kHz).
 F_DDOT_SMOOTHING = 0.2
@@ -63,7 +72,27 @@ S_YIELD = S_AHEAD_STEPS + 1   # 1 while a force-control soft stop's hold yields 
                               # (``ProgramReference._yield_step``: Python's, on the wrench)
 S_PLAN = S_YIELD + 1          # ak.PLAN_SIZE: the approach's state (``Approach.plan``, a view:
                               # the move it plays, ``approach_kernel``'s layout)
-SEQ_SIZE = S_PLAN + ak.PLAN_SIZE
+S_Y = S_PLAN + ak.PLAN_SIZE   # YIELD_SIZE: the compliant hold's state and settings (``Y_*``);
+                              # after the plan: a new start does not zero it (the last stop's
+                              # figures stay readable, as the Python attributes did)
+# within S_Y: how far the current (or last) stop's hold rose (m), its reference rose last
+# cycle, a pull beyond YIELD_START_PULL_N was seen, the yield ended with the pull still there;
+# the settings: speed (m/s), distance (m), the top (m), the lead on a measured slider (m);
+# then the force reference's ramp-down time constant (s).
+(Y_YIELDED, Y_STEPPED, Y_PULLED, Y_EXHAUSTED, Y_SPEED, Y_MAX, Y_TOP, Y_LEAD,
+ Y_RAMP_S, YIELD_SIZE) = range(10)
+SEQ_SIZE = S_Y + YIELD_SIZE
+
+#: The compliant hold starts rising only on a pull beyond this (N): the supervisor's
+#: CONTACT_HELD_N (``rt.references.sequencer.YIELD_START_PULL_N``).
+YIELD_START_PULL_N = CONTACT_HELD_N
+
+# ``rt.components.tare.TareState`` values, and :func:`tare_progress`'s answers.
+TARE_MEASURING, TARE_DONE, TARE_REFUSED = 1, 2, 3
+TARE_WAIT, TARE_GRANTED, TARE_DENIED = 0, 1, 2
+#: :func:`yield_step`'s answers: the hold's cycle written; or the yield is exhausted with the
+#: pull still there, nothing written (Python ends it: ``ProgramReference._yield_step``).
+YIELD_DONE, YIELD_EXHAUSTED = 0, 1
 
 #: Half-width (samples) of the centred difference that gives the previewed F̈_d: the table is
 #: known on both sides of the sample read ahead, so the derivative is smoothed without lag
@@ -162,7 +191,111 @@ def finish(io, seq, emitted, ahead=False):
 
 
 @njit(cache=True)
-def cycle(io, seq, q_meas, mode, table, dt):
+def tare_progress(tare, measuring, before):
+    """Where the force program's tare wait stands, on a cycle after the one that asked for
+    the tare (``ProgramReference._tare_step``): ``tare`` the force reader's tare port (state,
+    count, ...), ``measuring`` whether the reader has started this tare, ``before`` its tare
+    count when the tare was asked for. Returns (TARE_WAIT, TARE_GRANTED or TARE_DENIED, the
+    new ``measuring``); writes nothing."""
+    state = int(tare[0])
+    if state == TARE_MEASURING:
+        measuring = True
+    if not measuring:                  # the port still shows an earlier tare's outcome
+        return TARE_WAIT, measuring
+    if state == TARE_DONE and tare[1] > before:
+        return TARE_GRANTED, measuring
+    if state == TARE_REFUSED:
+        return TARE_DENIED, measuring
+    return TARE_WAIT, measuring
+
+
+@njit(cache=True)
+def ramp_force(io, ramp_s, dt):
+    """One cycle of the force reference's ramp-down in force mode (RETURN, STOPPED, REST:
+    ``ProgramReference._ramp_force``): F_d decays with time constant ``ramp_s`` (s), zero at
+    or below 1 N; Ḟ_d = F̈_d = 0. Returns True when F_d reaches zero: the caller then leaves
+    force control (``_hold_here``, Python: it re-plans the approach) — a compiled caller
+    checks :func:`ramp_ends` first and writes nothing on that cycle."""
+    f0 = io[IO_FORCE]
+    io[IO_FORCE] = max(0.0, f0 - (abs(f0) + 1.0) * dt / ramp_s) if f0 > 1.0 else 0.0
+    io[IO_FORCE + 1] = 0.0
+    io[IO_FORCE + 2] = 0.0
+    return io[IO_FORCE] == 0.0
+
+
+@njit(cache=True)
+def ramp_ends(io, ramp_s, dt):
+    """Whether this cycle's :func:`ramp_force` brings F_d to zero (nothing written)."""
+    f0 = io[IO_FORCE]
+    return (max(0.0, f0 - (abs(f0) + 1.0) * dt / ramp_s) if f0 > 1.0 else 0.0) == 0.0
+
+
+@njit(cache=True)
+def _max_nan(x):
+    """``x.max()`` as numpy gives it (a NaN anywhere: NaN), without allocating."""
+    m = x[0]
+    for i in range(x.shape[0]):
+        if math.isnan(x[i]):
+            return x[i]
+        m = max(m, x[i])
+    return m
+
+
+@njit(cache=True)
+def yield_step(io, ys, q_meas, wrench, flags, dt):
+    """One cycle of a force-control soft stop's compliant hold (``ProgramReference.
+    _yield_step`` documents it: the behaviour, the limits and why), on the reference's arena
+    ``io``, the hold's state and settings ``ys`` (``seq[S_Y:]``, ``Y_*``), the measured
+    sliders, the wrench and its flags (empty: always valid). Returns YIELD_DONE, or
+    YIELD_EXHAUSTED with nothing written: the room is used up with the pull still there
+    (the caller ends the yield)."""
+    push = -wrench[2]
+    if flags.shape[0] >= 2 and (flags[0] > 0.5 or flags[1] > 0.5):
+        push = math.nan              # a stale or saturated sensor moves nothing
+    pulled = ys[Y_PULLED] != 0.0 or push < -YIELD_START_PULL_N
+    q = io[IO_Q:IO_Q + 3]
+    room = 0.0
+    if push < 0.0 and pulled:
+        room = min(ys[Y_MAX] - ys[Y_YIELDED], ys[Y_TOP] - _max_nan(q))
+        if not room > 0.0:
+            return YIELD_EXHAUSTED
+    stepped = ys[Y_STEPPED] != 0.0
+    ys[Y_STEPPED] = 0.0
+    ys[Y_PULLED] = 1.0 if pulled else 0.0
+    for i in range(3):
+        io[IO_QDD + i] = 0.0
+    if push < 0.0 and pulled:
+        lead = q[0] - q_meas[0]
+        for i in range(1, 3):
+            d = q[i] - q_meas[i]
+            if math.isnan(d) or math.isnan(lead):
+                lead = math.nan
+            elif d > lead:
+                lead = d
+        if not lead < ys[Y_LEAD]:
+            # The platform does not follow (the drives at their limit under a load they
+            # cannot lift): wait for it rather than run away into the tracking hard stop.
+            for i in range(3):
+                io[IO_QD + i] = 0.0
+            return YIELD_DONE
+        step = ys[Y_SPEED] * dt
+        d = step if step < room else room  # noqa: FURB136 (as the interpreted hold wrote it)
+        # The rise's speed as the law's feedforward once it goes on, not on its first step
+        # (a single noise sample must not kick the drives through the law's damping).
+        v = d / dt if stepped else 0.0
+        for i in range(3):
+            q[i] += d
+            io[IO_QD + i] = v
+        ys[Y_YIELDED] += d
+        ys[Y_STEPPED] = 1.0
+        return YIELD_DONE
+    for i in range(3):
+        io[IO_QD + i] = 0.0
+    return YIELD_DONE
+
+
+@njit(cache=True)
+def cycle(io, seq, q_meas, mode, table, dt, wrench, flags, tare):
     """One steady cycle (module docstring); ``mode`` the supervisor's mode port (one cycle
     late). Returns DONE, NEED_PYTHON (nothing written) or PLAY_DONE."""
     if seq[S_STARTED] == 0.0 or mode[0] != seq[S_MODE]:
@@ -177,14 +310,22 @@ def cycle(io, seq, q_meas, mode, table, dt):
             io[IO_QDD + i] = 0.0
             io[IO_FORCE + i] = 0.0
         io[IO_CTRL_MODE] = 0.0
+    elif seq[S_YIELD] != 0.0:
+        # A force-control soft stop's compliant hold; its end (exhausted) is Python's.
+        if wrench.shape[0] < 3 or yield_step(io, seq[S_Y:S_Y + YIELD_SIZE], q_meas, wrench,
+                                             flags, dt) != YIELD_DONE:
+            return NEED_PYTHON
     elif phase == STOPPED or phase == REST or phase == RETURN:
         # The approach holds still (its update writes the hold) or plays a move's plain
-        # sample (a brake, the return); a force reference still ramping down is Python's (it
-        # ends by re-planning the approach), and so is a hold yielding to a pull (it reads the
-        # wrench), the move's arrival (RETURN ends at rest) and a sample outside the stroke.
-        if io[IO_CTRL_MODE] > 0.5 or seq[S_YIELD] != 0.0:
+        # sample (a brake, the return), and a force reference ramps down; the ramp's end is
+        # Python's (it re-plans the approach), and so are the move's arrival (RETURN ends at
+        # rest) and a sample outside the stroke.
+        ramping = io[IO_CTRL_MODE] > 0.5
+        if ramping and ramp_ends(io, seq[S_Y + Y_RAMP_S], dt):
             return NEED_PYTHON
-        if seq[S_HOLDING] != 0.0 and phase != RETURN:
+        # (RETURN's hold is its arrival, Python's, unless the force still ramps down: RETURN
+        # then ends with the ramp.)
+        if seq[S_HOLDING] != 0.0 and (phase != RETURN or ramping):
             for i in range(3):
                 io[IO_Q + i] = seq[S_HOLD + i]
                 io[IO_QD + i] = 0.0
@@ -192,11 +333,25 @@ def cycle(io, seq, q_meas, mode, table, dt):
         elif not ak.working_sample(seq[S_PLAN:S_PLAN + ak.PLAN_SIZE], io[IO_Q:IO_Q + 3],
                                    io[IO_QD:IO_QD + 3], io[IO_QDD:IO_QDD + 3]):
             return NEED_PYTHON
+        if ramping:
+            ramp_force(io, seq[S_Y + Y_RAMP_S], dt)
     elif phase == APPROACH:
-        # The approach's plain samples; its arrival (the program's first sample, a tare) is
-        # Python's.
-        if not ak.working_sample(seq[S_PLAN:S_PLAN + ak.PLAN_SIZE], io[IO_Q:IO_Q + 3],
-                                 io[IO_QD:IO_QD + 3], io[IO_QDD:IO_QDD + 3]):
+        if seq[S_TARING] != 0.0:
+            # A force program's first sample held while the force reader tares: its wait
+            # (the approach's hold, tare_progress); the tare's outcome is Python's.
+            if tare.shape[0] < 2 or seq[S_PLAN + ak.P_MODE] != ak.HOLD:
+                return NEED_PYTHON
+            answer, measuring = tare_progress(tare, seq[S_TARE_MEASURING] != 0.0,
+                                              seq[S_TARES_BEFORE])
+            if answer != TARE_WAIT:
+                return NEED_PYTHON
+            ak.update(seq[S_PLAN:S_PLAN + ak.PLAN_SIZE], io[IO_Q:IO_Q + 3],
+                      io[IO_QD:IO_QD + 3], io[IO_QDD:IO_QDD + 3])
+            seq[S_TARE_MEASURING] = 1.0 if measuring else 0.0
+        # The approach's plain samples; its arrival (the program's first sample, a tare
+        # asked for) is Python's.
+        elif not ak.working_sample(seq[S_PLAN:S_PLAN + ak.PLAN_SIZE], io[IO_Q:IO_Q + 3],
+                                   io[IO_QD:IO_QD + 3], io[IO_QDD:IO_QDD + 3]):
             return NEED_PYTHON
     elif phase == PLAY and seq[S_TABLE] != 0.0 and (seq[S_PREVIEW] == 0.0
                                                     or seq[S_AHEAD] != 0.0):
@@ -226,10 +381,16 @@ def warm_up() -> None:
     # A table may be read-only too: a prepared session's arrays arrive through shared memory.
     table_ro = np.zeros((1, 9))
     table_ro.flags.writeable = False
+    w, f, t = np.zeros(6), np.zeros(2), np.zeros(10)
+    w.flags.writeable = f.flags.writeable = t.flags.writeable = False
     for ro in (False, True):
         qq, mm = (q, m) if ro else (q.copy(), m.copy())
+        ww, ff, tt = (w, f, t) if ro else (w.copy(), f.copy(), t.copy())
         for table in (np.zeros((1, 9)), table_ro):
-            cycle(io, seq, qq, mm, table, 1e-3)
+            cycle(io, seq, qq, mm, table, 1e-3, ww, ff, tt)
+        yield_step(io, seq[S_Y:S_Y + YIELD_SIZE], qq, ww, ff, 1e-3)
+        tare_progress(tt, False, 0.0)
+    ramp_force(io, 0.3, 1e-3)
     for table in (np.zeros((1, 9)), table_ro):
         seq[S_K] = 0.0
         play_table(io, seq, table, 1e-3)
