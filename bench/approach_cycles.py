@@ -99,18 +99,11 @@ def _why(ref: Any) -> str:
     """Why the sequencer's Python runs this cycle (``--force``), from its state on entry."""
     from rt.references import sequencer_kernel as sk
 
-    seq, io = ref._seq, ref._io
+    seq = ref._seq
     if (ref._pending is not None or ref._abort or seq[sk.S_STARTED] == 0.0
             or ref.mode.data[0] != seq[sk.S_MODE]):
         return "event"
-    phase = seq[sk.S_PHASE]
-    if seq[sk.S_YIELD] != 0.0:
-        return "yield"
-    if phase == sk.APPROACH and seq[sk.S_TARING] != 0.0:
-        return "tare"
-    if phase in (sk.RETURN, sk.STOPPED, sk.REST) and io[sk.IO_CTRL_MODE] > 0.5:
-        return "ramp"
-    return "other"
+    return ref.steady_kind()
 
 
 def measure_force() -> dict[str, Any]:

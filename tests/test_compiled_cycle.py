@@ -427,16 +427,10 @@ class _Twins:
         from rt.references import sequencer_kernel as sk
 
         c = self.refs[0]
-        seq, io = c._seq, c._io
-        if event and (c._pending is not None or c._abort or self.mode[0] != seq[sk.S_MODE]):
+        if event and (c._pending is not None or c._abort
+                      or self.mode[0] != c._seq[sk.S_MODE]):
             return "event"
-        if seq[sk.S_YIELD] != 0.0:
-            return "yield"
-        if seq[sk.S_PHASE] == sk.APPROACH and seq[sk.S_TARING] != 0.0:
-            return "tare"
-        if seq[sk.S_PHASE] in (sk.RETURN, sk.STOPPED, sk.REST) and io[sk.IO_CTRL_MODE] > 0.5:
-            return "ramp"
-        return "other"
+        return c.steady_kind()
 
     def request(self, make_program, **kw) -> None:
         """Each sequencer gets its own program (the interpreted one calls it every cycle)."""

@@ -337,21 +337,6 @@ def test_a_force_then_a_position_protocol_are_the_per_block_cycle_bit_for_bit(mo
     assert h.ran[5] > 0.3 * h.cycles and h.ran[2] + h.ran[3] > 0, h.ran
 
 
-def _sequencer_kind(ref) -> str:
-    """The sequencer's next cycle: a force program's tare wait, a force reference's ramp-down,
-    a force stop's compliant hold, or "other"."""
-    from rt.references import sequencer_kernel as sk
-
-    seq, io = ref._seq, ref._io
-    if seq[sk.S_YIELD] != 0.0:
-        return "yield"
-    if seq[sk.S_PHASE] == sk.APPROACH and seq[sk.S_TARING] != 0.0:
-        return "tare"
-    if seq[sk.S_PHASE] in (sk.RETURN, sk.STOPPED, sk.REST) and io[sk.IO_CTRL_MODE] > 0.5:
-        return "ramp"
-    return "other"
-
-
 def test_a_force_programs_tare_ramp_and_hold_run_in_the_kernel_bit_for_bit(model):
     """hold9 (issue 16): against the per-block loop with its sequencer interpreted
     (``compiled=False``), a force program's tare wait, the force ramp-down after an abort in
@@ -368,7 +353,7 @@ def test_a_force_programs_tare_ramp_and_hold_run_in_the_kernel_bit_for_bit(model
 
     def step(n: int) -> None:
         for _ in range(n):
-            kind = _sequencer_kind(h.f.reference)
+            kind = h.f.reference.steady_kind()
             before = h.ran[5]
             h.run(1)
             cycles[kind] += 1

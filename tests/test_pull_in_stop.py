@@ -176,7 +176,7 @@ def test_an_offset_sensor_after_the_lost_contact_neither_raises_the_hold_nor_ala
     """The foot goes away and the force sensor has drifted since its tare: the empty platform
     reads a 3 N pull (twin drift bound ±4 N). The stop's compliant hold must not take that for
     the strap (it rose its whole 20 mm towards where the foot had been, and ``pull_in_stop``
-    told the staff to release a strap pulling nothing: ``YIELD_START_PULL_N``,
+    told the staff to release a strap pulling nothing: ``sequencer_kernel.YIELD_START_PULL_N``,
     ``PULL_IN_STOP_FZ_N``)."""
     twin, pl = _hold(model)
     h0 = float(twin.plant.q.mean())

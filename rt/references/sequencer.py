@@ -87,12 +87,6 @@ YIELD_MAX_RANGE_M = (0.0, 0.05)
 #: supervisor's tracking hard stop (3 ×) with room for the law's sag under the load (5.6-5.8 mm
 #: at 565-580 kg on the twin, where the tracking limit is 3 mm).
 YIELD_LEAD_TRACKING = 2.5
-#: The compliant hold starts rising only on a pull beyond what the force sensor reads with
-#: nothing on it (the supervisor's CONTACT_HELD_N, 10 N): after a lost contact an offset sensor
-#: (−3 N, a drift since the tare) otherwise raised the platform its whole 20 mm towards where
-#: the foot had been (watch9, 2026-11-26f). Once a real pull started it, it yields to any pull
-#: (push < 0 N) for the rest of the stop, so the foot still ends unpulled.
-YIELD_START_PULL_N = sk.YIELD_START_PULL_N
 
 #: How long a program's watcher waits after seeing the sequencer stopped, so the stop's events
 #: reach the loop's event log before it records them (s).
@@ -136,35 +130,23 @@ class _State:
 
 
 class _Field:
-    """One ``_State`` field kept in the compiled sequencer's state array (``sk.S_*``)."""
+    """An attribute kept in a state array the compiled cycle reads and writes: a ``_State``
+    field in the sequencer's (``_SeqState.seq``, ``sk.S_*``), or a setting or state of
+    :class:`ProgramReference`'s compliant hold in its part of it (``_ys``, ``sk.Y_*``)."""
 
-    def __init__(self, index: int, kind: type) -> None:
+    def __init__(self, index: int, kind: type, array: str = "seq") -> None:
         self.index = index
         self.kind = kind
+        self.array = array
 
-    def __get__(self, obj: _SeqState, owner: type | None = None) -> Any:
-        value = obj.seq[self.index]
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        value = getattr(obj, self.array)[self.index]
         if self.kind is float:
             return float(value)
         return self.kind(int(value))
 
-    def __set__(self, obj: _SeqState, value: object) -> None:
-        obj.seq[self.index] = float(value)  # type: ignore[arg-type]
-
-
-class _Slot:
-    """An attribute of :class:`ProgramReference` kept in its compliant hold's part of the
-    state array (``_ys``, ``sk.Y_*``), where the compiled cycle reads and writes it."""
-
-    def __init__(self, index: int, kind: type) -> None:
-        self.index = index
-        self.kind = kind
-
-    def __get__(self, obj: Any, owner: type | None = None) -> Any:
-        return self.kind(obj._ys[self.index])
-
     def __set__(self, obj: Any, value: object) -> None:
-        obj._ys[self.index] = float(value)  # type: ignore[arg-type]
+        getattr(obj, self.array)[self.index] = float(value)  # type: ignore[arg-type]
 
 
 class _SeqState:
@@ -287,15 +269,15 @@ class ProgramReference(Component):
         self._empty = np.zeros(0)               # an unbound wrench_flags/tare port's array
         self._empty.flags.writeable = False
 
-    force_ramp_s = _Slot(sk.Y_RAMP_S, float)
-    yield_speed_m_s = _Slot(sk.Y_SPEED, float)
-    yield_max_m = _Slot(sk.Y_MAX, float)
-    yield_top_m = _Slot(sk.Y_TOP, float)
-    yield_lead_m = _Slot(sk.Y_LEAD, float)
-    yielded_m = _Slot(sk.Y_YIELDED, float)
-    yield_exhausted = _Slot(sk.Y_EXHAUSTED, bool)
-    _stepped = _Slot(sk.Y_STEPPED, bool)       # the hold's reference rose last cycle
-    _pulled = _Slot(sk.Y_PULLED, bool)         # a pull beyond YIELD_START_PULL_N seen
+    force_ramp_s = _Field(sk.Y_RAMP_S, float, "_ys")
+    yield_speed_m_s = _Field(sk.Y_SPEED, float, "_ys")
+    yield_max_m = _Field(sk.Y_MAX, float, "_ys")
+    yield_top_m = _Field(sk.Y_TOP, float, "_ys")
+    yield_lead_m = _Field(sk.Y_LEAD, float, "_ys")
+    yielded_m = _Field(sk.Y_YIELDED, float, "_ys")
+    yield_exhausted = _Field(sk.Y_EXHAUSTED, bool, "_ys")
+    _stepped = _Field(sk.Y_STEPPED, bool, "_ys")       # the hold's reference rose last cycle
+    _pulled = _Field(sk.Y_PULLED, bool, "_ys")         # a pull beyond sk.YIELD_START_PULL_N seen
 
     #: False (on the class or a block): a previewed program's PLAY reads ahead in Python even
     #: where the compiled cycle could (the reference, for tests and before/after benchmarks;
@@ -496,9 +478,10 @@ class ProgramReference(Component):
         (565 kg on the twin: −507 N with the drives at 1.74 of 2.04 kN). A hard stop does
         not end that pull: the drives let go, the platform drops until the brakes engage and
         the brakes then hold the deeper pull (−507 → −722 N, twin). So while the measured
-        push (−wrench z) is below 0 N (once a pull beyond ``YIELD_START_PULL_N`` started it:
-        not an offset sensor's few N with nothing on the platform), the hold's reference rises (all three sliders alike:
-        a pure heave, the direction that unloads a foot above the platform) at
+        push (−wrench z) is below 0 N (once a pull beyond ``sk.YIELD_START_PULL_N`` started it:
+        not an offset sensor's few N with nothing on the platform), the hold's reference
+        rises (all three sliders alike: a pure heave, the direction that unloads a foot above
+        the platform) at
         ``yield_speed_m_s``, by at most ``yield_max_m`` and not past ``yield_top_m``, and
         holds where it got to otherwise. It stays compliant for the whole stop: a load the
         drives carry less well as they warm (580 kg, twin: the platform creeps down ≈ 20 µm/s
@@ -539,6 +522,20 @@ class ProgramReference(Component):
         status = self._update(dt)
         self._sync_hold()
         return status
+
+    def steady_kind(self) -> str:
+        """Which of the force programs' steady cycles the next one is, from the state: a force
+        stop's compliant hold ("yield"), a force program's tare wait ("tare"), a force
+        reference's ramp-down ("ramp"), or "other" (benchmarks and tests count cycles by it;
+        an event first, a request or a mode change, is the caller's to tell)."""
+        seq, io = self._seq, self._io
+        if seq[sk.S_YIELD] != 0.0:
+            return "yield"
+        if seq[sk.S_PHASE] == sk.APPROACH and seq[sk.S_TARING] != 0.0:
+            return "tare"
+        if seq[sk.S_PHASE] in (sk.RETURN, sk.STOPPED, sk.REST) and io[sk.IO_CTRL_MODE] > 0.5:
+            return "ramp"
+        return "other"
 
     def _flags(self) -> np.ndarray:
         """The wrench flags' port, or an empty array when unbound (always valid)."""

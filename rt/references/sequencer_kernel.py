@@ -83,8 +83,11 @@ S_Y = S_PLAN + ak.PLAN_SIZE   # YIELD_SIZE: the compliant hold's state and setti
  Y_RAMP_S, YIELD_SIZE) = range(10)
 SEQ_SIZE = S_Y + YIELD_SIZE
 
-#: The compliant hold starts rising only on a pull beyond this (N): the supervisor's
-#: CONTACT_HELD_N (``rt.references.sequencer.YIELD_START_PULL_N``).
+#: The compliant hold starts rising only on a pull beyond this (N): what the force sensor reads
+#: with nothing on it (the supervisor's CONTACT_HELD_N, 10 N). After a lost contact an offset
+#: sensor (−3 N, a drift since the tare) otherwise raised the platform its whole 20 mm towards
+#: where the foot had been (watch9, 2026-11-26f). Once a real pull started it, it yields to any
+#: pull (push < 0 N) for the rest of the stop, so the foot still ends unpulled.
 YIELD_START_PULL_N = CONTACT_HELD_N
 
 # ``rt.components.tare.TareState`` values, and :func:`tare_progress`'s answers.
